@@ -1,0 +1,51 @@
+//! # volwarp-core
+//!
+//! The vocabulary shared by every part of volwarp, after Zellmann, *Augmenting Image
+//! Warping-Based Remote Volume Rendering with Ray Tracing* (2020):
+//!
+//! | module | concept of the paper |
+//! |---|---|
+//! | [`camera`] | the pinhole camera and its primary rays (one convention for marcher, tracers and shader) |
+//! | [`sample`] | the object-space sample: quantized position + radius in 64 bits, RGBA8 color in 32 |
+//! | [`heuristics`] | the ZAL12 representative-depth heuristics, as state machines |
+//! | [`compaction`] | stable removal of empty (radius 0) samples |
+//! | [`morton`] | Morton codes of quantized positions and their radix sort |
+//! | [`lbvh`] | Karras-style LBVH over the sorted codes, built into caller buffers |
+//! | [`sphere`] | first-hit ray–sphere and ray–box intersection |
+//! | [`traversal`] | the scalar reference traversal: the oracle for every fast tracer |
+//! | [`wire`] | the framed, versioned wire codec over `embedded-io` |
+//! | `scene` (feature `alloc`) | an owned, traceable scene built from a received frame |
+//!
+//! The crate is `#![no_std]` and needs no allocator; the `alloc` feature adds owned
+//! conveniences and `std` only adds trait impls.
+#![no_std]
+#![deny(missing_docs)]
+
+#[cfg(feature = "alloc")]
+extern crate alloc;
+#[cfg(feature = "std")]
+extern crate std;
+
+pub mod camera;
+pub mod compaction;
+pub mod heuristics;
+pub mod lbvh;
+pub mod morton;
+pub mod sample;
+#[cfg(feature = "alloc")]
+pub mod scene;
+pub mod sphere;
+pub mod traversal;
+pub mod wire;
+
+mod math;
+
+pub use camera::{Camera, CameraError, Ray, RayBasis};
+pub use heuristics::{DepthPicker, FirstPass, FirstPassAccumulator, Heuristic};
+pub use lbvh::{Lbvh, Node};
+pub use sample::{Bounds, Dequantizer, Quantizer};
+#[cfg(feature = "alloc")]
+pub use scene::Scene;
+pub use traversal::Hit;
+
+pub use glam::Vec3;

@@ -1,0 +1,278 @@
+//! The object-space sample: a quantized position and a radius code in one little-endian `u64`,
+//! and its color as 32-bit RGBA8.
+//!
+//! Layout of the `u64` (bit 0 is the least significant):
+//!
+//! | bits | field |
+//! |---|---|
+//! | 0..18 | x, quantized over the frame's bounds (0 = `min.x`, 2¹⁸−1 = `max.x`) |
+//! | 18..36 | y |
+//! | 36..54 | z |
+//! | 54..64 | radius code r: radius = r × `radius_unit`; r = 0 marks an empty sample |
+//!
+//! A quantum is `(max − min) / (2¹⁸ − 1)` per axis, so the round-trip error is at most half a
+//! quantum. `docs/wire-format.md` explains the choice of 18/18/18/10.
+//!
+//! Colors are **premultiplied** RGBA8 packed little-endian (`r | g << 8 | b << 16 | a << 24`),
+//! i.e. the bytes R, G, B, A in memory: the front-to-back composited color of the pixel.
+
+use bytemuck::{Pod, Zeroable};
+use glam::Vec3;
+
+/// Bits per position axis.
+pub const POS_BITS: u32 = 18;
+/// Bits of the radius code.
+pub const RADIUS_BITS: u32 = 10;
+/// Largest quantized coordinate.
+pub const POS_MAX: u32 = (1 << POS_BITS) - 1;
+/// Largest radius code.
+pub const RADIUS_MAX: u32 = (1 << RADIUS_BITS) - 1;
+const POS_MASK: u64 = POS_MAX as u64;
+
+/// An axis-aligned box; the frame's scene bounds.
+#[repr(C)]
+#[derive(Clone, Copy, Debug, PartialEq, Pod, Zeroable)]
+pub struct Bounds {
+    /// Minimum corner.
+    pub min: [f32; 3],
+    /// Maximum corner.
+    pub max: [f32; 3],
+}
+
+impl Bounds {
+    /// A box from two corners.
+    pub fn new(min: Vec3, max: Vec3) -> Self {
+        Bounds { min: min.to_array(), max: max.to_array() }
+    }
+    /// Minimum corner.
+    pub fn min(&self) -> Vec3 {
+        Vec3::from_array(self.min)
+    }
+    /// Maximum corner.
+    pub fn max(&self) -> Vec3 {
+        Vec3::from_array(self.max)
+    }
+    /// Finite and `min <= max` on every axis, with an extent that does not overflow (zero
+    /// extent is allowed: all samples on one plane or point).
+    pub fn is_valid(&self) -> bool {
+        (0..3).all(|i| {
+            let (a, b) = (self.min[i], self.max[i]);
+            a.is_finite() && b.is_finite() && a <= b && (b - a).is_finite()
+        })
+    }
+    /// The box of a set of points; `None` if empty.
+    pub fn of_points(points: impl IntoIterator<Item = Vec3>) -> Option<Bounds> {
+        let mut it = points.into_iter();
+        let first = it.next()?;
+        let (mut lo, mut hi) = (first, first);
+        for p in it {
+            lo = lo.min(p);
+            hi = hi.max(p);
+        }
+        Some(Bounds::new(lo, hi))
+    }
+}
+
+/// Turns positions and radii into packed samples for one frame.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct Quantizer {
+    min: Vec3,
+    scale: Vec3,
+    radius_unit: f32,
+}
+
+impl Quantizer {
+    /// A quantizer over `bounds` (must be valid) with radius step `radius_unit` (> 0).
+    pub fn new(bounds: Bounds, radius_unit: f32) -> Self {
+        let ext = bounds.max() - bounds.min();
+        let s = |e: f32| if e > 0.0 { POS_MAX as f32 / e } else { 0.0 };
+        Quantizer { min: bounds.min(), scale: Vec3::new(s(ext.x), s(ext.y), s(ext.z)), radius_unit }
+    }
+
+    /// Quantizes one coordinate value to `0..=POS_MAX`, rounding to nearest and clamping.
+    #[inline]
+    fn q(v: f32, min: f32, scale: f32) -> u64 {
+        let f = (v - min) * scale + 0.5;
+        // NaN and negatives go to 0; clamp the top.
+        if f >= POS_MAX as f32 {
+            POS_MAX as u64
+        } else if f > 0.0 {
+            f as u64
+        } else {
+            0
+        }
+    }
+
+    /// The radius code of `radius` (rounded, clamped to `1..=RADIUS_MAX`; 0 only for radius <= 0).
+    #[inline]
+    pub fn radius_code(&self, radius: f32) -> u32 {
+        if !(radius > 0.0) || !(self.radius_unit > 0.0) {
+            return 0;
+        }
+        let f = radius / self.radius_unit + 0.5;
+        if f >= RADIUS_MAX as f32 {
+            RADIUS_MAX
+        } else if f >= 1.0 {
+            f as u32
+        } else {
+            1
+        }
+    }
+
+    /// Packs a position and radius (radius <= 0 gives an empty sample).
+    #[inline]
+    pub fn pack(&self, p: Vec3, radius: f32) -> u64 {
+        let x = Self::q(p.x, self.min.x, self.scale.x);
+        let y = Self::q(p.y, self.min.y, self.scale.y);
+        let z = Self::q(p.z, self.min.z, self.scale.z);
+        let r = self.radius_code(radius) as u64;
+        x | y << POS_BITS | z << (2 * POS_BITS) | r << (3 * POS_BITS)
+    }
+}
+
+/// Turns packed samples back into positions and radii: the one decode every tracer mirrors
+/// (`min + q * step`, a multiply then an add, no fused multiply-add).
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct Dequantizer {
+    /// Bounds minimum.
+    pub min: Vec3,
+    /// World size of one quantum per axis.
+    pub step: Vec3,
+    /// World size of one radius code step.
+    pub radius_unit: f32,
+}
+
+impl Dequantizer {
+    /// The decoder for a frame's bounds and radius unit.
+    pub fn new(bounds: Bounds, radius_unit: f32) -> Self {
+        let ext = bounds.max() - bounds.min();
+        Dequantizer { min: bounds.min(), step: ext / POS_MAX as f32, radius_unit }
+    }
+
+    /// The sample's center.
+    #[inline(always)]
+    pub fn center(&self, s: u64) -> Vec3 {
+        let (x, y, z) = unpack_position(s);
+        Vec3::new(
+            self.min.x + x as f32 * self.step.x,
+            self.min.y + y as f32 * self.step.y,
+            self.min.z + z as f32 * self.step.z,
+        )
+    }
+
+    /// The sample's radius.
+    #[inline(always)]
+    pub fn radius(&self, s: u64) -> f32 {
+        radius_code(s) as f32 * self.radius_unit
+    }
+}
+
+/// The three quantized coordinates of a packed sample.
+#[inline(always)]
+pub fn unpack_position(s: u64) -> (u32, u32, u32) {
+    ((s & POS_MASK) as u32, ((s >> POS_BITS) & POS_MASK) as u32, ((s >> (2 * POS_BITS)) & POS_MASK) as u32)
+}
+
+/// The radius code of a packed sample.
+#[inline(always)]
+pub fn radius_code(s: u64) -> u32 {
+    (s >> (3 * POS_BITS)) as u32
+}
+
+/// Whether the sample is empty (radius code 0).
+#[inline(always)]
+pub fn is_empty(s: u64) -> bool {
+    radius_code(s) == 0
+}
+
+/// Packs premultiplied RGBA8.
+#[inline]
+pub fn pack_color(r: u8, g: u8, b: u8, a: u8) -> u32 {
+    u32::from_le_bytes([r, g, b, a])
+}
+
+/// Packs a premultiplied color given as floats in 0..=1 (clamped; NaN becomes 0).
+#[inline]
+pub fn pack_color_f32(c: [f32; 4]) -> u32 {
+    let q = |v: f32| {
+        let f = v * 255.0 + 0.5;
+        if f >= 255.0 {
+            255
+        } else if f > 0.0 {
+            f as u8
+        } else {
+            0
+        }
+    };
+    pack_color(q(c[0]), q(c[1]), q(c[2]), q(c[3]))
+}
+
+/// Composites a premultiplied sample color over an opaque background color (both packed),
+/// giving an opaque packed color: `c + (1 − c.a) · bg`, per channel, rounded. Every renderer
+/// shows a hit this way.
+#[inline]
+pub fn over_background(c: u32, bg: u32) -> u32 {
+    let [r, g, b, a] = c.to_le_bytes();
+    let [br, bgc, bb, _] = bg.to_le_bytes();
+    let k = 255 - a as u32;
+    let ch = |s: u8, d: u8| -> u8 { (s as u32 + (k * d as u32 + 127) / 255).min(255) as u8 };
+    pack_color(ch(r, br), ch(g, bgc), ch(b, bb), 255)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn bounds_corners_are_exact() {
+        let b = Bounds::new(Vec3::new(-1.0, 2.0, 3.0), Vec3::new(5.0, 2.5, 100.0));
+        let q = Quantizer::new(b, 0.01);
+        let d = Dequantizer::new(b, 0.01);
+        let s = q.pack(b.min(), 0.5);
+        assert_eq!(unpack_position(s), (0, 0, 0));
+        assert_eq!(d.center(s), b.min());
+        let s = q.pack(b.max(), 0.5);
+        assert_eq!(unpack_position(s), (POS_MAX, POS_MAX, POS_MAX));
+        assert!((d.center(s) - b.max()).abs().max_element() < 1e-5);
+    }
+
+    #[test]
+    fn radius_zero_and_max() {
+        let b = Bounds::new(Vec3::ZERO, Vec3::ONE);
+        let q = Quantizer::new(b, 0.001);
+        assert!(is_empty(q.pack(Vec3::splat(0.5), 0.0)));
+        assert!(is_empty(q.pack(Vec3::splat(0.5), -1.0)));
+        assert!(is_empty(q.pack(Vec3::splat(0.5), f32::NAN)));
+        assert_eq!(radius_code(q.pack(Vec3::splat(0.5), 1e9)), RADIUS_MAX);
+        assert_eq!(radius_code(q.pack(Vec3::splat(0.5), 1e-9)), 1, "tiny radius stays non-empty");
+    }
+
+    #[test]
+    fn nan_position_clamps_instead_of_leaking() {
+        let b = Bounds::new(Vec3::ZERO, Vec3::ONE);
+        let s = Quantizer::new(b, 0.1).pack(Vec3::new(f32::NAN, 2.0, -3.0), 0.1);
+        assert_eq!(unpack_position(s), (0, POS_MAX, 0));
+    }
+
+    #[test]
+    fn zero_extent_axis() {
+        let b = Bounds::new(Vec3::new(1.0, 1.0, 1.0), Vec3::new(1.0, 2.0, 1.0));
+        let q = Quantizer::new(b, 0.1);
+        let d = Dequantizer::new(b, 0.1);
+        let p = Vec3::new(1.0, 1.5, 1.0);
+        let c = d.center(q.pack(p, 0.1));
+        assert_eq!(c.x, 1.0);
+        assert!((c.y - 1.5).abs() < 1e-5);
+    }
+
+    #[test]
+    fn over_background_is_exact_at_the_ends() {
+        let bg = pack_color(10, 20, 30, 255);
+        assert_eq!(over_background(pack_color(0, 0, 0, 0), bg), bg);
+        assert_eq!(over_background(pack_color(200, 100, 50, 255), bg), pack_color(200, 100, 50, 255));
+        assert_eq!(
+            over_background(pack_color(100, 0, 0, 128), pack_color(255, 255, 255, 255)),
+            pack_color(227, 127, 127, 255)
+        );
+    }
+}

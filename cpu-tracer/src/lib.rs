@@ -1,0 +1,3 @@
+//! SIMD packet ray tracer of volwarp scenes (in progress).
+//!
+//! Nothing here yet: this crate is a placeholder member of the workspace.

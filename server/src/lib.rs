@@ -1,0 +1,3 @@
+//! volwarp server: volumes, ray marcher, frames over TCP (in progress).
+//!
+//! Nothing here yet: this crate is a placeholder member of the workspace.
