@@ -15,6 +15,8 @@
 //! | [`traversal`] | the scalar reference traversal: the oracle for every fast tracer |
 //! | [`wire`] | the framed, versioned wire codec over `embedded-io` |
 //! | `scene` (feature `alloc`) | an owned, traceable scene built from a received frame |
+//! | `renderer` (feature `alloc`) | the one interface every way of drawing a scene implements |
+//! | [`record`] | the record file of a received stream, for replay |
 //!
 //! The crate is `#![no_std]` and needs no allocator; the `alloc` feature adds owned
 //! conveniences and `std` only adds trait impls.
@@ -31,6 +33,9 @@ pub mod compaction;
 pub mod heuristics;
 pub mod lbvh;
 pub mod morton;
+pub mod record;
+#[cfg(feature = "alloc")]
+pub mod renderer;
 pub mod sample;
 #[cfg(feature = "alloc")]
 pub mod scene;
@@ -43,6 +48,8 @@ mod math;
 pub use camera::{Camera, CameraError, Ray, RayBasis};
 pub use heuristics::{DepthPicker, FirstPass, FirstPassAccumulator, Heuristic};
 pub use lbvh::{Lbvh, Node};
+#[cfg(feature = "alloc")]
+pub use renderer::{Image, Renderer, BACKGROUND};
 pub use sample::{Bounds, Dequantizer, Quantizer};
 #[cfg(feature = "alloc")]
 pub use scene::Scene;

@@ -187,7 +187,7 @@ pub fn is_empty(s: u64) -> bool {
 
 /// Packs premultiplied RGBA8.
 #[inline]
-pub fn pack_color(r: u8, g: u8, b: u8, a: u8) -> u32 {
+pub const fn pack_color(r: u8, g: u8, b: u8, a: u8) -> u32 {
     u32::from_le_bytes([r, g, b, a])
 }
 

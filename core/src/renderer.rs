@@ -1,0 +1,60 @@
+//! The one interface every way of drawing a scene implements (feature `alloc`): the SIMD and
+//! scalar sphere tracers, the point and splat baselines, the stale image and the GPU tracer.
+//! Scene + camera + framebuffer in, image out.
+
+use crate::camera::Camera;
+use crate::sample::pack_color;
+use crate::scene::Scene;
+use alloc::string::String;
+use alloc::vec;
+use alloc::vec::Vec;
+
+/// The opaque background every renderer (and the ground-truth marcher) shows where nothing is.
+pub const BACKGROUND: u32 = pack_color(24, 24, 32, 255);
+
+/// An RGBA8 image: pixels packed like sample colors (R in the low byte), row-major, row 0 at
+/// the top.
+#[derive(Clone, Debug, PartialEq, Eq)]
+pub struct Image {
+    /// Width in pixels.
+    pub width: u32,
+    /// Height in pixels.
+    pub height: u32,
+    /// `width × height` packed RGBA8 pixels.
+    pub pixels: Vec<u32>,
+}
+
+impl Image {
+    /// An image filled with [`BACKGROUND`].
+    pub fn new(width: u32, height: u32) -> Self {
+        Image { width, height, pixels: vec![BACKGROUND; width as usize * height as usize] }
+    }
+
+    /// Resizes to the camera's viewport (if needed) and fills with [`BACKGROUND`].
+    pub fn reset_for(&mut self, camera: &Camera) {
+        self.width = camera.width;
+        self.height = camera.height;
+        self.pixels.clear();
+        self.pixels.resize(camera.width as usize * camera.height as usize, BACKGROUND);
+    }
+
+    /// The pixel at `(x, y)`.
+    pub fn get(&self, x: u32, y: u32) -> u32 {
+        self.pixels[(y * self.width + x) as usize]
+    }
+
+    /// The pixels as RGBA bytes (for PNG encoders).
+    pub fn as_rgba_bytes(&self) -> &[u8] {
+        bytemuck::cast_slice(&self.pixels)
+    }
+}
+
+/// A way of drawing a [`Scene`] for a camera.
+pub trait Renderer {
+    /// Short name, as used in CSV files and the client's title bar (e.g. `spheres-cpu`).
+    fn name(&self) -> String;
+
+    /// Draws `scene` as seen from `camera` into `out`, which it first resizes to the camera's
+    /// viewport and clears to [`BACKGROUND`].
+    fn render(&mut self, scene: &Scene, camera: &Camera, out: &mut Image);
+}
