@@ -1,0 +1,284 @@
+//! First-hit sphere tracing of the LBVH with 8-ray SIMD packets (`wide::f32x8`): the client's
+//! default renderer on machines without a GPU.
+//!
+//! * **Packets.** A packet is a 4×2 pixel group; the image is cut into bands of
+//!   [`BAND_ROWS`] rows (the unit of parallel work), each walked in 8×8 tiles of eight packets,
+//!   so consecutive packets are spatially coherent.
+//! * **Traversal.** One stack per packet; a node is entered for the lanes whose ray enters its
+//!   box no later than their current best hit (the *active mask*). An entry remembers each
+//!   lane's box entry distance, so a node popped after the whole packet has found closer hits
+//!   is skipped without touching memory (*early exit*). When both children are hit, the one
+//!   most active lanes enter first is visited first (*near-to-far*).
+//! * **Exactness.** Rays, box slabs, sphere intersection and the tie rule mirror core's scalar
+//!   code operation by operation (no fused multiply-add, IEEE `sqrt` and division, NaN-aware
+//!   `min`/`max` like `f32::min`), and the tie rule makes the result independent of the visit
+//!   order: the image equals [`crate::ScalarTracer`]'s bit for bit (tested).
+
+use crate::threads::Threads;
+use crate::{begin_frame, shade, NO_HIT};
+use volwarp_core::lbvh::{Lbvh, LEAF_BIT};
+use volwarp_core::renderer::{Image, Renderer};
+use volwarp_core::sample::Dequantizer;
+use volwarp_core::traversal::STACK_SIZE;
+use volwarp_core::{Camera, RayBasis, Scene};
+use wide::{f32x8, u32x8};
+
+/// Packet width in pixels.
+pub const PACKET_W: u32 = 4;
+/// Packet height in pixels.
+pub const PACKET_H: u32 = 2;
+/// Rows per band, the unit of parallel work.
+pub const BAND_ROWS: u32 = 8;
+/// Width of a tile (a band is walked tile by tile).
+const TILE_W: u32 = 8;
+
+/// Eight primary rays sharing one origin.
+#[derive(Clone, Copy)]
+struct Packet {
+    o: [f32; 3],
+    d: [f32x8; 3],
+    inv: [f32x8; 3],
+}
+
+/// Lane `l` of a packet at `(x0, y0)` is pixel `(x0 + l % 4, y0 + l / 4)`.
+#[inline(always)]
+fn make_packet(b: &RayBasis, x0: u32, y0: u32) -> Packet {
+    // Exactly `RayBasis::dir`: px = x + 0.5, d = corner + du*px + dv*py, d * (1 / sqrt(d·d)).
+    let px = f32x8::new(core::array::from_fn(|l| (x0 + l as u32 % PACKET_W) as f32 + 0.5));
+    let py = f32x8::new(core::array::from_fn(|l| (y0 + l as u32 / PACKET_W) as f32 + 0.5));
+    let comp = |a: usize| f32x8::splat(b.corner[a]) + f32x8::splat(b.du[a]) * px + f32x8::splat(b.dv[a]) * py;
+    let (dx, dy, dz) = (comp(0), comp(1), comp(2));
+    let inv_len = f32x8::ONE / (dx * dx + dy * dy + dz * dz).sqrt();
+    let d = [dx * inv_len, dy * inv_len, dz * inv_len];
+    // Exactly `Vec3::ONE / ray.dir` of the scalar traversal.
+    let inv = [f32x8::ONE / d[0], f32x8::ONE / d[1], f32x8::ONE / d[2]];
+    Packet { o: [b.eye[0], b.eye[1], b.eye[2]], d, inv }
+}
+
+/// All lanes set.
+#[inline(always)]
+fn all_lanes() -> f32x8 {
+    bytemuck::cast(u32x8::splat(u32::MAX))
+}
+
+/// `sphere::intersect_box` for eight rays: the entry distances and the mask of lanes whose
+/// ray enters the box before `t_max`.
+#[inline(always)]
+fn box_test(p: &Packet, min: &[f32; 3], max: &[f32; 3], t_max: f32x8) -> (f32x8, f32x8) {
+    let tx1 = f32x8::splat(min[0] - p.o[0]) * p.inv[0];
+    let tx2 = f32x8::splat(max[0] - p.o[0]) * p.inv[0];
+    let ty1 = f32x8::splat(min[1] - p.o[1]) * p.inv[1];
+    let ty2 = f32x8::splat(max[1] - p.o[1]) * p.inv[1];
+    let tz1 = f32x8::splat(min[2] - p.o[2]) * p.inv[2];
+    let tz2 = f32x8::splat(max[2] - p.o[2]) * p.inv[2];
+    let t_near = tx1.min(tx2).max(ty1.min(ty2)).max(tz1.min(tz2)).max(f32x8::ZERO);
+    let t_far = tx1.max(tx2).min(ty1.max(ty2)).min(tz1.max(tz2)).min(t_max);
+    (t_near, t_near.simd_le(t_far))
+}
+
+/// The per-packet best hits: distance and primitive per lane ([`NO_HIT`] and +∞ for none).
+struct Best {
+    t: f32x8,
+    prim: u32x8,
+}
+
+/// `sphere::intersect` of sample `prim` for the `active` lanes, kept if closer by core's tie
+/// rule.
+#[inline(always)]
+fn test_sphere(p: &Packet, deq: &Dequantizer, s: u64, prim: u32, active: f32x8, best: &mut Best) {
+    let c = deq.center(s);
+    let r = deq.radius(s);
+    let ocx = c.x - p.o[0];
+    let ocy = c.y - p.o[1];
+    let ocz = c.z - p.o[2];
+    let (ox, oy, oz) = (f32x8::splat(ocx), f32x8::splat(ocy), f32x8::splat(ocz));
+    let b = ox * p.d[0] + oy * p.d[1] + oz * p.d[2];
+    let fx = ox - b * p.d[0];
+    let fy = oy - b * p.d[1];
+    let fz = oz - b * p.d[2];
+    let disc = f32x8::splat(r * r) - (fx * fx + fy * fy + fz * fz);
+    let ok = disc.simd_ge(f32x8::ZERO) & active;
+    if !ok.any() {
+        return;
+    }
+    let sq = disc.sqrt();
+    let t0 = b - sq;
+    let t1 = b + sq;
+    let front = t0.simd_gt(f32x8::ZERO);
+    let t = front.select(t0, t1);
+    let hit = ok & (front | t1.simd_gt(f32x8::ZERO));
+    let pv = u32x8::splat(prim);
+    let smaller: f32x8 = bytemuck::cast(pv.simd_lt(best.prim));
+    let better = hit & (t.simd_lt(best.t) | (t.simd_eq(best.t) & smaller));
+    best.t = better.select(t, best.t);
+    best.prim = bytemuck::cast::<f32x8, u32x8>(better).select(pv, best.prim);
+}
+
+/// A traversal stack, allocated once per band.
+struct Stack {
+    node: [u32; STACK_SIZE],
+    /// Entry distance per lane, NaN for lanes that do not enter the node.
+    t: [f32x8; STACK_SIZE],
+}
+
+impl Stack {
+    fn new() -> Box<Stack> {
+        Box::new(Stack { node: [0; STACK_SIZE], t: [f32x8::ZERO; STACK_SIZE] })
+    }
+}
+
+/// The first hit of each lane of the packet: sample ids, [`NO_HIT`] where none.
+#[inline(always)]
+fn trace_packet(l: &Lbvh, p: &Packet, stack: &mut Stack) -> u32x8 {
+    let n = l.samples.len();
+    let mut best = Best { t: f32x8::splat(f32::INFINITY), prim: u32x8::splat(NO_HIT) };
+    if n == 0 {
+        return best.prim;
+    }
+    if n == 1 {
+        test_sphere(p, &l.deq, l.samples[0], 0, all_lanes(), &mut best);
+        return best.prim;
+    }
+    let nan = f32x8::splat(f32::NAN);
+    let root = &l.nodes[0];
+    let (tn, hit) = box_test(p, &root.min, &root.max, f32x8::splat(f32::INFINITY));
+    if !hit.any() {
+        return best.prim;
+    }
+    stack.node[0] = 0;
+    stack.t[0] = hit.select(tn, nan);
+    let mut sp = 1;
+    while sp > 0 {
+        sp -= 1;
+        // Early exit: NaN (lane not entering) compares false, as do lanes already closer.
+        let active = stack.t[sp].simd_le(best.t);
+        if !active.any() {
+            continue;
+        }
+        let node = &l.nodes[stack.node[sp] as usize];
+        let mut cand = [(0u32, nan, f32x8::ZERO); 2];
+        let mut m = 0;
+        for child in [node.left, node.right] {
+            if child & LEAF_BIT != 0 {
+                let k = child & !LEAF_BIT;
+                test_sphere(p, &l.deq, l.samples[k as usize], k, active, &mut best);
+            } else {
+                let c = &l.nodes[child as usize];
+                let (tn, hit) = box_test(p, &c.min, &c.max, best.t);
+                let hit = hit & active;
+                if hit.any() {
+                    cand[m] = (child, hit.select(tn, nan), hit);
+                    m += 1;
+                }
+            }
+        }
+        if m == 2 {
+            // Near-to-far: visit first the child that most lanes hitting both enter first.
+            let both = cand[0].2 & cand[1].2;
+            let nb = both.to_bitmask().count_ones();
+            let right_first = (cand[1].1.simd_lt(cand[0].1) & both).to_bitmask().count_ones();
+            if 2 * right_first > nb {
+                cand.swap(0, 1);
+            }
+        }
+        // Far first, so the near child is popped first.
+        for &(child, t, _) in cand[..m].iter().rev() {
+            if sp < STACK_SIZE {
+                stack.node[sp] = child;
+                stack.t[sp] = t;
+                sp += 1;
+            }
+        }
+    }
+    best.prim
+}
+
+/// Traces band `band` (rows `band * BAND_ROWS ..`) of a `width`-wide image into `rows`,
+/// writing `map(id)` per pixel.
+fn trace_band(
+    l: &Lbvh,
+    basis: &RayBasis,
+    width: u32,
+    band: usize,
+    rows: &mut [u32],
+    map: &(impl Fn(u32) -> u32 + Sync),
+) {
+    let mut stack = Stack::new();
+    let h = (rows.len() / width as usize) as u32;
+    let y_base = band as u32 * BAND_ROWS;
+    for tx in (0..width).step_by(TILE_W as usize) {
+        for py in (0..h).step_by(PACKET_H as usize) {
+            for px in (tx..(tx + TILE_W).min(width)).step_by(PACKET_W as usize) {
+                let p = make_packet(basis, px, y_base + py);
+                let ids = trace_packet(l, &p, &mut stack).to_array();
+                for (lane, &id) in ids.iter().enumerate() {
+                    let (x, y) = (px + lane as u32 % PACKET_W, py + lane as u32 / PACKET_W);
+                    if x < width && y < h {
+                        rows[(y * width + x) as usize] = map(id);
+                    }
+                }
+            }
+        }
+    }
+}
+
+/// The SIMD packet tracer (renderer name `spheres-cpu`).
+#[derive(Debug)]
+pub struct PacketTracer {
+    threads: Threads,
+}
+
+impl PacketTracer {
+    /// A tracer on `threads` threads (0: one per core; 1 runs on the caller's thread).
+    pub fn new(threads: usize) -> Self {
+        PacketTracer { threads: Threads::new(threads) }
+    }
+
+    /// The number of threads it renders with.
+    pub fn threads(&self) -> usize {
+        self.threads.count()
+    }
+
+    /// Traces `camera`'s viewport into `ids` (row-major, resized): the sorted sample index of
+    /// each pixel's first hit, [`NO_HIT`] where none. Returns `false` (all [`NO_HIT`], or
+    /// empty for an unusable viewport) if the camera or scene is unusable.
+    pub fn trace_ids(&self, scene: &Scene, camera: &Camera, ids: &mut Vec<u32>) -> bool {
+        let mut img = Image { width: 0, height: 0, pixels: std::mem::take(ids) };
+        let ok = begin_frame(scene, camera, &mut img);
+        *ids = img.pixels;
+        ids.fill(NO_HIT);
+        if ok {
+            self.draw(scene, camera, ids, |id| id);
+        }
+        ok
+    }
+
+    fn draw(&self, scene: &Scene, camera: &Camera, out: &mut [u32], map: impl Fn(u32) -> u32 + Sync) {
+        let l = scene.lbvh();
+        let basis = camera.ray_basis();
+        let width = camera.width;
+        self.threads.for_each_chunk(out, (width * BAND_ROWS) as usize, |band, rows| {
+            trace_band(&l, &basis, width, band, rows, &map)
+        });
+    }
+}
+
+impl Default for PacketTracer {
+    /// One thread per core.
+    fn default() -> Self {
+        PacketTracer::new(0)
+    }
+}
+
+impl Renderer for PacketTracer {
+    fn name(&self) -> String {
+        "spheres-cpu".into()
+    }
+
+    fn render(&mut self, scene: &Scene, camera: &Camera, out: &mut Image) {
+        if begin_frame(scene, camera, out) {
+            let colors = &scene.colors;
+            self.draw(scene, camera, &mut out.pixels, |id| shade(colors, id));
+        }
+    }
+}
