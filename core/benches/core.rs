@@ -1,1 +1,88 @@
-fn main() {}
+//! `cargo bench -p volwarp-core`: the serial LBVH build over 623,584 samples from a
+//! depth-image-like surface on a 1024×1024 grid (the paper's count), and wire encode/decode
+//! throughput.
+
+use criterion::{criterion_group, criterion_main, BenchmarkId, Criterion, Throughput};
+use std::hint::black_box;
+use volwarp_core::camera::Camera;
+use volwarp_core::heuristics::Heuristic;
+use volwarp_core::sample::{pack_color, Bounds, Quantizer};
+use volwarp_core::wire::{self, Frame, FrameHeader, Limits, Message};
+use volwarp_core::{Scene, Vec3};
+
+/// The paper's sample count after compaction.
+const PAPER_SAMPLES: usize = 623_584;
+
+/// A bumpy height field seen from the front on a 1024² grid, keeping the first
+/// `PAPER_SAMPLES` pixels inside a disc (pixel order, like a compacted server frame).
+fn depth_image_frame() -> Frame {
+    let n = 1024usize;
+    let b = Bounds::new(Vec3::ZERO, Vec3::new(1.0, 1.0, 0.3));
+    let radius = 0.5 * 1.732 / n as f32;
+    let radius_unit = radius / 1023.0;
+    let q = Quantizer::new(b, radius_unit);
+    let mut samples = Vec::with_capacity(PAPER_SAMPLES);
+    let mut colors = Vec::with_capacity(PAPER_SAMPLES);
+    'outer: for y in 0..n {
+        for x in 0..n {
+            let (u, v) = ((x as f32 + 0.5) / n as f32, (y as f32 + 0.5) / n as f32);
+            let (du, dv) = (u - 0.5, v - 0.5);
+            if du * du + dv * dv > 0.2 {
+                continue;
+            }
+            let h = 0.15 + 0.1 * (u * 23.0).sin() * (v * 17.0).cos() + 0.03 * (u * 97.0 + v * 41.0).sin();
+            samples.push(q.pack(Vec3::new(u, 1.0 - v, h), radius));
+            colors.push(pack_color((u * 255.0) as u8, (v * 255.0) as u8, 128, 255));
+            if samples.len() == PAPER_SAMPLES {
+                break 'outer;
+            }
+        }
+    }
+    let camera = Camera::look_at(Vec3::new(0.5, 0.5, 3.0), Vec3::new(0.5, 0.5, 0.15), Vec3::Y, 20.0, 1024, 1024);
+    Frame {
+        header: FrameHeader {
+            seq: 1,
+            camera,
+            heuristic: Heuristic::Threshold,
+            bounds: b,
+            radius_unit,
+            render_us: 0,
+            count: samples.len() as u32,
+        },
+        samples,
+        colors,
+    }
+}
+
+fn bench(c: &mut Criterion) {
+    let frame = depth_image_frame();
+    eprintln!("samples: {}", frame.samples.len());
+    let mut g = c.benchmark_group("lbvh");
+    g.sample_size(10);
+    g.throughput(Throughput::Elements(frame.samples.len() as u64));
+    g.bench_function(BenchmarkId::new("serial_build", frame.samples.len()), |b| {
+        b.iter(|| black_box(Scene::build(black_box(&frame))))
+    });
+    g.finish();
+
+    let msg = Message::Frame(frame);
+    let bytes = wire::encode_to_vec(&msg);
+    let mut g = c.benchmark_group("wire");
+    g.sample_size(20);
+    g.throughput(Throughput::Bytes(bytes.len() as u64));
+    let mut buf = Vec::with_capacity(bytes.len());
+    g.bench_function("encode_frame", |b| {
+        b.iter(|| {
+            buf.clear();
+            wire::write_message(&mut wire::VecWriter(&mut buf), black_box(&msg)).unwrap();
+            black_box(buf.len())
+        })
+    });
+    g.bench_function("decode_frame", |b| {
+        b.iter(|| black_box(wire::read_message(&mut black_box(&bytes[..]), &Limits::default()).unwrap()))
+    });
+    g.finish();
+}
+
+criterion_group!(benches, bench);
+criterion_main!(benches);

@@ -325,12 +325,9 @@ mod tests {
         assert_eq!(Camera { fov_y_deg: 180.0, ..cam() }.validate(4096), Err(CameraError::BadFieldOfView));
         assert_eq!(Camera { width: 0, ..cam() }.validate(4096), Err(CameraError::BadViewport));
         assert_eq!(Camera { width: 5000, ..cam() }.validate(4096), Err(CameraError::BadViewport));
-        assert_eq!(
-            Camera { eye: Vec3::new(1e38, 0.0, 0.0), target: Vec3::new(-1e38, 0.0, 0.0), ..cam() }
-                .validate(4096)
-                .is_err(),
-            true
-        );
+        assert!(Camera { eye: Vec3::new(1e38, 0.0, 0.0), target: Vec3::new(-1e38, 0.0, 0.0), ..cam() }
+            .validate(4096)
+            .is_err());
     }
 
     #[test]

@@ -22,6 +22,8 @@
 //! conveniences and `std` only adds trait impls.
 #![no_std]
 #![deny(missing_docs)]
+// `!(x > y)` is deliberate throughout: unlike `x <= y` it is also true when x is NaN.
+#![allow(clippy::neg_cmp_op_on_partial_ord)]
 
 #[cfg(feature = "alloc")]
 extern crate alloc;

@@ -80,7 +80,7 @@ pub fn radix_sort(keys: &mut [SortKey], scratch: &mut [SortKey]) {
         for k in src.iter() {
             hist[((k.code >> shift) as usize) & (BUCKETS - 1)] += 1;
         }
-        if hist.iter().any(|&h| h == n) {
+        if hist.contains(&n) {
             continue; // every key has the same digit: the pass would not move anything
         }
         let mut sum = 0;

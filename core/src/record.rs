@@ -7,7 +7,7 @@
 //! wire message (header and payload, exactly the bytes of [`crate::wire`]): a `Frame` for kind
 //! 1, a `CameraRequest` for kind 2.
 
-use crate::wire::{self, Limits, WireError};
+use crate::wire::WireError;
 use embedded_io::{Read, Write};
 
 /// Magic bytes that start a record file.
@@ -106,7 +106,7 @@ pub use owned::*;
 #[cfg(feature = "alloc")]
 mod owned {
     use super::*;
-    use crate::wire::{CameraRequest, Frame, Message};
+    use crate::wire::{self, CameraRequest, Frame, Limits, Message};
 
     /// One decoded entry.
     #[derive(Clone, Debug, PartialEq)]

@@ -35,8 +35,15 @@ pub fn intersect(o: Vec3, d: Vec3, c: Vec3, r: f32) -> Option<f32> {
     }
 }
 
+/// Factor `1 + 2γ₃` (γₙ = nε / (1 − nε), ε = 2⁻²⁴) by which [`intersect_box`] widens its far
+/// bound, so that rounding in the slab test never culls a box the ray touches (Ize, *Robust BVH
+/// Ray Traversal*, JCGT 2013). Without it a sphere far smaller than the rounding of the ray
+/// parameter (found by the `lbvh` fuzz target) is hit by brute force but culled by its box.
+pub const BOX_T_FAR_SCALE: f32 = 1.000_000_4;
+
 /// Slab test: the entry parameter of the ray into the box, if it enters before `t_max` and the
-/// box is not behind the ray. `inv_d` is `1 / d` per component (may be infinite).
+/// box is not behind the ray. `inv_d` is `1 / d` per component (may be infinite). Conservative:
+/// the far bound (and `t_max`) are scaled by [`BOX_T_FAR_SCALE`].
 #[inline(always)]
 pub fn intersect_box(o: Vec3, inv_d: Vec3, min: [f32; 3], max: [f32; 3], t_max: f32) -> Option<f32> {
     let tx1 = (min[0] - o.x) * inv_d.x;
@@ -46,7 +53,7 @@ pub fn intersect_box(o: Vec3, inv_d: Vec3, min: [f32; 3], max: [f32; 3], t_max: 
     let tz1 = (min[2] - o.z) * inv_d.z;
     let tz2 = (max[2] - o.z) * inv_d.z;
     let t_near = tx1.min(tx2).max(ty1.min(ty2)).max(tz1.min(tz2)).max(0.0);
-    let t_far = tx1.max(tx2).min(ty1.max(ty2)).min(tz1.max(tz2)).min(t_max);
+    let t_far = (tx1.max(tx2).min(ty1.max(ty2)).min(tz1.max(tz2)) * BOX_T_FAR_SCALE).min(t_max * BOX_T_FAR_SCALE);
     if t_near <= t_far {
         Some(t_near)
     } else {

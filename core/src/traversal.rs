@@ -58,9 +58,7 @@ impl Lbvh<'_> {
         let inv = Vec3::ONE / ray.dir;
         let t_max = |b: &Option<Hit>| b.map_or(f32::INFINITY, |h| h.t);
         let root = &self.nodes[0];
-        if intersect_box(ray.origin, inv, root.min, root.max, f32::INFINITY).is_none() {
-            return None;
-        }
+        intersect_box(ray.origin, inv, root.min, root.max, f32::INFINITY)?;
         let mut stack = [0u32; STACK_SIZE];
         let mut sp = 1;
         while sp > 0 {

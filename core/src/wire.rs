@@ -522,7 +522,7 @@ pub fn parse_header(h: &[u8; HEADER_LEN], limits: &Limits) -> Result<Header, Wir
         MsgType::Hello => (9..=9 + MAX_TOKEN as u32).contains(&len),
         MsgType::CameraRequest => len == CAMERA_REQUEST_LEN as u32,
         MsgType::Frame => {
-            len >= FRAME_FIXED_LEN as u32 && (len - FRAME_FIXED_LEN as u32) % BYTES_PER_SAMPLE as u32 == 0
+            len >= FRAME_FIXED_LEN as u32 && (len - FRAME_FIXED_LEN as u32).is_multiple_of(BYTES_PER_SAMPLE as u32)
         }
         MsgType::Error => (4..=4 + MAX_ERROR_TEXT as u32).contains(&len),
         MsgType::Bye => len == 0,
