@@ -1,0 +1,28 @@
+#!/usr/bin/env bash
+# Installs what building and testing volwarp needs on a fresh Debian machine (run as root, or
+# with sudo available). Idempotent: skips what is already there.
+set -euo pipefail
+cd "$(dirname "$0")/.."
+
+SUDO=""
+if [ "$(id -u)" != 0 ] && command -v sudo >/dev/null; then SUDO=sudo; fi
+
+# System packages: lavapipe (software Vulkan) for the GPU tests, Xvfb for the window test.
+need=()
+for p in mesa-vulkan-drivers libvulkan1 xvfb xauth x11-apps; do
+  dpkg -s "$p" >/dev/null 2>&1 || need+=("$p")
+done
+if [ ${#need[@]} -gt 0 ]; then
+  echo "setup: installing ${need[*]}"
+  $SUDO apt-get update -qq
+  DEBIAN_FRONTEND=noninteractive $SUDO apt-get install -y -qq --no-install-recommends "${need[@]}" >/dev/null
+fi
+
+# The no_std target core is checked for.
+rustup target list --installed | grep -q thumbv7em-none-eabihf || rustup target add thumbv7em-none-eabihf
+
+# Fuzz smoke runs need cargo-fuzz and a nightly toolchain.
+if [ "${VOLWARP_NO_FUZZ:-0}" != 1 ]; then
+  rustup toolchain list | grep -q nightly || rustup toolchain install nightly --profile minimal
+  command -v cargo-fuzz >/dev/null || cargo install cargo-fuzz --locked
+fi

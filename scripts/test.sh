@@ -1,0 +1,32 @@
+#!/usr/bin/env bash
+# The one command that passes every test of volwarp: installs what it needs, then checks
+# formatting, lints, the no_std build of core, the whole test suite (GPU tests on lavapipe,
+# the window test under Xvfb) and a short run of every fuzz target.
+set -euo pipefail
+cd "$(dirname "$0")/.."
+export CARGO_TERM_COLOR=never
+
+scripts/setup.sh
+
+# Software Vulkan for the GPU tests; a private runtime dir keeps Mesa quiet.
+export VK_DRIVER_FILES=/usr/share/vulkan/icd.d/lvp_icd.x86_64.json
+export XDG_RUNTIME_DIR="${XDG_RUNTIME_DIR:-/tmp/volwarp-xdg-$$}"
+mkdir -p "$XDG_RUNTIME_DIR" && chmod 700 "$XDG_RUNTIME_DIR"
+
+echo "== cargo fmt --check"
+cargo fmt --all --check
+
+echo "== cargo clippy --all-targets -- -D warnings"
+cargo clippy --workspace --all-targets -- -D warnings
+
+echo "== no_std build of volwarp-core for thumbv7em-none-eabihf"
+cargo build -p volwarp-core --no-default-features --target thumbv7em-none-eabihf
+
+echo "== tests (window tests under Xvfb)"
+xvfb-run -a -s "-screen 0 1280x1024x24" cargo test --workspace
+
+if [ "${VOLWARP_NO_FUZZ:-0}" != 1 ]; then
+  echo "== fuzz smoke"
+  scripts/fuzz-smoke.sh "${VOLWARP_FUZZ_SECONDS:-30}"
+fi
+echo "== all checks passed"
