@@ -1,3 +1,85 @@
-//! wgpu compute tracer of volwarp scenes (in progress).
+//! # volwarp-gpu-tracer
 //!
-//! Nothing here yet: this crate is a placeholder member of the workspace.
+//! The GPU path of volwarp's client (Zellmann 2020, §4): first-hit ray tracing of the
+//! object-space samples as spheres through the core LBVH, and the LBVH build itself, as wgpu
+//! compute shaders. Runs on any adapter wgpu can open (Vulkan, Metal, DX12, GL), including
+//! software Vulkan (lavapipe) where there is no GPU.
+//!
+//! | module | concept |
+//! |---|---|
+//! | [`adapter`] | picking a GPU (a real one first, a software one as the fallback) |
+//! | [`tracer`] | [`GpuTracer`]: the sphere tracer (`trace.wgsl`), a [`Renderer`] named `spheres-gpu` |
+//! | [`lbvh`] | the LBVH build on the GPU (`lbvh.wgsl`): Morton codes, radix sort, Karras, fit |
+//! | [`buffers`] | buffers reused across frames, readback |
+//! | [`reference`] | the scalar CPU renderer from core's `Lbvh::trace`, the oracle of the tests |
+//! | [`compare`] | CPU vs GPU image comparison: identical share, largest difference, PNGs |
+//! | [`synthetic`] | synthetic sample clouds (a bumpy surface) for tests and benchmarks |
+//!
+//! The shader mirrors core's ray formula, sample decoding, `sphere::intersect` operation by
+//! operation and the tie rule (equal `t`: the smaller primitive index wins), so it draws the
+//! CPU's image on all but the rare pixels where a GPU fuses a multiply-add (see
+//! `docs/gpu-tracer.md`).
+//!
+//! [`Renderer`]: volwarp_core::Renderer
+#![deny(missing_docs)]
+
+pub mod adapter;
+pub mod buffers;
+pub mod compare;
+pub mod lbvh;
+pub mod reference;
+pub mod synthetic;
+pub mod tracer;
+
+pub use adapter::GpuContext;
+pub use tracer::{BuildTiming, GpuTracer};
+
+/// Why the GPU tracer could not do its work.
+#[derive(Clone, Debug, PartialEq, Eq)]
+pub enum GpuError {
+    /// No usable adapter (the text says what to install).
+    NoAdapter(String),
+    /// The device could not be opened or waited on.
+    Device(String),
+    /// A shader did not compile or a pipeline was invalid.
+    Shader(String),
+    /// wgpu reported a validation or out-of-memory error.
+    Wgpu(String),
+    /// A buffer would exceed the device's limit.
+    TooLarge {
+        /// Which buffer.
+        what: &'static str,
+        /// Bytes needed.
+        bytes: u64,
+        /// The device limit.
+        limit: u64,
+    },
+    /// The camera is unusable.
+    BadCamera(volwarp_core::CameraError),
+    /// The scene or frame is inconsistent.
+    BadScene(&'static str),
+    /// Mapping a buffer for readback failed.
+    Readback(String),
+    /// A bug: an invariant of this crate did not hold.
+    Internal(&'static str),
+}
+
+impl std::fmt::Display for GpuError {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        match self {
+            GpuError::NoAdapter(s) => write!(f, "no GPU adapter: {s}"),
+            GpuError::Device(s) => write!(f, "GPU device: {s}"),
+            GpuError::Shader(s) => write!(f, "GPU shader: {s}"),
+            GpuError::Wgpu(s) => write!(f, "wgpu: {s}"),
+            GpuError::TooLarge { what, bytes, limit } => {
+                write!(f, "{what} needs {bytes} bytes, over the device's limit of {limit}")
+            }
+            GpuError::BadCamera(e) => write!(f, "camera: {e}"),
+            GpuError::BadScene(s) => write!(f, "scene: {s}"),
+            GpuError::Readback(s) => write!(f, "GPU readback: {s}"),
+            GpuError::Internal(s) => write!(f, "internal error: {s}"),
+        }
+    }
+}
+
+impl std::error::Error for GpuError {}

@@ -1,0 +1,149 @@
+//! Picking a GPU: any adapter wgpu can open (Vulkan, Metal, DX12, GL), a real GPU preferred,
+//! a software one (lavapipe/llvmpipe, WARP) as the fallback, and a clear error when there is none.
+
+use crate::GpuError;
+use std::sync::{Arc, Mutex};
+
+/// An opened device and its queue, with what was chosen.
+pub struct GpuContext {
+    /// The adapter the device was opened on.
+    pub adapter: wgpu::Adapter,
+    /// The logical device.
+    pub device: wgpu::Device,
+    /// Its queue.
+    pub queue: wgpu::Queue,
+    /// Name, backend and type of the adapter.
+    pub info: wgpu::AdapterInfo,
+    /// The limits the device was opened with (the adapter's own).
+    pub limits: wgpu::Limits,
+    /// Errors wgpu reported outside any error scope since the last [`GpuContext::take_error`].
+    uncaptured: Arc<Mutex<Option<String>>>,
+}
+
+/// Preference order of device types: a discrete GPU first, a software rasterizer last.
+fn rank(t: wgpu::DeviceType) -> u32 {
+    match t {
+        wgpu::DeviceType::DiscreteGpu => 0,
+        wgpu::DeviceType::IntegratedGpu => 1,
+        wgpu::DeviceType::VirtualGpu => 2,
+        wgpu::DeviceType::Other => 3,
+        wgpu::DeviceType::Cpu => 4,
+    }
+}
+
+/// Preference among backends for the same device: the native APIs before GL.
+fn backend_rank(b: wgpu::Backend) -> u32 {
+    match b {
+        wgpu::Backend::Vulkan | wgpu::Backend::Metal | wgpu::Backend::Dx12 => 0,
+        _ => 1,
+    }
+}
+
+impl GpuContext {
+    /// Opens the best adapter there is. Honours wgpu's `WGPU_BACKEND` (e.g. `vulkan`, `gl`) and
+    /// `WGPU_ADAPTER_NAME` environment variables.
+    pub fn new() -> Result<GpuContext, GpuError> {
+        // Native APIs first; GL (through EGL) only when they offer nothing, which also keeps
+        // EGL's start-up complaints out of the log on machines with Vulkan.
+        let mut adapters = Vec::new();
+        for backends in [wgpu::Backends::PRIMARY, wgpu::Backends::SECONDARY] {
+            let desc = wgpu::InstanceDescriptor { backends, ..wgpu::InstanceDescriptor::new_without_display_handle() };
+            let desc = desc.with_env();
+            let instance = wgpu::Instance::new(desc);
+            adapters = pollster::block_on(instance.enumerate_adapters(wgpu::Backends::all()));
+            if !adapters.is_empty() {
+                break;
+            }
+        }
+        let wanted_name = std::env::var("WGPU_ADAPTER_NAME").ok().map(|s| s.to_lowercase());
+        if let Some(w) = &wanted_name {
+            adapters.retain(|a| a.get_info().name.to_lowercase().contains(w.as_str()));
+        }
+        // Compute shaders are all we need; drop adapters that cannot run them.
+        adapters.retain(|a| a.get_downlevel_capabilities().flags.contains(wgpu::DownlevelFlags::COMPUTE_SHADERS));
+        for a in &adapters {
+            let i = a.get_info();
+            log::debug!("found adapter {:?} ({:?}, {:?})", i.name, i.backend, i.device_type);
+        }
+        adapters.sort_by_key(|a| {
+            let i = a.get_info();
+            (rank(i.device_type), backend_rank(i.backend))
+        });
+        let mut last_err = None;
+        for adapter in adapters {
+            match Self::open(adapter) {
+                Ok(ctx) => return Ok(ctx),
+                Err(e) => {
+                    log::warn!("{e}");
+                    last_err = Some(e);
+                }
+            }
+        }
+        Err(last_err.unwrap_or_else(|| {
+            GpuError::NoAdapter(
+                "no GPU adapter with compute shaders found (wgpu tried Vulkan, Metal, DX12 and GL); on Linux \
+                 without a GPU install a software driver, e.g. `apt-get install mesa-vulkan-drivers libvulkan1` \
+                 (lavapipe)"
+                    .into(),
+            )
+        }))
+    }
+
+    fn open(adapter: wgpu::Adapter) -> Result<GpuContext, GpuError> {
+        let info = adapter.get_info();
+        let limits = adapter.limits();
+        let desc = wgpu::DeviceDescriptor {
+            label: Some("volwarp-gpu-tracer"),
+            required_features: wgpu::Features::empty(),
+            required_limits: limits.clone(),
+            experimental_features: wgpu::ExperimentalFeatures::disabled(),
+            memory_hints: wgpu::MemoryHints::Performance,
+            trace: wgpu::Trace::Off,
+        };
+        let (device, queue) = pollster::block_on(adapter.request_device(&desc))
+            .map_err(|e| GpuError::Device(format!("adapter {:?} ({:?}): {e}", info.name, info.backend)))?;
+        let uncaptured = Arc::new(Mutex::new(None));
+        let sink = uncaptured.clone();
+        device.on_uncaptured_error(Arc::new(move |e: wgpu::Error| {
+            log::error!("wgpu: {e}");
+            if let Ok(mut s) = sink.lock() {
+                s.get_or_insert_with(|| e.to_string());
+            }
+        }));
+        log::info!(
+            "GPU adapter: {} ({:?}, {:?}, driver {} {})",
+            info.name,
+            info.backend,
+            info.device_type,
+            info.driver,
+            info.driver_info
+        );
+        Ok(GpuContext { adapter, device, queue, info, limits, uncaptured })
+    }
+
+    /// A one-line description: name, backend and type.
+    pub fn describe(&self) -> String {
+        format!("{} ({:?}, {:?})", self.info.name, self.info.backend, self.info.device_type)
+    }
+
+    /// Takes the first error wgpu reported outside an error scope, if any.
+    pub fn take_error(&self) -> Option<String> {
+        self.uncaptured.lock().ok().and_then(|mut s| s.take())
+    }
+
+    /// Blocks until the queue is idle.
+    pub fn wait(&self) -> Result<(), GpuError> {
+        self.device.poll(wgpu::PollType::wait_indefinitely()).map(|_| ()).map_err(|e| GpuError::Device(e.to_string()))
+    }
+
+    /// Largest storage buffer binding, in bytes.
+    pub fn max_binding(&self) -> u64 {
+        self.limits.max_storage_buffer_binding_size.min(self.limits.max_buffer_size)
+    }
+}
+
+impl std::fmt::Debug for GpuContext {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.debug_struct("GpuContext").field("adapter", &self.describe()).finish()
+    }
+}

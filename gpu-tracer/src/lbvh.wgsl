@@ -1,0 +1,392 @@
+// The LBVH build on the GPU, step for step the one of `volwarp_core::lbvh::build`:
+//
+// 1. `make_keys`: Morton code of each packed sample (all 54 bits, as two u32 words) and its
+//    index, laid out exactly like `volwarp_core::morton::SortKey` (code lo, code hi, index, 0);
+// 2. a stable LSD radix sort over 7 passes of 8 bits (`radix_count`, `scan_blocks`/`scan_add`,
+//    `radix_scatter`), so keys end up ordered by (code, index), exactly the CPU order;
+// 3. `reorder`: samples and colors into leaf order;
+// 4. `karras`: children and parent links of every internal node (Karras 2012), the same
+//    δ with the index tie-break as `lbvh::karras_node`;
+// 5. `fit`: bottom-up boxes, one thread per leaf, the second arrival at a node fits it
+//    (`lbvh::fit_from_leaf`), counted with atomics.
+//
+// 1-D kernels may be dispatched as a 2-D grid (to stay under the 65535 workgroups-per-dimension
+// limit); `linear_id` folds it back.
+
+struct BuildParams {
+    n: u32,
+    shift: u32,
+    tiles: u32,
+    count: u32,
+    // Dequantizer: min.xyz, step.xyz, radius unit in step.w.
+    deq_min: vec4<f32>,
+    deq_step: vec4<f32>,
+}
+
+struct Node {
+    min: vec3<f32>,
+    left: u32,
+    max: vec3<f32>,
+    right: u32,
+}
+
+@group(0) @binding(0) var<uniform> P: BuildParams;
+@group(0) @binding(1) var<storage, read> samples_in: array<vec2<u32>>;
+@group(0) @binding(2) var<storage, read> colors_in: array<u32>;
+@group(0) @binding(3) var<storage, read> keys_src: array<vec4<u32>>;
+@group(0) @binding(4) var<storage, read_write> keys_dst: array<vec4<u32>>;
+@group(0) @binding(5) var<storage, read_write> hist: array<u32>;
+@group(0) @binding(6) var<storage, read_write> scan_data: array<u32>;
+@group(0) @binding(7) var<storage, read_write> scan_sums: array<u32>;
+@group(0) @binding(8) var<storage, read_write> samples_out: array<vec2<u32>>;
+@group(0) @binding(9) var<storage, read_write> colors_out: array<u32>;
+@group(0) @binding(10) var<storage, read_write> nodes: array<Node>;
+@group(0) @binding(11) var<storage, read_write> parents: array<u32>;
+@group(0) @binding(12) var<storage, read_write> flags: array<atomic<u32>>;
+// Fitted boxes, 6 words per node (min.xyz, max.xyz as f32 bits), read and written only with
+// atomics so a fitter sees the boxes other invocations wrote in the same dispatch.
+@group(0) @binding(13) var<storage, read_write> boxes: array<atomic<u32>>;
+
+const LEAF_BIT: u32 = 0x80000000u;
+const NO_PARENT: u32 = 0xffffffffu;
+const POS_MASK: u32 = 0x3ffffu;
+// Keys per radix tile (one invocation walks its tile serially, which keeps the sort stable).
+const TILE: u32 = 128u;
+const BUCKETS: u32 = 256u;
+const SCAN_BLOCK: u32 = 256u;
+
+fn linear_id(wid: vec3<u32>, nwg: vec3<u32>, lidx: u32, wg_size: u32) -> u32 {
+    return (wid.y * nwg.x + wid.x) * wg_size + lidx;
+}
+
+// ---- 1. Morton keys --------------------------------------------------------------------------
+
+fn coords(s: vec2<u32>) -> vec3<u32> {
+    let x = s.x & POS_MASK;
+    let y = (s.x >> 18u) | ((s.y & 0xfu) << 14u);
+    let z = (s.y >> 4u) & POS_MASK;
+    return vec3<u32>(x, y, z);
+}
+
+@compute @workgroup_size(64)
+fn make_keys(
+    @builtin(workgroup_id) wid: vec3<u32>,
+    @builtin(num_workgroups) nwg: vec3<u32>,
+    @builtin(local_invocation_index) lidx: u32,
+) {
+    let i = linear_id(wid, nwg, lidx, 64u);
+    if i >= P.n {
+        return;
+    }
+    var q = coords(samples_in[i]);
+    // Bit b of axis a goes to code bit 3b + a (`morton::encode`), 54 bits over two words.
+    var lo = 0u;
+    var hi = 0u;
+    for (var b = 0u; b < 18u; b++) {
+        for (var a = 0u; a < 3u; a++) {
+            let bit = (q[a] >> b) & 1u;
+            let pos = 3u * b + a;
+            if pos < 32u {
+                lo |= bit << pos;
+            } else {
+                hi |= bit << (pos - 32u);
+            }
+        }
+    }
+    keys_dst[i] = vec4<u32>(lo, hi, i, 0u);
+}
+
+// ---- 2. stable LSD radix sort ----------------------------------------------------------------
+
+fn digit(k: vec4<u32>, shift: u32) -> u32 {
+    var v: u32;
+    if shift == 0u {
+        v = k.x;
+    } else if shift < 32u {
+        v = (k.x >> shift) | (k.y << (32u - shift));
+    } else {
+        v = k.y >> (shift - 32u);
+    }
+    return v & (BUCKETS - 1u);
+}
+
+// Counts the digits of tile t into column t of the digit-major histogram `hist[d * tiles + t]`,
+// whose exclusive prefix sum is then every (digit, tile)'s first output position.
+@compute @workgroup_size(64)
+fn radix_count(
+    @builtin(workgroup_id) wid: vec3<u32>,
+    @builtin(num_workgroups) nwg: vec3<u32>,
+    @builtin(local_invocation_index) lidx: u32,
+) {
+    let t = linear_id(wid, nwg, lidx, 64u);
+    if t >= P.tiles {
+        return;
+    }
+    for (var d = 0u; d < BUCKETS; d++) {
+        hist[d * P.tiles + t] = 0u;
+    }
+    let start = t * TILE;
+    let end = min(start + TILE, P.n);
+    for (var i = start; i < end; i++) {
+        let d = digit(keys_src[i], P.shift);
+        hist[d * P.tiles + t] += 1u;
+    }
+}
+
+// Walks tile t in order and scatters each key to its digit's next slot: stable.
+@compute @workgroup_size(64)
+fn radix_scatter(
+    @builtin(workgroup_id) wid: vec3<u32>,
+    @builtin(num_workgroups) nwg: vec3<u32>,
+    @builtin(local_invocation_index) lidx: u32,
+) {
+    let t = linear_id(wid, nwg, lidx, 64u);
+    if t >= P.tiles {
+        return;
+    }
+    let start = t * TILE;
+    let end = min(start + TILE, P.n);
+    for (var i = start; i < end; i++) {
+        let k = keys_src[i];
+        let slot = digit(k, P.shift) * P.tiles + t;
+        let pos = hist[slot];
+        hist[slot] = pos + 1u;
+        keys_dst[pos] = k;
+    }
+}
+
+var<workgroup> scan_shared: array<u32, 256>;
+
+// Exclusive prefix sum of each block of 256 values of `scan_data` (first `P.count`), in place;
+// the block's total goes to `scan_sums[block]`.
+@compute @workgroup_size(256)
+fn scan_blocks(
+    @builtin(workgroup_id) wid: vec3<u32>,
+    @builtin(num_workgroups) nwg: vec3<u32>,
+    @builtin(local_invocation_index) lidx: u32,
+) {
+    let block = wid.y * nwg.x + wid.x;
+    let i = block * SCAN_BLOCK + lidx;
+    var v = 0u;
+    if i < P.count {
+        v = scan_data[i];
+    }
+    scan_shared[lidx] = v;
+    workgroupBarrier();
+    for (var off = 1u; off < SCAN_BLOCK; off <<= 1u) {
+        var add = 0u;
+        if lidx >= off {
+            add = scan_shared[lidx - off];
+        }
+        workgroupBarrier();
+        scan_shared[lidx] += add;
+        workgroupBarrier();
+    }
+    if i < P.count {
+        scan_data[i] = scan_shared[lidx] - v;
+    }
+    let blocks = (P.count + SCAN_BLOCK - 1u) / SCAN_BLOCK;
+    if lidx == SCAN_BLOCK - 1u && block < blocks {
+        scan_sums[block] = scan_shared[lidx];
+    }
+}
+
+// Adds each block's offset (the scanned block totals) to its values.
+@compute @workgroup_size(256)
+fn scan_add(
+    @builtin(workgroup_id) wid: vec3<u32>,
+    @builtin(num_workgroups) nwg: vec3<u32>,
+    @builtin(local_invocation_index) lidx: u32,
+) {
+    let i = linear_id(wid, nwg, lidx, SCAN_BLOCK);
+    if i < P.count {
+        scan_data[i] += scan_sums[i / SCAN_BLOCK];
+    }
+}
+
+// ---- 3. samples and colors into leaf order ---------------------------------------------------
+
+@compute @workgroup_size(64)
+fn reorder(
+    @builtin(workgroup_id) wid: vec3<u32>,
+    @builtin(num_workgroups) nwg: vec3<u32>,
+    @builtin(local_invocation_index) lidx: u32,
+) {
+    let k = linear_id(wid, nwg, lidx, 64u);
+    if k >= P.n {
+        return;
+    }
+    let src = keys_src[k].z;
+    samples_out[k] = samples_in[src];
+    colors_out[k] = colors_in[src];
+}
+
+// ---- 4. Karras hierarchy ---------------------------------------------------------------------
+
+// δ(i, j): common prefix length of keys i and j (64-bit codes), 64 + clz(i ^ j) on equal codes,
+// -1 outside 0..n.
+fn delta(i: i32, j: i32) -> i32 {
+    if j < 0 || j >= i32(P.n) {
+        return -1;
+    }
+    let a = keys_src[i].xy;
+    let b = keys_src[j].xy;
+    if a.x == b.x && a.y == b.y {
+        return 64 + i32(countLeadingZeros(u32(i) ^ u32(j)));
+    }
+    if a.y != b.y {
+        return i32(countLeadingZeros(a.y ^ b.y));
+    }
+    return 32 + i32(countLeadingZeros(a.x ^ b.x));
+}
+
+fn parent_slot(child: u32) -> u32 {
+    if (child & LEAF_BIT) != 0u {
+        return P.n - 1u + (child & ~LEAF_BIT);
+    }
+    return child;
+}
+
+@compute @workgroup_size(64)
+fn karras(
+    @builtin(workgroup_id) wid: vec3<u32>,
+    @builtin(num_workgroups) nwg: vec3<u32>,
+    @builtin(local_invocation_index) lidx: u32,
+) {
+    let iu = linear_id(wid, nwg, lidx, 64u);
+    if iu + 1u >= P.n {
+        return;
+    }
+    let i = i32(iu);
+    var d = -1;
+    if delta(i, i + 1) - delta(i, i - 1) >= 0 {
+        d = 1;
+    }
+    let d_min = delta(i, i - d);
+    var l_max = 2;
+    while delta(i, i + l_max * d) > d_min {
+        l_max *= 2;
+    }
+    var l = 0;
+    var t = l_max / 2;
+    while t >= 1 {
+        if delta(i, i + (l + t) * d) > d_min {
+            l += t;
+        }
+        t /= 2;
+    }
+    let j = i + l * d;
+    let d_node = delta(i, j);
+    var s = 0;
+    var div = 2;
+    loop {
+        let tt = (l + div - 1) / div;
+        if delta(i, i + (s + tt) * d) > d_node {
+            s += tt;
+        }
+        if tt <= 1 {
+            break;
+        }
+        div *= 2;
+    }
+    let gamma = i + s * d + min(d, 0);
+    var left = u32(gamma);
+    if min(i, j) == gamma {
+        left |= LEAF_BIT;
+    }
+    var right = u32(gamma + 1);
+    if max(i, j) == gamma + 1 {
+        right |= LEAF_BIT;
+    }
+    nodes[iu].left = left;
+    nodes[iu].right = right;
+    parents[parent_slot(left)] = iu;
+    parents[parent_slot(right)] = iu;
+    if iu == 0u {
+        parents[0] = NO_PARENT;
+    }
+}
+
+// ---- 5. bottom-up fit ------------------------------------------------------------------------
+
+fn center(s: vec2<u32>) -> vec3<f32> {
+    let q = coords(s);
+    return vec3<f32>(
+        P.deq_min.x + f32(q.x) * P.deq_step.x,
+        P.deq_min.y + f32(q.y) * P.deq_step.y,
+        P.deq_min.z + f32(q.z) * P.deq_step.z,
+    );
+}
+
+struct Box {
+    lo: vec3<f32>,
+    hi: vec3<f32>,
+}
+
+// `sphere::sphere_box`: [c − r, c + r] widened by a relative 2⁻²⁰.
+fn leaf_box(k: u32) -> Box {
+    let s = samples_out[k];
+    let c = center(s);
+    let r = f32(s.y >> 22u) * P.deq_step.w;
+    let k20 = 1.0 / 1048576.0;
+    let pad = vec3<f32>((abs(c.x) + r) * k20, (abs(c.y) + r) * k20, (abs(c.z) + r) * k20);
+    return Box(
+        vec3<f32>(c.x - r - pad.x, c.y - r - pad.y, c.z - r - pad.z),
+        vec3<f32>(c.x + r + pad.x, c.y + r + pad.y, c.z + r + pad.z),
+    );
+}
+
+fn child_box(child: u32) -> Box {
+    if (child & LEAF_BIT) != 0u {
+        return leaf_box(child & ~LEAF_BIT);
+    }
+    let b = child * 6u;
+    return Box(
+        vec3<f32>(
+            bitcast<f32>(atomicLoad(&boxes[b])),
+            bitcast<f32>(atomicLoad(&boxes[b + 1u])),
+            bitcast<f32>(atomicLoad(&boxes[b + 2u])),
+        ),
+        vec3<f32>(
+            bitcast<f32>(atomicLoad(&boxes[b + 3u])),
+            bitcast<f32>(atomicLoad(&boxes[b + 4u])),
+            bitcast<f32>(atomicLoad(&boxes[b + 5u])),
+        ),
+    );
+}
+
+@compute @workgroup_size(64)
+fn fit(
+    @builtin(workgroup_id) wid: vec3<u32>,
+    @builtin(num_workgroups) nwg: vec3<u32>,
+    @builtin(local_invocation_index) lidx: u32,
+) {
+    let k = linear_id(wid, nwg, lidx, 64u);
+    if k >= P.n {
+        return;
+    }
+    var p = parents[P.n - 1u + k];
+    // At most one walk per level; the bound only guards against a corrupt tree.
+    for (var guard = 0u; guard < 256u; guard++) {
+        if p == NO_PARENT {
+            return;
+        }
+        if atomicAdd(&flags[p], 1u) == 0u {
+            return; // first arrival: the sibling's walk fits this node
+        }
+        let a = child_box(nodes[p].left);
+        let b = child_box(nodes[p].right);
+        let lo = min(a.lo, b.lo);
+        let hi = max(a.hi, b.hi);
+        let o = p * 6u;
+        atomicStore(&boxes[o], bitcast<u32>(lo.x));
+        atomicStore(&boxes[o + 1u], bitcast<u32>(lo.y));
+        atomicStore(&boxes[o + 2u], bitcast<u32>(lo.z));
+        atomicStore(&boxes[o + 3u], bitcast<u32>(hi.x));
+        atomicStore(&boxes[o + 4u], bitcast<u32>(hi.y));
+        atomicStore(&boxes[o + 5u], bitcast<u32>(hi.z));
+        nodes[p].min = lo;
+        nodes[p].max = hi;
+        p = parents[p];
+    }
+}

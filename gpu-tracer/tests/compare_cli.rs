@@ -1,0 +1,62 @@
+//! `volwarp-compare` end to end on a small record file (synthetic frames plus displayed
+//! cameras). Needs a GPU adapter (lavapipe in CI); `VOLWARP_SKIP_GPU=1` skips it explicitly.
+
+use std::process::Command;
+use volwarp_core::record::{write_entry, write_magic, Entry};
+use volwarp_core::wire::{CameraRequest, VecWriter};
+use volwarp_gpu_tracer::synthetic::bumpy_surface;
+
+#[test]
+fn compare_replays_a_record_file() {
+    if std::env::var("VOLWARP_SKIP_GPU").is_ok_and(|v| v == "1") {
+        eprintln!("VOLWARP_SKIP_GPU=1: GPU test skipped");
+        return;
+    }
+    let dir = std::env::temp_dir().join(format!("volwarp-compare-test-{}", std::process::id()));
+    std::fs::create_dir_all(&dir).unwrap();
+    let mut bytes = Vec::new();
+    let mut w = VecWriter(&mut bytes);
+    write_magic(&mut w).unwrap();
+    // Frame 0 with two displayed cameras, frame 1 with none (its own camera orbited 10°).
+    let f0 = bumpy_surface(96, 1.5, 1);
+    let cam = f0.header.camera;
+    write_entry(&mut w, &Entry::Frame { t_us: 0, frame: f0 }).unwrap();
+    for (i, yaw) in [5.0f32, 12.0].into_iter().enumerate() {
+        let request = CameraRequest {
+            seq: 2 + i as u64,
+            camera: cam.orbit(yaw, 3.0),
+            heuristic: volwarp_core::Heuristic::Threshold,
+            radius_scale: 1.0,
+        };
+        write_entry(&mut w, &Entry::Camera { t_us: 1000 * (i as u64 + 1), request }).unwrap();
+    }
+    write_entry(&mut w, &Entry::Frame { t_us: 5000, frame: bumpy_surface(80, 2.0, 4) }).unwrap();
+    let file = dir.join("stream.vwrec");
+    std::fs::write(&file, &bytes).unwrap();
+
+    let out = Command::new(env!("CARGO_BIN_EXE_volwarp-compare"))
+        .arg(&file)
+        .arg("--out")
+        .arg(dir.join("png"))
+        .args(["--width", "96", "--height", "80"])
+        .output()
+        .unwrap();
+    let stdout = String::from_utf8_lossy(&out.stdout);
+    eprintln!("{stdout}\n{}", String::from_utf8_lossy(&out.stderr));
+    assert!(out.status.success(), "status {:?}", out.status);
+    assert!(stdout.contains("worst identical share"));
+    let rows = stdout.lines().filter(|l| l.contains(" %  ")).count();
+    assert_eq!(rows, 3, "two displayed cameras for frame 0, one orbit for frame 1");
+    let mut pngs: Vec<_> = std::fs::read_dir(dir.join("png")).unwrap().map(|e| e.unwrap().file_name()).collect();
+    pngs.sort();
+    assert_eq!(pngs, ["frame0000_cam00.png", "frame0000_cam01.png", "frame0001_cam00.png"]);
+    let png = image::open(dir.join("png/frame0000_cam00.png")).unwrap();
+    assert_eq!((png.width(), png.height()), (3 * 96 + 8, 80));
+
+    // A file that is not a record is a clear error, not a panic.
+    std::fs::write(dir.join("bad"), b"not a record").unwrap();
+    let out = Command::new(env!("CARGO_BIN_EXE_volwarp-compare")).arg(dir.join("bad")).output().unwrap();
+    assert_eq!(out.status.code(), Some(1));
+    assert!(String::from_utf8_lossy(&out.stderr).contains("not a volwarp record file"));
+    let _ = std::fs::remove_dir_all(&dir);
+}
