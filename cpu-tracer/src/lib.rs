@@ -23,6 +23,8 @@
 //! Every renderer draws the background (and logs one warning) for a camera that does not
 //! validate or a scene whose buffers are inconsistent: no panic and no NaN from bad input.
 #![deny(missing_docs)]
+// `!(a <= b)` is how NaN is rejected on purpose here, as in core.
+#![allow(clippy::neg_cmp_op_on_partial_ord)]
 
 pub mod packet_tracer;
 pub mod parallel_build;

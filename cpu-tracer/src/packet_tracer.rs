@@ -19,6 +19,7 @@ use crate::{begin_frame, shade, NO_HIT};
 use volwarp_core::lbvh::{Lbvh, LEAF_BIT};
 use volwarp_core::renderer::{Image, Renderer};
 use volwarp_core::sample::Dequantizer;
+use volwarp_core::sphere::BOX_T_FAR_SCALE;
 use volwarp_core::traversal::STACK_SIZE;
 use volwarp_core::{Camera, RayBasis, Scene};
 use wide::{f32x8, u32x8};
@@ -61,7 +62,8 @@ fn all_lanes() -> f32x8 {
     bytemuck::cast(u32x8::splat(u32::MAX))
 }
 
-/// `sphere::intersect_box` for eight rays: the entry distances and the mask of lanes whose
+/// `sphere::intersect_box` for eight rays (same operations, far bound widened by
+/// [`BOX_T_FAR_SCALE`]): the entry distances and the mask of lanes whose
 /// ray enters the box before `t_max`.
 #[inline(always)]
 fn box_test(p: &Packet, min: &[f32; 3], max: &[f32; 3], t_max: f32x8) -> (f32x8, f32x8) {
@@ -72,7 +74,8 @@ fn box_test(p: &Packet, min: &[f32; 3], max: &[f32; 3], t_max: f32x8) -> (f32x8,
     let tz1 = f32x8::splat(min[2] - p.o[2]) * p.inv[2];
     let tz2 = f32x8::splat(max[2] - p.o[2]) * p.inv[2];
     let t_near = tx1.min(tx2).max(ty1.min(ty2)).max(tz1.min(tz2)).max(f32x8::ZERO);
-    let t_far = tx1.max(tx2).min(ty1.max(ty2)).min(tz1.max(tz2)).min(t_max);
+    let scale = f32x8::splat(BOX_T_FAR_SCALE);
+    let t_far = (tx1.max(tx2).min(ty1.max(ty2)).min(tz1.max(tz2)) * scale).min(t_max * scale);
     (t_near, t_near.simd_le(t_far))
 }
 
@@ -150,8 +153,9 @@ fn trace_packet(l: &Lbvh, p: &Packet, stack: &mut Stack) -> u32x8 {
     let mut sp = 1;
     while sp > 0 {
         sp -= 1;
-        // Early exit: NaN (lane not entering) compares false, as do lanes already closer.
-        let active = stack.t[sp].simd_le(best.t);
+        // Early exit: NaN (lane not entering) compares false, as do lanes whose best hit is
+        // closer than the node (with the slab test's conservative widening).
+        let active = stack.t[sp].simd_le(best.t * f32x8::splat(BOX_T_FAR_SCALE));
         if !active.any() {
             continue;
         }
