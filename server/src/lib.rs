@@ -1,3 +1,43 @@
-//! volwarp server: volumes, ray marcher, frames over TCP (in progress).
+//! # volwarp-server
 //!
-//! Nothing here yet: this crate is a placeholder member of the workspace.
+//! The server of Zellmann 2020, Figure 2: it loads a volume and a transfer function, ray
+//! marches each pixel of the camera a client asks for, picks a representative depth per pixel
+//! with one of the ZAL12 heuristics, turns every non-empty pixel into an object-space sample
+//! (`p = o + d·t`, radius half a voxel diagonal), quantizes and compacts the samples and sends
+//! them over TCP with the camera they belong to.
+//!
+//! | module | concept |
+//! |---|---|
+//! | [`volume`] | scalar volumes, raw loader, world-space placement, Marschner–Lobb |
+//! | [`nrrd`] | NRRD headers and data (raw, gzip; attached and detached) |
+//! | [`transfer_function`] | 1-D RGBA lookup tables, presets, ParaView JSON and text files |
+//! | [`dataset`] | a volume with its transfer function; the bundled default |
+//! | [`empty_space`] | the min/max brick grid for empty-space skipping |
+//! | [`marcher`] | the CPU ray marcher: frames for clients and ground-truth images |
+//! | [`compaction`] | the parallel compaction of a frame's samples |
+//! | [`server`] | the TCP server: handshake, latest-wins requests, limits |
+//!
+//! ```no_run
+//! use volwarp_server::{dataset::Dataset, server::{Server, ServerConfig}};
+//! let server = Server::bind(ServerConfig::default(), Dataset::default_bundled()).unwrap();
+//! println!("listening on {}", server.local_addr());
+//! let handle = server.spawn();
+//! // ... connect clients ...
+//! handle.shutdown();
+//! ```
+#![deny(missing_docs)]
+
+pub mod compaction;
+pub mod dataset;
+pub mod empty_space;
+pub mod marcher;
+pub mod nrrd;
+pub mod server;
+pub mod transfer_function;
+pub mod volume;
+
+pub use dataset::Dataset;
+pub use marcher::{default_camera, FrameStats, MarchOptions, Marcher, PixelBuffer};
+pub use server::{Server, ServerConfig, ServerHandle};
+pub use transfer_function::TransferFunction;
+pub use volume::{load_volume, LoadOptions, Volume, VolumeError};

@@ -1,0 +1,253 @@
+//! `volwarp-server`: serve a volume to volwarp clients, render ground-truth images, dump frames.
+//!
+//! ```text
+//! volwarp-server                                   # serve the bundled CT head on 127.0.0.1:7878
+//! volwarp-server --volume head.nrrd --tf tf.json --listen 0.0.0.0:7878 --token SECRET
+//! volwarp-server render --volume FILE [--tf FILE] [--orbit 30,10] [--size 1024x1024] --out img.png
+//! volwarp-server dump [--orbit 30,10] [--heuristic threshold] --out frame.vwf
+//! ```
+
+use clap::{Args, Parser, Subcommand};
+use std::net::SocketAddr;
+use std::path::PathBuf;
+use std::process::ExitCode;
+use std::time::{Duration, Instant};
+use volwarp_core::wire::{self, CameraRequest, Message};
+use volwarp_core::{Camera, Heuristic};
+use volwarp_server::volume::{parse_dims, LoadOptions, VoxelType};
+use volwarp_server::{default_camera, Dataset, MarchOptions, Marcher, Server, ServerConfig};
+
+#[derive(Parser, Debug)]
+#[command(name = "volwarp-server", version, about = "volwarp server: ray-marches a volume and sends compacted object-space samples to clients")]
+struct Cli {
+    #[command(subcommand)]
+    cmd: Option<Cmd>,
+    #[command(flatten)]
+    data: DataArgs,
+    #[command(flatten)]
+    net: NetArgs,
+}
+
+#[derive(Subcommand, Debug)]
+enum Cmd {
+    /// Serve clients (the default).
+    Serve,
+    /// Render a ground-truth image to a PNG file.
+    Render {
+        #[command(flatten)]
+        cam: CameraArgs,
+        /// Output PNG file.
+        #[arg(long)]
+        out: PathBuf,
+    },
+    /// Write one Frame (wire format, header included) to a file.
+    Dump {
+        #[command(flatten)]
+        cam: CameraArgs,
+        /// Output file.
+        #[arg(long)]
+        out: PathBuf,
+    },
+}
+
+#[derive(Args, Debug)]
+struct DataArgs {
+    /// Volume file (.raw named name_XxYxZ_type.raw, .nrrd, .nhdr), or `marschner-lobb[:N]`.
+    /// Default: the bundled CT head in data/.
+    #[arg(long, global = true)]
+    volume: Option<String>,
+    /// Transfer function (.json from ParaView, or the text format of docs/server.md). Default:
+    /// the preset for the volume.
+    #[arg(long, global = true)]
+    tf: Option<PathBuf>,
+    /// Dimensions XxYxZ of a raw file whose name does not carry them.
+    #[arg(long, global = true)]
+    dims: Option<String>,
+    /// Voxel type of a raw file (uint8, uint16, int16, float32, ...).
+    #[arg(long = "type", global = true)]
+    voxel_type: Option<String>,
+    /// Voxel spacing X,Y,Z (overrides the file).
+    #[arg(long, global = true)]
+    spacing: Option<String>,
+    /// Ray-marching step in voxels.
+    #[arg(long, global = true, default_value_t = 0.5)]
+    step: f32,
+    /// Depth heuristic for `dump` (entrance, exit, midpoint, threshold, peak, gradient,
+    /// rel-threshold, en-ex-mean).
+    #[arg(long, global = true, default_value = "threshold")]
+    heuristic: String,
+    /// Sphere radius as a multiple of half a voxel diagonal (for `dump`).
+    #[arg(long, global = true, default_value_t = 1.0)]
+    radius_scale: f32,
+}
+
+#[derive(Args, Debug)]
+struct NetArgs {
+    /// Address to listen on (port 0 picks a free port).
+    #[arg(long, default_value = "127.0.0.1:7878")]
+    listen: SocketAddr,
+    /// Access token clients must send (required on non-loopback addresses; also $VOLWARP_TOKEN).
+    #[arg(long)]
+    token: Option<String>,
+    /// Marcher threads (0 = one per core).
+    #[arg(long, default_value_t = 0)]
+    threads: usize,
+    /// Most clients at once.
+    #[arg(long, default_value_t = 8)]
+    max_clients: usize,
+    /// Largest client message payload in bytes.
+    #[arg(long, default_value_t = 260)]
+    max_message: u32,
+    /// Seconds a client has for the Hello exchange.
+    #[arg(long, default_value_t = 5.0)]
+    handshake_timeout: f64,
+    /// Seconds a client may stay silent.
+    #[arg(long, default_value_t = 600.0)]
+    idle_timeout: f64,
+    /// Seconds a frame may take to send.
+    #[arg(long, default_value_t = 30.0)]
+    send_timeout: f64,
+    /// Largest viewport width or height.
+    #[arg(long, default_value_t = 4096)]
+    max_viewport: u32,
+    /// Artificial delay before each frame, in milliseconds (latency demos).
+    #[arg(long, default_value_t = 0)]
+    frame_delay_ms: u64,
+}
+
+#[derive(Args, Debug)]
+struct CameraArgs {
+    /// Orbit YAW,PITCH in degrees relative to the default camera (which frames the volume from
+    /// its +y side with +z up).
+    #[arg(long, default_value = "0,0", allow_hyphen_values = true)]
+    orbit: String,
+    /// Distance factor relative to the default camera (< 1 moves closer).
+    #[arg(long, default_value_t = 1.0)]
+    zoom: f32,
+    /// Vertical field of view in degrees.
+    #[arg(long, default_value_t = 30.0)]
+    fov: f32,
+    /// Viewport WxH.
+    #[arg(long, default_value = "1024x1024")]
+    size: String,
+}
+
+fn secs(s: f64, what: &str) -> Result<Duration, String> {
+    Duration::try_from_secs_f64(s).map_err(|_| format!("--{what} must be a non-negative number of seconds"))
+}
+
+fn camera(ds: &Dataset, a: &CameraArgs) -> Result<Camera, String> {
+    let (w, h) = a
+        .size
+        .split_once(['x', 'X'])
+        .and_then(|(w, h)| Some((w.trim().parse::<u32>().ok()?, h.trim().parse::<u32>().ok()?)))
+        .ok_or_else(|| format!("--size {:?} is not WxH", a.size))?;
+    let (yaw, pitch) = a
+        .orbit
+        .split_once(',')
+        .and_then(|(y, p)| Some((y.trim().parse::<f32>().ok()?, p.trim().parse::<f32>().ok()?)))
+        .ok_or_else(|| format!("--orbit {:?} is not YAW,PITCH", a.orbit))?;
+    let cam = Camera { fov_y_deg: a.fov, ..default_camera(&ds.volume, w, h) }.orbit(yaw, pitch).dolly(a.zoom);
+    cam.validate(16384).map_err(|e| format!("camera: {e}"))?;
+    Ok(cam)
+}
+
+fn load(d: &DataArgs) -> Result<Dataset, String> {
+    let Some(v) = &d.volume else {
+        return Ok(Dataset::default_bundled());
+    };
+    if let Some(rest) = v.strip_prefix("marschner-lobb") {
+        let n = rest.strip_prefix(':').map_or(Ok(64), |s| s.parse::<u32>()).map_err(|_| "marschner-lobb:N".to_string())?;
+        let mut ds = Dataset::marschner_lobb(n);
+        if let Some(tf) = &d.tf {
+            ds.tf = volwarp_server::TransferFunction::load(tf, ds.volume.value_range()).map_err(|e| e.to_string())?;
+        }
+        return Ok(ds);
+    }
+    let mut opts = LoadOptions::default();
+    if let Some(s) = &d.dims {
+        opts.dims = Some(parse_dims(s).ok_or_else(|| format!("--dims {s:?} is not XxYxZ"))?);
+    }
+    if let Some(t) = &d.voxel_type {
+        opts.voxel_type = Some(VoxelType::parse(t).ok_or_else(|| format!("--type {t:?} is not a voxel type"))?);
+    }
+    if let Some(s) = &d.spacing {
+        let v: Vec<f32> = s.split(',').filter_map(|x| x.trim().parse().ok()).collect();
+        if v.len() != 3 || v.iter().any(|x| !(x.is_finite() && *x > 0.0)) {
+            return Err(format!("--spacing {s:?} is not three positive numbers X,Y,Z"));
+        }
+        opts.spacing = Some(volwarp_core::Vec3::new(v[0], v[1], v[2]));
+    }
+    Dataset::load_with(v, &opts, d.tf.as_deref()).map_err(|e| e.to_string())
+}
+
+fn run(cli: Cli) -> Result<(), String> {
+    let ds = load(&cli.data)?;
+    let heuristic = Heuristic::from_name(&cli.data.heuristic)
+        .ok_or_else(|| format!("unknown heuristic {:?}", cli.data.heuristic))?;
+    let opts = MarchOptions { step_voxels: cli.data.step, ..MarchOptions::default() };
+    let marcher = Marcher::with_options(ds.volume.clone(), &ds.tf, opts);
+    match cli.cmd.unwrap_or(Cmd::Serve) {
+        Cmd::Serve => {
+            let n = &cli.net;
+            let token = n.token.clone().or_else(|| std::env::var("VOLWARP_TOKEN").ok().filter(|t| !t.is_empty()));
+            let config = ServerConfig {
+                listen: n.listen,
+                threads: n.threads,
+                max_clients: n.max_clients,
+                max_message: n.max_message,
+                handshake_timeout: secs(n.handshake_timeout, "handshake-timeout")?,
+                idle_timeout: secs(n.idle_timeout, "idle-timeout")?,
+                send_timeout: secs(n.send_timeout, "send-timeout")?,
+                max_viewport: n.max_viewport,
+                token,
+                frame_delay: (n.frame_delay_ms > 0).then(|| Duration::from_millis(n.frame_delay_ms)),
+            };
+            let server = Server::with_marcher(config, std::sync::Arc::new(marcher)).map_err(|e| e.to_string())?;
+            println!("listening on {}", server.local_addr());
+            use std::io::Write;
+            let _ = std::io::stdout().flush();
+            server.run();
+            Ok(())
+        }
+        Cmd::Render { cam, out } => {
+            let cam = camera(&ds, &cam)?;
+            let t = Instant::now();
+            let img = marcher.render_image(&cam);
+            log::info!("rendered {}x{} in {:.1} ms", cam.width, cam.height, t.elapsed().as_secs_f64() * 1e3);
+            image::save_buffer(&out, img.as_rgba_bytes(), img.width, img.height, image::ExtendedColorType::Rgba8)
+                .map_err(|e| format!("{}: {e}", out.display()))?;
+            println!("wrote {}", out.display());
+            Ok(())
+        }
+        Cmd::Dump { cam, out } => {
+            let cam = camera(&ds, &cam)?;
+            let req = CameraRequest { seq: 0, camera: cam, heuristic, radius_scale: cli.data.radius_scale };
+            if !(req.radius_scale > 0.0 && req.radius_scale <= 16.0) {
+                return Err("--radius-scale must be in (0, 16]".into());
+            }
+            let (frame, stats) = marcher.render_frame(&req);
+            log::info!(
+                "frame: {} samples, march {:.1} ms, compact {:.2} ms",
+                stats.samples,
+                stats.march_us as f64 / 1e3,
+                stats.compact_us as f64 / 1e3
+            );
+            let bytes = wire::encode_to_vec(&Message::Frame(frame));
+            std::fs::write(&out, bytes).map_err(|e| format!("{}: {e}", out.display()))?;
+            println!("wrote {} ({} samples)", out.display(), stats.samples);
+            Ok(())
+        }
+    }
+}
+
+fn main() -> ExitCode {
+    env_logger::Builder::from_env(env_logger::Env::default().default_filter_or("info")).init();
+    match run(Cli::parse()) {
+        Ok(()) => ExitCode::SUCCESS,
+        Err(e) => {
+            eprintln!("volwarp-server: {e}");
+            ExitCode::FAILURE
+        }
+    }
+}

@@ -1,0 +1,342 @@
+//! The CPU ray marcher: the server's renderer and the ground truth of the evaluation.
+//!
+//! For each pixel, the primary ray of [`volwarp_core::RayBasis::dir`] is clipped to the volume
+//! box (see [`crate::volume`] for where the volume sits) and sampled at
+//! `t_k = t_enter + (k + ½)·Δt`, `Δt = step × min(spacing)` (default step ½ voxel). Each sample is
+//! trilinear, classified through the transfer function with opacity correction
+//! `α' = 1 − (1 − α)^(Δt / min spacing)`, and composited front to back into a premultiplied color.
+//! The ray stops once the accumulated opacity reaches the early-termination threshold
+//! (default 0.99). Bricks of the [`crate::empty_space`] grid that the transfer function makes
+//! invisible are skipped without changing any result.
+//!
+//! Every sample with non-zero opacity is fed to the requested [`Heuristic`]'s
+//! [`DepthPicker`]; the two-pass heuristics march the ray twice (the first pass into a
+//! [`FirstPassAccumulator`]). A frame's sample is `p = o + d·t` with radius
+//! `radius_scale × ½ |voxel diagonal|`; empty pixels get radius 0 and are compacted away.
+//! Work is spread with rayon over bands of image rows.
+
+use crate::compaction;
+use crate::empty_space::{MinMaxGrid, Occupancy};
+use crate::transfer_function::{TransferFunction, LUT_SIZE};
+use crate::volume::Volume;
+use rayon::prelude::*;
+use std::sync::Arc;
+use std::time::Instant;
+use volwarp_core::sample::{over_background, pack_color_f32, Quantizer};
+use volwarp_core::wire::{CameraRequest, Frame, FrameHeader};
+use volwarp_core::{Camera, DepthPicker, FirstPassAccumulator, Heuristic, Image, Vec3, BACKGROUND};
+
+/// Rows per parallel task.
+const BAND_ROWS: usize = 4;
+
+/// Radius code every sample of a frame gets (the frame's `radius_unit` is `radius / this`).
+pub const RADIUS_CODE: f32 = 512.0;
+
+/// Marcher settings.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct MarchOptions {
+    /// Step in voxels (of the smallest spacing); default 0.5.
+    pub step_voxels: f32,
+    /// Accumulated opacity at which a ray stops; default 0.99 (1 or more disables it).
+    pub early_termination: f32,
+    /// Skip bricks the transfer function makes invisible; default true.
+    pub skip_empty: bool,
+}
+
+impl Default for MarchOptions {
+    fn default() -> Self {
+        MarchOptions { step_voxels: 0.5, early_termination: 0.99, skip_empty: true }
+    }
+}
+
+/// The uncompacted result of marching every pixel.
+#[derive(Clone, Debug, PartialEq)]
+pub struct PixelBuffer {
+    /// Width in pixels.
+    pub width: u32,
+    /// Height in pixels.
+    pub height: u32,
+    /// Representative depth per pixel (ray parameter along the unit ray); `f32::INFINITY` for
+    /// an empty pixel.
+    pub t: Vec<f32>,
+    /// Composited premultiplied RGBA8 per pixel (packed like sample colors).
+    pub color: Vec<u32>,
+}
+
+impl PixelBuffer {
+    /// Number of non-empty pixels.
+    pub fn nonempty(&self) -> usize {
+        self.t.iter().filter(|t| t.is_finite()).count()
+    }
+}
+
+/// Timings and counts of one frame.
+#[derive(Clone, Copy, Debug, Default, PartialEq)]
+pub struct FrameStats {
+    /// Ray marching, µs.
+    pub march_us: u64,
+    /// Computing positions and quantizing, µs.
+    pub quantize_us: u64,
+    /// Parallel compaction, µs.
+    pub compact_us: u64,
+    /// Samples in the frame (non-empty pixels).
+    pub samples: usize,
+    /// Pixels of the viewport.
+    pub pixels: usize,
+}
+
+/// The ray marcher over one volume and transfer function.
+#[derive(Clone, Debug)]
+pub struct Marcher {
+    volume: Arc<Volume>,
+    grid: Arc<MinMaxGrid>,
+    occupancy: Occupancy,
+    /// Opacity-corrected, premultiplied table.
+    lut: Vec<[f32; 4]>,
+    opts: MarchOptions,
+    dt: f32,
+    inv_spacing: Vec3,
+}
+
+/// The ray's parameter interval inside the box `[0, ext]`, or `None` if it misses.
+#[inline]
+fn clip(o: Vec3, inv_d: Vec3, ext: Vec3) -> Option<(f32, f32)> {
+    let t0 = (Vec3::ZERO - o) * inv_d;
+    let t1 = (ext - o) * inv_d;
+    let tmin = t0.min(t1);
+    let tmax = t0.max(t1);
+    // NaN (0 · inf on a face) is ignored by max/min of f32.
+    let enter = tmin.x.max(tmin.y).max(tmin.z).max(0.0);
+    let exit = tmax.x.min(tmax.y).min(tmax.z);
+    (enter < exit && exit.is_finite()).then_some((enter, exit))
+}
+
+impl Marcher {
+    /// A marcher with default options.
+    pub fn new(volume: Arc<Volume>, tf: &TransferFunction) -> Marcher {
+        Marcher::with_options(volume, tf, MarchOptions::default())
+    }
+
+    /// A marcher of a [`crate::dataset::Dataset`] with default options.
+    pub fn from_dataset(ds: &crate::dataset::Dataset) -> Marcher {
+        Marcher::new(ds.volume.clone(), &ds.tf)
+    }
+
+    /// A marcher with options (a step below 0.01 voxel or non-finite is raised to 0.01).
+    pub fn with_options(volume: Arc<Volume>, tf: &TransferFunction, opts: MarchOptions) -> Marcher {
+        let grid = Arc::new(MinMaxGrid::new(&volume));
+        Marcher::with_grid(volume, grid, tf, opts)
+    }
+
+    fn with_grid(volume: Arc<Volume>, grid: Arc<MinMaxGrid>, tf: &TransferFunction, mut opts: MarchOptions) -> Marcher {
+        if !(opts.step_voxels >= 0.01) {
+            opts.step_voxels = 0.01;
+        }
+        opts.step_voxels = opts.step_voxels.min(16.0);
+        let sp = volume.spacing();
+        let dt = opts.step_voxels * sp.min_element();
+        let lut = tf
+            .table()
+            .iter()
+            .map(|&[r, g, b, a]| {
+                let a = 1.0 - (1.0 - a.clamp(0.0, 1.0)).powf(opts.step_voxels);
+                [r * a, g * a, b * a, a]
+            })
+            .collect::<Vec<_>>();
+        debug_assert_eq!(lut.len(), LUT_SIZE);
+        let occupancy = grid.occupancy(tf, sp);
+        log::debug!("empty-space grid: {:.1} % of bricks visible", occupancy.fraction_occupied() * 100.0);
+        Marcher { volume, grid, occupancy, lut, opts, dt, inv_spacing: 1.0 / sp }
+    }
+
+    /// The same volume and grid with another transfer function or options (no rebuild of the
+    /// min/max grid).
+    pub fn with_transfer_function(&self, tf: &TransferFunction, opts: MarchOptions) -> Marcher {
+        Marcher::with_grid(self.volume.clone(), self.grid.clone(), tf, opts)
+    }
+
+    /// The volume.
+    pub fn volume(&self) -> &Volume {
+        &self.volume
+    }
+
+    /// The options in use.
+    pub fn options(&self) -> MarchOptions {
+        self.opts
+    }
+
+    /// The step in world units.
+    pub fn step(&self) -> f32 {
+        self.dt
+    }
+
+    /// Radius of a sample at `radius_scale` 1: half a voxel diagonal.
+    pub fn default_radius(&self) -> f32 {
+        0.5 * self.volume.voxel_diagonal()
+    }
+
+    /// A camera framing the whole volume box from the front (`-z` view, `+y` up), 30° field of
+    /// view, orbited by `yaw`/`pitch` degrees.
+    pub fn default_camera(&self, width: u32, height: u32) -> Camera {
+        default_camera(&self.volume, width, height)
+    }
+
+    /// Marches one ray from `o` along unit `d`, feeding every sample with non-zero opacity as
+    /// `(t, src_a, dst_a)`; returns the premultiplied color and the box exit `t` (`None` if the
+    /// ray misses the box).
+    #[inline]
+    pub fn march_ray(&self, o: Vec3, d: Vec3, mut feed: impl FnMut(f32, f32, f32)) -> ([f32; 4], Option<f32>) {
+        let vol = &*self.volume;
+        let inv_d = 1.0 / d;
+        let Some((t_enter, t_exit)) = clip(o, inv_d, vol.extent()) else {
+            return ([0.0; 4], None);
+        };
+        let dt = self.dt;
+        let n = ((t_exit - t_enter) / dt - 0.5).ceil().max(0.0);
+        let n = if n < 1e7 { n as u32 } else { 10_000_000 };
+        let og = o * self.inv_spacing - 0.5;
+        let dg = d * self.inv_spacing;
+        let ert = self.opts.early_termination;
+        let (mut r, mut g, mut b, mut a) = (0.0f32, 0.0f32, 0.0f32, 0.0f32);
+        let mut k = 0u32;
+        while k < n {
+            let t = t_enter + (k as f32 + 0.5) * dt;
+            let gp = og + dg * t;
+            if self.opts.skip_empty {
+                let br = self.occupancy.brick_of(gp);
+                if !self.occupancy.occupied(br) {
+                    let t_out = self.occupancy.exit_t(br, o, inv_d);
+                    let k_next = ((t_out - t_enter) / dt - 0.5).ceil();
+                    k = if k_next > k as f32 + 1.0 { if k_next < n as f32 { k_next as u32 } else { n } } else { k + 1 };
+                    continue;
+                }
+            }
+            let v = vol.sample_grid(gp);
+            let [cr, cg, cb, ca] = self.lut[TransferFunction::index(v)];
+            if ca > 0.0 {
+                let w = 1.0 - a;
+                r += w * cr;
+                g += w * cg;
+                b += w * cb;
+                a += w * ca;
+                feed(t, ca, a);
+                if a >= ert {
+                    break;
+                }
+            }
+            k += 1;
+        }
+        ([r, g, b, a], Some(t_exit))
+    }
+
+    /// The color and representative depth of one ray (`None` for an empty ray).
+    #[inline]
+    pub fn pixel(&self, o: Vec3, d: Vec3, heuristic: Heuristic) -> ([f32; 4], Option<f32>) {
+        let first = heuristic.needs_first_pass().then(|| {
+            let mut acc = FirstPassAccumulator::new();
+            self.march_ray(o, d, |_, sa, da| acc.feed(sa, da));
+            acc.finish()
+        });
+        let mut picker = DepthPicker::new(heuristic, first);
+        let (c, t_exit) = self.march_ray(o, d, |t, sa, da| picker.feed(t, sa, da));
+        let t = t_exit.and_then(|te| picker.finish(te));
+        (c, t)
+    }
+
+    /// Marches every pixel of `camera` with `heuristic` (parallel over row bands).
+    pub fn march(&self, camera: &Camera, heuristic: Heuristic) -> PixelBuffer {
+        let (w, h) = (camera.width as usize, camera.height as usize);
+        let basis = camera.ray_basis();
+        let o = basis.origin();
+        let mut t = vec![f32::INFINITY; w * h];
+        let mut color = vec![0u32; w * h];
+        t.par_chunks_mut(w * BAND_ROWS).zip(color.par_chunks_mut(w * BAND_ROWS)).enumerate().for_each(
+            |(band, (tb, cb))| {
+                for (i, (tp, cp)) in tb.iter_mut().zip(cb.iter_mut()).enumerate() {
+                    let (x, y) = ((i % w) as u32, (band * BAND_ROWS + i / w) as u32);
+                    let (c, depth) = self.pixel(o, basis.dir(x, y), heuristic);
+                    *cp = pack_color_f32(c);
+                    *tp = depth.unwrap_or(f32::INFINITY);
+                }
+            },
+        );
+        PixelBuffer { width: camera.width, height: camera.height, t, color }
+    }
+
+    /// The ground-truth image: each pixel's composited color over [`BACKGROUND`] (exactly as a
+    /// renderer shows a sample's color).
+    pub fn render_image(&self, camera: &Camera) -> Image {
+        let (w, h) = (camera.width as usize, camera.height as usize);
+        let basis = camera.ray_basis();
+        let o = basis.origin();
+        let mut img = Image::new(camera.width, camera.height);
+        img.pixels.par_chunks_mut(w.max(1) * BAND_ROWS).enumerate().for_each(|(band, px)| {
+            for (i, p) in px.iter_mut().enumerate() {
+                let (x, y) = ((i % w) as u32, (band * BAND_ROWS + i / w) as u32);
+                let (c, _) = self.march_ray(o, basis.dir(x, y), |_, _, _| {});
+                *p = over_background(pack_color_f32(c), BACKGROUND);
+            }
+        });
+        debug_assert_eq!(img.pixels.len(), w * h);
+        img
+    }
+
+    /// Renders one compacted frame for a request: march with its heuristic, place each
+    /// non-empty pixel's sample at `o + d·t` with radius `radius_scale × ½ |voxel diagonal|`,
+    /// quantize over the volume box, compact in parallel.
+    pub fn render_frame(&self, req: &CameraRequest) -> (Frame, FrameStats) {
+        let t0 = Instant::now();
+        let pb = self.march(&req.camera, req.heuristic);
+        let t1 = Instant::now();
+        let bounds = self.volume.bounds();
+        let scale = if req.radius_scale.is_finite() && req.radius_scale > 0.0 { req.radius_scale.min(16.0) } else { 1.0 };
+        let radius = self.default_radius() * scale;
+        let radius_unit = radius / RADIUS_CODE;
+        let q = Quantizer::new(bounds, radius_unit);
+        let basis = req.camera.ray_basis();
+        let o = basis.origin();
+        let w = req.camera.width as usize;
+        let mut samples = vec![0u64; pb.t.len()];
+        samples.par_chunks_mut(w.max(1) * BAND_ROWS).zip(pb.t.par_chunks(w.max(1) * BAND_ROWS)).enumerate().for_each(
+            |(band, (s, t))| {
+                for (i, (s, &t)) in s.iter_mut().zip(t).enumerate() {
+                    if t.is_finite() {
+                        let (x, y) = ((i % w) as u32, (band * BAND_ROWS + i / w) as u32);
+                        *s = q.pack(o + basis.dir(x, y) * t, radius);
+                    }
+                }
+            },
+        );
+        let t2 = Instant::now();
+        let (samples, colors) = compaction::compact(&samples, &pb.color);
+        let t3 = Instant::now();
+        let stats = FrameStats {
+            march_us: (t1 - t0).as_micros() as u64,
+            quantize_us: (t2 - t1).as_micros() as u64,
+            compact_us: (t3 - t2).as_micros() as u64,
+            samples: samples.len(),
+            pixels: pb.t.len(),
+        };
+        let header = FrameHeader {
+            seq: req.seq,
+            camera: req.camera,
+            heuristic: req.heuristic,
+            bounds,
+            radius_unit,
+            render_us: (t3 - t0).as_micros().min(u32::MAX as u128) as u32,
+            count: samples.len() as u32,
+        };
+        (Frame { header, samples, colors }, stats)
+    }
+}
+
+/// A camera framing the whole box of `volume` (its bounding sphere fits the view; 30° vertical
+/// field of view) from the volume's `+y` side, looking along `−y` with `+z` up: the front view
+/// of a head stored in RAS orientation (x to the right, y anterior, z superior), as medical
+/// volumes usually are. [`Camera::orbit`] turns it around the box centre.
+pub fn default_camera(volume: &Volume, width: u32, height: u32) -> Camera {
+    let b = volume.bounds();
+    let f = Camera::framing(b.min(), b.max(), 0.0, 0.0, 30.0, width, height);
+    let dist = (f.eye - f.target).length();
+    Camera::look_at(f.target + Vec3::Y * dist, f.target, Vec3::Z, 30.0, width, height)
+}

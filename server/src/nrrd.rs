@@ -1,0 +1,400 @@
+//! NRRD volumes (`.nrrd` with attached data, `.nhdr` with a detached data file), as ParaView,
+//! 3D Slicer and teem write them: 3-D, raw or gzip encoding, little- or big-endian, spacing
+//! from `spacings:` or the lengths of `space directions:`.
+//!
+//! [`parse_header`] takes the file's bytes and never panics (it is fuzzed); [`load`] reads the
+//! voxels.
+
+use crate::volume::{decode_voxels, read_exactly, LoadOptions, Volume, VolumeError, VolumeErrorKind, VoxelType};
+use std::path::{Path, PathBuf};
+use volwarp_core::Vec3;
+
+/// Longest header accepted, in bytes.
+pub const MAX_HEADER: usize = 64 * 1024;
+
+/// How the voxel data is encoded.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum Encoding {
+    /// Plain bytes.
+    Raw,
+    /// A gzip stream.
+    Gzip,
+}
+
+/// The fields of a NRRD header this loader uses.
+#[derive(Clone, Debug, PartialEq)]
+pub struct NrrdHeader {
+    /// Voxel type.
+    pub voxel_type: VoxelType,
+    /// Sizes (x, y, z).
+    pub dims: [u32; 3],
+    /// Encoding.
+    pub encoding: Encoding,
+    /// Big-endian data (`endian: big`).
+    pub big_endian: bool,
+    /// Spacing, if the header gives one.
+    pub spacing: Option<Vec3>,
+    /// Axes to mirror so that the volume box is `[0, dims · spacing]` in the orientation of
+    /// `space directions` (an axis-aligned direction pointing the negative way flips its axis).
+    pub flip: [bool; 3],
+    /// The detached data file, if any (relative to the header's folder).
+    pub data_file: Option<String>,
+    /// Bytes to skip before the data (`byte skip:`; −1 = data is at the end of a raw file).
+    pub byte_skip: i64,
+    /// Where attached data starts in the file (just after the blank line ending the header).
+    pub data_offset: usize,
+}
+
+fn bad(s: impl Into<String>) -> VolumeError {
+    VolumeError::new(VolumeErrorKind::BadHeader(s.into()))
+}
+
+fn parse_f32_vec(s: &str) -> Option<Vec3> {
+    // "(1,0,0)" → vector
+    let s = s.trim().strip_prefix('(')?.strip_suffix(')')?;
+    let mut it = s.split(',').map(|v| v.trim().parse::<f32>().ok());
+    let v = Vec3::new(it.next()??, it.next()??, it.next()??);
+    if it.next().is_some() {
+        return None;
+    }
+    Some(v)
+}
+
+/// Parses a NRRD header from the start of a file (`bytes` may hold the whole file). Never
+/// panics; unknown fields and `key:=value` pairs are ignored.
+pub fn parse_header(bytes: &[u8]) -> Result<NrrdHeader, VolumeError> {
+    if !bytes.starts_with(b"NRRD") {
+        return Err(bad("does not start with the NRRD magic"));
+    }
+    // The header ends at the first empty line (or at the end of a detached header).
+    let limit = bytes.len().min(MAX_HEADER);
+    let mut end = None;
+    let mut i = 0;
+    while i < limit {
+        if bytes[i] == b'\n' {
+            let next = i + 1;
+            if bytes.get(next) == Some(&b'\n') {
+                end = Some((next, next + 1));
+                break;
+            }
+            if bytes.get(next) == Some(&b'\r') && bytes.get(next + 1) == Some(&b'\n') {
+                end = Some((next, next + 2));
+                break;
+            }
+        }
+        i += 1;
+    }
+    let (header_end, data_offset) = match end {
+        Some(e) => e,
+        None if bytes.len() <= MAX_HEADER => (bytes.len(), bytes.len()),
+        None => return Err(bad(format!("no end of header within {MAX_HEADER} bytes"))),
+    };
+    let text = std::str::from_utf8(&bytes[..header_end]).map_err(|_| bad("header is not text"))?;
+    let mut lines = text.lines();
+    let magic = lines.next().unwrap_or("").trim();
+    if !(magic.len() == 8 && magic.starts_with("NRRD000") && magic.as_bytes()[7].is_ascii_digit()) {
+        return Err(bad(format!("unknown magic {magic:?}")));
+    }
+    let (mut ty, mut dimension, mut sizes, mut encoding) = (None, None, None, None);
+    let (mut big_endian, mut spacing, mut data_file, mut byte_skip) = (false, None, None, 0i64);
+    let mut directions = None;
+    let mut flip = [false; 3];
+    for line in lines {
+        let line = line.trim_end_matches('\r');
+        if line.is_empty() || line.starts_with('#') {
+            continue;
+        }
+        if line.contains(":=") && line.find(":=") < line.find(": ") {
+            continue; // key/value pair
+        }
+        let Some((field, value)) = line.split_once(':') else {
+            return Err(bad(format!("line {line:?} is not `field: value`")));
+        };
+        let value = value.trim();
+        match field.trim().to_ascii_lowercase().as_str() {
+            "type" => {
+                ty = Some(VoxelType::parse(value).ok_or_else(|| {
+                    VolumeError::new(VolumeErrorKind::UnknownType(value.chars().take(40).collect()))
+                })?)
+            }
+            "dimension" => dimension = Some(value.parse::<u32>().map_err(|_| bad(format!("dimension {value:?}")))?),
+            "sizes" => {
+                let v: Result<Vec<u32>, _> = value.split_whitespace().take(17).map(|s| s.parse::<u32>()).collect();
+                sizes = Some(v.map_err(|_| bad(format!("sizes {value:?}")))?);
+            }
+            "encoding" => {
+                encoding = Some(match value.to_ascii_lowercase().as_str() {
+                    "raw" => Encoding::Raw,
+                    "gzip" | "gz" => Encoding::Gzip,
+                    other => {
+                        return Err(VolumeError::new(VolumeErrorKind::Unsupported(format!(
+                            "NRRD encoding {:?} (only raw and gzip)",
+                            other.chars().take(20).collect::<String>()
+                        ))))
+                    }
+                })
+            }
+            "endian" => {
+                big_endian = match value.to_ascii_lowercase().as_str() {
+                    "little" => false,
+                    "big" => true,
+                    _ => return Err(bad(format!("endian {value:?}"))),
+                }
+            }
+            "spacings" => {
+                let v: Vec<f32> = value.split_whitespace().take(17).filter_map(|s| s.parse::<f32>().ok()).collect();
+                if v.len() == 3 {
+                    spacing = Some(Vec3::new(v[0], v[1], v[2]));
+                } else {
+                    return Err(bad(format!("spacings {value:?}")));
+                }
+            }
+            "space directions" => {
+                let v: Vec<&str> = value.split_whitespace().take(17).collect();
+                if v.len() != 3 {
+                    return Err(bad(format!("space directions {value:?}")));
+                }
+                let mut s = [0f32; 3];
+                for (a, (d, t)) in s.iter_mut().zip(&v).enumerate() {
+                    let dir = parse_f32_vec(t).ok_or_else(|| bad(format!("space direction {t:?}")))?;
+                    *d = dir.length();
+                    let off_axis = (0..3).any(|b| b != a && dir[b] != 0.0);
+                    flip[a] = !off_axis && dir[a] < 0.0;
+                }
+                directions = Some(Vec3::from(s));
+            }
+            "data file" | "datafile" => {
+                if value.split_whitespace().count() > 1 || value.eq_ignore_ascii_case("list") {
+                    return Err(VolumeError::new(VolumeErrorKind::Unsupported(
+                        "NRRD data file lists and format strings (one data file only)".into(),
+                    )));
+                }
+                data_file = Some(value.to_string());
+            }
+            "byte skip" | "byteskip" => {
+                byte_skip = value.parse::<i64>().ok().filter(|&b| b >= -1).ok_or_else(|| bad(format!("byte skip {value:?}")))?
+            }
+            "line skip" | "lineskip" => {
+                if value != "0" {
+                    return Err(VolumeError::new(VolumeErrorKind::Unsupported("NRRD line skip".into())));
+                }
+            }
+            _ => {}
+        }
+    }
+    let voxel_type = ty.ok_or_else(|| bad("missing `type`"))?;
+    let dimension = dimension.ok_or_else(|| bad("missing `dimension`"))?;
+    let sizes = sizes.ok_or_else(|| bad("missing `sizes`"))?;
+    if dimension != 3 || sizes.len() != 3 {
+        return Err(VolumeError::new(VolumeErrorKind::Unsupported(format!(
+            "{dimension}-D NRRD (only 3-D scalar volumes)"
+        ))));
+    }
+    if sizes.contains(&0) {
+        return Err(bad("a size is 0"));
+    }
+    let encoding = encoding.ok_or_else(|| bad("missing `encoding`"))?;
+    let spacing = spacing.or(directions);
+    if let Some(s) = spacing {
+        if !s.is_finite() || s.min_element() <= 0.0 {
+            return Err(bad(format!("spacing {s} is not positive and finite")));
+        }
+    }
+    if byte_skip == -1 && encoding != Encoding::Raw {
+        return Err(bad("byte skip -1 needs raw encoding"));
+    }
+    Ok(NrrdHeader {
+        voxel_type,
+        dims: [sizes[0], sizes[1], sizes[2]],
+        encoding,
+        big_endian,
+        spacing,
+        flip,
+        data_file,
+        byte_skip,
+        data_offset,
+    })
+}
+
+/// Loads a `.nrrd` or `.nhdr` volume.
+pub fn load(path: &Path, opts: &LoadOptions) -> Result<Volume, VolumeError> {
+    let io = |p: &Path, e| VolumeError::new(VolumeErrorKind::Io(e)).at(p);
+    let mut head = Vec::new();
+    {
+        use std::io::Read;
+        let f = std::fs::File::open(path).map_err(|e| io(path, e))?;
+        f.take(MAX_HEADER as u64).read_to_end(&mut head).map_err(|e| io(path, e))?;
+    }
+    let h = parse_header(&head).map_err(|e| e.at(path))?;
+    let dims = opts.dims.unwrap_or(h.dims);
+    let ty = opts.voxel_type.unwrap_or(h.voxel_type);
+    let spacing = opts.spacing.or(h.spacing).unwrap_or(Vec3::ONE);
+    let voxels = dims.iter().map(|&d| d as u64).product::<u64>();
+    if voxels > opts.max_voxels {
+        return Err(VolumeError::new(VolumeErrorKind::TooLarge { voxels, limit: opts.max_voxels }).at(path));
+    }
+    let expected = voxels * ty.size() as u64;
+    let (data_path, offset): (PathBuf, u64) = match &h.data_file {
+        Some(f) => (path.parent().unwrap_or(Path::new(".")).join(f), 0),
+        None => (path.to_path_buf(), h.data_offset as u64),
+    };
+    let file = std::fs::File::open(&data_path).map_err(|e| io(&data_path, e))?;
+    let len = file.metadata().map_err(|e| io(&data_path, e))?.len();
+    let mut reader = std::io::BufReader::new(file);
+    let skip = match h.byte_skip {
+        -1 => len.checked_sub(expected).ok_or_else(|| {
+            VolumeError::new(VolumeErrorKind::SizeMismatch { expected, actual: len.saturating_sub(offset) }).at(&data_path)
+        })?,
+        b => offset + if h.encoding == Encoding::Raw { b as u64 } else { 0 },
+    };
+    {
+        use std::io::Seek;
+        reader.seek(std::io::SeekFrom::Start(skip)).map_err(|e| io(&data_path, e))?;
+    }
+    let bytes = match h.encoding {
+        Encoding::Raw => {
+            if len.saturating_sub(skip) != expected {
+                return Err(VolumeError::new(VolumeErrorKind::SizeMismatch { expected, actual: len.saturating_sub(skip) })
+                    .at(&data_path));
+            }
+            read_exactly(reader, expected, &data_path)?
+        }
+        Encoding::Gzip => {
+            use std::io::Read;
+            let mut dec = flate2::bufread::MultiGzDecoder::new(reader);
+            if h.byte_skip > 0 {
+                std::io::copy(&mut dec.by_ref().take(h.byte_skip as u64), &mut std::io::sink()).map_err(|e| {
+                    VolumeError::new(VolumeErrorKind::Decompress(e.to_string())).at(&data_path)
+                })?;
+            }
+            read_exactly(dec, expected, &data_path).map_err(|e| match e.kind {
+                VolumeErrorKind::Io(io) => VolumeError::new(VolumeErrorKind::Decompress(io.to_string())).at(&data_path),
+                _ => e,
+            })?
+        }
+    };
+    let mut values = decode_voxels(&bytes, ty, h.big_endian);
+    if h.flip.contains(&true) && opts.dims.is_none() {
+        values = flip_axes(&values, dims, h.flip);
+    }
+    let name = path.file_stem().and_then(|s| s.to_str()).unwrap_or("volume");
+    Volume::from_values(name, dims, spacing, values).map_err(|e| e.at(path))
+}
+
+/// Mirrors the chosen axes of an x-fastest array.
+pub fn flip_axes<T: Copy>(values: &[T], dims: [u32; 3], flip: [bool; 3]) -> Vec<T> {
+    let [nx, ny, nz] = dims.map(|d| d as usize);
+    let mut out = Vec::with_capacity(values.len());
+    for k in 0..nz {
+        let sk = if flip[2] { nz - 1 - k } else { k };
+        for j in 0..ny {
+            let sj = if flip[1] { ny - 1 - j } else { j };
+            let row = (sk * ny + sj) * nx;
+            if flip[0] {
+                out.extend((0..nx).rev().filter_map(|i| values.get(row + i).copied()));
+            } else {
+                out.extend(values.get(row..row + nx).unwrap_or(&[]).iter().copied());
+            }
+        }
+    }
+    out
+}
+
+/// Writes a 3-D NRRD file with attached data (`gzip` selects the encoding) or, when
+/// `detached` names a data file, a `.nhdr` header next to it. Used by tests and for exporting.
+pub fn write(
+    path: &Path,
+    volume_bytes: &[u8],
+    ty: VoxelType,
+    dims: [u32; 3],
+    spacing: Vec3,
+    gzip: bool,
+    detached: Option<&str>,
+) -> std::io::Result<()> {
+    use std::io::Write;
+    let tyname = match ty {
+        VoxelType::U8 => "uint8",
+        VoxelType::I8 => "int8",
+        VoxelType::U16 => "uint16",
+        VoxelType::I16 => "int16",
+        VoxelType::U32 => "uint32",
+        VoxelType::I32 => "int32",
+        VoxelType::F32 => "float",
+        VoxelType::F64 => "double",
+    };
+    let mut head = format!(
+        "NRRD0004\n# written by volwarp-server\ntype: {tyname}\ndimension: 3\nsizes: {} {} {}\nspacings: {} {} {}\nencoding: {}\nendian: little\n",
+        dims[0],
+        dims[1],
+        dims[2],
+        spacing.x,
+        spacing.y,
+        spacing.z,
+        if gzip { "gzip" } else { "raw" }
+    );
+    let payload = if gzip {
+        let mut e = flate2::write::GzEncoder::new(Vec::new(), flate2::Compression::default());
+        e.write_all(volume_bytes)?;
+        e.finish()?
+    } else {
+        volume_bytes.to_vec()
+    };
+    match detached {
+        Some(df) => {
+            head.push_str(&format!("data file: {df}\n"));
+            std::fs::write(path, head)?;
+            std::fs::write(path.parent().unwrap_or(Path::new(".")).join(df), payload)
+        }
+        None => {
+            head.push('\n');
+            let mut f = std::fs::File::create(path)?;
+            f.write_all(head.as_bytes())?;
+            f.write_all(&payload)
+        }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn parses_a_typical_header() {
+        let h = parse_header(
+            b"NRRD0004\n# c\ntype: short\ndimension: 3\nspace: left-posterior-superior\nsizes: 64 64 93\n\
+space directions: (3.2,0,0) (0,3.2,0) (0,0,1.5)\nkinds: domain domain domain\nendian: little\n\
+encoding: raw\nspace origin: (0,0,0)\nfoo:=bar\n\nDATA",
+        )
+        .unwrap();
+        assert_eq!(h.voxel_type, VoxelType::I16);
+        assert_eq!(h.dims, [64, 64, 93]);
+        assert_eq!(h.encoding, Encoding::Raw);
+        assert_eq!(h.spacing, Some(Vec3::new(3.2, 3.2, 1.5)));
+        assert_eq!(h.data_file, None);
+        assert_eq!(h.flip, [false; 3]);
+        let h2 = parse_header(b"NRRD0005\ntype: uchar\ndimension: 3\nsizes: 2 2 2\nencoding: gzip\nspace directions: (1,0,0) (0,-2,0) (0,0,-3)\n\n").unwrap();
+        assert_eq!(h2.flip, [false, true, true]);
+        assert_eq!(h2.spacing, Some(Vec3::new(1.0, 2.0, 3.0)));
+        assert_eq!(flip_axes(&[0, 1, 2, 3, 4, 5, 6, 7], [2, 2, 2], [true, false, true]), [5, 4, 7, 6, 1, 0, 3, 2]);
+    }
+
+    #[test]
+    fn rejects_bad_headers_without_panicking() {
+        for bad in [
+            &b""[..],
+            b"NRRD",
+            b"NRRD0004\n",
+            b"NRRD0004\ntype: complex\n\n",
+            b"NRRD0004\ntype: uchar\ndimension: 2\nsizes: 4 4\nencoding: raw\n\n",
+            b"NRRD0004\ntype: uchar\ndimension: 3\nsizes: 4 4 0\nencoding: raw\n\n",
+            b"NRRD0004\ntype: uchar\ndimension: 3\nsizes: 4 4 4\nencoding: bzip2\n\n",
+            b"NRRD0004\ntype: uchar\ndimension: 3\nsizes: 4 4 4\nencoding: raw\nspacings: 1 nan 1\n\n",
+            b"NRRD0004\ntype: uchar\ndimension: 3\nsizes: 4 4 x\nencoding: raw\n\n",
+            b"NRRD0004\nno colon here\n\n",
+            b"NRRD0004\n\xff\xfe\n\n",
+            b"NRRDxxxx\n\n",
+        ] {
+            assert!(parse_header(bad).is_err(), "{:?}", String::from_utf8_lossy(bad));
+        }
+    }
+}

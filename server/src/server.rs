@@ -1,0 +1,474 @@
+//! The TCP server: plain `std::net` and threads, one pair of threads per client.
+//!
+//! **Protocol per connection** (messages of [`volwarp_core::wire`]): the client sends Hello
+//! (with the token if the server has one), the server answers Hello; then the client sends
+//! CameraRequests whenever its camera changes and the server answers with Frames. A reader
+//! thread keeps only the **newest** request; the render-and-send loop always renders the newest
+//! one it has (latest wins: no queue of stale work, so a client's memory stays at about two
+//! frames). Bye ends the connection.
+//!
+//! **Failure handling.** A handshake that does not finish within the handshake timeout, an idle
+//! client (no message within the idle timeout), a wrong token, an oversized or malformed
+//! message, or a viewport over the limit ends *that* connection: the server sends an Error
+//! message where the socket still allows, logs the reason and closes. Other clients carry on.
+//! Over `max_clients` a new client gets Error `BUSY`. Bound to a non-loopback address the
+//! server refuses to start without a token; the token is compared in constant time.
+
+use crate::dataset::Dataset;
+use crate::marcher::Marcher;
+use std::collections::HashMap;
+use std::io::{self, BufWriter, Read};
+use std::net::{Shutdown, SocketAddr, TcpListener, TcpStream};
+use std::sync::atomic::{AtomicBool, AtomicU64, AtomicUsize, Ordering};
+use std::sync::{Arc, Condvar, Mutex};
+use std::thread::JoinHandle;
+use std::time::{Duration, Instant};
+use volwarp_core::wire::{self, error_code, CameraRequest, ErrorMsg, Hello, Limits, Message, WireError};
+
+/// Server settings (every limit has a command-line flag in the binary).
+#[derive(Clone, Debug, PartialEq)]
+pub struct ServerConfig {
+    /// Address to listen on (default `127.0.0.1:7878`; port 0 picks a free port).
+    pub listen: SocketAddr,
+    /// Marcher threads shared by all clients (0 = one per core).
+    pub threads: usize,
+    /// Most clients served at once; more get Error `BUSY`.
+    pub max_clients: usize,
+    /// Largest client message payload accepted, in bytes (at most what an Error message needs).
+    pub max_message: u32,
+    /// Time a new client has to complete the Hello exchange.
+    pub handshake_timeout: Duration,
+    /// Time a client may send nothing before it is dropped.
+    pub idle_timeout: Duration,
+    /// Time a frame may take to send before the client is dropped.
+    pub send_timeout: Duration,
+    /// Largest viewport width or height a request may ask for.
+    pub max_viewport: u32,
+    /// Access token; required when `listen` is not a loopback address.
+    pub token: Option<String>,
+    /// Artificial delay before each frame (latency demos and benchmarks).
+    pub frame_delay: Option<Duration>,
+}
+
+impl Default for ServerConfig {
+    fn default() -> Self {
+        ServerConfig {
+            listen: SocketAddr::from(([127, 0, 0, 1], 7878)),
+            threads: 0,
+            max_clients: 8,
+            max_message: Limits::for_requests(4096).max_payload,
+            handshake_timeout: Duration::from_secs(5),
+            idle_timeout: Duration::from_secs(600),
+            send_timeout: Duration::from_secs(30),
+            max_viewport: 4096,
+            token: None,
+            frame_delay: None,
+        }
+    }
+}
+
+/// Compares two byte strings in time that depends only on their lengths.
+pub fn constant_time_eq(a: &[u8], b: &[u8]) -> bool {
+    let n = a.len().max(b.len());
+    let mut diff = u8::from(a.len() != b.len());
+    for i in 0..n {
+        diff |= a.get(i).copied().unwrap_or(0) ^ b.get(i).copied().unwrap_or(0);
+    }
+    std::hint::black_box(diff) == 0
+}
+
+struct Shared {
+    config: ServerConfig,
+    marcher: Arc<Marcher>,
+    pool: rayon::ThreadPool,
+    stop: AtomicBool,
+    active: AtomicUsize,
+    next_id: AtomicU64,
+    conns: Mutex<HashMap<u64, TcpStream>>,
+    threads: Mutex<Vec<JoinHandle<()>>>,
+}
+
+/// A bound server, not yet serving.
+pub struct Server {
+    listener: TcpListener,
+    addr: SocketAddr,
+    shared: Arc<Shared>,
+}
+
+/// A server running on a background thread; [`ServerHandle::shutdown`] (or drop) stops it.
+pub struct ServerHandle {
+    addr: SocketAddr,
+    shared: Arc<Shared>,
+    accept: Option<JoinHandle<()>>,
+}
+
+impl Server {
+    /// Checks the config, builds the marcher of `dataset` and binds the listener.
+    pub fn bind(config: ServerConfig, dataset: Dataset) -> io::Result<Server> {
+        let marcher = Arc::new(Marcher::from_dataset(&dataset));
+        Server::with_marcher(config, marcher)
+    }
+
+    /// Like [`Server::bind`] with a ready marcher.
+    pub fn with_marcher(config: ServerConfig, marcher: Arc<Marcher>) -> io::Result<Server> {
+        let invalid = |m: &str| io::Error::new(io::ErrorKind::InvalidInput, m.to_string());
+        if config.token.is_none() && !config.listen.ip().is_loopback() {
+            return Err(invalid("a token (--token) is required to listen on a non-loopback address"));
+        }
+        if let Some(t) = &config.token {
+            if t.is_empty() || t.len() > wire::MAX_TOKEN {
+                return Err(invalid("the token must be 1 to 64 bytes"));
+            }
+        }
+        if config.max_viewport == 0 || config.max_clients == 0 {
+            return Err(invalid("max viewport and max clients must be at least 1"));
+        }
+        let pool = rayon::ThreadPoolBuilder::new()
+            .num_threads(config.threads)
+            .thread_name(|i| format!("volwarp-march-{i}"))
+            .build()
+            .map_err(|e| io::Error::other(e.to_string()))?;
+        let listener = TcpListener::bind(config.listen)?;
+        let addr = listener.local_addr()?;
+        let shared = Arc::new(Shared {
+            config,
+            marcher,
+            pool,
+            stop: AtomicBool::new(false),
+            active: AtomicUsize::new(0),
+            next_id: AtomicU64::new(1),
+            conns: Mutex::new(HashMap::new()),
+            threads: Mutex::new(Vec::new()),
+        });
+        Ok(Server { listener, addr, shared })
+    }
+
+    /// The bound address (with the real port when the config asked for port 0).
+    pub fn local_addr(&self) -> SocketAddr {
+        self.addr
+    }
+
+    /// Serves on a background thread.
+    pub fn spawn(self) -> ServerHandle {
+        let (addr, shared) = (self.addr, self.shared.clone());
+        let accept = std::thread::Builder::new()
+            .name("volwarp-accept".into())
+            .spawn(move || self.run())
+            .expect("spawning the accept thread");
+        ServerHandle { addr, shared, accept: Some(accept) }
+    }
+
+    /// Serves until shut down (blocking).
+    pub fn run(self) {
+        log::info!("serving {} on {}", self.shared.marcher.volume().name, self.addr);
+        for stream in self.listener.incoming() {
+            if self.shared.stop.load(Ordering::SeqCst) {
+                break;
+            }
+            match stream {
+                Ok(s) => accept(&self.shared, s),
+                Err(e) => {
+                    log::warn!("accept failed: {e}");
+                    std::thread::sleep(Duration::from_millis(20));
+                }
+            }
+            self.shared.threads.lock().unwrap_or_else(|e| e.into_inner()).retain(|h| !h.is_finished());
+        }
+        // Stop every connection and wait for its threads.
+        for s in self.shared.conns.lock().unwrap_or_else(|e| e.into_inner()).values() {
+            let _ = s.shutdown(Shutdown::Both);
+        }
+        let threads = std::mem::take(&mut *self.shared.threads.lock().unwrap_or_else(|e| e.into_inner()));
+        for t in threads {
+            let _ = t.join();
+        }
+        log::info!("server on {} stopped", self.addr);
+    }
+}
+
+impl ServerHandle {
+    /// The bound address.
+    pub fn local_addr(&self) -> SocketAddr {
+        self.addr
+    }
+
+    /// Clients being served now.
+    pub fn active_clients(&self) -> usize {
+        self.shared.active.load(Ordering::SeqCst)
+    }
+
+    /// Stops accepting, closes every connection and waits for all threads.
+    pub fn shutdown(mut self) {
+        self.stop();
+    }
+
+    fn stop(&mut self) {
+        let Some(accept) = self.accept.take() else { return };
+        self.shared.stop.store(true, Ordering::SeqCst);
+        // Wake the blocking accept.
+        let mut wake = self.addr;
+        if wake.ip().is_unspecified() {
+            wake.set_ip(if wake.is_ipv4() { [127, 0, 0, 1].into() } else { std::net::Ipv6Addr::LOCALHOST.into() });
+        }
+        let _ = TcpStream::connect_timeout(&wake, Duration::from_secs(1));
+        let _ = accept.join();
+    }
+}
+
+impl Drop for ServerHandle {
+    fn drop(&mut self) {
+        self.stop();
+    }
+}
+
+fn accept(shared: &Arc<Shared>, stream: TcpStream) {
+    let id = shared.next_id.fetch_add(1, Ordering::SeqCst);
+    let peer = stream.peer_addr().map(|a| a.to_string()).unwrap_or_else(|_| "?".into());
+    if shared.stop.load(Ordering::SeqCst) {
+        return;
+    }
+    if shared.active.load(Ordering::SeqCst) >= shared.config.max_clients {
+        log::warn!("client {id} ({peer}) refused: {} clients already", shared.config.max_clients);
+        let _ = stream.set_write_timeout(Some(Duration::from_secs(1)));
+        send_error(&stream, error_code::BUSY, "server busy: too many clients");
+        let _ = stream.shutdown(Shutdown::Both);
+        return;
+    }
+    log::info!("client {id} ({peer}) connected");
+    shared.active.fetch_add(1, Ordering::SeqCst);
+    if let Ok(c) = stream.try_clone() {
+        shared.conns.lock().unwrap_or_else(|e| e.into_inner()).insert(id, c);
+    }
+    let sh = shared.clone();
+    let spawned = std::thread::Builder::new().name(format!("volwarp-client-{id}")).spawn(move || {
+        let reason = serve(&sh, &stream, id);
+        log::info!("client {id} ({peer}) closed: {reason}");
+        let _ = stream.shutdown(Shutdown::Both);
+        sh.conns.lock().unwrap_or_else(|e| e.into_inner()).remove(&id);
+        sh.active.fetch_sub(1, Ordering::SeqCst);
+    });
+    match spawned {
+        Ok(h) => shared.threads.lock().unwrap_or_else(|e| e.into_inner()).push(h),
+        Err(e) => {
+            log::error!("client {id}: cannot spawn a thread: {e}");
+            shared.conns.lock().unwrap_or_else(|e| e.into_inner()).remove(&id);
+            shared.active.fetch_sub(1, Ordering::SeqCst);
+        }
+    }
+}
+
+/// An `embedded_io` reader over a socket that reports read timeouts as `TimedOut`.
+struct SocketReader<'a>(&'a TcpStream);
+
+#[derive(Debug)]
+struct SocketError(embedded_io::ErrorKind);
+
+impl std::fmt::Display for SocketError {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        write!(f, "socket error: {:?}", self.0)
+    }
+}
+
+impl std::error::Error for SocketError {}
+
+impl embedded_io::Error for SocketError {
+    fn kind(&self) -> embedded_io::ErrorKind {
+        self.0
+    }
+}
+
+impl embedded_io::ErrorType for SocketReader<'_> {
+    type Error = SocketError;
+}
+
+impl embedded_io::Read for SocketReader<'_> {
+    fn read(&mut self, buf: &mut [u8]) -> Result<usize, SocketError> {
+        loop {
+            match (&mut &*self.0).read(buf) {
+                Ok(n) => return Ok(n),
+                Err(e) if e.kind() == io::ErrorKind::Interrupted => continue,
+                Err(e) => {
+                    return Err(SocketError(match e.kind() {
+                        io::ErrorKind::WouldBlock | io::ErrorKind::TimedOut => embedded_io::ErrorKind::TimedOut,
+                        k => k.into(),
+                    }))
+                }
+            }
+        }
+    }
+}
+
+fn send_error(stream: &TcpStream, code: u16, text: &str) {
+    let mut w = embedded_io_adapters::std::FromStd::new(stream);
+    let _ = wire::write_error(&mut w, &ErrorMsg::new(code, text));
+}
+
+/// The error code and text to send for a decoding error, or `None` when the peer is gone.
+fn wire_error_reply(e: &WireError) -> Option<(u16, String)> {
+    let code = match e {
+        WireError::Closed | WireError::UnexpectedEof => return None,
+        WireError::Io(k) if *k == embedded_io::ErrorKind::TimedOut => error_code::TIMEOUT,
+        WireError::Io(_) => return None,
+        WireError::TooLarge { .. } | WireError::TooManySamples { .. } => error_code::TOO_LARGE,
+        WireError::BadCamera(volwarp_core::CameraError::BadViewport) => error_code::TOO_LARGE,
+        WireError::UnsupportedVersion(_) => error_code::UNSUPPORTED_VERSION,
+        _ => error_code::BAD_REQUEST,
+    };
+    Some((code, e.to_string()))
+}
+
+/// How the reader ended.
+enum End {
+    /// Bye from the client.
+    Bye,
+    /// The socket is gone (reason).
+    Gone(String),
+    /// A protocol error: send this Error, then close.
+    Error(u16, String),
+}
+
+#[derive(Default)]
+struct Slot {
+    latest: Option<CameraRequest>,
+    dropped: u64,
+    end: Option<End>,
+}
+
+/// Serves one connection; returns the reason it ended.
+fn serve(sh: &Shared, stream: &TcpStream, id: u64) -> String {
+    let cfg = &sh.config;
+    let _ = stream.set_nodelay(true);
+    let _ = stream.set_read_timeout(Some(cfg.handshake_timeout.max(Duration::from_millis(1))));
+    let _ = stream.set_write_timeout(Some(cfg.send_timeout.max(Duration::from_millis(1))));
+    let limits = Limits {
+        max_payload: cfg.max_message.min(Limits::for_requests(cfg.max_viewport).max_payload),
+        max_samples: 0,
+        max_viewport: cfg.max_viewport,
+    };
+    // Handshake.
+    let hello = match wire::read_message(&mut SocketReader(stream), &limits) {
+        Ok(Message::Hello(h)) => h,
+        Ok(other) => {
+            let text = format!("expected Hello, got {}", msg_name(&other));
+            send_error(stream, error_code::BAD_REQUEST, &text);
+            return text;
+        }
+        Err(e) => {
+            let text = format!("handshake failed: {e}");
+            if let Some((code, t)) = wire_error_reply(&e) {
+                send_error(stream, code, &t);
+            }
+            return text;
+        }
+    };
+    if let Some(token) = &cfg.token {
+        if !constant_time_eq(token.as_bytes(), &hello.token) {
+            send_error(stream, error_code::UNAUTHORIZED, "missing or wrong token");
+            return "missing or wrong token".into();
+        }
+    }
+    {
+        let mut w = embedded_io_adapters::std::FromStd::new(stream);
+        if let Err(e) = wire::write_hello(&mut w, &Hello::new(0)) {
+            return format!("cannot send Hello: {e}");
+        }
+    }
+    log::info!("client {id}: hello (version {}, capabilities {:#x})", hello.version, hello.capabilities);
+    let _ = stream.set_read_timeout(Some(cfg.idle_timeout.max(Duration::from_millis(1))));
+
+    let slot = Arc::new((Mutex::new(Slot::default()), Condvar::new()));
+    let reader = {
+        let slot = slot.clone();
+        let Ok(rs) = stream.try_clone() else { return "cannot clone the socket".into() };
+        std::thread::Builder::new().name(format!("volwarp-read-{id}")).spawn(move || read_loop(rs, limits, slot))
+    };
+    let Ok(reader) = reader else { return "cannot spawn the reader thread".into() };
+
+    let mut out = BufWriter::with_capacity(64 * 1024, stream);
+    let reason = loop {
+        let req = {
+            let (lock, cv) = &*slot;
+            let mut s = lock.lock().unwrap_or_else(|e| e.into_inner());
+            while s.latest.is_none() && s.end.is_none() {
+                s = cv.wait(s).unwrap_or_else(|e| e.into_inner());
+            }
+            match s.latest.take() {
+                Some(r) if s.end.is_none() => r,
+                _ => break s.end.take().unwrap_or(End::Gone("reader ended".into())),
+            }
+        };
+        if let Some(d) = cfg.frame_delay {
+            std::thread::sleep(d);
+        }
+        let (frame, stats) = sh.pool.install(|| sh.marcher.render_frame(&req));
+        let t_send = Instant::now();
+        let sent = {
+            let mut w = embedded_io_adapters::std::FromStd::new(&mut out);
+            wire::write_frame(&mut w, &frame.header, &frame.samples, &frame.colors)
+        };
+        let sent = sent.map_err(|e| e.to_string()).and_then(|_| io::Write::flush(&mut out).map_err(|e| e.to_string()));
+        if let Err(e) = sent {
+            break End::Gone(format!("cannot send frame: {e}"));
+        }
+        let dropped = std::mem::take(&mut slot.0.lock().unwrap_or_else(|e| e.into_inner()).dropped);
+        log::info!(
+            "client {id}: frame seq {} {}x{} {}: {} samples, march {:.1} ms, quantize {:.1} ms, compact {:.2} ms, send {:.1} ms{}",
+            req.seq,
+            req.camera.width,
+            req.camera.height,
+            req.heuristic,
+            stats.samples,
+            stats.march_us as f64 / 1e3,
+            stats.quantize_us as f64 / 1e3,
+            stats.compact_us as f64 / 1e3,
+            t_send.elapsed().as_secs_f64() * 1e3,
+            if dropped > 0 { format!(", {dropped} stale requests skipped") } else { String::new() }
+        );
+    };
+    let reason = match reason {
+        End::Bye => "bye".to_string(),
+        End::Gone(r) => r,
+        End::Error(code, text) => {
+            send_error(stream, code, &text);
+            text
+        }
+    };
+    let _ = stream.shutdown(Shutdown::Both);
+    let _ = reader.join();
+    reason
+}
+
+fn msg_name(m: &Message) -> &'static str {
+    match m {
+        Message::Hello(_) => "Hello",
+        Message::CameraRequest(_) => "CameraRequest",
+        Message::Frame(_) => "Frame",
+        Message::Error(_) => "Error",
+        Message::Bye => "Bye",
+    }
+}
+
+fn read_loop(stream: TcpStream, limits: Limits, slot: Arc<(Mutex<Slot>, Condvar)>) {
+    let mut rd = SocketReader(&stream);
+    let end = loop {
+        match wire::read_message(&mut rd, &limits) {
+            Ok(Message::CameraRequest(r)) => {
+                let mut s = slot.0.lock().unwrap_or_else(|e| e.into_inner());
+                if s.latest.replace(r).is_some() {
+                    s.dropped += 1;
+                }
+                slot.1.notify_one();
+            }
+            Ok(Message::Bye) => break End::Bye,
+            Ok(Message::Error(e)) => break End::Gone(format!("client sent Error {}: {}", e.code, e.text)),
+            Ok(other) => break End::Error(error_code::BAD_REQUEST, format!("unexpected {} message", msg_name(&other))),
+            Err(e) => match wire_error_reply(&e) {
+                Some((code, text)) => break End::Error(code, text),
+                None => break End::Gone(e.to_string()),
+            },
+        }
+    };
+    let mut s = slot.0.lock().unwrap_or_else(|e| e.into_inner());
+    s.end = Some(end);
+    slot.1.notify_one();
+}
