@@ -11,7 +11,6 @@
 //! | [`tracer`] | [`GpuTracer`]: the sphere tracer (`trace.wgsl`), a [`Renderer`] named `spheres-gpu` |
 //! | [`lbvh`] | the LBVH build on the GPU (`lbvh.wgsl`): Morton codes, radix sort, Karras, fit |
 //! | [`buffers`] | buffers reused across frames, readback |
-//! | [`reference`] | the scalar CPU renderer from core's `Lbvh::trace`, the oracle of the tests |
 //! | [`compare`] | CPU vs GPU image comparison: identical share, largest difference, PNGs |
 //! | [`synthetic`] | synthetic sample clouds (a bumpy surface) for tests and benchmarks |
 //!
@@ -27,7 +26,6 @@ pub mod adapter;
 pub mod buffers;
 pub mod compare;
 pub mod lbvh;
-pub mod reference;
 pub mod synthetic;
 pub mod tracer;
 

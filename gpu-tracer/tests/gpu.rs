@@ -4,8 +4,8 @@
 use volwarp_core::renderer::{Image, Renderer, BACKGROUND};
 use volwarp_core::wire::Frame;
 use volwarp_core::{Camera, Scene};
+use volwarp_cpu_tracer::{PacketTracer, ScalarTracer};
 use volwarp_gpu_tracer::compare::{diff, ImageDiff};
-use volwarp_gpu_tracer::reference::ScalarTracer;
 use volwarp_gpu_tracer::synthetic::bumpy_surface;
 use volwarp_gpu_tracer::GpuTracer;
 
@@ -24,7 +24,7 @@ fn tracer() -> Option<GpuTracer> {
 
 fn cpu_image(scene: &Scene, cam: &Camera) -> Image {
     let mut img = Image::new(1, 1);
-    ScalarTracer.render(scene, cam, &mut img);
+    PacketTracer::new(0).render(scene, cam, &mut img);
     img
 }
 
@@ -90,4 +90,106 @@ fn gpu_built_lbvh_is_valid_and_traces_the_same_image() {
     gpu.try_render(&gpu_scene, &cam, &mut img).unwrap();
     assert_eq!(gpu.scene_uploads(), uploads, "a GPU-built scene is already resident");
     check_match("GPU-built tree", &cpu, &img);
+}
+
+#[test]
+fn gpu_trace_matches_the_scalar_oracle_exactly_on_small_scenes() {
+    let Some(mut gpu) = tracer() else { return };
+    let mut scalar = ScalarTracer::new(0);
+    // 1 sample (no internal node), 2, 3, and a cloud whose size is not a tile multiple.
+    for size in [1u32, 2, 3, 37] {
+        let mut frame = synthetic(size.max(2));
+        frame.samples.truncate((size * size) as usize);
+        frame.colors.truncate((size * size) as usize);
+        frame.header.count = frame.samples.len() as u32;
+        let scene = Scene::build(&frame);
+        let cam = Camera::look_at(
+            volwarp_core::Vec3::new(0.3, 0.2, 3.0),
+            volwarp_core::Vec3::ZERO,
+            volwarp_core::Vec3::Y,
+            50.0,
+            48,
+            40,
+        );
+        let mut want = Image::new(1, 1);
+        scalar.render(&scene, &cam, &mut want);
+        let mut got = Image::new(1, 1);
+        gpu.try_render(&scene, &cam, &mut got).unwrap();
+        assert_eq!(diff(&want, &got).unwrap().identical, 48 * 40, "{} samples", scene.samples.len());
+    }
+}
+
+#[test]
+fn bad_input_is_a_clear_error_and_a_background_image() {
+    let Some(mut gpu) = tracer() else { return };
+    let frame = synthetic(32);
+    let scene = Scene::build(&frame);
+    let mut img = Image::new(1, 1);
+    let cam = frame.header.camera;
+    let bad_cam = Camera { fov_y_deg: f32::NAN, ..cam };
+    assert!(matches!(gpu.try_render(&scene, &bad_cam, &mut img), Err(volwarp_gpu_tracer::GpuError::BadCamera(_))));
+    let huge = cam.with_viewport(100_000, 10);
+    assert!(gpu.try_render(&scene, &huge, &mut img).is_err());
+    let mut broken = scene.clone();
+    broken.nodes.pop();
+    let r = gpu.try_render(&broken, &cam, &mut img);
+    assert!(matches!(r, Err(volwarp_gpu_tracer::GpuError::BadScene(_))), "{r:?}");
+    assert!(img.pixels.iter().all(|&p| p == BACKGROUND));
+    // The Renderer interface logs instead of failing and still gives a full background image.
+    gpu.render(&broken, &cam.with_viewport(20, 10), &mut img);
+    assert_eq!(img.pixels.len(), 200);
+    assert!(img.pixels.iter().all(|&p| p == BACKGROUND));
+    // An empty scene draws the background; a good scene still renders after the errors.
+    let empty = Scene::build(&Frame { samples: vec![], colors: vec![], ..frame.clone() });
+    gpu.try_render(&empty, &cam, &mut img).unwrap();
+    assert!(img.pixels.iter().all(|&p| p == BACKGROUND));
+    gpu.try_render(&scene, &cam, &mut img).unwrap();
+    assert!(img.pixels.iter().any(|&p| p != BACKGROUND));
+    let mut bad_frame = frame.clone();
+    bad_frame.colors.pop();
+    assert!(gpu.build_scene(&bad_frame).is_err());
+}
+
+#[test]
+fn buffers_are_reused_and_new_scenes_are_uploaded() {
+    let Some(mut gpu) = tracer() else { return };
+    let big = Scene::build(&synthetic(64));
+    let cam = big.header.camera.with_viewport(64, 64);
+    let mut img = Image::new(1, 1);
+    gpu.try_render(&big, &cam, &mut img).unwrap();
+    let allocs = gpu.buffer_allocations();
+    // Same length and sequence number, different content: must be uploaded, not mistaken.
+    let mut other_frame = synthetic(64);
+    other_frame.colors.iter_mut().for_each(|c| *c = 0xff00_00ff);
+    let other = Scene::build(&other_frame);
+    gpu.try_render(&other, &cam, &mut img).unwrap();
+    assert_eq!(gpu.scene_uploads(), 2);
+    assert!(img.pixels.iter().any(|&p| p == 0xff00_00ff), "the new scene's colors are shown");
+    // Smaller scenes and viewports fit in the buffers already there.
+    let small = Scene::build(&synthetic(40));
+    gpu.try_render(&small, &cam.with_viewport(50, 40), &mut img).unwrap();
+    gpu.try_render(&big, &cam, &mut img).unwrap();
+    assert_eq!(gpu.buffer_allocations(), allocs, "no reallocation for smaller frames");
+}
+
+#[test]
+fn gpu_build_handles_duplicates_and_odd_sizes() {
+    let Some(mut gpu) = tracer() else { return };
+    let base = synthetic(48);
+    for n in [2usize, 3, 129, 1000] {
+        let mut frame = base.clone();
+        frame.samples.truncate(n);
+        frame.colors.truncate(n);
+        // Many identical positions: the index tie-break must still give a valid tree.
+        for i in (0..n).step_by(3) {
+            frame.samples[i] = frame.samples[0];
+        }
+        let cpu = Scene::build(&frame);
+        let g = gpu.build_scene(&frame).unwrap();
+        let mut seen = vec![0u8; 2 * n];
+        g.lbvh().check(&mut seen).unwrap_or_else(|e| panic!("n = {n}: {e:?}"));
+        assert_eq!(g.samples, cpu.samples, "n = {n}");
+        let links = |s: &Scene| s.nodes.iter().map(|n| (n.left, n.right)).collect::<Vec<_>>();
+        assert_eq!(links(&g), links(&cpu), "n = {n}");
+    }
 }

@@ -13,8 +13,8 @@ use volwarp_core::record::{read_entry, read_magic, Entry};
 use volwarp_core::renderer::{Image, Renderer};
 use volwarp_core::wire::{Frame, Limits};
 use volwarp_core::{Camera, Scene};
+use volwarp_cpu_tracer::PacketTracer;
 use volwarp_gpu_tracer::compare::{diff, save_comparison, TARGET_IDENTICAL};
-use volwarp_gpu_tracer::reference::ScalarTracer;
 use volwarp_gpu_tracer::GpuTracer;
 
 /// Replays a recorded volwarp stream through the CPU and GPU tracers and compares the images.
@@ -91,7 +91,7 @@ fn run(args: &Args) -> Result<bool, String> {
     }
     let mut gpu = GpuTracer::new().map_err(|e| e.to_string())?;
     println!("adapter: {}", gpu.context().describe());
-    let mut cpu = ScalarTracer;
+    let mut cpu = PacketTracer::new(0);
     println!("CPU tracer: {}", cpu.name());
     if let Some(dir) = &args.out {
         std::fs::create_dir_all(dir).map_err(|e| format!("{}: {e}", dir.display()))?;
