@@ -164,7 +164,7 @@ fn buffers_are_reused_and_new_scenes_are_uploaded() {
     let other = Scene::build(&other_frame);
     gpu.try_render(&other, &cam, &mut img).unwrap();
     assert_eq!(gpu.scene_uploads(), 2);
-    assert!(img.pixels.iter().any(|&p| p == 0xff00_00ff), "the new scene's colors are shown");
+    assert!(img.pixels.contains(&0xff00_00ff), "the new scene's colors are shown");
     // Smaller scenes and viewports fit in the buffers already there.
     let small = Scene::build(&synthetic(40));
     gpu.try_render(&small, &cam.with_viewport(50, 40), &mut img).unwrap();
