@@ -1,0 +1,126 @@
+//! Real frames: the server's ray marcher on the bundled CT head (and the MRI from
+//! `../shared/data` where it exists), traced on the GPU and on the CPU, and replayed through
+//! `volwarp-compare` from a record file. Needs a GPU adapter (lavapipe in CI);
+//! `VOLWARP_SKIP_GPU=1` skips explicitly.
+
+use std::path::Path;
+use std::process::Command;
+use volwarp_core::record::{write_entry, write_magic, Entry};
+use volwarp_core::renderer::{Image, Renderer, BACKGROUND};
+use volwarp_core::wire::{CameraRequest, Frame, VecWriter};
+use volwarp_core::{Camera, Heuristic, Scene};
+use volwarp_cpu_tracer::PacketTracer;
+use volwarp_gpu_tracer::compare::diff;
+use volwarp_gpu_tracer::GpuTracer;
+use volwarp_server::{Dataset, Marcher};
+
+fn skip() -> bool {
+    let s = std::env::var("VOLWARP_SKIP_GPU").is_ok_and(|v| v == "1");
+    if s {
+        eprintln!("VOLWARP_SKIP_GPU=1: GPU test skipped");
+    }
+    s
+}
+
+fn request(seq: u64, camera: Camera, heuristic: Heuristic) -> CameraRequest {
+    CameraRequest { seq, camera, heuristic, radius_scale: 1.0 }
+}
+
+/// Frames of the marcher for a few views and heuristics.
+fn frames(marcher: &Marcher, size: u32) -> Vec<Frame> {
+    let cam = marcher.default_camera(size, size);
+    [(0.0, 0.0, Heuristic::Threshold), (35.0, 10.0, Heuristic::Gradient), (-60.0, -20.0, Heuristic::Entrance)]
+        .iter()
+        .enumerate()
+        .map(|(i, &(yaw, pitch, h))| marcher.render_frame(&request(i as u64, cam.orbit(yaw, pitch), h)).0)
+        .collect()
+}
+
+fn compare_frames(gpu: &mut GpuTracer, name: &str, frames: &[Frame]) {
+    let mut cpu = PacketTracer::new(0);
+    for (i, frame) in frames.iter().enumerate() {
+        let n = frame.samples.len();
+        assert!(n > 1000, "{name} frame {i}: only {n} samples");
+        let scene = Scene::build(frame);
+        let gpu_scene = gpu.build_scene(frame).unwrap();
+        let mut seen = vec![0u8; 2 * n];
+        gpu_scene.lbvh().check(&mut seen).unwrap();
+        let links = |s: &Scene| s.nodes.iter().map(|n| (n.left, n.right)).collect::<Vec<_>>();
+        assert_eq!(links(&gpu_scene), links(&scene), "{name} frame {i}: GPU tree topology");
+        let cam = frame.header.camera.orbit(10.0, 0.0);
+        let (mut want, mut got, mut got_gpu_built) = (Image::new(1, 1), Image::new(1, 1), Image::new(1, 1));
+        cpu.render(&scene, &cam, &mut want);
+        gpu.try_render(&scene, &cam, &mut got).unwrap();
+        gpu.try_render(&gpu_scene, &cam, &mut got_gpu_built).unwrap();
+        let hit = want.pixels.iter().filter(|&&p| p != BACKGROUND).count();
+        for (what, img) in [("CPU-built tree", &got), ("GPU-built tree", &got_gpu_built)] {
+            let d = diff(&want, img).unwrap();
+            eprintln!(
+                "{name} frame {i} ({n} samples, {hit} hit pixels), {what}: {:.4} % identical, max diff {}",
+                100.0 * d.identical_share(),
+                d.max_channel_diff
+            );
+            assert!(d.meets_target(), "{name} frame {i}, {what}: {:.4} %", 100.0 * d.identical_share());
+        }
+        assert!(hit > 1000);
+    }
+}
+
+#[test]
+fn gpu_matches_cpu_on_real_frames_of_the_bundled_ct_head() {
+    if skip() {
+        return;
+    }
+    let _ = env_logger::builder().is_test(true).try_init();
+    let mut gpu = GpuTracer::new().unwrap_or_else(|e| panic!("{e} (VOLWARP_SKIP_GPU=1 skips explicitly)"));
+    let marcher = Marcher::from_dataset(&Dataset::default_bundled());
+    compare_frames(&mut gpu, "ct head", &frames(&marcher, 256));
+}
+
+#[test]
+fn gpu_matches_cpu_on_a_real_frame_of_the_mri_where_available() {
+    if skip() {
+        return;
+    }
+    let path = Path::new(env!("CARGO_MANIFEST_DIR")).join("../../shared/data/mri_colin27_181x217x181_uint8.raw");
+    let Ok(ds) = Dataset::load(&path, None) else {
+        eprintln!("{} not found: the MRI frame is not compared (the CT head frames are)", path.display());
+        return;
+    };
+    let mut gpu = GpuTracer::new().unwrap_or_else(|e| panic!("{e} (VOLWARP_SKIP_GPU=1 skips explicitly)"));
+    let marcher = Marcher::from_dataset(&ds);
+    let cam = marcher.default_camera(256, 256);
+    let frame = marcher.render_frame(&request(1, cam, Heuristic::Threshold)).0;
+    compare_frames(&mut gpu, "mri", &[frame]);
+}
+
+#[test]
+fn compare_replays_a_recorded_real_stream() {
+    if skip() {
+        return;
+    }
+    let marcher = Marcher::from_dataset(&Dataset::default_bundled());
+    let frames = frames(&marcher, 128);
+    let mut bytes = Vec::new();
+    let mut w = VecWriter(&mut bytes);
+    write_magic(&mut w).unwrap();
+    for (i, f) in frames.iter().take(2).enumerate() {
+        let cam = f.header.camera;
+        write_entry(&mut w, &Entry::Frame { t_us: i as u64 * 100_000, frame: f.clone() }).unwrap();
+        for k in 1..=2u64 {
+            let req = request(10 + k, cam.orbit(4.0 * k as f32, 2.0), f.header.heuristic);
+            write_entry(&mut w, &Entry::Camera { t_us: i as u64 * 100_000 + k * 16_000, request: req }).unwrap();
+        }
+    }
+    let dir = std::env::temp_dir().join(format!("volwarp-compare-real-{}", std::process::id()));
+    std::fs::create_dir_all(&dir).unwrap();
+    let file = dir.join("ct.vwrec");
+    std::fs::write(&file, &bytes).unwrap();
+    let out = Command::new(env!("CARGO_BIN_EXE_volwarp-compare")).arg(&file).arg("--out").arg(&dir).output().unwrap();
+    let stdout = String::from_utf8_lossy(&out.stdout);
+    eprintln!("{stdout}{}", String::from_utf8_lossy(&out.stderr));
+    assert!(out.status.success(), "{:?}", out.status);
+    assert_eq!(stdout.lines().filter(|l| l.contains(" %  ")).count(), 4);
+    assert!(dir.join("frame0001_cam01.png").is_file());
+    let _ = std::fs::remove_dir_all(&dir);
+}
