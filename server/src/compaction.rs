@@ -27,7 +27,12 @@ pub fn compact(samples: &[u64], colors: &[u32]) -> (Vec<u64>, Vec<u32>) {
 ///
 /// # Panics
 /// If `samples` and `colors` differ in length.
-pub fn compact_into_vecs(samples: &[u64], colors: &[u32], out_samples: &mut Vec<u64>, out_colors: &mut Vec<u32>) -> usize {
+pub fn compact_into_vecs(
+    samples: &[u64],
+    colors: &[u32],
+    out_samples: &mut Vec<u64>,
+    out_colors: &mut Vec<u32>,
+) -> usize {
     assert_eq!(samples.len(), colors.len(), "one color per sample");
     let counts: Vec<usize> = samples.par_chunks(CHUNK).map(count_nonempty).collect();
     let total: usize = counts.iter().sum();

@@ -18,7 +18,11 @@ use volwarp_server::volume::{parse_dims, LoadOptions, VoxelType};
 use volwarp_server::{default_camera, Dataset, MarchOptions, Marcher, Server, ServerConfig};
 
 #[derive(Parser, Debug)]
-#[command(name = "volwarp-server", version, about = "volwarp server: ray-marches a volume and sends compacted object-space samples to clients")]
+#[command(
+    name = "volwarp-server",
+    version,
+    about = "volwarp server: ray-marches a volume and sends compacted object-space samples to clients"
+)]
 struct Cli {
     #[command(subcommand)]
     cmd: Option<Cmd>,
@@ -157,7 +161,8 @@ fn load(d: &DataArgs) -> Result<Dataset, String> {
         return Ok(Dataset::default_bundled());
     };
     if let Some(rest) = v.strip_prefix("marschner-lobb") {
-        let n = rest.strip_prefix(':').map_or(Ok(64), |s| s.parse::<u32>()).map_err(|_| "marschner-lobb:N".to_string())?;
+        let n =
+            rest.strip_prefix(':').map_or(Ok(64), |s| s.parse::<u32>()).map_err(|_| "marschner-lobb:N".to_string())?;
         let mut ds = Dataset::marschner_lobb(n);
         if let Some(tf) = &d.tf {
             ds.tf = volwarp_server::TransferFunction::load(tf, ds.volume.value_range()).map_err(|e| e.to_string())?;

@@ -129,7 +129,7 @@ impl Marcher {
     }
 
     fn with_grid(volume: Arc<Volume>, grid: Arc<MinMaxGrid>, tf: &TransferFunction, mut opts: MarchOptions) -> Marcher {
-        if !(opts.step_voxels >= 0.01) {
+        if opts.step_voxels.is_nan() || opts.step_voxels < 0.01 {
             opts.step_voxels = 0.01;
         }
         opts.step_voxels = opts.step_voxels.min(16.0);
@@ -207,7 +207,15 @@ impl Marcher {
                 if !self.occupancy.occupied(br) {
                     let t_out = self.occupancy.exit_t(br, o, inv_d);
                     let k_next = ((t_out - t_enter) / dt - 0.5).ceil();
-                    k = if k_next > k as f32 + 1.0 { if k_next < n as f32 { k_next as u32 } else { n } } else { k + 1 };
+                    k = if k_next > k as f32 + 1.0 {
+                        if k_next < n as f32 {
+                            k_next as u32
+                        } else {
+                            n
+                        }
+                    } else {
+                        k + 1
+                    };
                     continue;
                 }
             }
@@ -289,7 +297,8 @@ impl Marcher {
         let pb = self.march(&req.camera, req.heuristic);
         let t1 = Instant::now();
         let bounds = self.volume.bounds();
-        let scale = if req.radius_scale.is_finite() && req.radius_scale > 0.0 { req.radius_scale.min(16.0) } else { 1.0 };
+        let scale =
+            if req.radius_scale.is_finite() && req.radius_scale > 0.0 { req.radius_scale.min(16.0) } else { 1.0 };
         let radius = self.default_radius() * scale;
         let radius_unit = radius / RADIUS_CODE;
         let q = Quantizer::new(bounds, radius_unit);

@@ -113,9 +113,10 @@ pub fn parse_header(bytes: &[u8]) -> Result<NrrdHeader, VolumeError> {
         let value = value.trim();
         match field.trim().to_ascii_lowercase().as_str() {
             "type" => {
-                ty = Some(VoxelType::parse(value).ok_or_else(|| {
-                    VolumeError::new(VolumeErrorKind::UnknownType(value.chars().take(40).collect()))
-                })?)
+                ty =
+                    Some(VoxelType::parse(value).ok_or_else(|| {
+                        VolumeError::new(VolumeErrorKind::UnknownType(value.chars().take(40).collect()))
+                    })?)
             }
             "dimension" => dimension = Some(value.parse::<u32>().map_err(|_| bad(format!("dimension {value:?}")))?),
             "sizes" => {
@@ -172,12 +173,11 @@ pub fn parse_header(bytes: &[u8]) -> Result<NrrdHeader, VolumeError> {
                 data_file = Some(value.to_string());
             }
             "byte skip" | "byteskip" => {
-                byte_skip = value.parse::<i64>().ok().filter(|&b| b >= -1).ok_or_else(|| bad(format!("byte skip {value:?}")))?
+                byte_skip =
+                    value.parse::<i64>().ok().filter(|&b| b >= -1).ok_or_else(|| bad(format!("byte skip {value:?}")))?
             }
-            "line skip" | "lineskip" => {
-                if value != "0" {
-                    return Err(VolumeError::new(VolumeErrorKind::Unsupported("NRRD line skip".into())));
-                }
+            "line skip" | "lineskip" if value != "0" => {
+                return Err(VolumeError::new(VolumeErrorKind::Unsupported("NRRD line skip".into())));
             }
             _ => {}
         }
@@ -243,7 +243,8 @@ pub fn load(path: &Path, opts: &LoadOptions) -> Result<Volume, VolumeError> {
     let mut reader = std::io::BufReader::new(file);
     let skip = match h.byte_skip {
         -1 => len.checked_sub(expected).ok_or_else(|| {
-            VolumeError::new(VolumeErrorKind::SizeMismatch { expected, actual: len.saturating_sub(offset) }).at(&data_path)
+            VolumeError::new(VolumeErrorKind::SizeMismatch { expected, actual: len.saturating_sub(offset) })
+                .at(&data_path)
         })?,
         b => offset + if h.encoding == Encoding::Raw { b as u64 } else { 0 },
     };
@@ -254,8 +255,11 @@ pub fn load(path: &Path, opts: &LoadOptions) -> Result<Volume, VolumeError> {
     let bytes = match h.encoding {
         Encoding::Raw => {
             if len.saturating_sub(skip) != expected {
-                return Err(VolumeError::new(VolumeErrorKind::SizeMismatch { expected, actual: len.saturating_sub(skip) })
-                    .at(&data_path));
+                return Err(VolumeError::new(VolumeErrorKind::SizeMismatch {
+                    expected,
+                    actual: len.saturating_sub(skip),
+                })
+                .at(&data_path));
             }
             read_exactly(reader, expected, &data_path)?
         }
@@ -263,9 +267,8 @@ pub fn load(path: &Path, opts: &LoadOptions) -> Result<Volume, VolumeError> {
             use std::io::Read;
             let mut dec = flate2::bufread::MultiGzDecoder::new(reader);
             if h.byte_skip > 0 {
-                std::io::copy(&mut dec.by_ref().take(h.byte_skip as u64), &mut std::io::sink()).map_err(|e| {
-                    VolumeError::new(VolumeErrorKind::Decompress(e.to_string())).at(&data_path)
-                })?;
+                std::io::copy(&mut dec.by_ref().take(h.byte_skip as u64), &mut std::io::sink())
+                    .map_err(|e| VolumeError::new(VolumeErrorKind::Decompress(e.to_string())).at(&data_path))?;
             }
             read_exactly(dec, expected, &data_path).map_err(|e| match e.kind {
                 VolumeErrorKind::Io(io) => VolumeError::new(VolumeErrorKind::Decompress(io.to_string())).at(&data_path),

@@ -148,13 +148,23 @@ impl TransferFunction {
         if n.starts_with("mri") {
             // Skin and soft tissue from ~30/254, the brain's grey/white matter brighter.
             tf(
-                &[(0.10, [0.55, 0.30, 0.22]), (0.25, [0.90, 0.65, 0.50]), (0.45, [0.95, 0.85, 0.75]), (0.7, [1.0, 1.0, 0.95])],
+                &[
+                    (0.10, [0.55, 0.30, 0.22]),
+                    (0.25, [0.90, 0.65, 0.50]),
+                    (0.45, [0.95, 0.85, 0.75]),
+                    (0.7, [1.0, 1.0, 0.95]),
+                ],
                 &[(0.08, 0.0), (0.14, 0.04), (0.30, 0.10), (0.45, 0.35), (0.7, 0.8)],
             )
         } else if n.starts_with("ct_head") || n.starts_with("ct-head") {
             // 0..3926: air < 600, soft tissue ~900..1300, bone > 1400.
             tf(
-                &[(0.18, [0.75, 0.45, 0.35]), (0.30, [0.9, 0.7, 0.6]), (0.36, [0.95, 0.92, 0.85]), (1.0, [1.0, 1.0, 1.0])],
+                &[
+                    (0.18, [0.75, 0.45, 0.35]),
+                    (0.30, [0.9, 0.7, 0.6]),
+                    (0.36, [0.95, 0.92, 0.85]),
+                    (1.0, [1.0, 1.0, 1.0]),
+                ],
                 &[(0.16, 0.0), (0.22, 0.03), (0.32, 0.04), (0.38, 0.7), (1.0, 0.95)],
             )
         } else if n.starts_with("neghip") {
@@ -181,7 +191,10 @@ impl TransferFunction {
                 &[(0.38, 0.0), (0.5, 0.05), (0.6, 0.3), (0.9, 0.9)],
             )
         } else if n.starts_with("marschner") {
-            tf(&[(0.0, [0.2, 0.4, 1.0]), (0.5, [0.9, 0.9, 0.9]), (1.0, [1.0, 0.4, 0.2])], &[(0.45, 0.0), (0.5, 0.6), (0.55, 0.0)])
+            tf(
+                &[(0.0, [0.2, 0.4, 1.0]), (0.5, [0.9, 0.9, 0.9]), (1.0, [1.0, 0.4, 0.2])],
+                &[(0.45, 0.0), (0.5, 0.6), (0.55, 0.0)],
+            )
         } else {
             TransferFunction::grey_ramp()
         }
@@ -199,7 +212,11 @@ impl TransferFunction {
         let text = std::fs::read_to_string(path).map_err(|e| err(format!("cannot read: {e}")))?;
         let name = path.file_stem().and_then(|s| s.to_str()).unwrap_or("tf");
         let is_json = path.extension().is_some_and(|e| e.eq_ignore_ascii_case("json"));
-        let r = if is_json { Self::parse_paraview_json(name, &text, value_range) } else { Self::parse_text(name, &text, value_range) };
+        let r = if is_json {
+            Self::parse_paraview_json(name, &text, value_range)
+        } else {
+            Self::parse_text(name, &text, value_range)
+        };
         r.map_err(err)
     }
 
@@ -291,7 +308,11 @@ mod tests {
 
     #[test]
     fn points_interpolate_and_clamp() {
-        let tf = TransferFunction::from_points("t", &[(0.0, [0.0, 0.0, 0.0]), (1.0, [1.0, 0.5, 0.0])], &[(0.5, 0.0), (1.0, 1.0)]);
+        let tf = TransferFunction::from_points(
+            "t",
+            &[(0.0, [0.0, 0.0, 0.0]), (1.0, [1.0, 0.5, 0.0])],
+            &[(0.5, 0.0), (1.0, 1.0)],
+        );
         assert_eq!(tf.lookup(0.0), [0.0, 0.0, 0.0, 0.0]);
         assert_eq!(tf.lookup(1.0), [1.0, 0.5, 0.0, 1.0]);
         assert_eq!(tf.lookup(0.25)[3], 0.0);

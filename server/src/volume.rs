@@ -257,7 +257,10 @@ fn check_geometry(dims: [u32; 3], spacing: Vec3, max_voxels: u64) -> Result<u64,
     if dims.contains(&0) {
         return Err(VolumeError::new(VolumeErrorKind::BadGeometry(format!("dimensions {dims:?} contain a zero"))));
     }
-    if !spacing.is_finite() || spacing.min_element() <= 0.0 || (Vec3::from(dims.map(|d| d as f32)) * spacing).max_element() > 1e12 {
+    if !spacing.is_finite()
+        || spacing.min_element() <= 0.0
+        || (Vec3::from(dims.map(|d| d as f32)) * spacing).max_element() > 1e12
+    {
         return Err(VolumeError::new(VolumeErrorKind::BadGeometry(format!(
             "spacing {spacing} must be positive and finite"
         ))));
@@ -446,7 +449,11 @@ pub(crate) fn read_exactly(mut r: impl Read, expected: u64, path: &Path) -> Resu
     let more = r.read(&mut extra).map_err(|e| io_err(path, e))?;
     let actual = buf.len() as u64 + more as u64;
     if buf.len() as u64 != expected || more != 0 {
-        return Err(VolumeError::new(VolumeErrorKind::SizeMismatch { expected, actual: if more != 0 { actual } else { buf.len() as u64 } }).at(path));
+        return Err(VolumeError::new(VolumeErrorKind::SizeMismatch {
+            expected,
+            actual: if more != 0 { actual } else { buf.len() as u64 },
+        })
+        .at(path));
     }
     Ok(buf)
 }
@@ -504,7 +511,8 @@ mod tests {
         assert_eq!(n.voxel_type, VoxelType::U8);
         assert_eq!(parse_raw_name("ct_64x64x93_int16.raw").unwrap().voxel_type, VoxelType::I16);
         assert_eq!(parse_raw_name("a_2x3x4_float32.raw").unwrap().voxel_type, VoxelType::F32);
-        for bad in ["", "x.raw", "a_2x3_uint8.raw", "a_0x1x1_uint8.raw", "a_2x3x4x5_uint8.raw", "a_1x1x1_complex.raw", "_._"]
+        for bad in
+            ["", "x.raw", "a_2x3_uint8.raw", "a_0x1x1_uint8.raw", "a_2x3x4x5_uint8.raw", "a_1x1x1_complex.raw", "_._"]
         {
             assert!(parse_raw_name(bad).is_err(), "{bad}");
         }

@@ -1,0 +1,162 @@
+//! Volume and transfer-function loaders: round trips and clear errors.
+
+mod common;
+
+use volwarp_core::Vec3;
+use volwarp_server::nrrd;
+use volwarp_server::volume::{load_volume, LoadOptions, VolumeErrorKind, VoxelType};
+use volwarp_server::{Dataset, TransferFunction};
+
+fn ramp_i16(n: usize) -> (Vec<i16>, Vec<u8>) {
+    let v: Vec<i16> = (0..n).map(|i| (i as i16 * 37) % 1000 - 200).collect();
+    let b = v.iter().flat_map(|x| x.to_le_bytes()).collect();
+    (v, b)
+}
+
+fn expect_normalized(vol: &volwarp_server::Volume, raw: &[f32]) {
+    let (lo, hi) = vol.value_range();
+    assert_eq!(lo, raw.iter().cloned().fold(f32::INFINITY, f32::min));
+    assert_eq!(hi, raw.iter().cloned().fold(f32::NEG_INFINITY, f32::max));
+    for (a, &b) in vol.data().iter().zip(raw) {
+        assert!((a - (b - lo) / (hi - lo)).abs() < 1e-6);
+    }
+}
+
+#[test]
+fn raw_round_trip_with_dims_from_the_name() {
+    let dir = common::temp_dir("raw");
+    let (v, b) = ramp_i16(5 * 4 * 3);
+    let p = dir.join("thing_5x4x3_int16.raw");
+    std::fs::write(&p, &b).unwrap();
+    let vol = load_volume(&p, &LoadOptions::default()).unwrap();
+    assert_eq!(vol.name, "thing");
+    assert_eq!(vol.dims(), [5, 4, 3]);
+    assert_eq!(vol.spacing(), Vec3::ONE);
+    expect_normalized(&vol, &v.iter().map(|&x| x as f32).collect::<Vec<_>>());
+
+    // Dims, type and spacing from options for a file without them in its name.
+    let q = dir.join("plain.dat");
+    let f: Vec<f32> = (0..24).map(|i| i as f32 * 0.5).collect();
+    std::fs::write(&q, f.iter().flat_map(|x| x.to_le_bytes()).collect::<Vec<u8>>()).unwrap();
+    let opts = LoadOptions {
+        dims: Some([2, 3, 4]),
+        voxel_type: Some(VoxelType::F32),
+        spacing: Some(Vec3::new(1.0, 2.0, 0.5)),
+        ..LoadOptions::default()
+    };
+    let vol = load_volume(&q, &opts).unwrap();
+    assert_eq!(vol.extent(), Vec3::new(2.0, 6.0, 2.0));
+    expect_normalized(&vol, &f);
+}
+
+#[test]
+fn loader_errors_name_the_file_and_the_problem() {
+    let dir = common::temp_dir("errors");
+    let missing = dir.join("nope_4x4x4_uint8.raw");
+    let e = load_volume(&missing, &LoadOptions::default()).unwrap_err();
+    assert!(matches!(e.kind, VolumeErrorKind::Io(_)));
+    assert!(e.to_string().contains("nope_4x4x4_uint8.raw"), "{e}");
+
+    let short = dir.join("short_4x4x4_uint16.raw");
+    std::fs::write(&short, [0u8; 100]).unwrap();
+    let e = load_volume(&short, &LoadOptions::default()).unwrap_err();
+    assert!(matches!(e.kind, VolumeErrorKind::SizeMismatch { expected: 128, actual: 100 }), "{e}");
+    assert!(e.to_string().contains("short_4x4x4_uint16.raw") && e.to_string().contains("128"), "{e}");
+
+    let noname = dir.join("volume.raw");
+    std::fs::write(&noname, [0u8; 8]).unwrap();
+    let e = load_volume(&noname, &LoadOptions::default()).unwrap_err();
+    assert!(matches!(e.kind, VolumeErrorKind::BadName(_)), "{e}");
+
+    let badtype = dir.join("v_2x2x2_complex64.raw");
+    std::fs::write(&badtype, [0u8; 8]).unwrap();
+    let e = load_volume(&badtype, &LoadOptions::default()).unwrap_err();
+    assert!(matches!(e.kind, VolumeErrorKind::UnknownType(_)), "{e}");
+
+    let big = dir.join("big_4096x4096x4096_uint8.raw");
+    std::fs::write(&big, [0u8; 8]).unwrap();
+    let e = load_volume(&big, &LoadOptions::default()).unwrap_err();
+    assert!(matches!(e.kind, VolumeErrorKind::TooLarge { .. }), "{e}");
+
+    let hdr = dir.join("bad.nrrd");
+    std::fs::write(&hdr, b"NRRD0004\ntype: uchar\ndimension: 3\nsizes: 2 2\nencoding: raw\n\n\0\0\0\0").unwrap();
+    let e = load_volume(&hdr, &LoadOptions::default()).unwrap_err();
+    assert!(e.to_string().contains("bad.nrrd"), "{e}");
+
+    let trunc = dir.join("trunc.nrrd");
+    std::fs::write(&trunc, b"NRRD0004\ntype: uchar\ndimension: 3\nsizes: 2 2 2\nencoding: raw\n\n\0\0\0").unwrap();
+    let e = load_volume(&trunc, &LoadOptions::default()).unwrap_err();
+    assert!(matches!(e.kind, VolumeErrorKind::SizeMismatch { expected: 8, actual: 3 }), "{e}");
+
+    let badgz = dir.join("badgz.nrrd");
+    std::fs::write(&badgz, b"NRRD0004\ntype: uchar\ndimension: 3\nsizes: 2 2 2\nencoding: gzip\n\nnot gzip at all")
+        .unwrap();
+    let e = load_volume(&badgz, &LoadOptions::default()).unwrap_err();
+    assert!(matches!(e.kind, VolumeErrorKind::Decompress(_)), "{e}");
+
+    let e = Dataset::load(dir.join("thing_1x1x1_uint8.raw"), None).unwrap_err();
+    assert!(e.to_string().contains("thing_1x1x1_uint8.raw"), "{e}");
+}
+
+#[test]
+fn nrrd_raw_gzip_and_detached_round_trips() {
+    let dir = common::temp_dir("nrrd");
+    let dims = [6, 5, 4];
+    let (v, bytes) = ramp_i16(6 * 5 * 4);
+    let raw: Vec<f32> = v.iter().map(|&x| x as f32).collect();
+    let spacing = Vec3::new(3.2, 3.2, 1.5);
+    for (name, gzip, detached) in [
+        ("a.nrrd", false, None),
+        ("b.nrrd", true, None),
+        ("c.nhdr", false, Some("c.raw")),
+        ("d.nhdr", true, Some("d.raw.gz")),
+    ] {
+        let p = dir.join(name);
+        nrrd::write(&p, &bytes, VoxelType::I16, dims, spacing, gzip, detached).unwrap();
+        let vol = load_volume(&p, &LoadOptions::default()).unwrap_or_else(|e| panic!("{name}: {e}"));
+        assert_eq!(vol.dims(), dims, "{name}");
+        assert_eq!(vol.spacing(), spacing, "{name}");
+        expect_normalized(&vol, &raw);
+    }
+    // A detached header whose data file is missing names that file.
+    std::fs::remove_file(dir.join("c.raw")).unwrap();
+    let e = load_volume(dir.join("c.nhdr"), &LoadOptions::default()).unwrap_err();
+    assert!(e.to_string().contains("c.raw"), "{e}");
+}
+
+#[test]
+fn bundled_data_loads_with_its_spacing_and_orientation() {
+    let ds = Dataset::default_bundled();
+    assert_eq!(ds.name, "ct_head_quarter");
+    assert_eq!(ds.volume.dims(), [64, 64, 93]);
+    assert_eq!(ds.volume.spacing(), Vec3::new(3.2, 3.2, 1.5));
+    assert_eq!(ds.volume.value_range(), (0.0, 3926.0));
+    // The header flips y and z: stored voxel (i, j, k) is at (i, 63 - j, 92 - k).
+    let dir = volwarp_server::dataset::data_dir().unwrap();
+    let raw = load_volume(dir.join("ct_head_quarter_64x64x93_int16.raw"), &LoadOptions::default()).unwrap();
+    for (i, j, k) in [(0, 0, 0), (10, 20, 30), (63, 1, 92), (31, 40, 7)] {
+        assert_eq!(raw.voxel(i, j, k), ds.volume.voxel(i, 63 - j, 92 - k));
+    }
+    let neghip = Dataset::load(dir.join("neghip_64x64x64_uint8.raw"), None).unwrap();
+    assert_eq!(neghip.tf.name, "neghip");
+}
+
+#[test]
+fn transfer_function_files() {
+    let dir = common::temp_dir("tf");
+    let j = dir.join("map.json");
+    std::fs::write(&j, r#"[{"Name":"Cool","RGBPoints":[0,0,0,1, 100,1,0,0],"Points":[0,0,0.5,0, 100,0.5,0.5,0]}]"#)
+        .unwrap();
+    let tf = TransferFunction::load(&j, (0.0, 100.0)).unwrap();
+    assert_eq!(tf.name, "Cool");
+    assert_eq!(tf.lookup(1.0), [1.0, 0.0, 0.0, 0.5]);
+    let t = dir.join("map.txt");
+    std::fs::write(&t, "# x r g b a\n0 0 0 0 0\n50 1 1 1 1\n").unwrap();
+    let tf = TransferFunction::load(&t, (0.0, 100.0)).unwrap();
+    assert_eq!(tf.lookup(0.5), [1.0, 1.0, 1.0, 1.0]);
+    let bad = dir.join("bad.txt");
+    std::fs::write(&bad, "0 1 2\n").unwrap();
+    let e = TransferFunction::load(&bad, (0.0, 1.0)).unwrap_err();
+    assert!(e.to_string().contains("bad.txt") && e.to_string().contains("line 1"), "{e}");
+    assert!(TransferFunction::load(dir.join("missing.json"), (0.0, 1.0)).is_err());
+}

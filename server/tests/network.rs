@@ -1,0 +1,210 @@
+//! End to end over loopback: handshake, frames, heuristics, latest wins, limits, bad clients.
+
+mod common;
+
+use common::Client;
+use std::net::SocketAddr;
+use std::sync::Arc;
+use std::time::{Duration, Instant};
+use volwarp_core::wire::{error_code, CameraRequest, Hello, Message, WireError};
+use volwarp_core::{Camera, Heuristic};
+use volwarp_server::{Dataset, Marcher, Server, ServerConfig, ServerHandle};
+
+fn config() -> ServerConfig {
+    ServerConfig { listen: SocketAddr::from(([127, 0, 0, 1], 0)), threads: 2, ..ServerConfig::default() }
+}
+
+fn start(cfg: ServerConfig) -> (ServerHandle, Arc<Marcher>) {
+    let marcher = Arc::new(Marcher::from_dataset(&Dataset::default_bundled()));
+    let server = Server::with_marcher(cfg, marcher.clone()).unwrap();
+    (server.spawn(), marcher)
+}
+
+fn request(m: &Marcher, seq: u64, heuristic: Heuristic, yaw: f32) -> CameraRequest {
+    CameraRequest { seq, camera: m.default_camera(64, 48).orbit(yaw, 10.0), heuristic, radius_scale: 1.0 }
+}
+
+fn wait_for_clients(server: &ServerHandle, n: usize) {
+    let t = Instant::now();
+    while server.active_clients() != n && t.elapsed() < Duration::from_secs(20) {
+        std::thread::sleep(Duration::from_millis(10));
+    }
+    assert_eq!(server.active_clients(), n);
+}
+
+fn expect_frame(c: &mut Client) -> volwarp_core::wire::Frame {
+    match c.recv() {
+        Ok(Message::Frame(f)) => f,
+        other => panic!("expected a Frame, got {other:?}"),
+    }
+}
+
+fn expect_error(c: &mut Client, code: u16) {
+    match c.recv() {
+        Ok(Message::Error(e)) => assert_eq!(e.code, code, "{}", e.text),
+        other => panic!("expected Error {code}, got {other:?}"),
+    }
+    // Then the server closes.
+    assert!(matches!(c.recv(), Err(WireError::Closed | WireError::Io(_) | WireError::UnexpectedEof)));
+}
+
+#[test]
+fn frame_matches_request_and_heuristic_changes_take_effect() {
+    let (server, m) = start(config());
+    let mut c = Client::hello(server.local_addr(), None);
+    let req = request(&m, 7, Heuristic::Entrance, 30.0);
+    c.send(&Message::CameraRequest(req));
+    let f = expect_frame(&mut c);
+    assert_eq!(f.header.seq, 7);
+    assert_eq!(f.header.camera, req.camera);
+    assert_eq!(f.header.heuristic, Heuristic::Entrance);
+    let pb = m.march(&req.camera, Heuristic::Entrance);
+    assert!(pb.nonempty() > 300, "{}", pb.nonempty());
+    assert_eq!(f.header.count as usize, pb.nonempty());
+    assert_eq!(f.samples.len(), pb.nonempty());
+    assert_eq!(f, Message::Frame(f.clone()).try_into_frame(), "round trip");
+    let (local, _) = m.render_frame(&req);
+    assert_eq!(f.samples, local.samples);
+    assert_eq!(f.colors, local.colors);
+
+    // Same camera, another heuristic: the frame follows it.
+    let req2 = CameraRequest { seq: 8, heuristic: Heuristic::Exit, ..req };
+    c.send(&Message::CameraRequest(req2));
+    let f2 = expect_frame(&mut c);
+    assert_eq!(f2.header.seq, 8);
+    assert_eq!(f2.header.heuristic, Heuristic::Exit);
+    assert_eq!(f2.samples, m.render_frame(&req2).0.samples);
+    assert_ne!(f2.samples, f.samples, "exit depths differ from entrance depths");
+    c.send(&Message::Bye);
+    assert!(matches!(c.recv(), Err(WireError::Closed | WireError::Io(_))));
+    server.shutdown();
+}
+
+trait IntoFrame {
+    fn try_into_frame(self) -> volwarp_core::wire::Frame;
+}
+impl IntoFrame for Message {
+    fn try_into_frame(self) -> volwarp_core::wire::Frame {
+        let bytes = volwarp_core::wire::encode_to_vec(&self);
+        match volwarp_core::wire::read_message(&mut &bytes[..], &volwarp_core::wire::Limits::default()) {
+            Ok(Message::Frame(f)) => f,
+            other => panic!("{other:?}"),
+        }
+    }
+}
+
+#[test]
+fn latest_request_wins() {
+    let (server, m) = start(ServerConfig { frame_delay: Some(Duration::from_millis(300)), ..config() });
+    let mut c = Client::hello(server.local_addr(), None);
+    for seq in 1..=6 {
+        c.send(&Message::CameraRequest(request(&m, seq, Heuristic::Threshold, seq as f32 * 10.0)));
+    }
+    let mut seqs = Vec::new();
+    while seqs.last() != Some(&6) {
+        seqs.push(expect_frame(&mut c).header.seq);
+    }
+    assert!(seqs.len() <= 3, "stale requests were rendered: {seqs:?}");
+    // Nothing else is queued.
+    c.stream.set_read_timeout(Some(Duration::from_millis(800))).unwrap();
+    assert!(matches!(c.recv(), Err(WireError::Io(_))), "no further frame");
+    server.shutdown();
+}
+
+#[test]
+fn bad_clients_do_not_disturb_a_good_one() {
+    let (server, m) = start(config());
+    let addr = server.local_addr();
+    let mut good = Client::hello(addr, None);
+    good.send(&Message::CameraRequest(request(&m, 1, Heuristic::Threshold, 0.0)));
+    assert_eq!(expect_frame(&mut good).header.seq, 1);
+
+    // Disconnects in the middle of a large frame.
+    let mut quitter = Client::hello(addr, None);
+    let big = CameraRequest { camera: m.default_camera(1024, 1024), ..request(&m, 1, Heuristic::Exit, 0.0) };
+    quitter.send(&Message::CameraRequest(big));
+    drop(quitter);
+
+    // Garbage instead of a Hello.
+    let mut garbage = Client::connect(addr);
+    garbage.send_raw(b"GET / HTTP/1.1\r\nHost: x\r\n\r\n");
+    expect_error(&mut garbage, error_code::BAD_REQUEST);
+
+    // Garbage after the handshake.
+    let mut g2 = Client::hello(addr, None);
+    g2.send_raw(&[0xAB; 64]);
+    expect_error(&mut g2, error_code::BAD_REQUEST);
+
+    // An oversized message.
+    let mut huge = Client::hello(addr, None);
+    let mut h = b"VWRP".to_vec();
+    h.extend_from_slice(&1u16.to_le_bytes());
+    h.extend_from_slice(&[2, 0]);
+    h.extend_from_slice(&100_000_000u32.to_le_bytes());
+    huge.send_raw(&h);
+    expect_error(&mut huge, error_code::TOO_LARGE);
+
+    // A viewport over the limit.
+    let mut wide = Client::hello(addr, None);
+    let mut req = request(&m, 1, Heuristic::Threshold, 0.0);
+    req.camera = Camera { width: 5000, ..req.camera };
+    wide.send(&Message::CameraRequest(req));
+    expect_error(&mut wide, error_code::TOO_LARGE);
+
+    // A frame sent to the server is a protocol error.
+    let mut backwards = Client::hello(addr, None);
+    backwards.send(&Message::Hello(Hello::new(0)));
+    expect_error(&mut backwards, error_code::BAD_REQUEST);
+
+    // The good client still gets every frame.
+    for seq in 2..5 {
+        good.send(&Message::CameraRequest(request(&m, seq, Heuristic::Peak, seq as f32 * 20.0)));
+        let f = expect_frame(&mut good);
+        assert_eq!(f.header.seq, seq);
+        assert_eq!(f.header.heuristic, Heuristic::Peak);
+    }
+    // Connections of the bad clients are gone.
+    wait_for_clients(&server, 1);
+    server.shutdown();
+}
+
+#[test]
+fn token_limits_and_timeouts() {
+    // A token is required off loopback.
+    let open = ServerConfig { listen: SocketAddr::from(([0, 0, 0, 0], 0)), ..config() };
+    assert!(Server::bind(open, Dataset::marschner_lobb(8)).is_err());
+
+    let cfg = ServerConfig {
+        token: Some("s3cret".into()),
+        max_clients: 2,
+        handshake_timeout: Duration::from_millis(300),
+        idle_timeout: Duration::from_millis(1500),
+        ..config()
+    };
+    let (server, m) = start(cfg);
+    let addr = server.local_addr();
+
+    let mut wrong = Client::connect(addr);
+    wrong.send(&Message::Hello(Hello::new(0).with_token(b"guess").unwrap()));
+    expect_error(&mut wrong, error_code::UNAUTHORIZED);
+    let mut none = Client::connect(addr);
+    none.send(&Message::Hello(Hello::new(0)));
+    expect_error(&mut none, error_code::UNAUTHORIZED);
+
+    let t = Instant::now();
+    let mut silent = Client::connect(addr);
+    expect_error(&mut silent, error_code::TIMEOUT);
+    assert!(t.elapsed() < Duration::from_secs(5));
+
+    wait_for_clients(&server, 0);
+    let mut a = Client::hello(addr, Some(b"s3cret"));
+    a.send(&Message::CameraRequest(request(&m, 1, Heuristic::Gradient, 0.0)));
+    assert_eq!(expect_frame(&mut a).header.seq, 1);
+    let _b = Client::hello(addr, Some(b"s3cret"));
+    let mut c = Client::connect(addr);
+    expect_error(&mut c, error_code::BUSY);
+
+    // An idle client is dropped with a TIMEOUT error.
+    expect_error(&mut a, error_code::TIMEOUT);
+    server.shutdown();
+}
