@@ -1,0 +1,74 @@
+//! Fuzz targets of volwarp (see `docs/fuzzing.md`). The properties live in [`checks`], which
+//! the stable proptest mirrors in `core/tests/fuzz_mirror.rs` include unchanged; this crate adds
+//! the structured-message generator for `arbitrary`.
+#![deny(missing_docs)]
+
+pub mod checks;
+
+use arbitrary::{Result, Unstructured};
+use volwarp_core::camera::Camera;
+use volwarp_core::heuristics::Heuristic;
+use volwarp_core::sample::Bounds;
+use volwarp_core::wire::{ErrorMsg, Frame, FrameHeader, Hello, Message, MAX_TOKEN};
+use volwarp_core::Vec3;
+
+/// Any bit pattern, or a small exact value (so that valid messages are common).
+fn float(u: &mut Unstructured) -> Result<f32> {
+    Ok(if u.arbitrary::<bool>()? { f32::from_bits(u.arbitrary()?) } else { u.int_in_range(-64i32..=64)? as f32 * 0.25 })
+}
+
+fn vec3(u: &mut Unstructured) -> Result<Vec3> {
+    Ok(Vec3::new(float(u)?, float(u)?, float(u)?))
+}
+
+fn dim(u: &mut Unstructured) -> Result<u32> {
+    Ok(if u.ratio(1, 8)? { u.arbitrary()? } else { u.int_in_range(0..=80)? })
+}
+
+fn camera(u: &mut Unstructured) -> Result<Camera> {
+    let fov = if u.arbitrary::<bool>()? { float(u)? } else { u.int_in_range(1..=179)? as f32 };
+    Ok(Camera { eye: vec3(u)?, target: vec3(u)?, up: vec3(u)?, fov_y_deg: fov, width: dim(u)?, height: dim(u)? })
+}
+
+fn heuristic(u: &mut Unstructured) -> Result<Heuristic> {
+    Ok(*u.choose(&Heuristic::ALL)?)
+}
+
+/// A structured message from fuzz input: every field arbitrary, floats biased towards values
+/// that validate. Frames have up to 300 samples with one color each.
+pub fn arb_message(u: &mut Unstructured) -> Result<Message> {
+    Ok(match u.int_in_range(0u8..=4)? {
+        0 => {
+            let n = u.int_in_range(0..=MAX_TOKEN)?;
+            let token = u.bytes(n)?;
+            let h = Hello { version: u.arbitrary()?, capabilities: u.arbitrary()?, token: Default::default() };
+            Message::Hello(h.with_token(token).map_err(|_| arbitrary::Error::IncorrectFormat)?)
+        }
+        1 => checks::camera_request(u.arbitrary()?, camera(u)?, heuristic(u)?, float(u)?),
+        2 => {
+            let n = u.int_in_range(0..=300usize)?;
+            let mut samples = Vec::with_capacity(n);
+            let mut colors = Vec::with_capacity(n);
+            for _ in 0..n {
+                samples.push(u.arbitrary()?);
+                colors.push(u.arbitrary()?);
+            }
+            let header = FrameHeader {
+                seq: u.arbitrary()?,
+                camera: camera(u)?,
+                heuristic: heuristic(u)?,
+                bounds: Bounds::new(vec3(u)?, vec3(u)?),
+                radius_unit: float(u)?,
+                render_us: u.arbitrary()?,
+                count: n as u32,
+            };
+            Message::Frame(Frame { header, samples, colors })
+        }
+        3 => {
+            let code = u.arbitrary()?;
+            let text: &str = u.arbitrary()?;
+            Message::Error(ErrorMsg::new(code, text))
+        }
+        _ => Message::Bye,
+    })
+}
