@@ -1,3 +1,41 @@
-//! volwarp thin client with a minifb window (in progress).
+//! # volwarp-client
 //!
-//! Nothing here yet: this crate is a placeholder member of the workspace.
+//! The thin client of Zellmann 2020 (Figure 2, right): it receives compacted object-space
+//! samples, builds an LBVH over them as spheres and ray traces them for the camera of *now*,
+//! at display rate, however slowly frames arrive.
+//!
+//! | module | concept |
+//! |---|---|
+//! | [`connection`] | TCP connect, Hello exchange, the probe frame that gives the volume bounds |
+//! | [`network`] | the network thread: receive, delay (`--latency-ms`), LBVH build, newest-camera writer |
+//! | [`display`] | one display frame: swap in the newest scene without waiting, draw it for the current camera |
+//! | [`renderers`] | the interchangeable renderers and live switching (GPU opened lazily) |
+//! | [`controls`] | orbit, pan and zoom; the home view of a volume |
+//! | [`window`] | the minifb window, its input and status title |
+//! | [`headless`] | the scripted orbit that writes PNG frames and `timings.csv` |
+//! | [`bench`] | the display-rate benchmark while frames are decoded and built |
+//! | [`record`] / [`replay`] | saving the received stream and playing it back offline |
+//! | [`local_server`] | the in-process server of the one-command demo |
+//! | [`options`], [`error`], [`app`] | command line, errors, putting it together |
+//!
+//! The wire format, record format and the client's use of them are documented in `docs/`.
+#![deny(missing_docs)]
+
+pub mod app;
+pub mod bench;
+pub mod connection;
+pub mod controls;
+pub mod display;
+pub mod error;
+pub mod headless;
+pub mod local_server;
+pub mod network;
+pub mod options;
+pub mod record;
+pub mod renderers;
+pub mod replay;
+pub mod window;
+
+pub use app::run;
+pub use error::ClientError;
+pub use options::Options;

@@ -1,0 +1,180 @@
+//! The command line of `volwarp-client` (`--help` prints it with the window controls).
+
+use crate::error::ClientError;
+use clap::Parser;
+use std::path::PathBuf;
+use volwarp_core::Heuristic;
+
+/// The window controls, printed by `--help`.
+pub const CONTROLS: &str = "\
+Window controls:
+  left drag / arrow keys     orbit around the volume
+  right drag / W A S D       pan
+  wheel / + -                zoom
+  1..7                       renderer: 1 spheres-cpu, 2 points1, 3 points2, 4 points3,
+                             5 splat (exact sphere splatting), 6 stale (unwarped frame),
+                             7 spheres-gpu (GPU opened on first use); 8 spheres-scalar
+  H / Shift+H                next / previous depth heuristic (sent to the server)
+  [ ]                        smaller / larger sample radius (sent to the server)
+  R                          reset the camera
+  Esc / Q                    quit
+The title shows display FPS, server frames per second, the age of the shown frame (time since
+its camera was requested), its sample count, the renderer and the heuristic.
+
+Without --connect an in-process server on 127.0.0.1 (random port) serves the bundled dataset
+over real TCP. With no display (DISPLAY and WAYLAND_DISPLAY unset, or the window cannot be
+opened) the client exits with an error: use --headless.";
+
+/// Command-line options.
+#[derive(Parser, Debug, Clone)]
+#[command(
+    name = "volwarp-client",
+    version,
+    about = "volwarp thin client: receives object-space samples, builds an LBVH and ray traces them for the camera of now",
+    after_help = CONTROLS
+)]
+pub struct Options {
+    /// Server address (host:port). Default: start an in-process server on the bundled dataset.
+    #[arg(long, value_name = "ADDR")]
+    pub connect: Option<String>,
+    /// Access token for the server.
+    #[arg(long)]
+    pub token: Option<String>,
+    /// Render to PNG files instead of a window (needs --out unless --bench).
+    #[arg(long)]
+    pub headless: bool,
+    /// Display frames to render (headless: default 60; window: quit after N frames, 0 = never).
+    #[arg(long, value_name = "N")]
+    pub frames: Option<u32>,
+    /// Headless: degrees the scripted camera orbits over all frames (yaw around the up axis).
+    #[arg(long, value_name = "DEG", default_value_t = 90.0)]
+    pub orbit: f32,
+    /// Headless / replay: folder for the PNG frames and timings.csv.
+    #[arg(long, value_name = "DIR")]
+    pub out: Option<PathBuf>,
+    /// Viewport (window) size.
+    #[arg(long, value_name = "WxH", default_value = "512x512", value_parser = parse_size)]
+    pub size: (u32, u32),
+    /// Save the received frames and the displayed cameras to FILE (docs/client.md).
+    #[arg(long, value_name = "FILE")]
+    pub record: Option<PathBuf>,
+    /// Play a recorded FILE back offline (no server) through --renderer.
+    #[arg(long, value_name = "FILE", conflicts_with_all = ["connect", "record"])]
+    pub replay: Option<PathBuf>,
+    /// Tracer threads (0: all cores but one, at least one).
+    #[arg(long, value_name = "N", default_value_t = 0)]
+    pub threads: usize,
+    /// Threads of the network thread's LBVH build (0: all cores).
+    #[arg(long, value_name = "N", default_value_t = 1)]
+    pub build_threads: usize,
+    /// Renderer: spheres-cpu, spheres-scalar, splat, points1, points2, points3, stale, spheres-gpu.
+    #[arg(long, value_name = "NAME", default_value = "spheres-cpu")]
+    pub renderer: String,
+    /// Depth heuristic the server uses: entrance, exit, midpoint, threshold, peak, gradient,
+    /// rel-threshold, en-ex-mean.
+    #[arg(long, value_name = "NAME", default_value = "threshold", value_parser = parse_heuristic)]
+    pub heuristic: Heuristic,
+    /// Sphere radius as a multiple of half a voxel diagonal, in (0, 16].
+    #[arg(long, value_name = "X", default_value_t = 1.0)]
+    pub radius_scale: f32,
+    /// In-process server: delay before each frame, in ms (slows the server down).
+    #[arg(long, value_name = "MS", default_value_t = 0)]
+    pub server_delay_ms: u64,
+    /// In-process server: marcher threads (0: all cores).
+    #[arg(long, value_name = "N", default_value_t = 0)]
+    pub server_threads: usize,
+    /// Extra delay of every received frame before it is built and shown, in ms.
+    #[arg(long, value_name = "MS", default_value_t = 0)]
+    pub latency_ms: u64,
+    /// Display frame rate limit (0: none). Default: 60 in the window, none headless.
+    #[arg(long)]
+    pub fps: Option<u32>,
+    /// Measure the display rate while frames arrive (headless, prints a summary).
+    #[arg(long)]
+    pub bench: bool,
+    /// Length of --bench in seconds.
+    #[arg(long, value_name = "S", default_value_t = 20.0)]
+    pub seconds: f64,
+    /// Seconds to wait for the server (connect, handshake, each frame).
+    #[arg(long, value_name = "S", default_value_t = 30)]
+    pub timeout_s: u64,
+}
+
+/// Parses `WxH`.
+pub fn parse_size(s: &str) -> Result<(u32, u32), String> {
+    let (w, h) = s.split_once(['x', 'X']).ok_or_else(|| format!("size `{s}` is not WxH"))?;
+    let w: u32 = w.trim().parse().map_err(|_| format!("bad width in `{s}`"))?;
+    let h: u32 = h.trim().parse().map_err(|_| format!("bad height in `{s}`"))?;
+    if !(1..=4096).contains(&w) || !(1..=4096).contains(&h) {
+        return Err(format!("size `{s}`: width and height must be 1 to 4096"));
+    }
+    Ok((w, h))
+}
+
+/// Parses a heuristic name.
+pub fn parse_heuristic(s: &str) -> Result<Heuristic, String> {
+    Heuristic::from_name(s).ok_or_else(|| {
+        let names: Vec<&str> = Heuristic::ALL.iter().map(|h| h.name()).collect();
+        format!("unknown heuristic `{s}` (one of {})", names.join(", "))
+    })
+}
+
+impl Options {
+    /// Checks combinations clap cannot express.
+    pub fn validate(&self) -> Result<(), ClientError> {
+        if !(self.radius_scale > 0.0 && self.radius_scale <= 16.0) {
+            return Err(ClientError::Usage("--radius-scale must be in (0, 16]".into()));
+        }
+        if !crate::renderers::NAMES.contains(&self.renderer.as_str()) {
+            return Err(ClientError::Usage(format!(
+                "unknown renderer `{}` (one of {})",
+                self.renderer,
+                crate::renderers::NAMES.join(", ")
+            )));
+        }
+        if self.headless && !self.bench && self.out.is_none() {
+            return Err(ClientError::Usage("--headless needs --out DIR".into()));
+        }
+        if !self.orbit.is_finite() {
+            return Err(ClientError::Usage("--orbit must be a finite number of degrees".into()));
+        }
+        if !(self.seconds > 0.0 && self.seconds < 3600.0) {
+            return Err(ClientError::Usage("--seconds must be in (0, 3600)".into()));
+        }
+        Ok(())
+    }
+
+    /// The tracer thread count actually used.
+    pub fn tracer_threads(&self) -> usize {
+        if self.threads > 0 {
+            self.threads
+        } else {
+            std::thread::available_parallelism().map_or(1, |n| n.get()).saturating_sub(1).max(1)
+        }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn sizes_and_heuristics_parse() {
+        assert_eq!(parse_size("640x480"), Ok((640, 480)));
+        assert!(parse_size("640").is_err());
+        assert!(parse_size("0x10").is_err());
+        assert!(parse_size("99999x10").is_err());
+        assert_eq!(parse_heuristic("rel-threshold"), Ok(Heuristic::RelThreshold));
+        assert!(parse_heuristic("nope").unwrap_err().contains("threshold"));
+    }
+
+    #[test]
+    fn validation_catches_bad_combinations() {
+        let o = Options::parse_from(["volwarp-client", "--headless"]);
+        assert!(matches!(o.validate(), Err(ClientError::Usage(_))));
+        let o = Options::parse_from(["volwarp-client", "--renderer", "nope"]);
+        assert!(matches!(o.validate(), Err(ClientError::Usage(_))));
+        let o = Options::parse_from(["volwarp-client", "--headless", "--out", "x", "--renderer", "splat"]);
+        assert_eq!(o.validate(), Ok(()));
+    }
+}
