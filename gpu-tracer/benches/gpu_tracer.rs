@@ -1,0 +1,99 @@
+//! `cargo bench -p volwarp-gpu-tracer --bench gpu_tracer [-- --quick]`: frames per second of the
+//! GPU tracer at 1024×1024 on a ~620k-sample cloud (the paper's Table 1 size) and the GPU LBVH
+//! build time, on whatever adapter there is; the CPU packet tracer and CPU build for context.
+//! Prints medians over repeated runs.
+
+use std::time::{Duration, Instant};
+use volwarp_core::renderer::{Image, Renderer};
+use volwarp_core::wire::Frame;
+use volwarp_core::{Camera, Heuristic, Scene};
+use volwarp_cpu_tracer::PacketTracer;
+use volwarp_gpu_tracer::synthetic::bumpy_surface;
+use volwarp_gpu_tracer::GpuTracer;
+
+fn median(mut v: Vec<Duration>) -> Duration {
+    v.sort();
+    v[v.len() / 2]
+}
+
+fn time<T>(reps: usize, mut f: impl FnMut() -> T) -> Duration {
+    median(
+        (0..reps)
+            .map(|_| {
+                let t = Instant::now();
+                std::hint::black_box(f());
+                t.elapsed()
+            })
+            .collect(),
+    )
+}
+
+fn ms(d: Duration) -> f64 {
+    d.as_secs_f64() * 1e3
+}
+
+fn bench(gpu: &mut GpuTracer, name: &str, frame: &Frame, cam: &Camera, reps: usize) {
+    let n = frame.samples.len();
+    println!("\n## {name}: {n} samples, {}x{} view", cam.width, cam.height);
+    let cpu_build = time(reps, || Scene::build(frame));
+    let scene = Scene::build(frame);
+    let gpu_scene = gpu.build_scene(frame).expect("GPU build");
+    let t = gpu.last_build_timing();
+    let rebuild = median((0..reps).map(|_| gpu.rebuild_only(frame, 1).expect("GPU rebuild")).collect());
+    println!(
+        "LBVH build: GPU {:.1} ms (compute passes, median of {reps}); first build: upload {:.1} ms, passes {:.1} ms, readback {:.1} ms; CPU serial Scene::build {:.1} ms",
+        ms(rebuild),
+        ms(t.upload),
+        ms(t.build),
+        ms(t.readback),
+        ms(cpu_build)
+    );
+    assert_eq!(gpu_scene.samples, scene.samples);
+    let mut img = Image::new(1, 1);
+    gpu.try_render(&scene, cam, &mut img).expect("render"); // upload + warm-up
+    let with_readback = time(reps, || gpu.try_render(&scene, cam, &mut img).expect("render"));
+    let frames = reps as u32;
+    let trace_only = median((0..3).map(|_| gpu.trace_only(&scene, cam, frames).expect("trace") / frames).collect());
+    let mut cpu = PacketTracer::new(0);
+    let mut cimg = Image::new(1, 1);
+    cpu.render(&scene, cam, &mut cimg);
+    let cpu_t = time(reps, || cpu.render(&scene, cam, &mut cimg));
+    println!(
+        "render: GPU {:.2} FPS with readback ({:.1} ms), {:.2} FPS trace only ({:.1} ms); CPU packet tracer ({} threads) {:.2} FPS ({:.1} ms)",
+        1.0 / with_readback.as_secs_f64(),
+        ms(with_readback),
+        1.0 / trace_only.as_secs_f64(),
+        ms(trace_only),
+        cpu.threads(),
+        1.0 / cpu_t.as_secs_f64(),
+        ms(cpu_t)
+    );
+}
+
+fn main() {
+    env_logger::Builder::from_env(env_logger::Env::default().default_filter_or("warn")).init();
+    let quick = std::env::args().any(|a| a == "--quick");
+    let reps = if quick { 3 } else { 7 };
+    let mut gpu = match GpuTracer::new() {
+        Ok(g) => g,
+        Err(e) => {
+            eprintln!("gpu_tracer bench: {e}");
+            std::process::exit(1);
+        }
+    };
+    println!("adapter: {}", gpu.context().describe());
+    // 790² grid points minus the empty corners: about the paper's 623,584 samples.
+    let frame = bumpy_surface(790, 1.5, 1);
+    let cam = frame.header.camera.orbit(10.0, 0.0).with_viewport(1024, 1024);
+    bench(&mut gpu, "synthetic bumpy surface", &frame, &cam, reps);
+
+    // A real frame where the shared data is there: the MRI marched at 1024² by the server.
+    let mri = std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("../../shared/data/mri_colin27_181x217x181_uint8.raw");
+    if let Ok(ds) = volwarp_server::Dataset::load(&mri, None) {
+        let marcher = volwarp_server::Marcher::from_dataset(&ds);
+        let cam = marcher.default_camera(1024, 1024);
+        let req = volwarp_core::wire::CameraRequest { seq: 1, camera: cam, heuristic: Heuristic::Threshold, radius_scale: 1.0 };
+        let frame = marcher.render_frame(&req).0;
+        bench(&mut gpu, "MRI (colin27), threshold heuristic", &frame, &cam.orbit(10.0, 0.0), reps);
+    }
+}
