@@ -318,7 +318,7 @@ mod tests {
         assert_eq!(tf.lookup(0.25)[3], 0.0);
         assert!((tf.lookup(0.75)[3] - 0.5).abs() < 2e-3);
         assert_eq!(tf.lookup(f32::NAN)[3], 0.0);
-        assert_eq!(tf.max_opacity(0.0, 0.5), 0.0);
+        assert_eq!(tf.max_opacity(0.0, 0.49), 0.0);
         assert!(tf.max_opacity(0.0, 0.6) > 0.0);
     }
 

@@ -375,9 +375,9 @@ impl Volume {
     #[inline(always)]
     pub fn sample_grid(&self, g: Vec3) -> f32 {
         let [nx, ny, nz] = self.dims;
-        let gx = g.x.clamp(0.0, (nx - 1) as f32);
-        let gy = g.y.clamp(0.0, (ny - 1) as f32);
-        let gz = g.z.clamp(0.0, (nz - 1) as f32);
+        let gx = g.x.max(0.0).min((nx - 1) as f32); // NaN -> 0
+        let gy = g.y.max(0.0).min((ny - 1) as f32); // NaN -> 0
+        let gz = g.z.max(0.0).min((nz - 1) as f32); // NaN -> 0
         let (x0, y0, z0) = (gx as usize, gy as usize, gz as usize);
         let (fx, fy, fz) = (gx - x0 as f32, gy - y0 as f32, gz - z0 as f32);
         let sx = usize::from(x0 + 1 < nx as usize);

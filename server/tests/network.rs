@@ -191,6 +191,7 @@ fn token_limits_and_timeouts() {
     none.send(&Message::Hello(Hello::new(0)));
     expect_error(&mut none, error_code::UNAUTHORIZED);
 
+    wait_for_clients(&server, 0);
     let t = Instant::now();
     let mut silent = Client::connect(addr);
     expect_error(&mut silent, error_code::TIMEOUT);
