@@ -1,0 +1,186 @@
+//! `volwarp-eval`: accuracy against speed (issue 7).
+//!
+//! ```text
+//! volwarp-eval quality  --volume FILE [--tf FILE] [--heuristic H|all] --out DIR
+//! volwarp-eval quality  --all [--data-dir ../shared/data] --out DIR
+//! volwarp-eval table1   [--volume ../shared/data/mri_colin27_181x217x181_uint8.raw] --out DIR [--results docs/results.md]
+//! volwarp-eval bits     [--volume FILE] --out DIR
+//! volwarp-eval failures [--volume FILE] --out DIR
+//! volwarp-eval fixtures --out tests/fixtures
+//! ```
+//! Without `--volume`, the bundled dataset (`data/ct_head_quarter.nhdr`) is used.
+
+use clap::{Args, Parser, Subcommand};
+use std::path::{Path, PathBuf};
+use std::time::Instant;
+use volwarp_core::Heuristic;
+use volwarp_server::dataset::{data_dir, Dataset};
+use volwarp_server::Marcher;
+use volwarp_tests::roster::{roster, RosterOptions};
+use volwarp_tests::{report, ErrorBox};
+
+#[derive(Parser)]
+#[command(name = "volwarp-eval", version, about = "volwarp evaluation: accuracy (PSNR, SSIM, FLIP) against speed")]
+struct Cli {
+    #[command(subcommand)]
+    cmd: Cmd,
+}
+
+#[derive(Args, Clone)]
+struct Common {
+    /// Volume file (raw `name_XxYxZ_type.raw` or NRRD); default: the bundled dataset.
+    #[arg(long)]
+    volume: Option<PathBuf>,
+    /// Transfer function file (ParaView JSON or text); default: the volume's preset.
+    #[arg(long)]
+    tf: Option<PathBuf>,
+    /// Output folder.
+    #[arg(long)]
+    out: PathBuf,
+    /// Threads per CPU renderer (0: all cores).
+    #[arg(long, default_value_t = 0)]
+    threads: usize,
+    /// Leave the GPU tracer out.
+    #[arg(long)]
+    no_gpu: bool,
+}
+
+#[derive(Subcommand)]
+enum Cmd {
+    /// Warp a frame along orbit and dolly paths with every renderer; score against the truth.
+    Quality {
+        #[command(flatten)]
+        common: Common,
+        /// Every dataset of `--data-dir`.
+        #[arg(long)]
+        all: bool,
+        /// Folder of the shared volumes (for `--all`).
+        #[arg(long, default_value = "../shared/data")]
+        data_dir: PathBuf,
+        /// A heuristic name, or `all`.
+        #[arg(long, default_value = "threshold")]
+        heuristic: String,
+        /// Viewport side of the accuracy comparison.
+        #[arg(long, default_value_t = 512)]
+        size: u32,
+        /// Renders per timing (median reported); 0: no timing.
+        #[arg(long, default_value_t = 3)]
+        runs: usize,
+        /// Time every heuristic, not only the first.
+        #[arg(long)]
+        time_all_heuristics: bool,
+        /// Largest viewport side at which the GPU tracer is timed.
+        #[arg(long, default_value_t = 512)]
+        gpu_max_time_size: u32,
+    },
+    /// The paper's Table 1: samples, compaction and LBVH ms, FPS per view per tracer.
+    Table1 {
+        #[command(flatten)]
+        common: Common,
+        /// Viewport side.
+        #[arg(long, default_value_t = 1024)]
+        size: u32,
+        /// Depth heuristic of the frame (the paper's Figure 3 uses gradient).
+        #[arg(long, default_value = "gradient")]
+        heuristic: String,
+        /// Timed renders per view and tracer.
+        #[arg(long, default_value_t = 5)]
+        runs: usize,
+        /// Markdown file whose `table1` section (between marker comments) is replaced.
+        #[arg(long)]
+        results: Option<PathBuf>,
+    },
+    /// Error against representation size: position bits, radius bits, samples kept.
+    Bits {
+        #[command(flatten)]
+        common: Common,
+        /// Viewport side.
+        #[arg(long, default_value_t = 512)]
+        size: u32,
+        /// Depth heuristic of the frame.
+        #[arg(long, default_value = "threshold")]
+        heuristic: String,
+    },
+    /// Drive every renderer through the failure cases; CSV and pictures.
+    Failures {
+        #[command(flatten)]
+        common: Common,
+        /// Viewport side.
+        #[arg(long, default_value_t = 256)]
+        size: u32,
+        /// Depth heuristic of the frames.
+        #[arg(long, default_value = "threshold")]
+        heuristic: String,
+    },
+    /// Write the small image pairs the metric tests compare with the reference implementations.
+    Fixtures {
+        /// Output folder.
+        #[arg(long)]
+        out: PathBuf,
+    },
+}
+
+fn load(volume: Option<&Path>, tf: Option<&Path>) -> Result<Dataset, ErrorBox> {
+    Ok(match volume {
+        Some(v) => Dataset::load(v, tf)?,
+        None => {
+            let dir = data_dir().ok_or("the bundled data/ folder was not found (set VOLWARP_DATA)")?;
+            Dataset::load(dir.join(volwarp_server::dataset::DEFAULT_VOLUME), tf)?
+        }
+    })
+}
+
+fn heuristic(name: &str) -> Result<Heuristic, ErrorBox> {
+    Heuristic::from_name(name).ok_or_else(|| {
+        let names: Vec<&str> = Heuristic::ALL.iter().map(|h| h.name()).collect();
+        format!("unknown heuristic {name:?}; one of {}", names.join(", ")).into()
+    })
+}
+
+fn run(cli: Cli) -> Result<(), ErrorBox> {
+    match cli.cmd {
+        Cmd::Quality { common, all, data_dir, heuristic: h, size, runs, time_all_heuristics, gpu_max_time_size } => {
+            let heuristics = if h == "all" { Heuristic::ALL.to_vec() } else { vec![heuristic(&h)?] };
+            let datasets = if all {
+                report::shared_datasets(&data_dir)?
+            } else {
+                vec![load(common.volume.as_deref(), common.tf.as_deref())?]
+            };
+            let opts = volwarp_tests::quality::QualityOptions {
+                size,
+                runs,
+                time_all_heuristics,
+                gpu_max_time_size,
+                ..Default::default()
+            };
+            let mut r = roster(RosterOptions { threads: common.threads, gpu: !common.no_gpu });
+            report::quality(&datasets, &heuristics, &mut r, &opts, &common.out)
+        }
+        Cmd::Table1 { common, size, heuristic: h, runs, results } => {
+            let volume = common.volume.clone().unwrap_or_else(|| PathBuf::from(report::MRI));
+            let ds = Dataset::load(&volume, common.tf.as_deref())?;
+            let gpu = !common.no_gpu;
+            report::table1(&ds, heuristic(&h)?, size, runs, common.threads, gpu, &common.out, results.as_deref())
+        }
+        Cmd::Bits { common, size, heuristic: h } => {
+            let ds = load(common.volume.as_deref(), common.tf.as_deref())?;
+            report::bits(&ds, heuristic(&h)?, size, &common.out)
+        }
+        Cmd::Failures { common, size, heuristic: h } => {
+            let ds = load(common.volume.as_deref(), common.tf.as_deref())?;
+            let mut r = roster(RosterOptions { threads: common.threads, gpu: !common.no_gpu });
+            report::failures(&Marcher::from_dataset(&ds), &ds.name, heuristic(&h)?, size, &mut r, &common.out)
+        }
+        Cmd::Fixtures { out } => report::fixtures(&out),
+    }
+}
+
+fn main() {
+    env_logger::Builder::from_env(env_logger::Env::default().default_filter_or("info")).init();
+    let t = Instant::now();
+    if let Err(e) = run(Cli::parse()) {
+        log::error!("{e}");
+        std::process::exit(1);
+    }
+    log::info!("done in {:.1} s", t.elapsed().as_secs_f64());
+}

@@ -1,0 +1,100 @@
+//! PNG files of [`Image`]s, and image strips (side-by-side tiles with gaps).
+
+use std::path::Path;
+use volwarp_core::sample::pack_color;
+use volwarp_core::Image;
+
+/// Why an image could not be read or written.
+#[derive(Debug)]
+pub struct ImageIoError(pub String);
+
+impl std::fmt::Display for ImageIoError {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.write_str(&self.0)
+    }
+}
+
+impl std::error::Error for ImageIoError {}
+
+/// Writes an image as an RGBA PNG.
+pub fn save_png(img: &Image, path: &Path) -> Result<(), ImageIoError> {
+    if img.pixels.len() != img.width as usize * img.height as usize {
+        return Err(ImageIoError(format!("{}: inconsistent image buffer", path.display())));
+    }
+    image::save_buffer(path, img.as_rgba_bytes(), img.width, img.height, image::ExtendedColorType::Rgba8)
+        .map_err(|e| ImageIoError(format!("{}: {e}", path.display())))
+}
+
+/// Reads a PNG (any color type; converted to RGBA8) of at most `max_pixels` pixels.
+pub fn load_png(path: &Path, max_pixels: u64) -> Result<Image, ImageIoError> {
+    let err = |e: String| ImageIoError(format!("{}: {e}", path.display()));
+    let reader = image::ImageReader::open(path).map_err(|e| err(e.to_string()))?;
+    let reader = reader.with_guessed_format().map_err(|e| err(e.to_string()))?;
+    let (w, h) = reader.into_dimensions().map_err(|e| err(e.to_string()))?;
+    if w as u64 * h as u64 > max_pixels {
+        return Err(err(format!("{w}x{h} is larger than {max_pixels} pixels")));
+    }
+    let img = image::open(path).map_err(|e| err(e.to_string()))?.to_rgba8();
+    let pixels = img.pixels().map(|p| pack_color(p[0], p[1], p[2], p[3])).collect();
+    Ok(Image { width: img.width(), height: img.height(), pixels })
+}
+
+/// Tiles `rows` of equally sized images into one image with `gap` pixels of `gap_color`
+/// between tiles. Missing or differently sized tiles are left as gap color.
+pub fn strip(rows: &[Vec<&Image>], gap: u32, gap_color: u32) -> Image {
+    let tw = rows.iter().flatten().map(|i| i.width).max().unwrap_or(0);
+    let th = rows.iter().flatten().map(|i| i.height).max().unwrap_or(0);
+    let cols = rows.iter().map(|r| r.len()).max().unwrap_or(0) as u32;
+    let w = cols * tw + cols.saturating_sub(1) * gap;
+    let h = rows.len() as u32 * th + (rows.len() as u32).saturating_sub(1) * gap;
+    let mut out = Image { width: w, height: h, pixels: vec![gap_color; w as usize * h as usize] };
+    for (r, row) in rows.iter().enumerate() {
+        for (c, tile) in row.iter().enumerate() {
+            if tile.width != tw || tile.height != th || tile.pixels.len() != (tw * th) as usize {
+                continue;
+            }
+            let (ox, oy) = (c as u32 * (tw + gap), r as u32 * (th + gap));
+            for y in 0..th {
+                let dst = ((oy + y) * w + ox) as usize;
+                out.pixels[dst..dst + tw as usize]
+                    .copy_from_slice(&tile.pixels[(y * tw) as usize..((y + 1) * tw) as usize]);
+            }
+        }
+    }
+    out
+}
+
+/// Nearest-neighbour downscale by an integer factor (at least 1).
+pub fn downscale(img: &Image, factor: u32) -> Image {
+    let f = factor.max(1);
+    let (w, h) = ((img.width / f).max(1), (img.height / f).max(1));
+    let mut pixels = Vec::with_capacity((w * h) as usize);
+    for y in 0..h {
+        for x in 0..w {
+            let (sx, sy) = ((x * f + f / 2).min(img.width - 1), (y * f + f / 2).min(img.height - 1));
+            pixels.push(img.pixels[(sy * img.width + sx) as usize]);
+        }
+    }
+    Image { width: w, height: h, pixels }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn png_round_trip_and_strip_layout() {
+        let a = Image { width: 3, height: 2, pixels: (0..6).map(|i| pack_color(i as u8 * 40, 1, 2, 255)).collect() };
+        let dir = std::env::temp_dir().join(format!("volwarp-io-{}", std::process::id()));
+        std::fs::create_dir_all(&dir).unwrap();
+        let p = dir.join("a.png");
+        save_png(&a, &p).unwrap();
+        assert_eq!(load_png(&p, 100).unwrap(), a);
+        assert!(load_png(&p, 5).is_err(), "size limit");
+        let s = strip(&[vec![&a, &a], vec![&a]], 1, 0);
+        assert_eq!((s.width, s.height), (7, 5));
+        assert_eq!(s.get(4, 0), a.get(0, 0));
+        assert_eq!(s.get(4, 3), 0, "missing tile stays gap color");
+        std::fs::remove_dir_all(&dir).ok();
+    }
+}

@@ -1,0 +1,114 @@
+//! Every renderer the evaluation compares, under its CSV name: the stale image, points with
+//! N = 1, 2, 3, the CPU sphere tracer (and its radius variants ×0.5 and ×2), the GPU sphere
+//! tracer where an adapter opens, and the exact sphere splatter.
+
+use volwarp_core::renderer::Renderer;
+use volwarp_core::wire::Frame;
+use volwarp_core::Scene;
+use volwarp_cpu_tracer::{PacketTracer, PointSplat, SphereSplat, StaleImage};
+
+/// The radius scales of the sphere-size variants (`spheres-cpu-r0.5`, `spheres-cpu-r2`).
+pub const RADIUS_VARIANTS: [f32; 2] = [0.5, 2.0];
+
+/// One renderer of the comparison.
+pub struct Entry {
+    /// The CSV name (`stale`, `points1`, …, `spheres-cpu-r0.5`).
+    pub name: String,
+    /// Which scene it draws: the sphere radius as a multiple of the frame's.
+    pub radius_scale: f32,
+    /// Whether it is the GPU tracer (slow on a software adapter).
+    pub gpu: bool,
+    /// The renderer.
+    pub renderer: Box<dyn Renderer>,
+}
+
+/// Options of [`roster`].
+#[derive(Clone, Copy, Debug)]
+pub struct RosterOptions {
+    /// Threads per CPU renderer (0: all cores).
+    pub threads: usize,
+    /// Try to open the GPU tracer.
+    pub gpu: bool,
+}
+
+impl Default for RosterOptions {
+    fn default() -> Self {
+        RosterOptions { threads: 0, gpu: true }
+    }
+}
+
+fn entry(name: &str, radius_scale: f32, renderer: Box<dyn Renderer>) -> Entry {
+    Entry { name: name.into(), radius_scale, gpu: false, renderer }
+}
+
+/// The renderers, in the order of the CSV. The GPU tracer is included only if it is built in
+/// (feature `gpu`) and an adapter opens; otherwise a log line says why.
+pub fn roster(opts: RosterOptions) -> Vec<Entry> {
+    let t = opts.threads;
+    let mut v = vec![
+        entry("stale", 1.0, Box::new(StaleImage::new(t))),
+        entry("points1", 1.0, Box::new(PointSplat::new(1, t))),
+        entry("points2", 1.0, Box::new(PointSplat::new(2, t))),
+        entry("points3", 1.0, Box::new(PointSplat::new(3, t))),
+        entry("spheres-cpu", 1.0, Box::new(PacketTracer::new(t))),
+    ];
+    if opts.gpu {
+        if let Some(g) = gpu_entry() {
+            v.push(g);
+        }
+    }
+    v.push(entry("splat", 1.0, Box::new(SphereSplat::new(t))));
+    for s in RADIUS_VARIANTS {
+        v.push(entry(&format!("spheres-cpu-r{s}"), s, Box::new(PacketTracer::new(t))));
+    }
+    v
+}
+
+#[cfg(feature = "gpu")]
+fn gpu_entry() -> Option<Entry> {
+    match volwarp_gpu_tracer::GpuTracer::new() {
+        Ok(g) => {
+            log::info!("spheres-gpu on {}", g.context().describe());
+            Some(Entry { name: "spheres-gpu".into(), radius_scale: 1.0, gpu: true, renderer: Box::new(g) })
+        }
+        Err(e) => {
+            log::warn!("spheres-gpu left out: {e}");
+            None
+        }
+    }
+}
+
+#[cfg(not(feature = "gpu"))]
+fn gpu_entry() -> Option<Entry> {
+    log::info!("spheres-gpu left out: built without the `gpu` feature");
+    None
+}
+
+/// The frame with every sphere's radius scaled by `s` (the radius codes stay; the unit changes).
+pub fn scaled_frame(frame: &Frame, s: f32) -> Frame {
+    let mut f = frame.clone();
+    f.header.radius_unit *= s;
+    f
+}
+
+/// A frame's scene at radius ×1 and at each of [`RADIUS_VARIANTS`].
+pub struct SceneSet {
+    /// `(radius scale, scene)`, the ×1 scene first.
+    pub scenes: Vec<(f32, Scene)>,
+}
+
+impl SceneSet {
+    /// Builds the scenes (parallel LBVH builds).
+    pub fn build(frame: &Frame) -> SceneSet {
+        let mut scenes = vec![(1.0, volwarp_cpu_tracer::build_scene(frame))];
+        for s in RADIUS_VARIANTS {
+            scenes.push((s, volwarp_cpu_tracer::build_scene(&scaled_frame(frame, s))));
+        }
+        SceneSet { scenes }
+    }
+
+    /// The scene of a radius scale (the ×1 scene for an unknown one).
+    pub fn get(&self, radius_scale: f32) -> &Scene {
+        self.scenes.iter().find(|(s, _)| *s == radius_scale).map_or(&self.scenes[0].1, |(_, sc)| sc)
+    }
+}
