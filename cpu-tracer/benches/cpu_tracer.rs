@@ -1,1 +1,159 @@
-fn main() {}
+//! `cargo bench -p volwarp-cpu-tracer`: tracing (packet vs scalar, 1 and 2 threads, 1024² and
+//! 512², 10° off the frame's camera), LBVH build (parallel vs serial), the baselines, and
+//! resident bytes per sample. Before criterion's runs it prints a summary table of medians
+//! (FPS, rays/s, ms) — the figures quoted in `docs/perf.md`.
+//!
+//! The frame is a server render of the MRI (`../shared/data`) when the server library and the
+//! data are there, else the synthetic depth-image cloud of the same size.
+
+use criterion::{criterion_group, criterion_main, BenchmarkId, Criterion, Throughput};
+use std::time::{Duration, Instant};
+use volwarp_core::renderer::{Image, Renderer};
+use volwarp_core::wire::Frame;
+use volwarp_core::{Camera, Scene};
+use volwarp_cpu_tracer::synthetic::depth_image_frame;
+use volwarp_cpu_tracer::{PacketTracer, ParallelBuilder, PointSplat, ScalarTracer, SphereSplat, StaleImage};
+
+#[path = "support/frames.rs"]
+mod frames;
+
+/// The benchmark frame and a description of it.
+fn bench_frame() -> (Frame, String) {
+    if let Some(f) = frames::mri_frame(1024) {
+        return f;
+    }
+    let f = depth_image_frame(1024, 2.0, 1);
+    let what = format!("synthetic depth-image cloud, {} samples (radius 2 grid steps)", f.samples.len());
+    (f, what)
+}
+
+/// Median seconds of `f` over up to `max_runs` runs (stops after ~`budget`).
+fn median_secs(max_runs: usize, budget: Duration, mut f: impl FnMut()) -> f64 {
+    f(); // warm up
+    let start = Instant::now();
+    let mut t = Vec::new();
+    while t.len() < max_runs && (t.len() < 3 || start.elapsed() < budget) {
+        let s = Instant::now();
+        f();
+        t.push(s.elapsed().as_secs_f64());
+    }
+    t.sort_by(f64::total_cmp);
+    t[t.len() / 2]
+}
+
+fn warped(frame: &Frame, res: u32) -> Camera {
+    frame.header.camera.orbit(10.0, 0.0).with_viewport(res, res)
+}
+
+fn summary(frame: &Frame, what: &str, scene: &Scene) {
+    println!("\n## volwarp-cpu-tracer summary (medians)\nframe: {what}");
+    let n = scene.samples.len();
+    println!(
+        "resident bytes per sample (samples + colors + nodes): {:.1} B ({} B for {} samples)",
+        scene.resident_bytes() as f64 / n.max(1) as f64,
+        scene.resident_bytes(),
+        n
+    );
+    println!("| renderer | threads | viewport | ms | FPS | Mrays/s |\n|---|---|---|---|---|---|");
+    let mut img = Image::new(1, 1);
+    for res in [1024u32, 512] {
+        let cam = warped(frame, res);
+        for threads in [1usize, 2] {
+            let mut rs: Vec<Box<dyn Renderer>> =
+                vec![Box::new(PacketTracer::new(threads)), Box::new(ScalarTracer::new(threads))];
+            for r in rs.iter_mut() {
+                let s = median_secs(11, Duration::from_secs(4), || r.render(scene, &cam, &mut img));
+                let rays = (res * res) as f64 / s / 1e6;
+                println!("| {} | {threads} | {res}² | {:.1} | {:.1} | {rays:.1} |", r.name(), s * 1e3, 1.0 / s);
+            }
+        }
+    }
+    let cam = warped(frame, 1024);
+    for threads in [1usize, 2] {
+        let mut rs: Vec<Box<dyn Renderer>> = vec![
+            Box::new(SphereSplat::new(threads)),
+            Box::new(PointSplat::new(1, threads)),
+            Box::new(PointSplat::new(2, threads)),
+            Box::new(PointSplat::new(3, threads)),
+            Box::new(StaleImage::new(threads)),
+        ];
+        for r in rs.iter_mut() {
+            let s = median_secs(11, Duration::from_secs(3), || r.render(scene, &cam, &mut img));
+            println!("| {} | {threads} | 1024² | {:.1} | {:.1} | — |", r.name(), s * 1e3, 1.0 / s);
+        }
+    }
+    println!("\n| LBVH build of {n} samples | ms |\n|---|---|");
+    let s = median_secs(11, Duration::from_secs(3), || drop(Scene::build(frame)));
+    println!("| serial `Scene::build` | {:.2} |", s * 1e3);
+    for threads in [1usize, 2] {
+        let mut b = ParallelBuilder::new(threads);
+        let mut sc = b.build(frame);
+        let s = median_secs(11, Duration::from_secs(3), || b.build_into(frame, &mut sc));
+        println!("| parallel, {threads} thread(s), buffers reused | {:.2} |", s * 1e3);
+        let s = median_secs(11, Duration::from_secs(3), || drop(b.build(frame)));
+        println!("| parallel, {threads} thread(s), fresh scene | {:.2} |", s * 1e3);
+    }
+    println!();
+}
+
+fn benches(c: &mut Criterion) {
+    let (frame, what) = bench_frame();
+    let scene = Scene::build(&frame);
+    if std::env::var_os("VOLWARP_BENCH_NO_SUMMARY").is_none() {
+        summary(&frame, &what, &scene);
+    }
+    let mut img = Image::new(1, 1);
+
+    let mut g = c.benchmark_group("trace");
+    g.sample_size(10).warm_up_time(Duration::from_millis(300)).measurement_time(Duration::from_secs(2));
+    for res in [1024u32, 512] {
+        let cam = warped(&frame, res);
+        g.throughput(Throughput::Elements((res * res) as u64));
+        for threads in [1usize, 2] {
+            let mut p = PacketTracer::new(threads);
+            g.bench_function(BenchmarkId::new(format!("packet/{threads}t"), res), |b| {
+                b.iter(|| p.render(&scene, &cam, &mut img))
+            });
+            let mut s = ScalarTracer::new(threads);
+            g.bench_function(BenchmarkId::new(format!("scalar/{threads}t"), res), |b| {
+                b.iter(|| s.render(&scene, &cam, &mut img))
+            });
+        }
+    }
+    g.finish();
+
+    let mut g = c.benchmark_group("lbvh_build");
+    g.sample_size(10).warm_up_time(Duration::from_millis(300)).measurement_time(Duration::from_secs(2));
+    g.throughput(Throughput::Elements(frame.samples.len() as u64));
+    g.bench_function("serial", |b| b.iter(|| Scene::build(&frame)));
+    for threads in [1usize, 2] {
+        let mut builder = ParallelBuilder::new(threads);
+        let mut sc = builder.build(&frame);
+        g.bench_function(BenchmarkId::new("parallel_reuse", threads), |b| {
+            b.iter(|| builder.build_into(&frame, &mut sc))
+        });
+        g.bench_function(BenchmarkId::new("parallel_fresh", threads), |b| b.iter(|| builder.build(&frame)));
+    }
+    g.finish();
+
+    let mut g = c.benchmark_group("baselines");
+    g.sample_size(10).warm_up_time(Duration::from_millis(300)).measurement_time(Duration::from_secs(2));
+    let cam = warped(&frame, 1024);
+    for threads in [1usize, 2] {
+        let mut rs: Vec<Box<dyn Renderer>> = vec![
+            Box::new(SphereSplat::new(threads)),
+            Box::new(PointSplat::new(1, threads)),
+            Box::new(PointSplat::new(3, threads)),
+            Box::new(StaleImage::new(threads)),
+        ];
+        for r in rs.iter_mut() {
+            g.bench_function(BenchmarkId::new(r.name(), format!("{threads}t")), |b| {
+                b.iter(|| r.render(&scene, &cam, &mut img))
+            });
+        }
+    }
+    g.finish();
+}
+
+criterion_group!(cpu_tracer, benches);
+criterion_main!(cpu_tracer);

@@ -39,6 +39,9 @@ struct Packet {
     o: [f32; 3],
     d: [f32x8; 3],
     inv: [f32x8; 3],
+    /// No lane has an infinite inverse direction, so no slab can be NaN and the plain SIMD
+    /// `min`/`max` give `f32::min`/`f32::max`'s results.
+    finite_inv: bool,
 }
 
 /// Lane `l` of a packet at `(x0, y0)` is pixel `(x0 + l % 4, y0 + l / 4)`.
@@ -53,7 +56,8 @@ fn make_packet(b: &RayBasis, x0: u32, y0: u32) -> Packet {
     let d = [dx * inv_len, dy * inv_len, dz * inv_len];
     // Exactly `Vec3::ONE / ray.dir` of the scalar traversal.
     let inv = [f32x8::ONE / d[0], f32x8::ONE / d[1], f32x8::ONE / d[2]];
-    Packet { o: [b.eye[0], b.eye[1], b.eye[2]], d, inv }
+    let finite_inv = (inv[0].is_finite() & inv[1].is_finite() & inv[2].is_finite()).all();
+    Packet { o: [b.eye[0], b.eye[1], b.eye[2]], d, inv, finite_inv }
 }
 
 /// All lanes set.
@@ -73,9 +77,19 @@ fn box_test(p: &Packet, min: &[f32; 3], max: &[f32; 3], t_max: f32x8) -> (f32x8,
     let ty2 = f32x8::splat(max[1] - p.o[1]) * p.inv[1];
     let tz1 = f32x8::splat(min[2] - p.o[2]) * p.inv[2];
     let tz2 = f32x8::splat(max[2] - p.o[2]) * p.inv[2];
-    let t_near = tx1.min(tx2).max(ty1.min(ty2)).max(tz1.min(tz2)).max(f32x8::ZERO);
     let scale = f32x8::splat(BOX_T_FAR_SCALE);
-    let t_far = (tx1.max(tx2).min(ty1.max(ty2)).min(tz1.max(tz2)) * scale).min(t_max * scale);
+    let (t_near, t_far) = if p.finite_inv {
+        // No NaN can occur (finite inverse times finite difference): the plain min/max are
+        // exact. Only the sign of a zero may differ, which no comparison sees.
+        let t_near = tx1.fast_min(tx2).fast_max(ty1.fast_min(ty2)).fast_max(tz1.fast_min(tz2)).fast_max(f32x8::ZERO);
+        let t_far =
+            (tx1.fast_max(tx2).fast_min(ty1.fast_max(ty2)).fast_min(tz1.fast_max(tz2)) * scale).fast_min(t_max * scale);
+        (t_near, t_far)
+    } else {
+        let t_near = tx1.min(tx2).max(ty1.min(ty2)).max(tz1.min(tz2)).max(f32x8::ZERO);
+        let t_far = (tx1.max(tx2).min(ty1.max(ty2)).min(tz1.max(tz2)) * scale).min(t_max * scale);
+        (t_near, t_far)
+    };
     (t_near, t_near.simd_le(t_far))
 }
 
@@ -144,61 +158,115 @@ fn trace_packet(l: &Lbvh, p: &Packet, stack: &mut Stack) -> u32x8 {
     }
     let nan = f32x8::splat(f32::NAN);
     let root = &l.nodes[0];
-    let (tn, hit) = box_test(p, &root.min, &root.max, f32x8::splat(f32::INFINITY));
+    let (_, hit) = box_test(p, &root.min, &root.max, f32x8::splat(f32::INFINITY));
     if !hit.any() {
         return best.prim;
     }
-    stack.node[0] = 0;
-    stack.t[0] = hit.select(tn, nan);
-    let mut sp = 1;
-    while sp > 0 {
-        sp -= 1;
-        // Early exit: NaN (lane not entering) compares false, as do lanes whose best hit is
-        // closer than the node (with the slab test's conservative widening).
-        let active = stack.t[sp].simd_le(best.t * f32x8::splat(BOX_T_FAR_SCALE));
-        if !active.any() {
-            continue;
-        }
-        let node = &l.nodes[stack.node[sp] as usize];
-        let mut cand = [(0u32, nan, f32x8::ZERO); 2];
-        let mut m = 0;
-        for child in [node.left, node.right] {
+    // The node being visited and its active lanes; the far children wait on the stack.
+    let (mut cur, mut active) = (0u32, hit);
+    let mut sp = 0;
+    loop {
+        let node = &l.nodes[cur as usize];
+        let (left, right) = (node.left, node.right);
+        let visit = |child: u32, best: &mut Best| -> Option<(f32x8, f32x8)> {
             if child & LEAF_BIT != 0 {
                 let k = child & !LEAF_BIT;
-                test_sphere(p, &l.deq, l.samples[k as usize], k, active, &mut best);
+                test_sphere(p, &l.deq, l.samples[k as usize], k, active, best);
+                None
             } else {
                 let c = &l.nodes[child as usize];
                 let (tn, hit) = box_test(p, &c.min, &c.max, best.t);
                 let hit = hit & active;
-                if hit.any() {
-                    cand[m] = (child, hit.select(tn, nan), hit);
-                    m += 1;
+                hit.any().then_some((tn, hit))
+            }
+        };
+        let lh = visit(left, &mut best);
+        let rh = visit(right, &mut best);
+        match (lh, rh) {
+            (Some((lt, lm)), Some((rt, rm))) => {
+                // Near-to-far: descend into the child that most lanes hitting both enter
+                // first; the other waits with its entry distances (NaN where not entered).
+                let both = lm & rm;
+                let right_first = (rt.simd_lt(lt) & both).to_bitmask().count_ones();
+                let (near, far, far_t) = if 2 * right_first > both.to_bitmask().count_ones() {
+                    ((right, rm), left, lm.select(lt, nan))
+                } else {
+                    ((left, lm), right, rm.select(rt, nan))
+                };
+                if sp < STACK_SIZE {
+                    stack.node[sp] = far;
+                    stack.t[sp] = far_t;
+                    sp += 1;
                 }
+                (cur, active) = near;
+                continue;
             }
-        }
-        if m == 2 {
-            // Near-to-far: visit first the child that most lanes hitting both enter first.
-            let both = cand[0].2 & cand[1].2;
-            let nb = both.to_bitmask().count_ones();
-            let right_first = (cand[1].1.simd_lt(cand[0].1) & both).to_bitmask().count_ones();
-            if 2 * right_first > nb {
-                cand.swap(0, 1);
+            (Some((_, lm)), None) => {
+                (cur, active) = (left, lm);
+                continue;
             }
+            (None, Some((_, rm))) => {
+                (cur, active) = (right, rm);
+                continue;
+            }
+            (None, None) => {}
         }
-        // Far first, so the near child is popped first.
-        for &(child, t, _) in cand[..m].iter().rev() {
-            if sp < STACK_SIZE {
-                stack.node[sp] = child;
-                stack.t[sp] = t;
-                sp += 1;
+        // Pop the next node some lane still needs. Early exit: NaN (a lane that does not
+        // enter it) compares false, as do lanes whose best hit is already closer than the
+        // node (with the slab test's conservative widening).
+        let limit = best.t * f32x8::splat(BOX_T_FAR_SCALE);
+        loop {
+            if sp == 0 {
+                return best.prim;
+            }
+            sp -= 1;
+            let a = stack.t[sp].simd_le(limit);
+            if a.any() {
+                (cur, active) = (stack.node[sp], a);
+                break;
             }
         }
     }
-    best.prim
+}
+
+/// [`trace_band`] compiled for the best instruction set this CPU has: the same operations
+/// (AVX2 only widens the vectors; no fused multiply-add is ever formed), so the same result.
+fn trace_band_dispatch(
+    l: &Lbvh,
+    basis: &RayBasis,
+    width: u32,
+    band: usize,
+    rows: &mut [u32],
+    map: &(impl Fn(u32) -> u32 + Sync),
+) {
+    #[cfg(target_arch = "x86_64")]
+    if std::is_x86_feature_detected!("avx2") {
+        // SAFETY: the CPU supports AVX2 (checked just above).
+        return unsafe { trace_band_avx2(l, basis, width, band, rows, map) };
+    }
+    trace_band(l, basis, width, band, rows, map)
+}
+
+/// [`trace_band`] with AVX2 enabled.
+///
+/// # Safety
+/// The CPU must support AVX2.
+#[cfg(target_arch = "x86_64")]
+#[target_feature(enable = "avx2")]
+unsafe fn trace_band_avx2(
+    l: &Lbvh,
+    basis: &RayBasis,
+    width: u32,
+    band: usize,
+    rows: &mut [u32],
+    map: &(impl Fn(u32) -> u32 + Sync),
+) {
+    trace_band(l, basis, width, band, rows, map)
 }
 
 /// Traces band `band` (rows `band * BAND_ROWS ..`) of a `width`-wide image into `rows`,
 /// writing `map(id)` per pixel.
+#[inline(always)]
 fn trace_band(
     l: &Lbvh,
     basis: &RayBasis,
@@ -262,7 +330,7 @@ impl PacketTracer {
         let basis = camera.ray_basis();
         let width = camera.width;
         self.threads.for_each_chunk(out, (width * BAND_ROWS) as usize, |band, rows| {
-            trace_band(&l, &basis, width, band, rows, &map)
+            trace_band_dispatch(&l, &basis, width, band, rows, &map)
         });
     }
 }
