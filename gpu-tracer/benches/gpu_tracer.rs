@@ -88,11 +88,17 @@ fn main() {
     bench(&mut gpu, "synthetic bumpy surface", &frame, &cam, reps);
 
     // A real frame where the shared data is there: the MRI marched at 1024² by the server.
-    let mri = std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("../../shared/data/mri_colin27_181x217x181_uint8.raw");
+    let mri =
+        std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("../../shared/data/mri_colin27_181x217x181_uint8.raw");
     if let Ok(ds) = volwarp_server::Dataset::load(&mri, None) {
         let marcher = volwarp_server::Marcher::from_dataset(&ds);
         let cam = marcher.default_camera(1024, 1024);
-        let req = volwarp_core::wire::CameraRequest { seq: 1, camera: cam, heuristic: Heuristic::Threshold, radius_scale: 1.0 };
+        let req = volwarp_core::wire::CameraRequest {
+            seq: 1,
+            camera: cam,
+            heuristic: Heuristic::Threshold,
+            radius_scale: 1.0,
+        };
         let frame = marcher.render_frame(&req).0;
         bench(&mut gpu, "MRI (colin27), threshold heuristic", &frame, &cam.orbit(10.0, 0.0), reps);
     }

@@ -31,7 +31,8 @@ use volwarp_core::Scene;
 const TILE: u32 = 128;
 /// Radix passes of 8 bits over the 54-bit code.
 const PASSES: u32 = 7;
-const SCAN_BLOCK: u32 = 256;
+/// Values per scan block (the shader's `SCAN_BLOCK`: 256 invocations × 8).
+const SCAN_BLOCK: u32 = 2048;
 /// Uniform slots are this far apart (the largest `min_uniform_buffer_offset_alignment`).
 const SLOT: u64 = 256;
 const MAX_SLOTS: u64 = 32;
@@ -254,10 +255,15 @@ impl LbvhBuilder {
         for (l, &c) in counts.iter().enumerate() {
             let data = self.levels[l].get()?;
             let sums = self.levels[l + 1].get()?;
-            let groups = c.div_ceil(SCAN_BLOCK);
-            scan_up.push((self.bind(ctx, &p.scan_blocks, scan_slot + l as u64, &[(6, data), (7, sums)]), groups));
+            scan_up.push((
+                self.bind(ctx, &p.scan_blocks, scan_slot + l as u64, &[(6, data), (7, sums)]),
+                c.div_ceil(SCAN_BLOCK),
+            ));
             if l + 1 < counts.len() {
-                scan_down.push((self.bind(ctx, &p.scan_add, scan_slot + l as u64, &[(6, data), (7, sums)]), groups));
+                scan_down.push((
+                    self.bind(ctx, &p.scan_add, scan_slot + l as u64, &[(6, data), (7, sums)]),
+                    c.div_ceil(256),
+                ));
             }
         }
         for pass in 0..PASSES {
@@ -419,8 +425,9 @@ mod tests {
     #[test]
     fn scan_levels_shrink_to_one_block() {
         assert_eq!(scan_counts(10), vec![10]);
-        assert_eq!(scan_counts(256), vec![256]);
-        assert_eq!(scan_counts(257), vec![257, 2]);
-        assert_eq!(scan_counts(256 * 4850), vec![256 * 4850, 4850, 19]);
+        assert_eq!(scan_counts(2048), vec![2048]);
+        assert_eq!(scan_counts(2049), vec![2049, 2]);
+        assert_eq!(scan_counts(256 * 4869), vec![256 * 4869, 609]);
+        assert_eq!(scan_counts(1 << 25), vec![1 << 25, 1 << 14, 8]);
     }
 }

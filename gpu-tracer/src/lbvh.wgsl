@@ -53,7 +53,8 @@ const POS_MASK: u32 = 0x3ffffu;
 // Keys per radix tile (one invocation walks its tile serially, which keeps the sort stable).
 const TILE: u32 = 128u;
 const BUCKETS: u32 = 256u;
-const SCAN_BLOCK: u32 = 256u;
+const SCAN_ITEMS: u32 = 8u;
+const SCAN_BLOCK: u32 = 2048u;
 
 fn linear_id(wid: vec3<u32>, nwg: vec3<u32>, lidx: u32, wg_size: u32) -> u32 {
     return (wid.y * nwg.x + wid.x) * wg_size + lidx;
@@ -157,8 +158,9 @@ fn radix_scatter(
 
 var<workgroup> scan_shared: array<u32, 256>;
 
-// Exclusive prefix sum of each block of 256 values of `scan_data` (first `P.count`), in place;
-// the block's total goes to `scan_sums[block]`.
+// Exclusive prefix sum of each block of `SCAN_BLOCK` (2048) values of `scan_data` (the first
+// `P.count`), in place: each of 256 invocations sums 8 consecutive values serially, a
+// workgroup scan combines the 256 partial sums. The block's total goes to `scan_sums[block]`.
 @compute @workgroup_size(256)
 fn scan_blocks(
     @builtin(workgroup_id) wid: vec3<u32>,
@@ -166,14 +168,16 @@ fn scan_blocks(
     @builtin(local_invocation_index) lidx: u32,
 ) {
     let block = wid.y * nwg.x + wid.x;
-    let i = block * SCAN_BLOCK + lidx;
-    var v = 0u;
-    if i < P.count {
-        v = scan_data[i];
+    let base = block * SCAN_BLOCK + lidx * SCAN_ITEMS;
+    var sum = 0u;
+    for (var k = 0u; k < SCAN_ITEMS; k++) {
+        if base + k < P.count {
+            sum += scan_data[base + k];
+        }
     }
-    scan_shared[lidx] = v;
+    scan_shared[lidx] = sum;
     workgroupBarrier();
-    for (var off = 1u; off < SCAN_BLOCK; off <<= 1u) {
+    for (var off = 1u; off < 256u; off <<= 1u) {
         var add = 0u;
         if lidx >= off {
             add = scan_shared[lidx - off];
@@ -182,12 +186,17 @@ fn scan_blocks(
         scan_shared[lidx] += add;
         workgroupBarrier();
     }
-    if i < P.count {
-        scan_data[i] = scan_shared[lidx] - v;
+    var run = scan_shared[lidx] - sum;
+    for (var k = 0u; k < SCAN_ITEMS; k++) {
+        if base + k < P.count {
+            let v = scan_data[base + k];
+            scan_data[base + k] = run;
+            run += v;
+        }
     }
     let blocks = (P.count + SCAN_BLOCK - 1u) / SCAN_BLOCK;
-    if lidx == SCAN_BLOCK - 1u && block < blocks {
-        scan_sums[block] = scan_shared[lidx];
+    if lidx == 255u && block < blocks {
+        scan_sums[block] = scan_shared[255];
     }
 }
 
@@ -198,7 +207,7 @@ fn scan_add(
     @builtin(num_workgroups) nwg: vec3<u32>,
     @builtin(local_invocation_index) lidx: u32,
 ) {
-    let i = linear_id(wid, nwg, lidx, SCAN_BLOCK);
+    let i = linear_id(wid, nwg, lidx, 256u);
     if i < P.count {
         scan_data[i] += scan_sums[i / SCAN_BLOCK];
     }

@@ -148,11 +148,19 @@ fn trace(@builtin(global_invocation_id) gid: vec3<u32>) {
         if intersect_box(o, inv, root.min, root.max, F32_MAX).x > 0.0 {
             var sp = 1u;
             stack[0] = 0u;
-            while sp > 0u {
+            // For a valid tree every internal node is popped at most once: the bound only
+            // keeps a corrupt tree from hanging the GPU.
+            var budget = n;
+            while sp > 0u && budget > 0u {
+                budget -= 1u;
                 sp -= 1u;
                 let node = nodes[stack[sp]];
-                var near_child: array<u32, 2>;
-                var near_t: array<f32, 2>;
+                // Children in order (left, right), as `Lbvh::trace` visits them; leaves are
+                // tested at once, internal children kept for the ordered push below.
+                var c0 = 0u;
+                var t0 = 0.0;
+                var c1 = 0u;
+                var t1 = 0.0;
                 var m = 0u;
                 for (var ci = 0u; ci < 2u; ci++) {
                     let child = select(node.right, node.left, ci == 0u);
@@ -171,23 +179,32 @@ fn trace(@builtin(global_invocation_id) gid: vec3<u32>) {
                         let t_max = select(F32_MAX, best_t, hit);
                         let bh = intersect_box(o, inv, c.min, c.max, t_max);
                         if bh.x > 0.0 {
-                            near_child[m] = child;
-                            near_t[m] = bh.y;
+                            if m == 0u {
+                                c0 = child;
+                                t0 = bh.y;
+                            } else {
+                                c1 = child;
+                                t1 = bh.y;
+                            }
                             m += 1u;
                         }
                     }
                 }
-                if m == 2u && near_t[1] < near_t[0] {
-                    let tmp = near_child[0];
-                    near_child[0] = near_child[1];
-                    near_child[1] = tmp;
-                }
-                // Far first, so the near child is popped first.
-                for (var j = 0u; j < m; j++) {
+                // Far first, so the near child is popped first (ties: the first child is near).
+                if m == 2u {
+                    let far_first = select(c1, c0, t1 < t0);
+                    let near_second = select(c0, c1, t1 < t0);
                     if sp < STACK_SIZE {
-                        stack[sp] = near_child[m - 1u - j];
+                        stack[sp] = far_first;
                         sp += 1u;
                     }
+                    if sp < STACK_SIZE {
+                        stack[sp] = near_second;
+                        sp += 1u;
+                    }
+                } else if m == 1u && sp < STACK_SIZE {
+                    stack[sp] = c0;
+                    sp += 1u;
                 }
             }
         }
