@@ -1,0 +1,107 @@
+//! Helpers shared by the client's integration tests: running the real binary with a time
+//! limit, reading PNG frames, a scripted fake server.
+#![allow(dead_code)]
+
+use std::io::Read;
+use std::net::{TcpListener, TcpStream};
+use std::path::{Path, PathBuf};
+use std::process::{Command, Output, Stdio};
+use std::time::{Duration, Instant};
+use volwarp_core::wire::{self, Message, VecWriter};
+
+/// The client binary built by cargo for these tests.
+pub fn bin() -> &'static str {
+    env!("CARGO_BIN_EXE_volwarp-client")
+}
+
+/// A fresh scratch folder under the target dir.
+pub fn scratch(name: &str) -> PathBuf {
+    let d = Path::new(env!("CARGO_TARGET_TMPDIR")).join(format!("client-{name}-{}", std::process::id()));
+    let _ = std::fs::remove_dir_all(&d);
+    std::fs::create_dir_all(&d).unwrap();
+    d
+}
+
+/// Runs the client with `args`, killing it after `limit`; returns its output.
+pub fn run(args: &[&str], limit: Duration) -> Output {
+    let mut child = Command::new(bin())
+        .args(args)
+        .env("RUST_LOG", "info")
+        .stdout(Stdio::piped())
+        .stderr(Stdio::piped())
+        .spawn()
+        .expect("starting volwarp-client");
+    let t0 = Instant::now();
+    loop {
+        if child.try_wait().unwrap().is_some() {
+            break;
+        }
+        if t0.elapsed() > limit {
+            let _ = child.kill();
+            let out = child.wait_with_output().unwrap();
+            panic!(
+                "volwarp-client {args:?} did not finish within {limit:?}\nstderr:\n{}",
+                String::from_utf8_lossy(&out.stderr)
+            );
+        }
+        std::thread::sleep(Duration::from_millis(20));
+    }
+    child.wait_with_output().unwrap()
+}
+
+/// The error line the client printed.
+pub fn error_line(out: &Output) -> String {
+    String::from_utf8_lossy(&out.stderr)
+        .lines()
+        .find(|l| l.starts_with("volwarp-client: error:"))
+        .unwrap_or("")
+        .to_string()
+}
+
+/// Decodes a PNG into RGBA8 pixels and its size.
+pub fn load_png(path: &Path) -> (u32, u32, Vec<u8>) {
+    let img = image::open(path).unwrap_or_else(|e| panic!("{}: {e}", path.display())).to_rgba8();
+    (img.width(), img.height(), img.into_raw())
+}
+
+/// Sorted PNG files in a folder.
+pub fn pngs(dir: &Path) -> Vec<PathBuf> {
+    let mut v: Vec<PathBuf> = std::fs::read_dir(dir)
+        .unwrap()
+        .map(|e| e.unwrap().path())
+        .filter(|p| p.extension().is_some_and(|e| e == "png"))
+        .collect();
+    v.sort();
+    v
+}
+
+/// Bytes of a message.
+pub fn encode(m: &Message) -> Vec<u8> {
+    let mut v = Vec::new();
+    wire::write_message(&mut VecWriter(&mut v), m).unwrap();
+    v
+}
+
+/// Reads one whole message from a socket (test side; small messages only).
+pub fn read_msg(s: &mut TcpStream) -> Option<Message> {
+    let mut head = [0u8; wire::HEADER_LEN];
+    s.read_exact(&mut head).ok()?;
+    let limits = wire::Limits::for_requests(4096);
+    let h = wire::parse_header(&head, &limits).ok()?;
+    let mut body = vec![0u8; h.len as usize];
+    s.read_exact(&mut body).ok()?;
+    wire::read_payload(&mut &body[..], &h, &limits).ok()
+}
+
+/// A one-connection fake server running `script` on the accepted socket; returns its address.
+pub fn fake_server(script: impl FnOnce(TcpStream) + Send + 'static) -> String {
+    let l = TcpListener::bind("127.0.0.1:0").unwrap();
+    let addr = l.local_addr().unwrap().to_string();
+    std::thread::spawn(move || {
+        if let Ok((s, _)) = l.accept() {
+            s.set_read_timeout(Some(Duration::from_secs(20))).unwrap();
+            script(s);
+        }
+    });
+    addr
+}

@@ -1,0 +1,150 @@
+//! Failures a user meets: bad address, nothing listening, server gone, another protocol
+//! version, a server Error, no display. Each is one clear line and a nonzero exit, never a
+//! panic.
+
+mod common;
+
+use common::*;
+use std::time::Duration;
+use volwarp_core::sample::Bounds;
+use volwarp_core::wire::{self, error_code, ErrorMsg, Frame, FrameHeader, Hello, Message};
+use volwarp_core::{Camera, Heuristic, Vec3};
+
+const LIMIT: Duration = Duration::from_secs(60);
+
+fn headless(addr: &str) -> Vec<String> {
+    let out = std::env::temp_dir().join(format!("volwarp-client-errors-{}", std::process::id()));
+    vec![
+        "--headless".into(),
+        "--connect".into(),
+        addr.into(),
+        "--out".into(),
+        out.to_str().unwrap().into(),
+        "--frames".into(),
+        "2".into(),
+        "--timeout-s".into(),
+        "5".into(),
+    ]
+}
+
+fn run_headless(addr: &str) -> std::process::Output {
+    let args = headless(addr);
+    let args: Vec<&str> = args.iter().map(|s| s.as_str()).collect();
+    run(&args, LIMIT)
+}
+
+fn assert_clean_failure(out: &std::process::Output, expect: &str) {
+    let stderr = String::from_utf8_lossy(&out.stderr);
+    assert_eq!(out.status.code(), Some(1), "stderr:\n{stderr}");
+    assert!(!stderr.contains("panicked"), "stderr:\n{stderr}");
+    let line = error_line(out);
+    assert!(line.contains(expect), "expected `{expect}` in `{line}`\nstderr:\n{stderr}");
+}
+
+fn probe_frame(seq: u64) -> Message {
+    let camera = Camera::look_at(Vec3::new(0.0, 0.0, 1.0), Vec3::ZERO, Vec3::Y, 30.0, 1, 1);
+    Message::Frame(Frame {
+        header: FrameHeader {
+            seq,
+            camera,
+            heuristic: Heuristic::Threshold,
+            bounds: Bounds::new(Vec3::ZERO, Vec3::ONE),
+            radius_unit: 0.01,
+            render_us: 1,
+            count: 0,
+        },
+        samples: vec![],
+        colors: vec![],
+    })
+}
+
+#[test]
+fn bad_address_and_nothing_listening() {
+    let out = run_headless("not an address");
+    assert_clean_failure(&out, "bad server address");
+    let out = run_headless("no-such-host.invalid:7878");
+    assert_clean_failure(&out, "bad server address");
+    // A port nobody listens on.
+    let port = std::net::TcpListener::bind("127.0.0.1:0").unwrap().local_addr().unwrap().port();
+    let out = run_headless(&format!("127.0.0.1:{port}"));
+    assert_clean_failure(&out, "cannot connect");
+}
+
+#[test]
+fn server_gone_after_the_handshake() {
+    let addr = fake_server(|mut s| {
+        use std::io::Write;
+        assert!(matches!(read_msg(&mut s), Some(Message::Hello(_))));
+        s.write_all(&encode(&Message::Hello(Hello::new(0)))).unwrap();
+        assert!(matches!(read_msg(&mut s), Some(Message::CameraRequest(_))));
+        s.write_all(&encode(&probe_frame(0))).unwrap();
+        // The first real request arrives, then the server dies.
+        let _ = read_msg(&mut s);
+    });
+    let out = run_headless(&addr);
+    assert_clean_failure(&out, "server gone");
+}
+
+#[test]
+fn server_speaking_another_version() {
+    let addr = fake_server(|mut s| {
+        use std::io::Write;
+        let _ = read_msg(&mut s);
+        let mut hello = encode(&Message::Hello(Hello::new(0)));
+        hello[4..6].copy_from_slice(&2u16.to_le_bytes());
+        hello[10..12].copy_from_slice(&[0, 0]);
+        s.write_all(&hello).unwrap();
+        std::thread::sleep(Duration::from_millis(500));
+    });
+    let out = run_headless(&addr);
+    assert_clean_failure(&out, "protocol version 2");
+}
+
+#[test]
+fn server_error_messages_are_shown() {
+    let addr = fake_server(|mut s| {
+        use std::io::Write;
+        let _ = read_msg(&mut s);
+        let e = ErrorMsg::new(error_code::UNAUTHORIZED, "missing or wrong token");
+        s.write_all(&encode(&Message::Error(e))).unwrap();
+        std::thread::sleep(Duration::from_millis(500));
+    });
+    let out = run_headless(&addr);
+    assert_clean_failure(&out, "missing or wrong token");
+}
+
+#[test]
+fn not_a_volwarp_server() {
+    let addr = fake_server(|mut s| {
+        use std::io::Write;
+        let _ = read_msg(&mut s);
+        s.write_all(b"HTTP/1.1 400 Bad Request\r\n\r\n").unwrap();
+        std::thread::sleep(Duration::from_millis(500));
+    });
+    let out = run_headless(&addr);
+    assert_clean_failure(&out, "not a volwarp stream");
+    let _ = wire::VERSION;
+}
+
+#[test]
+fn no_display_says_so_and_suggests_headless() {
+    let out = std::process::Command::new(bin())
+        .args(["--frames", "1"])
+        .env_remove("DISPLAY")
+        .env_remove("WAYLAND_DISPLAY")
+        .output()
+        .unwrap();
+    assert_eq!(out.status.code(), Some(2));
+    let line = error_line(&out);
+    assert!(line.contains("no display") && line.contains("--headless"), "{line}");
+}
+
+#[test]
+fn usage_errors_exit_with_2() {
+    let out = run(&["--headless"], LIMIT);
+    assert_eq!(out.status.code(), Some(2));
+    assert!(error_line(&out).contains("--out"));
+    let out = run(&["--headless", "--out", "x", "--renderer", "nope"], LIMIT);
+    assert_eq!(out.status.code(), Some(2));
+    assert!(error_line(&out).contains("unknown renderer"));
+}
