@@ -100,6 +100,24 @@ pub struct Panel {
     pub x_axis: XAxis,
     /// Fixed y range (else from the data, padded).
     pub y_range: Option<(f64, f64)>,
+    /// y holds log10 of the value; ticks show the value.
+    pub y_log: bool,
+    /// Where the legend goes.
+    pub legend: Legend,
+}
+
+/// Legend placement.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
+pub enum Legend {
+    /// Upper left corner.
+    #[default]
+    UpperLeft,
+    /// Upper right corner.
+    UpperRight,
+    /// Lower left corner.
+    LowerLeft,
+    /// Lower right corner.
+    LowerRight,
 }
 
 /// A color of the chart palette (distinct for the first ten indices).
@@ -177,6 +195,19 @@ fn draw_panel(area: &DrawingArea<BitMapBackend<'_>, Shift>, p: &Panel) -> Result
             format!("{v}")
         }
     };
+    let y_log = p.y_log;
+    let yfmt = move |v: &f64| -> String {
+        if y_log {
+            let y = 10f64.powf(*v);
+            if y >= 10.0 {
+                format!("{y:.0}")
+            } else {
+                format!("{y:.2}")
+            }
+        } else {
+            format!("{v}")
+        }
+    };
     let n_cat = match &p.x_axis {
         XAxis::Categories(c) => c.len(),
         _ => 8,
@@ -187,6 +218,7 @@ fn draw_panel(area: &DrawingArea<BitMapBackend<'_>, Shift>, p: &Panel) -> Result
         .y_desc(&p.y_desc)
         .x_labels(if n_cat > 0 { n_cat.max(2) } else { 8 })
         .x_label_formatter(&fmt)
+        .y_label_formatter(&yfmt)
         .label_style(("sans-serif", 14))
         .light_line_style(WHITE.mix(0.0))
         .draw()
@@ -236,7 +268,12 @@ fn draw_panel(area: &DrawingArea<BitMapBackend<'_>, Shift>, p: &Panel) -> Result
             .background_style(WHITE.mix(0.85))
             .border_style(BLACK.mix(0.4))
             .label_font(("sans-serif", 13))
-            .position(SeriesLabelPosition::UpperLeft)
+            .position(match p.legend {
+                Legend::UpperLeft => SeriesLabelPosition::UpperLeft,
+                Legend::UpperRight => SeriesLabelPosition::UpperRight,
+                Legend::LowerLeft => SeriesLabelPosition::LowerLeft,
+                Legend::LowerRight => SeriesLabelPosition::LowerRight,
+            })
             .draw()
             .map_err(err)?;
     }
@@ -301,6 +338,8 @@ mod tests {
             ],
             x_axis: XAxis::Categories(vec!["p".into(), "q".into()]),
             y_range: None,
+            y_log: false,
+            legend: Legend::UpperLeft,
         };
         draw(&path, 300, 200, &[panel.clone(), Panel { x_axis: XAxis::Log10, ..panel }]).unwrap();
         let img = image::open(&path).unwrap();

@@ -21,6 +21,9 @@
 //! `flip_evaluator.evaluate(ref, test, "LDR")` to about 1e-6 (tested against committed
 //! fixtures in `tests/fixtures/`). The mean itself is accumulated in `f64`.
 
+// The constants are written as in the reference, digit for digit, so they can be compared.
+#![allow(clippy::excessive_precision)]
+
 use crate::psnr::same_shape;
 use rayon::prelude::*;
 use volwarp_core::Image;
@@ -29,7 +32,7 @@ use volwarp_core::Image;
 /// monitor seen from 0.7 m.
 pub const DEFAULT_PPD: f32 = 0.7 * (3840.0 / 0.7) * (PI / 180.0);
 
-const PI: f32 = 3.14159265358979;
+const PI: f32 = std::f32::consts::PI;
 const QC: f32 = 0.7;
 const PC: f32 = 0.4;
 const PT: f32 = 0.95;

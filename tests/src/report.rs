@@ -20,6 +20,9 @@ pub const MRI: &str = "../shared/data/mri_colin27_181x217x181_uint8.raw";
 /// Side of the tiles of image strips (pictures are downscaled to about this size).
 pub const TILE: u32 = 200;
 
+/// Top of the PSNR axes (higher values, i.e. identical images, are drawn there).
+const PSNR_AXIS_TOP: f64 = 50.0;
+
 fn info(s: &str) {
     log::info!("{s}");
 }
@@ -118,6 +121,14 @@ pub fn quality(
     Ok(())
 }
 
+/// Writes the files of a finished sweep into `out` (what `quality` does after each dataset;
+/// public for the tests).
+pub fn write_quality_for_test(results: &[(String, DatasetResult)], out: &Path) -> Result<(), ErrorBox> {
+    std::fs::create_dir_all(out)?;
+    let hs: Vec<Heuristic> = results.iter().flat_map(|(_, r)| r.samples.iter().map(|(h, _)| *h)).collect();
+    write_quality(results, &hs, out)
+}
+
 fn write_quality(results: &[(String, DatasetResult)], heuristics: &[Heuristic], out: &Path) -> Result<(), ErrorBox> {
     let rows: Vec<Row> = results.iter().flat_map(|(_, r)| r.rows.clone()).collect();
     quality_table(&rows).write(&out.join("quality.csv"))?;
@@ -164,13 +175,15 @@ fn error_vs_angle_chart(rows: &[Row], h: Heuristic, path: &Path) -> Result<(), E
         v
     };
     let names = renderers(&rows.iter().map(|r| (*r).clone()).collect::<Vec<_>>());
+    let psnr_lo = rows.iter().map(|r| r.metrics.psnr).fold(PSNR_AXIS_TOP, f64::min);
     let mut panels = Vec::new();
     for (metric, label) in [(0usize, "mean FLIP (lower is better)"), (1, "PSNR dB (higher is better)")] {
         let mut series = Vec::new();
         for (i, name) in names.iter().enumerate() {
             let mut by_angle: BTreeMap<i64, Vec<f64>> = BTreeMap::new();
             for r in rows.iter().filter(|r| &r.renderer == name) {
-                let v = if metric == 0 { r.metrics.flip } else { r.metrics.psnr };
+                // Identical images score 100 dB; draw them at the top of a 50 dB axis.
+                let v = if metric == 0 { r.metrics.flip } else { r.metrics.psnr.min(PSNR_AXIS_TOP) };
                 by_angle.entry((r.angle_deg * 1000.0) as i64).or_default().push(v);
             }
             let pts = by_angle.iter().map(|(a, v)| (*a as f64 / 1000.0, mean(v.iter().copied()))).collect();
@@ -182,7 +195,9 @@ fn error_vs_angle_chart(rows: &[Row], h: Heuristic, path: &Path) -> Result<(), E
             y_desc: label.split(" (").next().unwrap_or(label).into(),
             series,
             x_axis: XAxis::Linear,
-            y_range: None,
+            y_range: if metric == 1 { Some((psnr_lo.floor() - 1.0, PSNR_AXIS_TOP + 1.0)) } else { None },
+            y_log: false,
+            legend: if metric == 0 { charts::Legend::UpperLeft } else { charts::Legend::UpperRight },
         });
     }
     charts::draw(path, 1600, 650, &panels)?;
@@ -228,6 +243,8 @@ fn speed_vs_accuracy_chart(rows: &[Row], h: Heuristic, path: &Path) -> Result<()
         series,
         x_axis: XAxis::Log10,
         y_range: None,
+        y_log: false,
+        legend: charts::Legend::LowerRight,
     };
     charts::draw(path, 1100, 700, &[panel])?;
     Ok(())
@@ -264,6 +281,8 @@ fn heuristics_chart(rows: &[Row], path: &Path) -> Result<(), ErrorBox> {
         series,
         x_axis: XAxis::Categories(hs.iter().map(|h| h.name().to_string()).collect()),
         y_range: None,
+        y_log: false,
+        legend: charts::Legend::UpperLeft,
     };
     charts::draw(path, 1300, 650, &[panel])?;
     Ok(())
