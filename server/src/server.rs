@@ -257,8 +257,21 @@ fn accept(shared: &Arc<Shared>, stream: TcpStream) {
     }
 }
 
-/// An `embedded_io` reader over a socket that reports read timeouts as `TimedOut`.
-struct SocketReader<'a>(&'a TcpStream);
+/// An `embedded_io` reader over a socket that reports read timeouts as `TimedOut`. With a
+/// deadline, every read waits at most until it: a client trickling one byte at a time cannot
+/// stretch a message past the handshake or idle timeout (a per-read timeout restarts on
+/// every byte).
+struct SocketReader<'a> {
+    stream: &'a TcpStream,
+    deadline: Option<Instant>,
+}
+
+impl<'a> SocketReader<'a> {
+    /// A reader whose reads all end by `deadline`.
+    fn until(stream: &'a TcpStream, deadline: Instant) -> Self {
+        SocketReader { stream, deadline: Some(deadline) }
+    }
+}
 
 #[derive(Debug)]
 struct SocketError(embedded_io::ErrorKind);
@@ -284,7 +297,14 @@ impl embedded_io::ErrorType for SocketReader<'_> {
 impl embedded_io::Read for SocketReader<'_> {
     fn read(&mut self, buf: &mut [u8]) -> Result<usize, SocketError> {
         loop {
-            match (&mut &*self.0).read(buf) {
+            if let Some(d) = self.deadline {
+                let left = d.saturating_duration_since(Instant::now());
+                if left.is_zero() {
+                    return Err(SocketError(embedded_io::ErrorKind::TimedOut));
+                }
+                let _ = self.stream.set_read_timeout(Some(left.max(Duration::from_millis(1))));
+            }
+            match (&mut &*self.stream).read(buf) {
                 Ok(n) => return Ok(n),
                 Err(e) if e.kind() == io::ErrorKind::Interrupted => continue,
                 Err(e) => {
@@ -346,7 +366,8 @@ fn serve(sh: &Shared, stream: &TcpStream, id: u64) -> String {
         max_viewport: cfg.max_viewport,
     };
     // Handshake.
-    let hello = match wire::read_message(&mut SocketReader(stream), &limits) {
+    let handshake_deadline = Instant::now() + cfg.handshake_timeout.max(Duration::from_millis(1));
+    let hello = match wire::read_message(&mut SocketReader::until(stream, handshake_deadline), &limits) {
         Ok(Message::Hello(h)) => h,
         Ok(other) => {
             let text = format!("expected Hello, got {}", msg_name(&other));
@@ -380,7 +401,8 @@ fn serve(sh: &Shared, stream: &TcpStream, id: u64) -> String {
     let reader = {
         let slot = slot.clone();
         let Ok(rs) = stream.try_clone() else { return "cannot clone the socket".into() };
-        std::thread::Builder::new().name(format!("volwarp-read-{id}")).spawn(move || read_loop(rs, limits, slot))
+        let idle = cfg.idle_timeout.max(Duration::from_millis(1));
+        std::thread::Builder::new().name(format!("volwarp-read-{id}")).spawn(move || read_loop(rs, limits, idle, slot))
     };
     let Ok(reader) = reader else { return "cannot spawn the reader thread".into() };
 
@@ -448,10 +470,10 @@ fn msg_name(m: &Message) -> &'static str {
     }
 }
 
-fn read_loop(stream: TcpStream, limits: Limits, slot: Arc<(Mutex<Slot>, Condvar)>) {
-    let mut rd = SocketReader(&stream);
+/// Reads the client's messages; each must arrive complete within `idle` of the previous one.
+fn read_loop(stream: TcpStream, limits: Limits, idle: Duration, slot: Arc<(Mutex<Slot>, Condvar)>) {
     let end = loop {
-        match wire::read_message(&mut rd, &limits) {
+        match wire::read_message(&mut SocketReader::until(&stream, Instant::now() + idle), &limits) {
             Ok(Message::CameraRequest(r)) => {
                 let mut s = slot.0.lock().unwrap_or_else(|e| e.into_inner());
                 if s.latest.replace(r).is_some() {
