@@ -1,0 +1,476 @@
+//! Hardening against garbage, hostile and slow clients (issue 8): a real server on loopback
+//! with short limits, attacked by bad clients, while a well-behaved client keeps checking
+//! that its frames are exactly what the marcher renders; the server's memory (this process's
+//! RSS) stays bounded. `docs/security.md` has the threat model these tests exercise.
+//!
+//! The file also holds the stable mirror of the `volume_header` fuzz target.
+
+mod common;
+
+#[allow(dead_code)]
+#[path = "../../fuzz/src/volume_checks.rs"]
+mod volume_checks;
+
+use common::Client;
+use std::io::{Read, Write};
+use std::net::{SocketAddr, TcpStream};
+use std::sync::atomic::{AtomicBool, AtomicU64, Ordering};
+use std::sync::Arc;
+use std::thread;
+use std::time::{Duration, Instant};
+use volwarp_core::wire::{self, error_code, CameraRequest, Frame, Hello, Message, WireError};
+use volwarp_core::Heuristic;
+use volwarp_server::{Dataset, Marcher, Server, ServerConfig, ServerHandle};
+
+/// The tests run one at a time: they measure this process's memory and time their timeouts.
+fn serial() -> std::sync::MutexGuard<'static, ()> {
+    static LOCK: std::sync::Mutex<()> = std::sync::Mutex::new(());
+    LOCK.lock().unwrap_or_else(|e| e.into_inner())
+}
+
+fn marcher() -> Arc<Marcher> {
+    Arc::new(Marcher::from_dataset(&Dataset::marschner_lobb(32)))
+}
+
+/// Short limits so that every timeout fires within a second or two.
+fn config() -> ServerConfig {
+    ServerConfig {
+        listen: SocketAddr::from(([127, 0, 0, 1], 0)),
+        threads: 2,
+        max_clients: 16,
+        handshake_timeout: Duration::from_millis(800),
+        idle_timeout: Duration::from_millis(1500),
+        send_timeout: Duration::from_millis(1000),
+        max_viewport: 1024,
+        ..ServerConfig::default()
+    }
+}
+
+fn start(cfg: ServerConfig, m: &Arc<Marcher>) -> ServerHandle {
+    Server::with_marcher(cfg, m.clone()).unwrap().spawn()
+}
+
+fn request(m: &Marcher, seq: u64, size: u32) -> CameraRequest {
+    let h = Heuristic::ALL[seq as usize % Heuristic::ALL.len()];
+    CameraRequest {
+        seq,
+        camera: m.default_camera(size, size).orbit(seq as f32 * 17.0, 10.0),
+        heuristic: h,
+        radius_scale: 1.0,
+    }
+}
+
+/// Resident memory of this process (server and test together), in bytes.
+fn rss() -> u64 {
+    let s = std::fs::read_to_string("/proc/self/status").unwrap_or_default();
+    s.lines()
+        .find_map(|l| l.strip_prefix("VmRSS:"))
+        .and_then(|v| v.trim().trim_end_matches("kB").trim().parse::<u64>().ok())
+        .map_or(0, |kb| kb * 1024)
+}
+
+fn wait_for_clients(server: &ServerHandle, n: usize, within: Duration) {
+    let t = Instant::now();
+    while server.active_clients() != n && t.elapsed() < within {
+        thread::sleep(Duration::from_millis(10));
+    }
+    assert_eq!(server.active_clients(), n, "clients still connected after {within:?}");
+}
+
+/// Asserts the frame is exactly the marcher's render of the request (all but the timing).
+fn assert_correct(m: &Marcher, req: &CameraRequest, f: &Frame) {
+    let (want, _) = m.render_frame(req);
+    assert_eq!(f.header.seq, req.seq);
+    assert_eq!(f.header.camera, req.camera);
+    assert_eq!(f.header.heuristic, req.heuristic);
+    assert_eq!(f.header.bounds, want.header.bounds);
+    assert_eq!(f.header.radius_unit, want.header.radius_unit);
+    assert_eq!(f.header.count, want.header.count);
+    assert!(f.samples == want.samples && f.colors == want.colors, "frame {} differs from the marcher's", req.seq);
+}
+
+fn expect_frame(c: &mut Client) -> Frame {
+    match c.recv() {
+        Ok(Message::Frame(f)) => f,
+        other => panic!("expected a Frame, got {other:?}"),
+    }
+}
+
+/// Reads until the server closes; returns the Error code it sent first, if any.
+fn error_then_close(s: &mut TcpStream, within: Duration) -> Option<u16> {
+    s.set_read_timeout(Some(within)).unwrap();
+    let mut r = embedded_io_adapters::std::FromStd::new(&mut *s);
+    let code = match wire::read_message(&mut r, &wire::Limits::for_frames(1024)) {
+        Ok(Message::Error(e)) => Some(e.code),
+        Ok(other) => panic!("expected Error or close, got {other:?}"),
+        Err(WireError::Io(embedded_io::ErrorKind::TimedOut)) => panic!("not closed within {within:?}"),
+        Err(_) => None,
+    };
+    let mut buf = [0u8; 256];
+    loop {
+        match s.read(&mut buf) {
+            Ok(0) => return code,
+            Ok(_) => continue,
+            Err(e) if e.kind() == std::io::ErrorKind::WouldBlock || e.kind() == std::io::ErrorKind::TimedOut => {
+                panic!("not closed within {within:?}")
+            }
+            Err(_) => return code,
+        }
+    }
+}
+
+/// A well-behaved client on its own thread that keeps requesting small frames and checks each
+/// one, until stopped; returns how many frames it verified.
+struct Watchdog {
+    stop: Arc<AtomicBool>,
+    frames: Arc<AtomicU64>,
+    handle: thread::JoinHandle<()>,
+}
+
+impl Watchdog {
+    fn start(addr: SocketAddr, m: &Arc<Marcher>) -> Watchdog {
+        let stop = Arc::new(AtomicBool::new(false));
+        let frames = Arc::new(AtomicU64::new(0));
+        let (st, fr, m) = (stop.clone(), frames.clone(), m.clone());
+        let handle = thread::spawn(move || {
+            let mut c = Client::hello(addr, None);
+            let mut seq = 1;
+            while !st.load(Ordering::SeqCst) {
+                let req = request(&m, seq, 48);
+                c.send(&Message::CameraRequest(req));
+                let f = expect_frame(&mut c);
+                assert_correct(&m, &req, &f);
+                fr.fetch_add(1, Ordering::SeqCst);
+                seq += 1;
+            }
+            c.send(&Message::Bye);
+        });
+        Watchdog { stop, frames, handle }
+    }
+
+    fn wait_for(&self, n: u64) {
+        let t = Instant::now();
+        while self.frames.load(Ordering::SeqCst) < n && t.elapsed() < Duration::from_secs(30) {
+            assert!(!self.handle.is_finished(), "the well-behaved client failed");
+            thread::sleep(Duration::from_millis(5));
+        }
+        assert!(self.frames.load(Ordering::SeqCst) >= n, "the well-behaved client got no frames");
+    }
+
+    /// Checks it got at least `more` frames beyond now, then stops it.
+    fn finish(self, more: u64) -> u64 {
+        let now = self.frames.load(Ordering::SeqCst);
+        self.wait_for(now + more);
+        self.stop.store(true, Ordering::SeqCst);
+        self.handle.join().expect("the well-behaved client failed");
+        self.frames.load(Ordering::SeqCst)
+    }
+}
+
+/// Deterministic garbage (xorshift), sometimes behind a valid-looking header.
+fn garbage(seed: u64, len: usize) -> Vec<u8> {
+    let mut x = seed.wrapping_mul(0x9E37_79B9_7F4A_7C15) | 1;
+    let mut v: Vec<u8> = (0..len)
+        .map(|_| {
+            x ^= x << 13;
+            x ^= x >> 7;
+            x ^= x << 17;
+            x as u8
+        })
+        .collect();
+    let prefix: &[u8] = match seed % 4 {
+        0 => b"VWRP\x01\x00",
+        1 => b"VWRP\x01\x00\x02\x00\x40\x00\x00\x00",
+        _ => b"",
+    };
+    v.splice(0..0, prefix.iter().copied());
+    v
+}
+
+#[test]
+fn hundred_garbage_connections_do_not_disturb_a_good_client() {
+    let _serial = serial();
+    let m = marcher();
+    let server = start(ServerConfig { max_clients: 24, ..config() }, &m);
+    let addr = server.local_addr();
+    let dog = Watchdog::start(addr, &m);
+    dog.wait_for(2);
+    let rss0 = rss();
+    let t = Instant::now();
+    let attackers: Vec<_> = (0..100u64)
+        .map(|i| {
+            thread::spawn(move || {
+                let mut s = TcpStream::connect(addr).unwrap();
+                if i % 3 == 0 {
+                    // Garbage after a proper handshake.
+                    let mut w = embedded_io_adapters::std::FromStd::new(&mut s);
+                    wire::write_hello(&mut w, &Hello::new(0)).unwrap();
+                    let mut r = embedded_io_adapters::std::FromStd::new(&mut s);
+                    match wire::read_message(&mut r, &wire::Limits::for_frames(16)) {
+                        Ok(Message::Hello(_)) => {}
+                        Ok(Message::Error(e)) => assert_eq!(e.code, error_code::BUSY),
+                        other => panic!("{other:?}"),
+                    }
+                }
+                let _ = s.write_all(&garbage(i, 16 + (i as usize * 37) % 2000));
+                // Busy, bad request, too large or timeout: always an answer and a close.
+                error_then_close(&mut s, Duration::from_secs(10))
+            })
+        })
+        .collect();
+    let mut codes = std::collections::BTreeMap::new();
+    for a in attackers {
+        *codes.entry(a.join().expect("an attacker thread failed")).or_insert(0) += 1;
+    }
+    eprintln!("100 garbage connections answered in {:?}: {codes:?}", t.elapsed());
+    assert!(!codes.contains_key(&Some(error_code::INTERNAL)));
+    wait_for_clients(&server, 1, Duration::from_secs(10));
+    let frames = dog.finish(3);
+    let grown = rss().saturating_sub(rss0);
+    eprintln!("RSS grew by {} KiB over the attack; watchdog verified {frames} frames", grown / 1024);
+    assert!(grown < 64 << 20, "RSS grew by {grown} bytes");
+    server.shutdown();
+}
+
+#[test]
+fn a_header_promising_4_gib_is_refused_without_allocating() {
+    let _serial = serial();
+    let m = marcher();
+    let server = start(config(), &m);
+    let addr = server.local_addr();
+    let rss0 = rss();
+    for (handshake, ty) in [(false, 1u8), (true, 2), (true, 3), (true, 4)] {
+        let mut c = if handshake { Client::hello(addr, None) } else { Client::connect(addr) };
+        let mut h = b"VWRP\x01\x00".to_vec();
+        h.extend_from_slice(&[ty, 0]);
+        h.extend_from_slice(&u32::MAX.to_le_bytes());
+        c.send_raw(&h);
+        // Then keep streaming: the server must not wait for (or buffer) 4 GiB.
+        let _ = c.stream.write_all(&[0u8; 4096]);
+        let code = error_then_close(&mut c.stream, Duration::from_secs(5));
+        assert_eq!(code, Some(error_code::TOO_LARGE), "type {ty}");
+    }
+    let grown = rss().saturating_sub(rss0);
+    assert!(grown < 32 << 20, "RSS grew by {grown} bytes");
+    wait_for_clients(&server, 0, Duration::from_secs(5));
+    let mut c = Client::hello(addr, None);
+    let req = request(&m, 1, 32);
+    c.send(&Message::CameraRequest(req));
+    assert_correct(&m, &req, &expect_frame(&mut c));
+    server.shutdown();
+}
+
+/// Sends `bytes` one at a time, `gap` apart (after a proper handshake if `after_hello`),
+/// until the server closes; returns how long that took and the Error code it sent.
+fn trickle(addr: SocketAddr, after_hello: bool, bytes: &[u8], gap: Duration) -> (Duration, Option<u16>) {
+    let mut s = if after_hello { Client::hello(addr, None).stream } else { TcpStream::connect(addr).unwrap() };
+    let t = Instant::now();
+    let mut closed = false;
+    for b in bytes {
+        thread::sleep(gap);
+        if s.write_all(&[*b]).is_err() {
+            closed = true;
+            break;
+        }
+        // Has the server answered (Error) or closed already?
+        s.set_nonblocking(true).unwrap();
+        let mut probe = [0u8; 1];
+        let gone = !matches!(s.peek(&mut probe), Err(ref e) if e.kind() == std::io::ErrorKind::WouldBlock);
+        s.set_nonblocking(false).unwrap();
+        if gone {
+            closed = true;
+            break;
+        }
+    }
+    let at = t.elapsed();
+    assert!(closed, "the server never dropped a client sending one byte every {gap:?}");
+    (at, error_then_close(&mut s, Duration::from_secs(5)))
+}
+
+#[test]
+fn a_client_sending_one_byte_at_a_time_is_dropped_at_the_deadline() {
+    let _serial = serial();
+    let m = marcher();
+    let cfg = config();
+    let server = start(cfg.clone(), &m);
+    let addr = server.local_addr();
+    let dog = Watchdog::start(addr, &m);
+    dog.wait_for(1);
+    let gap = Duration::from_millis(250);
+
+    // During the handshake: a Hello trickled in at 4 bytes/s (21 bytes would take 5 s).
+    let hello = wire::encode_to_vec(&Message::Hello(Hello::new(0)));
+    let (at, code) = trickle(addr, false, &hello, gap);
+    eprintln!("slow handshake dropped after {at:?} with {code:?}");
+    assert!(at < cfg.handshake_timeout + Duration::from_millis(1200), "dropped only after {at:?}");
+    assert_eq!(code, Some(error_code::TIMEOUT));
+
+    // After the handshake: a CameraRequest trickled in (76 bytes would take 19 s).
+    let req = wire::encode_to_vec(&Message::CameraRequest(request(&m, 1, 32)));
+    let (at, code) = trickle(addr, true, &req, gap);
+    eprintln!("slow request dropped after {at:?} with {code:?}");
+    assert!(at < cfg.idle_timeout + Duration::from_millis(1200), "dropped only after {at:?}");
+    assert_eq!(code, Some(error_code::TIMEOUT));
+
+    dog.finish(2);
+    wait_for_clients(&server, 0, Duration::from_secs(5));
+    server.shutdown();
+}
+
+#[test]
+fn clients_disconnecting_mid_message_and_mid_frame_are_cleaned_up() {
+    let _serial = serial();
+    let m = marcher();
+    let server = start(config(), &m);
+    let addr = server.local_addr();
+    let dog = Watchdog::start(addr, &m);
+    dog.wait_for(1);
+    for i in 0..6u64 {
+        let mut c = Client::hello(addr, None);
+        if i % 2 == 0 {
+            // Half a CameraRequest, then gone.
+            let req = wire::encode_to_vec(&Message::CameraRequest(request(&m, i, 64)));
+            c.send_raw(&req[..req.len() / 2]);
+        } else {
+            // A large frame, read a little of it, then gone.
+            c.send(&Message::CameraRequest(request(&m, i, 1024)));
+            let mut buf = [0u8; 100];
+            c.stream.read_exact(&mut buf).unwrap();
+        }
+        drop(c);
+    }
+    wait_for_clients(&server, 1, Duration::from_secs(10));
+    dog.finish(3);
+    server.shutdown();
+}
+
+#[test]
+fn a_client_that_never_reads_costs_bounded_memory_and_is_dropped() {
+    let _serial = serial();
+    let m = marcher();
+    let server = start(config(), &m);
+    let addr = server.local_addr();
+    let dog = Watchdog::start(addr, &m);
+    dog.wait_for(1);
+    let rss0 = rss();
+    let mut c = Client::hello(addr, None);
+    c.stream.set_write_timeout(Some(Duration::from_secs(5))).unwrap();
+    // Thousands of requests for large frames it never reads: latest wins, nothing queues.
+    let t = Instant::now();
+    let mut sent = 0;
+    for seq in 0..5000 {
+        let msg = wire::encode_to_vec(&Message::CameraRequest(request(&m, seq, 512)));
+        if c.stream.write_all(&msg).is_err() {
+            break;
+        }
+        sent += 1;
+        if t.elapsed() > Duration::from_secs(4) {
+            break;
+        }
+    }
+    let peak = rss();
+    // The send timeout drops it once its socket buffers are full.
+    wait_for_clients(&server, 1, Duration::from_secs(10));
+    let grown = peak.saturating_sub(rss0);
+    eprintln!("never-reading client: {sent} requests sent, RSS grew by {} KiB", grown / 1024);
+    assert!(grown < 96 << 20, "RSS grew by {grown} bytes");
+    dog.finish(3);
+    drop(c);
+    server.shutdown();
+}
+
+#[test]
+fn eight_well_behaved_clients_at_once_get_correct_frames() {
+    let _serial = serial();
+    let m = marcher();
+    let server = start(ServerConfig { max_clients: 8, ..config() }, &m);
+    let addr = server.local_addr();
+    let clients: Vec<_> = (0..8u64)
+        .map(|k| {
+            let m = m.clone();
+            thread::spawn(move || {
+                let mut c = Client::hello(addr, None);
+                for j in 0..4 {
+                    let req = request(&m, k * 100 + j, 32 + 8 * k as u32);
+                    c.send(&Message::CameraRequest(req));
+                    assert_correct(&m, &req, &expect_frame(&mut c));
+                }
+                c.send(&Message::Bye);
+            })
+        })
+        .collect();
+    for c in clients {
+        c.join().expect("a client failed");
+    }
+    wait_for_clients(&server, 0, Duration::from_secs(5));
+    server.shutdown();
+}
+
+#[test]
+fn the_token_is_checked_and_a_wrong_one_gets_an_error_and_a_close() {
+    let _serial = serial();
+    let m = marcher();
+    // Off loopback a token is mandatory.
+    let open = ServerConfig { listen: SocketAddr::from(([0, 0, 0, 0], 0)), ..config() };
+    assert!(Server::with_marcher(open.clone(), m.clone()).is_err());
+    let server = start(ServerConfig { token: Some("correct horse".into()), ..open }, &m);
+    let addr = SocketAddr::from(([127, 0, 0, 1], server.local_addr().port()));
+    for token in [&b""[..], b"correct hors", b"correct horse ", b"Correct horse", &[0xff; 64]] {
+        let mut c = Client::connect(addr);
+        c.send(&Message::Hello(Hello::new(0).with_token(token).unwrap()));
+        assert_eq!(error_then_close(&mut c.stream, Duration::from_secs(5)), Some(error_code::UNAUTHORIZED));
+    }
+    let mut c = Client::hello(addr, Some(b"correct horse"));
+    let req = request(&m, 9, 32);
+    c.send(&Message::CameraRequest(req));
+    assert_correct(&m, &req, &expect_frame(&mut c));
+    server.shutdown();
+}
+
+// ---------------------------------------------------------------- volume_header fuzz mirror
+
+/// Stable mirror of the `volume_header` fuzz target: its seeds, then deterministic mutations
+/// of them (byte flips, insertions of header syntax, truncations).
+#[test]
+fn volume_header_mirror() {
+    let dir = std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("../fuzz/seeds/volume_header");
+    let mut seeds: Vec<Vec<u8>> =
+        std::fs::read_dir(&dir).map(|d| d.flatten().map(|e| std::fs::read(e.path()).unwrap()).collect()).unwrap();
+    seeds.sort();
+    assert!(seeds.len() >= 5, "seed corpus missing under {}", dir.display());
+    let tokens: [&[u8]; 10] =
+        [b"\n\n", b"\r\n", b": ", b":=", b"sizes: 0 1 2", b"spacings: nan 1 1", b"byte skip: -2", b"(1,0", b"_", b"x"];
+    let mut x: u64 = 0x2545_F491_4F6C_DD1D;
+    let mut next = |n: usize| {
+        x ^= x << 13;
+        x ^= x >> 7;
+        x ^= x << 17;
+        (x % n.max(1) as u64) as usize
+    };
+    for s in &seeds {
+        volume_checks::volume_header(s);
+    }
+    for _ in 0..20_000 {
+        let mut v = seeds[next(seeds.len())].clone();
+        for _ in 0..1 + next(4) {
+            let n = v.len();
+            match next(4) {
+                0 if n > 1 => {
+                    let i = 1 + next(n - 1);
+                    v[i] ^= 1 << next(8);
+                }
+                1 => {
+                    let t = tokens[next(tokens.len())];
+                    let i = 1 + next(n.saturating_sub(1) + 1).min(n.saturating_sub(1));
+                    v.splice(i.min(v.len())..i.min(v.len()), t.iter().copied());
+                }
+                2 => v.truncate(next(n + 1)),
+                _ => v[0] ^= 1,
+            }
+            if v.is_empty() {
+                v.push(0);
+            }
+        }
+        volume_checks::volume_header(&v);
+    }
+}
