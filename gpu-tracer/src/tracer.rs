@@ -106,6 +106,7 @@ pub struct GpuTracer {
     uploads: u64,
     builder: Option<LbvhBuilder>,
     last_build: BuildTiming,
+    last_error: Option<String>,
 }
 
 impl std::fmt::Debug for GpuTracer {
@@ -160,6 +161,7 @@ impl GpuTracer {
             uploads: 0,
             builder: None,
             last_build: BuildTiming::default(),
+            last_error: None,
             ctx,
         })
     }
@@ -290,7 +292,21 @@ impl GpuTracer {
     }
 
     /// Renders `scene` for `camera` into `out` (resized to the viewport), reading the image back.
+    ///
+    /// Like the CPU renderers, an unusable camera whose viewport is still within
+    /// [`MAX_VIEWPORT`] leaves a background image of that size, one with an unusable viewport an
+    /// empty (0×0) image: a bad camera never makes it allocate.
     pub fn try_render(&mut self, scene: &Scene, camera: &Camera, out: &mut Image) -> Result<(), GpuError> {
+        if let Err(e) = camera.validate(MAX_VIEWPORT) {
+            if (1..=MAX_VIEWPORT).contains(&camera.width) && (1..=MAX_VIEWPORT).contains(&camera.height) {
+                out.reset_for(camera);
+            } else {
+                out.width = 0;
+                out.height = 0;
+                out.pixels.clear();
+            }
+            return Err(GpuError::BadCamera(e));
+        }
         out.reset_for(camera);
         let scope = self.ctx.device.push_error_scope(wgpu::ErrorFilter::Validation);
         let result = self.render_inner(scene, camera, out);
@@ -391,10 +407,18 @@ impl Renderer for GpuTracer {
         "spheres-gpu".into()
     }
 
-    /// Renders; a failure is logged and leaves the background image.
+    /// Renders; a failure leaves the background image and is logged once (again only when the
+    /// error changes, so a display loop does not flood the log).
     fn render(&mut self, scene: &Scene, camera: &Camera, out: &mut Image) {
-        if let Err(e) = self.try_render(scene, camera, out) {
-            log::error!("GPU tracer: {e}");
+        match self.try_render(scene, camera, out) {
+            Ok(()) => self.last_error = None,
+            Err(e) => {
+                let msg = e.to_string();
+                if self.last_error.as_deref() != Some(msg.as_str()) {
+                    log::error!("GPU tracer: {msg}");
+                    self.last_error = Some(msg);
+                }
+            }
         }
     }
 }

@@ -128,8 +128,9 @@ fn bad_input_is_a_clear_error_and_a_background_image() {
     let cam = frame.header.camera;
     let bad_cam = Camera { fov_y_deg: f32::NAN, ..cam };
     assert!(matches!(gpu.try_render(&scene, &bad_cam, &mut img), Err(volwarp_gpu_tracer::GpuError::BadCamera(_))));
-    let huge = cam.with_viewport(100_000, 10);
+    let huge = cam.with_viewport(100_000, 100_000);
     assert!(gpu.try_render(&scene, &huge, &mut img).is_err());
+    assert_eq!((img.width, img.height, img.pixels.len()), (0, 0, 0), "no allocation for a bad viewport");
     let mut broken = scene.clone();
     broken.nodes.pop();
     let r = gpu.try_render(&broken, &cam, &mut img);
@@ -208,4 +209,12 @@ fn gpu_build_of_two_million_samples_uses_a_three_level_scan() {
     assert!(g.nodes.iter().zip(&cpu.nodes).all(|(a, b)| (a.left, a.right) == (b.left, b.right)));
     let mut seen = vec![0u8; 2 * n];
     g.lbvh().check(&mut seen).unwrap();
+}
+
+#[test]
+fn the_tracer_can_move_to_another_thread() {
+    fn assert_send<T: Send>() {}
+    assert_send::<GpuTracer>();
+    assert_send::<Box<dyn Renderer + Send>>();
+    let _boxed: Option<Box<dyn Renderer + Send>> = tracer().map(|t| Box::new(t) as Box<dyn Renderer + Send>);
 }
