@@ -13,8 +13,10 @@
 //! scan), and scatter the tile in order — stable by construction.
 //!
 //! **Fit.** One invocation per leaf walks up; an atomic counter per node lets the second
-//! arrival fit it. Fitted boxes are exchanged through a separate buffer read and written only
-//! with atomics, so they are visible across workgroups within the dispatch.
+//! arrival fit it. Fitted boxes are exchanged through a separate buffer, cleared first and read
+//! and written only with atomics; WGSL atomics are relaxed, so a reader waits until each word it
+//! needs has been stored (a stored word is never 0) instead of relying on an ordering WGSL does
+//! not promise.
 
 use crate::buffers::{grid, read_mapped, GrowBuffer};
 use crate::tracer::BuildTiming;
@@ -144,7 +146,7 @@ impl LbvhBuilder {
             levels: Vec::new(),
             parents: GrowBuffer::new("parents", st),
             flags: GrowBuffer::new("fit flags", st_dst),
-            boxes: GrowBuffer::new("fit boxes", st),
+            boxes: GrowBuffer::new("fit boxes", st_dst),
         })
     }
 
@@ -242,6 +244,7 @@ impl LbvhBuilder {
         let hist = self.levels[0].get()?;
         let flags = self.flags.get()?;
         encoder.clear_buffer(flags, 0, Some((n as u64 - 1) * 4));
+        encoder.clear_buffer(self.boxes.get()?, 0, Some((n as u64 - 1) * 24));
 
         let mut steps: Vec<(&wgpu::ComputePipeline, wgpu::BindGroup, u32)> = Vec::new();
         steps.push((

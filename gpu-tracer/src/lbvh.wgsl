@@ -43,8 +43,11 @@ struct Node {
 @group(0) @binding(10) var<storage, read_write> nodes: array<Node>;
 @group(0) @binding(11) var<storage, read_write> parents: array<u32>;
 @group(0) @binding(12) var<storage, read_write> flags: array<atomic<u32>>;
-// Fitted boxes, 6 words per node (min.xyz, max.xyz as f32 bits), read and written only with
-// atomics so a fitter sees the boxes other invocations wrote in the same dispatch.
+// Fitted boxes, 6 words per node (min.xyz, max.xyz as f32 bits + 1), cleared to 0 before the
+// fit and read and written only with atomics. WGSL atomics are relaxed (no release/acquire),
+// so seeing a sibling's arrival count does not order its box stores before our loads; instead
+// a reader waits for each word to leave 0, which no finite float's bits + 1 can be. Per-location
+// coherence then guarantees it reads the one value stored there.
 @group(0) @binding(13) var<storage, read_write> boxes: array<atomic<u32>>;
 
 const LEAF_BIT: u32 = 0x80000000u;
@@ -351,17 +354,22 @@ fn child_box(child: u32) -> Box {
     }
     let b = child * 6u;
     return Box(
-        vec3<f32>(
-            bitcast<f32>(atomicLoad(&boxes[b])),
-            bitcast<f32>(atomicLoad(&boxes[b + 1u])),
-            bitcast<f32>(atomicLoad(&boxes[b + 2u])),
-        ),
-        vec3<f32>(
-            bitcast<f32>(atomicLoad(&boxes[b + 3u])),
-            bitcast<f32>(atomicLoad(&boxes[b + 4u])),
-            bitcast<f32>(atomicLoad(&boxes[b + 5u])),
-        ),
+        vec3<f32>(load_box_word(b), load_box_word(b + 1u), load_box_word(b + 2u)),
+        vec3<f32>(load_box_word(b + 3u), load_box_word(b + 4u), load_box_word(b + 5u)),
     );
+}
+
+// Waits (boundedly) until word i of `boxes` has been stored, then decodes it.
+fn load_box_word(i: u32) -> f32 {
+    var v = atomicLoad(&boxes[i]);
+    for (var spin = 0u; v == 0u && spin < 1000000u; spin++) {
+        v = atomicLoad(&boxes[i]);
+    }
+    return bitcast<f32>(v - 1u);
+}
+
+fn store_box_word(i: u32, f: f32) {
+    atomicStore(&boxes[i], bitcast<u32>(f) + 1u);
 }
 
 @compute @workgroup_size(64)
@@ -388,12 +396,12 @@ fn fit(
         let lo = min(a.lo, b.lo);
         let hi = max(a.hi, b.hi);
         let o = p * 6u;
-        atomicStore(&boxes[o], bitcast<u32>(lo.x));
-        atomicStore(&boxes[o + 1u], bitcast<u32>(lo.y));
-        atomicStore(&boxes[o + 2u], bitcast<u32>(lo.z));
-        atomicStore(&boxes[o + 3u], bitcast<u32>(hi.x));
-        atomicStore(&boxes[o + 4u], bitcast<u32>(hi.y));
-        atomicStore(&boxes[o + 5u], bitcast<u32>(hi.z));
+        store_box_word(o, lo.x);
+        store_box_word(o + 1u, lo.y);
+        store_box_word(o + 2u, lo.z);
+        store_box_word(o + 3u, hi.x);
+        store_box_word(o + 4u, hi.y);
+        store_box_word(o + 5u, hi.z);
         nodes[p].min = lo;
         nodes[p].max = hi;
         p = parents[p];

@@ -363,6 +363,10 @@ impl GpuTracer {
         if n >= (1 << 30) {
             return Err(GpuError::BadScene("more than 2^30 samples"));
         }
+        let deq = volwarp_core::Dequantizer::new(frame.header.bounds, frame.header.radius_unit);
+        if !(frame.header.bounds.is_valid() && deq.step.is_finite() && deq.radius_unit.is_finite()) {
+            return Err(GpuError::BadScene("frame bounds or radius unit are not finite"));
+        }
         if self.builder.is_none() {
             self.builder = Some(LbvhBuilder::new(&self.ctx)?);
         }

@@ -149,6 +149,9 @@ fn bad_input_is_a_clear_error_and_a_background_image() {
     let mut bad_frame = frame.clone();
     bad_frame.colors.pop();
     assert!(gpu.build_scene(&bad_frame).is_err());
+    let mut nan_frame = frame.clone();
+    nan_frame.header.bounds.max[1] = f32::NAN;
+    assert!(matches!(gpu.build_scene(&nan_frame), Err(volwarp_gpu_tracer::GpuError::BadScene(_))));
 }
 
 #[test]
