@@ -196,10 +196,25 @@ proptest! {
         checks::roundtrip_bytes(&s);
     }
 
-    /// Mirror of `lbvh` on raw bytes (the target's own input layout).
+    /// Mirror of `lbvh` on raw bytes (the target's own input layout), behind a header of
+    /// valid bounds and radius unit so that most cases build a scene.
     #[test]
-    fn lbvh_mirror(data in prop::collection::vec(any::<u8>(), 0..1200)) {
+    fn lbvh_mirror(
+        axes in prop::collection::vec((-128i8..=127, 0u8..=127, 0u8..24), 3),
+        unit in (1u8..=127, 0u8..20),
+        data in prop::collection::vec(any::<u8>(), 0..1200),
+    ) {
+        let mut v = Vec::new();
+        for &(m, _, e) in &axes {
+            v.extend_from_slice(&[0, m as u8, e]); // nice float: m · 2^(e − 12)
+        }
+        for &(m, d, e) in &axes {
+            v.extend_from_slice(&[0, m.saturating_add(d.min(127) as i8) as u8, e]);
+        }
+        v.extend_from_slice(&[0, unit.0, unit.1]);
+        v.extend_from_slice(&data);
         checks::lbvh(&data);
+        checks::lbvh(&v);
     }
 
     /// Mirror of `lbvh` with structured input: clustered samples in nice bounds, rays aimed at
@@ -384,4 +399,32 @@ fn allocation_accounting_works() {
     let (v, peak) = checks::peak_alloc(|| vec![0u8; 100_000]);
     assert_eq!(v.len(), 100_000);
     assert!(peak >= 100_000, "peak {peak}");
+}
+
+/// The real frames dumped from the server (seeds of `frame_decode`) build valid trees, and
+/// `trace` equals `brute_force` for the pixel rays of a camera 10° off the frame's.
+#[test]
+fn real_frames_trace_like_brute_force() {
+    let dir = fuzz_dir("seeds").join("frame_decode");
+    let mut n = 0;
+    for e in std::fs::read_dir(&dir).unwrap().flatten() {
+        if !e.file_name().to_string_lossy().starts_with("real_") {
+            continue;
+        }
+        let data = std::fs::read(e.path()).unwrap();
+        let Ok(Message::Frame(f)) = volwarp_core::wire::read_message(&mut &data[..], &checks::LIMITS) else {
+            panic!("{} is not a frame", e.path().display())
+        };
+        checks::check_scene(&f);
+        let scene = Scene::build(&f);
+        let cam = f.header.camera.orbit(10.0, 5.0).with_viewport(24, 24);
+        for y in 0..24 {
+            for x in 0..24 {
+                let ray = cam.ray(x, y);
+                assert_eq!(scene.lbvh().trace(&ray), brute_force(&scene.samples, &scene.deq, &ray));
+            }
+        }
+        n += 1;
+    }
+    assert!(n >= 3, "expected real frames under {}", dir.display());
 }
