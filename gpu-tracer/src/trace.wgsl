@@ -43,7 +43,6 @@ const STACK_SIZE: u32 = 128u;
 const F32_MAX: f32 = 3.40282347e38;
 const POS_MASK: u32 = 0x3ffffu;
 
-var<private> stack: array<u32, 128>;
 
 fn center(s: vec2<u32>) -> vec3<f32> {
     let x = s.x & POS_MASK;
@@ -146,6 +145,7 @@ fn trace(@builtin(global_invocation_id) gid: vec3<u32>) {
         let inv = vec3<f32>(1.0 / d.x, 1.0 / d.y, 1.0 / d.z);
         let root = nodes[0];
         if intersect_box(o, inv, root.min, root.max, F32_MAX).x > 0.0 {
+            var stack: array<u32, STACK_SIZE>;
             var sp = 1u;
             stack[0] = 0u;
             // For a valid tree every internal node is popped at most once: the bound only
