@@ -5,6 +5,7 @@ use crate::connection::connect;
 use crate::controls::home_camera;
 use crate::display::Display;
 use crate::error::ClientError;
+use crate::feed_server::FeedServer;
 use crate::local_server::LocalServer;
 use crate::network::{NetConfig, Network};
 use crate::options::Options;
@@ -23,22 +24,23 @@ pub fn run(opts: &Options) -> Result<(), ClientError> {
         // Fail before starting anything when there is no display at all.
         crate::window::check_display()?;
     }
-    let local = match &opts.connect {
-        Some(_) => None,
-        None => {
-            let delay = (opts.server_delay_ms > 0).then(|| Duration::from_millis(opts.server_delay_ms));
-            Some(LocalServer::start(delay, opts.server_threads)?)
-        }
-    };
-    let addr = match (&opts.connect, &local) {
-        (Some(a), _) => a.clone(),
-        (None, Some(l)) => l.addr().to_string(),
-        (None, None) => unreachable!("an in-process server was started"),
-    };
-    let result = run_connected(opts, &addr);
-    if let Some(l) = local {
-        l.shutdown();
+    if let Some(addr) = &opts.connect {
+        return run_connected(opts, addr);
     }
+    if opts.prerender {
+        let interval = Duration::from_millis(if opts.server_delay_ms > 0 { opts.server_delay_ms } else { 500 });
+        let step = crate::bench::DEG_PER_SECOND * interval.as_secs_f32();
+        let count = ((360.0 / step).ceil() as usize).clamp(1, 64);
+        log::info!("prerendering {count} frames of {}x{} ...", opts.size.0, opts.size.1);
+        let pre =
+            crate::feed_server::prerender(opts.size.0, opts.size.1, opts.heuristic, opts.radius_scale, count, step);
+        let feed = FeedServer::start(pre.frames, interval)?;
+        return run_connected(opts, &feed.addr().to_string());
+    }
+    let delay = (opts.server_delay_ms > 0).then(|| Duration::from_millis(opts.server_delay_ms));
+    let local = LocalServer::start(delay, opts.server_threads)?;
+    let result = run_connected(opts, &local.addr().to_string());
+    local.shutdown();
     result
 }
 

@@ -16,6 +16,7 @@
 //! | [`bench`] | the display-rate benchmark while frames are decoded and built |
 //! | [`record`] / [`replay`] | saving the received stream and playing it back offline |
 //! | [`local_server`] | the in-process server of the one-command demo |
+//! | [`feed_server`] | prerendered frames served at a fixed pace, to benchmark the client alone |
 //! | [`options`], [`error`], [`app`] | command line, errors, putting it together |
 //!
 //! The wire format, record format and the client's use of them are documented in `docs/`.
@@ -27,6 +28,7 @@ pub mod connection;
 pub mod controls;
 pub mod display;
 pub mod error;
+pub mod feed_server;
 pub mod headless;
 pub mod local_server;
 pub mod network;

@@ -92,6 +92,10 @@ pub struct Options {
     /// Measure the display rate while frames arrive (headless, prints a summary).
     #[arg(long)]
     pub bench: bool,
+    /// With --bench: serve frames prerendered along the bench orbit over loopback TCP, one per
+    /// --server-delay-ms (default 500), so no ray marcher competes with the client for the CPU.
+    #[arg(long, requires = "bench", conflicts_with = "connect")]
+    pub prerender: bool,
     /// Length of --bench in seconds.
     #[arg(long, value_name = "S", default_value_t = 20.0)]
     pub seconds: f64,
