@@ -137,6 +137,30 @@ pub fn color(i: usize) -> RGBColor {
     C[i % C.len()]
 }
 
+/// A tick label: a few significant digits, no trailing zeros.
+pub fn tick(v: f64) -> String {
+    let a = v.abs();
+    let s = if a >= 100.0 {
+        format!("{v:.0}")
+    } else if a >= 10.0 {
+        format!("{v:.1}")
+    } else if a >= 1.0 {
+        format!("{v:.2}")
+    } else {
+        format!("{v:.3}")
+    };
+    if s.contains('.') {
+        let t = s.trim_end_matches('0').trim_end_matches('.');
+        if t == "-0" {
+            "0".into()
+        } else {
+            t.into()
+        }
+    } else {
+        s
+    }
+}
+
 fn finite(points: &[(f64, f64)]) -> impl Iterator<Item = (f64, f64)> + '_ {
     points.iter().copied().filter(|(x, y)| x.is_finite() && y.is_finite())
 }
@@ -185,27 +209,17 @@ fn draw_panel(area: &DrawingArea<BitMapBackend<'_>, Shift>, p: &Panel) -> Result
             return String::new();
         }
         if log {
-            let x = 10f64.powf(*v);
-            if x >= 10.0 {
-                format!("{x:.0}")
-            } else {
-                format!("{x:.2}")
-            }
+            tick(10f64.powf(*v))
         } else {
-            format!("{v}")
+            tick(*v)
         }
     };
     let y_log = p.y_log;
     let yfmt = move |v: &f64| -> String {
         if y_log {
-            let y = 10f64.powf(*v);
-            if y >= 10.0 {
-                format!("{y:.0}")
-            } else {
-                format!("{y:.2}")
-            }
+            tick(10f64.powf(*v))
         } else {
-            format!("{v}")
+            tick(*v)
         }
     };
     let n_cat = match &p.x_axis {
@@ -316,6 +330,15 @@ pub fn pareto_front(points: &[(f64, f64)]) -> Vec<usize> {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn tick_labels_are_short() {
+        assert_eq!(tick(0.30000000001), "0.3");
+        assert_eq!(tick(-0.1), "-0.1");
+        assert_eq!(tick(12.345), "12.3");
+        assert_eq!(tick(250.0), "250");
+        assert_eq!(tick(-0.0001), "0");
+    }
 
     #[test]
     fn pareto_front_keeps_the_non_dominated_points() {

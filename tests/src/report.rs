@@ -167,6 +167,57 @@ fn write_quality(results: &[(String, DatasetResult)], heuristics: &[Heuristic], 
     Ok(())
 }
 
+/// Parses a `quality.csv` written by [`quality`] (rows with unknown heuristics or unparsable
+/// numbers are an error naming the line).
+pub fn parse_quality_csv(text: &str) -> Result<Vec<Row>, ErrorBox> {
+    let mut lines = text.lines();
+    if lines.next().map(str::trim) != Some(QUALITY_COLUMNS.join(",").as_str()) {
+        return Err("not a quality.csv: unexpected header".into());
+    }
+    let mut rows = Vec::new();
+    for (i, line) in lines.enumerate().filter(|(_, l)| !l.trim().is_empty()) {
+        let bad = || format!("quality.csv line {}: {line:?}", i + 2);
+        let f: Vec<&str> = line.split(',').collect();
+        if f.len() != QUALITY_COLUMNS.len() {
+            return Err(bad().into());
+        }
+        let num = |s: &str| -> Result<f64, String> { s.parse::<f64>().map_err(|_| bad()) };
+        let opt = |s: &str| -> Result<Option<f64>, String> {
+            if s.is_empty() {
+                Ok(None)
+            } else {
+                num(s).map(Some)
+            }
+        };
+        rows.push(Row {
+            dataset: f[0].into(),
+            heuristic: Heuristic::from_name(f[1]).ok_or_else(bad)?,
+            renderer: f[2].into(),
+            angle_deg: num(f[3])? as f32,
+            metrics: crate::Metrics { psnr: num(f[4])?, ssim: num(f[5])?, flip: num(f[6])? },
+            ms: [opt(f[7])?, opt(f[8])?],
+        });
+    }
+    Ok(rows)
+}
+
+/// Redraws the charts of a quality run from its `quality.csv` (primary heuristic: the first
+/// one in the file).
+pub fn replot(dir: &Path) -> Result<(), ErrorBox> {
+    let path = dir.join("quality.csv");
+    let meta = std::fs::metadata(&path).map_err(|e| format!("{}: {e}", path.display()))?;
+    if meta.len() > 256 << 20 {
+        return Err(format!("{}: too large", path.display()).into());
+    }
+    let rows = parse_quality_csv(&std::fs::read_to_string(&path)?)?;
+    let primary = rows.first().map_or(Heuristic::Threshold, |r| r.heuristic);
+    error_vs_angle_chart(&rows, primary, &dir.join("error_vs_angle.png"))?;
+    speed_vs_accuracy_chart(&rows, primary, &dir.join("speed_vs_accuracy.png"))?;
+    heuristics_chart(&rows, &dir.join("heuristics.png"))?;
+    info(&format!("redrew the charts of {} rows in {}", rows.len(), dir.display()));
+    Ok(())
+}
+
 fn error_vs_angle_chart(rows: &[Row], h: Heuristic, path: &Path) -> Result<(), ErrorBox> {
     let rows: Vec<&Row> = rows.iter().filter(|r| r.heuristic == h).collect();
     let datasets: Vec<&str> = {

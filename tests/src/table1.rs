@@ -34,7 +34,7 @@ pub const PAPER_COMPACT_MS: f64 = 23.0;
 pub const PAPER_LBVH_MS: f64 = 11.0;
 /// How far view 1 is dollied in from the default framing (the head fills the image, as in the
 /// paper's figure).
-pub const VIEW_DOLLY: f32 = 0.75;
+pub const VIEW_DOLLY: f32 = 0.66;
 
 /// Everything the table reports.
 #[derive(Clone, Debug, Default)]
