@@ -1,0 +1,39 @@
+//! Switching to the GPU tracer: where an adapter opens (lavapipe counts), it draws the CPU
+//! tracer's image; where none does, the switch fails with a clear message and the current
+//! renderer stays. Never a panic.
+
+use volwarp_client::renderers::{Renderers, GPU};
+use volwarp_core::renderer::Image;
+use volwarp_core::Scene;
+use volwarp_cpu_tracer::synthetic::depth_image_frame;
+
+#[test]
+fn gpu_switch_draws_the_cpu_image_or_explains_why_not() {
+    let frame = depth_image_frame(64, 1.0, 3);
+    let scene = Scene::build(&frame);
+    let cam = frame.header.camera.orbit(10.0, 5.0);
+    let mut r = Renderers::new("spheres-cpu", 1).unwrap();
+    let mut cpu = Image::new(1, 1);
+    r.render(&scene, &cam, &mut cpu);
+    match r.select(GPU) {
+        Ok(()) => {
+            assert_eq!(r.name(), GPU);
+            let mut gpu = Image::new(1, 1);
+            r.render(&scene, &cam, &mut gpu);
+            assert_eq!((gpu.width, gpu.height), (cpu.width, cpu.height));
+            let same = gpu.pixels.iter().zip(&cpu.pixels).filter(|(a, b)| a == b).count();
+            assert!(same * 100 >= cpu.pixels.len() * 99, "GPU and CPU images agree on only {same} pixels");
+            // Switching back and forth keeps the opened tracer.
+            r.select_key(1).unwrap();
+            r.select_key(7).unwrap();
+            assert_eq!(r.name(), GPU);
+        }
+        Err(e) => {
+            eprintln!("no GPU adapter here: {e}");
+            assert!(e.contains("unavailable") && e.contains("staying on spheres-cpu"), "{e}");
+            assert_eq!(r.name(), "spheres-cpu");
+            // A second try answers at once with the same reason.
+            assert_eq!(r.select(GPU).unwrap_err(), e);
+        }
+    }
+}
