@@ -39,7 +39,7 @@ pub mod threads;
 mod depth_buffer;
 
 pub use packet_tracer::PacketTracer;
-pub use parallel_build::{build_scene, ParallelBuilder};
+pub use parallel_build::{build_scene, BuildTimes, Method, ParallelBuilder};
 pub use point_splat::PointSplat;
 pub use scalar_tracer::ScalarTracer;
 pub use sphere_splat::SphereSplat;

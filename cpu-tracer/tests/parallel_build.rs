@@ -5,7 +5,7 @@ use volwarp_core::wire::Frame;
 use volwarp_core::Scene;
 use volwarp_cpu_tracer::parallel_sort::par_radix_sort;
 use volwarp_cpu_tracer::synthetic::{clustered_cloud, depth_image_frame, one_point_cloud, random_cloud, SplitMix64};
-use volwarp_cpu_tracer::{ParallelBuilder, Threads};
+use volwarp_cpu_tracer::{Method, ParallelBuilder, Threads};
 
 fn assert_same(a: &Scene, b: &Scene, what: &str) {
     assert_eq!(a.samples, b.samples, "{what}: samples");
@@ -30,7 +30,13 @@ fn frames() -> Vec<(&'static str, Frame)> {
 
 #[test]
 fn parallel_build_equals_serial_build() {
-    let mut builders = [ParallelBuilder::new(1), ParallelBuilder::new(2), ParallelBuilder::new(3)];
+    let mut builders = [
+        ParallelBuilder::new(1),
+        ParallelBuilder::new(2),
+        ParallelBuilder::new(3),
+        ParallelBuilder::new(1).with_method(Method::Karras),
+        ParallelBuilder::new(2).with_method(Method::Karras),
+    ];
     for (what, frame) in frames() {
         let serial = Scene::build(&frame);
         let mut seen = vec![0u8; (2 * serial.samples.len()).max(1)];
@@ -45,10 +51,15 @@ fn parallel_build_equals_serial_build() {
 #[test]
 fn builder_reuses_buffers_across_frames() {
     let mut b = ParallelBuilder::new(2);
+    let mut k = ParallelBuilder::new(2).with_method(Method::Karras);
+    let mut scene2 = k.build(&depth_image_frame(300, 1.0, 1));
     let mut scene = b.build(&depth_image_frame(300, 1.0, 1));
     for (what, frame) in frames().into_iter().rev() {
         b.build_into(&frame, &mut scene);
-        assert_same(&scene, &Scene::build(&frame), what);
+        k.build_into(&frame, &mut scene2);
+        let serial = Scene::build(&frame);
+        assert_same(&scene, &serial, what);
+        assert_same(&scene2, &serial, what);
     }
 }
 
