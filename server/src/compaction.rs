@@ -22,8 +22,9 @@ pub fn compact(samples: &[u64], colors: &[u32]) -> (Vec<u64>, Vec<u32>) {
     (s, c)
 }
 
-/// Compacts into `out_samples` / `out_colors` (cleared and resized; their capacity is reused)
-/// and returns the count.
+/// Compacts into `out_samples` / `out_colors` (resized to the count; their memory is reused,
+/// so a server that keeps them from frame to frame neither allocates nor zeroes) and returns
+/// the count.
 ///
 /// # Panics
 /// If `samples` and `colors` differ in length.
@@ -36,8 +37,9 @@ pub fn compact_into_vecs(
     assert_eq!(samples.len(), colors.len(), "one color per sample");
     let counts: Vec<usize> = samples.par_chunks(CHUNK).map(count_nonempty).collect();
     let total: usize = counts.iter().sum();
-    out_samples.clear();
-    out_colors.clear();
+    // Every slot below `total` is overwritten: keep what is there rather than zeroing it.
+    out_samples.truncate(total);
+    out_colors.truncate(total);
     out_samples.resize(total, 0);
     out_colors.resize(total, 0);
     let mut windows = Vec::with_capacity(counts.len());

@@ -5,8 +5,10 @@
 //! `[b·B, (b+1)·B)` (the first and last brick extend to the clamped outside). A trilinear
 //! sample there reads voxels `b·B ..= (b+1)·B`; the recorded range covers one more voxel on
 //! each side, so a sample that rounding puts a hair outside its brick is still covered.
-//! A brick whose range maps to zero opacity everywhere is skipped in one step, and the
-//! marcher resumes on its regular sample lattice, so skipping changes no result.
+//! A brick whose range maps to zero opacity everywhere is invisible. Each brick also stores
+//! its Chebyshev distance (in bricks) to the nearest visible brick, so a ray in empty space
+//! leaps over the whole cube of bricks known to be empty around it in one step; the marcher
+//! then resumes on its regular sample lattice, so skipping changes no result.
 
 use crate::transfer_function::TransferFunction;
 use crate::volume::Volume;
@@ -68,8 +70,9 @@ impl MinMaxGrid {
 
     /// Which bricks a transfer function can make visible.
     pub fn occupancy(&self, tf: &TransferFunction, spacing: Vec3) -> Occupancy {
-        let occupied = self.ranges.iter().map(|&(lo, hi)| tf.max_opacity(lo, hi) > 0.0).collect();
-        Occupancy { bricks: self.bricks, occupied, spacing }
+        let occupied: Vec<bool> = self.ranges.iter().map(|&(lo, hi)| tf.max_opacity(lo, hi) > 0.0).collect();
+        let dist = chebyshev_distance(self.bricks, &occupied);
+        Occupancy { bricks: self.bricks, occupied, dist, spacing }
     }
 }
 
@@ -78,7 +81,46 @@ impl MinMaxGrid {
 pub struct Occupancy {
     bricks: [u32; 3],
     occupied: Vec<bool>,
+    /// Chebyshev distance in bricks to the nearest visible brick (0: visible), capped at 255.
+    dist: Vec<u8>,
     spacing: Vec3,
+}
+
+/// Chebyshev (26-neighbour) distance of every brick to the nearest `true` one, capped at 255
+/// (breadth-first search from all visible bricks at once).
+fn chebyshev_distance(bricks: [u32; 3], occupied: &[bool]) -> Vec<u8> {
+    let [nx, ny, nz] = bricks.map(|b| b as i64);
+    let mut dist = vec![255u8; occupied.len()];
+    let mut queue = std::collections::VecDeque::new();
+    for (i, &o) in occupied.iter().enumerate() {
+        if o {
+            dist[i] = 0;
+            queue.push_back(i);
+        }
+    }
+    while let Some(i) = queue.pop_front() {
+        let d = dist[i];
+        if d == 254 {
+            continue;
+        }
+        let (x, y, z) = ((i as i64) % nx, (i as i64 / nx) % ny, i as i64 / (nx * ny));
+        for dz in -1..=1 {
+            for dy in -1..=1 {
+                for dx in -1..=1 {
+                    let (a, b, c) = (x + dx, y + dy, z + dz);
+                    if a < 0 || b < 0 || c < 0 || a >= nx || b >= ny || c >= nz {
+                        continue;
+                    }
+                    let j = (a + nx * (b + ny * c)) as usize;
+                    if dist[j] > d + 1 {
+                        dist[j] = d + 1;
+                        queue.push_back(j);
+                    }
+                }
+            }
+        }
+    }
+    dist
 }
 
 impl Occupancy {
@@ -101,8 +143,43 @@ impl Occupancy {
     /// Whether brick `b` can be visible.
     #[inline(always)]
     pub fn occupied(&self, b: [u32; 3]) -> bool {
+        self.distance(b) == 0
+    }
+
+    /// Chebyshev distance in bricks from brick `b` to the nearest visible one (0: visible):
+    /// every brick closer than that is invisible.
+    #[inline(always)]
+    pub fn distance(&self, b: [u32; 3]) -> u8 {
         let i = b[0] as usize + self.bricks[0] as usize * (b[1] as usize + self.bricks[1] as usize * b[2] as usize);
-        self.occupied.get(i).copied().unwrap_or(true)
+        self.dist.get(i).copied().unwrap_or(0)
+    }
+
+    /// Where a ray `o + d·t` leaves the cube of bricks within Chebyshev distance `r − 1` of brick
+    /// `b` (all invisible when `r` = [`Occupancy::distance`] of `b`); faces on the grid's outer
+    /// boundary do not count (the clamped outside belongs to the edge bricks).
+    #[inline]
+    pub fn leap_exit_t(&self, b: [u32; 3], r: u8, o: Vec3, inv_d: Vec3) -> f32 {
+        let reach = r.saturating_sub(1) as u32;
+        let mut t = f32::INFINITY;
+        for a in 0..3 {
+            if !inv_d[a].is_finite() {
+                continue;
+            }
+            let plane = if inv_d[a] > 0.0 {
+                let hi = b[a] + reach + 1;
+                if hi >= self.bricks[a] {
+                    continue;
+                }
+                (hi * BRICK) as f32 + 0.5
+            } else {
+                if b[a] < reach + 1 {
+                    continue;
+                }
+                ((b[a] - reach) * BRICK) as f32 + 0.5
+            };
+            t = t.min((plane * self.spacing[a] - o[a]) * inv_d[a]);
+        }
+        t
     }
 
     /// The fraction of bricks that can be visible.
@@ -110,30 +187,9 @@ impl Occupancy {
         self.occupied.iter().filter(|&&o| o).count() as f32 / self.occupied.len().max(1) as f32
     }
 
-    /// The ray parameter where a ray `o + d·t` leaves brick `b` (world space, `t` ≥ `t_min`).
+    /// The ray parameter where a ray `o + d·t` leaves brick `b` (world space).
     #[inline]
     pub fn exit_t(&self, b: [u32; 3], o: Vec3, inv_d: Vec3) -> f32 {
-        let mut t = f32::INFINITY;
-        for a in 0..3 {
-            let d_pos = inv_d[a] > 0.0;
-            let last = b[a] + 1 >= self.bricks[a];
-            let plane = if d_pos {
-                if last {
-                    continue;
-                }
-                ((b[a] + 1) * BRICK) as f32 + 0.5
-            } else {
-                if b[a] == 0 {
-                    continue;
-                }
-                (b[a] * BRICK) as f32 + 0.5
-            };
-            if !inv_d[a].is_finite() {
-                continue;
-            }
-            let tp = (plane * self.spacing[a] - o[a]) * inv_d[a];
-            t = t.min(tp);
-        }
-        t
+        self.leap_exit_t(b, 1, o, inv_d)
     }
 }

@@ -198,14 +198,21 @@ impl Marcher {
         let dg = d * self.inv_spacing;
         let ert = self.opts.early_termination;
         let (mut r, mut g, mut b, mut a) = (0.0f32, 0.0f32, 0.0f32, 0.0f32);
+        let skip = self.opts.skip_empty;
+        let occ = &self.occupancy;
+        // Samples before `t_check` lie in a brick already found visible: no need to look again.
+        // (A sample a rounding error past that brick's face may then be sampled needlessly; that
+        // is harmless, skipping is the only thing that must be exact.)
+        let mut t_check = f32::NEG_INFINITY;
         let mut k = 0u32;
         while k < n {
             let t = t_enter + (k as f32 + 0.5) * dt;
             let gp = og + dg * t;
-            if self.opts.skip_empty {
-                let br = self.occupancy.brick_of(gp);
-                if !self.occupancy.occupied(br) {
-                    let t_out = self.occupancy.exit_t(br, o, inv_d);
+            if skip && t >= t_check {
+                let br = occ.brick_of(gp);
+                let r = occ.distance(br);
+                let t_out = occ.leap_exit_t(br, r.max(1), o, inv_d);
+                if r > 0 {
                     let k_next = ((t_out - t_enter) / dt - 0.5).ceil();
                     k = if k_next > k as f32 + 1.0 {
                         if k_next < n as f32 {
@@ -218,6 +225,7 @@ impl Marcher {
                     };
                     continue;
                 }
+                t_check = t_out;
             }
             let v = vol.sample_grid(gp);
             let [cr, cg, cb, ca] = self.lut[TransferFunction::index(v)];
@@ -289,24 +297,20 @@ impl Marcher {
         img
     }
 
-    /// Renders one compacted frame for a request: march with its heuristic, place each
-    /// non-empty pixel's sample at `o + d·t` with radius `radius_scale × ½ |voxel diagonal|`,
-    /// quantize over the volume box, compact in parallel.
-    pub fn render_frame(&self, req: &CameraRequest) -> (Frame, FrameStats) {
-        let t0 = Instant::now();
-        let pb = self.march(&req.camera, req.heuristic);
-        let t1 = Instant::now();
-        let bounds = self.volume.bounds();
+    /// The uncompacted packed samples of a marched [`PixelBuffer`] (radius 0 for empty pixels)
+    /// and the frame's radius unit: each non-empty pixel's sample at `o + d·t` with radius
+    /// `radius_scale × ½ |voxel diagonal|`, quantized over the volume box.
+    pub fn quantize(&self, req: &CameraRequest, pb: &PixelBuffer) -> (Vec<u64>, f32) {
         let scale =
             if req.radius_scale.is_finite() && req.radius_scale > 0.0 { req.radius_scale.min(16.0) } else { 1.0 };
         let radius = self.default_radius() * scale;
         let radius_unit = radius / RADIUS_CODE;
-        let q = Quantizer::new(bounds, radius_unit);
+        let q = Quantizer::new(self.volume.bounds(), radius_unit);
         let basis = req.camera.ray_basis();
         let o = basis.origin();
-        let w = req.camera.width as usize;
+        let w = (pb.width as usize).max(1);
         let mut samples = vec![0u64; pb.t.len()];
-        samples.par_chunks_mut(w.max(1) * BAND_ROWS).zip(pb.t.par_chunks(w.max(1) * BAND_ROWS)).enumerate().for_each(
+        samples.par_chunks_mut(w * BAND_ROWS).zip(pb.t.par_chunks(w * BAND_ROWS)).enumerate().for_each(
             |(band, (s, t))| {
                 for (i, (s, &t)) in s.iter_mut().zip(t).enumerate() {
                     if t.is_finite() {
@@ -316,26 +320,65 @@ impl Marcher {
                 }
             },
         );
+        (samples, radius_unit)
+    }
+
+    /// Renders one compacted frame for a request: march with its heuristic, place each
+    /// non-empty pixel's sample at `o + d·t` with radius `radius_scale × ½ |voxel diagonal|`,
+    /// quantize over the volume box, compact in parallel.
+    pub fn render_frame(&self, req: &CameraRequest) -> (Frame, FrameStats) {
+        let mut frame = Frame { header: self.empty_header(req), samples: Vec::new(), colors: Vec::new() };
+        let stats = self.render_frame_into(req, &mut frame);
+        (frame, stats)
+    }
+
+    /// [`Marcher::render_frame`] into an existing frame, reusing the memory of its sample and
+    /// color vectors (a server keeps one frame per client).
+    pub fn render_frame_into(&self, req: &CameraRequest, frame: &mut Frame) -> FrameStats {
+        let t0 = Instant::now();
+        let pb = self.march(&req.camera, req.heuristic);
+        let t1 = Instant::now();
+        let (samples, radius_unit) = self.quantize(req, &pb);
         let t2 = Instant::now();
-        let (samples, colors) = compaction::compact(&samples, &pb.color);
+        let n = compaction::compact_into_vecs(&samples, &pb.color, &mut frame.samples, &mut frame.colors);
         let t3 = Instant::now();
-        let stats = FrameStats {
+        frame.header = FrameHeader {
+            radius_unit,
+            render_us: (t3 - t0).as_micros().min(u32::MAX as u128) as u32,
+            count: n as u32,
+            ..self.empty_header(req)
+        };
+        FrameStats {
             march_us: (t1 - t0).as_micros() as u64,
             quantize_us: (t2 - t1).as_micros() as u64,
             compact_us: (t3 - t2).as_micros() as u64,
-            samples: samples.len(),
+            samples: n,
             pixels: pb.t.len(),
+        }
+    }
+
+    /// A frame with no samples (for the default camera at 1×1), to render into with
+    /// [`Marcher::render_frame_into`].
+    pub fn empty_frame(&self) -> Frame {
+        let req = CameraRequest {
+            seq: 0,
+            camera: self.default_camera(1, 1),
+            heuristic: Heuristic::Threshold,
+            radius_scale: 1.0,
         };
-        let header = FrameHeader {
+        Frame { header: self.empty_header(&req), samples: Vec::new(), colors: Vec::new() }
+    }
+
+    fn empty_header(&self, req: &CameraRequest) -> FrameHeader {
+        FrameHeader {
             seq: req.seq,
             camera: req.camera,
             heuristic: req.heuristic,
-            bounds,
-            radius_unit,
-            render_us: (t3 - t0).as_micros().min(u32::MAX as u128) as u32,
-            count: samples.len() as u32,
-        };
-        (Frame { header, samples, colors }, stats)
+            bounds: self.volume.bounds(),
+            radius_unit: self.default_radius() / RADIUS_CODE,
+            render_us: 0,
+            count: 0,
+        }
     }
 }
 

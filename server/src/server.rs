@@ -407,6 +407,8 @@ fn serve(sh: &Shared, stream: &TcpStream, id: u64) -> String {
     let Ok(reader) = reader else { return "cannot spawn the reader thread".into() };
 
     let mut out = BufWriter::with_capacity(64 * 1024, stream);
+    // One frame per client, its vectors reused from frame to frame.
+    let mut frame = sh.marcher.empty_frame();
     let reason = loop {
         let req = {
             let (lock, cv) = &*slot;
@@ -422,7 +424,7 @@ fn serve(sh: &Shared, stream: &TcpStream, id: u64) -> String {
         if let Some(d) = cfg.frame_delay {
             std::thread::sleep(d);
         }
-        let (frame, stats) = sh.pool.install(|| sh.marcher.render_frame(&req));
+        let stats = sh.pool.install(|| sh.marcher.render_frame_into(&req, &mut frame));
         let t_send = Instant::now();
         let sent = {
             let mut w = embedded_io_adapters::std::FromStd::new(&mut out);
