@@ -61,6 +61,17 @@ pub fn read_message_bytes(
     limits: &Limits,
     what: &str,
 ) -> Result<(Vec<u8>, Message), ClientError> {
+    read_message_bytes_marked(stream, limits, what, || ())
+}
+
+/// [`read_message_bytes`], calling `mark` once the header has arrived and keeping what it
+/// returns (e.g. a "decoding" guard) alive until the payload is read and decoded.
+pub fn read_message_bytes_marked<G>(
+    stream: &mut TcpStream,
+    limits: &Limits,
+    what: &str,
+    mark: impl FnOnce() -> G,
+) -> Result<(Vec<u8>, Message), ClientError> {
     let mut head = [0u8; HEADER_LEN];
     let mut got = 0;
     while got < HEADER_LEN {
@@ -75,6 +86,7 @@ pub fn read_message_bytes(
         }
     }
     let h = wire::parse_header(&head, limits).map_err(wire_err)?;
+    let _guard = mark();
     let mut bytes = Vec::new();
     bytes.try_reserve_exact(HEADER_LEN + h.len as usize).map_err(|_| ClientError::Protocol("out of memory".into()))?;
     bytes.extend_from_slice(&head);

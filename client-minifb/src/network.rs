@@ -13,7 +13,7 @@
 //! The display loop only ever `try_lock`s the slot ([`Network::take_scene`]); every lock the
 //! display takes is held for a few instructions.
 
-use crate::connection::{read_message_bytes, send_bye, send_request, server_error, Connection};
+use crate::connection::{read_message_bytes_marked, send_bye, send_request, server_error, Connection};
 use crate::error::ClientError;
 use crate::record::RecordSink;
 use std::collections::VecDeque;
@@ -272,7 +272,7 @@ impl Drop for Network {
 
 fn read_loop(sh: &Shared, mut stream: TcpStream, limits: Limits, recorder: Option<RecordSink>) {
     loop {
-        let got = read_message_bytes(&mut stream, &limits, "waiting for a frame");
+        let got = read_message_bytes_marked(&mut stream, &limits, "waiting for a frame", || Busy::new(&sh.work_gen));
         if sh.stop.load(Ordering::SeqCst) {
             return;
         }

@@ -62,7 +62,7 @@ fn probe_frame(seq: u64) -> Message {
 fn bad_address_and_nothing_listening() {
     let out = run_headless("not an address");
     assert_clean_failure(&out, "bad server address");
-    let out = run_headless("no-such-host.invalid:7878");
+    let out = run_headless("127.0.0.1:99999");
     assert_clean_failure(&out, "bad server address");
     // A port nobody listens on.
     let port = std::net::TcpListener::bind("127.0.0.1:0").unwrap().local_addr().unwrap().port();
