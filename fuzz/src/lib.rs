@@ -1,10 +1,11 @@
 //! Fuzz targets of volwarp (see `docs/fuzzing.md`). The properties live in [`checks`], which
 //! the stable proptest mirrors in `core/tests/fuzz_mirror.rs` include unchanged; this crate adds
-//! the structured-message generator for `arbitrary`; [`volume_checks`] holds the properties of
-//! the server's volume header parsers.
+//! the structured-message generator for `arbitrary`; `volume_checks` (feature `volume`) holds the
+//! properties of the server's volume header parsers.
 #![deny(missing_docs)]
 
 pub mod checks;
+#[cfg(feature = "volume")]
 pub mod volume_checks;
 
 use arbitrary::{Result, Unstructured};
