@@ -13,7 +13,7 @@
 //! | [`controls`] | orbit, pan and zoom; the home view of a volume |
 //! | [`window`] | the minifb window, its input and status title |
 //! | [`headless`] | the scripted orbit that writes PNG frames and `timings.csv` |
-//! | [`bench`] | the display-rate benchmark while frames are decoded and built |
+//! | [`bench`](mod@bench) | the display-rate benchmark while frames are decoded and built |
 //! | [`record`] / [`replay`] | saving the received stream and playing it back offline |
 //! | [`local_server`] | the in-process server of the one-command demo |
 //! | [`feed_server`] | prerendered frames served at a fixed pace, to benchmark the client alone |
