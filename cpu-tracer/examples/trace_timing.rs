@@ -1,4 +1,5 @@
-//! Quick timing of the single-threaded renderers on the synthetic frame, in on-CPU time of the
+//! Timing of the single-threaded renderers and builders on the MRI frame (`mri`) or the
+//! synthetic one, in on-CPU time of the
 //! calling thread (robust on a busy machine): `cargo run --release -p volwarp-cpu-tracer
 //! --example trace_timing [res] [radius_scale | mri]`.
 
@@ -6,7 +7,7 @@ use std::time::Instant;
 use volwarp_core::renderer::{Image, Renderer};
 use volwarp_core::Scene;
 use volwarp_cpu_tracer::synthetic::depth_image_frame;
-use volwarp_cpu_tracer::{Method, PacketTracer, ParallelBuilder, ScalarTracer, SphereSplat};
+use volwarp_cpu_tracer::{Method, PacketTracer, ParallelBuilder, PointSplat, ScalarTracer, SphereSplat, StaleImage};
 
 #[path = "../benches/support/frames.rs"]
 mod frames;
@@ -59,8 +60,15 @@ fn main() {
     }
     let cam = frame.header.camera.orbit(10.0, 0.0).with_viewport(res, res);
     let mut img = Image::new(1, 1);
-    let mut rs: Vec<Box<dyn Renderer>> =
-        vec![Box::new(PacketTracer::new(1)), Box::new(ScalarTracer::new(1)), Box::new(SphereSplat::new(1))];
+    let mut rs: Vec<Box<dyn Renderer>> = vec![
+        Box::new(PacketTracer::new(1)),
+        Box::new(ScalarTracer::new(1)),
+        Box::new(SphereSplat::new(1)),
+        Box::new(PointSplat::new(1, 1)),
+        Box::new(PointSplat::new(2, 1)),
+        Box::new(PointSplat::new(3, 1)),
+        Box::new(StaleImage::new(1)),
+    ];
     for r in rs.iter_mut() {
         let mut cpu = Vec::new();
         let mut wall = Vec::new();
@@ -76,8 +84,9 @@ fn main() {
         wall.sort_by(f64::total_cmp);
         let c = cpu.get(cpu.len() / 2).copied().unwrap_or(f64::NAN);
         println!(
-            "{:15} {res}²: cpu {c:7.1} ms ({:5.2} Mrays/s)  wall {:7.1} ms",
+            "{:15} {res}²: cpu {c:7.1} ms ({:5.1} FPS, {:5.2} Mrays/s)  wall {:7.1} ms",
             r.name(),
+            1e3 / c,
             (res * res) as f64 / c / 1e3,
             wall[2]
         );

@@ -33,6 +33,7 @@ fn mri_frames_trace_exactly() {
         PacketTracer::new(2).trace_ids(&par, &c, &mut t);
         SphereSplat::new(2).splat_ids(&par, &c, &mut s);
         let same = t.iter().zip(&s).filter(|(a, b)| a == b).count() as f64 / t.len() as f64;
+        eprintln!("{label}: splat == trace on {:.4} % of the pixels", same * 100.0);
         assert!(same >= 0.999, "{label}: splat == trace on {:.4} %", same * 100.0);
         assert!(t.iter().any(|&i| i != NO_HIT));
     }
