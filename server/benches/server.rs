@@ -17,7 +17,7 @@ const MRI: &str = concat!(env!("CARGO_MANIFEST_DIR"), "/../../shared/data/mri_co
 
 /// Dolly factor of the default camera that makes the head fill most of the view (about 620k
 /// samples at 1024², like the seed paper's frames).
-const ZOOM: f32 = 0.66;
+const ZOOM: f32 = 0.68;
 
 fn request(m: &Marcher, size: u32) -> CameraRequest {
     let camera = m.default_camera(size, size).orbit(20.0, 10.0).dolly(ZOOM);

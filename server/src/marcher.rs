@@ -213,13 +213,14 @@ impl Marcher {
                 let r = occ.distance(br);
                 let t_out = occ.leap_exit_t(br, r.max(1), o, inv_d);
                 if r > 0 {
-                    let k_next = ((t_out - t_enter) / dt - 0.5).ceil();
-                    k = if k_next > k as f32 + 1.0 {
-                        if k_next < n as f32 {
-                            k_next as u32
-                        } else {
-                            n
-                        }
+                    // Resume at the first lattice sample at or after t_out (ceil, done by hand:
+                    // the libm call showed in profiles); NaN or no progress steps by one.
+                    let x = (t_out - t_enter) / dt - 0.5;
+                    k = if x >= n as f32 {
+                        n
+                    } else if x > (k + 1) as f32 {
+                        let c = x as u32;
+                        c + u32::from((c as f32) < x)
                     } else {
                         k + 1
                     };
