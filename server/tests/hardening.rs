@@ -22,10 +22,55 @@ use volwarp_core::wire::{self, error_code, CameraRequest, Frame, Hello, Message,
 use volwarp_core::Heuristic;
 use volwarp_server::{Dataset, Marcher, Server, ServerConfig, ServerHandle};
 
-/// The tests run one at a time: they measure this process's memory and time their timeouts.
+/// The tests run one at a time: they measure this process's memory, time their timeouts and
+/// read the server's log.
 fn serial() -> std::sync::MutexGuard<'static, ()> {
     static LOCK: std::sync::Mutex<()> = std::sync::Mutex::new(());
+    static LOGGER: Capture = Capture;
+    if log::set_logger(&LOGGER).is_ok() {
+        log::set_max_level(log::LevelFilter::Info);
+    }
     LOCK.lock().unwrap_or_else(|e| e.into_inner())
+}
+
+/// Keeps every log line of the server, so tests can check that rejections name their reason.
+struct Capture;
+
+static LOG_LINES: std::sync::Mutex<Vec<String>> = std::sync::Mutex::new(Vec::new());
+
+impl log::Log for Capture {
+    fn enabled(&self, m: &log::Metadata) -> bool {
+        m.level() <= log::Level::Info
+    }
+    fn log(&self, r: &log::Record) {
+        if self.enabled(r.metadata()) {
+            LOG_LINES.lock().unwrap_or_else(|e| e.into_inner()).push(r.args().to_string());
+        }
+    }
+    fn flush(&self) {}
+}
+
+fn log_mark() -> usize {
+    LOG_LINES.lock().unwrap_or_else(|e| e.into_inner()).len()
+}
+
+/// Asserts that a log line after `mark` contains every one of `words` (waits a little: the
+/// server logs a closed connection after closing it).
+fn assert_logged(mark: usize, words: &[&str]) {
+    let t = Instant::now();
+    loop {
+        let found = LOG_LINES.lock().unwrap_or_else(|e| e.into_inner())[mark..]
+            .iter()
+            .any(|l| words.iter().all(|w| l.contains(w)));
+        if found {
+            return;
+        }
+        if t.elapsed() > Duration::from_secs(5) {
+            let lines = LOG_LINES.lock().unwrap_or_else(|e| e.into_inner())[mark..].join("\n");
+            panic!("no log line with {words:?} in:\n{lines}");
+        }
+        thread::sleep(Duration::from_millis(10));
+    }
 }
 
 fn marcher() -> Arc<Marcher> {
@@ -196,6 +241,7 @@ fn hundred_garbage_connections_do_not_disturb_a_good_client() {
     let dog = Watchdog::start(addr, &m);
     dog.wait_for(2);
     let rss0 = rss();
+    let mark = log_mark();
     let t = Instant::now();
     let attackers: Vec<_> = (0..100u64)
         .map(|i| {
@@ -224,6 +270,7 @@ fn hundred_garbage_connections_do_not_disturb_a_good_client() {
     }
     eprintln!("100 garbage connections answered in {:?}: {codes:?}", t.elapsed());
     assert!(!codes.contains_key(&Some(error_code::INTERNAL)));
+    assert_logged(mark, &["closed: handshake failed: not a volwarp stream"]);
     wait_for_clients(&server, 1, Duration::from_secs(10));
     let frames = dog.finish(3);
     let grown = rss().saturating_sub(rss0);
@@ -239,6 +286,7 @@ fn a_header_promising_4_gib_is_refused_without_allocating() {
     let server = start(config(), &m);
     let addr = server.local_addr();
     let rss0 = rss();
+    let mark = log_mark();
     for (handshake, ty) in [(false, 1u8), (true, 2), (true, 3), (true, 4)] {
         let mut c = if handshake { Client::hello(addr, None) } else { Client::connect(addr) };
         let mut h = b"VWRP\x01\x00".to_vec();
@@ -250,6 +298,7 @@ fn a_header_promising_4_gib_is_refused_without_allocating() {
         let code = error_then_close(&mut c.stream, Duration::from_secs(5));
         assert_eq!(code, Some(error_code::TOO_LARGE), "type {ty}");
     }
+    assert_logged(mark, &["closed", "4294967295 bytes is over the limit"]);
     let grown = rss().saturating_sub(rss0);
     assert!(grown < 32 << 20, "RSS grew by {grown} bytes");
     wait_for_clients(&server, 0, Duration::from_secs(5));
@@ -300,14 +349,18 @@ fn a_client_sending_one_byte_at_a_time_is_dropped_at_the_deadline() {
 
     // During the handshake: a Hello trickled in at 4 bytes/s (21 bytes would take 5 s).
     let hello = wire::encode_to_vec(&Message::Hello(Hello::new(0)));
+    let mark = log_mark();
     let (at, code) = trickle(addr, false, &hello, gap);
+    assert_logged(mark, &["closed: handshake failed", "TimedOut"]);
     eprintln!("slow handshake dropped after {at:?} with {code:?}");
     assert!(at < cfg.handshake_timeout + Duration::from_millis(1200), "dropped only after {at:?}");
     assert_eq!(code, Some(error_code::TIMEOUT));
 
     // After the handshake: a CameraRequest trickled in (76 bytes would take 19 s).
     let req = wire::encode_to_vec(&Message::CameraRequest(request(&m, 1, 32)));
+    let mark = log_mark();
     let (at, code) = trickle(addr, true, &req, gap);
+    assert_logged(mark, &["closed", "TimedOut"]);
     eprintln!("slow request dropped after {at:?} with {code:?}");
     assert!(at < cfg.idle_timeout + Duration::from_millis(1200), "dropped only after {at:?}");
     assert_eq!(code, Some(error_code::TIMEOUT));
@@ -353,6 +406,7 @@ fn a_client_that_never_reads_costs_bounded_memory_and_is_dropped() {
     let dog = Watchdog::start(addr, &m);
     dog.wait_for(1);
     let rss0 = rss();
+    let mark = log_mark();
     let mut c = Client::hello(addr, None);
     c.stream.set_write_timeout(Some(Duration::from_secs(5))).unwrap();
     // Thousands of requests for large frames it never reads: latest wins, nothing queues.
@@ -369,8 +423,11 @@ fn a_client_that_never_reads_costs_bounded_memory_and_is_dropped() {
         }
     }
     let peak = rss();
-    // The send timeout drops it once its socket buffers are full.
+    // Dropped by the send timeout once its socket buffers are full, or by the idle timeout
+    // after its last request, whichever comes first.
     wait_for_clients(&server, 1, Duration::from_secs(10));
+    // Latest wins: thousands of requests, a handful of frames.
+    assert_logged(mark, &["stale requests skipped"]);
     let grown = peak.saturating_sub(rss0);
     eprintln!("never-reading client: {sent} requests sent, RSS grew by {} KiB", grown / 1024);
     assert!(grown < 96 << 20, "RSS grew by {grown} bytes");
@@ -415,11 +472,13 @@ fn the_token_is_checked_and_a_wrong_one_gets_an_error_and_a_close() {
     assert!(Server::with_marcher(open.clone(), m.clone()).is_err());
     let server = start(ServerConfig { token: Some("correct horse".into()), ..open }, &m);
     let addr = SocketAddr::from(([127, 0, 0, 1], server.local_addr().port()));
+    let mark = log_mark();
     for token in [&b""[..], b"correct hors", b"correct horse ", b"Correct horse", &[0xff; 64]] {
         let mut c = Client::connect(addr);
         c.send(&Message::Hello(Hello::new(0).with_token(token).unwrap()));
         assert_eq!(error_then_close(&mut c.stream, Duration::from_secs(5)), Some(error_code::UNAUTHORIZED));
     }
+    assert_logged(mark, &["closed: missing or wrong token"]);
     let mut c = Client::hello(addr, Some(b"correct horse"));
     let req = request(&m, 9, 32);
     c.send(&Message::CameraRequest(req));
