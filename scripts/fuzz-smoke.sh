@@ -3,8 +3,8 @@
 # the committed seeds (fuzz/seeds/<target>/; new inputs go to the ignored fuzz/corpus/).
 # Fails on the first finding; the crash input is left under fuzz/artifacts/<target>/.
 #
-# The four volwarp-core targets always run (clean sanitizer build ≈ 1 min). `volume_header`
-# fuzzes the server's parsers and needs the server's dependencies (a clean build of several
+# The four volwarp-core targets always run (clean sanitizer build ≈ 3 min on 2 loaded cores).
+# `volume_header` fuzzes the server's parsers and needs the server's dependencies (a clean build of several
 # minutes more): it runs with VOLWARP_FUZZ_VOLUME=1. Its stable mirror runs in `cargo test`.
 # Needs: a nightly toolchain and `cargo install cargo-fuzz --locked` (scripts/setup.sh).
 set -euo pipefail
