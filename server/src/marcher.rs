@@ -15,7 +15,6 @@
 //! `radius_scale × ½ |voxel diagonal|`; empty pixels get radius 0 and are compacted away.
 //! Work is spread with rayon over bands of image rows.
 
-use crate::compaction;
 use crate::empty_space::{MinMaxGrid, Occupancy};
 use crate::transfer_function::{TransferFunction, LUT_SIZE};
 use crate::volume::Volume;
@@ -75,9 +74,7 @@ impl PixelBuffer {
 pub struct FrameStats {
     /// Ray marching, µs.
     pub march_us: u64,
-    /// Computing positions and quantizing, µs.
-    pub quantize_us: u64,
-    /// Parallel compaction, µs.
+    /// Positions, quantization and parallel compaction (fused), µs.
     pub compact_us: u64,
     /// Samples in the frame (non-empty pixels).
     pub samples: usize,
@@ -302,11 +299,7 @@ impl Marcher {
     /// and the frame's radius unit: each non-empty pixel's sample at `o + d·t` with radius
     /// `radius_scale × ½ |voxel diagonal|`, quantized over the volume box.
     pub fn quantize(&self, req: &CameraRequest, pb: &PixelBuffer) -> (Vec<u64>, f32) {
-        let scale =
-            if req.radius_scale.is_finite() && req.radius_scale > 0.0 { req.radius_scale.min(16.0) } else { 1.0 };
-        let radius = self.default_radius() * scale;
-        let radius_unit = radius / RADIUS_CODE;
-        let q = Quantizer::new(self.volume.bounds(), radius_unit);
+        let (q, radius, radius_unit) = self.quantizer(req);
         let basis = req.camera.ray_basis();
         let o = basis.origin();
         let w = (pb.width as usize).max(1);
@@ -339,23 +332,78 @@ impl Marcher {
         let t0 = Instant::now();
         let pb = self.march(&req.camera, req.heuristic);
         let t1 = Instant::now();
-        let (samples, radius_unit) = self.quantize(req, &pb);
+        let (n, radius_unit) = self.compact_frame(req, &pb, &mut frame.samples, &mut frame.colors);
         let t2 = Instant::now();
-        let n = compaction::compact_into_vecs(&samples, &pb.color, &mut frame.samples, &mut frame.colors);
-        let t3 = Instant::now();
         frame.header = FrameHeader {
             radius_unit,
-            render_us: (t3 - t0).as_micros().min(u32::MAX as u128) as u32,
+            render_us: (t2 - t0).as_micros().min(u32::MAX as u128) as u32,
             count: n as u32,
             ..self.empty_header(req)
         };
         FrameStats {
             march_us: (t1 - t0).as_micros() as u64,
-            quantize_us: (t2 - t1).as_micros() as u64,
-            compact_us: (t3 - t2).as_micros() as u64,
+            compact_us: (t2 - t1).as_micros() as u64,
             samples: n,
             pixels: pb.t.len(),
         }
+    }
+
+    /// Quantization fused with the parallel compaction: count each band's non-empty pixels,
+    /// take the prefix sum, and let every band write its quantized samples and colors straight
+    /// into its window of `samples`/`colors` (resized to the count, memory reused). Equal to
+    /// [`Marcher::quantize`] followed by a compaction (tested), without the uncompacted buffer.
+    /// Returns the count and the radius unit.
+    pub fn compact_frame(
+        &self,
+        req: &CameraRequest,
+        pb: &PixelBuffer,
+        samples: &mut Vec<u64>,
+        colors: &mut Vec<u32>,
+    ) -> (usize, f32) {
+        let (q, radius, radius_unit) = self.quantizer(req);
+        let basis = req.camera.ray_basis();
+        let o = basis.origin();
+        let w = (pb.width as usize).max(1);
+        let band = w * BAND_ROWS;
+        let counts: Vec<usize> = pb.t.par_chunks(band).map(|t| t.iter().filter(|t| t.is_finite()).count()).collect();
+        let total: usize = counts.iter().sum();
+        samples.truncate(total);
+        colors.truncate(total);
+        samples.resize(total, 0);
+        colors.resize(total, 0);
+        let mut windows = Vec::with_capacity(counts.len());
+        let (mut rs, mut rc) = (&mut samples[..], &mut colors[..]);
+        for &c in &counts {
+            let (ws, s2) = rs.split_at_mut(c);
+            let (wc, c2) = rc.split_at_mut(c);
+            windows.push((ws, wc));
+            rs = s2;
+            rc = c2;
+        }
+        windows.into_par_iter().zip(pb.t.par_chunks(band).zip(pb.color.par_chunks(band))).enumerate().for_each(
+            |(b, ((ws, wc), (t, c)))| {
+                let mut j = 0;
+                for (i, (&t, &c)) in t.iter().zip(c).enumerate() {
+                    if t.is_finite() {
+                        let (x, y) = ((i % w) as u32, (b * BAND_ROWS + i / w) as u32);
+                        if let (Some(s), Some(col)) = (ws.get_mut(j), wc.get_mut(j)) {
+                            *s = q.pack(o + basis.dir(x, y) * t, radius);
+                            *col = c;
+                        }
+                        j += 1;
+                    }
+                }
+            },
+        );
+        (total, radius_unit)
+    }
+
+    fn quantizer(&self, req: &CameraRequest) -> (Quantizer, f32, f32) {
+        let scale =
+            if req.radius_scale.is_finite() && req.radius_scale > 0.0 { req.radius_scale.min(16.0) } else { 1.0 };
+        let radius = self.default_radius() * scale;
+        let radius_unit = radius / RADIUS_CODE;
+        (Quantizer::new(self.volume.bounds(), radius_unit), radius, radius_unit)
     }
 
     /// A frame with no samples (for the default camera at 1×1), to render into with

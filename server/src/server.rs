@@ -436,14 +436,13 @@ fn serve(sh: &Shared, stream: &TcpStream, id: u64) -> String {
         }
         let dropped = std::mem::take(&mut slot.0.lock().unwrap_or_else(|e| e.into_inner()).dropped);
         log::info!(
-            "client {id}: frame seq {} {}x{} {}: {} samples, march {:.1} ms, quantize {:.1} ms, compact {:.2} ms, send {:.1} ms{}",
+            "client {id}: frame seq {} {}x{} {}: {} samples, march {:.1} ms, compact {:.2} ms, send {:.1} ms{}",
             req.seq,
             req.camera.width,
             req.camera.height,
             req.heuristic,
             stats.samples,
             stats.march_us as f64 / 1e3,
-            stats.quantize_us as f64 / 1e3,
             stats.compact_us as f64 / 1e3,
             t_send.elapsed().as_secs_f64() * 1e3,
             if dropped > 0 { format!(", {dropped} stale requests skipped") } else { String::new() }
