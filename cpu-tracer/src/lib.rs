@@ -51,8 +51,9 @@ use volwarp_core::renderer::{Image, Renderer};
 use volwarp_core::sample::over_background;
 use volwarp_core::{Camera, Scene, BACKGROUND};
 
-/// The largest viewport width or height any renderer here draws.
-pub const MAX_VIEWPORT: u32 = 16384;
+/// The largest viewport width or height any renderer here draws (bounds what a renderer
+/// allocates: at most 8192² pixels of image and depth buffer).
+pub const MAX_VIEWPORT: u32 = 8192;
 
 /// The pixel value for "no hit" in sample-id buffers.
 pub const NO_HIT: u32 = u32::MAX;
