@@ -185,7 +185,12 @@ fn draw_panel(area: &DrawingArea<BitMapBackend<'_>, Shift>, p: &Panel) -> Result
     let all: Vec<(f64, f64)> = p.series.iter().flat_map(|s| finite(&s.points).collect::<Vec<_>>()).collect();
     let (x0, x1) = match &p.x_axis {
         XAxis::Categories(c) => (-0.5, c.len() as f64 - 0.5),
-        _ => range(all.iter().map(|v| v.0)),
+        // Room on the right for point labels.
+        XAxis::Log10 => {
+            let (a, b) = range(all.iter().map(|v| v.0));
+            (a, b + (b - a) * 0.12)
+        }
+        XAxis::Linear => range(all.iter().map(|v| v.0)),
     };
     let (y0, y1) = p.y_range.unwrap_or_else(|| range(all.iter().map(|v| v.1)));
     let mut chart = ChartBuilder::on(area)

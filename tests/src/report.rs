@@ -391,7 +391,7 @@ pub fn failures(
             if !o.defined {
                 log::warn!("{}: {} produced an undefined image", case.name, o.renderer);
             }
-            if ["stale", "points1", "spheres-cpu", "splat", "spheres-cpu-r2"].contains(&o.renderer.as_str()) {
+            if ["stale", "points1", "spheres-cpu", "spheres-cpu-r2"].contains(&o.renderer.as_str()) {
                 row_pics.push(tile(&o.image));
             }
         }
@@ -401,7 +401,7 @@ pub fn failures(
     let refs: Vec<Vec<&Image>> = pictures.iter().map(|v| v.iter().collect()).collect();
     save_png(&strip(&refs, 3, volwarp_core::sample::pack_color(255, 255, 255, 255)), &out.join("failures.png"))?;
     info(&format!(
-        "wrote {} and failures.png (rows: {}; columns: truth, stale, points1, spheres-cpu, splat, spheres-cpu-r2)",
+        "wrote {} and failures.png (rows: {}; columns: truth, stale, points1, spheres-cpu, spheres-cpu-r2)",
         out.join("failures.csv").display(),
         CASES.iter().map(|c| c.name).collect::<Vec<_>>().join(", ")
     ));
