@@ -1,8 +1,8 @@
 //! `cargo bench -p volwarp-server`: march the MRI head of `../shared/data` at 1024² and 512²
 //! (framed to fill most of the view, threshold heuristic), render a whole frame, and compact
-//! the 1024² frame (the seed paper compacted serially in 23 ms): the frame path (quantization
-//! fused with the parallel compaction), the standalone parallel compaction of a packed buffer
-//! (fresh and reused output) and core's serial one.
+//! the 1024² frame's packed samples (the seed paper compacted serially in 23 ms): in parallel
+//! into fresh vectors, in parallel into reused ones (what the server does per frame), and core's
+//! serial `compact_in_place`.
 //!
 //! Skipped with a message when the shared data set is absent.
 
@@ -55,8 +55,6 @@ fn benches(c: &mut Criterion) {
     let (samples, _) = m.quantize(&req, &pb);
     let mut g = c.benchmark_group("compaction");
     g.throughput(Throughput::Elements(samples.len() as u64));
-    let (mut fs, mut fc) = (Vec::new(), Vec::new());
-    g.bench_function("frame_fused_1024", |b| b.iter(|| black_box(m.compact_frame(&req, &pb, &mut fs, &mut fc))));
     g.bench_function("parallel_1024", |b| b.iter(|| black_box(compact(&samples, &pb.color))));
     let (mut s, mut col) = (Vec::new(), Vec::new());
     g.bench_function("parallel_reuse_1024", |b| {

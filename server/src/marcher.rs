@@ -15,6 +15,7 @@
 //! `radius_scale × ½ |voxel diagonal|`; empty pixels get radius 0 and are compacted away.
 //! Work is spread with rayon over bands of image rows.
 
+use crate::compaction;
 use crate::empty_space::{MinMaxGrid, Occupancy};
 use crate::transfer_function::{TransferFunction, LUT_SIZE};
 use crate::volume::Volume;
@@ -74,7 +75,7 @@ impl PixelBuffer {
 pub struct FrameStats {
     /// Ray marching, µs.
     pub march_us: u64,
-    /// Positions, quantization and parallel compaction (fused), µs.
+    /// Parallel compaction, µs (positions are quantized during the march).
     pub compact_us: u64,
     /// Samples in the frame (non-empty pixels).
     pub samples: usize,
@@ -259,22 +260,42 @@ impl Marcher {
 
     /// Marches every pixel of `camera` with `heuristic` (parallel over row bands).
     pub fn march(&self, camera: &Camera, heuristic: Heuristic) -> PixelBuffer {
+        self.march_impl(camera, heuristic, None).0
+    }
+
+    /// Marches every pixel and, with `pack`, also packs each non-empty pixel's sample (the same
+    /// values as [`Marcher::quantize`], computed while the ray direction is at hand).
+    fn march_impl(
+        &self,
+        camera: &Camera,
+        heuristic: Heuristic,
+        pack: Option<(&Quantizer, f32)>,
+    ) -> (PixelBuffer, Vec<u64>) {
         let (w, h) = (camera.width as usize, camera.height as usize);
         let basis = camera.ray_basis();
         let o = basis.origin();
         let mut t = vec![f32::INFINITY; w * h];
         let mut color = vec![0u32; w * h];
-        t.par_chunks_mut(w * BAND_ROWS).zip(color.par_chunks_mut(w * BAND_ROWS)).enumerate().for_each(
-            |(band, (tb, cb))| {
+        let mut packed = if pack.is_some() { vec![0u64; w * h] } else { Vec::new() };
+        let band = w.max(1) * BAND_ROWS;
+        let mut packed_bands: Vec<&mut [u64]> =
+            if pack.is_some() { packed.chunks_mut(band).collect() } else { Vec::new() };
+        packed_bands.resize_with(t.len().div_ceil(band), || &mut []);
+        t.par_chunks_mut(band).zip(color.par_chunks_mut(band)).zip(packed_bands.into_par_iter()).enumerate().for_each(
+            |(b, ((tb, cb), sb))| {
                 for (i, (tp, cp)) in tb.iter_mut().zip(cb.iter_mut()).enumerate() {
-                    let (x, y) = ((i % w) as u32, (band * BAND_ROWS + i / w) as u32);
-                    let (c, depth) = self.pixel(o, basis.dir(x, y), heuristic);
+                    let (x, y) = ((i % w) as u32, (b * BAND_ROWS + i / w) as u32);
+                    let d = basis.dir(x, y);
+                    let (c, depth) = self.pixel(o, d, heuristic);
                     *cp = pack_color_f32(c);
                     *tp = depth.unwrap_or(f32::INFINITY);
+                    if let (Some((q, radius)), Some(t), Some(s)) = (pack, depth, sb.get_mut(i)) {
+                        *s = q.pack(o + d * t, radius);
+                    }
                 }
             },
         );
-        PixelBuffer { width: camera.width, height: camera.height, t, color }
+        (PixelBuffer { width: camera.width, height: camera.height, t, color }, packed)
     }
 
     /// The ground-truth image: each pixel's composited color over [`BACKGROUND`] (exactly as a
@@ -330,9 +351,10 @@ impl Marcher {
     /// color vectors (a server keeps one frame per client).
     pub fn render_frame_into(&self, req: &CameraRequest, frame: &mut Frame) -> FrameStats {
         let t0 = Instant::now();
-        let pb = self.march(&req.camera, req.heuristic);
+        let (q, radius, radius_unit) = self.quantizer(req);
+        let (pb, packed) = self.march_impl(&req.camera, req.heuristic, Some((&q, radius)));
         let t1 = Instant::now();
-        let (n, radius_unit) = self.compact_frame(req, &pb, &mut frame.samples, &mut frame.colors);
+        let n = compaction::compact_into_vecs(&packed, &pb.color, &mut frame.samples, &mut frame.colors);
         let t2 = Instant::now();
         frame.header = FrameHeader {
             radius_unit,
@@ -346,56 +368,6 @@ impl Marcher {
             samples: n,
             pixels: pb.t.len(),
         }
-    }
-
-    /// Quantization fused with the parallel compaction: count each band's non-empty pixels,
-    /// take the prefix sum, and let every band write its quantized samples and colors straight
-    /// into its window of `samples`/`colors` (resized to the count, memory reused). Equal to
-    /// [`Marcher::quantize`] followed by a compaction (tested), without the uncompacted buffer.
-    /// Returns the count and the radius unit.
-    pub fn compact_frame(
-        &self,
-        req: &CameraRequest,
-        pb: &PixelBuffer,
-        samples: &mut Vec<u64>,
-        colors: &mut Vec<u32>,
-    ) -> (usize, f32) {
-        let (q, radius, radius_unit) = self.quantizer(req);
-        let basis = req.camera.ray_basis();
-        let o = basis.origin();
-        let w = (pb.width as usize).max(1);
-        let band = w * BAND_ROWS;
-        let counts: Vec<usize> = pb.t.par_chunks(band).map(|t| t.iter().filter(|t| t.is_finite()).count()).collect();
-        let total: usize = counts.iter().sum();
-        samples.truncate(total);
-        colors.truncate(total);
-        samples.resize(total, 0);
-        colors.resize(total, 0);
-        let mut windows = Vec::with_capacity(counts.len());
-        let (mut rs, mut rc) = (&mut samples[..], &mut colors[..]);
-        for &c in &counts {
-            let (ws, s2) = rs.split_at_mut(c);
-            let (wc, c2) = rc.split_at_mut(c);
-            windows.push((ws, wc));
-            rs = s2;
-            rc = c2;
-        }
-        windows.into_par_iter().zip(pb.t.par_chunks(band).zip(pb.color.par_chunks(band))).enumerate().for_each(
-            |(b, ((ws, wc), (t, c)))| {
-                let mut j = 0;
-                for (i, (&t, &c)) in t.iter().zip(c).enumerate() {
-                    if t.is_finite() {
-                        let (x, y) = ((i % w) as u32, (b * BAND_ROWS + i / w) as u32);
-                        if let (Some(s), Some(col)) = (ws.get_mut(j), wc.get_mut(j)) {
-                            *s = q.pack(o + basis.dir(x, y) * t, radius);
-                            *col = c;
-                        }
-                        j += 1;
-                    }
-                }
-            },
-        );
-        (total, radius_unit)
     }
 
     fn quantizer(&self, req: &CameraRequest) -> (Quantizer, f32, f32) {

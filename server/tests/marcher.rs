@@ -141,7 +141,7 @@ fn frame_samples_sit_on_their_rays() {
         let req = CameraRequest { seq: 3, camera: cam, heuristic: h, radius_scale: scale };
         let (frame, stats) = m.render_frame(&req);
         let pb = m.march(&cam, h);
-        // The fused quantize-and-compact equals quantizing every pixel, then compacting serially.
+        // The frame equals quantizing every pixel, then compacting serially.
         let (mut all, unit) = m.quantize(&req, &pb);
         let mut cols = pb.color.clone();
         let k = volwarp_core::compaction::compact_in_place(&mut all, &mut cols);
