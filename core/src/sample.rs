@@ -53,11 +53,14 @@ impl Bounds {
         Vec3::from_array(self.max)
     }
     /// Finite and `min <= max` on every axis, with an extent that does not overflow (zero
-    /// extent is allowed: all samples on one plane or point).
+    /// extent is allowed: all samples on one plane or point), and every quantized position
+    /// decodes ([`Dequantizer::center`]) to a finite point: near `f32::MAX` the rounding of
+    /// `min + (2¹⁸ − 1) · step` can overflow to infinity (bounds `[0, f32::MAX]` did).
     pub fn is_valid(&self) -> bool {
         (0..3).all(|i| {
             let (a, b) = (self.min[i], self.max[i]);
-            a.is_finite() && b.is_finite() && a <= b && (b - a).is_finite()
+            let top = a + POS_MAX as f32 * ((b - a) / POS_MAX as f32);
+            a.is_finite() && b.is_finite() && a <= b && (b - a).is_finite() && top.is_finite()
         })
     }
     /// The box of a set of points; `None` if empty.
