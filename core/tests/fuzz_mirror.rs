@@ -428,3 +428,61 @@ fn real_frames_trace_like_brute_force() {
     }
     assert!(n >= 3, "expected real frames under {}", dir.display());
 }
+
+/// Found by reasoning about `frame_decode`'s invariant (then kept as a seed): bounds
+/// `[0, f32::MAX]` passed `Bounds::is_valid`, but `min + (2¹⁸ − 1) · step` rounds past
+/// `f32::MAX`, so the top quantized position decoded to an infinite center. `is_valid` now also
+/// requires that corner to be finite: every valid bounds decode every position to a finite
+/// point, and the wire decoder rejects the frame with `BadBounds`.
+#[test]
+fn regression_extreme_bounds_decode_to_finite_centers_or_are_rejected() {
+    let m = f32::MAX;
+    let cases = [
+        (0.0, m),
+        (-m, 0.0),
+        (m / 2.0, m),
+        (-m / 2.0, m / 2.0),
+        (m - m / 1024.0, m),
+        (1.0, m),
+        (-m, -1.0),
+        (f32::MIN_POSITIVE, m),
+        (-1e38, 1e38),
+        (0.0, 1e38),
+    ];
+    let mut accepted = 0;
+    for (lo, hi) in cases {
+        let b = Bounds::new(Vec3::splat(lo), Vec3::splat(hi));
+        if !b.is_valid() {
+            continue;
+        }
+        accepted += 1;
+        let deq = Dequantizer::new(b, 1.0);
+        for q in [0u64, 1, 131071, 262142, 262143] {
+            let s = q | (q << 18) | (q << 36) | (1 << 54);
+            let c = deq.center(s);
+            assert!(c.is_finite(), "bounds {lo}..{hi}, q {q}: center {c:?}");
+        }
+    }
+    assert!(accepted >= 3, "only {accepted} of the extreme bounds are valid");
+    assert!(!Bounds::new(Vec3::ZERO, Vec3::splat(m)).is_valid());
+    // On the wire: a frame with those bounds and a valid camera is refused.
+    let f = Frame {
+        header: FrameHeader {
+            seq: 0,
+            camera: Camera::look_at(Vec3::Z, Vec3::ZERO, Vec3::Y, 60.0, 16, 16),
+            heuristic: Heuristic::Threshold,
+            bounds: Bounds::new(Vec3::ZERO, Vec3::splat(m)),
+            radius_unit: 1.0,
+            render_us: 0,
+            count: 1,
+        },
+        samples: vec![0x3f_ffff_ffff_ffff | (1 << 54)],
+        colors: vec![0],
+    };
+    let bytes = encode_to_vec(&Message::Frame(f));
+    assert_eq!(
+        volwarp_core::wire::read_message(&mut &bytes[..], &checks::LIMITS),
+        Err(volwarp_core::wire::WireError::BadBounds)
+    );
+    checks::frame_decode(&bytes);
+}

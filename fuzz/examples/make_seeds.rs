@@ -47,6 +47,13 @@ fn main() {
         ("frame_point", frame(9, Bounds::new(Vec3::ONE, Vec3::ONE), 1.0, 3, 3)),
         ("frame_huge_bounds", frame(8, Bounds::new(Vec3::ZERO, Vec3::splat(f32::MAX)), 1e30, 4, 4)),
     ];
+    // Bounds up to f32::MAX behind a valid camera, a sample at the top corner (rejected since
+    // `Bounds::is_valid` checks that corner decodes to a finite point).
+    let mut max_bounds = frame(1, unit, 1.0, 16, 16);
+    if let Message::Frame(f) = &mut max_bounds {
+        f.header.bounds = Bounds::new(Vec3::ZERO, Vec3::splat(f32::MAX));
+        f.samples[0] = 0x3f_ffff_ffff_ffff | (1 << 54);
+    }
     let mut four_gib = b"VWRP\x01\x00\x03\x00".to_vec();
     four_gib.extend_from_slice(&u32::MAX.to_le_bytes());
 
@@ -78,6 +85,8 @@ fn main() {
     files.push(("wire_decode_chunked", "stream_fault".into(), prefix(&[7], 100, &stream)));
     files.push(("wire_decode_chunked", "four_gib".into(), prefix(&[], u16::MAX, &four_gib)));
     files.push(("frame_decode", "four_gib".into(), four_gib.clone()));
+    files.push(("frame_decode", "max_bounds_top_corner".into(), encode_to_vec(&max_bounds)));
+    files.push(("roundtrip", "max_bounds_top_corner".into(), encode_to_vec(&max_bounds)));
     files.push(("wire_decode_chunked", "bad_magic".into(), prefix(&[1], u16::MAX, b"HTTP/1.1 200 OK\r\n")));
     files.push((
         "wire_decode_chunked",
