@@ -1,0 +1,67 @@
+//! The `volwarp-server` binary: `render`, `dump`, serving, and clear errors.
+
+mod common;
+
+use std::io::{BufRead, BufReader};
+use std::process::{Command, Stdio};
+use volwarp_core::wire::{self, Limits, Message};
+use volwarp_core::Heuristic;
+
+const BIN: &str = env!("CARGO_BIN_EXE_volwarp-server");
+
+#[test]
+fn dump_writes_one_frame_and_render_a_png() {
+    let dir = common::temp_dir("cli");
+    let frame = dir.join("f.vwf");
+    let out = Command::new(BIN)
+        .args(["dump", "--size", "40x30", "--orbit", "-20,15", "--heuristic", "gradient", "--out"])
+        .arg(&frame)
+        .output()
+        .unwrap();
+    assert!(out.status.success(), "{}", String::from_utf8_lossy(&out.stderr));
+    let bytes = std::fs::read(&frame).unwrap();
+    match wire::read_message(&mut &bytes[..], &Limits::default()) {
+        Ok(Message::Frame(f)) => {
+            assert_eq!((f.header.camera.width, f.header.camera.height), (40, 30));
+            assert_eq!(f.header.heuristic, Heuristic::Gradient);
+            assert!(f.samples.len() > 100 && f.samples.len() < 1200, "{}", f.samples.len());
+        }
+        other => panic!("{other:?}"),
+    }
+    let png = dir.join("i.png");
+    let out = Command::new(BIN).args(["render", "--size", "24x20", "--out"]).arg(&png).output().unwrap();
+    assert!(out.status.success(), "{}", String::from_utf8_lossy(&out.stderr));
+    assert!(std::fs::read(&png).unwrap().starts_with(b"\x89PNG"));
+}
+
+#[test]
+fn bad_arguments_fail_with_a_message() {
+    for args in [
+        &["render", "--volume", "/nonexistent/v_2x2x2_uint8.raw", "--out", "x.png"][..],
+        &["dump", "--heuristic", "nope", "--out", "x"],
+        &["render", "--size", "0x10", "--out", "x.png"],
+        &["render", "--orbit", "abc", "--out", "x.png"],
+        &["--listen", "0.0.0.0:0"],
+    ] {
+        let out = Command::new(BIN).args(args).output().unwrap();
+        assert!(!out.status.success(), "{args:?}");
+        let err = String::from_utf8_lossy(&out.stderr);
+        assert!(err.contains("volwarp-server: "), "{args:?}: {err}");
+    }
+}
+
+#[test]
+fn serve_prints_the_bound_address() {
+    let mut child = Command::new(BIN)
+        .args(["--listen", "127.0.0.1:0", "--volume", "marschner-lobb:16"])
+        .stdout(Stdio::piped())
+        .stderr(Stdio::null())
+        .spawn()
+        .unwrap();
+    let mut line = String::new();
+    BufReader::new(child.stdout.take().unwrap()).read_line(&mut line).unwrap();
+    let addr = line.trim().strip_prefix("listening on ").unwrap_or_else(|| panic!("{line:?}")).parse().unwrap();
+    let _c = common::Client::hello(addr, None);
+    child.kill().unwrap();
+    child.wait().unwrap();
+}
