@@ -6,6 +6,8 @@
 # The four volwarp-core targets always run (clean sanitizer build ≈ 3 min on 2 loaded cores).
 # `volume_header` fuzzes the server's parsers and needs the server's dependencies (a clean build of several
 # minutes more): it runs with VOLWARP_FUZZ_VOLUME=1. Its stable mirror runs in `cargo test`.
+# The libFuzzer seed is fixed (VOLWARP_FUZZ_SEED, default 1) so that a CI failure reproduces;
+# long campaigns with random seeds are run by hand (docs/fuzzing.md).
 # Needs: a nightly toolchain and `cargo install cargo-fuzz --locked` (scripts/setup.sh).
 set -euo pipefail
 secs="${1:-30}"
@@ -22,7 +24,7 @@ for t in "${targets[@]}"; do
   echo "-- fuzz $t for ${secs} s"
   log="$(mktemp)"
   if ! cargo +nightly fuzz run "${features[@]}" "$t" "corpus/$t" "seeds/$t" -- \
-      -max_total_time="$secs" -max_len=65536 -print_final_stats=1 >"$log" 2>&1; then
+      -max_total_time="$secs" -max_len=65536 -seed="${VOLWARP_FUZZ_SEED:-1}" -print_final_stats=1 >"$log" 2>&1; then
     tail -n 60 "$log"
     echo "fuzz target $t failed; see fuzz/artifacts/$t/"
     exit 1
