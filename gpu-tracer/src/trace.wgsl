@@ -41,6 +41,8 @@ const STACK_SIZE: u32 = 128u;
 // Stands in for +inf as `t_max` before the first hit: `min(t_far, F32_MAX)` equals
 // `min(t_far, inf)` for every finite `t_far`.
 const F32_MAX: f32 = 3.40282347e38;
+// `volwarp_core::sphere::BOX_T_FAR_SCALE`: the conservative widening of the slab test's far bound.
+const BOX_T_FAR_SCALE: f32 = 1.0000004;
 const POS_MASK: u32 = 0x3ffffu;
 
 
@@ -92,7 +94,9 @@ fn intersect_box(o: vec3<f32>, inv: vec3<f32>, bmin: vec3<f32>, bmax: vec3<f32>,
     let tz1 = (bmin.z - o.z) * inv.z;
     let tz2 = (bmax.z - o.z) * inv.z;
     let t_near = max(max(max(min(tx1, tx2), min(ty1, ty2)), min(tz1, tz2)), 0.0);
-    let t_far = min(min(min(max(tx1, tx2), max(ty1, ty2)), max(tz1, tz2)), t_max);
+    // Core scales both far bounds by BOX_T_FAR_SCALE and takes their minimum; scaling the
+    // minimum is the same number (rounding is monotonic) and cannot overflow F32_MAX first.
+    let t_far = min(min(min(max(tx1, tx2), max(ty1, ty2)), max(tz1, tz2)), t_max) * BOX_T_FAR_SCALE;
     if t_near <= t_far {
         return vec2<f32>(1.0, t_near);
     }
