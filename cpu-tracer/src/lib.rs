@@ -92,6 +92,24 @@ fn warn_once(flag: &AtomicBool, msg: &str) {
     }
 }
 
+/// The common body of the tracers' `trace_ids`: sizes `ids` to the camera's viewport, fills it
+/// with [`NO_HIT`] and, if camera and scene are usable, lets `draw` write the first-hit ids.
+pub(crate) fn trace_ids_with(
+    scene: &Scene,
+    camera: &Camera,
+    ids: &mut Vec<u32>,
+    draw: impl FnOnce(&mut [u32]),
+) -> bool {
+    let mut img = Image { width: 0, height: 0, pixels: std::mem::take(ids) };
+    let ok = begin_frame(scene, camera, &mut img);
+    *ids = img.pixels;
+    ids.fill(NO_HIT);
+    if ok {
+        draw(ids);
+    }
+    ok
+}
+
 /// Prepares `out` for drawing `scene` from `camera`: resizes and clears it. Returns `false`
 /// (after drawing the background, or an empty image for an unusable viewport) if the camera
 /// does not validate or the scene is inconsistent.

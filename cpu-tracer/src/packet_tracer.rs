@@ -315,14 +315,7 @@ impl PacketTracer {
     /// each pixel's first hit, [`NO_HIT`] where none. Returns `false` (all [`NO_HIT`], or
     /// empty for an unusable viewport) if the camera or scene is unusable.
     pub fn trace_ids(&self, scene: &Scene, camera: &Camera, ids: &mut Vec<u32>) -> bool {
-        let mut img = Image { width: 0, height: 0, pixels: std::mem::take(ids) };
-        let ok = begin_frame(scene, camera, &mut img);
-        *ids = img.pixels;
-        ids.fill(NO_HIT);
-        if ok {
-            self.draw(scene, camera, ids, |id| id);
-        }
-        ok
+        crate::trace_ids_with(scene, camera, ids, |ids| self.draw(scene, camera, ids, |id| id))
     }
 
     fn draw(&self, scene: &Scene, camera: &Camera, out: &mut [u32], map: impl Fn(u32) -> u32 + Sync) {
