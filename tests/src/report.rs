@@ -436,23 +436,3 @@ pub fn fixtures(out: &Path) -> Result<(), ErrorBox> {
     }
     Ok(())
 }
-
-/// `volwarp-eval table1` (see [`crate::table1`]).
-#[allow(clippy::too_many_arguments)]
-pub fn table1(
-    ds: &Dataset,
-    heuristic: Heuristic,
-    size: u32,
-    runs: usize,
-    threads: usize,
-    gpu: bool,
-    out: &Path,
-    results: Option<&Path>,
-) -> Result<(), ErrorBox> {
-    crate::table1::run(ds, heuristic, size, runs, threads, gpu, out, results)
-}
-
-/// `volwarp-eval bits` (see [`crate::representation_size`]).
-pub fn bits(ds: &Dataset, heuristic: Heuristic, size: u32, out: &Path) -> Result<(), ErrorBox> {
-    crate::representation_size::run(ds, heuristic, size, out)
-}

@@ -175,11 +175,20 @@ fn run(cli: Cli) -> Result<(), ErrorBox> {
             let volume = common.volume.clone().unwrap_or_else(|| PathBuf::from(report::MRI));
             let ds = Dataset::load(&volume, common.tf.as_deref())?;
             let gpu = !common.no_gpu;
-            report::table1(&ds, heuristic(&h)?, size, runs, common.threads, gpu, &common.out, results.as_deref())
+            volwarp_tests::table1::run(
+                &ds,
+                heuristic(&h)?,
+                size,
+                runs,
+                common.threads,
+                gpu,
+                &common.out,
+                results.as_deref(),
+            )
         }
         Cmd::Bits { common, size, heuristic: h } => {
             let ds = load(common.volume.as_deref(), common.tf.as_deref())?;
-            report::bits(&ds, heuristic(&h)?, size, &common.out)
+            volwarp_tests::representation_size::run(&ds, heuristic(&h)?, size, &common.out)
         }
         Cmd::Failures { common, size, heuristic: h } => {
             let ds = load(common.volume.as_deref(), common.tf.as_deref())?;
