@@ -13,9 +13,8 @@ use volwarp_client::display::Display;
 use volwarp_client::local_server::LocalServer;
 use volwarp_client::network::{NetConfig, Network, View, THROTTLE};
 use volwarp_client::renderers::Renderers;
-use volwarp_core::sample::Bounds;
-use volwarp_core::wire::{Frame, FrameHeader, Hello, Message};
-use volwarp_core::{Camera, Heuristic, Vec3};
+use volwarp_core::wire::{Hello, Message};
+use volwarp_core::Heuristic;
 
 #[test]
 fn display_keeps_running_while_a_slow_server_and_latency_delay_frames() {
@@ -54,22 +53,6 @@ fn display_keeps_running_while_a_slow_server_and_latency_delay_frames() {
     );
     d.shutdown();
     server.shutdown();
-}
-
-fn empty_frame(seq: u64) -> Message {
-    Message::Frame(Frame {
-        header: FrameHeader {
-            seq,
-            camera: Camera::look_at(Vec3::new(0.0, 0.0, 1.0), Vec3::ZERO, Vec3::Y, 30.0, 1, 1),
-            heuristic: Heuristic::Threshold,
-            bounds: Bounds::new(Vec3::ZERO, Vec3::ONE),
-            radius_unit: 0.01,
-            render_us: 1,
-            count: 0,
-        },
-        samples: vec![],
-        colors: vec![],
-    })
 }
 
 #[test]

@@ -6,9 +6,7 @@ mod common;
 
 use common::*;
 use std::time::Duration;
-use volwarp_core::sample::Bounds;
-use volwarp_core::wire::{self, error_code, ErrorMsg, Frame, FrameHeader, Hello, Message};
-use volwarp_core::{Camera, Heuristic, Vec3};
+use volwarp_core::wire::{self, error_code, ErrorMsg, Hello, Message};
 
 const LIMIT: Duration = Duration::from_secs(60);
 
@@ -41,23 +39,6 @@ fn assert_clean_failure(out: &std::process::Output, expect: &str) {
     assert!(line.contains(expect), "expected `{expect}` in `{line}`\nstderr:\n{stderr}");
 }
 
-fn probe_frame(seq: u64) -> Message {
-    let camera = Camera::look_at(Vec3::new(0.0, 0.0, 1.0), Vec3::ZERO, Vec3::Y, 30.0, 1, 1);
-    Message::Frame(Frame {
-        header: FrameHeader {
-            seq,
-            camera,
-            heuristic: Heuristic::Threshold,
-            bounds: Bounds::new(Vec3::ZERO, Vec3::ONE),
-            radius_unit: 0.01,
-            render_us: 1,
-            count: 0,
-        },
-        samples: vec![],
-        colors: vec![],
-    })
-}
-
 #[test]
 fn bad_address_and_nothing_listening() {
     let out = run_headless("not an address");
@@ -77,7 +58,7 @@ fn server_gone_after_the_handshake() {
         assert!(matches!(read_msg(&mut s), Some(Message::Hello(_))));
         s.write_all(&encode(&Message::Hello(Hello::new(0)))).unwrap();
         assert!(matches!(read_msg(&mut s), Some(Message::CameraRequest(_))));
-        s.write_all(&encode(&probe_frame(0))).unwrap();
+        s.write_all(&encode(&empty_frame(0))).unwrap();
         // The first real request arrives, then the server dies.
         let _ = read_msg(&mut s);
     });

@@ -105,3 +105,23 @@ pub fn fake_server(script: impl FnOnce(TcpStream) + Send + 'static) -> String {
     });
     addr
 }
+
+/// A Frame with no samples for a 1×1 camera (what a fake server answers the client's probe with).
+pub fn empty_frame(seq: u64) -> Message {
+    use volwarp_core::sample::Bounds;
+    use volwarp_core::wire::{Frame, FrameHeader};
+    use volwarp_core::{Camera, Heuristic, Vec3};
+    Message::Frame(Frame {
+        header: FrameHeader {
+            seq,
+            camera: Camera::look_at(Vec3::new(0.0, 0.0, 1.0), Vec3::ZERO, Vec3::Y, 30.0, 1, 1),
+            heuristic: Heuristic::Threshold,
+            bounds: Bounds::new(Vec3::ZERO, Vec3::ONE),
+            radius_unit: 0.01,
+            render_us: 1,
+            count: 0,
+        },
+        samples: vec![],
+        colors: vec![],
+    })
+}
