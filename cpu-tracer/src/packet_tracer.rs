@@ -144,44 +144,55 @@ impl Stack {
     }
 }
 
-/// The first hit of each lane of the packet: sample ids, [`NO_HIT`] where none.
+/// Tests child reference `child` for the `active` lanes: a leaf's sphere updates `best`; an
+/// inner node gives its entry distances and the lanes that enter it, if any.
 #[inline(always)]
-fn trace_packet(l: &Lbvh, p: &Packet, stack: &mut Stack) -> u32x8 {
-    let n = l.samples.len();
+fn visit(l: &Lbvh, p: &Packet, child: u32, active: f32x8, best: &mut Best) -> Option<(f32x8, f32x8)> {
+    if child & LEAF_BIT != 0 {
+        let k = child & !LEAF_BIT;
+        test_sphere(p, &l.deq, l.samples[k as usize], k, active, best);
+        None
+    } else {
+        let c = &l.nodes[child as usize];
+        let (tn, hit) = box_test(p, &c.min, &c.max, best.t);
+        let hit = hit & active;
+        hit.any().then_some((tn, hit))
+    }
+}
+
+/// The first hit of each lane of the packet: sample ids, [`NO_HIT`] where none. Traversal
+/// starts from the child references `entries` (the root's).
+#[inline(always)]
+fn trace_packet(l: &Lbvh, p: &Packet, entries: &[u32], stack: &mut Stack) -> u32x8 {
     let mut best = Best { t: f32x8::splat(f32::INFINITY), prim: u32x8::splat(NO_HIT) };
-    if n == 0 {
-        return best.prim;
-    }
-    if n == 1 {
-        test_sphere(p, &l.deq, l.samples[0], 0, all_lanes(), &mut best);
-        return best.prim;
-    }
     let nan = f32x8::splat(f32::NAN);
-    let root = &l.nodes[0];
-    let (_, hit) = box_test(p, &root.min, &root.max, f32x8::splat(f32::INFINITY));
-    if !hit.any() {
-        return best.prim;
+    let mut sp = 0;
+    for &e in entries {
+        if let Some((t, hit)) = visit(l, p, e, all_lanes(), &mut best) {
+            stack.node[sp] = e;
+            stack.t[sp] = hit.select(t, nan);
+            sp += 1;
+        }
     }
     // The node being visited and its active lanes; the far children wait on the stack.
-    let (mut cur, mut active) = (0u32, hit);
-    let mut sp = 0;
+    let (mut cur, mut active);
+    let limit = best.t * f32x8::splat(BOX_T_FAR_SCALE);
+    loop {
+        if sp == 0 {
+            return best.prim;
+        }
+        sp -= 1;
+        let a = stack.t[sp].simd_le(limit);
+        if a.any() {
+            (cur, active) = (stack.node[sp], a);
+            break;
+        }
+    }
     loop {
         let node = &l.nodes[cur as usize];
         let (left, right) = (node.left, node.right);
-        let visit = |child: u32, best: &mut Best| -> Option<(f32x8, f32x8)> {
-            if child & LEAF_BIT != 0 {
-                let k = child & !LEAF_BIT;
-                test_sphere(p, &l.deq, l.samples[k as usize], k, active, best);
-                None
-            } else {
-                let c = &l.nodes[child as usize];
-                let (tn, hit) = box_test(p, &c.min, &c.max, best.t);
-                let hit = hit & active;
-                hit.any().then_some((tn, hit))
-            }
-        };
-        let lh = visit(left, &mut best);
-        let rh = visit(right, &mut best);
+        let lh = visit(l, p, left, active, &mut best);
+        let rh = visit(l, p, right, active, &mut best);
         match (lh, rh) {
             (Some((lt, lm)), Some((rt, rm))) => {
                 // Near-to-far: descend into the child that most lanes hitting both enter
@@ -278,11 +289,17 @@ fn trace_band(
     let mut stack = Stack::new();
     let h = (rows.len() / width as usize) as u32;
     let y_base = band as u32 * BAND_ROWS;
+    let root = match l.samples.len() {
+        0 => None,
+        1 => Some(LEAF_BIT),
+        _ => Some(0),
+    };
+    let entries = root.as_slice();
     for tx in (0..width).step_by(TILE_W as usize) {
         for py in (0..h).step_by(PACKET_H as usize) {
             for px in (tx..(tx + TILE_W).min(width)).step_by(PACKET_W as usize) {
                 let p = make_packet(basis, px, y_base + py);
-                let ids = trace_packet(l, &p, &mut stack).to_array();
+                let ids = trace_packet(l, &p, entries, &mut stack).to_array();
                 for (lane, &id) in ids.iter().enumerate() {
                     let (x, y) = (px + lane as u32 % PACKET_W, py + lane as u32 / PACKET_W);
                     if x < width && y < h {
