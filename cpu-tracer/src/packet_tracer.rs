@@ -1,5 +1,5 @@
-//! First-hit sphere tracing of the LBVH with 8-ray SIMD packets (`wide::f32x8`): the client's
-//! default renderer on machines without a GPU.
+//! First-hit sphere tracing of the LBVH with 8-ray SIMD packets: the client's default renderer
+//! on machines without a GPU.
 //!
 //! * **Packets.** A packet is a 4×2 pixel group; the image is cut into bands of
 //!   [`BAND_ROWS`] rows (the unit of parallel work), each walked in 8×8 tiles of eight packets,
@@ -13,6 +13,16 @@
 //!   code operation by operation (no fused multiply-add, IEEE `sqrt` and division, NaN-aware
 //!   `min`/`max` like `f32::min`), and the tie rule makes the result independent of the visit
 //!   order: the image equals [`crate::ScalarTracer`]'s bit for bit (tested).
+//! * **SIMD dispatch.** The kernel is generic over its eight-lane vector type (`lanes::Lanes`)
+//!   and compiled twice: with `wide::f32x8` (portable: two SSE halves on baseline x86-64,
+//!   whatever `wide` was built for elsewhere) and, on x86-64, with `lanes::Avx2` (`__m256`
+//!   intrinsics) inside a `#[target_feature(enable = "avx2")]` function, chosen per band by
+//!   `is_x86_feature_detected!("avx2")`. So one portable binary runs 256-bit ymm code where the
+//!   CPU has AVX2 (`wide` alone would not: it picks its representation when it is compiled, not
+//!   per function). Each `Avx2` operation reproduces the `wide` one it replaces (comparisons
+//!   ordered, `min`/`max` operand order and NaN handling, blends on full-lane masks), and no
+//!   fused multiply-add is formed, so both kernels give the same image (tested against each
+//!   other operation by operation and against the scalar tracer).
 
 use crate::threads::Threads;
 use crate::{begin_frame, shade, NO_HIT};
@@ -22,7 +32,10 @@ use volwarp_core::sample::Dequantizer;
 use volwarp_core::sphere::BOX_T_FAR_SCALE;
 use volwarp_core::traversal::STACK_SIZE;
 use volwarp_core::{Camera, RayBasis, Scene};
-use wide::{f32x8, u32x8};
+use wide::f32x8;
+
+mod lanes;
+use lanes::Lanes;
 
 /// Packet width in pixels.
 pub const PACKET_W: u32 = 4;
@@ -35,10 +48,10 @@ const TILE_W: u32 = 8;
 
 /// Eight primary rays sharing one origin.
 #[derive(Clone, Copy)]
-struct Packet {
+struct Packet<L> {
     o: [f32; 3],
-    d: [f32x8; 3],
-    inv: [f32x8; 3],
+    d: [L; 3],
+    inv: [L; 3],
     /// No lane has an infinite inverse direction, so no slab can be NaN and the plain SIMD
     /// `min`/`max` give `f32::min`/`f32::max`'s results.
     finite_inv: bool,
@@ -46,47 +59,49 @@ struct Packet {
 
 /// Lane `l` of a packet at `(x0, y0)` is pixel `(x0 + l % 4, y0 + l / 4)`.
 #[inline(always)]
-fn make_packet(b: &RayBasis, x0: u32, y0: u32) -> Packet {
+fn make_packet<L: Lanes>(b: &RayBasis, x0: u32, y0: u32) -> Packet<L> {
     // Exactly `RayBasis::dir`: px = x + 0.5, d = corner + du*px + dv*py, d * (1 / sqrt(d·d)).
-    let px = f32x8::new(core::array::from_fn(|l| (x0 + l as u32 % PACKET_W) as f32 + 0.5));
-    let py = f32x8::new(core::array::from_fn(|l| (y0 + l as u32 / PACKET_W) as f32 + 0.5));
-    let comp = |a: usize| f32x8::splat(b.corner[a]) + f32x8::splat(b.du[a]) * px + f32x8::splat(b.dv[a]) * py;
+    let px = L::new(core::array::from_fn(|l| (x0 + l as u32 % PACKET_W) as f32 + 0.5));
+    let py = L::new(core::array::from_fn(|l| (y0 + l as u32 / PACKET_W) as f32 + 0.5));
+    let comp = |a: usize| L::splat(b.corner[a]) + L::splat(b.du[a]) * px + L::splat(b.dv[a]) * py;
     let (dx, dy, dz) = (comp(0), comp(1), comp(2));
-    let inv_len = f32x8::ONE / (dx * dx + dy * dy + dz * dz).sqrt();
+    let one = L::splat(1.0);
+    let inv_len = one / (dx * dx + dy * dy + dz * dz).sqrt();
     let d = [dx * inv_len, dy * inv_len, dz * inv_len];
     // Exactly `Vec3::ONE / ray.dir` of the scalar traversal.
-    let inv = [f32x8::ONE / d[0], f32x8::ONE / d[1], f32x8::ONE / d[2]];
+    let inv = [one / d[0], one / d[1], one / d[2]];
     let finite_inv = (inv[0].is_finite() & inv[1].is_finite() & inv[2].is_finite()).all();
     Packet { o: [b.eye[0], b.eye[1], b.eye[2]], d, inv, finite_inv }
 }
 
 /// All lanes set.
 #[inline(always)]
-fn all_lanes() -> f32x8 {
-    bytemuck::cast(u32x8::splat(u32::MAX))
+fn all_lanes<L: Lanes>() -> L {
+    L::splat(0.0).simd_eq(L::splat(0.0))
 }
 
 /// `sphere::intersect_box` for eight rays (same operations, far bound widened by
 /// [`BOX_T_FAR_SCALE`]): the entry distances and the mask of lanes whose
 /// ray enters the box before `t_max`.
 #[inline(always)]
-fn box_test(p: &Packet, min: &[f32; 3], max: &[f32; 3], t_max: f32x8) -> (f32x8, f32x8) {
-    let tx1 = f32x8::splat(min[0] - p.o[0]) * p.inv[0];
-    let tx2 = f32x8::splat(max[0] - p.o[0]) * p.inv[0];
-    let ty1 = f32x8::splat(min[1] - p.o[1]) * p.inv[1];
-    let ty2 = f32x8::splat(max[1] - p.o[1]) * p.inv[1];
-    let tz1 = f32x8::splat(min[2] - p.o[2]) * p.inv[2];
-    let tz2 = f32x8::splat(max[2] - p.o[2]) * p.inv[2];
-    let scale = f32x8::splat(BOX_T_FAR_SCALE);
+fn box_test<L: Lanes>(p: &Packet<L>, min: &[f32; 3], max: &[f32; 3], t_max: L) -> (L, L) {
+    let tx1 = L::splat(min[0] - p.o[0]) * p.inv[0];
+    let tx2 = L::splat(max[0] - p.o[0]) * p.inv[0];
+    let ty1 = L::splat(min[1] - p.o[1]) * p.inv[1];
+    let ty2 = L::splat(max[1] - p.o[1]) * p.inv[1];
+    let tz1 = L::splat(min[2] - p.o[2]) * p.inv[2];
+    let tz2 = L::splat(max[2] - p.o[2]) * p.inv[2];
+    let scale = L::splat(BOX_T_FAR_SCALE);
+    let zero = L::splat(0.0);
     let (t_near, t_far) = if p.finite_inv {
         // No NaN can occur (finite inverse times finite difference): the plain min/max are
         // exact. Only the sign of a zero may differ, which no comparison sees.
-        let t_near = tx1.fast_min(tx2).fast_max(ty1.fast_min(ty2)).fast_max(tz1.fast_min(tz2)).fast_max(f32x8::ZERO);
+        let t_near = tx1.fast_min(tx2).fast_max(ty1.fast_min(ty2)).fast_max(tz1.fast_min(tz2)).fast_max(zero);
         let t_far =
             (tx1.fast_max(tx2).fast_min(ty1.fast_max(ty2)).fast_min(tz1.fast_max(tz2)) * scale).fast_min(t_max * scale);
         (t_near, t_far)
     } else {
-        let t_near = tx1.min(tx2).max(ty1.min(ty2)).max(tz1.min(tz2)).max(f32x8::ZERO);
+        let t_near = tx1.min(tx2).max(ty1.min(ty2)).max(tz1.min(tz2)).max(zero);
         let t_far = (tx1.max(tx2).min(ty1.max(ty2)).min(tz1.max(tz2)) * scale).min(t_max * scale);
         (t_near, t_far)
     };
@@ -94,60 +109,62 @@ fn box_test(p: &Packet, min: &[f32; 3], max: &[f32; 3], t_max: f32x8) -> (f32x8,
 }
 
 /// The per-packet best hits: distance and primitive per lane ([`NO_HIT`] and +∞ for none).
-struct Best {
-    t: f32x8,
-    prim: u32x8,
+struct Best<L: Lanes> {
+    t: L,
+    prim: L::U,
 }
 
 /// `sphere::intersect` of sample `prim` for the `active` lanes, kept if closer by core's tie
 /// rule.
 #[inline(always)]
-fn test_sphere(p: &Packet, deq: &Dequantizer, s: u64, prim: u32, active: f32x8, best: &mut Best) {
+fn test_sphere<L: Lanes>(p: &Packet<L>, deq: &Dequantizer, s: u64, prim: u32, active: L, best: &mut Best<L>) {
     let c = deq.center(s);
     let r = deq.radius(s);
     let ocx = c.x - p.o[0];
     let ocy = c.y - p.o[1];
     let ocz = c.z - p.o[2];
-    let (ox, oy, oz) = (f32x8::splat(ocx), f32x8::splat(ocy), f32x8::splat(ocz));
+    let (ox, oy, oz) = (L::splat(ocx), L::splat(ocy), L::splat(ocz));
     let b = ox * p.d[0] + oy * p.d[1] + oz * p.d[2];
     let fx = ox - b * p.d[0];
     let fy = oy - b * p.d[1];
     let fz = oz - b * p.d[2];
-    let disc = f32x8::splat(r * r) - (fx * fx + fy * fy + fz * fz);
-    let ok = disc.simd_ge(f32x8::ZERO) & active;
+    let disc = L::splat(r * r) - (fx * fx + fy * fy + fz * fz);
+    let zero = L::splat(0.0);
+    let ok = disc.simd_ge(zero) & active;
     if !ok.any() {
         return;
     }
     let sq = disc.sqrt();
     let t0 = b - sq;
     let t1 = b + sq;
-    let front = t0.simd_gt(f32x8::ZERO);
+    let front = t0.simd_gt(zero);
     let t = front.select(t0, t1);
-    let hit = ok & (front | t1.simd_gt(f32x8::ZERO));
-    let pv = u32x8::splat(prim);
-    let smaller: f32x8 = bytemuck::cast(pv.simd_lt(best.prim));
+    let hit = ok & (front | t1.simd_gt(zero));
+    let pv = L::splat_u(prim);
+    let smaller = L::lt_u(pv, best.prim);
     let better = hit & (t.simd_lt(best.t) | (t.simd_eq(best.t) & smaller));
     best.t = better.select(t, best.t);
-    best.prim = bytemuck::cast::<f32x8, u32x8>(better).select(pv, best.prim);
+    best.prim = better.select_u(pv, best.prim);
 }
 
 /// A traversal stack, allocated once per band.
-struct Stack {
+struct Stack<L> {
     node: [u32; STACK_SIZE],
     /// Entry distance per lane, NaN for lanes that do not enter the node.
-    t: [f32x8; STACK_SIZE],
+    t: [L; STACK_SIZE],
 }
 
-impl Stack {
-    fn new() -> Box<Stack> {
-        Box::new(Stack { node: [0; STACK_SIZE], t: [f32x8::ZERO; STACK_SIZE] })
+impl<L: Lanes> Stack<L> {
+    #[inline(always)]
+    fn new() -> Box<Stack<L>> {
+        Box::new(Stack { node: [0; STACK_SIZE], t: [L::splat(0.0); STACK_SIZE] })
     }
 }
 
 /// Tests child reference `child` for the `active` lanes: a leaf's sphere updates `best`; an
 /// inner node gives its entry distances and the lanes that enter it, if any.
 #[inline(always)]
-fn visit(l: &Lbvh, p: &Packet, child: u32, active: f32x8, best: &mut Best) -> Option<(f32x8, f32x8)> {
+fn visit<L: Lanes>(l: &Lbvh, p: &Packet<L>, child: u32, active: L, best: &mut Best<L>) -> Option<(L, L)> {
     if child & LEAF_BIT != 0 {
         let k = child & !LEAF_BIT;
         test_sphere(p, &l.deq, l.samples[k as usize], k, active, best);
@@ -163,9 +180,9 @@ fn visit(l: &Lbvh, p: &Packet, child: u32, active: f32x8, best: &mut Best) -> Op
 /// The first hit of each lane of the packet: sample ids, [`NO_HIT`] where none. Traversal
 /// starts from the child references `entries` (the root's).
 #[inline(always)]
-fn trace_packet(l: &Lbvh, p: &Packet, entries: &[u32], stack: &mut Stack) -> u32x8 {
-    let mut best = Best { t: f32x8::splat(f32::INFINITY), prim: u32x8::splat(NO_HIT) };
-    let nan = f32x8::splat(f32::NAN);
+fn trace_packet<L: Lanes>(l: &Lbvh, p: &Packet<L>, entries: &[u32], stack: &mut Stack<L>) -> L::U {
+    let mut best = Best { t: L::splat(f32::INFINITY), prim: L::splat_u(NO_HIT) };
+    let nan = L::splat(f32::NAN);
     let mut sp = 0;
     for &e in entries {
         if let Some((t, hit)) = visit(l, p, e, all_lanes(), &mut best) {
@@ -176,7 +193,7 @@ fn trace_packet(l: &Lbvh, p: &Packet, entries: &[u32], stack: &mut Stack) -> u32
     }
     // The node being visited and its active lanes; the far children wait on the stack.
     let (mut cur, mut active);
-    let limit = best.t * f32x8::splat(BOX_T_FAR_SCALE);
+    let limit = best.t * L::splat(BOX_T_FAR_SCALE);
     loop {
         if sp == 0 {
             return best.prim;
@@ -225,7 +242,7 @@ fn trace_packet(l: &Lbvh, p: &Packet, entries: &[u32], stack: &mut Stack) -> u32
         // Pop the next node some lane still needs. Early exit: NaN (a lane that does not
         // enter it) compares false, as do lanes whose best hit is already closer than the
         // node (with the slab test's conservative widening).
-        let limit = best.t * f32x8::splat(BOX_T_FAR_SCALE);
+        let limit = best.t * L::splat(BOX_T_FAR_SCALE);
         loop {
             if sp == 0 {
                 return best.prim;
@@ -241,7 +258,8 @@ fn trace_packet(l: &Lbvh, p: &Packet, entries: &[u32], stack: &mut Stack) -> u32
 }
 
 /// [`trace_band`] compiled for the best instruction set this CPU has: the same operations
-/// (AVX2 only widens the vectors; no fused multiply-add is ever formed), so the same result.
+/// (AVX2 only widens the vectors to one ymm register; no fused multiply-add is ever formed), so
+/// the same result.
 fn trace_band_dispatch(
     l: &Lbvh,
     basis: &RayBasis,
@@ -255,10 +273,11 @@ fn trace_band_dispatch(
         // SAFETY: the CPU supports AVX2 (checked just above).
         return unsafe { trace_band_avx2(l, basis, width, band, rows, map) };
     }
-    trace_band(l, basis, width, band, rows, map)
+    trace_band::<f32x8>(l, basis, width, band, rows, map)
 }
 
-/// [`trace_band`] with AVX2 enabled.
+/// [`trace_band`] on [`lanes::Avx2`] lanes, compiled with AVX2 (the lane methods inline to ymm
+/// instructions).
 ///
 /// # Safety
 /// The CPU must support AVX2.
@@ -272,13 +291,14 @@ unsafe fn trace_band_avx2(
     rows: &mut [u32],
     map: &(impl Fn(u32) -> u32 + Sync),
 ) {
-    trace_band(l, basis, width, band, rows, map)
+    // `Avx2`'s invariant holds: the caller guarantees AVX2.
+    trace_band::<lanes::Avx2>(l, basis, width, band, rows, map)
 }
 
 /// Traces band `band` (rows `band * BAND_ROWS ..`) of a `width`-wide image into `rows`,
 /// writing `map(id)` per pixel.
 #[inline(always)]
-fn trace_band(
+fn trace_band<L: Lanes>(
     l: &Lbvh,
     basis: &RayBasis,
     width: u32,
@@ -286,7 +306,7 @@ fn trace_band(
     rows: &mut [u32],
     map: &(impl Fn(u32) -> u32 + Sync),
 ) {
-    let mut stack = Stack::new();
+    let mut stack = Stack::<L>::new();
     let h = (rows.len() / width as usize) as u32;
     let y_base = band as u32 * BAND_ROWS;
     let root = match l.samples.len() {
@@ -299,7 +319,7 @@ fn trace_band(
         for py in (0..h).step_by(PACKET_H as usize) {
             for px in (tx..(tx + TILE_W).min(width)).step_by(PACKET_W as usize) {
                 let p = make_packet(basis, px, y_base + py);
-                let ids = trace_packet(l, &p, entries, &mut stack).to_array();
+                let ids = L::u_to_array(trace_packet(l, &p, entries, &mut stack));
                 for (lane, &id) in ids.iter().enumerate() {
                     let (x, y) = (px + lane as u32 % PACKET_W, py + lane as u32 / PACKET_W);
                     if x < width && y < h {
@@ -361,6 +381,56 @@ impl Renderer for PacketTracer {
         if begin_frame(scene, camera, out) {
             let colors = &scene.colors;
             self.draw(scene, camera, &mut out.pixels, |id| shade(colors, id));
+        }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::synthetic::{depth_image_frame, random_cloud};
+    use crate::{build_scene, ScalarTracer};
+    use volwarp_core::Vec3;
+
+    /// The sample ids of every band traced by `band` (one thread).
+    fn ids_by_band(scene: &Scene, cam: &Camera, band: impl Fn(&Lbvh, &RayBasis, u32, usize, &mut [u32])) -> Vec<u32> {
+        let mut ids = vec![NO_HIT; (cam.width * cam.height) as usize];
+        let (l, basis) = (scene.lbvh(), cam.ray_basis());
+        for (i, rows) in ids.chunks_mut((cam.width * BAND_ROWS) as usize).enumerate() {
+            band(&l, &basis, cam.width, i, rows);
+        }
+        ids
+    }
+
+    /// Whichever kernel the dispatch picks, the integration tests compare the packet tracer with
+    /// the scalar one; this checks both kernels, so the portable one is covered on AVX2
+    /// machines too.
+    #[test]
+    fn portable_and_avx2_kernels_equal_scalar() {
+        let cloud = random_cloud(5000, 0.02, 7, 96);
+        let depth = depth_image_frame(128, 1.0, 3);
+        let axis = Camera::look_at(Vec3::new(0.5, 0.5, 4.0), Vec3::new(0.5, 0.5, 0.0), Vec3::Y, 30.0, 65, 65);
+        for (frame, cams) in [
+            (&cloud, vec![cloud.header.camera, cloud.header.camera.orbit(35.0, 20.0).with_viewport(61, 47), axis]),
+            (&depth, vec![depth.header.camera, depth.header.camera.orbit(10.0, 0.0).with_viewport(99, 70)]),
+        ] {
+            let scene = build_scene(frame);
+            for cam in cams {
+                let mut scalar = Vec::new();
+                assert!(ScalarTracer::new(1).trace_ids(&scene, &cam, &mut scalar));
+                assert!(scalar.iter().any(|&i| i != NO_HIT));
+                let portable =
+                    ids_by_band(&scene, &cam, |l, b, w, i, rows| trace_band::<f32x8>(l, b, w, i, rows, &|id| id));
+                assert!(portable == scalar, "portable kernel");
+                #[cfg(target_arch = "x86_64")]
+                if std::is_x86_feature_detected!("avx2") {
+                    let avx2 = ids_by_band(&scene, &cam, |l, b, w, i, rows| {
+                        // SAFETY: the CPU supports AVX2 (checked just above).
+                        unsafe { trace_band_avx2(l, b, w, i, rows, &|id| id) }
+                    });
+                    assert!(avx2 == scalar, "AVX2 kernel");
+                }
+            }
         }
     }
 }

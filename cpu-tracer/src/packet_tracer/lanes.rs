@@ -1,0 +1,414 @@
+//! The eight-lane vector types the packet kernel is generic over.
+//!
+//! `wide` chooses its `f32x8` representation when *it* is compiled (two SSE halves on baseline
+//! x86-64), so enabling AVX2 on the calling function does not widen it. `Avx2` (x86-64 only)
+//! wraps the 256-bit registers directly; once its `#[inline(always)]` methods are inlined into a
+//! function compiled with AVX2 they are single ymm instructions. Every method has exactly the
+//! semantics of the `wide` operation it replaces (noted per method), so both kernels compute
+//! the same values: the same bits, except that a NaN's sign and payload are unspecified in Rust
+//! and may differ, which only NaN-aware operations (comparisons, `min`/`max`) ever see.
+//!
+//! Masks are lanes with all bits set (true) or clear (false), as `wide`'s comparisons give.
+
+use core::ops::{Add, BitAnd, BitOr, Div, Mul, Sub};
+use wide::{f32x8, u32x8};
+
+/// Eight `f32` lanes (also used as masks) and their companion eight `u32` lanes.
+pub(super) trait Lanes:
+    Copy
+    + Add<Output = Self>
+    + Sub<Output = Self>
+    + Mul<Output = Self>
+    + Div<Output = Self>
+    + BitAnd<Output = Self>
+    + BitOr<Output = Self>
+{
+    /// Eight `u32` lanes.
+    type U: Copy;
+
+    /// All lanes `x`.
+    fn splat(x: f32) -> Self;
+    /// The lanes of `a`, lane 0 first.
+    fn new(a: [f32; 8]) -> Self;
+    /// IEEE square root per lane.
+    fn sqrt(self) -> Self;
+    /// `f32::min` per lane (a NaN operand gives the other one).
+    fn min(self, rhs: Self) -> Self;
+    /// `f32::max` per lane (a NaN operand gives the other one).
+    fn max(self, rhs: Self) -> Self;
+    /// `if self < rhs { self } else { rhs }` per lane (`minps`).
+    fn fast_min(self, rhs: Self) -> Self;
+    /// `if self > rhs { self } else { rhs }` per lane (`maxps`).
+    fn fast_max(self, rhs: Self) -> Self;
+    /// Mask of `self < rhs` (false if either is NaN); likewise the next four.
+    fn simd_lt(self, rhs: Self) -> Self;
+    /// Mask of `self <= rhs`.
+    fn simd_le(self, rhs: Self) -> Self;
+    /// Mask of `self > rhs`.
+    fn simd_gt(self, rhs: Self) -> Self;
+    /// Mask of `self >= rhs`.
+    fn simd_ge(self, rhs: Self) -> Self;
+    /// Mask of `self == rhs`.
+    fn simd_eq(self, rhs: Self) -> Self;
+    /// Mask of the finite lanes.
+    fn is_finite(self) -> Self;
+    /// Per lane, `if_true` where the mask `self` is set, else `if_false`.
+    fn select(self, if_true: Self, if_false: Self) -> Self;
+    /// Bit `l` is lane `l`'s sign bit (for a mask: whether it is set).
+    fn to_bitmask(self) -> u32;
+    /// Whether any lane of the mask is set.
+    fn any(self) -> bool;
+    /// Whether all lanes of the mask are set.
+    fn all(self) -> bool;
+    /// All `u32` lanes `x`.
+    fn splat_u(x: u32) -> Self::U;
+    /// Mask of `a < b` (unsigned).
+    fn lt_u(a: Self::U, b: Self::U) -> Self;
+    /// Per lane, `if_true` where the mask `self` is set, else `if_false`.
+    fn select_u(self, if_true: Self::U, if_false: Self::U) -> Self::U;
+    /// The `u32` lanes, lane 0 first.
+    fn u_to_array(u: Self::U) -> [u32; 8];
+}
+
+/// The portable lanes: `wide`'s, whatever it was compiled for.
+impl Lanes for f32x8 {
+    type U = u32x8;
+
+    #[inline(always)]
+    fn splat(x: f32) -> Self {
+        f32x8::splat(x)
+    }
+    #[inline(always)]
+    fn new(a: [f32; 8]) -> Self {
+        f32x8::new(a)
+    }
+    #[inline(always)]
+    fn sqrt(self) -> Self {
+        f32x8::sqrt(self)
+    }
+    #[inline(always)]
+    fn min(self, rhs: Self) -> Self {
+        f32x8::min(self, rhs)
+    }
+    #[inline(always)]
+    fn max(self, rhs: Self) -> Self {
+        f32x8::max(self, rhs)
+    }
+    #[inline(always)]
+    fn fast_min(self, rhs: Self) -> Self {
+        f32x8::fast_min(self, rhs)
+    }
+    #[inline(always)]
+    fn fast_max(self, rhs: Self) -> Self {
+        f32x8::fast_max(self, rhs)
+    }
+    #[inline(always)]
+    fn simd_lt(self, rhs: Self) -> Self {
+        f32x8::simd_lt(self, rhs)
+    }
+    #[inline(always)]
+    fn simd_le(self, rhs: Self) -> Self {
+        f32x8::simd_le(self, rhs)
+    }
+    #[inline(always)]
+    fn simd_gt(self, rhs: Self) -> Self {
+        f32x8::simd_gt(self, rhs)
+    }
+    #[inline(always)]
+    fn simd_ge(self, rhs: Self) -> Self {
+        f32x8::simd_ge(self, rhs)
+    }
+    #[inline(always)]
+    fn simd_eq(self, rhs: Self) -> Self {
+        f32x8::simd_eq(self, rhs)
+    }
+    #[inline(always)]
+    fn is_finite(self) -> Self {
+        f32x8::is_finite(self)
+    }
+    #[inline(always)]
+    fn select(self, if_true: Self, if_false: Self) -> Self {
+        f32x8::select(self, if_true, if_false)
+    }
+    #[inline(always)]
+    fn to_bitmask(self) -> u32 {
+        f32x8::to_bitmask(self)
+    }
+    #[inline(always)]
+    fn any(self) -> bool {
+        f32x8::any(self)
+    }
+    #[inline(always)]
+    fn all(self) -> bool {
+        f32x8::all(self)
+    }
+    #[inline(always)]
+    fn splat_u(x: u32) -> u32x8 {
+        u32x8::splat(x)
+    }
+    #[inline(always)]
+    fn lt_u(a: u32x8, b: u32x8) -> Self {
+        bytemuck::cast(u32x8::simd_lt(a, b))
+    }
+    #[inline(always)]
+    fn select_u(self, if_true: u32x8, if_false: u32x8) -> u32x8 {
+        bytemuck::cast::<f32x8, u32x8>(self).select(if_true, if_false)
+    }
+    #[inline(always)]
+    fn u_to_array(u: u32x8) -> [u32; 8] {
+        u.to_array()
+    }
+}
+
+#[cfg(target_arch = "x86_64")]
+pub(super) use avx2::Avx2;
+
+#[cfg(target_arch = "x86_64")]
+mod avx2 {
+    use super::Lanes;
+    use core::arch::x86_64::*;
+    use core::ops::{Add, BitAnd, BitOr, Div, Mul, Sub};
+
+    /// Eight `f32` lanes in one AVX register, for the kernel compiled with AVX2.
+    ///
+    /// **Invariant**: values of this type and calls of its methods exist only on CPUs with
+    /// AVX2. The type is private to the packet tracer, whose only user of it is
+    /// `trace_band_avx2`, called only after `is_x86_feature_detected!("avx2")`. This is what
+    /// every `unsafe` block below relies on.
+    #[derive(Clone, Copy)]
+    pub(in crate::packet_tracer) struct Avx2(__m256);
+
+    /// A binary operator as one AVX instruction.
+    macro_rules! binop {
+        ($tr:ident, $f:ident, $intr:ident) => {
+            impl $tr for Avx2 {
+                type Output = Avx2;
+                #[inline(always)]
+                fn $f(self, rhs: Avx2) -> Avx2 {
+                    // SAFETY: AVX is available (the type's invariant).
+                    Avx2(unsafe { $intr(self.0, rhs.0) })
+                }
+            }
+        };
+    }
+    binop!(Add, add, _mm256_add_ps);
+    binop!(Sub, sub, _mm256_sub_ps);
+    binop!(Mul, mul, _mm256_mul_ps);
+    binop!(Div, div, _mm256_div_ps);
+    binop!(BitAnd, bitand, _mm256_and_ps);
+    binop!(BitOr, bitor, _mm256_or_ps);
+
+    impl Avx2 {
+        /// Ordered, non-signalling comparison `P` (a `_CMP_*_OQ`), as `wide`'s comparisons:
+        /// false where either lane is NaN.
+        #[inline(always)]
+        fn cmp<const P: i32>(self, rhs: Avx2) -> Avx2 {
+            // SAFETY: AVX is available (the type's invariant).
+            Avx2(unsafe { _mm256_cmp_ps::<P>(self.0, rhs.0) })
+        }
+    }
+
+    // SAFETY (every `unsafe` block of this impl): AVX and AVX2 are available (the type's
+    // invariant); the intrinsics have no other precondition, except `_mm256_loadu_ps` and
+    // `_mm256_storeu_si256`, whose pointers are to eight `f32` / `u32` as noted there.
+    impl Lanes for Avx2 {
+        type U = __m256i;
+
+        #[inline(always)]
+        fn splat(x: f32) -> Self {
+            Avx2(unsafe { _mm256_set1_ps(x) })
+        }
+        #[inline(always)]
+        fn new(a: [f32; 8]) -> Self {
+            // `a` is eight readable `f32`; the load needs no alignment.
+            Avx2(unsafe { _mm256_loadu_ps(a.as_ptr()) })
+        }
+        #[inline(always)]
+        fn sqrt(self) -> Self {
+            // `vsqrtps`: correctly rounded, as `sqrtps`.
+            Avx2(unsafe { _mm256_sqrt_ps(self.0) })
+        }
+        #[inline(always)]
+        fn min(self, rhs: Self) -> Self {
+            // `wide`: `rhs.is_nan().select(self, self.fast_min(rhs))`.
+            rhs.cmp::<_CMP_UNORD_Q>(rhs).select(self, self.fast_min(rhs))
+        }
+        #[inline(always)]
+        fn max(self, rhs: Self) -> Self {
+            // `wide`: `rhs.is_nan().select(self, self.fast_max(rhs))`.
+            rhs.cmp::<_CMP_UNORD_Q>(rhs).select(self, self.fast_max(rhs))
+        }
+        #[inline(always)]
+        fn fast_min(self, rhs: Self) -> Self {
+            // `vminps` with `minps`'s operand order: `self < rhs ? self : rhs`.
+            Avx2(unsafe { _mm256_min_ps(self.0, rhs.0) })
+        }
+        #[inline(always)]
+        fn fast_max(self, rhs: Self) -> Self {
+            // `vmaxps` with `maxps`'s operand order: `self > rhs ? self : rhs`.
+            Avx2(unsafe { _mm256_max_ps(self.0, rhs.0) })
+        }
+        #[inline(always)]
+        fn simd_lt(self, rhs: Self) -> Self {
+            self.cmp::<_CMP_LT_OQ>(rhs)
+        }
+        #[inline(always)]
+        fn simd_le(self, rhs: Self) -> Self {
+            self.cmp::<_CMP_LE_OQ>(rhs)
+        }
+        #[inline(always)]
+        fn simd_gt(self, rhs: Self) -> Self {
+            self.cmp::<_CMP_GT_OQ>(rhs)
+        }
+        #[inline(always)]
+        fn simd_ge(self, rhs: Self) -> Self {
+            self.cmp::<_CMP_GE_OQ>(rhs)
+        }
+        #[inline(always)]
+        fn simd_eq(self, rhs: Self) -> Self {
+            self.cmp::<_CMP_EQ_OQ>(rhs)
+        }
+        #[inline(always)]
+        fn is_finite(self) -> Self {
+            // |x| < ∞: false for ±∞ and NaN, as `wide`'s exponent test.
+            let abs = Avx2(unsafe { _mm256_andnot_ps(_mm256_set1_ps(-0.0), self.0) });
+            abs.simd_lt(Avx2::splat(f32::INFINITY))
+        }
+        #[inline(always)]
+        fn select(self, if_true: Self, if_false: Self) -> Self {
+            // `vblendvps` reads the sign bit, i.e. the whole lane of a mask.
+            Avx2(unsafe { _mm256_blendv_ps(if_false.0, if_true.0, self.0) })
+        }
+        #[inline(always)]
+        fn to_bitmask(self) -> u32 {
+            (unsafe { _mm256_movemask_ps(self.0) }) as u32
+        }
+        #[inline(always)]
+        fn any(self) -> bool {
+            // `vtestps`: ZF is set when no sign bit is.
+            unsafe { _mm256_testz_ps(self.0, self.0) == 0 }
+        }
+        #[inline(always)]
+        fn all(self) -> bool {
+            self.to_bitmask() == 0xff
+        }
+        #[inline(always)]
+        fn splat_u(x: u32) -> __m256i {
+            unsafe { _mm256_set1_epi32(x as i32) }
+        }
+        #[inline(always)]
+        fn lt_u(a: __m256i, b: __m256i) -> Self {
+            // Unsigned `a < b` is signed `b > a` with the top bits flipped (`wide` does the same).
+            unsafe {
+                let h = _mm256_set1_epi32(i32::MIN);
+                Avx2(_mm256_castsi256_ps(_mm256_cmpgt_epi32(_mm256_xor_si256(b, h), _mm256_xor_si256(a, h))))
+            }
+        }
+        #[inline(always)]
+        fn select_u(self, if_true: __m256i, if_false: __m256i) -> __m256i {
+            unsafe {
+                let (t, f) = (_mm256_castsi256_ps(if_true), _mm256_castsi256_ps(if_false));
+                _mm256_castps_si256(_mm256_blendv_ps(f, t, self.0))
+            }
+        }
+        #[inline(always)]
+        fn u_to_array(u: __m256i) -> [u32; 8] {
+            let mut a = [0u32; 8];
+            // `a` is 32 writable bytes; the store needs no alignment.
+            unsafe { _mm256_storeu_si256(a.as_mut_ptr().cast(), u) };
+            a
+        }
+    }
+
+    #[cfg(test)]
+    mod tests {
+        use super::{Avx2, Lanes};
+        use core::arch::x86_64::{__m256, __m256i};
+        use wide::{f32x8, u32x8};
+
+        fn bits(x: Avx2) -> [u32; 8] {
+            // SAFETY: `__m256` is 32 bytes of plain data, as is `[u32; 8]`.
+            unsafe { core::mem::transmute::<__m256, [u32; 8]>(x.0) }
+        }
+
+        fn wbits(x: f32x8) -> [u32; 8] {
+            bytemuck::cast(x)
+        }
+
+        /// Every `Lanes` method of `Avx2` against `wide`'s on NaNs, signed zeros, infinities,
+        /// subnormals and ordinary values, compiled as the kernel is (inlined into an AVX2
+        /// function).
+        #[target_feature(enable = "avx2")]
+        fn check() {
+            let vals =
+                [0.0, -0.0, 1.0, -1.0, 0.5, 3.0, 1e-40, f32::MAX, f32::INFINITY, -f32::INFINITY, f32::NAN, -f32::NAN];
+            let pairs: Vec<(f32, f32)> = vals.iter().flat_map(|&a| vals.iter().map(move |&b| (a, b))).collect();
+            for c in pairs.chunks_exact(8) {
+                let a: [f32; 8] = core::array::from_fn(|l| c[l].0);
+                let b: [f32; 8] = core::array::from_fn(|l| c[l].1);
+                let (x, y) = (<Avx2 as Lanes>::new(a), <Avx2 as Lanes>::new(b));
+                let (p, q) = (f32x8::new(a), f32x8::new(b));
+                let eq = |what: &str, r: Avx2, s: f32x8| assert_eq!(bits(r), wbits(s), "{what}: {a:?} {b:?}");
+                // Arithmetic: the same values; a NaN's sign and payload are unspecified in Rust
+                // (LLVM may commute an addition), and only ever reach NaN-aware operations.
+                let same = |what: &str, r: Avx2, s: f32x8| {
+                    let (r, s) = (bits(r).map(f32::from_bits), wbits(s).map(f32::from_bits));
+                    let ok = (0..8).all(|l| r[l].to_bits() == s[l].to_bits() || (r[l].is_nan() && s[l].is_nan()));
+                    assert!(ok, "{what}: {a:?} {b:?}: {r:?} {s:?}");
+                };
+                eq("new", x, p);
+                eq("splat", Avx2::splat(a[3]), <f32x8 as Lanes>::splat(a[3]));
+                same("add", x + y, p + q);
+                same("sub", x - y, p - q);
+                same("mul", x * y, p * q);
+                same("div", x / y, p / q);
+                same("sqrt", x.sqrt(), Lanes::sqrt(p));
+                eq("min", Lanes::min(x, y), Lanes::min(p, q));
+                eq("max", Lanes::max(x, y), Lanes::max(p, q));
+                eq("fast_min", x.fast_min(y), Lanes::fast_min(p, q));
+                eq("fast_max", x.fast_max(y), Lanes::fast_max(p, q));
+                let (lt, wlt) = (x.simd_lt(y), Lanes::simd_lt(p, q));
+                let (ge, wge) = (x.simd_ge(y), Lanes::simd_ge(p, q));
+                eq("lt", lt, wlt);
+                eq("le", x.simd_le(y), Lanes::simd_le(p, q));
+                eq("gt", x.simd_gt(y), Lanes::simd_gt(p, q));
+                eq("ge", ge, wge);
+                eq("eq", x.simd_eq(y), Lanes::simd_eq(p, q));
+                eq("is_finite", x.is_finite(), Lanes::is_finite(p));
+                eq("and", lt & ge, wlt & wge);
+                eq("or", lt | ge, wlt | wge);
+                eq("select", lt.select(x, y), Lanes::select(wlt, p, q));
+                assert_eq!(lt.to_bitmask(), Lanes::to_bitmask(wlt));
+                assert_eq!(x.to_bitmask(), Lanes::to_bitmask(p));
+                for m in [lt, ge, lt & ge, lt | ge] {
+                    let w = f32x8::new(bytemuck::cast(bits(m)));
+                    assert_eq!(m.any(), Lanes::any(w));
+                    assert_eq!(m.all(), Lanes::all(w));
+                }
+            }
+            let us = [0, 1, 2, 0x7fff_ffff, 0x8000_0000, 0x8000_0001, u32::MAX - 1, u32::MAX];
+            // SAFETY: both are 32 bytes of plain data.
+            let v = unsafe { core::mem::transmute::<[u32; 8], __m256i>(us) };
+            let wv = u32x8::new(us);
+            for &s in &us {
+                let (u, wu) = (Avx2::splat_u(s), <f32x8 as Lanes>::splat_u(s));
+                for (m, wm) in [
+                    (Avx2::lt_u(u, v), <f32x8 as Lanes>::lt_u(wu, wv)),
+                    (Avx2::lt_u(v, u), <f32x8 as Lanes>::lt_u(wv, wu)),
+                ] {
+                    assert_eq!(bits(m), wbits(wm), "lt_u {s}");
+                    assert_eq!(Avx2::u_to_array(m.select_u(u, v)), wm.select_u(wu, wv).to_array());
+                }
+                assert_eq!(Avx2::u_to_array(u), wu.to_array());
+            }
+        }
+
+        #[test]
+        fn avx2_lanes_equal_wide_bit_for_bit() {
+            if std::is_x86_feature_detected!("avx2") {
+                // SAFETY: the CPU supports AVX2 (checked just above).
+                unsafe { check() }
+            }
+        }
+    }
+}
