@@ -3,7 +3,7 @@
 //! The server of Zellmann 2020, Figure 2: it loads a volume and a transfer function, ray
 //! marches each pixel of the camera a client asks for, picks a representative depth per pixel
 //! with one of the ZAL12 heuristics, turns every non-empty pixel into an object-space sample
-//! (`p = o + d·t`, radius half a voxel diagonal), quantizes and compacts the samples and sends
+//! (`p = o + d·t`, radius the pixel's footprint at that depth or half a voxel diagonal), quantizes and compacts the samples and sends
 //! them over TCP with the camera they belong to.
 //!
 //! | module | concept |
@@ -14,6 +14,7 @@
 //! | [`dataset`] | a volume with its transfer function; the bundled default |
 //! | [`empty_space`] | the min/max brick grid for empty-space skipping |
 //! | [`marcher`] | the CPU ray marcher: frames for clients and ground-truth images |
+//! | [`radius`] | the sphere radius models: pixel footprint or half a voxel diagonal |
 //! | [`compaction`] | the parallel compaction of a frame's samples |
 //! | [`server`] | the TCP server: handshake, latest-wins requests, limits |
 //!
@@ -32,12 +33,14 @@ pub mod dataset;
 pub mod empty_space;
 pub mod marcher;
 pub mod nrrd;
+pub mod radius;
 pub mod server;
 pub mod transfer_function;
 pub mod volume;
 
 pub use dataset::Dataset;
 pub use marcher::{default_camera, FrameStats, MarchOptions, Marcher, PixelBuffer};
+pub use radius::RadiusModel;
 pub use server::{Server, ServerConfig, ServerHandle};
 pub use transfer_function::TransferFunction;
 pub use volume::{load_volume, LoadOptions, Volume, VolumeError};

@@ -15,7 +15,7 @@ use std::time::{Duration, Instant};
 use volwarp_core::wire::{self, CameraRequest, Message};
 use volwarp_core::{Camera, Heuristic};
 use volwarp_server::volume::{parse_dims, LoadOptions, VoxelType};
-use volwarp_server::{default_camera, Dataset, MarchOptions, Marcher, Server, ServerConfig};
+use volwarp_server::{default_camera, Dataset, MarchOptions, Marcher, RadiusModel, Server, ServerConfig};
 
 #[derive(Parser, Debug)]
 #[command(
@@ -80,7 +80,11 @@ struct DataArgs {
     /// rel-threshold, en-ex-mean).
     #[arg(long, global = true, default_value = "threshold")]
     heuristic: String,
-    /// Sphere radius as a multiple of half a voxel diagonal (for `dump`).
+    /// Sphere radius model: `footprint` (one pixel at the sample's depth) or
+    /// `voxel` (half a voxel diagonal, the seed paper's).
+    #[arg(long, global = true, default_value = "footprint")]
+    radius: RadiusModel,
+    /// Sphere radius as a multiple of the model's (for `dump`; clients send their own).
     #[arg(long, global = true, default_value_t = 1.0)]
     radius_scale: f32,
 }
@@ -190,7 +194,7 @@ fn run(cli: Cli) -> Result<(), String> {
     let ds = load(&cli.data)?;
     let heuristic = Heuristic::from_name(&cli.data.heuristic)
         .ok_or_else(|| format!("unknown heuristic {:?}", cli.data.heuristic))?;
-    let opts = MarchOptions { step_voxels: cli.data.step, ..MarchOptions::default() };
+    let opts = MarchOptions { step_voxels: cli.data.step, radius: cli.data.radius, ..MarchOptions::default() };
     let marcher = Marcher::with_options(ds.volume.clone(), &ds.tf, opts);
     match cli.cmd.unwrap_or(Cmd::Serve) {
         Cmd::Serve => {

@@ -11,12 +11,14 @@
 //!
 //! Every sample with non-zero opacity is fed to the requested [`Heuristic`]'s
 //! [`DepthPicker`]; the two-pass heuristics march the ray twice (the first pass into a
-//! [`FirstPassAccumulator`]). A frame's sample is `p = o + d·t` with radius
-//! `radius_scale × ½ |voxel diagonal|`; empty pixels get radius 0 and are compacted away.
+//! [`FirstPassAccumulator`]). A frame's sample is `p = o + d·t` with radius `radius_scale` ×
+//! the [`crate::radius`] model's (by default the pixel's footprint at depth `t`); empty pixels
+//! get radius 0 and are compacted away.
 //! Work is spread with rayon over bands of image rows.
 
 use crate::compaction;
 use crate::empty_space::{MinMaxGrid, Occupancy};
+use crate::radius::{FrameRadius, RadiusModel};
 use crate::transfer_function::{TransferFunction, LUT_SIZE};
 use crate::volume::Volume;
 use rayon::prelude::*;
@@ -29,7 +31,8 @@ use volwarp_core::{Camera, DepthPicker, FirstPassAccumulator, Heuristic, Image, 
 /// Rows per parallel task.
 const BAND_ROWS: usize = 4;
 
-/// Radius code every sample of a frame gets (the frame's `radius_unit` is `radius / this`).
+/// Radius code every sample of a frame gets under [`RadiusModel::Voxel`] (the frame's
+/// `radius_unit` is `radius / this`).
 pub const RADIUS_CODE: f32 = 512.0;
 
 /// Marcher settings.
@@ -41,11 +44,13 @@ pub struct MarchOptions {
     pub early_termination: f32,
     /// Skip bricks the transfer function makes invisible; default true.
     pub skip_empty: bool,
+    /// How each sample's sphere radius is chosen; default the pixel footprint.
+    pub radius: RadiusModel,
 }
 
 impl Default for MarchOptions {
     fn default() -> Self {
-        MarchOptions { step_voxels: 0.5, early_termination: 0.99, skip_empty: true }
+        MarchOptions { step_voxels: 0.5, early_termination: 0.99, skip_empty: true, radius: RadiusModel::Footprint }
     }
 }
 
@@ -168,7 +173,8 @@ impl Marcher {
         self.dt
     }
 
-    /// Radius of a sample at `radius_scale` 1: half a voxel diagonal.
+    /// Radius of a sample at `radius_scale` 1 under [`RadiusModel::Voxel`]: half a voxel
+    /// diagonal.
     pub fn default_radius(&self) -> f32 {
         0.5 * self.volume.voxel_diagonal()
     }
@@ -269,7 +275,7 @@ impl Marcher {
         &self,
         camera: &Camera,
         heuristic: Heuristic,
-        pack: Option<(&Quantizer, f32)>,
+        pack: Option<(&Quantizer, FrameRadius)>,
     ) -> (PixelBuffer, Vec<u64>) {
         let (w, h) = (camera.width as usize, camera.height as usize);
         let basis = camera.ray_basis();
@@ -290,7 +296,7 @@ impl Marcher {
                     *cp = pack_color_f32(c);
                     *tp = depth.unwrap_or(f32::INFINITY);
                     if let (Some((q, radius)), Some(t), Some(s)) = (pack, depth, sb.get_mut(i)) {
-                        *s = q.pack(o + d * t, radius);
+                        *s = q.pack(o + d * t, radius.at(d, t));
                     }
                 }
             },
@@ -318,9 +324,10 @@ impl Marcher {
 
     /// The uncompacted packed samples of a marched [`PixelBuffer`] (radius 0 for empty pixels)
     /// and the frame's radius unit: each non-empty pixel's sample at `o + d·t` with radius
-    /// `radius_scale × ½ |voxel diagonal|`, quantized over the volume box.
+    /// `radius_scale` × the options' [`RadiusModel`], quantized over the volume box.
     pub fn quantize(&self, req: &CameraRequest, pb: &PixelBuffer) -> (Vec<u64>, f32) {
-        let (q, radius, radius_unit) = self.quantizer(req);
+        let (q, radius) = self.quantizer(req);
+        let radius_unit = radius.unit();
         let basis = req.camera.ray_basis();
         let o = basis.origin();
         let w = (pb.width as usize).max(1);
@@ -330,7 +337,8 @@ impl Marcher {
                 for (i, (s, &t)) in s.iter_mut().zip(t).enumerate() {
                     if t.is_finite() {
                         let (x, y) = ((i % w) as u32, (band * BAND_ROWS + i / w) as u32);
-                        *s = q.pack(o + basis.dir(x, y) * t, radius);
+                        let d = basis.dir(x, y);
+                        *s = q.pack(o + d * t, radius.at(d, t));
                     }
                 }
             },
@@ -339,7 +347,8 @@ impl Marcher {
     }
 
     /// Renders one compacted frame for a request: march with its heuristic, place each
-    /// non-empty pixel's sample at `o + d·t` with radius `radius_scale × ½ |voxel diagonal|`,
+    /// non-empty pixel's sample at `o + d·t` with radius `radius_scale` × the options'
+    /// [`RadiusModel`],
     /// quantize over the volume box, compact in parallel.
     pub fn render_frame(&self, req: &CameraRequest) -> (Frame, FrameStats) {
         let mut frame = Frame { header: self.empty_header(req), samples: Vec::new(), colors: Vec::new() };
@@ -351,7 +360,8 @@ impl Marcher {
     /// color vectors (a server keeps one frame per client).
     pub fn render_frame_into(&self, req: &CameraRequest, frame: &mut Frame) -> FrameStats {
         let t0 = Instant::now();
-        let (q, radius, radius_unit) = self.quantizer(req);
+        let (q, radius) = self.quantizer(req);
+        let radius_unit = radius.unit();
         let (pb, packed) = self.march_impl(&req.camera, req.heuristic, Some((&q, radius)));
         let t1 = Instant::now();
         let n = compaction::compact_into_vecs(&packed, &pb.color, &mut frame.samples, &mut frame.colors);
@@ -370,12 +380,24 @@ impl Marcher {
         }
     }
 
-    fn quantizer(&self, req: &CameraRequest) -> (Quantizer, f32, f32) {
+    /// The frame's sphere radius for a request (its model from the options, its scale from
+    /// the request).
+    pub fn frame_radius(&self, req: &CameraRequest) -> FrameRadius {
         let scale =
             if req.radius_scale.is_finite() && req.radius_scale > 0.0 { req.radius_scale.min(16.0) } else { 1.0 };
-        let radius = self.default_radius() * scale;
-        let radius_unit = radius / RADIUS_CODE;
-        (Quantizer::new(self.volume.bounds(), radius_unit), radius, radius_unit)
+        FrameRadius::new(
+            self.opts.radius,
+            scale,
+            &req.camera,
+            &self.volume.bounds(),
+            self.default_radius(),
+            RADIUS_CODE,
+        )
+    }
+
+    fn quantizer(&self, req: &CameraRequest) -> (Quantizer, FrameRadius) {
+        let radius = self.frame_radius(req);
+        (Quantizer::new(self.volume.bounds(), radius.unit()), radius)
     }
 
     /// A frame with no samples (for the default camera at 1×1), to render into with

@@ -6,7 +6,7 @@ use volwarp_core::sample::{over_background, pack_color_f32, Dequantizer};
 use volwarp_core::wire::CameraRequest;
 use volwarp_core::{Camera, Heuristic, Vec3, BACKGROUND};
 use volwarp_server::transfer_function::TransferFunction;
-use volwarp_server::{Dataset, MarchOptions, Marcher, Volume};
+use volwarp_server::{Dataset, MarchOptions, Marcher, RadiusModel, Volume};
 
 /// A 16³ volume of one value, unit spacing: the box [0, 16]³.
 fn constant_box(alpha: f32) -> Marcher {
@@ -135,9 +135,15 @@ fn empty_space_skipping_changes_nothing() {
 #[test]
 fn frame_samples_sit_on_their_rays() {
     let ds = Dataset::default_bundled();
-    let m = Marcher::from_dataset(&ds);
-    let cam = m.default_camera(64, 48).orbit(30.0, 10.0);
-    for (h, scale) in [(Heuristic::Threshold, 1.0), (Heuristic::Midpoint, 2.5)] {
+    let base = Marcher::from_dataset(&ds);
+    let cam = base.default_camera(64, 48).orbit(30.0, 10.0);
+    for (h, scale, model) in [
+        (Heuristic::Threshold, 1.0, RadiusModel::Voxel),
+        (Heuristic::Midpoint, 2.5, RadiusModel::Voxel),
+        (Heuristic::Threshold, 1.0, RadiusModel::Footprint),
+        (Heuristic::Peak, 0.5, RadiusModel::Footprint),
+    ] {
+        let m = base.with_transfer_function(&ds.tf, MarchOptions { radius: model, ..MarchOptions::default() });
         let req = CameraRequest { seq: 3, camera: cam, heuristic: h, radius_scale: scale };
         let (frame, stats) = m.render_frame(&req);
         let pb = m.march(&cam, h);
@@ -165,8 +171,23 @@ fn frame_samples_sit_on_their_rays() {
             let (x, y) = (i as u32 % cam.width, i as u32 / cam.width);
             let p = cam.eye + basis.dir(x, y) * t;
             assert!((deq.center(frame.samples[j]) - p).abs().max_element() <= quantum, "{h} pixel {i}");
-            let want_r = 0.5 * ds.volume.voxel_diagonal() * scale;
-            assert!((deq.radius(frame.samples[j]) - want_r).abs() < want_r * 1e-3);
+            let r = deq.radius(frame.samples[j]);
+            match model {
+                RadiusModel::Voxel => {
+                    let want_r = 0.5 * ds.volume.voxel_diagonal() * scale;
+                    assert!((r - want_r).abs() < want_r * 1e-3);
+                }
+                RadiusModel::Footprint => {
+                    // One pixel at the sample's depth: the distance between this pixel's and
+                    // its right neighbour's rays at the sample's view depth.
+                    let (_, _, w) = cam.basis();
+                    let z = (p - cam.eye).dot(w);
+                    let (d0, d1) = (basis.dir(x, y), basis.dir(x + 1, y));
+                    let pitch = (d1 * (z / d1.dot(w)) - d0 * (z / d0.dot(w))).length();
+                    let want_r = pitch * scale;
+                    assert!((r - want_r).abs() <= 0.5 * frame.header.radius_unit + want_r * 1e-3, "{r} vs {want_r}");
+                }
+            }
             assert_eq!(frame.colors[j], pb.color[i]);
             j += 1;
         }
