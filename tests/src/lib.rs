@@ -17,6 +17,7 @@
 //! | [`charts`] | the charts (plotters, embedded DejaVu font) |
 //! | [`table1`] | the paper's Table 1: samples, compaction, LBVH, FPS per view |
 //! | [`representation_size`] | error against position bits, radius bits and samples kept |
+//! | [`radius_model`] | accuracy against tracing speed for the server's sphere radius models |
 //! | [`failure_modes`] | the cases where the methods break down |
 //! | [`csv`] | small CSV writer |
 //! | [`report`] | the `volwarp-eval` commands: files, charts, markdown |
@@ -30,6 +31,7 @@ pub mod flip;
 pub mod image_io;
 pub mod psnr;
 pub mod quality;
+pub mod radius_model;
 pub mod report;
 pub mod representation_size;
 pub mod roster;

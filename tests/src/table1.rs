@@ -15,11 +15,9 @@ use crate::quality::time_renderer;
 use crate::{median, ErrorBox};
 use std::path::Path;
 use std::time::Instant;
-use volwarp_core::sample::Quantizer;
 use volwarp_core::wire::{CameraRequest, Frame};
 use volwarp_core::{Camera, Heuristic, Scene};
 use volwarp_server::dataset::Dataset;
-use volwarp_server::marcher::RADIUS_CODE;
 use volwarp_server::Marcher;
 
 /// Orbit of each view away from view 1, degrees.
@@ -82,25 +80,12 @@ pub fn measure(ds: &Dataset, heuristic: Heuristic, size: u32, runs: usize, threa
     let runs = runs.max(1);
     log::info!("table1: marching view 1 of {} at {size}² ({})", ds.name, heuristic.name());
     let t = Instant::now();
-    let (frame, stats) = marcher.render_frame(&CameraRequest { seq: 1, camera: cams[0], heuristic, radius_scale: 1.0 });
+    let req = CameraRequest { seq: 1, camera: cams[0], heuristic, radius_scale: 1.0 };
+    let (frame, stats) = marcher.render_frame(&req);
     let march_ms = t.elapsed().as_secs_f64() * 1e3;
     // The uncompacted buffer, as the server has it before compaction.
     let pb = marcher.march(&cams[0], heuristic);
-    let basis = cams[0].ray_basis();
-    let radius = marcher.default_radius();
-    let q = Quantizer::new(marcher.volume().bounds(), radius / RADIUS_CODE);
-    let full: Vec<u64> =
-        pb.t.iter()
-            .enumerate()
-            .map(|(i, &t)| {
-                if t.is_finite() {
-                    let (x, y) = (i as u32 % size, i as u32 / size);
-                    q.pack(basis.origin() + basis.dir(x, y) * t, radius)
-                } else {
-                    0
-                }
-            })
-            .collect();
+    let full = marcher.quantize(&req, &pb).0;
     let (mut os, mut oc) = (vec![0u64; full.len()], vec![0u32; full.len()]);
     let mut n_serial = 0;
     let compact_serial_ms = med((0..runs)

@@ -5,6 +5,7 @@
 //! volwarp-eval quality  --all [--data-dir ../shared/data] --out DIR
 //! volwarp-eval table1   [--volume ../shared/data/mri_colin27_181x217x181_uint8.raw] --out DIR [--results docs/results.md]
 //! volwarp-eval bits     [--volume FILE] --out DIR
+//! volwarp-eval radius   [--volume FILE | --all] --out DIR
 //! volwarp-eval failures [--volume FILE] --out DIR
 //! volwarp-eval replot   --dir DIR
 //! volwarp-eval fixtures --out tests/fixtures
@@ -102,6 +103,26 @@ enum Cmd {
         #[arg(long, default_value = "threshold")]
         heuristic: String,
     },
+    /// Accuracy against tracing speed for the sphere radius models (voxel, footprint).
+    Radius {
+        #[command(flatten)]
+        common: Common,
+        /// Every dataset of `--data-dir`.
+        #[arg(long)]
+        all: bool,
+        /// Folder of the shared volumes (for `--all`).
+        #[arg(long, default_value = "../shared/data")]
+        data_dir: PathBuf,
+        /// Viewport side.
+        #[arg(long, default_value_t = 512)]
+        size: u32,
+        /// Depth heuristic of the frames.
+        #[arg(long, default_value = "threshold")]
+        heuristic: String,
+        /// Timed renders per variant (median reported); 0: no timing.
+        #[arg(long, default_value_t = 5)]
+        runs: usize,
+    },
     /// Drive every renderer through the failure cases; CSV and pictures.
     Failures {
         #[command(flatten)]
@@ -189,6 +210,14 @@ fn run(cli: Cli) -> Result<(), ErrorBox> {
         Cmd::Bits { common, size, heuristic: h } => {
             let ds = load(common.volume.as_deref(), common.tf.as_deref())?;
             volwarp_tests::representation_size::run(&ds, heuristic(&h)?, size, &common.out)
+        }
+        Cmd::Radius { common, all, data_dir, size, heuristic: h, runs } => {
+            let datasets = if all {
+                report::shared_datasets(&data_dir)?
+            } else {
+                vec![load(common.volume.as_deref(), common.tf.as_deref())?]
+            };
+            volwarp_tests::radius_model::run(&datasets, heuristic(&h)?, size, runs, &common.out)
         }
         Cmd::Failures { common, size, heuristic: h } => {
             let ds = load(common.volume.as_deref(), common.tf.as_deref())?;
