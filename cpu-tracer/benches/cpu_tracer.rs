@@ -4,7 +4,9 @@
 //! (FPS, rays/s, ms) — the figures quoted in `docs/perf.md`.
 //!
 //! The frame is a server render of the MRI (`../shared/data`) when the server library and the
-//! data are there, else the synthetic depth-image cloud of the same size.
+//! data are there, else the synthetic depth-image cloud of the same size. The packet tracer is
+//! also timed on the same view rendered with the paper's radius (half a voxel diagonal) instead
+//! of the server's default (one pixel's footprint).
 
 use criterion::{criterion_group, criterion_main, BenchmarkId, Criterion, Throughput};
 use std::time::{Duration, Instant};
@@ -80,6 +82,21 @@ fn summary(frame: &Frame, what: &str, scene: &Scene) {
         for r in rs.iter_mut() {
             let s = median_secs(11, Duration::from_secs(3), || r.render(scene, &cam, &mut img));
             println!("| {} | {threads} | 1024² | {:.1} | {:.1} | — |", r.name(), s * 1e3, 1.0 / s);
+        }
+    }
+    if let Some((paper, what)) = frames::mri_frame_with(1024, volwarp_server::RadiusModel::Voxel) {
+        // The same view with the seed paper's radius (half a voxel diagonal): what the radius
+        // model costs or saves the tracer.
+        let ps = Scene::build(&paper);
+        println!("\nthe paper's radius: {what}\n| renderer | threads | viewport | ms | FPS | Mrays/s |\n|---|---|---|---|---|---|");
+        for res in [1024u32, 512] {
+            let cam = warped(&paper, res);
+            for threads in [1usize, 2] {
+                let mut r = PacketTracer::new(threads);
+                let s = median_secs(11, Duration::from_secs(4), || r.render(&ps, &cam, &mut img));
+                let rays = (res * res) as f64 / s / 1e6;
+                println!("| {} | {threads} | {res}² | {:.1} | {:.1} | {rays:.1} |", r.name(), s * 1e3, 1.0 / s);
+            }
         }
     }
     println!("\n| LBVH build of {n} samples | ms |\n|---|---|");
