@@ -3,7 +3,9 @@
 use volwarp_core::morton::{make_keys, radix_sort, SortKey};
 use volwarp_core::wire::Frame;
 use volwarp_core::Scene;
-use volwarp_cpu_tracer::parallel_sort::par_radix_sort;
+use volwarp_cpu_tracer::parallel_sort::{
+    packed_index, par_radix_sort, par_sort_packed, PACKED_INDEX_BITS, PACKED_MAX_LEN,
+};
 use volwarp_cpu_tracer::synthetic::{clustered_cloud, depth_image_frame, one_point_cloud, random_cloud, SplitMix64};
 use volwarp_cpu_tracer::{Method, ParallelBuilder, Threads};
 
@@ -84,5 +86,34 @@ fn parallel_radix_sort_equals_serial() {
         radix_sort(&mut s2, &mut vec![SortKey::default(); n]);
         par_radix_sort(&mut from_samples, &mut vec![SortKey::default(); n], &Threads::new(2));
         assert_eq!(from_samples, s2);
+    }
+}
+
+#[test]
+fn packed_sort_equals_serial() {
+    let mut rng = SplitMix64(9);
+    // Codes of up to 54 bits; few bits: most passes skipped; many equal codes.
+    for (n, bits) in [(0usize, 54u32), (1, 54), (17, 54), (100_000, 54), (70_000, 3), (50_000, 30), (40_000, 12)] {
+        let codes: Vec<u64> = (0..n).map(|_| rng.next_u64() & ((1u64 << bits) - 1)).collect();
+        let mut serial: Vec<SortKey> =
+            codes.iter().enumerate().map(|(i, &c)| SortKey { code: c, index: i as u32, pad: 0 }).collect();
+        radix_sort(&mut serial, &mut vec![SortKey::default(); n]);
+        for t in [1, 2, 3] {
+            let (mut out, mut scratch) = (vec![0u64; n], vec![0u64; n]);
+            par_sort_packed(&codes, &mut out, &mut scratch, &Threads::new(t));
+            for (k, s) in out.iter().zip(&serial) {
+                assert_eq!(packed_index(*k), s.index as usize, "n {n} bits {bits} threads {t}");
+                assert_eq!(k >> PACKED_INDEX_BITS, s.code >> 11, "n {n} bits {bits} threads {t}");
+            }
+        }
+    }
+}
+
+#[test]
+fn frame_past_the_packed_sort_limit_uses_16_byte_keys() {
+    let frame = random_cloud(PACKED_MAX_LEN + 3_000, 0.002, 7, 64);
+    let serial = Scene::build(&frame);
+    for b in [ParallelBuilder::new(2), ParallelBuilder::new(2).with_method(Method::Karras)].iter_mut() {
+        assert_same(&b.build(&frame), &serial, &format!("{} samples", frame.samples.len()));
     }
 }
