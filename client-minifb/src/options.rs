@@ -74,8 +74,8 @@ pub struct Options {
     /// rel-threshold, en-ex-mean.
     #[arg(long, value_name = "NAME", default_value = "threshold", value_parser = parse_heuristic)]
     pub heuristic: Heuristic,
-    /// Sphere radius as a multiple of the server's radius model (by default one pixel at the
-    /// sample's depth), in (0, 16].
+    /// Sphere radius as a multiple of the server's radius model (by default a pixel diagonal
+    /// at the sample's depth), in (0, 16].
     #[arg(long, value_name = "X", default_value_t = 1.0)]
     pub radius_scale: f32,
     /// In-process server: delay before each frame, in ms (slows the server down).

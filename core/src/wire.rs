@@ -235,8 +235,8 @@ pub struct CameraRequest {
     pub camera: Camera,
     /// Depth heuristic.
     pub heuristic: Heuristic,
-    /// Sphere radius as a multiple of the server's radius model (by default one pixel's
-    /// footprint at the sample's depth), in (0, 16].
+    /// Sphere radius as a multiple of the server's radius model (by default a pixel
+    /// diagonal at the sample's depth), in (0, 16].
     pub radius_scale: f32,
 }
 

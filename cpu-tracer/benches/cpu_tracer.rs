@@ -6,7 +6,7 @@
 //! The frame is a server render of the MRI (`../shared/data`) when the server library and the
 //! data are there, else the synthetic depth-image cloud of the same size. The packet tracer is
 //! also timed on the same view rendered with the paper's radius (half a voxel diagonal) instead
-//! of the server's default (one pixel's footprint).
+//! of the server's default (a pixel diagonal at the sample's depth).
 
 use criterion::{criterion_group, criterion_main, BenchmarkId, Criterion, Throughput};
 use std::time::{Duration, Instant};

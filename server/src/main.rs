@@ -80,7 +80,7 @@ struct DataArgs {
     /// rel-threshold, en-ex-mean).
     #[arg(long, global = true, default_value = "threshold")]
     heuristic: String,
-    /// Sphere radius model: `footprint` (one pixel at the sample's depth) or
+    /// Sphere radius model: `footprint` (a pixel diagonal at the sample's depth) or
     /// `voxel` (half a voxel diagonal, the seed paper's).
     #[arg(long, global = true, default_value = "footprint")]
     radius: RadiusModel,

@@ -178,13 +178,13 @@ fn frame_samples_sit_on_their_rays() {
                     assert!((r - want_r).abs() < want_r * 1e-3);
                 }
                 RadiusModel::Footprint => {
-                    // One pixel at the sample's depth: the distance between this pixel's and
-                    // its right neighbour's rays at the sample's view depth.
+                    // A pixel diagonal at the sample's depth: √2 × the distance between this
+                    // pixel's and its right neighbour's rays at the sample's view depth.
                     let (_, _, w) = cam.basis();
                     let z = (p - cam.eye).dot(w);
                     let (d0, d1) = (basis.dir(x, y), basis.dir(x + 1, y));
                     let pitch = (d1 * (z / d1.dot(w)) - d0 * (z / d0.dot(w))).length();
-                    let want_r = pitch * scale;
+                    let want_r = std::f32::consts::SQRT_2 * pitch * scale;
                     assert!((r - want_r).abs() <= 0.5 * frame.header.radius_unit + want_r * 1e-3, "{r} vs {want_r}");
                 }
             }

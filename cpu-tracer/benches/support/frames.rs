@@ -1,6 +1,7 @@
 //! Real frames: the server's render of the MRI of `../shared/data`, framed like the server's
 //! benchmark (default camera orbited 20°/10°, dolly 0.66: ≈ 620k samples at 1024²,
-//! threshold heuristic), with the server's default radius model (one pixel's footprint) or
+//! threshold heuristic), with the server's default radius model (a pixel diagonal at
+//! the sample's depth) or
 //! another one (the paper's half voxel diagonal).
 
 use std::path::Path;
