@@ -191,68 +191,49 @@ fn trace_packet<L: Lanes>(l: &Lbvh, p: &Packet<L>, entries: &[u32], stack: &mut 
             sp += 1;
         }
     }
-    // The node being visited and its active lanes; the far children wait on the stack.
-    let (mut cur, mut active);
-    let limit = best.t * L::splat(BOX_T_FAR_SCALE);
     loop {
-        if sp == 0 {
-            return best.prim;
-        }
-        sp -= 1;
-        let a = stack.t[sp].simd_le(limit);
-        if a.any() {
-            (cur, active) = (stack.node[sp], a);
-            break;
-        }
-    }
-    loop {
-        let node = &l.nodes[cur as usize];
-        let (left, right) = (node.left, node.right);
-        let lh = visit(l, p, left, active, &mut best);
-        let rh = visit(l, p, right, active, &mut best);
-        match (lh, rh) {
-            (Some((lt, lm)), Some((rt, rm))) => {
-                // Near-to-far: descend into the child that most lanes hitting both enter
-                // first; the other waits with its entry distances (NaN where not entered).
-                let both = lm & rm;
-                let right_first = (rt.simd_lt(lt) & both).to_bitmask().count_ones();
-                let (near, far, far_t) = if 2 * right_first > both.to_bitmask().count_ones() {
-                    ((right, rm), left, lm.select(lt, nan))
-                } else {
-                    ((left, lm), right, rm.select(rt, nan))
-                };
-                if sp < STACK_SIZE {
-                    stack.node[sp] = far;
-                    stack.t[sp] = far_t;
-                    sp += 1;
-                }
-                (cur, active) = near;
-                continue;
-            }
-            (Some((_, lm)), None) => {
-                (cur, active) = (left, lm);
-                continue;
-            }
-            (None, Some((_, rm))) => {
-                (cur, active) = (right, rm);
-                continue;
-            }
-            (None, None) => {}
-        }
         // Pop the next node some lane still needs. Early exit: NaN (a lane that does not
         // enter it) compares false, as do lanes whose best hit is already closer than the
         // node (with the slab test's conservative widening).
         let limit = best.t * L::splat(BOX_T_FAR_SCALE);
-        loop {
+        // The node being visited and its active lanes; the far children wait on the stack.
+        let (mut cur, mut active) = loop {
             if sp == 0 {
                 return best.prim;
             }
             sp -= 1;
             let a = stack.t[sp].simd_le(limit);
             if a.any() {
-                (cur, active) = (stack.node[sp], a);
-                break;
+                break (stack.node[sp], a);
             }
+        };
+        loop {
+            let node = &l.nodes[cur as usize];
+            let (left, right) = (node.left, node.right);
+            let lh = visit(l, p, left, active, &mut best);
+            let rh = visit(l, p, right, active, &mut best);
+            (cur, active) = match (lh, rh) {
+                (Some((lt, lm)), Some((rt, rm))) => {
+                    // Near-to-far: descend into the child that most lanes hitting both enter
+                    // first; the other waits with its entry distances (NaN where not entered).
+                    let both = lm & rm;
+                    let right_first = (rt.simd_lt(lt) & both).to_bitmask().count_ones();
+                    let (near, far, far_t) = if 2 * right_first > both.to_bitmask().count_ones() {
+                        ((right, rm), left, lm.select(lt, nan))
+                    } else {
+                        ((left, lm), right, rm.select(rt, nan))
+                    };
+                    if sp < STACK_SIZE {
+                        stack.node[sp] = far;
+                        stack.t[sp] = far_t;
+                        sp += 1;
+                    }
+                    near
+                }
+                (Some((_, lm)), None) => (left, lm),
+                (None, Some((_, rm))) => (right, rm),
+                (None, None) => break,
+            };
         }
     }
 }
