@@ -141,17 +141,18 @@ pub fn run(datasets: &[Dataset], heuristic: Heuristic, size: u32, runs: usize, o
     let k10 = ANGLES.iter().position(|&a| a == TIMED_ANGLE).unwrap_or(0);
     let mut names: Vec<&str> = results.iter().map(|r| r.dataset.as_str()).collect();
     names.dedup();
-    // Left: FLIP at 10° against ms, one series per variant (a point per dataset).
+    // Left: mean FLIP at 10° against mean ms over the datasets, one point per variant.
+    let mean = |v: Vec<f64>| v.iter().sum::<f64>() / v.len().max(1) as f64;
     let speed = VARIANTS
         .iter()
         .enumerate()
         .map(|(i, &(m, s))| {
-            let pts = results
-                .iter()
-                .filter(|r| r.model == m && r.scale == s)
-                .filter_map(|r| Some((r.ms?.log10(), r.metrics[k10].flip)))
-                .collect();
-            Series::new(&label(m, s), pts, Mark::Dots, i)
+            let of: Vec<&VariantResult> = results.iter().filter(|r| r.model == m && r.scale == s).collect();
+            let ms = mean(of.iter().filter_map(|r| r.ms).collect());
+            let flip = mean(of.iter().map(|r| r.metrics[k10].flip).collect());
+            let mut series = Series::new(&label(m, s), vec![(ms.log10(), flip)], Mark::Dots, i);
+            series.labels = vec![label(m, s)];
+            series
         })
         .collect();
     // Right: FLIP against angle for each variant, averaged over the datasets.
@@ -168,7 +169,7 @@ pub fn run(datasets: &[Dataset], heuristic: Heuristic, size: u32, runs: usize, o
         .collect();
     let panels = [
         Panel {
-            title: format!("FLIP at {TIMED_ANGLE}° vs tracing time, {size}², 1 thread"),
+            title: format!("FLIP at {TIMED_ANGLE}° vs tracing time, {size}², 1 thread (means)"),
             x_desc: "packet tracer ms (log)".into(),
             y_desc: "mean FLIP (lower is better)".into(),
             series: speed,

@@ -47,18 +47,35 @@ struct Common {
     no_gpu: bool,
 }
 
+/// Which datasets: `--volume` (or the bundled one), or with `--all` every volume of a folder.
+#[derive(Args, Clone)]
+struct Selection {
+    /// Every dataset of `--data-dir`.
+    #[arg(long)]
+    all: bool,
+    /// Folder of the shared volumes (for `--all`).
+    #[arg(long, default_value = "../shared/data")]
+    data_dir: PathBuf,
+}
+
+impl Selection {
+    fn datasets(&self, common: &Common) -> Result<Vec<Dataset>, ErrorBox> {
+        if self.all {
+            report::shared_datasets(&self.data_dir)
+        } else {
+            Ok(vec![load(common.volume.as_deref(), common.tf.as_deref())?])
+        }
+    }
+}
+
 #[derive(Subcommand)]
 enum Cmd {
     /// Warp a frame along orbit and dolly paths with every renderer; score against the truth.
     Quality {
         #[command(flatten)]
         common: Common,
-        /// Every dataset of `--data-dir`.
-        #[arg(long)]
-        all: bool,
-        /// Folder of the shared volumes (for `--all`).
-        #[arg(long, default_value = "../shared/data")]
-        data_dir: PathBuf,
+        #[command(flatten)]
+        sel: Selection,
         /// A heuristic name, or `all`.
         #[arg(long, default_value = "threshold")]
         heuristic: String,
@@ -107,12 +124,8 @@ enum Cmd {
     Radius {
         #[command(flatten)]
         common: Common,
-        /// Every dataset of `--data-dir`.
-        #[arg(long)]
-        all: bool,
-        /// Folder of the shared volumes (for `--all`).
-        #[arg(long, default_value = "../shared/data")]
-        data_dir: PathBuf,
+        #[command(flatten)]
+        sel: Selection,
         /// Viewport side.
         #[arg(long, default_value_t = 512)]
         size: u32,
@@ -167,7 +180,7 @@ fn heuristic(name: &str) -> Result<Heuristic, ErrorBox> {
 
 fn run(cli: Cli) -> Result<(), ErrorBox> {
     match cli.cmd {
-        Cmd::Quality { common, all, data_dir, heuristic: h, size, runs, time_all_heuristics, gpu_max_time_size } => {
+        Cmd::Quality { common, sel, heuristic: h, size, runs, time_all_heuristics, gpu_max_time_size } => {
             // With `all`, threshold (the seed paper's choice) comes first: it is the primary
             // heuristic of the charts and the one that is timed.
             let heuristics = if h == "all" {
@@ -177,11 +190,7 @@ fn run(cli: Cli) -> Result<(), ErrorBox> {
             } else {
                 vec![heuristic(&h)?]
             };
-            let datasets = if all {
-                report::shared_datasets(&data_dir)?
-            } else {
-                vec![load(common.volume.as_deref(), common.tf.as_deref())?]
-            };
+            let datasets = sel.datasets(&common)?;
             let opts = volwarp_tests::quality::QualityOptions {
                 size,
                 runs,
@@ -211,13 +220,8 @@ fn run(cli: Cli) -> Result<(), ErrorBox> {
             let ds = load(common.volume.as_deref(), common.tf.as_deref())?;
             volwarp_tests::representation_size::run(&ds, heuristic(&h)?, size, &common.out)
         }
-        Cmd::Radius { common, all, data_dir, size, heuristic: h, runs } => {
-            let datasets = if all {
-                report::shared_datasets(&data_dir)?
-            } else {
-                vec![load(common.volume.as_deref(), common.tf.as_deref())?]
-            };
-            volwarp_tests::radius_model::run(&datasets, heuristic(&h)?, size, runs, &common.out)
+        Cmd::Radius { common, sel, size, heuristic: h, runs } => {
+            volwarp_tests::radius_model::run(&sel.datasets(&common)?, heuristic(&h)?, size, runs, &common.out)
         }
         Cmd::Failures { common, size, heuristic: h } => {
             let ds = load(common.volume.as_deref(), common.tf.as_deref())?;
