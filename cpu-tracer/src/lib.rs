@@ -37,6 +37,7 @@ pub mod synthetic;
 pub mod threads;
 
 mod depth_buffer;
+mod lanes;
 
 pub use packet_tracer::PacketTracer;
 pub use parallel_build::{build_scene, BuildTimes, Method, ParallelBuilder};

@@ -34,8 +34,7 @@ use volwarp_core::traversal::STACK_SIZE;
 use volwarp_core::{Camera, RayBasis, Scene};
 use wide::f32x8;
 
-mod lanes;
-use lanes::Lanes;
+use crate::lanes::{self, ray_dirs, sphere_hits, Lanes};
 
 /// Packet width in pixels.
 pub const PACKET_W: u32 = 4;
@@ -60,14 +59,10 @@ struct Packet<L> {
 /// Lane `l` of a packet at `(x0, y0)` is pixel `(x0 + l % 4, y0 + l / 4)`.
 #[inline(always)]
 fn make_packet<L: Lanes>(b: &RayBasis, x0: u32, y0: u32) -> Packet<L> {
-    // Exactly `RayBasis::dir`: px = x + 0.5, d = corner + du*px + dv*py, d * (1 / sqrt(d·d)).
     let px = L::new(core::array::from_fn(|l| (x0 + l as u32 % PACKET_W) as f32 + 0.5));
     let py = L::new(core::array::from_fn(|l| (y0 + l as u32 / PACKET_W) as f32 + 0.5));
-    let comp = |a: usize| L::splat(b.corner[a]) + L::splat(b.du[a]) * px + L::splat(b.dv[a]) * py;
-    let (dx, dy, dz) = (comp(0), comp(1), comp(2));
+    let d = ray_dirs(b, px, py);
     let one = L::splat(1.0);
-    let inv_len = one / (dx * dx + dy * dy + dz * dz).sqrt();
-    let d = [dx * inv_len, dy * inv_len, dz * inv_len];
     // Exactly `Vec3::ONE / ray.dir` of the scalar traversal.
     let inv = [one / d[0], one / d[1], one / d[2]];
     let finite_inv = (inv[0].is_finite() & inv[1].is_finite() & inv[2].is_finite()).all();
@@ -118,28 +113,7 @@ struct Best<L: Lanes> {
 /// rule.
 #[inline(always)]
 fn test_sphere<L: Lanes>(p: &Packet<L>, deq: &Dequantizer, s: u64, prim: u32, active: L, best: &mut Best<L>) {
-    let c = deq.center(s);
-    let r = deq.radius(s);
-    let ocx = c.x - p.o[0];
-    let ocy = c.y - p.o[1];
-    let ocz = c.z - p.o[2];
-    let (ox, oy, oz) = (L::splat(ocx), L::splat(ocy), L::splat(ocz));
-    let b = ox * p.d[0] + oy * p.d[1] + oz * p.d[2];
-    let fx = ox - b * p.d[0];
-    let fy = oy - b * p.d[1];
-    let fz = oz - b * p.d[2];
-    let disc = L::splat(r * r) - (fx * fx + fy * fy + fz * fz);
-    let zero = L::splat(0.0);
-    let ok = disc.simd_ge(zero) & active;
-    if !ok.any() {
-        return;
-    }
-    let sq = disc.sqrt();
-    let t0 = b - sq;
-    let t1 = b + sq;
-    let front = t0.simd_gt(zero);
-    let t = front.select(t0, t1);
-    let hit = ok & (front | t1.simd_gt(zero));
+    let Some((t, hit)) = sphere_hits(&p.o, &p.d, deq.center(s), deq.radius(s), active) else { return };
     let pv = L::splat_u(prim);
     let smaller = L::lt_u(pv, best.prim);
     let better = hit & (t.simd_lt(best.t) | (t.simd_eq(best.t) & smaller));

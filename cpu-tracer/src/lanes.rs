@@ -1,4 +1,6 @@
-//! The eight-lane vector types the packet kernel is generic over.
+//! The eight-lane vector types the SIMD kernels (the packet tracer and the exact sphere
+//! splatter) are generic over, and the two operations they share: primary ray directions and
+//! the ray–sphere test, each exactly as core's scalar code computes them.
 //!
 //! `wide` chooses its `f32x8` representation when *it* is compiled (two SSE halves on baseline
 //! x86-64), so enabling AVX2 on the calling function does not widen it. `Avx2` (x86-64 only)
@@ -11,10 +13,48 @@
 //! Masks are lanes with all bits set (true) or clear (false), as `wide`'s comparisons give.
 
 use core::ops::{Add, BitAnd, BitOr, Div, Mul, Sub};
+use volwarp_core::{RayBasis, Vec3};
 use wide::{f32x8, u32x8};
 
+/// `RayBasis::dir` for eight pixels whose centres are `(px, py)` (pixel index + 0.5): the same
+/// operations (`corner + du·px + dv·py`, then `d · (1 / sqrt(d·d))`), so the same unit
+/// directions bit for bit.
+#[inline(always)]
+pub(crate) fn ray_dirs<L: Lanes>(b: &RayBasis, px: L, py: L) -> [L; 3] {
+    // No closure: one would be compiled without the caller's AVX2 target feature.
+    let dx = L::splat(b.corner[0]) + L::splat(b.du[0]) * px + L::splat(b.dv[0]) * py;
+    let dy = L::splat(b.corner[1]) + L::splat(b.du[1]) * px + L::splat(b.dv[1]) * py;
+    let dz = L::splat(b.corner[2]) + L::splat(b.du[2]) * px + L::splat(b.dv[2]) * py;
+    let inv_len = L::splat(1.0) / (dx * dx + dy * dy + dz * dz).sqrt();
+    [dx * inv_len, dy * inv_len, dz * inv_len]
+}
+
+/// `sphere::intersect` of the sphere `(c, r)` for eight rays from `o` along unit `d`, for the
+/// `active` lanes: the hit distances and the mask of lanes that hit, `None` if none does. The
+/// same operations as core's scalar code, so the same `t` bit for bit.
+#[inline(always)]
+pub(crate) fn sphere_hits<L: Lanes>(o: &[f32; 3], d: &[L; 3], c: Vec3, r: f32, active: L) -> Option<(L, L)> {
+    let (ox, oy, oz) = (L::splat(c.x - o[0]), L::splat(c.y - o[1]), L::splat(c.z - o[2]));
+    let b = ox * d[0] + oy * d[1] + oz * d[2];
+    let fx = ox - b * d[0];
+    let fy = oy - b * d[1];
+    let fz = oz - b * d[2];
+    let disc = L::splat(r * r) - (fx * fx + fy * fy + fz * fz);
+    let zero = L::splat(0.0);
+    let ok = disc.simd_ge(zero) & active;
+    if !ok.any() {
+        return None;
+    }
+    let sq = disc.sqrt();
+    let t0 = b - sq;
+    let t1 = b + sq;
+    let front = t0.simd_gt(zero);
+    let t = front.select(t0, t1);
+    Some((t, ok & (front | t1.simd_gt(zero))))
+}
+
 /// Eight `f32` lanes (also used as masks) and their companion eight `u32` lanes.
-pub(super) trait Lanes:
+pub(crate) trait Lanes:
     Copy
     + Add<Output = Self>
     + Sub<Output = Self>
@@ -68,6 +108,8 @@ pub(super) trait Lanes:
     fn select_u(self, if_true: Self::U, if_false: Self::U) -> Self::U;
     /// The `u32` lanes, lane 0 first.
     fn u_to_array(u: Self::U) -> [u32; 8];
+    /// The lanes, lane 0 first.
+    fn to_array(self) -> [f32; 8];
 }
 
 /// The portable lanes: `wide`'s, whatever it was compiled for.
@@ -158,10 +200,14 @@ impl Lanes for f32x8 {
     fn u_to_array(u: u32x8) -> [u32; 8] {
         u.to_array()
     }
+    #[inline(always)]
+    fn to_array(self) -> [f32; 8] {
+        f32x8::to_array(self)
+    }
 }
 
 #[cfg(target_arch = "x86_64")]
-pub(super) use avx2::Avx2;
+pub(crate) use avx2::Avx2;
 
 #[cfg(target_arch = "x86_64")]
 mod avx2 {
@@ -172,11 +218,12 @@ mod avx2 {
     /// Eight `f32` lanes in one AVX register, for the kernel compiled with AVX2.
     ///
     /// **Invariant**: values of this type and calls of its methods exist only on CPUs with
-    /// AVX2. The type is private to the packet tracer, whose only user of it is
-    /// `trace_band_avx2`, called only after `is_x86_feature_detected!("avx2")`. This is what
-    /// every `unsafe` block below relies on.
+    /// AVX2. The type is private to the crate, whose only users of it are the
+    /// `#[target_feature(enable = "avx2")]` kernels of the packet tracer and the sphere
+    /// splatter, called only after `is_x86_feature_detected!("avx2")`. This is what every
+    /// `unsafe` block below relies on.
     #[derive(Clone, Copy)]
-    pub(in crate::packet_tracer) struct Avx2(__m256);
+    pub(crate) struct Avx2(__m256);
 
     /// A binary operator as one AVX instruction.
     macro_rules! binop {
@@ -316,6 +363,13 @@ mod avx2 {
             let mut a = [0u32; 8];
             // `a` is 32 writable bytes; the store needs no alignment.
             unsafe { _mm256_storeu_si256(a.as_mut_ptr().cast(), u) };
+            a
+        }
+        #[inline(always)]
+        fn to_array(self) -> [f32; 8] {
+            let mut a = [0f32; 8];
+            // `a` is 32 writable bytes; the store needs no alignment.
+            unsafe { _mm256_storeu_ps(a.as_mut_ptr(), self.0) };
             a
         }
     }
