@@ -14,7 +14,7 @@
 //! 8 bytes per pixel per thread plus 12 per pixel for the direction table.
 
 use crate::depth_buffer::{key, pixel_span};
-use crate::lanes::{self, sphere_hits, Lanes};
+use crate::lanes::{self, ray_dirs, sphere_hits, Lanes};
 use crate::threads::Threads;
 use crate::{begin_frame, shade, NO_HIT};
 use volwarp_core::renderer::{Image, Renderer};
@@ -140,7 +140,7 @@ impl SphereSplat {
         let n = self.threads.count();
         let (w, seg) = (camera.width as usize, camera.width as usize + LANES);
         self.dirs.resize(3 * seg * camera.height as usize, 0.0);
-        self.threads.for_each_chunk(&mut self.dirs, 3 * seg, |y, row| ray_row(&view.basis, y as u32, w, row));
+        self.threads.for_each_chunk(&mut self.dirs, 3 * seg, |y, row| ray_row_dispatch(&view.basis, y as u32, w, row));
         let dirs = &self.dirs[..];
         self.keys.resize_with(n, Vec::new);
         let share = samples.len().div_ceil(n);
@@ -166,19 +166,51 @@ impl SphereSplat {
 }
 
 /// Row `y`'s unit ray directions into `row` (x components, then y, then z, each `w` pixels and
-/// [`LANES`] zeros): exactly `RayBasis::dir`.
-fn ray_row(b: &RayBasis, y: u32, w: usize, row: &mut [f32]) {
+/// [`LANES`] zeros): exactly `RayBasis::dir`, eight pixels at a time.
+#[inline(always)]
+fn ray_row<L: Lanes>(b: &RayBasis, y: u32, w: usize, row: &mut [f32]) {
     let seg = w + LANES;
-    for x in 0..w {
-        let d = b.dir(x as u32, y);
-        (row[x], row[seg + x], row[2 * seg + x]) = (d.x, d.y, d.z);
+    let lane = L::new([0.5, 1.5, 2.5, 3.5, 4.5, 5.5, 6.5, 7.5]);
+    let py = L::splat(y as f32 + 0.5);
+    for x in (0..w).step_by(LANES) {
+        // Pixel centres x + l + 0.5, exactly as `RayBasis::dir` forms them (integers below
+        // 2²⁴ and halves are exact in f32).
+        let d = ray_dirs(b, L::splat(x as f32) + lane, py);
+        let n = (w - x).min(LANES);
+        for (a, d) in d.iter().enumerate() {
+            row[a * seg + x..a * seg + x + n].copy_from_slice(&d.to_array()[..n]);
+        }
     }
 }
 
-/// Eight floats from `s` (at least eight long).
+/// [`ray_row`] compiled for the best instruction set this CPU has.
+fn ray_row_dispatch(b: &RayBasis, y: u32, w: usize, row: &mut [f32]) {
+    #[cfg(target_arch = "x86_64")]
+    if std::is_x86_feature_detected!("avx2") {
+        // SAFETY: the CPU supports AVX2 (checked just above).
+        return unsafe { ray_row_avx2(b, y, w, row) };
+    }
+    ray_row::<f32x8>(b, y, w, row)
+}
+
+/// [`ray_row`] on [`lanes::Avx2`] lanes, compiled with AVX2.
+///
+/// # Safety
+/// The CPU must support AVX2.
+#[cfg(target_arch = "x86_64")]
+#[target_feature(enable = "avx2")]
+unsafe fn ray_row_avx2(b: &RayBasis, y: u32, w: usize, row: &mut [f32]) {
+    // `Avx2`'s invariant holds: the caller guarantees AVX2.
+    ray_row::<lanes::Avx2>(b, y, w, row)
+}
+
+/// The first eight floats of `s` (at least eight long): one bounds check, one load.
 #[inline(always)]
 fn load<L: Lanes>(s: &[f32]) -> L {
-    L::new([s[0], s[1], s[2], s[3], s[4], s[5], s[6], s[7]])
+    match s.first_chunk::<8>() {
+        Some(a) => L::new(*a),
+        None => L::splat(0.0),
+    }
 }
 
 /// Splats `samples` (sample indices from `first` on) into `keys`: for each sphere, every pixel
