@@ -4,8 +4,8 @@
 //! (FPS, rays/s, ms) — the figures quoted in `docs/perf.md`.
 //!
 //! The frame is a server render of the MRI (`../shared/data`) when the server library and the
-//! data are there, else the synthetic depth-image cloud of the same size. The packet tracer is
-//! also timed on the same view rendered with the paper's radius (half a voxel diagonal) instead
+//! data are there, else the synthetic depth-image cloud of the same size. The packet tracer and
+//! the exact splatter are also timed on the same view rendered with the paper's radius (half a voxel diagonal) instead
 //! of the server's default (a pixel diagonal at the sample's depth).
 
 use criterion::{criterion_group, criterion_main, BenchmarkId, Criterion, Throughput};
@@ -92,10 +92,13 @@ fn summary(frame: &Frame, what: &str, scene: &Scene) {
         for res in [1024u32, 512] {
             let cam = warped(&paper, res);
             for threads in [1usize, 2] {
-                let mut r = PacketTracer::new(threads);
-                let s = median_secs(11, Duration::from_secs(4), || r.render(&ps, &cam, &mut img));
-                let rays = (res * res) as f64 / s / 1e6;
-                println!("| {} | {threads} | {res}² | {:.1} | {:.1} | {rays:.1} |", r.name(), s * 1e3, 1.0 / s);
+                let mut rs: Vec<Box<dyn Renderer>> =
+                    vec![Box::new(PacketTracer::new(threads)), Box::new(SphereSplat::new(threads))];
+                for r in rs.iter_mut() {
+                    let s = median_secs(11, Duration::from_secs(4), || r.render(&ps, &cam, &mut img));
+                    let rays = (res * res) as f64 / s / 1e6;
+                    println!("| {} | {threads} | {res}² | {:.1} | {:.1} | {rays:.1} |", r.name(), s * 1e3, 1.0 / s);
+                }
             }
         }
     }
