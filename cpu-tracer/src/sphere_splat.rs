@@ -47,8 +47,11 @@ struct View {
     u: [f64; 3],
     v: [f64; 3],
     w: [f64; 3],
-    tan_x: f64,
-    tan_y: f64,
+    /// Pixels per unit slope along x (`w / 2 / tan_x`) and y (`h / 2 / tan_y`).
+    px_x: f64,
+    px_y: f64,
+    half_w: f64,
+    half_h: f64,
     width: u32,
     height: u32,
 }
@@ -56,15 +59,6 @@ struct View {
 #[inline(always)]
 fn dot(a: [f64; 3], b: [f64; 3]) -> f64 {
     a[0] * b[0] + a[1] * b[1] + a[2] * b[2]
-}
-
-/// Range of `a / z` over a disc of centre `(a, z)` and radius `r` with `z > r`: the slopes of
-/// the two tangents from the origin.
-#[inline(always)]
-fn slopes(a: f64, z: f64, r: f64) -> (f64, f64) {
-    let denom = z * z - r * r;
-    let sq = (a * a + denom).sqrt();
-    ((a * z - r * sq) / denom, (a * z + r * sq) / denom)
 }
 
 impl View {
@@ -79,8 +73,10 @@ impl View {
             u: f(u),
             v: f(v),
             w: f(w),
-            tan_x: tan_y * camera.aspect() as f64,
-            tan_y,
+            px_x: 0.5 * camera.width as f64 / (tan_y * camera.aspect() as f64),
+            px_y: 0.5 * camera.height as f64 / tan_y,
+            half_w: 0.5 * camera.width as f64,
+            half_h: 0.5 * camera.height as f64,
             width: camera.width,
             height: camera.height,
         }
@@ -100,13 +96,17 @@ impl View {
             // Touches the eye plane: the projection is unbounded; test the whole viewport.
             return Some((0, self.width - 1, 0, self.height - 1));
         }
-        let (xl, xh) = slopes(cx, cz, r);
-        let (yl, yh) = slopes(cy, cz, r);
-        let (w, h) = (self.width as f64, self.height as f64);
-        let (x0, x1) =
-            pixel_span((xl / self.tan_x + 1.0) * 0.5 * w, (xh / self.tan_x + 1.0) * 0.5 * w, 0.0, self.width)?;
-        let (y0, y1) =
-            pixel_span((1.0 - yh / self.tan_y) * 0.5 * h, (1.0 - yl / self.tan_y) * 0.5 * h, 0.0, self.height)?;
+        // Per image axis, the range of `a / z` over the disc of centre `(a, z)` and radius `r`
+        // (`z > r`): the slopes `(a·z ∓ r·√(a² + z² − r²)) / (z² − r²)` of the two tangents
+        // from the eye. Both axes share `z² − r²`, so one division serves all four.
+        let denom = cz * cz - r * r;
+        let inv = 1.0 / denom;
+        let (sx, sy) = ((cx * cx + denom).sqrt(), (cy * cy + denom).sqrt());
+        let (xl, xh) = ((cx * cz - r * sx) * inv, (cx * cz + r * sx) * inv);
+        let (yl, yh) = ((cy * cz - r * sy) * inv, (cy * cz + r * sy) * inv);
+        // Slopes to continuous pixel coordinates: x = (s / tan_x + 1)·w/2, y = (1 − s / tan_y)·h/2.
+        let (x0, x1) = pixel_span(xl * self.px_x + self.half_w, xh * self.px_x + self.half_w, 0.0, self.width)?;
+        let (y0, y1) = pixel_span(self.half_h - yh * self.px_y, self.half_h - yl * self.px_y, 0.0, self.height)?;
         Some((x0, x1, y0, y1))
     }
 }
