@@ -38,6 +38,19 @@ impl Image {
         self.pixels.resize(camera.width as usize * camera.height as usize, BACKGROUND);
     }
 
+    /// What a renderer draws for a camera it cannot use: the background at the camera's
+    /// viewport if that is within `1..=max_viewport` on both axes, otherwise an empty (0×0)
+    /// image, so a bad camera never makes a renderer allocate.
+    pub fn reset_for_unusable(&mut self, camera: &Camera, max_viewport: u32) {
+        if (1..=max_viewport).contains(&camera.width) && (1..=max_viewport).contains(&camera.height) {
+            self.reset_for(camera);
+        } else {
+            self.width = 0;
+            self.height = 0;
+            self.pixels.clear();
+        }
+    }
+
     /// The pixel at `(x, y)`.
     pub fn get(&self, x: u32, y: u32) -> u32 {
         self.pixels[(y * self.width + x) as usize]

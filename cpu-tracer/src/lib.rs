@@ -117,13 +117,7 @@ pub(crate) fn trace_ids_with(
 pub(crate) fn begin_frame(scene: &Scene, camera: &Camera, out: &mut Image) -> bool {
     if let Err(e) = camera.validate(MAX_VIEWPORT) {
         warn_once(&WARNED_CAMERA, &format!("unusable camera: {e}"));
-        if (1..=MAX_VIEWPORT).contains(&camera.width) && (1..=MAX_VIEWPORT).contains(&camera.height) {
-            out.reset_for(camera);
-        } else {
-            out.width = 0;
-            out.height = 0;
-            out.pixels.clear();
-        }
+        out.reset_for_unusable(camera, MAX_VIEWPORT);
         return false;
     }
     out.reset_for(camera);

@@ -298,13 +298,7 @@ impl GpuTracer {
     /// empty (0×0) image: a bad camera never makes it allocate.
     pub fn try_render(&mut self, scene: &Scene, camera: &Camera, out: &mut Image) -> Result<(), GpuError> {
         if let Err(e) = camera.validate(MAX_VIEWPORT) {
-            if (1..=MAX_VIEWPORT).contains(&camera.width) && (1..=MAX_VIEWPORT).contains(&camera.height) {
-                out.reset_for(camera);
-            } else {
-                out.width = 0;
-                out.height = 0;
-                out.pixels.clear();
-            }
+            out.reset_for_unusable(camera, MAX_VIEWPORT);
             return Err(GpuError::BadCamera(e));
         }
         out.reset_for(camera);
