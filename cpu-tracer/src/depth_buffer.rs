@@ -7,7 +7,7 @@ use std::sync::atomic::{AtomicU64, Ordering};
 use volwarp_core::{Camera, Vec3, BACKGROUND};
 
 /// Empty pixel.
-const EMPTY: u64 = u64::MAX;
+pub(crate) const EMPTY: u64 = u64::MAX;
 
 /// The depth-test key of a hit at positive depth `t` on sample `prim`: the smaller key is the
 /// closer hit, and equal depths go to the smaller id (core's tie rule), because the bits of a
@@ -15,6 +15,12 @@ const EMPTY: u64 = u64::MAX;
 #[inline(always)]
 pub(crate) fn key(t: f32, prim: u32) -> u64 {
     ((t.to_bits() as u64) << 32) | prim as u64
+}
+
+/// The sample id of a key, `None` for [`EMPTY`].
+#[inline(always)]
+pub(crate) fn key_prim(k: u64) -> Option<u32> {
+    (k != EMPTY).then_some(k as u32)
 }
 
 /// Per-pixel atomic minimum of keys; threads splat concurrently without locks.
@@ -51,8 +57,7 @@ impl DepthBuffer {
     /// The sample id at pixel `i`, if any.
     #[inline(always)]
     pub(crate) fn prim(&self, i: usize) -> Option<u32> {
-        let k = self.keys.get(i)?.load(Ordering::Relaxed);
-        (k != EMPTY).then_some(k as u32)
+        key_prim(self.keys.get(i)?.load(Ordering::Relaxed))
     }
 
     /// Writes the shaded pixels (`out.len()` must equal the buffer's length).

@@ -13,7 +13,7 @@
 //! minimum at the end (keys order like depths, so the merge is the same depth test). Memory:
 //! 8 bytes per pixel per thread plus 12 per pixel for the direction table.
 
-use crate::depth_buffer::{key, pixel_span};
+use crate::depth_buffer::{key, key_prim, pixel_span, EMPTY};
 use crate::lanes::{self, ray_dirs, sphere_hits, Lanes};
 use crate::threads::Threads;
 use crate::{begin_frame, shade, NO_HIT};
@@ -21,9 +21,6 @@ use volwarp_core::renderer::{Image, Renderer};
 use volwarp_core::sample::Dequantizer;
 use volwarp_core::{Camera, RayBasis, Scene, Vec3, BACKGROUND};
 use wide::f32x8;
-
-/// Empty depth-buffer pixel.
-const EMPTY: u64 = u64::MAX;
 
 /// The exact sphere splatter (renderer name `splat`).
 #[derive(Debug)]
@@ -127,7 +124,7 @@ impl SphereSplat {
         if ok {
             self.splat(scene, camera);
             for (id, &k) in ids.iter_mut().zip(&self.keys[0]) {
-                *id = if k == EMPTY { NO_HIT } else { k as u32 };
+                *id = key_prim(k).unwrap_or(NO_HIT);
             }
         }
         ok
@@ -290,7 +287,7 @@ impl Renderer for SphereSplat {
             let (colors, keys) = (&scene.colors, &self.keys[0]);
             self.threads.for_each_chunk(&mut out.pixels, 1 << 14, |c, px| {
                 for (p, &k) in px.iter_mut().zip(&keys[c << 14..]) {
-                    *p = if k == EMPTY { BACKGROUND } else { shade(colors, k as u32) };
+                    *p = key_prim(k).map_or(BACKGROUND, |id| shade(colors, id));
                 }
             });
         }
