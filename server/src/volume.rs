@@ -389,15 +389,8 @@ impl Volume {
             let sz = nx as usize * ny as usize;
             let base = x0 + sy * y0 + sz * z0;
             if let Some(c) = self.data.get(base..base + sz + sy + 2) {
-                let (c000, c100, c010, c110) = (c[0], c[1], c[sy], c[sy + 1]);
-                let (c001, c101, c011, c111) = (c[sz], c[sz + 1], c[sz + sy], c[sz + sy + 1]);
-                let c00 = c000 + (c100 - c000) * fx;
-                let c10 = c010 + (c110 - c010) * fx;
-                let c01 = c001 + (c101 - c001) * fx;
-                let c11 = c011 + (c111 - c011) * fx;
-                let c0 = c00 + (c10 - c00) * fy;
-                let c1 = c01 + (c11 - c01) * fy;
-                return c0 + (c1 - c0) * fz;
+                let corners = [c[0], c[1], c[sy], c[sy + 1], c[sz], c[sz + 1], c[sz + sy], c[sz + sy + 1]];
+                return trilinear(corners, fx, fy, fz);
             }
         }
         self.sample_grid_clamped(g)
@@ -429,13 +422,7 @@ impl Volume {
         else {
             return 0.0;
         };
-        let c00 = c000 + (c100 - c000) * fx;
-        let c10 = c010 + (c110 - c010) * fx;
-        let c01 = c001 + (c101 - c001) * fx;
-        let c11 = c011 + (c111 - c011) * fx;
-        let c0 = c00 + (c10 - c00) * fy;
-        let c1 = c01 + (c11 - c01) * fy;
-        c0 + (c1 - c0) * fz
+        trilinear([c000, c100, c010, c110, c001, c101, c011, c111], fx, fy, fz)
     }
 
     /// Trilinear sample at world position `p`.
@@ -443,6 +430,19 @@ impl Volume {
     pub fn sample(&self, p: Vec3) -> f32 {
         self.sample_grid(p / self.spacing - 0.5)
     }
+}
+
+/// Trilinear blend of the corners `[c000, c100, c010, c110, c001, c101, c011, c111]` (x
+/// fastest) at fractions `(fx, fy, fz)`: along x, then y, then z.
+#[inline(always)]
+fn trilinear(c: [f32; 8], fx: f32, fy: f32, fz: f32) -> f32 {
+    let c00 = c[0] + (c[1] - c[0]) * fx;
+    let c10 = c[2] + (c[3] - c[2]) * fx;
+    let c01 = c[4] + (c[5] - c[4]) * fx;
+    let c11 = c[6] + (c[7] - c[6]) * fx;
+    let c0 = c00 + (c10 - c00) * fy;
+    let c1 = c01 + (c11 - c01) * fy;
+    c0 + (c1 - c0) * fz
 }
 
 /// Converts little- or big-endian voxel bytes to f32 (`bytes.len()` a multiple of the size).
