@@ -16,6 +16,38 @@ use core::ops::{Add, BitAnd, BitOr, Div, Mul, Sub};
 use volwarp_core::{RayBasis, Vec3};
 use wide::{f32x8, u32x8};
 
+/// Defines `$name`, which runs the kernel `$kernel::<L>` on the best lanes this CPU has: the
+/// instance `$avx2`, compiled with `#[target_feature(enable = "avx2")]` on [`Avx2`] lanes, where
+/// `is_x86_feature_detected!("avx2")` says the CPU has AVX2, and the portable `wide::f32x8`
+/// instance elsewhere. Both compute the same values (see the module docs), so the choice only
+/// changes the speed.
+macro_rules! dispatch {
+    ($(#[$doc:meta])* fn $name:ident / $avx2:ident => $kernel:ident($($arg:ident: $ty:ty),* $(,)?)) => {
+        $(#[$doc])*
+        fn $name($($arg: $ty),*) {
+            #[cfg(target_arch = "x86_64")]
+            if std::is_x86_feature_detected!("avx2") {
+                // SAFETY: the CPU supports AVX2 (checked just above).
+                return unsafe { $avx2($($arg),*) };
+            }
+            $kernel::<wide::f32x8>($($arg),*)
+        }
+
+        /// The kernel on [`crate::lanes::Avx2`] lanes, compiled with AVX2 (the lane methods
+        /// inline to ymm instructions).
+        ///
+        /// # Safety
+        /// The CPU must support AVX2.
+        #[cfg(target_arch = "x86_64")]
+        #[target_feature(enable = "avx2")]
+        unsafe fn $avx2($($arg: $ty),*) {
+            // `Avx2`'s invariant holds: the caller guarantees AVX2.
+            $kernel::<$crate::lanes::Avx2>($($arg),*)
+        }
+    };
+}
+pub(crate) use dispatch;
+
 /// `RayBasis::dir` for eight pixels whose centres are `(px, py)` (pixel index + 0.5): the same
 /// operations (`corner + du·px + dv·py`, then `d · (1 / sqrt(d·d))`), so the same unit
 /// directions bit for bit.

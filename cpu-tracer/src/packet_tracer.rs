@@ -32,7 +32,6 @@ use volwarp_core::sample::Dequantizer;
 use volwarp_core::sphere::BOX_T_FAR_SCALE;
 use volwarp_core::traversal::STACK_SIZE;
 use volwarp_core::{Camera, RayBasis, Scene};
-use wide::f32x8;
 
 use crate::lanes::{self, ray_dirs, sphere_hits, Lanes};
 
@@ -212,42 +211,17 @@ fn trace_packet<L: Lanes>(l: &Lbvh, p: &Packet<L>, entries: &[u32], stack: &mut 
     }
 }
 
-/// [`trace_band`] compiled for the best instruction set this CPU has: the same operations
-/// (AVX2 only widens the vectors to one ymm register; no fused multiply-add is ever formed), so
-/// the same result.
-fn trace_band_dispatch(
-    l: &Lbvh,
-    basis: &RayBasis,
-    width: u32,
-    band: usize,
-    rows: &mut [u32],
-    map: &(impl Fn(u32) -> u32 + Sync),
-) {
-    #[cfg(target_arch = "x86_64")]
-    if std::is_x86_feature_detected!("avx2") {
-        // SAFETY: the CPU supports AVX2 (checked just above).
-        return unsafe { trace_band_avx2(l, basis, width, band, rows, map) };
-    }
-    trace_band::<f32x8>(l, basis, width, band, rows, map)
-}
-
-/// [`trace_band`] on [`lanes::Avx2`] lanes, compiled with AVX2 (the lane methods inline to ymm
-/// instructions).
-///
-/// # Safety
-/// The CPU must support AVX2.
-#[cfg(target_arch = "x86_64")]
-#[target_feature(enable = "avx2")]
-unsafe fn trace_band_avx2(
-    l: &Lbvh,
-    basis: &RayBasis,
-    width: u32,
-    band: usize,
-    rows: &mut [u32],
-    map: &(impl Fn(u32) -> u32 + Sync),
-) {
-    // `Avx2`'s invariant holds: the caller guarantees AVX2.
-    trace_band::<lanes::Avx2>(l, basis, width, band, rows, map)
+lanes::dispatch! {
+    /// [`trace_band`] on the best lanes this CPU has (AVX2 only widens the vectors to one ymm
+    /// register; no fused multiply-add is ever formed), so the same result.
+    fn trace_band_dispatch / trace_band_avx2 => trace_band(
+        l: &Lbvh,
+        basis: &RayBasis,
+        width: u32,
+        band: usize,
+        rows: &mut [u32],
+        map: &(impl Fn(u32) -> u32 + Sync),
+    )
 }
 
 /// Traces band `band` (rows `band * BAND_ROWS ..`) of a `width`-wide image into `rows`,
@@ -346,6 +320,7 @@ mod tests {
     use crate::synthetic::{depth_image_frame, random_cloud};
     use crate::{build_scene, ScalarTracer};
     use volwarp_core::Vec3;
+    use wide::f32x8;
 
     /// The sample ids of every band traced by `band` (one thread).
     fn ids_by_band(scene: &Scene, cam: &Camera, band: impl Fn(&Lbvh, &RayBasis, u32, usize, &mut [u32])) -> Vec<u32> {

@@ -20,7 +20,6 @@ use crate::{begin_frame, shade, NO_HIT};
 use volwarp_core::renderer::{Image, Renderer};
 use volwarp_core::sample::Dequantizer;
 use volwarp_core::{Camera, RayBasis, Scene, Vec3, BACKGROUND};
-use wide::f32x8;
 
 /// The exact sphere splatter (renderer name `splat`).
 #[derive(Debug)]
@@ -180,25 +179,9 @@ fn ray_row<L: Lanes>(b: &RayBasis, y: u32, w: usize, row: &mut [f32]) {
     }
 }
 
-/// [`ray_row`] compiled for the best instruction set this CPU has.
-fn ray_row_dispatch(b: &RayBasis, y: u32, w: usize, row: &mut [f32]) {
-    #[cfg(target_arch = "x86_64")]
-    if std::is_x86_feature_detected!("avx2") {
-        // SAFETY: the CPU supports AVX2 (checked just above).
-        return unsafe { ray_row_avx2(b, y, w, row) };
-    }
-    ray_row::<f32x8>(b, y, w, row)
-}
-
-/// [`ray_row`] on [`lanes::Avx2`] lanes, compiled with AVX2.
-///
-/// # Safety
-/// The CPU must support AVX2.
-#[cfg(target_arch = "x86_64")]
-#[target_feature(enable = "avx2")]
-unsafe fn ray_row_avx2(b: &RayBasis, y: u32, w: usize, row: &mut [f32]) {
-    // `Avx2`'s invariant holds: the caller guarantees AVX2.
-    ray_row::<lanes::Avx2>(b, y, w, row)
+lanes::dispatch! {
+    /// [`ray_row`] on the best lanes this CPU has.
+    fn ray_row_dispatch / ray_row_avx2 => ray_row(b: &RayBasis, y: u32, w: usize, row: &mut [f32])
 }
 
 /// The first eight floats of `s` (at least eight long): one bounds check, one load.
@@ -254,26 +237,17 @@ fn splat_spheres<L: Lanes>(
     }
 }
 
-/// [`splat_spheres`] compiled for the best instruction set this CPU has (as the packet tracer:
-/// AVX2 widens the vectors; the operations, and so the image, stay the same).
-fn splat_dispatch(view: &View, dirs: &[f32], deq: &Dequantizer, samples: &[u64], first: u32, keys: &mut [u64]) {
-    #[cfg(target_arch = "x86_64")]
-    if std::is_x86_feature_detected!("avx2") {
-        // SAFETY: the CPU supports AVX2 (checked just above).
-        return unsafe { splat_avx2(view, dirs, deq, samples, first, keys) };
-    }
-    splat_spheres::<f32x8>(view, dirs, deq, samples, first, keys)
-}
-
-/// [`splat_spheres`] on [`lanes::Avx2`] lanes, compiled with AVX2.
-///
-/// # Safety
-/// The CPU must support AVX2.
-#[cfg(target_arch = "x86_64")]
-#[target_feature(enable = "avx2")]
-unsafe fn splat_avx2(view: &View, dirs: &[f32], deq: &Dequantizer, samples: &[u64], first: u32, keys: &mut [u64]) {
-    // `Avx2`'s invariant holds: the caller guarantees AVX2.
-    splat_spheres::<lanes::Avx2>(view, dirs, deq, samples, first, keys)
+lanes::dispatch! {
+    /// [`splat_spheres`] on the best lanes this CPU has (as the packet tracer: AVX2 widens the
+    /// vectors; the operations, and so the image, stay the same).
+    fn splat_dispatch / splat_avx2 => splat_spheres(
+        view: &View,
+        dirs: &[f32],
+        deq: &Dequantizer,
+        samples: &[u64],
+        first: u32,
+        keys: &mut [u64],
+    )
 }
 
 impl Renderer for SphereSplat {
