@@ -12,11 +12,15 @@
 //! | [`morton`] | Morton codes of quantized positions and their radix sort |
 //! | [`lbvh`] | Karras-style LBVH over the sorted codes, built into caller buffers |
 //! | [`sphere`] | first-hit ray–sphere and ray–box intersection |
+//! | [`stats`] | the median of measured figures |
 //! | [`traversal`] | the scalar reference traversal: the oracle for every fast tracer |
 //! | [`wire`] | the framed, versioned wire codec over `embedded-io` |
 //! | `scene` (feature `alloc`) | an owned, traceable scene built from a received frame |
 //! | `renderer` (feature `alloc`) | the one interface every way of drawing a scene implements |
+//! | [`renderer_kind`] | the one registry of renderers: names, client keys, capabilities |
+//! | `image_diff` (feature `alloc`) | identical-pixel share and largest channel difference of two images |
 //! | [`record`] | the record file of a received stream, for replay |
+//! | `png` (feature `png`) | saving and loading [`Image`]s as PNG files |
 //!
 //! The crate is `#![no_std]` and needs no allocator; the `alloc` feature adds owned
 //! conveniences and `std` only adds trait impls.
@@ -33,15 +37,21 @@ extern crate std;
 pub mod camera;
 pub mod compaction;
 pub mod heuristics;
+#[cfg(feature = "alloc")]
+pub mod image_diff;
 pub mod lbvh;
 pub mod morton;
+#[cfg(feature = "png")]
+pub mod png;
 pub mod record;
 #[cfg(feature = "alloc")]
 pub mod renderer;
+pub mod renderer_kind;
 pub mod sample;
 #[cfg(feature = "alloc")]
 pub mod scene;
 pub mod sphere;
+pub mod stats;
 pub mod traversal;
 pub mod wire;
 
@@ -49,12 +59,15 @@ mod math;
 
 pub use camera::{Camera, CameraError, Ray, RayBasis};
 pub use heuristics::{DepthPicker, FirstPass, FirstPassAccumulator, Heuristic};
+#[cfg(feature = "alloc")]
+pub use image_diff::ImageDiff;
 pub use lbvh::{Lbvh, Node};
 #[cfg(feature = "alloc")]
 pub use renderer::{Image, Renderer, BACKGROUND};
+pub use renderer_kind::{RendererKind, REGISTRY};
 pub use sample::{Bounds, Dequantizer, Quantizer};
 #[cfg(feature = "alloc")]
-pub use scene::Scene;
+pub use scene::{Scene, SceneError};
 pub use traversal::Hit;
 
 pub use glam::Vec3;

@@ -3,9 +3,9 @@
 //! Scene + camera + framebuffer in, image out.
 
 use crate::camera::Camera;
+use crate::renderer_kind::RendererKind;
 use crate::sample::pack_color;
 use crate::scene::Scene;
-use alloc::string::String;
 use alloc::vec;
 use alloc::vec::Vec;
 
@@ -64,8 +64,13 @@ impl Image {
 
 /// A way of drawing a [`Scene`] for a camera.
 pub trait Renderer {
-    /// Short name, as used in CSV files and the client's title bar (e.g. `spheres-cpu`).
-    fn name(&self) -> String;
+    /// Which renderer of the [`RendererKind`] registry this is.
+    fn kind(&self) -> RendererKind;
+
+    /// Its name, as used in CSV files and the client's title bar (e.g. `spheres-cpu`).
+    fn name(&self) -> &'static str {
+        self.kind().name()
+    }
 
     /// Draws `scene` as seen from `camera` into `out`, which it first resizes to the camera's
     /// viewport and clears to [`BACKGROUND`].

@@ -25,11 +25,62 @@ pub struct Scene {
     pub nodes: Vec<Node>,
 }
 
+/// Why a scene's buffers cannot be drawn (what [`Scene::check`] rejects).
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum SceneError {
+    /// Sample, color and node counts do not match (`n`, `n`, `n − 1`).
+    CountMismatch,
+    /// More samples than [`Scene::MAX_SAMPLES`].
+    TooManySamples,
+    /// The dequantizer has a non-finite origin, step or radius unit.
+    NonFiniteDequantizer,
+}
+
+impl core::fmt::Display for SceneError {
+    fn fmt(&self, f: &mut core::fmt::Formatter<'_>) -> core::fmt::Result {
+        f.write_str(match self {
+            SceneError::CountMismatch => "sample, color and node counts do not match",
+            SceneError::TooManySamples => "more than 2^30 samples",
+            SceneError::NonFiniteDequantizer => "dequantizer is not finite",
+        })
+    }
+}
+
+#[cfg(feature = "std")]
+impl std::error::Error for SceneError {}
+
 impl Scene {
+    /// The most samples a scene may hold: sample ids (and the GPU's packed keys) need the top
+    /// bits of a `u32` free.
+    pub const MAX_SAMPLES: usize = 1 << 30;
+
+    /// A scene with the frame's header and dequantizer but no samples: what a builder fills, and
+    /// what a renderer draws as background.
+    pub fn empty(header: &FrameHeader) -> Scene {
+        Scene { header: *header, deq: header.dequantizer(), samples: Vec::new(), colors: Vec::new(), nodes: Vec::new() }
+    }
+
+    /// The rules every renderer and builder relies on: one color per sample, `n − 1` nodes, at
+    /// most [`Scene::MAX_SAMPLES`] samples and a finite dequantizer. Returns the sample count.
+    pub fn check(&self) -> Result<u32, SceneError> {
+        let n = self.samples.len();
+        if self.colors.len() != n || self.nodes.len() != n.saturating_sub(1) {
+            return Err(SceneError::CountMismatch);
+        }
+        if n >= Self::MAX_SAMPLES {
+            return Err(SceneError::TooManySamples);
+        }
+        let d = &self.deq;
+        if !(d.min.is_finite() && d.step.is_finite() && d.radius_unit.is_finite()) {
+            return Err(SceneError::NonFiniteDequantizer);
+        }
+        Ok(n as u32)
+    }
+
     /// Builds the scene serially (the reference for parallel and GPU builders).
     pub fn build(frame: &Frame) -> Scene {
         let n = frame.samples.len();
-        let deq = Dequantizer::new(frame.header.bounds, frame.header.radius_unit);
+        let deq = frame.header.dequantizer();
         let mut keys = vec![SortKey::default(); n];
         let mut scratch = vec![SortKey::default(); n];
         make_keys(&frame.samples, &mut keys);

@@ -259,6 +259,13 @@ pub struct FrameHeader {
     pub count: u32,
 }
 
+impl FrameHeader {
+    /// The decoder of this frame's packed samples (its bounds and radius unit).
+    pub fn dequantizer(&self) -> crate::sample::Dequantizer {
+        crate::sample::Dequantizer::new(self.bounds, self.radius_unit)
+    }
+}
+
 /// An Error message.
 #[derive(Clone, Debug, PartialEq, Eq)]
 pub struct ErrorMsg {

@@ -1,0 +1,223 @@
+//! The one registry of renderers: every way of drawing a scene that volwarp offers, with its
+//! name (CSV files, `--renderer`, the window title), its key in the client (1–8) and what it can
+//! do. The client, the evaluation and every command line read this table; adding a renderer is
+//! one entry here plus its constructor (the compiler points at the `match`es that need it).
+
+/// What a renderer can do (its capabilities), for the client's menus and the evaluation.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub struct Capabilities {
+    /// It draws the exact first-hit sphere image (the same sample id per pixel as core's scalar
+    /// reference traversal, with the tie rule).
+    pub exact_spheres: bool,
+    /// It traverses the scene's LBVH (a client must build one before it draws).
+    pub needs_lbvh: bool,
+    /// It runs on a GPU (opened lazily; may be unavailable).
+    pub gpu: bool,
+}
+
+/// A renderer, by kind. The order of [`RendererKind::ALL`] is the client's key order.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Hash)]
+pub enum RendererKind {
+    /// SIMD packet sphere tracer over the LBVH (`spheres-cpu`, key 1).
+    SpheresCpu,
+    /// ZAL12 2.5D points, 1×1 pixel (`points1`, key 2).
+    Points1,
+    /// ZAL12 2.5D points, 2×2 pixels (`points2`, key 3).
+    Points2,
+    /// ZAL12 2.5D points, 3×3 pixels (`points3`, key 4).
+    Points3,
+    /// Exact object-order sphere splatting, no LBVH (`splat`, key 5).
+    Splat,
+    /// The frame as it was rendered, not warped: what a send-image system shows (`stale`, key 6).
+    Stale,
+    /// The wgpu compute sphere tracer (`spheres-gpu`, key 7).
+    SpheresGpu,
+    /// Core's scalar reference traversal per pixel (`spheres-scalar`, key 8).
+    SpheresScalar,
+}
+
+/// One row of the registry.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub struct RendererInfo {
+    /// The kind.
+    pub kind: RendererKind,
+    /// Its name.
+    pub name: &'static str,
+    /// What it is, in a few words (for `--help` and docs).
+    pub about: &'static str,
+    /// Its capabilities.
+    pub caps: Capabilities,
+}
+
+const fn caps(exact_spheres: bool, needs_lbvh: bool, gpu: bool) -> Capabilities {
+    Capabilities { exact_spheres, needs_lbvh, gpu }
+}
+
+/// The registry, in key order (key `k` selects `REGISTRY[k − 1]`).
+pub const REGISTRY: [RendererInfo; 8] = [
+    RendererInfo {
+        kind: RendererKind::SpheresCpu,
+        name: "spheres-cpu",
+        about: "SIMD packet sphere tracer (LBVH)",
+        caps: caps(true, true, false),
+    },
+    RendererInfo {
+        kind: RendererKind::Points1,
+        name: "points1",
+        about: "2.5D points, 1 px",
+        caps: caps(false, false, false),
+    },
+    RendererInfo {
+        kind: RendererKind::Points2,
+        name: "points2",
+        about: "2.5D points, 2 px",
+        caps: caps(false, false, false),
+    },
+    RendererInfo {
+        kind: RendererKind::Points3,
+        name: "points3",
+        about: "2.5D points, 3 px",
+        caps: caps(false, false, false),
+    },
+    RendererInfo {
+        kind: RendererKind::Splat,
+        name: "splat",
+        about: "exact sphere splatting (no LBVH)",
+        caps: caps(true, false, false),
+    },
+    RendererInfo {
+        kind: RendererKind::Stale,
+        name: "stale",
+        about: "the frame, not warped",
+        caps: caps(false, false, false),
+    },
+    RendererInfo {
+        kind: RendererKind::SpheresGpu,
+        name: "spheres-gpu",
+        about: "wgpu compute sphere tracer",
+        caps: caps(true, true, true),
+    },
+    RendererInfo {
+        kind: RendererKind::SpheresScalar,
+        name: "spheres-scalar",
+        about: "scalar reference sphere tracer",
+        caps: caps(true, true, false),
+    },
+];
+
+impl RendererKind {
+    /// Every renderer, in key order.
+    pub const ALL: [RendererKind; 8] = [
+        RendererKind::SpheresCpu,
+        RendererKind::Points1,
+        RendererKind::Points2,
+        RendererKind::Points3,
+        RendererKind::Splat,
+        RendererKind::Stale,
+        RendererKind::SpheresGpu,
+        RendererKind::SpheresScalar,
+    ];
+
+    /// The renderer a client starts with.
+    pub const DEFAULT: RendererKind = RendererKind::SpheresCpu;
+
+    /// Its row of [`REGISTRY`].
+    pub const fn info(self) -> &'static RendererInfo {
+        &REGISTRY[self.index()]
+    }
+
+    /// Its position in key order (0-based).
+    pub const fn index(self) -> usize {
+        match self {
+            RendererKind::SpheresCpu => 0,
+            RendererKind::Points1 => 1,
+            RendererKind::Points2 => 2,
+            RendererKind::Points3 => 3,
+            RendererKind::Splat => 4,
+            RendererKind::Stale => 5,
+            RendererKind::SpheresGpu => 6,
+            RendererKind::SpheresScalar => 7,
+        }
+    }
+
+    /// Its name (no allocation).
+    pub const fn name(self) -> &'static str {
+        self.info().name
+    }
+
+    /// Its key in the client (1–8).
+    pub const fn key(self) -> usize {
+        self.index() + 1
+    }
+
+    /// The renderer of a client key (1–8).
+    pub fn from_key(key: usize) -> Option<RendererKind> {
+        key.checked_sub(1).and_then(|i| Self::ALL.get(i)).copied()
+    }
+
+    /// The renderer of a name.
+    pub fn from_name(name: &str) -> Option<RendererKind> {
+        Self::ALL.iter().copied().find(|k| k.name() == name)
+    }
+
+    /// The 2.5D points renderer of an `n × n` footprint (`n` = 1, 2, 3).
+    pub fn points(n: u32) -> Option<RendererKind> {
+        match n {
+            1 => Some(RendererKind::Points1),
+            2 => Some(RendererKind::Points2),
+            3 => Some(RendererKind::Points3),
+            _ => None,
+        }
+    }
+}
+
+impl core::fmt::Display for RendererKind {
+    fn fmt(&self, f: &mut core::fmt::Formatter<'_>) -> core::fmt::Result {
+        f.write_str(self.name())
+    }
+}
+
+impl core::str::FromStr for RendererKind {
+    type Err = UnknownRenderer;
+    fn from_str(s: &str) -> Result<Self, Self::Err> {
+        RendererKind::from_name(s).ok_or(UnknownRenderer)
+    }
+}
+
+/// A name that is not in the [`REGISTRY`].
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub struct UnknownRenderer;
+
+impl core::fmt::Display for UnknownRenderer {
+    fn fmt(&self, f: &mut core::fmt::Formatter<'_>) -> core::fmt::Result {
+        f.write_str("unknown renderer (one of")?;
+        for r in REGISTRY {
+            write!(f, " {}", r.name)?;
+        }
+        f.write_str(")")
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn table_matches_kinds_keys_and_names() {
+        for (i, k) in RendererKind::ALL.iter().enumerate() {
+            assert_eq!(REGISTRY[i].kind, *k, "REGISTRY and ALL are in the same order");
+            assert_eq!(k.index(), i);
+            assert_eq!(RendererKind::from_key(k.key()), Some(*k));
+            assert_eq!(RendererKind::from_name(k.name()), Some(*k));
+            assert_eq!(k.name().parse::<RendererKind>(), Ok(*k));
+        }
+        let mut names: [&str; 8] = REGISTRY.map(|r| r.name);
+        names.sort_unstable();
+        assert!(names.windows(2).all(|w| w[0] != w[1]), "names are unique");
+        assert_eq!(RendererKind::from_key(0), None);
+        assert_eq!(RendererKind::from_key(9), None);
+        assert!("nope".parse::<RendererKind>().is_err());
+        assert_eq!(RendererKind::points(2), Some(RendererKind::Points2));
+        assert_eq!(RendererKind::points(4), None);
+    }
+}
