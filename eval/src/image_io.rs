@@ -1,43 +1,7 @@
-//! PNG files of [`Image`]s, and image strips (side-by-side tiles with gaps).
+//! Image strips (side-by-side tiles with gaps) and downscaling; PNG files are core's
+//! [`Image::save_png`] and [`Image::load_png`].
 
-use std::path::Path;
-use volwarp_core::sample::pack_color;
 use volwarp_core::Image;
-
-/// Why an image could not be read or written.
-#[derive(Debug)]
-pub struct ImageIoError(pub String);
-
-impl std::fmt::Display for ImageIoError {
-    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
-        f.write_str(&self.0)
-    }
-}
-
-impl std::error::Error for ImageIoError {}
-
-/// Writes an image as an RGBA PNG.
-pub fn save_png(img: &Image, path: &Path) -> Result<(), ImageIoError> {
-    if img.pixels.len() != img.width as usize * img.height as usize {
-        return Err(ImageIoError(format!("{}: inconsistent image buffer", path.display())));
-    }
-    image::save_buffer(path, img.as_rgba_bytes(), img.width, img.height, image::ExtendedColorType::Rgba8)
-        .map_err(|e| ImageIoError(format!("{}: {e}", path.display())))
-}
-
-/// Reads a PNG (any color type; converted to RGBA8) of at most `max_pixels` pixels.
-pub fn load_png(path: &Path, max_pixels: u64) -> Result<Image, ImageIoError> {
-    let err = |e: String| ImageIoError(format!("{}: {e}", path.display()));
-    let reader = image::ImageReader::open(path).map_err(|e| err(e.to_string()))?;
-    let reader = reader.with_guessed_format().map_err(|e| err(e.to_string()))?;
-    let (w, h) = reader.into_dimensions().map_err(|e| err(e.to_string()))?;
-    if w as u64 * h as u64 > max_pixels {
-        return Err(err(format!("{w}x{h} is larger than {max_pixels} pixels")));
-    }
-    let img = image::open(path).map_err(|e| err(e.to_string()))?.to_rgba8();
-    let pixels = img.pixels().map(|p| pack_color(p[0], p[1], p[2], p[3])).collect();
-    Ok(Image { width: img.width(), height: img.height(), pixels })
-}
 
 /// Tiles `rows` of equally sized images into one image with `gap` pixels of `gap_color`
 /// between tiles. Missing or differently sized tiles are left as gap color.
@@ -81,20 +45,14 @@ pub fn downscale(img: &Image, factor: u32) -> Image {
 #[cfg(test)]
 mod tests {
     use super::*;
+    use volwarp_core::sample::pack_color;
 
     #[test]
-    fn png_round_trip_and_strip_layout() {
+    fn strip_layout() {
         let a = Image { width: 3, height: 2, pixels: (0..6).map(|i| pack_color(i as u8 * 40, 1, 2, 255)).collect() };
-        let dir = std::env::temp_dir().join(format!("volwarp-io-{}", std::process::id()));
-        std::fs::create_dir_all(&dir).unwrap();
-        let p = dir.join("a.png");
-        save_png(&a, &p).unwrap();
-        assert_eq!(load_png(&p, 100).unwrap(), a);
-        assert!(load_png(&p, 5).is_err(), "size limit");
         let s = strip(&[vec![&a, &a], vec![&a]], 1, 0);
         assert_eq!((s.width, s.height), (7, 5));
         assert_eq!(s.get(4, 0), a.get(0, 0));
         assert_eq!(s.get(4, 3), 0, "missing tile stays gap color");
-        std::fs::remove_dir_all(&dir).ok();
     }
 }

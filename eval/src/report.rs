@@ -4,7 +4,7 @@
 use crate::charts::{self, Mark, Panel, Series, XAxis};
 use crate::csv::{num, Table};
 use crate::failure_modes::{run_case, CASES};
-use crate::image_io::{downscale, save_png, strip};
+use crate::image_io::{downscale, strip};
 use crate::quality::{self, DatasetResult, QualityOptions, Row, QUALITY_COLUMNS};
 use crate::roster::Entry;
 use crate::ErrorBox;
@@ -347,7 +347,7 @@ fn write_strip(r: &DatasetResult, path: &Path) -> Result<(), ErrorBox> {
     let rows: Vec<Vec<Image>> =
         [&r.strip.truth, &r.strip.spheres, &r.strip.points].iter().map(|v| v.iter().map(tile).collect()).collect();
     let refs: Vec<Vec<&Image>> = rows.iter().map(|v| v.iter().collect()).collect();
-    save_png(&strip(&refs, 4, volwarp_core::sample::pack_color(255, 255, 255, 255)), path)?;
+    strip(&refs, 4, volwarp_core::sample::pack_color(255, 255, 255, 255)).save_png(path)?;
     Ok(())
 }
 
@@ -399,7 +399,7 @@ pub fn failures(
     }
     t.write(&out.join("failures.csv"))?;
     let refs: Vec<Vec<&Image>> = pictures.iter().map(|v| v.iter().collect()).collect();
-    save_png(&strip(&refs, 3, volwarp_core::sample::pack_color(255, 255, 255, 255)), &out.join("failures.png"))?;
+    strip(&refs, 3, volwarp_core::sample::pack_color(255, 255, 255, 255)).save_png(&out.join("failures.png"))?;
     info(&format!(
         "wrote {} and failures.png (rows: {}; columns: truth, stale, points1, spheres-cpu, spheres-cpu-r2)",
         out.join("failures.csv").display(),
@@ -430,8 +430,8 @@ pub fn fixtures(out: &Path) -> Result<(), ErrorBox> {
         let e = r.iter_mut().find(|e| e.name == renderer).ok_or("renderer missing")?;
         let mut img = Image::new(0, 0);
         e.renderer.render(&scene, &cam, &mut img);
-        save_png(&truth, &out.join(format!("{name}_ref.png")))?;
-        save_png(&img, &out.join(format!("{name}_test.png")))?;
+        truth.save_png(&out.join(format!("{name}_ref.png")))?;
+        img.save_png(&out.join(format!("{name}_test.png")))?;
         info(&format!("fixture {name}"));
     }
     Ok(())

@@ -15,7 +15,8 @@
 
 use crate::charts::{self, Mark, Panel, Series, XAxis};
 use crate::csv::{num, Table};
-use crate::{psnr, ErrorBox, Metrics};
+use crate::metrics::psnr;
+use crate::{ErrorBox, Metrics};
 use rayon::prelude::*;
 use std::path::Path;
 use volwarp_core::sample::over_background;

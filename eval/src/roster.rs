@@ -4,8 +4,7 @@
 
 use volwarp_core::renderer::Renderer;
 use volwarp_core::wire::Frame;
-use volwarp_core::Scene;
-use volwarp_cpu_tracer::{PacketTracer, PointSplat, SphereSplat, StaleImage};
+use volwarp_core::{RendererKind, Scene};
 
 /// The radius scales of the sphere-size variants (`spheres-cpu-r0.5`, `spheres-cpu-r2`).
 pub const RADIUS_VARIANTS: [f32; 2] = [0.5, 2.0];
@@ -37,29 +36,26 @@ impl Default for RosterOptions {
     }
 }
 
-fn entry(name: &str, radius_scale: f32, renderer: Box<dyn Renderer>) -> Entry {
-    Entry { name: name.into(), radius_scale, gpu: false, renderer }
+/// A CPU renderer of the registry under its own name, at radius ×1.
+fn entry(kind: RendererKind, threads: usize) -> Entry {
+    let renderer = volwarp_cpu_tracer::create(kind, threads).expect("a CPU renderer");
+    Entry { name: kind.name().into(), radius_scale: 1.0, gpu: false, renderer }
 }
 
 /// The renderers, in the order of the CSV. The GPU tracer is included only if it is built in
 /// (feature `gpu`) and an adapter opens; otherwise a log line says why.
 pub fn roster(opts: RosterOptions) -> Vec<Entry> {
+    use RendererKind::*;
     let t = opts.threads;
-    let mut v = vec![
-        entry("stale", 1.0, Box::new(StaleImage::new(t))),
-        entry("points1", 1.0, Box::new(PointSplat::new(1, t))),
-        entry("points2", 1.0, Box::new(PointSplat::new(2, t))),
-        entry("points3", 1.0, Box::new(PointSplat::new(3, t))),
-        entry("spheres-cpu", 1.0, Box::new(PacketTracer::new(t))),
-    ];
+    let mut v: Vec<Entry> = [Stale, Points1, Points2, Points3, SpheresCpu].into_iter().map(|k| entry(k, t)).collect();
     if opts.gpu {
         if let Some(g) = gpu_entry() {
             v.push(g);
         }
     }
-    v.push(entry("splat", 1.0, Box::new(SphereSplat::new(t))));
+    v.push(entry(Splat, t));
     for s in RADIUS_VARIANTS {
-        v.push(entry(&format!("spheres-cpu-r{s}"), s, Box::new(PacketTracer::new(t))));
+        v.push(Entry { name: format!("{SpheresCpu}-r{s}"), radius_scale: s, ..entry(SpheresCpu, t) });
     }
     v
 }
@@ -68,8 +64,13 @@ pub fn roster(opts: RosterOptions) -> Vec<Entry> {
 fn gpu_entry() -> Option<Entry> {
     match volwarp_gpu_tracer::GpuTracer::new() {
         Ok(g) => {
-            log::info!("spheres-gpu on {}", g.context().describe());
-            Some(Entry { name: "spheres-gpu".into(), radius_scale: 1.0, gpu: true, renderer: Box::new(g) })
+            log::info!("{} on {}", RendererKind::SpheresGpu, g.context().describe());
+            Some(Entry {
+                name: RendererKind::SpheresGpu.name().into(),
+                radius_scale: 1.0,
+                gpu: true,
+                renderer: Box::new(g),
+            })
         }
         Err(e) => {
             log::warn!("spheres-gpu left out: {e}");

@@ -16,7 +16,7 @@ use crate::{median, ErrorBox};
 use std::path::Path;
 use std::time::Instant;
 use volwarp_core::wire::{CameraRequest, Frame};
-use volwarp_core::{Camera, Heuristic, Scene};
+use volwarp_core::{Camera, Heuristic, RendererKind, Scene};
 use volwarp_server::dataset::Dataset;
 use volwarp_server::Marcher;
 
@@ -144,7 +144,7 @@ pub fn measure(ds: &Dataset, heuristic: Heuristic, size: u32, runs: usize, threa
         fps[k] = 1000.0 / time_renderer(&mut cpu, &scene, c, runs);
         log::info!("table1: spheres-cpu view {} {:.1} FPS", k + 1, fps[k]);
     }
-    out.fps.push(("spheres-cpu".into(), fps));
+    out.fps.push((RendererKind::SpheresCpu.name().into(), fps));
     if gpu {
         gpu_part(&frame, &scene, &cams, runs, &mut out);
     }
@@ -182,7 +182,7 @@ fn gpu_part(frame: &Frame, scene: &Scene, cams: &[Camera; 5], runs: usize, out: 
         }
         log::info!("table1: spheres-gpu view {} {:.2} FPS", k + 1, fps[k]);
     }
-    out.fps.push(("spheres-gpu".into(), fps));
+    out.fps.push((RendererKind::SpheresGpu.name().into(), fps));
 }
 
 #[cfg(not(feature = "gpu"))]
@@ -219,7 +219,7 @@ impl Table1 {
             PAPER_FPS.iter().map(|f| format!("{f:.0}")).collect::<Vec<_>>().join(" | ")
         ));
         for (name, fps) in &self.fps {
-            let label = if name == "spheres-gpu" {
+            let label = if name == RendererKind::SpheresGpu.name() {
                 format!("spheres-gpu ({})", self.gpu_adapter.as_deref().unwrap_or("GPU"))
             } else {
                 format!("{name} (2 cores)")

@@ -1,10 +1,12 @@
 //! `volwarp-compare` end to end on a small record file (synthetic frames plus displayed
-//! cameras). Needs a GPU adapter (lavapipe in CI); `VOLWARP_SKIP_GPU=1` skips it explicitly.
+//! cameras) and on a recorded stream of real server frames. Needs a GPU adapter (lavapipe in CI); `VOLWARP_SKIP_GPU=1` skips it explicitly.
 
 use std::process::Command;
 use volwarp_core::record::{write_entry, write_magic, Entry};
 use volwarp_core::wire::{CameraRequest, VecWriter};
+use volwarp_core::Heuristic;
 use volwarp_gpu_tracer::synthetic::bumpy_surface;
+use volwarp_server::{Dataset, Marcher};
 
 #[test]
 fn compare_replays_a_record_file() {
@@ -58,5 +60,46 @@ fn compare_replays_a_record_file() {
     let out = Command::new(env!("CARGO_BIN_EXE_volwarp-compare")).arg(dir.join("bad")).output().unwrap();
     assert_eq!(out.status.code(), Some(1));
     assert!(String::from_utf8_lossy(&out.stderr).contains("not a volwarp record file"));
+    let _ = std::fs::remove_dir_all(&dir);
+}
+
+fn request(seq: u64, camera: volwarp_core::Camera, heuristic: Heuristic) -> CameraRequest {
+    CameraRequest { seq, camera, heuristic, radius_scale: 1.0 }
+}
+
+#[test]
+fn compare_replays_a_recorded_real_stream() {
+    if std::env::var("VOLWARP_SKIP_GPU").is_ok_and(|v| v == "1") {
+        eprintln!("VOLWARP_SKIP_GPU=1: GPU test skipped");
+        return;
+    }
+    let marcher = Marcher::from_dataset(&Dataset::default_bundled());
+    let cam = marcher.default_camera(128, 128);
+    let frames: Vec<_> = [(0.0, 0.0, Heuristic::Threshold), (35.0, 10.0, Heuristic::Gradient)]
+        .iter()
+        .enumerate()
+        .map(|(i, &(yaw, pitch, h))| marcher.render_frame(&request(i as u64, cam.orbit(yaw, pitch), h)).0)
+        .collect();
+    let mut bytes = Vec::new();
+    let mut w = VecWriter(&mut bytes);
+    write_magic(&mut w).unwrap();
+    for (i, f) in frames.iter().take(2).enumerate() {
+        let cam = f.header.camera;
+        write_entry(&mut w, &Entry::Frame { t_us: i as u64 * 100_000, frame: f.clone() }).unwrap();
+        for k in 1..=2u64 {
+            let req = request(10 + k, cam.orbit(4.0 * k as f32, 2.0), f.header.heuristic);
+            write_entry(&mut w, &Entry::Camera { t_us: i as u64 * 100_000 + k * 16_000, request: req }).unwrap();
+        }
+    }
+    let dir = std::env::temp_dir().join(format!("volwarp-compare-real-{}", std::process::id()));
+    std::fs::create_dir_all(&dir).unwrap();
+    let file = dir.join("ct.vwrec");
+    std::fs::write(&file, &bytes).unwrap();
+    let out = Command::new(env!("CARGO_BIN_EXE_volwarp-compare")).arg(&file).arg("--out").arg(&dir).output().unwrap();
+    let stdout = String::from_utf8_lossy(&out.stdout);
+    eprintln!("{stdout}{}", String::from_utf8_lossy(&out.stderr));
+    assert!(out.status.success(), "{:?}", out.status);
+    assert_eq!(stdout.lines().filter(|l| l.contains(" %  ")).count(), 4);
+    assert!(dir.join("frame0001_cam01.png").is_file());
     let _ = std::fs::remove_dir_all(&dir);
 }

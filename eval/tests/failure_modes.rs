@@ -1,11 +1,11 @@
-//! Every renderer driven into the cases where warping breaks down (`volwarp_tests::failure_modes`):
+//! Every renderer driven into the cases where warping breaks down (`volwarp_eval::failure_modes`):
 //! each must finish without panicking, produce a defined image (the viewport's size, every
 //! pixel opaque) and finite scores. The GPU tracer takes part where an adapter opens.
 
 use volwarp_core::BACKGROUND;
+use volwarp_eval::failure_modes::{run_case, CASES};
+use volwarp_eval::roster::{roster, RosterOptions};
 use volwarp_server::{Dataset, Marcher};
-use volwarp_tests::failure_modes::{run_case, CASES};
-use volwarp_tests::roster::{roster, RosterOptions};
 
 const SIZE: u32 = 64;
 

@@ -1,10 +1,9 @@
 //! Our PSNR, SSIM and FLIP against the reference implementations (scikit-image and NVIDIA's
-//! `flip-evaluator` 1.7) on the committed 64² image pairs in `tests/fixtures/` (truth and a
-//! warped render each; `tests/fixtures/reference.py` made `reference.csv`).
+//! `flip-evaluator` 1.7) on the committed 64² image pairs in `eval/fixtures/` (truth and a
+//! warped render each; `eval/fixtures/reference.py` made `reference.csv`).
 
 use std::path::Path;
-use volwarp_tests::image_io::load_png;
-use volwarp_tests::{flip, psnr, ssim};
+use volwarp_eval::metrics::{flip, psnr, ssim};
 
 #[test]
 fn metrics_match_the_reference_implementations() {
@@ -15,8 +14,8 @@ fn metrics_match_the_reference_implementations() {
         let f: Vec<&str> = line.split(',').collect();
         let (name, flip_ref, psnr_ref, ssim_ref) =
             (f[0], f[1].parse::<f64>().unwrap(), f[2].parse::<f64>().unwrap(), f[3].parse::<f64>().unwrap());
-        let a = load_png(&dir.join(format!("{name}_ref.png")), 1 << 20).unwrap();
-        let b = load_png(&dir.join(format!("{name}_test.png")), 1 << 20).unwrap();
+        let a = volwarp_core::Image::load_png(&dir.join(format!("{name}_ref.png")), 1 << 20).unwrap();
+        let b = volwarp_core::Image::load_png(&dir.join(format!("{name}_test.png")), 1 << 20).unwrap();
         let ours = flip::flip(&a, &b).unwrap();
         assert!((ours - flip_ref).abs() < 1e-5, "{name}: FLIP {ours} vs reference {flip_ref}");
         let p = psnr::psnr(&a, &b).unwrap();

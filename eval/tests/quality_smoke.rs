@@ -2,9 +2,9 @@
 //! scored at every angle, the GPU tracer (where present) agrees with the CPU tracer, the CSV has
 //! exactly the columns and the charts are drawn.
 
+use volwarp_eval::quality::{evaluate, QualityOptions, QUALITY_COLUMNS};
+use volwarp_eval::roster::{roster, RosterOptions};
 use volwarp_server::{Dataset, Marcher};
-use volwarp_tests::quality::{evaluate, QualityOptions, QUALITY_COLUMNS};
-use volwarp_tests::roster::{roster, RosterOptions};
 
 #[test]
 fn quality_sweep_writes_every_row_and_chart() {
@@ -36,17 +36,17 @@ fn quality_sweep_writes_every_row_and_chart() {
     assert_eq!(res.strip.truth.len(), 2);
     let dir = std::env::temp_dir().join(format!("volwarp-quality-{}", std::process::id()));
     let res_rows = res.rows.clone();
-    volwarp_tests::report::write_quality_for_test(&[(ds.name.clone(), res)], &dir).unwrap();
+    volwarp_eval::report::write_quality_for_test(&[(ds.name.clone(), res)], &dir).unwrap();
     let csv = std::fs::read_to_string(dir.join("quality.csv")).unwrap();
     assert_eq!(csv.lines().next().unwrap(), QUALITY_COLUMNS.join(","));
     assert_eq!(csv.lines().count(), 1 + 2 * r.len());
-    let parsed = volwarp_tests::report::parse_quality_csv(&csv).unwrap();
+    let parsed = volwarp_eval::report::parse_quality_csv(&csv).unwrap();
     assert_eq!(parsed.len(), 2 * r.len());
     assert!(parsed
         .iter()
         .zip(&res_rows)
         .all(|(a, b)| a.renderer == b.renderer && (a.metrics.flip - b.metrics.flip).abs() < 1e-4));
-    volwarp_tests::report::replot(&dir).unwrap();
+    volwarp_eval::report::replot(&dir).unwrap();
     for f in ["error_vs_angle.png", "speed_vs_accuracy.png", "heuristics.png", "strip.png", "dolly.csv"] {
         assert!(dir.join(f).is_file(), "{f} missing");
     }

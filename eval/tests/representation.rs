@@ -4,10 +4,10 @@
 
 use volwarp_core::renderer::Renderer;
 use volwarp_core::{Heuristic, Image};
+use volwarp_eval::camera_paths::orbit;
+use volwarp_eval::quality::frame_for;
+use volwarp_eval::representation_size::{render_spheres, sweep, FloatSamples};
 use volwarp_server::{Dataset, Marcher};
-use volwarp_tests::camera_paths::orbit;
-use volwarp_tests::quality::frame_for;
-use volwarp_tests::representation_size::{render_spheres, sweep, FloatSamples};
 
 #[test]
 fn float_splatter_draws_what_the_packet_tracer_draws() {

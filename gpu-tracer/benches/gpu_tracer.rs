@@ -11,9 +11,9 @@ use volwarp_cpu_tracer::PacketTracer;
 use volwarp_gpu_tracer::synthetic::bumpy_surface;
 use volwarp_gpu_tracer::GpuTracer;
 
-fn median(mut v: Vec<Duration>) -> Duration {
-    v.sort();
-    v[v.len() / 2]
+fn median(v: Vec<Duration>) -> Duration {
+    let mut secs: Vec<f64> = v.iter().map(Duration::as_secs_f64).collect();
+    Duration::from_secs_f64(volwarp_core::stats::median(&mut secs).unwrap_or(0.0))
 }
 
 fn time<T>(reps: usize, mut f: impl FnMut() -> T) -> Duration {

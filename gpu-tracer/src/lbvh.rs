@@ -25,7 +25,6 @@ use bytemuck::{Pod, Zeroable};
 use std::num::NonZeroU64;
 use std::time::{Duration, Instant};
 use volwarp_core::lbvh::Node;
-use volwarp_core::sample::Dequantizer;
 use volwarp_core::wire::Frame;
 use volwarp_core::Scene;
 
@@ -178,7 +177,7 @@ impl LbvhBuilder {
         }
         self.levels[counts.len()].ensure(ctx, 4)?;
 
-        let deq = Dequantizer::new(frame.header.bounds, frame.header.radius_unit);
+        let deq = frame.header.dequantizer();
         let base = BuildParams {
             n,
             shift: 0,
@@ -380,13 +379,7 @@ impl LbvhBuilder {
             )
         })?;
         let t3 = Instant::now();
-        let scene = Scene {
-            header: frame.header,
-            deq: Dequantizer::new(frame.header.bounds, frame.header.radius_unit),
-            samples,
-            colors,
-            nodes: nodes_v,
-        };
+        let scene = Scene { samples, colors, nodes: nodes_v, ..Scene::empty(&frame.header) };
         let timing = BuildTiming { upload: t1 - t0, build: t2 - t1, readback: t3 - t2 };
         log::debug!("GPU LBVH build of {n} samples: {timing:?}");
         Ok((scene, timing))

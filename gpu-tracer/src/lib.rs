@@ -11,7 +11,6 @@
 //! | [`tracer`] | [`GpuTracer`]: the sphere tracer (`trace.wgsl`), a [`Renderer`] named `spheres-gpu` |
 //! | [`lbvh`] | the LBVH build on the GPU (`lbvh.wgsl`): Morton codes, radix sort, Karras, fit |
 //! | [`buffers`] | buffers reused across frames, readback |
-//! | [`compare`] | CPU vs GPU image comparison: identical share, largest difference, PNGs |
 //! | [`synthetic`] | synthetic sample clouds (a bumpy surface) for tests and benchmarks |
 //!
 //! The shader mirrors core's ray formula, sample decoding, `sphere::intersect` operation by
@@ -24,7 +23,6 @@
 
 pub mod adapter;
 pub mod buffers;
-pub mod compare;
 pub mod lbvh;
 pub mod synthetic;
 pub mod tracer;

@@ -8,7 +8,8 @@ use bytemuck::{Pod, Zeroable};
 use std::time::{Duration, Instant};
 use volwarp_core::renderer::{Image, Renderer, BACKGROUND};
 use volwarp_core::wire::Frame;
-use volwarp_core::{Camera, RayBasis, Scene};
+use volwarp_core::RendererKind;
+use volwarp_core::{Camera, RayBasis, Scene, SceneError};
 
 /// Largest viewport side the tracer accepts.
 pub const MAX_VIEWPORT: u32 = 16384;
@@ -192,18 +193,13 @@ impl GpuTracer {
     }
 
     fn check_scene(scene: &Scene) -> Result<u32, GpuError> {
-        let n = scene.samples.len();
-        if scene.colors.len() != n || scene.nodes.len() != n.saturating_sub(1) {
-            return Err(GpuError::BadScene("sample, color and node counts do not match"));
-        }
-        if n >= (1 << 30) {
-            return Err(GpuError::BadScene("more than 2^30 samples"));
-        }
-        let d = &scene.deq;
-        if !(d.min.is_finite() && d.step.is_finite() && d.radius_unit.is_finite()) {
-            return Err(GpuError::BadScene("dequantizer is not finite"));
-        }
-        Ok(n as u32)
+        scene.check().map_err(|e| {
+            GpuError::BadScene(match e {
+                SceneError::CountMismatch => "sample, color and node counts do not match",
+                SceneError::TooManySamples => "more than 2^30 samples",
+                SceneError::NonFiniteDequantizer => "dequantizer is not finite",
+            })
+        })
     }
 
     fn ensure_scene_buffers(&mut self, n: usize) -> Result<(), GpuError> {
@@ -357,7 +353,7 @@ impl GpuTracer {
         if n >= (1 << 30) {
             return Err(GpuError::BadScene("more than 2^30 samples"));
         }
-        let deq = volwarp_core::Dequantizer::new(frame.header.bounds, frame.header.radius_unit);
+        let deq = frame.header.dequantizer();
         if !(frame.header.bounds.is_valid() && deq.step.is_finite() && deq.radius_unit.is_finite()) {
             return Err(GpuError::BadScene("frame bounds or radius unit are not finite"));
         }
@@ -401,8 +397,8 @@ impl GpuTracer {
 }
 
 impl Renderer for GpuTracer {
-    fn name(&self) -> String {
-        "spheres-gpu".into()
+    fn kind(&self) -> RendererKind {
+        RendererKind::SpheresGpu
     }
 
     /// Renders; a failure leaves the background image and is logged once (again only when the

@@ -3,9 +3,9 @@
 
 use volwarp_core::renderer::{Image, Renderer, BACKGROUND};
 use volwarp_core::wire::Frame;
+use volwarp_core::ImageDiff;
 use volwarp_core::{Camera, Scene};
 use volwarp_cpu_tracer::{PacketTracer, ScalarTracer};
-use volwarp_gpu_tracer::compare::{diff, ImageDiff};
 use volwarp_gpu_tracer::synthetic::bumpy_surface;
 use volwarp_gpu_tracer::GpuTracer;
 
@@ -29,7 +29,7 @@ fn cpu_image(scene: &Scene, cam: &Camera) -> Image {
 }
 
 fn check_match(what: &str, cpu: &Image, gpu: &Image) -> ImageDiff {
-    let d = diff(cpu, gpu).expect("same size");
+    let d = cpu.diff(gpu).expect("same size");
     let hit = cpu.pixels.iter().filter(|&&p| p != BACKGROUND).count();
     eprintln!(
         "{what}: {:.4} % identical ({} of {}), max channel diff {}, {} hit pixels",
@@ -115,7 +115,7 @@ fn gpu_trace_matches_the_scalar_oracle_exactly_on_small_scenes() {
         scalar.render(&scene, &cam, &mut want);
         let mut got = Image::new(1, 1);
         gpu.try_render(&scene, &cam, &mut got).unwrap();
-        assert_eq!(diff(&want, &got).unwrap().identical, 48 * 40, "{} samples", scene.samples.len());
+        assert_eq!(want.diff(&got).unwrap().identical, 48 * 40, "{} samples", scene.samples.len());
     }
 }
 

@@ -9,12 +9,13 @@ use clap::Parser;
 use std::path::PathBuf;
 use std::process::ExitCode;
 use std::time::Instant;
+use volwarp_core::image_diff::TARGET_IDENTICAL;
 use volwarp_core::record::{read_entry, read_magic, Entry};
 use volwarp_core::renderer::{Image, Renderer};
 use volwarp_core::wire::{Frame, Limits};
 use volwarp_core::{Camera, Scene};
 use volwarp_cpu_tracer::PacketTracer;
-use volwarp_gpu_tracer::compare::{diff, save_comparison, TARGET_IDENTICAL};
+use volwarp_eval::metrics::diff::save_comparison;
 use volwarp_gpu_tracer::GpuTracer;
 
 /// Replays a recorded volwarp stream through the CPU and GPU tracers and compares the images.
@@ -132,7 +133,7 @@ fn run(args: &Args) -> Result<bool, String> {
             let t = Instant::now();
             gpu.try_render(gscene, cam, &mut gpu_img).map_err(|e| format!("frame {fi}: {e}"))?;
             let gpu_ms = t.elapsed().as_secs_f64() * 1e3;
-            let d = diff(&cpu_img, &gpu_img).ok_or("image sizes differ")?;
+            let d = cpu_img.diff(&gpu_img).ok_or("image sizes differ")?;
             let ok = d.meets_target();
             all_ok &= ok;
             worst = worst.min(d.identical_share());

@@ -8,7 +8,7 @@
 //! volwarp-eval radius   [--volume FILE | --all] --out DIR
 //! volwarp-eval failures [--volume FILE] --out DIR
 //! volwarp-eval replot   --dir DIR
-//! volwarp-eval fixtures --out tests/fixtures
+//! volwarp-eval fixtures --out eval/fixtures
 //! ```
 //! Without `--volume`, the bundled dataset (`data/ct_head_quarter.nhdr`) is used.
 
@@ -16,10 +16,10 @@ use clap::{Args, Parser, Subcommand};
 use std::path::{Path, PathBuf};
 use std::time::Instant;
 use volwarp_core::Heuristic;
+use volwarp_eval::roster::{roster, RosterOptions};
+use volwarp_eval::{report, ErrorBox};
 use volwarp_server::dataset::{data_dir, Dataset};
 use volwarp_server::Marcher;
-use volwarp_tests::roster::{roster, RosterOptions};
-use volwarp_tests::{report, ErrorBox};
 
 #[derive(Parser)]
 #[command(name = "volwarp-eval", version, about = "volwarp evaluation: accuracy (PSNR, SSIM, FLIP) against speed")]
@@ -191,7 +191,7 @@ fn run(cli: Cli) -> Result<(), ErrorBox> {
                 vec![heuristic(&h)?]
             };
             let datasets = sel.datasets(&common)?;
-            let opts = volwarp_tests::quality::QualityOptions {
+            let opts = volwarp_eval::quality::QualityOptions {
                 size,
                 runs,
                 time_all_heuristics,
@@ -205,7 +205,7 @@ fn run(cli: Cli) -> Result<(), ErrorBox> {
             let volume = common.volume.clone().unwrap_or_else(|| PathBuf::from(report::MRI));
             let ds = Dataset::load(&volume, common.tf.as_deref())?;
             let gpu = !common.no_gpu;
-            volwarp_tests::table1::run(
+            volwarp_eval::table1::run(
                 &ds,
                 heuristic(&h)?,
                 size,
@@ -218,10 +218,10 @@ fn run(cli: Cli) -> Result<(), ErrorBox> {
         }
         Cmd::Bits { common, size, heuristic: h } => {
             let ds = load(common.volume.as_deref(), common.tf.as_deref())?;
-            volwarp_tests::representation_size::run(&ds, heuristic(&h)?, size, &common.out)
+            volwarp_eval::representation_size::run(&ds, heuristic(&h)?, size, &common.out)
         }
         Cmd::Radius { common, sel, size, heuristic: h, runs } => {
-            volwarp_tests::radius_model::run(&sel.datasets(&common)?, heuristic(&h)?, size, runs, &common.out)
+            volwarp_eval::radius_model::run(&sel.datasets(&common)?, heuristic(&h)?, size, runs, &common.out)
         }
         Cmd::Failures { common, size, heuristic: h } => {
             let ds = load(common.volume.as_deref(), common.tf.as_deref())?;

@@ -19,12 +19,12 @@
 //!
 //! All arithmetic is `f32` like the reference, in the same order, so the mean agrees with
 //! `flip_evaluator.evaluate(ref, test, "LDR")` to about 1e-6 (tested against committed
-//! fixtures in `tests/fixtures/`). The mean itself is accumulated in `f64`.
+//! fixtures in `eval/fixtures/`). The mean itself is accumulated in `f64`.
 
 // The constants are written as in the reference, digit for digit, so they can be compared.
 #![allow(clippy::excessive_precision)]
 
-use crate::psnr::same_shape;
+use super::psnr::same_shape;
 use rayon::prelude::*;
 use volwarp_core::Image;
 

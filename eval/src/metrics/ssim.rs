@@ -8,12 +8,12 @@
 //! `'valid'`), and the result is its mean. This equals
 //! `skimage.metrics.structural_similarity(ref_y, test_y, data_range=255, gaussian_weights=True,
 //! sigma=1.5, use_sample_covariance=False)` (which crops the same 5-pixel border), checked
-//! against it by the fixtures in `tests/fixtures/`.
+//! against it by the fixtures in `eval/fixtures/`.
 //!
 //! Images smaller than the window (under 11 pixels on a side) use one window over the whole
 //! image with uniform weights.
 
-use crate::psnr::same_shape;
+use super::psnr::same_shape;
 use rayon::prelude::*;
 use volwarp_core::Image;
 
