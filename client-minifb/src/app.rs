@@ -1,16 +1,16 @@
-//! Putting the client together: in-process server or `--connect`, connection, network thread,
+//! Putting the client together: a `volwarp-server` child process or `--connect`, connection, network thread,
 //! renderers, recorder, and one of the window / headless / bench loops.
 
 use crate::connection::connect;
 use crate::controls::home_camera;
 use crate::display::Display;
 use crate::error::ClientError;
-use crate::feed_server::FeedServer;
-use crate::local_server::LocalServer;
+use crate::feed_server::{FeedServer, PrerenderOptions};
 use crate::network::{NetConfig, Network};
 use crate::options::Options;
 use crate::record::Recorder;
 use crate::renderers::Renderers;
+use crate::server_process::{ServerProcess, ServerSpawn};
 use std::time::Duration;
 
 /// Runs the client as the command line says.
@@ -32,21 +32,33 @@ pub fn run(opts: &Options) -> Result<(), ClientError> {
         let step = crate::bench::DEG_PER_SECOND * interval.as_secs_f32();
         let count = ((360.0 / step).ceil() as usize).clamp(1, 64);
         log::info!("prerendering {count} frames of {}x{} ...", opts.size.0, opts.size.1);
-        let pre =
-            crate::feed_server::prerender(opts.size.0, opts.size.1, opts.heuristic, opts.radius_scale, count, step);
+        let pre = crate::feed_server::prerender(&PrerenderOptions {
+            width: opts.size.0,
+            height: opts.size.1,
+            heuristic: opts.heuristic,
+            radius_scale: opts.radius_scale,
+            count,
+            step_deg: step,
+            server_threads: opts.server_threads,
+            timeout: Duration::from_secs(opts.timeout_s.max(1)),
+        })?;
         let feed = FeedServer::start(pre.frames, interval)?;
         return run_connected(opts, &feed.addr().to_string());
     }
-    let delay = (opts.server_delay_ms > 0).then(|| Duration::from_millis(opts.server_delay_ms));
-    let local = LocalServer::start(delay, opts.server_threads)?;
-    let result = run_connected(opts, &local.addr().to_string());
-    local.shutdown();
+    let server = ServerProcess::spawn(&ServerSpawn {
+        frame_delay: (opts.server_delay_ms > 0).then(|| Duration::from_millis(opts.server_delay_ms)),
+        threads: opts.server_threads,
+        extra_args: opts.server_args(),
+        startup_timeout: Duration::from_secs(opts.timeout_s.max(1)),
+    })?;
+    let result = run_connected(opts, &server.addr().to_string());
+    drop(server);
     result
 }
 
 fn run_connected(opts: &Options, addr: &str) -> Result<(), ClientError> {
     let timeout = Duration::from_secs(opts.timeout_s.max(1));
-    let renderers = Renderers::new(&opts.renderer, opts.tracer_threads()).map_err(ClientError::Renderer)?;
+    let renderers = Renderers::new(opts.renderer, opts.tracer_threads()).map_err(ClientError::Renderer)?;
     let conn = connect(addr, opts.token.as_deref(), timeout)?;
     let home = home_camera(&conn.bounds, opts.size.0, opts.size.1);
     let recorder = opts.record.as_deref().map(Recorder::create).transpose()?;

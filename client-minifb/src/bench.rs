@@ -112,11 +112,7 @@ impl fmt::Display for BenchSummary {
 }
 
 fn median(mut v: Vec<f64>) -> f64 {
-    if v.is_empty() {
-        return f64::NAN;
-    }
-    v.sort_by(f64::total_cmp);
-    v[v.len() / 2]
+    volwarp_core::stats::median(&mut v).unwrap_or(f64::NAN)
 }
 
 /// Runs the bench and prints its summary to stdout.

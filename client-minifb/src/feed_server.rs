@@ -1,49 +1,77 @@
 //! A feed server for benchmarking the client alone: frames of the bundled dataset are rendered
-//! **before** the measurement (along the bench's orbit) and then served over loopback TCP at a
+//! by the real server **before** the measurement (along the bench's orbit) and then served over loopback TCP at a
 //! fixed pace, like a server that needs `interval` per frame — but without its ray marcher
 //! competing with the client for the CPU. Each frame carries the sequence number of the newest
 //! request, as a real server's would.
 
-use crate::connection::read_message_bytes;
+use crate::connection::{connect, read_message_bytes, send_bye, send_request, server_error};
 use crate::error::ClientError;
+use crate::server_process::{ServerProcess, ServerSpawn};
 use std::io::Write;
 use std::net::{SocketAddr, TcpListener, TcpStream};
 use std::sync::atomic::{AtomicBool, AtomicU64, Ordering};
 use std::sync::Arc;
 use std::thread::JoinHandle;
 use std::time::{Duration, Instant};
-use volwarp_core::wire::{self, CameraRequest, Hello, Limits, Message, HEADER_LEN};
-use volwarp_core::{Camera, Heuristic};
-use volwarp_server::{Dataset, Marcher};
+use volwarp_core::wire::{self, CameraRequest, Frame, Hello, Limits, Message};
+use volwarp_core::Heuristic;
 
-/// Prerendered frames (exact message bytes) and the volume's home camera.
+/// Prerendered frames and the volume's bounds.
 pub struct Prerendered {
-    /// Frame messages, header included.
-    pub frames: Vec<Vec<u8>>,
+    /// The frames, in orbit order.
+    pub frames: Vec<Frame>,
     /// The volume's bounds.
     pub bounds: volwarp_core::sample::Bounds,
 }
 
-/// Renders `count` frames of the bundled dataset for `home` orbited by `k × step_deg`.
-pub fn prerender(
-    width: u32,
-    height: u32,
-    heuristic: Heuristic,
-    radius_scale: f32,
-    count: usize,
-    step_deg: f32,
-) -> Prerendered {
-    let marcher = Marcher::from_dataset(&Dataset::default_bundled());
-    let bounds = marcher.volume().bounds();
-    let home: Camera = crate::controls::home_camera(&bounds, width, height);
-    let frames = (0..count.max(1))
-        .map(|k| {
-            let req = CameraRequest { seq: 0, camera: home.orbit(k as f32 * step_deg, 0.0), heuristic, radius_scale };
-            let (frame, _) = marcher.render_frame(&req);
-            wire::encode_to_vec(&Message::Frame(frame))
-        })
-        .collect();
-    Prerendered { frames, bounds }
+/// What to prerender.
+#[derive(Clone, Debug)]
+pub struct PrerenderOptions {
+    /// Viewport.
+    pub width: u32,
+    /// Viewport.
+    pub height: u32,
+    /// Depth heuristic.
+    pub heuristic: Heuristic,
+    /// Sphere radius scale.
+    pub radius_scale: f32,
+    /// Frames to render.
+    pub count: usize,
+    /// Degrees of orbit between frames.
+    pub step_deg: f32,
+    /// Marcher threads of the server (0: all cores).
+    pub server_threads: usize,
+    /// How long to wait for each frame.
+    pub timeout: Duration,
+}
+
+/// Renders `count` frames of the bundled dataset for the home camera orbited by `k × step_deg`,
+/// by the real `volwarp-server` (started as a child process and stopped again before the
+/// measurement).
+pub fn prerender(o: &PrerenderOptions) -> Result<Prerendered, ClientError> {
+    let server = ServerProcess::spawn(&ServerSpawn { threads: o.server_threads, ..ServerSpawn::default() })?;
+    let mut conn = connect(&server.addr().to_string(), None, o.timeout)?;
+    let home = crate::controls::home_camera(&conn.bounds, o.width, o.height);
+    let mut frames = Vec::with_capacity(o.count.max(1));
+    for k in 0..o.count.max(1) {
+        let seq = k as u64 + 1;
+        let camera = home.orbit(k as f32 * o.step_deg, 0.0);
+        let req = CameraRequest { seq, camera, heuristic: o.heuristic, radius_scale: o.radius_scale };
+        send_request(&mut conn.stream, &req).map_err(|e| ClientError::Io(format!("prerender: {e}")))?;
+        loop {
+            match read_message_bytes(&mut conn.stream, &conn.limits, "prerendering")?.1 {
+                Message::Frame(f) if f.header.seq == seq => {
+                    frames.push(f);
+                    break;
+                }
+                Message::Frame(_) => {}
+                Message::Error(e) => return Err(server_error(&e)),
+                _ => return Err(ClientError::Protocol("prerender: unexpected message".into())),
+            }
+        }
+    }
+    send_bye(&mut conn.stream);
+    Ok(Prerendered { frames, bounds: conn.bounds })
 }
 
 /// A running feed server.
@@ -53,13 +81,15 @@ pub struct FeedServer {
     thread: Option<JoinHandle<()>>,
 }
 
-fn set_seq(msg: &mut [u8], seq: u64) {
-    if msg.len() >= HEADER_LEN + 8 {
-        msg[HEADER_LEN..HEADER_LEN + 8].copy_from_slice(&seq.to_le_bytes());
-    }
+/// The frame's wire bytes, as answering request `seq` (encoded by core's codec).
+fn encoded(frame: &Frame, seq: u64) -> Vec<u8> {
+    let header = wire::FrameHeader { seq, ..frame.header };
+    let mut bytes = Vec::new();
+    let _ = wire::write_frame(&mut wire::VecWriter(&mut bytes), &header, &frame.samples, &frame.colors);
+    bytes
 }
 
-fn serve(listener: TcpListener, mut frames: Vec<Vec<u8>>, interval: Duration, stop: Arc<AtomicBool>) {
+fn serve(listener: TcpListener, frames: Vec<Frame>, interval: Duration, stop: Arc<AtomicBool>) {
     let Ok((mut s, _)) = listener.accept() else { return };
     if stop.load(Ordering::SeqCst) || frames.is_empty() {
         return;
@@ -76,8 +106,7 @@ fn serve(listener: TcpListener, mut frames: Vec<Vec<u8>>, interval: Duration, st
     if !matches!(read_message_bytes(&mut s, &limits, "feed"), Ok((_, Message::CameraRequest(_)))) {
         return;
     }
-    set_seq(&mut frames[0], 0);
-    if s.write_all(&frames[0]).is_err() {
+    if s.write_all(&encoded(&frames[0], 0)).is_err() {
         return;
     }
     // Track the newest request.
@@ -104,9 +133,8 @@ fn serve(listener: TcpListener, mut frames: Vec<Vec<u8>>, interval: Duration, st
         }
         // The frame arriving now was rendered for the camera of one interval ago.
         let n = frames.len();
-        let f = &mut frames[(k - 1) % n];
-        set_seq(f, latest.load(Ordering::SeqCst));
-        if s.write_all(f).is_err() {
+        let bytes = encoded(&frames[(k - 1) % n], latest.load(Ordering::SeqCst));
+        if s.write_all(&bytes).is_err() {
             return;
         }
     }
@@ -114,7 +142,7 @@ fn serve(listener: TcpListener, mut frames: Vec<Vec<u8>>, interval: Duration, st
 
 impl FeedServer {
     /// Serves `frames` (one client) on a loopback port, one every `interval`.
-    pub fn start(frames: Vec<Vec<u8>>, interval: Duration) -> Result<FeedServer, ClientError> {
+    pub fn start(frames: Vec<Frame>, interval: Duration) -> Result<FeedServer, ClientError> {
         let listener = TcpListener::bind("127.0.0.1:0").map_err(|e| ClientError::Io(format!("feed server: {e}")))?;
         let addr = listener.local_addr().map_err(|e| ClientError::Io(format!("feed server: {e}")))?;
         let stop = Arc::new(AtomicBool::new(false));

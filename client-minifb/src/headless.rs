@@ -7,20 +7,12 @@ use crate::error::ClientError;
 use crate::network::View;
 use crate::options::Options;
 use std::fmt::Write as _;
-use std::path::Path;
 use std::time::{Duration, Instant};
-use volwarp_core::renderer::Image;
 use volwarp_core::Camera;
 
 /// The header of `timings.csv`.
 pub const CSV_HEADER: &str =
     "frame,display_ms,frame_age_ms,samples,renderer,render_ms,frame_seq,new_frame,during_build";
-
-/// Saves an image as an RGBA PNG.
-pub fn save_png(path: &Path, image: &Image) -> Result<(), ClientError> {
-    image::save_buffer(path, image.as_rgba_bytes(), image.width, image.height, image::ExtendedColorType::Rgba8)
-        .map_err(|e| ClientError::Io(format!("cannot write {}: {e}", path.display())))
-}
 
 /// The PNG file name of display frame `i`.
 pub fn frame_file(i: usize) -> String {
@@ -69,7 +61,7 @@ pub fn run(opts: &Options, display: &mut Display, home: Camera) -> Result<(), Cl
         let report = display.frame(&view);
         let display_ms = t0.elapsed().as_secs_f64() * 1e3;
         display.check()?;
-        save_png(&out.join(frame_file(i as usize)), &display.image)?;
+        display.image.save_png(&out.join(frame_file(i as usize))).map_err(|e| ClientError::Io(e.to_string()))?;
         csv_line(&mut csv, i as usize, display_ms, &report, display.renderers.name());
         if let Some(p) = pace {
             let next = t_start + p * (i + 1);

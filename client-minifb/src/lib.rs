@@ -15,7 +15,7 @@
 //! | [`headless`] | the scripted orbit that writes PNG frames and `timings.csv` |
 //! | [`bench`](mod@bench) | the display-rate benchmark while frames are decoded and built |
 //! | [`record`] / [`replay`] | saving the received stream and playing it back offline |
-//! | [`local_server`] | the in-process server of the one-command demo |
+//! | [`server_process`] | the real `volwarp-server` as a child process (demo, `--prerender`) |
 //! | [`feed_server`] | prerendered frames served at a fixed pace, to benchmark the client alone |
 //! | [`options`], [`error`], [`app`] | command line, errors, putting it together |
 //!
@@ -30,12 +30,12 @@ pub mod display;
 pub mod error;
 pub mod feed_server;
 pub mod headless;
-pub mod local_server;
 pub mod network;
 pub mod options;
 pub mod record;
 pub mod renderers;
 pub mod replay;
+pub mod server_process;
 pub mod window;
 
 pub use app::run;

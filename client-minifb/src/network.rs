@@ -22,7 +22,6 @@ use std::sync::atomic::{AtomicBool, AtomicU64, Ordering};
 use std::sync::{Arc, Condvar, Mutex, MutexGuard};
 use std::thread::JoinHandle;
 use std::time::{Duration, Instant};
-use volwarp_core::sample::Dequantizer;
 use volwarp_core::wire::{CameraRequest, Frame, Limits, Message};
 use volwarp_core::{Camera, Heuristic, Scene};
 use volwarp_cpu_tracer::ParallelBuilder;
@@ -308,16 +307,6 @@ fn read_loop(sh: &Shared, mut stream: TcpStream, limits: Limits, recorder: Optio
     }
 }
 
-fn empty_scene(frame: &Frame) -> Scene {
-    Scene {
-        header: frame.header,
-        deq: Dequantizer::new(frame.header.bounds, frame.header.radius_unit),
-        samples: Vec::new(),
-        colors: Vec::new(),
-        nodes: Vec::new(),
-    }
-}
-
 fn build_loop(sh: &Shared, cfg: &NetConfig) {
     let mut builder = ParallelBuilder::new(cfg.build_threads);
     loop {
@@ -348,7 +337,7 @@ fn build_loop(sh: &Shared, cfg: &NetConfig) {
         let Some(p) = next else { continue };
         let busy = Busy::new(&sh.work_gen);
         let t0 = Instant::now();
-        let mut scene = lock(&sh.recycle).take().unwrap_or_else(|| empty_scene(&p.frame));
+        let mut scene = lock(&sh.recycle).take().unwrap_or_else(|| Scene::empty(&p.frame.header));
         builder.build_into(&p.frame, &mut scene);
         drop(p.frame);
         let build_ms = t0.elapsed().as_secs_f64() * 1e3;

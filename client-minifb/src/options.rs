@@ -3,7 +3,7 @@
 use crate::error::ClientError;
 use clap::Parser;
 use std::path::PathBuf;
-use volwarp_core::Heuristic;
+use volwarp_core::{Heuristic, RendererKind};
 
 /// The window controls, printed by `--help`.
 pub const CONTROLS: &str = "\
@@ -11,9 +11,7 @@ Window controls:
   left drag / arrow keys     orbit around the volume
   right drag / W A S D       pan
   wheel / + -                zoom
-  1..7                       renderer: 1 spheres-cpu, 2 points1, 3 points2, 4 points3,
-                             5 splat (exact sphere splatting), 6 stale (unwarped frame),
-                             7 spheres-gpu (GPU opened on first use); 8 spheres-scalar
+  1..8                       renderer (see --renderer; key k is the k-th of its list)
   H / Shift+H                next / previous depth heuristic (sent to the server)
   [ ]                        smaller / larger sample radius (sent to the server)
   R                          reset the camera
@@ -21,8 +19,9 @@ Window controls:
 The title shows display FPS, server frames per second, the age of the shown frame (time since
 its camera was requested), its sample count, the renderer and the heuristic.
 
-Without --connect an in-process server on 127.0.0.1 (random port) serves the bundled dataset
-over real TCP. With no display (DISPLAY and WAYLAND_DISPLAY unset, or the window cannot be
+Without --connect the client starts the real volwarp-server program (found beside this client,
+on PATH or in $VOLWARP_SERVER) on 127.0.0.1 (random port); it serves the bundled dataset, or
+--volume FILE, over real TCP and stops with the client. With no display (DISPLAY and WAYLAND_DISPLAY unset, or the window cannot be
 opened) the client exits with an error: use --headless.";
 
 /// Command-line options.
@@ -34,7 +33,7 @@ opened) the client exits with an error: use --headless.";
     after_help = CONTROLS
 )]
 pub struct Options {
-    /// Server address (host:port). Default: start an in-process server on the bundled dataset.
+    /// Server address (host:port). Default: start a `volwarp-server` child process on loopback.
     #[arg(long, value_name = "ADDR")]
     pub connect: Option<String>,
     /// Access token for the server.
@@ -67,9 +66,11 @@ pub struct Options {
     /// Threads of the network thread's LBVH build (0: all cores).
     #[arg(long, value_name = "N", default_value_t = 1)]
     pub build_threads: usize,
-    /// Renderer: spheres-cpu, spheres-scalar, splat, points1, points2, points3, stale, spheres-gpu.
-    #[arg(long, value_name = "NAME", default_value = "spheres-cpu")]
-    pub renderer: String,
+    /// Renderer, in key order (keys 1–8): spheres-cpu, points1, points2, points3, splat (exact
+    /// sphere splatting), stale (unwarped frame), spheres-gpu (GPU opened on first use),
+    /// spheres-scalar.
+    #[arg(long, value_name = "NAME", default_value_t = RendererKind::DEFAULT, value_parser = parse_renderer)]
+    pub renderer: RendererKind,
     /// Depth heuristic the server uses: entrance, exit, midpoint, threshold, peak, gradient,
     /// rel-threshold, en-ex-mean.
     #[arg(long, value_name = "NAME", default_value = "threshold", value_parser = parse_heuristic)]
@@ -78,10 +79,14 @@ pub struct Options {
     /// at the sample's depth), in (0, 16].
     #[arg(long, value_name = "X", default_value_t = 1.0)]
     pub radius_scale: f32,
-    /// In-process server: delay before each frame, in ms (slows the server down).
+    /// Child server (no --connect): the volume it serves (raw or NRRD path, as `volwarp-server
+    /// --volume`). Default: the bundled dataset.
+    #[arg(long, value_name = "FILE", conflicts_with = "connect")]
+    pub volume: Option<String>,
+    /// Child server (no --connect): delay before each frame, in ms (slows the server down).
     #[arg(long, value_name = "MS", default_value_t = 0)]
     pub server_delay_ms: u64,
-    /// In-process server: marcher threads (0: all cores).
+    /// Child server (no --connect): marcher threads (0: all cores).
     #[arg(long, value_name = "N", default_value_t = 0)]
     pub server_threads: usize,
     /// Extra delay of every received frame before it is built and shown, in ms.
@@ -116,6 +121,11 @@ pub fn parse_size(s: &str) -> Result<(u32, u32), String> {
     Ok((w, h))
 }
 
+/// Parses a renderer name of the registry.
+pub fn parse_renderer(s: &str) -> Result<RendererKind, String> {
+    s.parse::<RendererKind>().map_err(|e| format!("`{s}`: {e}"))
+}
+
 /// Parses a heuristic name.
 pub fn parse_heuristic(s: &str) -> Result<Heuristic, String> {
     Heuristic::from_name(s).ok_or_else(|| {
@@ -130,13 +140,6 @@ impl Options {
         if !(self.radius_scale > 0.0 && self.radius_scale <= 16.0) {
             return Err(ClientError::Usage("--radius-scale must be in (0, 16]".into()));
         }
-        if !crate::renderers::NAMES.contains(&self.renderer.as_str()) {
-            return Err(ClientError::Usage(format!(
-                "unknown renderer `{}` (one of {})",
-                self.renderer,
-                crate::renderers::NAMES.join(", ")
-            )));
-        }
         if self.headless && !self.bench && self.out.is_none() {
             return Err(ClientError::Usage("--headless needs --out DIR".into()));
         }
@@ -147,6 +150,11 @@ impl Options {
             return Err(ClientError::Usage("--seconds must be in (0, 3600)".into()));
         }
         Ok(())
+    }
+
+    /// Extra arguments of the child server (`--volume FILE`).
+    pub fn server_args(&self) -> Vec<String> {
+        self.volume.iter().flat_map(|v| ["--volume".to_string(), v.clone()]).collect()
     }
 
     /// The tracer thread count actually used.
@@ -177,8 +185,7 @@ mod tests {
     fn validation_catches_bad_combinations() {
         let o = Options::parse_from(["volwarp-client", "--headless"]);
         assert!(matches!(o.validate(), Err(ClientError::Usage(_))));
-        let o = Options::parse_from(["volwarp-client", "--renderer", "nope"]);
-        assert!(matches!(o.validate(), Err(ClientError::Usage(_))));
+        assert!(Options::try_parse_from(["volwarp-client", "--renderer", "nope"]).is_err());
         let o = Options::parse_from(["volwarp-client", "--headless", "--out", "x", "--renderer", "splat"]);
         assert_eq!(o.validate(), Ok(()));
     }

@@ -1,33 +1,28 @@
-//! The interchangeable renderers of the client and their live switching (keys 1–8). Every
-//! renderer draws the same scene for the same camera; the GPU tracer is opened lazily the first
-//! time it is chosen, and if no adapter can be opened the client says so and keeps the current
-//! renderer.
+//! The interchangeable renderers of the client and their live switching (keys 1–8 of core's
+//! [`RendererKind`] registry). Every renderer draws the same scene for the same camera; the GPU
+//! tracer is opened lazily the first time it is chosen, and if no adapter can be opened the
+//! client says so and keeps the current renderer.
 
 use volwarp_core::renderer::{Image, Renderer};
-use volwarp_core::{Camera, Scene};
-
-/// Renderer names in key order: key 1 selects `NAMES[0]`, …, key 8 `NAMES[7]`.
-pub const NAMES: [&str; 8] =
-    ["spheres-cpu", "points1", "points2", "points3", "splat", "stale", "spheres-gpu", "spheres-scalar"];
-
-/// The name of the GPU tracer.
-pub const GPU: &str = "spheres-gpu";
+use volwarp_core::{Camera, RendererKind, Scene};
 
 /// All renderers of a client, created on first use.
 pub struct Renderers {
     threads: usize,
     slots: Vec<Option<Box<dyn Renderer>>>,
-    current: usize,
+    current: RendererKind,
     gpu_error: Option<String>,
 }
 
-fn create(name: &str, threads: usize) -> Result<Box<dyn Renderer>, String> {
-    if name == GPU {
+/// Creates a renderer of the registry with `threads` CPU threads (0: all cores); the GPU tracer
+/// opens an adapter (an error names what to install when none opens).
+pub fn create(kind: RendererKind, threads: usize) -> Result<Box<dyn Renderer>, String> {
+    if kind == RendererKind::SpheresGpu {
         return create_gpu();
     }
-    match volwarp_cpu_tracer::renderer_by_name(name, threads) {
+    match volwarp_cpu_tracer::create(kind, threads) {
         Some(r) => Ok(r),
-        None => Err(format!("unknown renderer `{name}`")),
+        None => Err(format!("no CPU renderer `{kind}`")),
     }
 }
 
@@ -46,59 +41,61 @@ fn create_gpu() -> Result<Box<dyn Renderer>, String> {
 }
 
 impl Renderers {
-    /// The renderers, starting with `name` (created now: an unusable GPU is an error here).
-    pub fn new(name: &str, threads: usize) -> Result<Renderers, String> {
-        let current = NAMES.iter().position(|n| *n == name).ok_or_else(|| format!("unknown renderer `{name}`"))?;
-        let mut slots: Vec<Option<Box<dyn Renderer>>> = NAMES.iter().map(|_| None).collect();
-        slots[current] = Some(create(name, threads)?);
-        Ok(Renderers { threads, slots, current, gpu_error: None })
+    /// The renderers, starting with `kind` (created now: an unusable GPU is an error here).
+    pub fn new(kind: RendererKind, threads: usize) -> Result<Renderers, String> {
+        let mut slots: Vec<Option<Box<dyn Renderer>>> = RendererKind::ALL.iter().map(|_| None).collect();
+        slots[kind.index()] = Some(create(kind, threads)?);
+        Ok(Renderers { threads, slots, current: kind, gpu_error: None })
     }
 
-    /// Switches to `name`, creating it on first use. On failure (no GPU adapter) the current
+    /// Switches to `kind`, creating it on first use. On failure (no GPU adapter) the current
     /// renderer stays and the reason is returned (and logged once).
-    pub fn select(&mut self, name: &str) -> Result<(), String> {
-        let i = NAMES.iter().position(|n| *n == name).ok_or_else(|| format!("unknown renderer `{name}`"))?;
+    pub fn select(&mut self, kind: RendererKind) -> Result<(), String> {
+        let i = kind.index();
         if self.slots[i].is_none() {
-            if name == GPU {
-                if let Some(e) = &self.gpu_error {
-                    return Err(e.clone());
-                }
+            if let (true, Some(e)) = (kind.info().caps.gpu, &self.gpu_error) {
+                return Err(e.clone());
             }
-            match create(name, self.threads) {
+            match create(kind, self.threads) {
                 Ok(r) => self.slots[i] = Some(r),
                 Err(e) => {
-                    let e = format!("{name} unavailable: {e}; staying on {}", self.name());
+                    let e = format!("{kind} unavailable: {e}; staying on {}", self.name());
                     log::warn!("{e}");
-                    if name == GPU {
+                    if kind.info().caps.gpu {
                         self.gpu_error = Some(e.clone());
                     }
                     return Err(e);
                 }
             }
         }
-        if i != self.current {
-            log::info!("renderer: {name}");
+        if kind != self.current {
+            log::info!("renderer: {kind}");
         }
-        self.current = i;
+        self.current = kind;
         Ok(())
     }
 
     /// Switches to the renderer of key `1..=8`.
     pub fn select_key(&mut self, key: usize) -> Result<(), String> {
-        match key.checked_sub(1).and_then(|i| NAMES.get(i)) {
-            Some(name) => self.select(name),
+        match RendererKind::from_key(key) {
+            Some(kind) => self.select(kind),
             None => Err(format!("no renderer on key {key}")),
         }
     }
 
+    /// The current renderer.
+    pub fn kind(&self) -> RendererKind {
+        self.current
+    }
+
     /// The current renderer's name.
     pub fn name(&self) -> &'static str {
-        NAMES[self.current]
+        self.current.name()
     }
 
     /// Draws `scene` for `camera` with the current renderer.
     pub fn render(&mut self, scene: &Scene, camera: &Camera, out: &mut Image) {
-        match self.slots[self.current].as_mut() {
+        match self.slots[self.current.index()].as_mut() {
             Some(r) => r.render(scene, camera, out),
             None => out.reset_for(camera),
         }
@@ -115,20 +112,19 @@ mod tests {
         let frame = depth_image_frame(48, 1.0, 7);
         let scene = Scene::build(&frame);
         let cam = frame.header.camera.orbit(8.0, 4.0);
-        let mut r = Renderers::new("spheres-cpu", 1).unwrap();
+        let mut r = Renderers::new(RendererKind::SpheresCpu, 1).unwrap();
         let mut a = Image::new(1, 1);
         r.render(&scene, &cam, &mut a);
         r.select_key(8).unwrap();
-        assert_eq!(r.name(), "spheres-scalar");
+        assert_eq!(r.kind(), RendererKind::SpheresScalar);
         let mut b = Image::new(1, 1);
         r.render(&scene, &cam, &mut b);
         assert_eq!(a, b, "packet and scalar tracers draw the same image");
         assert!(a.pixels.iter().any(|&p| p != volwarp_core::BACKGROUND));
         for k in 1..=6 {
             r.select_key(k).unwrap();
-            assert_eq!(r.name(), NAMES[k - 1]);
+            assert_eq!(r.kind(), RendererKind::ALL[k - 1]);
         }
         assert!(r.select_key(9).is_err());
-        assert!(r.select("nope").is_err());
     }
 }

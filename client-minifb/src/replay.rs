@@ -7,7 +7,7 @@
 
 use crate::display::FrameReport;
 use crate::error::ClientError;
-use crate::headless::{csv_line, frame_file, save_png, CSV_HEADER};
+use crate::headless::{csv_line, frame_file, CSV_HEADER};
 use crate::options::Options;
 use crate::renderers::Renderers;
 use embedded_io_adapters::std::FromStd;
@@ -121,7 +121,7 @@ pub fn draw(replay: &mut Replay, renderers: &mut Renderers, req: &CameraRequest,
 /// Replays `path`: to PNG files with `--headless --out DIR`, else in a window.
 pub fn run(opts: &Options, path: &Path) -> Result<(), ClientError> {
     let mut replay = Replay::open(path, opts.build_threads)?;
-    let mut renderers = Renderers::new(&opts.renderer, opts.tracer_threads()).map_err(ClientError::Renderer)?;
+    let mut renderers = Renderers::new(opts.renderer, opts.tracer_threads()).map_err(ClientError::Renderer)?;
     if !opts.headless {
         return crate::window::run_replay(opts, &mut replay, &mut renderers);
     }
@@ -137,7 +137,7 @@ pub fn run(opts: &Options, path: &Path) -> Result<(), ClientError> {
         let t0 = Instant::now();
         let r = draw(&mut replay, &mut renderers, &req, &mut image);
         let ms = t0.elapsed().as_secs_f64() * 1e3;
-        save_png(&out.join(frame_file(i)), &image)?;
+        image.save_png(&out.join(frame_file(i))).map_err(|e| ClientError::Io(e.to_string()))?;
         csv_line(&mut csv, i, ms, &r, renderers.name());
         i += 1;
     }

@@ -250,11 +250,6 @@ pub fn run_replay(opts: &Options, replay: &mut Replay, renderers: &mut Renderers
     Ok(())
 }
 
-/// The home camera for a connection's volume bounds at the window size.
-pub fn home_for(bounds: &volwarp_core::sample::Bounds, opts: &Options) -> Camera {
-    home_camera(bounds, opts.size.0, opts.size.1)
-}
-
 #[cfg(test)]
 mod tests {
     use super::*;

@@ -2,8 +2,9 @@
 //! tracer's image; where none does, the switch fails with a clear message and the current
 //! renderer stays. Never a panic.
 
-use volwarp_client::renderers::{Renderers, GPU};
+use volwarp_client::renderers::Renderers;
 use volwarp_core::renderer::Image;
+use volwarp_core::RendererKind;
 use volwarp_core::Scene;
 use volwarp_cpu_tracer::synthetic::depth_image_frame;
 
@@ -12,12 +13,12 @@ fn gpu_switch_draws_the_cpu_image_or_explains_why_not() {
     let frame = depth_image_frame(64, 1.0, 3);
     let scene = Scene::build(&frame);
     let cam = frame.header.camera.orbit(10.0, 5.0);
-    let mut r = Renderers::new("spheres-cpu", 1).unwrap();
+    let mut r = Renderers::new(RendererKind::SpheresCpu, 1).unwrap();
     let mut cpu = Image::new(1, 1);
     r.render(&scene, &cam, &mut cpu);
-    match r.select(GPU) {
+    match r.select(RendererKind::SpheresGpu) {
         Ok(()) => {
-            assert_eq!(r.name(), GPU);
+            assert_eq!(r.name(), "spheres-gpu");
             let mut gpu = Image::new(1, 1);
             r.render(&scene, &cam, &mut gpu);
             assert_eq!((gpu.width, gpu.height), (cpu.width, cpu.height));
@@ -26,14 +27,14 @@ fn gpu_switch_draws_the_cpu_image_or_explains_why_not() {
             // Switching back and forth keeps the opened tracer.
             r.select_key(1).unwrap();
             r.select_key(7).unwrap();
-            assert_eq!(r.name(), GPU);
+            assert_eq!(r.name(), "spheres-gpu");
         }
         Err(e) => {
             eprintln!("no GPU adapter here: {e}");
             assert!(e.contains("unavailable") && e.contains("staying on spheres-cpu"), "{e}");
             assert_eq!(r.name(), "spheres-cpu");
             // A second try answers at once with the same reason.
-            assert_eq!(r.select(GPU).unwrap_err(), e);
+            assert_eq!(r.select(RendererKind::SpheresGpu).unwrap_err(), e);
         }
     }
 }

@@ -73,6 +73,7 @@ fn window_opens_and_shows_the_volume() {
     let mut child = Command::new(bin())
         .args(["--size", &size, "--threads", "1", "--frames", "3000", "--fps", "60"])
         .env("RUST_LOG", "info")
+        .env("VOLWARP_SERVER", server_program())
         .stdout(Stdio::null())
         .stderr(Stdio::piped())
         .spawn()

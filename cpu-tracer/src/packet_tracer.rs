@@ -31,6 +31,7 @@ use volwarp_core::renderer::{Image, Renderer};
 use volwarp_core::sample::Dequantizer;
 use volwarp_core::sphere::BOX_T_FAR_SCALE;
 use volwarp_core::traversal::STACK_SIZE;
+use volwarp_core::RendererKind;
 use volwarp_core::{Camera, RayBasis, Scene};
 
 use crate::lanes::{self, ray_dirs, sphere_hits, Lanes};
@@ -302,8 +303,8 @@ impl Default for PacketTracer {
 }
 
 impl Renderer for PacketTracer {
-    fn name(&self) -> String {
-        "spheres-cpu".into()
+    fn kind(&self) -> RendererKind {
+        RendererKind::SpheresCpu
     }
 
     fn render(&mut self, scene: &Scene, camera: &Camera, out: &mut Image) {

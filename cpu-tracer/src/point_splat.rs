@@ -8,6 +8,7 @@ use crate::begin_frame;
 use crate::depth_buffer::{key, DepthBuffer, Projector};
 use crate::threads::Threads;
 use volwarp_core::renderer::{Image, Renderer};
+use volwarp_core::RendererKind;
 use volwarp_core::{Camera, Scene};
 
 /// Samples per unit of parallel work.
@@ -73,8 +74,8 @@ pub(crate) fn splat_points(
 }
 
 impl Renderer for PointSplat {
-    fn name(&self) -> String {
-        format!("points{}", self.size)
+    fn kind(&self) -> RendererKind {
+        RendererKind::points(self.size).unwrap_or(RendererKind::Points3)
     }
 
     fn render(&mut self, scene: &Scene, camera: &Camera, out: &mut Image) {

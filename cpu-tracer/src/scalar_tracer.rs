@@ -4,6 +4,7 @@
 use crate::threads::Threads;
 use crate::{begin_frame, shade, NO_HIT};
 use volwarp_core::renderer::{Image, Renderer};
+use volwarp_core::RendererKind;
 use volwarp_core::{Camera, Scene};
 
 /// Rows per unit of parallel work.
@@ -41,8 +42,8 @@ impl ScalarTracer {
 }
 
 impl Renderer for ScalarTracer {
-    fn name(&self) -> String {
-        "spheres-scalar".into()
+    fn kind(&self) -> RendererKind {
+        RendererKind::SpheresScalar
     }
 
     fn render(&mut self, scene: &Scene, camera: &Camera, out: &mut Image) {

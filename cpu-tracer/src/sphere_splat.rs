@@ -19,6 +19,7 @@ use crate::threads::Threads;
 use crate::{begin_frame, shade, NO_HIT};
 use volwarp_core::renderer::{Image, Renderer};
 use volwarp_core::sample::Dequantizer;
+use volwarp_core::RendererKind;
 use volwarp_core::{Camera, RayBasis, Scene, Vec3, BACKGROUND};
 
 /// The exact sphere splatter (renderer name `splat`).
@@ -251,8 +252,8 @@ lanes::dispatch! {
 }
 
 impl Renderer for SphereSplat {
-    fn name(&self) -> String {
-        "splat".into()
+    fn kind(&self) -> RendererKind {
+        RendererKind::Splat
     }
 
     fn render(&mut self, scene: &Scene, camera: &Camera, out: &mut Image) {

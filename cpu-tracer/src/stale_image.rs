@@ -9,6 +9,7 @@ use crate::point_splat::splat_points;
 use crate::threads::Threads;
 use crate::{begin_frame, MAX_VIEWPORT};
 use volwarp_core::renderer::{Image, Renderer};
+use volwarp_core::RendererKind;
 use volwarp_core::{Camera, Scene};
 
 /// The stale-image baseline (renderer name `stale`).
@@ -34,8 +35,8 @@ fn nearest(i: u32, dst: u32, src: u32) -> usize {
 }
 
 impl Renderer for StaleImage {
-    fn name(&self) -> String {
-        "stale".into()
+    fn kind(&self) -> RendererKind {
+        RendererKind::Stale
     }
 
     fn render(&mut self, scene: &Scene, camera: &Camera, out: &mut Image) {

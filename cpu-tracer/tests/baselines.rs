@@ -5,11 +5,10 @@ mod common;
 
 use volwarp_core::renderer::{Image, Renderer};
 use volwarp_core::sample::over_background;
+use volwarp_core::RendererKind;
 use volwarp_core::{Camera, Scene, Vec3, BACKGROUND};
 use volwarp_cpu_tracer::synthetic::{depth_image_frame, one_point_cloud, random_cloud};
-use volwarp_cpu_tracer::{
-    build_scene, renderer_by_name, PacketTracer, PointSplat, SphereSplat, StaleImage, NO_HIT, RENDERER_NAMES,
-};
+use volwarp_cpu_tracer::{build_scene, cpu_kinds, create, PacketTracer, PointSplat, SphereSplat, StaleImage, NO_HIT};
 
 fn render(r: &mut dyn Renderer, scene: &Scene, cam: &Camera) -> Image {
     let mut img = Image::new(1, 1);
@@ -70,16 +69,18 @@ fn renderers_share_colors_and_names() {
         let want = if id == NO_HIT { BACKGROUND } else { over_background(scene.colors[id as usize], BACKGROUND) };
         assert_eq!(traced.pixels[i], want);
     }
-    let scalar = render(&mut *renderer_by_name("spheres-scalar", 2).unwrap(), &scene, &cam);
+    let scalar = render(&mut *create(RendererKind::SpheresScalar, 2).unwrap(), &scene, &cam);
     assert_eq!(scalar, traced);
-    for name in RENDERER_NAMES {
-        let mut r = renderer_by_name(name, 2).unwrap();
-        assert_eq!(r.name(), name);
+    assert_eq!(cpu_kinds().count(), 7, "every registry entry but the GPU tracer");
+    for kind in cpu_kinds() {
+        let mut r = create(kind, 2).unwrap();
+        assert_eq!(r.kind(), kind);
+        let name = kind.name();
         let img = render(&mut *r, &scene, &cam);
         assert!(img.pixels.iter().any(|&p| p != BACKGROUND), "{name} draws something");
         assert!(img.pixels.iter().all(|&p| p >> 24 == 255), "{name}: opaque pixels");
     }
-    assert!(renderer_by_name("nope", 1).is_none());
+    assert!(create(RendererKind::SpheresGpu, 1).is_none());
 }
 
 #[test]

@@ -5,10 +5,10 @@ use volwarp_core::renderer::Image;
 use volwarp_core::wire::Frame;
 use volwarp_core::{Camera, Scene, Vec3, BACKGROUND};
 use volwarp_cpu_tracer::synthetic::{one_point_cloud, random_cloud};
-use volwarp_cpu_tracer::{build_scene, renderer_by_name, PacketTracer, RENDERER_NAMES};
+use volwarp_cpu_tracer::{build_scene, cpu_kinds, create, PacketTracer};
 
 fn all_renderers() -> Vec<Box<dyn volwarp_core::Renderer + Send>> {
-    RENDERER_NAMES.iter().flat_map(|n| [renderer_by_name(n, 1).unwrap(), renderer_by_name(n, 2).unwrap()]).collect()
+    cpu_kinds().flat_map(|k| [create(k, 1).unwrap(), create(k, 2).unwrap()]).collect()
 }
 
 #[test]

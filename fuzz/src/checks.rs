@@ -205,7 +205,7 @@ pub fn check_frame(h: &FrameHeader, samples: &[u64], colors: &[u32], limits: &Li
     check_camera(&h.camera, limits);
     assert!(h.bounds.is_valid(), "accepted bounds are invalid: {:?}", h.bounds);
     assert!(h.radius_unit > 0.0 && (h.radius_unit * RADIUS_MAX as f32).is_finite(), "radius unit {}", h.radius_unit);
-    let deq = Dequantizer::new(h.bounds, h.radius_unit);
+    let deq = h.dequantizer();
     for &s in samples {
         let c = deq.center(s);
         assert!(c.is_finite(), "sample {s:#x} decodes to a non-finite center {c:?} (bounds {:?})", h.bounds);

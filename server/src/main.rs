@@ -121,6 +121,10 @@ struct NetArgs {
     /// Artificial delay before each frame, in milliseconds (latency demos).
     #[arg(long, default_value_t = 0)]
     frame_delay_ms: u64,
+    /// Exit when standard input reaches its end: a parent that started this server as a child
+    /// (the client's demo) takes it down with it, even if the parent is killed.
+    #[arg(long)]
+    exit_on_stdin_eof: bool,
 }
 
 #[derive(Args, Debug)]
@@ -216,6 +220,13 @@ fn run(cli: Cli) -> Result<(), String> {
             println!("listening on {}", server.local_addr());
             use std::io::Write;
             let _ = std::io::stdout().flush();
+            if n.exit_on_stdin_eof {
+                std::thread::spawn(|| {
+                    let _ = std::io::copy(&mut std::io::stdin().lock(), &mut std::io::sink());
+                    log::info!("standard input closed: the parent is gone, exiting");
+                    std::process::exit(0);
+                });
+            }
             server.run();
             Ok(())
         }
@@ -224,8 +235,7 @@ fn run(cli: Cli) -> Result<(), String> {
             let t = Instant::now();
             let img = marcher.render_image(&cam);
             log::info!("rendered {}x{} in {:.1} ms", cam.width, cam.height, t.elapsed().as_secs_f64() * 1e3);
-            image::save_buffer(&out, img.as_rgba_bytes(), img.width, img.height, image::ExtendedColorType::Rgba8)
-                .map_err(|e| format!("{}: {e}", out.display()))?;
+            img.save_png(&out).map_err(|e| e.to_string())?;
             println!("wrote {}", out.display());
             Ok(())
         }

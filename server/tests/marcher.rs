@@ -2,7 +2,7 @@
 //! fast paths (empty-space skipping, parallel compaction) against the plain ones.
 
 use std::sync::Arc;
-use volwarp_core::sample::{over_background, pack_color_f32, Dequantizer};
+use volwarp_core::sample::{over_background, pack_color_f32};
 use volwarp_core::wire::CameraRequest;
 use volwarp_core::{Camera, Heuristic, Vec3, BACKGROUND};
 use volwarp_server::transfer_function::TransferFunction;
@@ -160,7 +160,7 @@ fn frame_samples_sit_on_their_rays() {
         assert_eq!(frame.header.camera, cam);
         assert_eq!(frame.header.seq, 3);
         assert_eq!(frame.header.bounds, ds.volume.bounds());
-        let deq = Dequantizer::new(frame.header.bounds, frame.header.radius_unit);
+        let deq = frame.header.dequantizer();
         let quantum = ds.volume.extent().max_element() / 262143.0;
         let basis = cam.ray_basis();
         let mut j = 0;

@@ -14,6 +14,30 @@ pub fn bin() -> &'static str {
     env!("CARGO_BIN_EXE_volwarp-client")
 }
 
+/// The `volwarp-server` program the client starts when no `--connect` is given, beside the
+/// client binary; built here (same profile and target dir) if this test run did not build it.
+pub fn server_program() -> PathBuf {
+    static PROGRAM: std::sync::OnceLock<PathBuf> = std::sync::OnceLock::new();
+    PROGRAM
+        .get_or_init(|| {
+            let client = Path::new(bin());
+            let dir = client.parent().expect("the client binary is in a folder");
+            let program = dir.join(format!("volwarp-server{}", std::env::consts::EXE_SUFFIX));
+            if !program.is_file() {
+                let cargo = std::env::var_os("CARGO").unwrap_or_else(|| "cargo".into());
+                let mut cmd = Command::new(cargo);
+                cmd.args(["build", "--quiet", "-p", "volwarp-server", "--bin", "volwarp-server"]);
+                if dir.ends_with("release") {
+                    cmd.arg("--release");
+                }
+                let ok = cmd.status().map(|s| s.success()).unwrap_or(false);
+                assert!(ok && program.is_file(), "could not build {}", program.display());
+            }
+            program
+        })
+        .clone()
+}
+
 /// A fresh scratch folder under the target dir.
 pub fn scratch(name: &str) -> PathBuf {
     let d = Path::new(env!("CARGO_TARGET_TMPDIR")).join(format!("client-{name}-{}", std::process::id()));
@@ -27,6 +51,7 @@ pub fn run(args: &[&str], limit: Duration) -> Output {
     let mut child = Command::new(bin())
         .args(args)
         .env("RUST_LOG", "info")
+        .env("VOLWARP_SERVER", server_program())
         .stdout(Stdio::piped())
         .stderr(Stdio::piped())
         .spawn()

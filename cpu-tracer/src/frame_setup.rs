@@ -1,0 +1,62 @@
+//! What every CPU renderer does before it draws: validate the camera and the scene (core's
+//! [`Scene::check`]), size and clear the output, and draw the background (with one warning)
+//! for anything unusable; and the color a sample-id pixel shows.
+
+use crate::{MAX_VIEWPORT, NO_HIT};
+use std::sync::atomic::{AtomicBool, Ordering};
+use volwarp_core::renderer::Image;
+use volwarp_core::sample::over_background;
+use volwarp_core::{Camera, Scene, BACKGROUND};
+
+static WARNED_CAMERA: AtomicBool = AtomicBool::new(false);
+static WARNED_SCENE: AtomicBool = AtomicBool::new(false);
+
+fn warn_once(flag: &AtomicBool, msg: &str) {
+    if !flag.swap(true, Ordering::Relaxed) {
+        log::warn!("{msg} (drawing the background; warned once)");
+    }
+}
+
+/// The common body of the tracers' `trace_ids`: sizes `ids` to the camera's viewport, fills it
+/// with [`NO_HIT`] and, if camera and scene are usable, lets `draw` write the first-hit ids.
+pub(crate) fn trace_ids_with(
+    scene: &Scene,
+    camera: &Camera,
+    ids: &mut Vec<u32>,
+    draw: impl FnOnce(&mut [u32]),
+) -> bool {
+    let mut img = Image { width: 0, height: 0, pixels: std::mem::take(ids) };
+    let ok = begin_frame(scene, camera, &mut img);
+    *ids = img.pixels;
+    ids.fill(NO_HIT);
+    if ok {
+        draw(ids);
+    }
+    ok
+}
+
+/// Prepares `out` for drawing `scene` from `camera`: resizes and clears it. Returns `false`
+/// (after drawing the background, or an empty image for an unusable viewport) if the camera
+/// does not validate or the scene is inconsistent.
+pub(crate) fn begin_frame(scene: &Scene, camera: &Camera, out: &mut Image) -> bool {
+    if let Err(e) = camera.validate(MAX_VIEWPORT) {
+        warn_once(&WARNED_CAMERA, &format!("unusable camera: {e}"));
+        out.reset_for_unusable(camera, MAX_VIEWPORT);
+        return false;
+    }
+    out.reset_for(camera);
+    if let Err(e) = scene.check() {
+        warn_once(&WARNED_SCENE, &format!("unusable scene: {e}"));
+        return false;
+    }
+    true
+}
+
+/// The color a renderer shows for a sample-id pixel.
+#[inline(always)]
+pub(crate) fn shade(colors: &[u32], prim: u32) -> u32 {
+    match colors.get(prim as usize) {
+        Some(&c) => over_background(c, BACKGROUND),
+        None => BACKGROUND,
+    }
+}
