@@ -56,8 +56,12 @@ fn writer_sends_only_the_newest_camera_throttled() {
     assert!(got.len() >= 5 && got.len() <= max, "{} requests in one second (at most {max})", got.len());
     for w in got.windows(2) {
         assert!(w[1].1.seq > w[0].1.seq, "sequence numbers increase");
-        assert!(w[1].0 - w[0].0 >= THROTTLE - Duration::from_millis(5), "requests at least {THROTTLE:?} apart");
     }
+    // Arrival gaps, not send gaps: on a loaded machine one request can be delayed and the next
+    // arrive right after it, so the throttle shows in the median gap (and in the count above).
+    let mut gaps: Vec<f64> = got.windows(2).map(|w| (w[1].0 - w[0].0).as_secs_f64()).collect();
+    let median = volwarp_core::stats::median(&mut gaps).unwrap();
+    assert!(median >= (THROTTLE - Duration::from_millis(5)).as_secs_f64(), "median gap {median} s < {THROTTLE:?}");
     let r = got.last().unwrap().1;
     assert_eq!((r.heuristic, r.radius_scale), (Heuristic::Peak, 2.0));
     assert!(r.camera != home, "the newest camera is sent, not the first");
