@@ -32,7 +32,7 @@ pub mod compaction;
 pub mod dataset;
 pub mod empty_space;
 pub mod marcher;
-pub mod nrrd;
+pub use volume::nrrd;
 pub mod radius;
 pub mod server;
 pub mod transfer_function;

@@ -5,7 +5,7 @@
 //! [`parse_header`] takes the file's bytes and never panics (it is fuzzed); [`load`] reads the
 //! voxels.
 
-use crate::volume::{decode_voxels, read_exactly, LoadOptions, Volume, VolumeError, VolumeErrorKind, VoxelType};
+use super::{decode_voxels, read_exactly, LoadOptions, Volume, VolumeError, VolumeErrorKind, VoxelType};
 use std::path::{Path, PathBuf};
 use volwarp_core::Vec3;
 

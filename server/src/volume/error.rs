@@ -1,0 +1,99 @@
+//! The loaders' error type: the file (if known) and what is wrong with it.
+
+use std::fmt;
+use std::path::{Path, PathBuf};
+
+/// What went wrong while loading a volume.
+#[derive(Debug)]
+pub enum VolumeErrorKind {
+    /// The file could not be opened or read.
+    Io(std::io::Error),
+    /// The raw file name does not carry `_XxYxZ_type` and no options supplied them.
+    BadName(String),
+    /// The file holds a different number of bytes than the dims and type need.
+    SizeMismatch {
+        /// Bytes the header or name implies.
+        expected: u64,
+        /// Bytes found.
+        actual: u64,
+    },
+    /// The voxel type is not one of [`VoxelType`](super::VoxelType).
+    UnknownType(String),
+    /// The NRRD header is malformed.
+    BadHeader(String),
+    /// A valid header asks for something this loader does not do (e.g. bzip2 encoding).
+    Unsupported(String),
+    /// More voxels than [`LoadOptions::max_voxels`](super::LoadOptions::max_voxels).
+    TooLarge {
+        /// Voxels the file declares.
+        voxels: u64,
+        /// The limit.
+        limit: u64,
+    },
+    /// Gzip data that does not decompress.
+    Decompress(String),
+    /// A dimension or spacing is zero, negative or not finite.
+    BadGeometry(String),
+}
+
+/// A loader error: the file (if known) and what is wrong with it.
+#[derive(Debug)]
+pub struct VolumeError {
+    /// The file the error is about.
+    pub path: Option<PathBuf>,
+    /// What is wrong.
+    pub kind: VolumeErrorKind,
+}
+
+impl VolumeError {
+    /// An error without a path (yet).
+    pub fn new(kind: VolumeErrorKind) -> Self {
+        VolumeError { path: None, kind }
+    }
+
+    /// The same error about `path` (keeps an existing path).
+    pub fn at(mut self, path: &Path) -> Self {
+        if self.path.is_none() {
+            self.path = Some(path.to_path_buf());
+        }
+        self
+    }
+}
+
+impl fmt::Display for VolumeErrorKind {
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        match self {
+            VolumeErrorKind::Io(e) => write!(f, "cannot read: {e}"),
+            VolumeErrorKind::BadName(s) => write!(f, "{s}"),
+            VolumeErrorKind::SizeMismatch { expected, actual } => {
+                write!(f, "size mismatch: expected {expected} bytes of voxel data, found {actual}")
+            }
+            VolumeErrorKind::UnknownType(t) => write!(f, "unknown voxel type {t:?}"),
+            VolumeErrorKind::BadHeader(s) => write!(f, "bad NRRD header: {s}"),
+            VolumeErrorKind::Unsupported(s) => write!(f, "unsupported: {s}"),
+            VolumeErrorKind::TooLarge { voxels, limit } => {
+                write!(f, "{voxels} voxels is over the limit of {limit}")
+            }
+            VolumeErrorKind::Decompress(s) => write!(f, "gzip data does not decompress: {s}"),
+            VolumeErrorKind::BadGeometry(s) => write!(f, "{s}"),
+        }
+    }
+}
+
+impl fmt::Display for VolumeError {
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        match &self.path {
+            Some(p) => write!(f, "{}: {}", p.display(), self.kind),
+            None => write!(f, "{}", self.kind),
+        }
+    }
+}
+
+impl std::error::Error for VolumeError {
+    fn source(&self) -> Option<&(dyn std::error::Error + 'static)> {
+        match &self.kind {
+            VolumeErrorKind::Io(e) => Some(e),
+            _ => None,
+        }
+    }
+}

@@ -1,0 +1,208 @@
+//! Scalar volumes: the data the server renders.
+//!
+//! **World space.** A volume of `dims` voxels with `spacing` sits in the box
+//! `[0, dims · spacing]`; voxel `(i, j, k)` has its centre at `((i, j, k) + 0.5) · spacing`.
+//! Sampling is trilinear between voxel centres and clamps to the nearest voxel within half a
+//! voxel of the box faces.
+//!
+//! Values are stored normalized to `0..=1` over the data range of the file
+//! ([`Volume::value_range`]), so a transfer function is a lookup over `0..=1`.
+//!
+//! Loaders ([`load_volume`]): headerless raw files named `name_XxYxZ_type.raw`
+//! ([`parse_raw_name`]; dims, type and spacing may also come from [`LoadOptions`]) and NRRD
+//! (`.nrrd` attached, `.nhdr` detached; raw or gzip; see [`nrrd`]). Every failure is a
+//! [`VolumeError`] naming the file and the problem, never a panic.
+//!
+//! | file | content |
+//! |---|---|
+//! | `mod.rs` | the [`Volume`] data model, [`LoadOptions`], [`load_volume`] |
+//! | `error.rs` | [`VolumeError`] and [`VolumeErrorKind`] |
+//! | `sampling.rs` | voxel reads and trilinear sampling |
+//! | `raw.rs` | [`VoxelType`], raw file names ([`parse_raw_name`]), voxel decoding, the raw loader |
+//! | [`nrrd`] | NRRD headers and data |
+
+mod error;
+pub mod nrrd;
+mod raw;
+mod sampling;
+
+pub use error::{VolumeError, VolumeErrorKind};
+pub(crate) use raw::read_exactly;
+pub use raw::{decode_voxels, parse_dims, parse_raw_name, RawName, VoxelType};
+
+use std::path::Path;
+use volwarp_core::sample::Bounds;
+use volwarp_core::Vec3;
+
+/// Options for [`load_volume`]; every field overrides what the file name or header says.
+#[derive(Clone, Debug, PartialEq)]
+pub struct LoadOptions {
+    /// Dimensions (x, y, z) of a raw file.
+    pub dims: Option<[u32; 3]>,
+    /// Voxel type of a raw file.
+    pub voxel_type: Option<VoxelType>,
+    /// Voxel spacing (default: from the NRRD header, else 1, 1, 1).
+    pub spacing: Option<Vec3>,
+    /// Most voxels accepted (default 2²⁸, i.e. 1 GiB as f32).
+    pub max_voxels: u64,
+}
+
+impl Default for LoadOptions {
+    fn default() -> Self {
+        LoadOptions { dims: None, voxel_type: None, spacing: None, max_voxels: 1 << 28 }
+    }
+}
+
+/// A scalar volume, normalized to `0..=1` (see the module docs for its place in world space).
+#[derive(Clone, Debug)]
+pub struct Volume {
+    /// A short name (file stem).
+    pub name: String,
+    dims: [u32; 3],
+    spacing: Vec3,
+    value_range: (f32, f32),
+    data: Vec<f32>,
+}
+
+/// Checks dims and spacing and returns the number of voxels (at most `max_voxels`).
+pub(crate) fn check_geometry(dims: [u32; 3], spacing: Vec3, max_voxels: u64) -> Result<u64, VolumeError> {
+    if dims.contains(&0) {
+        return Err(VolumeError::new(VolumeErrorKind::BadGeometry(format!("dimensions {dims:?} contain a zero"))));
+    }
+    if !spacing.is_finite()
+        || spacing.min_element() <= 0.0
+        || (Vec3::from(dims.map(|d| d as f32)) * spacing).max_element() > 1e12
+    {
+        return Err(VolumeError::new(VolumeErrorKind::BadGeometry(format!(
+            "spacing {spacing} must be positive and finite"
+        ))));
+    }
+    let voxels = dims.iter().map(|&d| d as u64).product::<u64>();
+    if voxels > max_voxels {
+        return Err(VolumeError::new(VolumeErrorKind::TooLarge { voxels, limit: max_voxels }));
+    }
+    Ok(voxels)
+}
+
+impl Volume {
+    /// A volume from values in x-fastest order (`dims` product long). Non-finite values become
+    /// the data minimum; the values are normalized over their range.
+    pub fn from_values(name: &str, dims: [u32; 3], spacing: Vec3, mut values: Vec<f32>) -> Result<Volume, VolumeError> {
+        let n = check_geometry(dims, spacing, u64::MAX)?;
+        if values.len() as u64 != n {
+            return Err(VolumeError::new(VolumeErrorKind::SizeMismatch {
+                expected: n * 4,
+                actual: values.len() as u64 * 4,
+            }));
+        }
+        let (mut lo, mut hi) = (f32::INFINITY, f32::NEG_INFINITY);
+        for &v in values.iter().filter(|v| v.is_finite()) {
+            lo = lo.min(v);
+            hi = hi.max(v);
+        }
+        if lo > hi {
+            (lo, hi) = (0.0, 0.0);
+        }
+        let scale = if hi > lo { 1.0 / (hi as f64 - lo as f64) } else { 0.0 };
+        for v in values.iter_mut() {
+            *v = if v.is_finite() { ((*v as f64 - lo as f64) * scale).clamp(0.0, 1.0) as f32 } else { 0.0 };
+        }
+        Ok(Volume { name: name.to_string(), dims, spacing, value_range: (lo, hi), data: values })
+    }
+
+    /// A volume from a function of the world position of each voxel centre.
+    pub fn from_fn(name: &str, dims: [u32; 3], spacing: Vec3, f: impl Fn(Vec3) -> f32) -> Result<Volume, VolumeError> {
+        let n = check_geometry(dims, spacing, 1 << 28)?;
+        let mut values = Vec::with_capacity(n as usize);
+        for k in 0..dims[2] {
+            for j in 0..dims[1] {
+                for i in 0..dims[0] {
+                    values.push(f((Vec3::new(i as f32, j as f32, k as f32) + 0.5) * spacing));
+                }
+            }
+        }
+        Volume::from_values(name, dims, spacing, values)
+    }
+
+    /// The Marschner–Lobb test signal (f_M = 6, α = 0.25) sampled at `n³` voxels over
+    /// `[-1, 1]³`, with unit spacing (so the box is `[0, n]³`).
+    pub fn marschner_lobb(n: u32) -> Volume {
+        let n = n.clamp(2, 512);
+        let (fm, alpha) = (6.0f64, 0.25f64);
+        let pi = std::f64::consts::PI;
+        Volume::from_fn("marschner-lobb", [n; 3], Vec3::ONE, |p| {
+            let q = [p.x, p.y, p.z].map(|c| c as f64 / n as f64 * 2.0 - 1.0);
+            let r = (q[0] * q[0] + q[1] * q[1]).sqrt();
+            let rho_r = (2.0 * pi * fm * (pi * r / 2.0).cos()).cos();
+            ((1.0 - (pi * q[2] / 2.0).sin() + alpha * (1.0 + rho_r)) / (2.0 * (1.0 + alpha))) as f32
+        })
+        .expect("a clamped Marschner-Lobb size is always valid")
+    }
+
+    /// Dimensions (x, y, z) in voxels.
+    pub fn dims(&self) -> [u32; 3] {
+        self.dims
+    }
+
+    /// Voxel spacing.
+    pub fn spacing(&self) -> Vec3 {
+        self.spacing
+    }
+
+    /// The data range of the source, in its own units (normalized 0 and 1 map to these).
+    pub fn value_range(&self) -> (f32, f32) {
+        self.value_range
+    }
+
+    /// The volume box's size, `dims · spacing`.
+    pub fn extent(&self) -> Vec3 {
+        Vec3::new(self.dims[0] as f32, self.dims[1] as f32, self.dims[2] as f32) * self.spacing
+    }
+
+    /// The volume box `[0, dims · spacing]`: the bounds of every frame.
+    pub fn bounds(&self) -> Bounds {
+        Bounds::new(Vec3::ZERO, self.extent())
+    }
+
+    /// Length of one voxel's diagonal, `|spacing|`.
+    pub fn voxel_diagonal(&self) -> f32 {
+        self.spacing.length()
+    }
+
+    /// The normalized values, x fastest.
+    pub fn data(&self) -> &[f32] {
+        &self.data
+    }
+}
+
+/// Loads a raw (`.raw` or any other extension) or NRRD (`.nrrd`, `.nhdr`) volume.
+pub fn load_volume(path: impl AsRef<Path>, opts: &LoadOptions) -> Result<Volume, VolumeError> {
+    let path = path.as_ref();
+    let ext = path.extension().and_then(|s| s.to_str()).unwrap_or("").to_ascii_lowercase();
+    let vol = match ext.as_str() {
+        "nrrd" | "nhdr" => nrrd::load(path, opts)?,
+        _ => raw::load_raw(path, opts)?,
+    };
+    log::info!(
+        "loaded {} : {}x{}x{} voxels, spacing {}, value range {:?}",
+        path.display(),
+        vol.dims[0],
+        vol.dims[1],
+        vol.dims[2],
+        vol.spacing,
+        vol.value_range
+    );
+    Ok(vol)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn marschner_lobb_is_in_range() {
+        let v = Volume::marschner_lobb(16);
+        assert_eq!(v.dims(), [16; 3]);
+        assert!(v.data().iter().all(|x| (0.0..=1.0).contains(x)));
+    }
+}
