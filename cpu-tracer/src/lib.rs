@@ -11,8 +11,8 @@
 //! | [`point_splat`] | ZAL12 2.5D points: fixed N×N squares with a depth test | `points1`, `points2`, `points3` |
 //! | [`sphere_splat`] | exact object-order sphere splatting (no BVH) | `splat` |
 //! | [`stale_image`] | the frame as it was rendered, not warped | `stale` |
-//! | [`parallel_build`] | rayon LBVH build, byte-identical to `Scene::build` | — |
-//! | [`parallel_sort`] | the parallel stable radix sort it uses | — |
+//! | [`build`] (also `parallel_build`) | rayon LBVH build, byte-identical to `Scene::build` | — |
+//! | [`build::sort`] (also `parallel_sort`) | the parallel stable radix sort it uses | — |
 //! | [`synthetic`] | synthetic frames and clouds for tests and benchmarks | — |
 //! | [`threads`] | a renderer's own thread count | — |
 //! | `frame_setup` | what every renderer does first: validate camera and scene, size and clear the output | — |
@@ -27,9 +27,8 @@
 // `!(a <= b)` is how NaN is rejected on purpose here, as in core.
 #![allow(clippy::neg_cmp_op_on_partial_ord)]
 
+pub mod build;
 pub mod packet_tracer;
-pub mod parallel_build;
-pub mod parallel_sort;
 pub mod point_splat;
 pub mod scalar_tracer;
 pub mod sphere_splat;
@@ -43,8 +42,13 @@ mod lanes;
 
 pub(crate) use frame_setup::{begin_frame, shade, trace_ids_with};
 
+/// The parallel LBVH build under its earlier path.
+pub use build as parallel_build;
+/// The parallel radix sorts under their earlier path.
+pub use build::sort as parallel_sort;
+
+pub use build::{build_scene, BuildTimes, Method, ParallelBuilder};
 pub use packet_tracer::PacketTracer;
-pub use parallel_build::{build_scene, BuildTimes, Method, ParallelBuilder};
 pub use point_splat::PointSplat;
 pub use scalar_tracer::ScalarTracer;
 pub use sphere_splat::SphereSplat;
