@@ -5,7 +5,7 @@
 //! run `--headless` instead (no silent fallback: a user asking for a window learns why there
 //! is none).
 
-use crate::controls::{home_camera, Controls, HeldKeys};
+use crate::controls::{Controls, HeldKeys};
 use crate::display::{to_0rgb, Display, RateMeter};
 use crate::error::ClientError;
 use crate::network::View;
