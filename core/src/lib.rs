@@ -8,6 +8,7 @@
 //! | [`camera`] | the pinhole camera and its primary rays (one convention for marcher, tracers and shader) |
 //! | [`sample`] | the object-space sample: quantized position + radius in 64 bits, RGBA8 color in 32 |
 //! | [`heuristics`] | the ZAL12 representative-depth heuristics, as state machines |
+//! | [`compact_frame`] | the compact frame encoding: coverage mask, predicted depths, radii and colors, zstd (≈3 B/sample) |
 //! | [`compaction`] | stable removal of empty (radius 0) samples |
 //! | [`morton`] | Morton codes of quantized positions and their radix sort |
 //! | [`lbvh`] | Karras-style LBVH over the sorted codes, built into caller buffers |
@@ -35,6 +36,7 @@ extern crate alloc;
 extern crate std;
 
 pub mod camera;
+pub mod compact_frame;
 pub mod compaction;
 pub mod heuristics;
 #[cfg(feature = "alloc")]

@@ -17,8 +17,11 @@ use glam::Vec3;
 
 /// The four magic bytes that start every message.
 pub const MAGIC: [u8; 4] = *b"VWRP";
-/// The protocol version this crate speaks.
-pub const VERSION: u16 = 1;
+/// The protocol version this crate speaks (and writes in every header).
+pub const VERSION: u16 = 2;
+/// The oldest version a receiver accepts: version 2 only added the CompactFrame message and the
+/// [`CAP_COMPACT`] bit, so every version-1 message is read as it was (old record files replay).
+pub const MIN_VERSION: u16 = 1;
 /// Bytes of a message header.
 pub const HEADER_LEN: usize = 12;
 /// Bytes of an encoded camera.
@@ -35,6 +38,9 @@ pub const MAX_TOKEN: usize = 64;
 pub const MAX_ERROR_TEXT: usize = 256;
 /// Capability bit: the peer can trace on a GPU (informational).
 pub const CAP_GPU: u32 = 1;
+/// Capability bit: in a client's Hello, "send me CompactFrames"; in the server's answer, "I
+/// will" (version 2). A server that answers without it sends only 12-byte Frames.
+pub const CAP_COMPACT: u32 = 2;
 
 /// Message types.
 #[repr(u8)]
@@ -50,6 +56,8 @@ pub enum MsgType {
     Error = 4,
     /// Either way: orderly goodbye.
     Bye = 5,
+    /// Server to client: one frame in the compact encoding (version 2; `crate::compact_frame`).
+    CompactFrame = 6,
 }
 
 impl MsgType {
@@ -61,6 +69,7 @@ impl MsgType {
             3 => MsgType::Frame,
             4 => MsgType::Error,
             5 => MsgType::Bye,
+            6 => MsgType::CompactFrame,
             _ => return None,
         })
     }
@@ -90,7 +99,11 @@ impl Limits {
     /// Limits for a client receiving frames up to `max_viewport`² samples.
     pub const fn for_frames(max_viewport: u32) -> Limits {
         let max_samples = max_viewport.saturating_mul(max_viewport);
-        let max_payload = max_samples as u64 * BYTES_PER_SAMPLE as u64 + FRAME_FIXED_LEN as u64;
+        let raw = max_samples as u64 * BYTES_PER_SAMPLE as u64 + FRAME_FIXED_LEN as u64;
+        // A CompactFrame holds a mask and 8 bytes per sample, which zstd can grow a little.
+        let body = (max_samples as u64).div_ceil(8) + 8 * max_samples as u64;
+        let compact = crate::compact_frame::COMPACT_FIXED_LEN as u64 + body + body / 64 + 1024;
+        let max_payload = if compact > raw { compact } else { raw };
         Limits {
             max_payload: if max_payload > u32::MAX as u64 { u32::MAX } else { max_payload as u32 },
             max_samples,
@@ -159,6 +172,8 @@ pub enum WireError {
     BadToken,
     /// Caller-provided buffers are too small for the frame.
     BufferTooSmall,
+    /// A CompactFrame's own fields or body are invalid.
+    Compact(crate::compact_frame::CompactError),
 }
 
 impl core::fmt::Display for WireError {
@@ -183,6 +198,7 @@ impl core::fmt::Display for WireError {
             WireError::BadHeuristic(h) => write!(f, "unknown heuristic code {h}"),
             WireError::BadToken => f.write_str("token too long"),
             WireError::BufferTooSmall => f.write_str("buffers too small for the frame"),
+            WireError::Compact(e) => write!(f, "{e}"),
         }
     }
 }
@@ -521,7 +537,7 @@ pub fn parse_header(h: &[u8; HEADER_LEN], limits: &Limits) -> Result<Header, Wir
         return Err(WireError::BadMagic([h[0], h[1], h[2], h[3]]));
     }
     let version = u16::from_le_bytes([h[4], h[5]]);
-    if version != VERSION {
+    if !(MIN_VERSION..=VERSION).contains(&version) {
         return Err(WireError::UnsupportedVersion(version));
     }
     let ty = MsgType::from_code(h[6]).ok_or(WireError::UnknownType(h[6]))?;
@@ -534,6 +550,7 @@ pub fn parse_header(h: &[u8; HEADER_LEN], limits: &Limits) -> Result<Header, Wir
         }
         MsgType::Error => (4..=4 + MAX_ERROR_TEXT as u32).contains(&len),
         MsgType::Bye => len == 0,
+        MsgType::CompactFrame => len >= crate::compact_frame::COMPACT_FIXED_LEN as u32,
     };
     if len > limits.max_payload {
         return Err(WireError::TooLarge { len, limit: limits.max_payload });
@@ -595,7 +612,44 @@ pub fn read_frame_header<R: Read>(r: &mut R, h: &Header, limits: &Limits) -> Res
         return Err(WireError::BadLength { ty: h.ty, len: h.len });
     }
     let b: [u8; FRAME_FIXED_LEN] = read_fixed(r, FRAME_FIXED_LEN)?;
-    let mut c = Cur::new(&b);
+    let fh = decode_frame_fixed(&b, limits)?;
+    let expect = FRAME_FIXED_LEN as u64 + fh.count as u64 * BYTES_PER_SAMPLE as u64;
+    if expect != h.len as u64 {
+        return Err(WireError::BadLength { ty: h.ty, len: h.len });
+    }
+    check_count(&fh, limits)?;
+    Ok(fh)
+}
+
+/// The sample count of a frame header against its viewport and the limits.
+pub fn check_count(fh: &FrameHeader, limits: &Limits) -> Result<(), WireError> {
+    let pixels = fh.camera.width as u64 * fh.camera.height as u64;
+    let limit = (limits.max_samples as u64).min(pixels) as u32;
+    if fh.count > limit {
+        return Err(WireError::TooManySamples { count: fh.count, limit });
+    }
+    Ok(())
+}
+
+/// The fixed 96 bytes of a Frame (also the start of a CompactFrame), encoded.
+pub fn encode_frame_fixed(fh: &FrameHeader) -> [u8; FRAME_FIXED_LEN] {
+    let mut o = Out::<FRAME_FIXED_LEN>::new();
+    o.put(&fh.seq.to_le_bytes());
+    encode_camera(&mut o, &fh.camera);
+    o.put(&[fh.heuristic.code(), 0, 0, 0]);
+    for v in fh.bounds.min.iter().chain(fh.bounds.max.iter()) {
+        o.put(&v.to_le_bytes());
+    }
+    o.put(&fh.radius_unit.to_le_bytes());
+    o.put(&fh.render_us.to_le_bytes());
+    o.put(&fh.count.to_le_bytes());
+    o.b
+}
+
+/// Decodes and validates the fixed 96 bytes of a Frame (camera, heuristic, bounds, radius
+/// unit), without checking the count (see [`check_count`]) or the message length.
+pub fn decode_frame_fixed(b: &[u8; FRAME_FIXED_LEN], limits: &Limits) -> Result<FrameHeader, WireError> {
+    let mut c = Cur::new(b);
     let seq = c.u64();
     let camera = decode_camera(&mut c, limits)?;
     let hcode = c.u8();
@@ -613,15 +667,6 @@ pub fn read_frame_header<R: Read>(r: &mut R, h: &Header, limits: &Limits) -> Res
     }
     let render_us = c.u32();
     let count = c.u32();
-    let expect = FRAME_FIXED_LEN as u64 + count as u64 * BYTES_PER_SAMPLE as u64;
-    if expect != h.len as u64 {
-        return Err(WireError::BadLength { ty: h.ty, len: h.len });
-    }
-    let pixels = camera.width as u64 * camera.height as u64;
-    let limit = (limits.max_samples as u64).min(pixels) as u32;
-    if count > limit {
-        return Err(WireError::TooManySamples { count, limit });
-    }
     Ok(FrameHeader { seq, camera, heuristic, bounds, radius_unit, render_us, count })
 }
 
@@ -744,6 +789,12 @@ mod owned {
             }
             MsgType::Error => Message::Error(read_error(r, h)?),
             MsgType::Bye => Message::Bye,
+            MsgType::CompactFrame => {
+                // The length passed the limit in `read_header`; the decoder bounds the rest.
+                let mut payload = alloc::vec![0u8; h.len as usize];
+                r.read_exact(&mut payload)?;
+                Message::Frame(crate::compact_frame::decode_payload(&payload, limits)?)
+            }
         })
     }
 

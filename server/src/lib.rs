@@ -12,6 +12,7 @@
 //! | [`nrrd`] | NRRD headers and data (raw, gzip; attached and detached) |
 //! | [`transfer_function`] | 1-D RGBA lookup tables, presets, ParaView JSON and text files |
 //! | [`dataset`] | a volume with its transfer function; the bundled default |
+//! | [`encoding`] | the wire encoding of a frame: 12-byte or compact, negotiated per client |
 //! | [`empty_space`] | the min/max brick grid for empty-space skipping |
 //! | [`marcher`] | the CPU ray marcher: frames for clients and ground-truth images |
 //! | [`radius`] | the sphere radius models: pixel footprint or half a voxel diagonal |
@@ -31,6 +32,7 @@
 pub mod compaction;
 pub mod dataset;
 pub mod empty_space;
+pub mod encoding;
 pub mod marcher;
 pub use volume::nrrd;
 pub mod radius;

@@ -4,7 +4,7 @@
 //! volwarp-server                                   # serve the bundled CT head on 127.0.0.1:7878
 //! volwarp-server --volume head.nrrd --tf tf.json --listen 0.0.0.0:7878 --token SECRET
 //! volwarp-server render --volume FILE [--tf FILE] [--orbit 30,10] [--size 1024x1024] --out img.png
-//! volwarp-server dump [--orbit 30,10] [--heuristic threshold] --out frame.vwf
+//! volwarp-server dump [--orbit 30,10] [--heuristic threshold] [--encoding compact|raw12] --out frame.vwf
 //! ```
 
 use clap::{Args, Parser, Subcommand};
@@ -12,7 +12,8 @@ use std::net::SocketAddr;
 use std::path::PathBuf;
 use std::process::ExitCode;
 use std::time::{Duration, Instant};
-use volwarp_core::wire::{self, CameraRequest, Message};
+use volwarp_core::compact_frame::Encoding;
+use volwarp_core::wire::CameraRequest;
 use volwarp_core::{Camera, Heuristic};
 use volwarp_server::volume::{parse_dims, LoadOptions, VoxelType};
 use volwarp_server::{default_camera, Dataset, MarchOptions, Marcher, RadiusModel, Server, ServerConfig};
@@ -44,13 +45,17 @@ enum Cmd {
         #[arg(long)]
         out: PathBuf,
     },
-    /// Write one Frame (wire format, header included) to a file.
+    /// Write one Frame (wire format, header included) to a file; prints its sample count and
+    /// bytes.
     Dump {
         #[command(flatten)]
         cam: CameraArgs,
         /// Output file.
         #[arg(long)]
         out: PathBuf,
+        /// Wire encoding: `raw12` (message type 3, 12 bytes per sample) or `compact` (type 6).
+        #[arg(long, default_value = "raw12", value_parser = parse_encoding)]
+        encoding: Encoding,
     },
 }
 
@@ -125,6 +130,9 @@ struct NetArgs {
     /// (the client's demo) takes it down with it, even if the parent is killed.
     #[arg(long)]
     exit_on_stdin_eof: bool,
+    /// Never send CompactFrames, even to clients that ask (every frame 12 bytes per sample).
+    #[arg(long)]
+    no_compact: bool,
 }
 
 #[derive(Args, Debug)]
@@ -215,6 +223,7 @@ fn run(cli: Cli) -> Result<(), String> {
                 max_viewport: n.max_viewport,
                 token,
                 frame_delay: (n.frame_delay_ms > 0).then(|| Duration::from_millis(n.frame_delay_ms)),
+                compact: !n.no_compact,
             };
             let server = Server::with_marcher(config, std::sync::Arc::new(marcher)).map_err(|e| e.to_string())?;
             println!("listening on {}", server.local_addr());
@@ -239,7 +248,7 @@ fn run(cli: Cli) -> Result<(), String> {
             println!("wrote {}", out.display());
             Ok(())
         }
-        Cmd::Dump { cam, out } => {
+        Cmd::Dump { cam, out, encoding } => {
             let cam = camera(&ds, &cam)?;
             let req = CameraRequest { seq: 0, camera: cam, heuristic, radius_scale: cli.data.radius_scale };
             if !(req.radius_scale > 0.0 && req.radius_scale <= 16.0) {
@@ -252,12 +261,28 @@ fn run(cli: Cli) -> Result<(), String> {
                 stats.march_us as f64 / 1e3,
                 stats.compact_us as f64 / 1e3
             );
-            let bytes = wire::encode_to_vec(&Message::Frame(frame));
-            std::fs::write(&out, bytes).map_err(|e| format!("{}: {e}", out.display()))?;
-            println!("wrote {} ({} samples)", out.display(), stats.samples);
+            let t = Instant::now();
+            let (bytes, got) = volwarp_server::encoding::encode_frame(&marcher, &req, &frame, encoding);
+            let encode_ms = t.elapsed().as_secs_f64() * 1e3;
+            if got != encoding {
+                log::warn!("the frame does not fit the compact form; wrote the 12-byte form");
+            }
+            std::fs::write(&out, &bytes).map_err(|e| format!("{}: {e}", out.display()))?;
+            println!(
+                "wrote {} ({} samples, {} bytes, {:.3} bytes/sample, {}, encoded in {encode_ms:.1} ms)",
+                out.display(),
+                stats.samples,
+                bytes.len(),
+                bytes.len() as f64 / stats.samples.max(1) as f64,
+                got.name()
+            );
             Ok(())
         }
     }
+}
+
+fn parse_encoding(s: &str) -> Result<Encoding, String> {
+    Encoding::from_name(s).ok_or_else(|| format!("unknown encoding {s:?}; one of raw12, compact"))
 }
 
 fn main() -> ExitCode {

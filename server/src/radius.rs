@@ -136,6 +136,16 @@ impl FrameRadius {
     pub fn unit(&self) -> f32 {
         self.unit
     }
+
+    /// The radius at depth 0 (the voxel model's radius; 0 for the footprint model).
+    pub fn constant(&self) -> f32 {
+        self.constant
+    }
+
+    /// The radius per unit of depth along the view direction (0 for the voxel model).
+    pub fn per_depth(&self) -> f32 {
+        self.per_depth
+    }
 }
 
 #[cfg(test)]

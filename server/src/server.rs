@@ -23,6 +23,7 @@ use std::sync::atomic::{AtomicBool, AtomicU64, AtomicUsize, Ordering};
 use std::sync::{Arc, Condvar, Mutex};
 use std::thread::JoinHandle;
 use std::time::{Duration, Instant};
+use volwarp_core::compact_frame::Encoding;
 use volwarp_core::wire::{self, error_code, CameraRequest, ErrorMsg, Hello, Limits, Message, WireError};
 
 /// Server settings (every limit has a command-line flag in the binary).
@@ -48,6 +49,9 @@ pub struct ServerConfig {
     pub token: Option<String>,
     /// Artificial delay before each frame (latency demos and benchmarks).
     pub frame_delay: Option<Duration>,
+    /// Send CompactFrames to clients that ask for them (`CAP_COMPACT` in their Hello);
+    /// default true. Off, every client gets 12-byte Frames.
+    pub compact: bool,
 }
 
 impl Default for ServerConfig {
@@ -63,6 +67,7 @@ impl Default for ServerConfig {
             max_viewport: 4096,
             token: None,
             frame_delay: None,
+            compact: true,
         }
     }
 }
@@ -388,9 +393,12 @@ fn serve(sh: &Shared, stream: &TcpStream, id: u64) -> String {
             return "missing or wrong token".into();
         }
     }
+    // The encoding: compact if the client asks and the server allows it.
+    let compact = cfg.compact && hello.capabilities & wire::CAP_COMPACT != 0;
+    let encoding = if compact { Encoding::Compact } else { Encoding::Raw12 };
     {
         let mut w = embedded_io_adapters::std::FromStd::new(stream);
-        if let Err(e) = wire::write_hello(&mut w, &Hello::new(0)) {
+        if let Err(e) = wire::write_hello(&mut w, &Hello::new(if compact { wire::CAP_COMPACT } else { 0 })) {
             return format!("cannot send Hello: {e}");
         }
     }
@@ -426,11 +434,14 @@ fn serve(sh: &Shared, stream: &TcpStream, id: u64) -> String {
         }
         let stats = sh.pool.install(|| sh.marcher.render_frame_into(&req, &mut frame));
         let t_send = Instant::now();
-        let sent = {
+        let sent = if encoding == Encoding::Compact {
+            let (bytes, _) = crate::encoding::encode_frame(&sh.marcher, &req, &frame, encoding);
+            io::Write::write_all(&mut out, &bytes).map_err(|e| e.to_string())
+        } else {
             let mut w = embedded_io_adapters::std::FromStd::new(&mut out);
-            wire::write_frame(&mut w, &frame.header, &frame.samples, &frame.colors)
+            wire::write_frame(&mut w, &frame.header, &frame.samples, &frame.colors).map_err(|e| e.to_string())
         };
-        let sent = sent.map_err(|e| e.to_string()).and_then(|_| io::Write::flush(&mut out).map_err(|e| e.to_string()));
+        let sent = sent.and_then(|_| io::Write::flush(&mut out).map_err(|e| e.to_string()));
         if let Err(e) = sent {
             break End::Gone(format!("cannot send frame: {e}"));
         }

@@ -1,0 +1,822 @@
+//! The compact frame encoding (feature `alloc`): a Frame in about 3 bytes per sample instead of
+//! 12, documented byte by byte in `docs/wire-format.md` (message type 6, `CompactFrame`).
+//!
+//! Every sample of a server frame came from one pixel of the camera that travels with the
+//! frame, so the compact form sends what the client cannot derive itself:
+//!
+//! * a **coverage mask** of the pixels that have a sample (one bit per pixel, row-major);
+//! * each sample's **depth along its pixel's ray**, quantized to a step of the largest bounds
+//!   extent / 2¹² (`EncodeOptions::depth_bits`; the bits study in `docs/results.md` found 10 bits
+//!   per axis indistinguishable from floats at 512² and 1024², so 12 keeps a 4× margin), coded
+//!   as the residual from the MED (LOCO-I) prediction of the left, upper and upper-left
+//!   neighbour's depth codes;
+//! * each sample's **radius code as the residual from the radius model** (`constant +
+//!   per_depth × z` at the decoded depth; the server's default footprint model and the voxel
+//!   model are both of this form), so only samples off the model cost anything;
+//! * each **color as the per-channel residual from the MED prediction** of the neighbours'
+//!   colors (lossless).
+//!
+//! The mask and the residual planes go through one zstd frame (decoded by `ruzstd`, pure Rust,
+//! no_std + alloc). The decoded sample sits on its pixel's ray ([`crate::RayBasis::dir`]) at the
+//! dequantized depth and is quantized again to the usual packed `u64`, so a decoded compact
+//! frame is an ordinary [`Frame`] (same sample order: pixel order) and every renderer works
+//! unchanged. Colors and radius codes round-trip exactly; positions move by at most
+//! [`position_bound`] from the 12-byte form's.
+//!
+//! **Bounded decoding.** Every size the decoder allocates follows from the header after it was
+//! validated (viewport ≤ the limits, sample count ≤ pixels and ≤ the limits): the decompressed
+//! length must equal `⌈w·h/8⌉ + 8·count` exactly (stated in the header and checked before
+//! decompressing), zstd writes into a buffer of exactly that size (`TargetTooSmall` otherwise)
+//! with its window capped at that size (or [`MIN_ZSTD_WINDOW`], whichever is larger), so no
+//! input can make it allocate more.
+
+use crate::sample::{Dequantizer, RADIUS_MAX};
+use crate::wire::{decode_frame_fixed, FrameHeader, Limits, MsgType, WireError, FRAME_FIXED_LEN};
+#[cfg(feature = "alloc")]
+use crate::wire::{encode_frame_fixed, HEADER_LEN};
+
+/// Bytes of a CompactFrame payload before the compressed body.
+pub const COMPACT_FIXED_LEN: usize = FRAME_FIXED_LEN + 24;
+/// The zstd window a decoder allows even for a body shorter than it (ruzstd's encoder always
+/// declares 128 KiB); otherwise the window may not exceed the body.
+pub const MIN_ZSTD_WINDOW: u64 = 128 << 10;
+/// Default depth precision: the depth step is the largest bounds extent / 2^this.
+pub const DEFAULT_DEPTH_BITS: u32 = 12;
+/// Largest depth code (depth codes are `u16`).
+pub const DEPTH_CODE_MAX: u32 = u16::MAX as u32;
+/// Bytes per sample in the decompressed body: depth residual (2), radius residual (2), color
+/// residual (4).
+pub const PLANE_BYTES_PER_SAMPLE: usize = 8;
+
+/// How the body is entropy coded.
+#[repr(u8)]
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum Coder {
+    /// The body is stored as is (for tests and debugging).
+    Stored = 0,
+    /// One zstd frame.
+    Zstd = 1,
+}
+
+impl Coder {
+    /// The coder with this code.
+    pub fn from_code(c: u8) -> Option<Coder> {
+        match c {
+            0 => Some(Coder::Stored),
+            1 => Some(Coder::Zstd),
+            _ => None,
+        }
+    }
+}
+
+/// Why a compact frame could not be decoded. Carried by [`WireError::Compact`].
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum CompactError {
+    /// The depth origin or step is NaN, infinite, not positive, or the largest depth code
+    /// decodes to a non-finite depth.
+    BadDepth,
+    /// The radius model's constant or slope is NaN or infinite.
+    BadRadiusModel,
+    /// Unknown entropy coder code.
+    BadCoder(u8),
+    /// The stated decompressed length is not `⌈w·h/8⌉ + 8·count`.
+    BadRawLength {
+        /// Stated.
+        stated: u32,
+        /// What the header's dimensions and count give.
+        expected: u64,
+    },
+    /// The entropy-coded body is corrupt (zstd refused it, it decompresses to another length,
+    /// or a stored body has the wrong length).
+    Corrupt,
+    /// The coverage mask has another number of set bits than the sample count, or bits set
+    /// past the last pixel.
+    MaskCount {
+        /// Set bits of the mask (within the viewport).
+        mask: u32,
+        /// The header's sample count.
+        count: u32,
+    },
+    /// A radius residual outside the 10-bit code range.
+    BadRadiusResidual,
+}
+
+impl core::fmt::Display for CompactError {
+    fn fmt(&self, f: &mut core::fmt::Formatter<'_>) -> core::fmt::Result {
+        match self {
+            CompactError::BadDepth => f.write_str("compact frame: bad depth origin or step"),
+            CompactError::BadRadiusModel => f.write_str("compact frame: bad radius model"),
+            CompactError::BadCoder(c) => write!(f, "compact frame: unknown entropy coder {c}"),
+            CompactError::BadRawLength { stated, expected } => {
+                write!(f, "compact frame: body length {stated}, expected {expected}")
+            }
+            CompactError::Corrupt => f.write_str("compact frame: corrupt compressed body"),
+            CompactError::MaskCount { mask, count } => {
+                write!(f, "compact frame: coverage mask has {mask} pixels, header says {count} samples")
+            }
+            CompactError::BadRadiusResidual => f.write_str("compact frame: radius residual out of range"),
+        }
+    }
+}
+
+/// Why a frame could not be put in compact form (the sender then sends the 12-byte form).
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum EncodeError {
+    /// Sample `index` does not project into its own pixel of the frame's camera after the
+    /// previous sample's (samples must come one per pixel, in pixel order, as a server's do).
+    NotPixelAligned {
+        /// The sample.
+        index: usize,
+    },
+    /// The depths of the frame do not fit the depth code (more than 2¹⁶ steps, or not finite).
+    DepthRange,
+    /// The frame's own header is invalid (camera, bounds or radius unit), or samples and colors
+    /// differ in length.
+    BadFrame,
+}
+
+impl core::fmt::Display for EncodeError {
+    fn fmt(&self, f: &mut core::fmt::Formatter<'_>) -> core::fmt::Result {
+        match self {
+            EncodeError::NotPixelAligned { index } => {
+                write!(f, "sample {index} is not on its own pixel's ray of the frame's camera")
+            }
+            EncodeError::DepthRange => f.write_str("frame depths do not fit the depth code"),
+            EncodeError::BadFrame => f.write_str("invalid frame header"),
+        }
+    }
+}
+
+#[cfg(feature = "std")]
+impl std::error::Error for CompactError {}
+#[cfg(feature = "std")]
+impl std::error::Error for EncodeError {}
+
+/// The radius every sample is predicted to have: `constant + per_depth × z`, `z` the sample's
+/// distance along the camera's view direction (what `volwarp-server`'s radius models produce).
+#[derive(Clone, Copy, Debug, Default, PartialEq)]
+pub struct RadiusPrediction {
+    /// World radius at any depth.
+    pub constant: f32,
+    /// World radius per unit of depth along the view direction.
+    pub per_depth: f32,
+}
+
+/// Encoder settings.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct EncodeOptions {
+    /// Depth step = largest bounds extent / 2^`depth_bits` (1..=16; default
+    /// [`DEFAULT_DEPTH_BITS`]). A frame whose depth range needs more than 2¹⁶ such steps gets a
+    /// coarser step (range / 65535).
+    pub depth_bits: u32,
+    /// The radius model to code radii against; `None` fits one ([`RadiusPrediction::fit`]).
+    pub radius: Option<RadiusPrediction>,
+    /// Entropy coder of the body.
+    pub coder: Coder,
+}
+
+impl Default for EncodeOptions {
+    fn default() -> Self {
+        EncodeOptions { depth_bits: DEFAULT_DEPTH_BITS, radius: None, coder: Coder::Zstd }
+    }
+}
+
+/// The compact-specific fields of a CompactFrame (after the Frame's fixed 96 bytes).
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct CompactParams {
+    /// Depth (ray parameter) of depth code 0.
+    pub depth_min: f32,
+    /// Depth per code step (> 0).
+    pub depth_step: f32,
+    /// The radius model radii are coded against.
+    pub radius: RadiusPrediction,
+    /// Entropy coder of the body.
+    pub coder: Coder,
+    /// Decompressed body length: `⌈w·h/8⌉ + 8·count`.
+    pub raw_len: u32,
+}
+
+/// Largest distance between a sample's center decoded from the compact form and from the
+/// 12-byte form it was encoded from: half a depth step along the ray, the 12-byte form's own
+/// rounding (up to half a quantum per axis) twice, and f32 rounding of `eye + dir · depth`.
+pub fn position_bound(header: &FrameHeader, params: &CompactParams) -> f32 {
+    let deq = Dequantizer::new(header.bounds, header.radius_unit);
+    let q = deq.step.length();
+    let far = params.depth_min.abs() + params.depth_step * DEPTH_CODE_MAX as f32;
+    let scale = header.camera.eye.abs().max_element() + far + header.bounds.max().abs().max_element();
+    0.5 * params.depth_step + q + 8.0 * f32::EPSILON * scale
+}
+
+// ---------------------------------------------------------------- shared by both sides
+
+/// The depth of a code.
+#[inline(always)]
+fn depth_of(params: &CompactParams, code: u32) -> f32 {
+    params.depth_min + code as f32 * params.depth_step
+}
+
+/// Bytes of the coverage mask of a `w × h` viewport.
+#[inline]
+pub fn mask_len(width: u32, height: u32) -> u64 {
+    (width as u64 * height as u64).div_ceil(8)
+}
+
+fn params_valid(p: &CompactParams) -> bool {
+    p.depth_min.is_finite()
+        && p.depth_step > 0.0
+        && p.depth_step.is_finite()
+        && depth_of(p, DEPTH_CODE_MAX).is_finite()
+        && p.radius.constant.is_finite()
+        && p.radius.per_depth.is_finite()
+}
+
+/// The wire encodings of a frame.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Hash)]
+pub enum Encoding {
+    /// Message type 3: 12 bytes per sample.
+    Raw12,
+    /// Message type 6: this module's form.
+    Compact,
+}
+
+impl Encoding {
+    /// The name on command lines (`raw12`, `compact`).
+    pub fn name(self) -> &'static str {
+        match self {
+            Encoding::Raw12 => "raw12",
+            Encoding::Compact => "compact",
+        }
+    }
+
+    /// The encoding with this name.
+    pub fn from_name(s: &str) -> Option<Encoding> {
+        match s {
+            "raw12" => Some(Encoding::Raw12),
+            "compact" => Some(Encoding::Compact),
+            _ => None,
+        }
+    }
+}
+
+/// Parses the compact fields and checks them against the frame header.
+fn parse_params(b: &[u8; 24], header: &FrameHeader) -> Result<CompactParams, WireError> {
+    let f = |i: usize| f32::from_le_bytes([b[i], b[i + 1], b[i + 2], b[i + 3]]);
+    let coder = Coder::from_code(b[16]).ok_or(WireError::Compact(CompactError::BadCoder(b[16])))?;
+    let raw_len = u32::from_le_bytes([b[20], b[21], b[22], b[23]]);
+    let p = CompactParams {
+        depth_min: f(0),
+        depth_step: f(4),
+        radius: RadiusPrediction { constant: f(8), per_depth: f(12) },
+        coder,
+        raw_len,
+    };
+    if !(p.depth_min.is_finite() && p.depth_step > 0.0 && p.depth_step.is_finite())
+        || !depth_of(&p, DEPTH_CODE_MAX).is_finite()
+    {
+        return Err(WireError::Compact(CompactError::BadDepth));
+    }
+    if !(p.radius.constant.is_finite() && p.radius.per_depth.is_finite()) {
+        return Err(WireError::Compact(CompactError::BadRadiusModel));
+    }
+    let expected =
+        mask_len(header.camera.width, header.camera.height) + PLANE_BYTES_PER_SAMPLE as u64 * header.count as u64;
+    if raw_len as u64 != expected {
+        return Err(WireError::Compact(CompactError::BadRawLength { stated: raw_len, expected }));
+    }
+    Ok(p)
+}
+
+/// The compact parameters of a CompactFrame message's payload (for tools: bounds, statistics).
+pub fn read_params(payload: &[u8], limits: &Limits) -> Result<(FrameHeader, CompactParams), WireError> {
+    if payload.len() < COMPACT_FIXED_LEN {
+        return Err(WireError::BadLength { ty: MsgType::CompactFrame, len: payload.len() as u32 });
+    }
+    let fixed: &[u8; FRAME_FIXED_LEN] = payload[..FRAME_FIXED_LEN].try_into().unwrap_or(&[0; FRAME_FIXED_LEN]);
+    let header = decode_frame_fixed(fixed, limits)?;
+    let cb: &[u8; 24] = payload[FRAME_FIXED_LEN..COMPACT_FIXED_LEN].try_into().unwrap_or(&[0; 24]);
+    Ok((header, parse_params(cb, &header)?))
+}
+
+/// The encoder and decoder proper (they need an allocator).
+#[cfg(feature = "alloc")]
+mod codec {
+    use super::*;
+    use crate::camera::{Camera, RayBasis};
+    use crate::sample::{Dequantizer, Quantizer};
+    use crate::wire::Frame;
+    use alloc::vec;
+    use alloc::vec::Vec;
+    use glam::Vec3;
+
+    impl RadiusPrediction {
+        /// A guess for a frame whose radius model is not known: the constant of a frame whose
+        /// samples all share one radius code, else the median radius per depth (codes off the
+        /// guess cost a few bits each, never correctness).
+        pub fn fit(frame: &Frame) -> RadiusPrediction {
+            let deq = Dequantizer::new(frame.header.bounds, frame.header.radius_unit);
+            let Some(&first) = frame.samples.first() else { return RadiusPrediction::default() };
+            if frame.samples.iter().all(|&s| crate::sample::radius_code(s) == crate::sample::radius_code(first)) {
+                return RadiusPrediction { constant: deq.radius(first), per_depth: 0.0 };
+            }
+            let (_, _, w) = frame.header.camera.basis();
+            let eye = frame.header.camera.eye;
+            let stride = (frame.samples.len() / 1024).max(1);
+            let mut ratios: Vec<f32> = frame
+                .samples
+                .iter()
+                .step_by(stride)
+                .filter_map(|&s| {
+                    let z = (deq.center(s) - eye).dot(w);
+                    let r = deq.radius(s) / z;
+                    (z > 0.0 && r.is_finite()).then_some(r)
+                })
+                .collect();
+            if ratios.is_empty() {
+                return RadiusPrediction::default();
+            }
+            let mid = ratios.len() / 2;
+            ratios.select_nth_unstable_by(mid, |a, b| a.total_cmp(b));
+            RadiusPrediction { constant: 0.0, per_depth: ratios[mid] }
+        }
+    }
+
+    /// The MED (LOCO-I median edge detector) prediction from the left `a`, upper `b` and
+    /// upper-left `c` neighbours, each present or not; `last` when none is.
+    #[inline(always)]
+    fn med(a: Option<i32>, b: Option<i32>, c: Option<i32>, last: i32) -> i32 {
+        match (a, b, c) {
+            (Some(a), Some(b), Some(c)) => {
+                if c >= a.max(b) {
+                    a.min(b)
+                } else if c <= a.min(b) {
+                    a.max(b)
+                } else {
+                    a + b - c
+                }
+            }
+            (Some(a), Some(b), None) => (a + b) >> 1,
+            (Some(a), None, _) => a,
+            (None, Some(b), _) => b,
+            (None, None, Some(c)) => c,
+            (None, None, None) => last,
+        }
+    }
+
+    /// What the predictors remember of one column: the last covered pixel's values and the row
+    /// (+1) it was in.
+    #[derive(Clone, Copy, Default)]
+    struct Cell {
+        tag: u32,
+        depth: u16,
+        color: [u8; 4],
+    }
+
+    /// The neighbour context of the pixels of one frame, visited in pixel order (covered pixels
+    /// only): predicts a pixel's depth code and color, then records its true values.
+    struct Context {
+        cells: Vec<Cell>,
+        width: u32,
+        /// Row and column of the previously visited pixel.
+        last_x: u32,
+        last_y: u32,
+        /// The cell of the previous pixel's column as it was before that pixel overwrote it.
+        saved: Cell,
+        last: Cell,
+    }
+
+    struct Prediction {
+        depth: i32,
+        color: [i32; 4],
+    }
+
+    impl Context {
+        fn new(width: u32) -> Self {
+            Context {
+                cells: vec![Cell::default(); width as usize],
+                width,
+                last_x: u32::MAX,
+                last_y: u32::MAX,
+                saved: Cell::default(),
+                last: Cell::default(),
+            }
+        }
+
+        /// Predicts pixel `(x, y)` (the next covered pixel in pixel order).
+        #[inline(always)]
+        fn predict(&self, x: u32, y: u32) -> Prediction {
+            let cells = &self.cells;
+            let left = (x > 0 && self.last_y == y && self.last_x == x - 1).then(|| cells[x as usize - 1]);
+            let up = cells[x as usize];
+            let up = (up.tag == y && y > 0).then_some(up);
+            let ul = if x > 0 && y > 0 {
+                // The upper-left cell was overwritten in this row if the previous pixel was (x-1, y).
+                let c = if left.is_some() { self.saved } else { cells[x as usize - 1] };
+                (c.tag == y).then_some(c)
+            } else {
+                None
+            };
+            let depth = med(
+                left.map(|c| c.depth as i32),
+                up.map(|c| c.depth as i32),
+                ul.map(|c| c.depth as i32),
+                self.last.depth as i32,
+            );
+            let mut color = [0i32; 4];
+            for (k, v) in color.iter_mut().enumerate() {
+                *v = med(
+                    left.map(|c| c.color[k] as i32),
+                    up.map(|c| c.color[k] as i32),
+                    ul.map(|c| c.color[k] as i32),
+                    self.last.color[k] as i32,
+                );
+            }
+            Prediction { depth, color }
+        }
+
+        /// Records pixel `(x, y)`'s true values.
+        #[inline(always)]
+        fn record(&mut self, x: u32, y: u32, depth: u16, color: [u8; 4]) {
+            let cell = Cell { tag: y + 1, depth, color };
+            self.saved = self.cells[x as usize];
+            self.cells[x as usize] = cell;
+            self.last = cell;
+            self.last_x = x;
+            self.last_y = y;
+            debug_assert!(x < self.width);
+        }
+    }
+
+    /// The pieces of the decoded position and radius prediction of one frame.
+    struct Geometry {
+        basis: RayBasis,
+        eye: Vec3,
+        forward: Vec3,
+        quant: Quantizer,
+    }
+
+    impl Geometry {
+        fn new(h: &FrameHeader) -> Self {
+            let (_, _, forward) = h.camera.basis();
+            let basis = h.camera.ray_basis();
+            Geometry { eye: basis.origin(), basis, forward, quant: Quantizer::new(h.bounds, h.radius_unit) }
+        }
+
+        /// The radius code the model predicts for a sample at depth `t` along unit `d`.
+        #[inline(always)]
+        fn radius_code(&self, radius: &RadiusPrediction, d: Vec3, t: f32) -> u32 {
+            self.quant.radius_code(radius.constant + radius.per_depth * (t * d.dot(self.forward)))
+        }
+    }
+
+    // ---------------------------------------------------------------- encoding
+
+    /// Projects world points to pixels of a camera (the inverse of [`RayBasis::dir`], the same
+    /// arithmetic as [`Camera::project`] with the basis computed once).
+    struct Projector {
+        eye: Vec3,
+        u: Vec3,
+        v: Vec3,
+        w: Vec3,
+        tan_x: f32,
+        tan_y: f32,
+        width: f32,
+        height: f32,
+    }
+
+    impl Projector {
+        fn new(c: &Camera) -> Self {
+            let (u, v, w) = c.basis();
+            let tan_y = crate::math::tan(c.fov_y_deg.to_radians() * 0.5);
+            Projector {
+                eye: c.eye,
+                u,
+                v,
+                w,
+                tan_x: tan_y * c.aspect(),
+                tan_y,
+                width: c.width as f32,
+                height: c.height as f32,
+            }
+        }
+
+        /// The pixel `(x, y)` the point projects into, if in the viewport and in front.
+        #[inline(always)]
+        fn pixel(&self, p: Vec3) -> Option<(u32, u32)> {
+            let rel = p - self.eye;
+            let z = rel.dot(self.w);
+            if !(z > 1e-6) {
+                return None;
+            }
+            let sx = rel.dot(self.u) / (z * self.tan_x);
+            let sy = rel.dot(self.v) / (z * self.tan_y);
+            let x = (sx + 1.0) * 0.5 * self.width;
+            let y = (1.0 - sy) * 0.5 * self.height;
+            if x >= 0.0 && y >= 0.0 && x < self.width && y < self.height {
+                Some((x as u32, y as u32))
+            } else {
+                None
+            }
+        }
+    }
+
+    /// A frame taken apart for the compact form: its parameters and the uncompressed body (mask,
+    /// then the residual planes).
+    #[derive(Clone, Debug, PartialEq)]
+    pub struct Planes {
+        /// The compact-specific header fields (`raw_len` = `body.len()`).
+        pub params: CompactParams,
+        /// Mask and residual planes, uncompressed.
+        pub body: Vec<u8>,
+    }
+
+    /// Splits a frame into the compact form's mask and residual planes (everything but the
+    /// entropy coding). Samples must be one per pixel of the frame's camera, in pixel order.
+    pub fn build_planes(frame: &Frame, opts: &EncodeOptions) -> Result<Planes, EncodeError> {
+        let h = &frame.header;
+        let cam = &h.camera;
+        let n = frame.samples.len();
+        if frame.colors.len() != n
+            || cam.validate(u32::MAX).is_err()
+            || !h.bounds.is_valid()
+            || !(h.radius_unit > 0.0 && (h.radius_unit * RADIUS_MAX as f32).is_finite())
+            || n > cam.width as usize * cam.height as usize
+        {
+            return Err(EncodeError::BadFrame);
+        }
+        let (w, hgt) = (cam.width, cam.height);
+        let geo = Geometry::new(h);
+        let proj = Projector::new(cam);
+        let deq = Dequantizer::new(h.bounds, h.radius_unit);
+        // Pass 1: every sample's pixel and depth along that pixel's ray.
+        let mut pix = Vec::with_capacity(n);
+        let mut depth = Vec::with_capacity(n);
+        let (mut t_lo, mut t_hi) = (f32::INFINITY, f32::NEG_INFINITY);
+        let mut next = 0u64;
+        for (i, &s) in frame.samples.iter().enumerate() {
+            let p = deq.center(s);
+            let (x, y) = proj.pixel(p).ok_or(EncodeError::NotPixelAligned { index: i })?;
+            let idx = y as u64 * w as u64 + x as u64;
+            if idx < next {
+                return Err(EncodeError::NotPixelAligned { index: i });
+            }
+            next = idx + 1;
+            let t = (p - geo.eye).dot(geo.basis.dir(x, y));
+            if !t.is_finite() {
+                return Err(EncodeError::DepthRange);
+            }
+            t_lo = t_lo.min(t);
+            t_hi = t_hi.max(t);
+            pix.push((x, y));
+            depth.push(t);
+        }
+        if n == 0 {
+            (t_lo, t_hi) = (0.0, 0.0);
+        }
+        let ext = (h.bounds.max() - h.bounds.min()).max_element();
+        let bits = opts.depth_bits.clamp(1, 16);
+        let mut step = ext / (1u32 << bits) as f32;
+        step = step.max((t_hi - t_lo) / DEPTH_CODE_MAX as f32);
+        if !(step > 0.0 && step.is_finite()) {
+            step = if (t_hi - t_lo) > 0.0 { (t_hi - t_lo) / DEPTH_CODE_MAX as f32 } else { 1.0 };
+        }
+        let radius = opts.radius.unwrap_or_else(|| RadiusPrediction::fit(frame));
+        let mlen = mask_len(w, hgt) as usize;
+        let raw_len = mlen + PLANE_BYTES_PER_SAMPLE * n;
+        let mut params = CompactParams {
+            depth_min: t_lo,
+            depth_step: step,
+            radius,
+            coder: opts.coder,
+            raw_len: u32::try_from(raw_len).map_err(|_| EncodeError::DepthRange)?,
+        };
+        if !params_valid(&params) {
+            // A step that makes the top code overflow, or a model that is not finite: no model.
+            params.radius = RadiusPrediction::default();
+            if !params_valid(&params) {
+                return Err(EncodeError::DepthRange);
+            }
+        }
+        // Pass 2: the planes.
+        let mut body = vec![0u8; raw_len];
+        let (mask, planes) = body.split_at_mut(mlen);
+        let (dlo, rest) = planes.split_at_mut(n);
+        let (dhi, rest) = rest.split_at_mut(n);
+        let (rlo, rest) = rest.split_at_mut(n);
+        let (rhi, rest) = rest.split_at_mut(n);
+        let (cr, rest) = rest.split_at_mut(n);
+        let (cg, rest) = rest.split_at_mut(n);
+        let (cb, ca) = rest.split_at_mut(n);
+        let mut ctx = Context::new(w);
+        for i in 0..n {
+            let (x, y) = pix[i];
+            let idx = y as usize * w as usize + x as usize;
+            mask[idx >> 3] |= 1 << (idx & 7);
+            let code = ((depth[i] - t_lo) / step + 0.5).clamp(0.0, DEPTH_CODE_MAX as f32) as u32 as u16;
+            let pred = ctx.predict(x, y);
+            let dres = code.wrapping_sub(pred.depth as u16);
+            dlo[i] = dres as u8;
+            dhi[i] = (dres >> 8) as u8;
+            let d = geo.basis.dir(x, y);
+            let rpred = geo.radius_code(&params.radius, d, depth_of(&params, code as u32));
+            let rcode = crate::sample::radius_code(frame.samples[i]);
+            let rres = (rcode.wrapping_sub(rpred)) & RADIUS_MAX;
+            rlo[i] = rres as u8;
+            rhi[i] = (rres >> 8) as u8;
+            let c = frame.colors[i].to_le_bytes();
+            cr[i] = c[0].wrapping_sub(pred.color[0] as u8);
+            cg[i] = c[1].wrapping_sub(pred.color[1] as u8);
+            cb[i] = c[2].wrapping_sub(pred.color[2] as u8);
+            ca[i] = c[3].wrapping_sub(pred.color[3] as u8);
+            ctx.record(x, y, code, c);
+        }
+        Ok(Planes { params, body })
+    }
+
+    /// Entropy codes a body with `coder` (ruzstd's compressor for zstd).
+    pub fn compress(body: &[u8], coder: Coder) -> Vec<u8> {
+        match coder {
+            Coder::Stored => body.to_vec(),
+            Coder::Zstd => ruzstd::encoding::compress_to_vec(body, ruzstd::encoding::CompressionLevel::Fastest),
+        }
+    }
+
+    /// The whole CompactFrame message (12-byte header and payload) from the frame's header, the
+    /// parameters and the entropy-coded body.
+    pub fn assemble(header: &FrameHeader, params: &CompactParams, coded: &[u8]) -> Result<Vec<u8>, EncodeError> {
+        let len = COMPACT_FIXED_LEN + coded.len();
+        let len32 = u32::try_from(len).map_err(|_| EncodeError::DepthRange)?;
+        let mut out = Vec::with_capacity(HEADER_LEN + len);
+        out.extend_from_slice(&crate::wire::MAGIC);
+        out.extend_from_slice(&crate::wire::VERSION.to_le_bytes());
+        out.push(MsgType::CompactFrame as u8);
+        out.push(0);
+        out.extend_from_slice(&len32.to_le_bytes());
+        out.extend_from_slice(&encode_frame_fixed(header));
+        for v in [params.depth_min, params.depth_step, params.radius.constant, params.radius.per_depth] {
+            out.extend_from_slice(&v.to_le_bytes());
+        }
+        out.extend_from_slice(&[params.coder as u8, 0, 0, 0]);
+        out.extend_from_slice(&params.raw_len.to_le_bytes());
+        out.extend_from_slice(coded);
+        Ok(out)
+    }
+
+    /// Encodes a frame as one CompactFrame message (header and payload). The frame's `count` is
+    /// taken from its samples.
+    pub fn encode(frame: &Frame, opts: &EncodeOptions) -> Result<Vec<u8>, EncodeError> {
+        let planes = build_planes(frame, opts)?;
+        let coded = compress(&planes.body, planes.params.coder);
+        let header = FrameHeader { count: frame.samples.len() as u32, ..frame.header };
+        assemble(&header, &planes.params, &coded)
+    }
+
+    /// The message bytes of `frame` in `encoding` (header included). A frame the compact form
+    /// cannot hold ([`EncodeError`]) is sent in the 12-byte form, as a server does; the second
+    /// value says which form the bytes are in.
+    pub fn encode_frame(frame: &Frame, encoding: Encoding, opts: &EncodeOptions) -> (Vec<u8>, Encoding) {
+        if encoding == Encoding::Compact {
+            if let Ok(b) = encode(frame, opts) {
+                return (b, Encoding::Compact);
+            }
+        }
+        (crate::wire::encode_to_vec(&crate::wire::Message::Frame(frame.clone())), Encoding::Raw12)
+    }
+
+    /// The bytes `frame` takes on the wire in `encoding` (message header included): what a link
+    /// model or session simulator should charge for it.
+    pub fn encoded_size(frame: &Frame, encoding: Encoding, opts: &EncodeOptions) -> usize {
+        match encoding {
+            Encoding::Raw12 => HEADER_LEN + FRAME_FIXED_LEN + frame.samples.len() * crate::wire::BYTES_PER_SAMPLE,
+            Encoding::Compact => encode_frame(frame, encoding, opts).0.len(),
+        }
+    }
+
+    // ---------------------------------------------------------------- decoding
+
+    /// Decodes a CompactFrame payload (the bytes after the 12-byte message header) into an
+    /// ordinary frame. Allocates at most the payload's decompressed length (`⌈w·h/8⌉ + 8·count`,
+    /// both bounded by the validated header and `limits`), the 12 bytes per sample of the result,
+    /// and a row of predictor state (`12 · width` bytes).
+    pub fn decode_payload(payload: &[u8], limits: &Limits) -> Result<Frame, WireError> {
+        let len = payload.len() as u32;
+        let bad_len = WireError::BadLength { ty: MsgType::CompactFrame, len };
+        if payload.len() < COMPACT_FIXED_LEN {
+            return Err(bad_len);
+        }
+        let fixed: &[u8; FRAME_FIXED_LEN] = payload[..FRAME_FIXED_LEN].try_into().map_err(|_| bad_len)?;
+        let header = decode_frame_fixed(fixed, limits)?;
+        let cb: &[u8; 24] = payload[FRAME_FIXED_LEN..COMPACT_FIXED_LEN].try_into().map_err(|_| bad_len)?;
+        let params = parse_params(cb, &header)?;
+        let coded = &payload[COMPACT_FIXED_LEN..];
+        let body = decompress(coded, &params)?;
+        decode_body(&header, &params, &body)
+    }
+
+    /// Undoes the entropy coding into a buffer of exactly `params.raw_len` bytes.
+    pub fn decompress(coded: &[u8], params: &CompactParams) -> Result<Vec<u8>, WireError> {
+        let raw_len = params.raw_len as usize;
+        let corrupt = WireError::Compact(CompactError::Corrupt);
+        match params.coder {
+            Coder::Stored => {
+                if coded.len() != raw_len {
+                    return Err(corrupt);
+                }
+                Ok(coded.to_vec())
+            }
+            Coder::Zstd => {
+                let mut body = vec![0u8; raw_len];
+                if coded.is_empty() {
+                    return if raw_len == 0 { Ok(body) } else { Err(corrupt) };
+                }
+                let mut dec = ruzstd::decoding::FrameDecoder::new();
+                // The window never needs to exceed the content (or ruzstd's encoder's fixed
+                // 128 KiB); a frame that asks for more is refused before its buffers are
+                // allocated.
+                dec.set_max_window_size((raw_len as u64).max(MIN_ZSTD_WINDOW));
+                let got = dec.decode_all(coded, &mut body).map_err(|_| corrupt)?;
+                if got != raw_len {
+                    return Err(corrupt);
+                }
+                Ok(body)
+            }
+        }
+    }
+
+    /// Rebuilds the frame from the header, the parameters and the decompressed body.
+    pub fn decode_body(header: &FrameHeader, params: &CompactParams, body: &[u8]) -> Result<Frame, WireError> {
+        let n = header.count as usize;
+        let (w, h) = (header.camera.width, header.camera.height);
+        let pixels = w as u64 * h as u64;
+        let mlen = mask_len(w, h) as usize;
+        if body.len() != mlen + PLANE_BYTES_PER_SAMPLE * n {
+            return Err(WireError::Compact(CompactError::Corrupt));
+        }
+        let (mask, planes) = body.split_at(mlen);
+        // Count first: nothing is built from an inconsistent mask.
+        let mut ones = 0u64;
+        for (i, &b) in mask.iter().enumerate() {
+            let valid = pixels - (i as u64 * 8).min(pixels);
+            let b = if valid < 8 {
+                if b >> valid != 0 {
+                    return Err(WireError::Compact(CompactError::MaskCount { mask: u32::MAX, count: header.count }));
+                }
+                b
+            } else {
+                b
+            };
+            ones += b.count_ones() as u64;
+        }
+        if ones != n as u64 {
+            return Err(WireError::Compact(CompactError::MaskCount {
+                mask: ones.min(u32::MAX as u64) as u32,
+                count: header.count,
+            }));
+        }
+        let (dlo, rest) = planes.split_at(n);
+        let (dhi, rest) = rest.split_at(n);
+        let (rlo, rest) = rest.split_at(n);
+        let (rhi, rest) = rest.split_at(n);
+        let (cr, rest) = rest.split_at(n);
+        let (cg, rest) = rest.split_at(n);
+        let (cb, ca) = rest.split_at(n);
+        let geo = Geometry::new(header);
+        let mut samples = vec![0u64; n];
+        let mut colors = vec![0u32; n];
+        let mut ctx = Context::new(w);
+        let mut i = 0usize;
+        for (wi, chunk) in mask.chunks(8).enumerate() {
+            let mut word = [0u8; 8];
+            word[..chunk.len()].copy_from_slice(chunk);
+            let mut bits = u64::from_le_bytes(word);
+            while bits != 0 {
+                let idx = wi as u64 * 64 + bits.trailing_zeros() as u64;
+                bits &= bits - 1;
+                let (x, y) = ((idx % w as u64) as u32, (idx / w as u64) as u32);
+                let pred = ctx.predict(x, y);
+                let code = (pred.depth as u16).wrapping_add(dlo[i] as u16 | (dhi[i] as u16) << 8);
+                let rres = rlo[i] as u32 | (rhi[i] as u32) << 8;
+                if rres > RADIUS_MAX {
+                    return Err(WireError::Compact(CompactError::BadRadiusResidual));
+                }
+                let d = geo.basis.dir(x, y);
+                let t = depth_of(params, code as u32);
+                let rcode = (geo.radius_code(&params.radius, d, t).wrapping_add(rres)) & RADIUS_MAX;
+                let p = geo.eye + d * t;
+                samples[i] = geo.quant.pack(p, 0.0) | (rcode as u64) << (3 * crate::sample::POS_BITS);
+                let c = [
+                    (pred.color[0] as u8).wrapping_add(cr[i]),
+                    (pred.color[1] as u8).wrapping_add(cg[i]),
+                    (pred.color[2] as u8).wrapping_add(cb[i]),
+                    (pred.color[3] as u8).wrapping_add(ca[i]),
+                ];
+                colors[i] = u32::from_le_bytes(c);
+                ctx.record(x, y, code, c);
+                i += 1;
+            }
+        }
+        debug_assert_eq!(i, n);
+        Ok(Frame { header: *header, samples, colors })
+    }
+}
+#[cfg(feature = "alloc")]
+pub use codec::*;

@@ -1,0 +1,50 @@
+//! Which wire encoding a frame goes out in: the 12-byte form (message type 3) or the compact
+//! form of [`volwarp_core::compact_frame`] (message type 6), negotiated per client in the
+//! Hello exchange ([`volwarp_core::wire::CAP_COMPACT`]).
+//!
+//! The server knows each frame's radius model exactly ([`crate::radius::FrameRadius`]), so
+//! radius codes cost nothing in the compact form unless a depth rounds to the next code. The
+//! body is entropy coded with the C zstd library (level [`ZSTD_LEVEL`]): about 10× faster
+//! than ruzstd's pure-Rust encoder (core's default) at a better ratio; clients decode either
+//! with ruzstd (`docs/perf.md`, issue 16).
+
+use crate::marcher::Marcher;
+use volwarp_core::compact_frame::{self, Coder, EncodeOptions, Encoding, RadiusPrediction};
+use volwarp_core::wire::{self, CameraRequest, Frame, FrameHeader, Message};
+
+/// The zstd level of the compact body (1: fastest; higher levels gain little on residuals).
+pub const ZSTD_LEVEL: i32 = 1;
+
+/// The compact encoder's settings for a frame the marcher rendered for `req`: the frame's own
+/// radius model, default depth precision, zstd.
+pub fn encode_options(marcher: &Marcher, req: &CameraRequest) -> EncodeOptions {
+    let r = marcher.frame_radius(req);
+    EncodeOptions {
+        radius: Some(RadiusPrediction { constant: r.constant(), per_depth: r.per_depth() }),
+        ..EncodeOptions::default()
+    }
+}
+
+/// The compact message (header included) of `frame` with C zstd at `level`, or `None` if
+/// the frame does not fit the compact form.
+pub fn encode_compact(frame: &Frame, opts: &EncodeOptions, level: i32) -> Option<Vec<u8>> {
+    let planes = compact_frame::build_planes(frame, opts).ok()?;
+    let coded = match planes.params.coder {
+        Coder::Zstd => zstd::bulk::compress(&planes.body, level).ok()?,
+        Coder::Stored => planes.body,
+    };
+    let header = FrameHeader { count: frame.samples.len() as u32, ..frame.header };
+    compact_frame::assemble(&header, &planes.params, &coded).ok()
+}
+
+/// The message bytes (header included) of a frame the marcher rendered for `req`, in
+/// `encoding`; a frame the compact form cannot hold (samples off their pixels' rays, e.g. at
+/// extreme zoom) goes out in the 12-byte form. Returns the bytes and the form they are in.
+pub fn encode_frame(marcher: &Marcher, req: &CameraRequest, frame: &Frame, encoding: Encoding) -> (Vec<u8>, Encoding) {
+    if encoding == Encoding::Compact {
+        if let Some(b) = encode_compact(frame, &encode_options(marcher, req), ZSTD_LEVEL) {
+            return (b, Encoding::Compact);
+        }
+    }
+    (wire::encode_to_vec(&Message::Frame(frame.clone())), Encoding::Raw12)
+}
