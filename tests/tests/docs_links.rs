@@ -5,8 +5,20 @@
 use std::path::{Path, PathBuf};
 
 /// Top-level folders whose files the docs name.
-const TOP: [&str; 12] =
-    ["core", "server", "cpu-tracer", "gpu-tracer", "client-minifb", "eval", "tests", "docs", "scripts", "tools", "data", "fuzz"];
+const TOP: [&str; 12] = [
+    "core",
+    "server",
+    "cpu-tracer",
+    "gpu-tracer",
+    "client-minifb",
+    "eval",
+    "tests",
+    "docs",
+    "scripts",
+    "tools",
+    "data",
+    "fuzz",
+];
 
 fn root() -> PathBuf {
     Path::new(env!("CARGO_MANIFEST_DIR")).parent().unwrap().to_path_buf()
