@@ -27,10 +27,11 @@
 //! validated (viewport ≤ the limits, sample count ≤ pixels and ≤ the limits): the decompressed
 //! length must equal `⌈w·h/8⌉ + 8·count` exactly (stated in the header and checked before
 //! decompressing), zstd writes into a buffer of exactly that size (`TargetTooSmall` otherwise)
-//! with its window capped at that size (or [`MIN_ZSTD_WINDOW`], whichever is larger), so no
-//! input can make it allocate more.
+//! with its window capped at that size (or [`MIN_ZSTD_WINDOW`], whichever is larger), drained
+//! every [`DECODE_STEP`] bytes, so no input can make it allocate more than
+//! [`decode_alloc_bound`].
 
-use crate::sample::{Dequantizer, RADIUS_MAX};
+use crate::sample::Dequantizer;
 use crate::wire::{decode_frame_fixed, FrameHeader, Limits, MsgType, WireError, FRAME_FIXED_LEN};
 #[cfg(feature = "alloc")]
 use crate::wire::{encode_frame_fixed, HEADER_LEN};
@@ -40,6 +41,8 @@ pub const COMPACT_FIXED_LEN: usize = FRAME_FIXED_LEN + 24;
 /// The zstd window a decoder allows even for a body shorter than it (ruzstd's encoder always
 /// declares 128 KiB); otherwise the window may not exceed the body.
 pub const MIN_ZSTD_WINDOW: u64 = 128 << 10;
+/// Bytes ruzstd decodes per step before they are drained into the body.
+pub const DECODE_STEP: usize = 64 << 10;
 /// Default depth precision: the depth step is the largest bounds extent / 2^this.
 pub const DEFAULT_DEPTH_BITS: u32 = 12;
 /// Largest depth code (depth codes are `u16`).
@@ -215,12 +218,31 @@ fn depth_of(params: &CompactParams, code: u32) -> f32 {
     params.depth_min + code as f32 * params.depth_step
 }
 
+/// The most bytes one `wire::read_message` may allocate under `limits` when the message is a
+/// CompactFrame: the payload, the decompressed body (mask and 8 bytes per sample), the
+/// frame's 12 bytes per sample, a row of predictor state, and ruzstd's buffers (a window of at
+/// most max(body, [`MIN_ZSTD_WINDOW`]), one [`DECODE_STEP`], one 128 KiB block and its tables).
+/// The fuzz targets check every decode against it.
+pub fn decode_alloc_bound(limits: &Limits) -> u64 {
+    let samples = limits.max_samples as u64;
+    let vp = limits.max_viewport as u64;
+    let body = (vp * vp).div_ceil(8) + PLANE_BYTES_PER_SAMPLE as u64 * samples;
+    limits.max_payload as u64
+        + body
+        + 12 * samples
+        + 16 * vp
+        + body.max(MIN_ZSTD_WINDOW)
+        + DECODE_STEP as u64
+        + (256 << 10)
+}
+
 /// Bytes of the coverage mask of a `w × h` viewport.
 #[inline]
 pub fn mask_len(width: u32, height: u32) -> u64 {
     (width as u64 * height as u64).div_ceil(8)
 }
 
+#[cfg(feature = "alloc")]
 fn params_valid(p: &CompactParams) -> bool {
     p.depth_min.is_finite()
         && p.depth_step > 0.0
@@ -302,7 +324,7 @@ pub fn read_params(payload: &[u8], limits: &Limits) -> Result<(FrameHeader, Comp
 mod codec {
     use super::*;
     use crate::camera::{Camera, RayBasis};
-    use crate::sample::{Dequantizer, Quantizer};
+    use crate::sample::{Dequantizer, Quantizer, RADIUS_MAX};
     use crate::wire::Frame;
     use alloc::vec;
     use alloc::vec::Vec;
@@ -728,13 +750,31 @@ mod codec {
                 if coded.is_empty() {
                     return if raw_len == 0 { Ok(body) } else { Err(corrupt) };
                 }
-                let mut dec = ruzstd::decoding::FrameDecoder::new();
+                use ruzstd::decoding::{BlockDecodingStrategy, FrameDecoder};
+                use ruzstd::io::Read as _;
+                let mut dec = FrameDecoder::new();
                 // The window never needs to exceed the content (or ruzstd's encoder's fixed
                 // 128 KiB); a frame that asks for more is refused before its buffers are
                 // allocated.
                 dec.set_max_window_size((raw_len as u64).max(MIN_ZSTD_WINDOW));
-                let got = dec.decode_all(coded, &mut body).map_err(|_| corrupt)?;
-                if got != raw_len {
+                let mut input = coded;
+                dec.init(&mut input).map_err(|_| corrupt)?;
+                // Decode a little at a time and drain into the body at once, so ruzstd's own
+                // buffer never holds more than the window and one step: a body that would
+                // decompress past the stated length is caught within a step, not after it.
+                let mut written = 0;
+                loop {
+                    dec.decode_blocks(&mut input, BlockDecodingStrategy::UptoBytes(DECODE_STEP))
+                        .map_err(|_| corrupt)?;
+                    written += dec.read(&mut body[written..]).map_err(|_| corrupt)?;
+                    if dec.can_collect() != 0 {
+                        return Err(corrupt);
+                    }
+                    if dec.is_finished() {
+                        break;
+                    }
+                }
+                if written != raw_len || !input.is_empty() {
                     return Err(corrupt);
                 }
                 Ok(body)

@@ -287,7 +287,8 @@ fn seed_corpora_replay() {
     let n = replay("seeds", "wire_decode_chunked", checks::wire_decode_chunked)
         + replay("seeds", "frame_decode", checks::frame_decode)
         + replay("seeds", "roundtrip", roundtrip)
-        + replay("seeds", "lbvh", checks::lbvh);
+        + replay("seeds", "lbvh", checks::lbvh)
+        + replay("seeds", "compact_decode", checks::compact_decode);
     assert!(n >= 8, "expected the committed seed corpora under fuzz/seeds, found {n} files");
 }
 
@@ -297,6 +298,46 @@ fn kept_crash_inputs_replay() {
     replay("regressions", "frame_decode", checks::frame_decode);
     replay("regressions", "roundtrip", roundtrip);
     replay("regressions", "lbvh", checks::lbvh);
+    replay("regressions", "compact_decode", checks::compact_decode);
+}
+
+/// Mirror of `compact_decode`: consistent compact frames from random bytes (mode 1), and
+/// streams of real compact messages with random bytes changed (mode 0).
+mod compact_decode_mirror {
+    use super::checks;
+    use proptest::prelude::*;
+
+    proptest! {
+        #![proptest_config(ProptestConfig { cases: 256, .. ProptestConfig::default() })]
+
+        #[test]
+        fn consistent_frames(data in proptest::collection::vec(any::<u8>(), 12..1200)) {
+            let mut v = vec![1u8];
+            v.extend(data);
+            checks::compact_decode(&v);
+        }
+
+        #[test]
+        fn edited_real_messages(data in proptest::collection::vec(any::<u8>(), 12..600), edits in proptest::collection::vec((any::<u16>(), any::<u8>()), 0..6)) {
+            // A valid compact message from the bytes, then edited anywhere (header included).
+            let Some((mut msg, _)) = checks::compact_frame_from(&data) else { return Ok(()) };
+            for (at, v) in edits {
+                let i = at as usize % msg.len();
+                msg[i] = v;
+            }
+            let mut v = vec![0u8];
+            v.extend(msg);
+            checks::compact_decode(&v);
+        }
+
+        #[test]
+        fn random_streams(data in proptest::collection::vec(any::<u8>(), 0..400)) {
+            let mut v = vec![0u8];
+            v.extend(b"VWRP\x02\x00\x06\x00");
+            v.extend(data);
+            checks::compact_decode(&v);
+        }
+    }
 }
 
 /// Found by `lbvh` (crash-f09201c7…): a sphere of radius ~1e-34, far smaller than the rounding

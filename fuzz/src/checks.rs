@@ -13,6 +13,7 @@ use std::vec::Vec;
 
 use embedded_io::{ErrorKind, ErrorType, Read};
 use volwarp_core::camera::Camera;
+use volwarp_core::compact_frame;
 use volwarp_core::heuristics::Heuristic;
 use volwarp_core::sample::{Bounds, Dequantizer, RADIUS_MAX};
 use volwarp_core::scene::Scene;
@@ -30,6 +31,14 @@ pub const LIMITS: Limits = Limits::for_frames(64);
 /// Slack over the payload limit that one decoded message may allocate (the message's own
 /// bookkeeping; the sample arrays themselves are bounded by the payload limit).
 pub const ALLOC_SLACK: usize = 4096;
+
+/// What one `read_message` may allocate: the payload limit and [`ALLOC_SLACK`] for the 12-byte
+/// messages, or the compact decoder's stated bound (a CompactFrame also holds its decompressed
+/// body and zstd's window while it builds the frame).
+pub fn decode_alloc_limit(limits: &Limits) -> usize {
+    let plain = limits.max_payload as usize + ALLOC_SLACK;
+    plain.max(volwarp_core::compact_frame::decode_alloc_bound(limits) as usize)
+}
 
 // ---------------------------------------------------------------- allocation accounting
 
@@ -154,8 +163,8 @@ fn decode_all<R: Read>(r: &mut R, limits: &Limits) -> (Vec<Message>, WireError) 
     loop {
         let (res, peak) = peak_alloc(|| read_message(r, limits));
         assert!(
-            peak <= limits.max_payload as usize + ALLOC_SLACK,
-            "one decode allocated {peak} bytes, over the payload limit {} + slack",
+            peak <= decode_alloc_limit(limits),
+            "one decode allocated {peak} bytes, over the payload limit {} + slack (or a CompactFrame's bound)",
             limits.max_payload
         );
         match res {
@@ -573,4 +582,112 @@ pub fn check_scene(frame: &Frame) {
 /// A CameraRequest with the given fields (convenience for the structured generators).
 pub fn camera_request(seq: u64, camera: Camera, heuristic: Heuristic, radius_scale: f32) -> Message {
     Message::CameraRequest(CameraRequest { seq, camera, heuristic, radius_scale })
+}
+
+// ---------------------------------------------------------------- target 5: compact_decode
+
+/// Target `compact_decode` (issue 16). Byte 0 even: the rest is a stream of messages, decoded
+/// with `read_message` under [`LIMITS`] (CompactFrames among them): no panic, every decode within
+/// [`decode_alloc_limit`], accepted frames valid ([`check_frame`]), and a CompactFrame decodes to
+/// the same result through `compact_frame::decode_payload` on its payload. Byte 0 odd: the rest
+/// describes a *consistent* compact frame ([`compact_frame_from`]: viewport up to 24², mask,
+/// residual planes, depth and radius parameters, stored or zstd body), which must decode, to as
+/// many samples as mask bits, every center finite, and re-encode (when its samples still sit on
+/// their pixels' rays) to a message that decodes to the same colors and radius codes.
+pub fn compact_decode(data: &[u8]) {
+    let Some((&mode, rest)) = data.split_first() else { return };
+    if mode & 1 == 0 {
+        let (msgs, _) = decode_all(&mut &rest[..], &LIMITS);
+        // Every CompactFrame in the stream: the payload alone decodes the same way.
+        let mut at = 0usize;
+        let mut i = 0;
+        while at + HEADER_LEN <= rest.len() && i < msgs.len() {
+            let len = u32::from_le_bytes([rest[at + 8], rest[at + 9], rest[at + 10], rest[at + 11]]) as usize;
+            let end = at + HEADER_LEN + len;
+            if rest[at + 6] == MsgType::CompactFrame as u8 && end <= rest.len() {
+                let direct = compact_frame::decode_payload(&rest[at + HEADER_LEN..end], &LIMITS);
+                assert_eq!(direct.as_ref().ok().map(|f| Message::Frame(f.clone())).as_ref(), Some(&msgs[i]));
+            }
+            at = end;
+            i += 1;
+        }
+        return;
+    }
+    let Some((bytes, planes_body)) = compact_frame_from(rest) else { return };
+    let (res, peak) = peak_alloc(|| read_message(&mut &bytes[..], &LIMITS));
+    assert!(peak <= decode_alloc_limit(&LIMITS), "decode allocated {peak}");
+    let f = match res {
+        Ok(Message::Frame(f)) => f,
+        other => panic!("a consistent compact frame was refused: {other:?}"),
+    };
+    check_frame(&f.header, &f.samples, &f.colors, &LIMITS);
+    let mask_bits: u32 = planes_body
+        .iter()
+        .take(compact_frame::mask_len(f.header.camera.width, f.header.camera.height) as usize)
+        .map(|b| b.count_ones())
+        .sum();
+    assert_eq!(f.samples.len() as u32, mask_bits);
+    if let Ok(again) = compact_frame::encode(&f, &compact_frame::EncodeOptions::default()) {
+        match read_message(&mut &again[..], &LIMITS) {
+            Ok(Message::Frame(g)) => {
+                assert_eq!(g.colors, f.colors, "colors changed in a re-encode");
+                let codes = |s: &[u64]| s.iter().map(|&s| volwarp_core::sample::radius_code(s)).collect::<Vec<_>>();
+                assert_eq!(codes(&g.samples), codes(&f.samples), "radius codes changed in a re-encode");
+            }
+            other => panic!("a re-encoded frame does not decode: {other:?}"),
+        }
+    }
+}
+
+/// A consistent CompactFrame message built from fuzz bytes (see [`compact_decode`]) and its
+/// uncompressed body; `None` if the input is too short for the header bytes.
+pub fn compact_frame_from(data: &[u8]) -> Option<(Vec<u8>, Vec<u8>)> {
+    if data.len() < 12 {
+        return None;
+    }
+    let mut b = Bytes(data);
+    let w = 1 + b.u8() as u32 % 24;
+    let h = 1 + b.u8() as u32 % 24;
+    let yaw = b.u8() as f32 * 1.5;
+    let zstd = b.u8() & 1 == 1;
+    let depth_min = (b.u8() as f32) * 0.05;
+    let depth_step = (1 + b.u16() as u32) as f32 * 1e-5;
+    let constant = b.u8() as f32 * 1e-4;
+    let per_depth = b.u8() as f32 * 1e-4;
+    let bounds = Bounds::new(Vec3::splat(-1.0), Vec3::splat(1.0));
+    let camera = Camera::framing(bounds.min(), bounds.max(), yaw, 10.0, 40.0, w, h);
+    let mlen = compact_frame::mask_len(w, h) as usize;
+    let mut body = Vec::with_capacity(mlen);
+    let pixels = (w * h) as usize;
+    for i in 0..mlen {
+        let valid = (pixels - i * 8).min(8);
+        let m = if valid == 8 { 0xff } else { (1u16 << valid) as u8 - 1 };
+        body.push(b.u8() & m);
+    }
+    let n: usize = body.iter().map(|x| x.count_ones() as usize).sum();
+    for plane in 0..8 {
+        for _ in 0..n {
+            let v = b.u8();
+            body.push(if plane == 3 { v & 3 } else { v });
+        }
+    }
+    let header = FrameHeader {
+        seq: 1,
+        camera,
+        heuristic: Heuristic::Threshold,
+        bounds,
+        radius_unit: 1e-3,
+        render_us: 0,
+        count: n as u32,
+    };
+    let params = compact_frame::CompactParams {
+        depth_min,
+        depth_step,
+        radius: compact_frame::RadiusPrediction { constant, per_depth },
+        coder: if zstd { compact_frame::Coder::Zstd } else { compact_frame::Coder::Stored },
+        raw_len: body.len() as u32,
+    };
+    let coded = compact_frame::compress(&body, params.coder);
+    let msg = compact_frame::assemble(&header, &params, &coded).ok()?;
+    Some((msg, body))
 }
