@@ -64,9 +64,10 @@ pub(crate) trait Lanes:
     fn splat(x: f32) -> Self;
     /// The lanes of `a`, lane 0 first.
     fn new(a: [f32; 8]) -> Self;
-    /// `f32::min` per lane (a NaN operand gives the other one).
+    /// `f32::min` per lane where `rhs` is not NaN (a NaN `self` gives `rhs`); `rhs` where it is
+    /// (`minps`: one instruction, the kernel's bounds are never NaN).
     fn min(self, rhs: Self) -> Self;
-    /// `f32::max` per lane (a NaN operand gives the other one).
+    /// `f32::max` per lane where `rhs` is not NaN (a NaN `self` gives `rhs`); `rhs` where it is.
     fn max(self, rhs: Self) -> Self;
     /// Mask of `self < rhs` (false if either is NaN).
     fn simd_lt(self, rhs: Self) -> Self;
@@ -114,11 +115,11 @@ impl Lanes for f32x8 {
     }
     #[inline(always)]
     fn min(self, rhs: Self) -> Self {
-        f32x8::min(self, rhs)
+        f32x8::fast_min(self, rhs)
     }
     #[inline(always)]
     fn max(self, rhs: Self) -> Self {
-        f32x8::max(self, rhs)
+        f32x8::fast_max(self, rhs)
     }
     #[inline(always)]
     fn simd_lt(self, rhs: Self) -> Self {
@@ -261,15 +262,12 @@ mod avx2 {
         }
         #[inline(always)]
         fn min(self, rhs: Self) -> Self {
-            // `vminps` gives its second operand when either is NaN: right for a NaN `self`;
-            // a NaN `rhs` must give `self` (as `f32::min` and `wide` do), hence the select.
-            let m = Avx2(unsafe { _mm256_min_ps(self.0, rhs.0) });
-            rhs.cmp::<_CMP_UNORD_Q>(rhs).select(self, m)
+            // `vminps(self, rhs)`: `self < rhs ? self : rhs`, as `wide`'s `fast_min`.
+            Avx2(unsafe { _mm256_min_ps(self.0, rhs.0) })
         }
         #[inline(always)]
         fn max(self, rhs: Self) -> Self {
-            let m = Avx2(unsafe { _mm256_max_ps(self.0, rhs.0) });
-            rhs.cmp::<_CMP_UNORD_Q>(rhs).select(self, m)
+            Avx2(unsafe { _mm256_max_ps(self.0, rhs.0) })
         }
         #[inline(always)]
         fn simd_lt(self, rhs: Self) -> Self {
