@@ -182,6 +182,16 @@ impl Occupancy {
         t
     }
 
+    /// Bricks per axis.
+    pub fn bricks(&self) -> [u32; 3] {
+        self.bricks
+    }
+
+    /// [`Occupancy::distance`] of every brick, x fastest.
+    pub fn distances(&self) -> &[u8] {
+        &self.dist
+    }
+
     /// The fraction of bricks that can be visible.
     pub fn fraction_occupied(&self) -> f32 {
         self.occupied.iter().filter(|&&o| o).count() as f32 / self.occupied.len().max(1) as f32

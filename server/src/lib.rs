@@ -15,8 +15,10 @@
 //! | [`encoding`] | the wire encoding of a frame: 12-byte or compact, negotiated per client |
 //! | [`empty_space`] | the min/max brick grid for empty-space skipping |
 //! | [`marcher`] | the CPU ray marcher: frames for clients and ground-truth images |
+//! | [`packet_march`] | the marcher's fast kernel: eight rays at once in SIMD lanes |
 //! | [`radius`] | the sphere radius models: pixel footprint or half a voxel diagonal |
 //! | [`compaction`] | the parallel compaction of a frame's samples |
+//! | [`render_queue`] | one marcher pool shared by all clients; identical requests rendered once |
 //! | [`server`] | the TCP server: handshake, latest-wins requests, limits |
 //!
 //! ```no_run
@@ -33,15 +35,18 @@ pub mod compaction;
 pub mod dataset;
 pub mod empty_space;
 pub mod encoding;
+mod lanes;
 pub mod marcher;
+pub mod packet_march;
 pub use volume::nrrd;
 pub mod radius;
+pub mod render_queue;
 pub mod server;
 pub mod transfer_function;
 pub mod volume;
 
 pub use dataset::Dataset;
-pub use marcher::{default_camera, FrameStats, MarchOptions, Marcher, PixelBuffer};
+pub use marcher::{default_camera, FrameStats, MarchKernel, MarchOptions, Marcher, PixelBuffer};
 pub use radius::RadiusModel;
 pub use server::{Server, ServerConfig, ServerHandle};
 pub use transfer_function::TransferFunction;

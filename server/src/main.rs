@@ -16,7 +16,7 @@ use volwarp_core::compact_frame::Encoding;
 use volwarp_core::wire::CameraRequest;
 use volwarp_core::{Camera, Heuristic};
 use volwarp_server::volume::{parse_dims, LoadOptions, VoxelType};
-use volwarp_server::{default_camera, Dataset, MarchOptions, Marcher, RadiusModel, Server, ServerConfig};
+use volwarp_server::{default_camera, Dataset, MarchKernel, MarchOptions, Marcher, RadiusModel, Server, ServerConfig};
 
 #[derive(Parser, Debug)]
 #[command(
@@ -92,6 +92,16 @@ struct DataArgs {
     /// Sphere radius as a multiple of the model's (for `dump`; clients send their own).
     #[arg(long, global = true, default_value_t = 1.0)]
     radius_scale: f32,
+    /// Marching kernel: `packet` (eight rays at once in SIMD lanes) or `scalar` (one ray at a
+    /// time, the reference); both give the same image.
+    #[arg(long, global = true, default_value = "packet", value_parser = ["packet", "scalar"])]
+    kernel: String,
+    /// Skip bricks the transfer function makes invisible (`--skip-empty false` turns it off).
+    #[arg(long, global = true, default_value_t = true, action = clap::ArgAction::Set)]
+    skip_empty: bool,
+    /// Accumulated opacity at which a ray stops (1 or more: never).
+    #[arg(long, global = true, default_value_t = 0.99)]
+    early_termination: f32,
 }
 
 #[derive(Args, Debug)]
@@ -206,7 +216,14 @@ fn run(cli: Cli) -> Result<(), String> {
     let ds = load(&cli.data)?;
     let heuristic = Heuristic::from_name(&cli.data.heuristic)
         .ok_or_else(|| format!("unknown heuristic {:?}", cli.data.heuristic))?;
-    let opts = MarchOptions { step_voxels: cli.data.step, radius: cli.data.radius, ..MarchOptions::default() };
+    let kernel = if cli.data.kernel == "scalar" { MarchKernel::Scalar } else { MarchKernel::Packet };
+    let opts = MarchOptions {
+        step_voxels: cli.data.step,
+        radius: cli.data.radius,
+        kernel,
+        skip_empty: cli.data.skip_empty,
+        early_termination: cli.data.early_termination,
+    };
     let marcher = Marcher::with_options(ds.volume.clone(), &ds.tf, opts);
     match cli.cmd.unwrap_or(Cmd::Serve) {
         Cmd::Serve => {

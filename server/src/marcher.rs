@@ -28,8 +28,20 @@ use volwarp_core::sample::{over_background, pack_color_f32, Quantizer};
 use volwarp_core::wire::{CameraRequest, Frame, FrameHeader};
 use volwarp_core::{Camera, DepthPicker, FirstPassAccumulator, Heuristic, Image, Vec3, BACKGROUND};
 
-/// Rows per parallel task.
+/// Rows per parallel task (a multiple of the packet marcher's packet height).
 const BAND_ROWS: usize = 4;
+
+/// Which implementation marches the rays; both give the same colors and depths bit for bit.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
+pub enum MarchKernel {
+    /// Eight rays of a 4×2 pixel block at once in SIMD lanes ([`crate::packet_march`]); the
+    /// default.
+    #[default]
+    Packet,
+    /// One ray at a time ([`Marcher::march_ray`]): the reference the packet marcher is
+    /// tested against.
+    Scalar,
+}
 
 /// Radius code every sample of a frame gets under [`RadiusModel::Voxel`] (the frame's
 /// `radius_unit` is `radius / this`).
@@ -46,11 +58,19 @@ pub struct MarchOptions {
     pub skip_empty: bool,
     /// How each sample's sphere radius is chosen; default the pixel footprint.
     pub radius: RadiusModel,
+    /// Packet (SIMD) or scalar marching; default [`MarchKernel::Packet`].
+    pub kernel: MarchKernel,
 }
 
 impl Default for MarchOptions {
     fn default() -> Self {
-        MarchOptions { step_voxels: 0.5, early_termination: 0.99, skip_empty: true, radius: RadiusModel::Footprint }
+        MarchOptions {
+            step_voxels: 0.5,
+            early_termination: 0.99,
+            skip_empty: true,
+            radius: RadiusModel::Footprint,
+            kernel: MarchKernel::Packet,
+        }
     }
 }
 
@@ -96,6 +116,10 @@ pub struct Marcher {
     occupancy: Occupancy,
     /// Opacity-corrected, premultiplied table.
     lut: Vec<[f32; 4]>,
+    /// The same table as four planes (r, g, b, a) for the packet marcher's gathers.
+    lut_planes: Arc<[Vec<f32>; 4]>,
+    /// The occupancy's brick distances as `f32`, for the packet marcher's gathers.
+    dist: Arc<Vec<f32>>,
     opts: MarchOptions,
     dt: f32,
     inv_spacing: Vec3,
@@ -149,7 +173,9 @@ impl Marcher {
         debug_assert_eq!(lut.len(), LUT_SIZE);
         let occupancy = grid.occupancy(tf, sp);
         log::debug!("empty-space grid: {:.1} % of bricks visible", occupancy.fraction_occupied() * 100.0);
-        Marcher { volume, grid, occupancy, lut, opts, dt, inv_spacing: 1.0 / sp }
+        let lut_planes = Arc::new([0, 1, 2, 3].map(|c| lut.iter().map(|e| e[c]).collect::<Vec<f32>>()));
+        let dist = Arc::new(occupancy.distances().iter().map(|&d| d as f32).collect());
+        Marcher { volume, grid, occupancy, lut, lut_planes, dist, opts, dt, inv_spacing: 1.0 / sp }
     }
 
     /// The same volume and grid with another transfer function or options (no rebuild of the
@@ -173,6 +199,37 @@ impl Marcher {
         self.dt
     }
 
+    /// Which bricks the transfer function can make visible.
+    pub fn occupancy(&self) -> &Occupancy {
+        &self.occupancy
+    }
+
+    /// `1 / spacing`: world to voxel units.
+    pub(crate) fn inv_spacing(&self) -> Vec3 {
+        self.inv_spacing
+    }
+
+    /// A ray's samples: their count `n`, the box entry and exit (`None` if the ray misses the
+    /// box); sample `k` lies at `t_enter + (k + ½)·Δt`.
+    #[inline]
+    pub(crate) fn ray_setup(&self, o: Vec3, d: Vec3) -> (u32, f32, Option<f32>) {
+        let Some((t_enter, t_exit)) = clip(o, 1.0 / d, self.volume.extent()) else {
+            return (0, 0.0, None);
+        };
+        let n = ((t_exit - t_enter) / self.dt - 0.5).ceil().max(0.0);
+        let n = if n < 1e7 { n as u32 } else { 10_000_000 };
+        (n, t_enter, Some(t_exit))
+    }
+
+    fn kernel(&self) -> crate::packet_march::Kernel<'_> {
+        crate::packet_march::Kernel {
+            m: self,
+            data: self.volume.padded_data(),
+            lut: &self.lut_planes,
+            dist: &self.dist,
+        }
+    }
+
     /// Radius of a sample at `radius_scale` 1 under [`RadiusModel::Voxel`]: half a voxel
     /// diagonal.
     pub fn default_radius(&self) -> f32 {
@@ -192,12 +249,10 @@ impl Marcher {
     pub fn march_ray(&self, o: Vec3, d: Vec3, mut feed: impl FnMut(f32, f32, f32)) -> ([f32; 4], Option<f32>) {
         let vol = &*self.volume;
         let inv_d = 1.0 / d;
-        let Some((t_enter, t_exit)) = clip(o, inv_d, vol.extent()) else {
+        let (n, t_enter, Some(t_exit)) = self.ray_setup(o, d) else {
             return ([0.0; 4], None);
         };
         let dt = self.dt;
-        let n = ((t_exit - t_enter) / dt - 0.5).ceil().max(0.0);
-        let n = if n < 1e7 { n as u32 } else { 10_000_000 };
         let og = o * self.inv_spacing - 0.5;
         let dg = d * self.inv_spacing;
         let ert = self.opts.early_termination;
@@ -287,8 +342,14 @@ impl Marcher {
         let mut packed_bands: Vec<&mut [u64]> =
             if pack.is_some() { packed.chunks_mut(band).collect() } else { Vec::new() };
         packed_bands.resize_with(t.len().div_ceil(band), || &mut []);
+        let kernel = self.kernel();
         t.par_chunks_mut(band).zip(color.par_chunks_mut(band)).zip(packed_bands.into_par_iter()).enumerate().for_each(
             |(b, ((tb, cb), sb))| {
+                if self.opts.kernel == MarchKernel::Packet {
+                    let y0 = (b * BAND_ROWS) as u32;
+                    crate::packet_march::march_band(&kernel, &basis, Some(heuristic), pack, y0, tb, cb, sb);
+                    return;
+                }
                 for (i, (tp, cp)) in tb.iter_mut().zip(cb.iter_mut()).enumerate() {
                     let (x, y) = ((i % w) as u32, (b * BAND_ROWS + i / w) as u32);
                     let d = basis.dir(x, y);
@@ -311,7 +372,13 @@ impl Marcher {
         let basis = camera.ray_basis();
         let o = basis.origin();
         let mut img = Image::new(camera.width, camera.height);
+        let kernel = self.kernel();
         img.pixels.par_chunks_mut(w.max(1) * BAND_ROWS).enumerate().for_each(|(band, px)| {
+            if self.opts.kernel == MarchKernel::Packet {
+                let y0 = (band * BAND_ROWS) as u32;
+                crate::packet_march::march_band(&kernel, &basis, None, None, y0, &mut [], px, &mut []);
+                return;
+            }
             for (i, p) in px.iter_mut().enumerate() {
                 let (x, y) = ((i % w) as u32, (band * BAND_ROWS + i / w) as u32);
                 let (c, _) = self.march_ray(o, basis.dir(x, y), |_, _, _| {});

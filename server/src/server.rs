@@ -7,6 +7,11 @@
 //! one it has (latest wins: no queue of stale work, so a client's memory stays at about two
 //! frames). Bye ends the connection.
 //!
+//! **Several clients** share one marcher thread pool through a [`RenderQueue`]: each frame is
+//! one job in the pool's first-in-first-out queue (no client starves another), and a request
+//! identical to one being (or just) rendered gets a copy of that frame instead of a second
+//! render.
+//!
 //! **Failure handling.** A handshake that does not finish within the handshake timeout, an idle
 //! client (no message within the idle timeout), a wrong token, an oversized or malformed
 //! message, or a viewport over the limit ends *that* connection: the server sends an Error
@@ -16,6 +21,7 @@
 
 use crate::dataset::Dataset;
 use crate::marcher::Marcher;
+use crate::render_queue::{RenderCounts, RenderQueue};
 use std::collections::HashMap;
 use std::io::{self, BufWriter, Read};
 use std::net::{Shutdown, SocketAddr, TcpListener, TcpStream};
@@ -85,7 +91,7 @@ pub fn constant_time_eq(a: &[u8], b: &[u8]) -> bool {
 struct Shared {
     config: ServerConfig,
     marcher: Arc<Marcher>,
-    pool: rayon::ThreadPool,
+    queue: RenderQueue,
     stop: AtomicBool,
     active: AtomicUsize,
     next_id: AtomicU64,
@@ -137,8 +143,8 @@ impl Server {
         let addr = listener.local_addr()?;
         let shared = Arc::new(Shared {
             config,
+            queue: RenderQueue::new(marcher.clone(), pool),
             marcher,
-            pool,
             stop: AtomicBool::new(false),
             active: AtomicUsize::new(0),
             next_id: AtomicU64::new(1),
@@ -200,6 +206,11 @@ impl ServerHandle {
     /// Clients being served now.
     pub fn active_clients(&self) -> usize {
         self.shared.active.load(Ordering::SeqCst)
+    }
+
+    /// Frames rendered and requests answered with an identical request's frame so far.
+    pub fn render_counts(&self) -> RenderCounts {
+        self.shared.queue.counts()
     }
 
     /// Stops accepting, closes every connection and waits for all threads.
@@ -432,7 +443,7 @@ fn serve(sh: &Shared, stream: &TcpStream, id: u64) -> String {
         if let Some(d) = cfg.frame_delay {
             std::thread::sleep(d);
         }
-        let stats = sh.pool.install(|| sh.marcher.render_frame_into(&req, &mut frame));
+        let stats = sh.queue.render(&req, &mut frame);
         let t_send = Instant::now();
         let sent = if encoding == Encoding::Compact {
             let (bytes, _) = crate::encoding::encode_frame(&sh.marcher, &req, &frame, encoding);

@@ -61,6 +61,8 @@ pub struct Volume {
     dims: [u32; 3],
     spacing: Vec3,
     value_range: (f32, f32),
+    /// The values, then [`Volume::padding`] zeros (so that reads of a trilinear neighbourhood
+    /// need no clamping of its far corners; see `padded_data`).
     data: Vec<f32>,
 }
 
@@ -107,6 +109,7 @@ impl Volume {
         for v in values.iter_mut() {
             *v = if v.is_finite() { ((*v as f64 - lo as f64) * scale).clamp(0.0, 1.0) as f32 } else { 0.0 };
         }
+        values.resize(values.len() + Volume::padding(dims), 0.0);
         Ok(Volume { name: name.to_string(), dims, spacing, value_range: (lo, hi), data: values })
     }
 
@@ -171,6 +174,19 @@ impl Volume {
 
     /// The normalized values, x fastest.
     pub fn data(&self) -> &[f32] {
+        &self.data[..self.data.len() - Volume::padding(self.dims)]
+    }
+
+    /// Zeros stored after the values: one slice, one row and two values, so that the eight
+    /// neighbours `base + {0, 1} + {0, nx} + {0, nx·ny}` of any voxel `base` can be read
+    /// without bounds (the packet marcher's gathers; a far neighbour past the volume's edge
+    /// is read where its weight is exactly 0, so its value never matters).
+    fn padding(dims: [u32; 3]) -> usize {
+        dims[0] as usize * dims[1] as usize + dims[0] as usize + 2
+    }
+
+    /// [`Volume::data`] followed by the padding zeros.
+    pub(crate) fn padded_data(&self) -> &[f32] {
         &self.data
     }
 }

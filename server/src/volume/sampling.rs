@@ -10,7 +10,7 @@ impl Volume {
     pub fn voxel(&self, i: u32, j: u32, k: u32) -> f32 {
         let [nx, ny, nz] = self.dims;
         let (i, j, k) = (i.min(nx - 1) as usize, j.min(ny - 1) as usize, k.min(nz - 1) as usize);
-        self.data[i + nx as usize * (j + ny as usize * k)]
+        self.data()[i + nx as usize * (j + ny as usize * k)]
     }
 
     /// Trilinear sample at continuous voxel coordinates `g` (voxel centres at integers),
@@ -31,7 +31,7 @@ impl Volume {
             let sy = nx as usize;
             let sz = nx as usize * ny as usize;
             let base = x0 + sy * y0 + sz * z0;
-            if let Some(c) = self.data.get(base..base + sz + sy + 2) {
+            if let Some(c) = self.data().get(base..base + sz + sy + 2) {
                 let corners = [c[0], c[1], c[sy], c[sy + 1], c[sz], c[sz + 1], c[sz + sy], c[sz + sy + 1]];
                 return trilinear(corners, fx, fy, fz);
             }
@@ -53,7 +53,7 @@ impl Volume {
         let sy = if y0 + 1 < ny as usize { nx as usize } else { 0 };
         let sz = if z0 + 1 < nz as usize { nx as usize * ny as usize } else { 0 };
         let base = x0 + nx as usize * (y0 + ny as usize * z0);
-        let d = &self.data;
+        let d = self.data();
         let (Some(&c000), Some(&c100), Some(&c010), Some(&c110)) =
             (d.get(base), d.get(base + sx), d.get(base + sy), d.get(base + sy + sx))
         else {

@@ -1,0 +1,430 @@
+//! The eight-lane vector types the packet marcher ([`crate::packet_march`]) is generic over:
+//! `f32` lanes (also used as masks), `i32` lanes, and gathers from `f32` slices.
+//!
+//! The same approach as the CPU tracer's lanes (`cpu-tracer/src/lanes.rs`), with the
+//! operations a marcher needs (truncation to integers, integer index arithmetic, gathers)
+//! instead of a tracer's; the server does not depend on the tracer, so the two trait
+//! definitions are separate. `wide` picks its representation when *it* is compiled (two SSE
+//! halves on baseline x86-64), so [`Avx2`] wraps the 256-bit registers directly; its
+//! `#[inline(always)]` methods become single AVX2 instructions once inlined into a function
+//! compiled with AVX2. Every method computes exactly what the scalar marcher's operation does
+//! (IEEE single precision, no fused multiply-add), so the packet marcher's results are the
+//! scalar marcher's bit for bit.
+//!
+//! Masks are lanes with all bits set (true) or clear (false).
+
+use core::ops::{Add, BitAnd, BitOr, Div, Mul, Sub};
+use wide::{f32x8, i32x8};
+
+/// Defines `$name`, which runs the kernel `$kernel::<L>` on the best lanes this CPU has: the
+/// instance `$avx2`, compiled with `#[target_feature(enable = "avx2")]` on [`Avx2`] lanes,
+/// where `is_x86_feature_detected!("avx2")` says the CPU has AVX2, and the portable
+/// `wide::f32x8` instance elsewhere. Both compute the same values.
+macro_rules! dispatch {
+    ($(#[$doc:meta])* fn $name:ident / $avx2:ident => $kernel:ident($($arg:ident: $ty:ty),* $(,)?)) => {
+        $(#[$doc])*
+        pub(crate) fn $name($($arg: $ty),*) {
+            #[cfg(target_arch = "x86_64")]
+            if std::is_x86_feature_detected!("avx2") {
+                // SAFETY: the CPU supports AVX2 (checked just above).
+                return unsafe { $avx2($($arg),*) };
+            }
+            $kernel::<wide::f32x8>($($arg),*)
+        }
+
+        /// The kernel on [`crate::lanes::Avx2`] lanes, compiled with AVX2.
+        ///
+        /// # Safety
+        /// The CPU must support AVX2.
+        #[cfg(target_arch = "x86_64")]
+        #[target_feature(enable = "avx2")]
+        #[allow(clippy::too_many_arguments)]
+        unsafe fn $avx2($($arg: $ty),*) {
+            // `Avx2`'s invariant holds: the caller guarantees AVX2.
+            $kernel::<$crate::lanes::Avx2>($($arg),*)
+        }
+    };
+}
+pub(crate) use dispatch;
+
+/// Eight `f32` lanes (also masks) and their companion eight `i32` lanes.
+pub(crate) trait Lanes:
+    Copy
+    + Add<Output = Self>
+    + Sub<Output = Self>
+    + Mul<Output = Self>
+    + Div<Output = Self>
+    + BitAnd<Output = Self>
+    + BitOr<Output = Self>
+{
+    /// Eight `i32` lanes.
+    type I: Copy + Add<Output = Self::I>;
+
+    /// All lanes `x`.
+    fn splat(x: f32) -> Self;
+    /// The lanes of `a`, lane 0 first.
+    fn new(a: [f32; 8]) -> Self;
+    /// `f32::min` per lane where `rhs` is not NaN (a NaN `self` gives `rhs`); `rhs` where it is
+    /// (`minps`: one instruction, the kernel's bounds are never NaN).
+    fn min(self, rhs: Self) -> Self;
+    /// `f32::max` per lane where `rhs` is not NaN (a NaN `self` gives `rhs`); `rhs` where it is.
+    fn max(self, rhs: Self) -> Self;
+    /// Mask of `self < rhs` (false if either is NaN).
+    fn simd_lt(self, rhs: Self) -> Self;
+    /// Mask of `self > rhs` (false if either is NaN).
+    fn simd_gt(self, rhs: Self) -> Self;
+    /// Mask of `self >= rhs` (false if either is NaN).
+    fn simd_ge(self, rhs: Self) -> Self;
+    /// `self & !rhs` (for masks: `self` and not `rhs`).
+    fn and_not(self, rhs: Self) -> Self;
+    /// Per lane, `if_true` where the mask `self` is set, else `if_false`.
+    fn select(self, if_true: Self, if_false: Self) -> Self;
+    /// Bit `l` is lane `l`'s sign bit (for a mask: whether it is set).
+    fn to_bitmask(self) -> u32;
+    /// Whether any lane of the mask is set.
+    fn any(self) -> bool;
+    /// The lanes, lane 0 first.
+    fn to_array(self) -> [f32; 8];
+    /// Truncation toward zero of lanes in `0 ..= 2³¹ − 128` (`x as i32` there).
+    fn trunc_int(self) -> Self::I;
+    /// The `i32` lanes as `f32` (exact below 2²⁴).
+    fn int_to_float(i: Self::I) -> Self;
+    /// All `i32` lanes `x`.
+    fn splat_i(x: i32) -> Self::I;
+    /// Per lane `a * b`, the low 32 bits.
+    fn mul_i(a: Self::I, b: Self::I) -> Self::I;
+    /// Per lane `data[idx]`, each index clamped to `0 ..= data.len() − 1` first (an empty
+    /// slice gives zeros).
+    fn gather(data: &[f32], idx: Self::I) -> Self;
+    /// Per lane `(data[idx], data[idx + 1])`, each index clamped to `0 ..= data.len() − 2`
+    /// first (a slice shorter than 2 gives zeros).
+    fn gather_pairs(data: &[f32], idx: Self::I) -> (Self, Self);
+}
+
+/// The portable lanes: `wide`'s, whatever it was compiled for.
+impl Lanes for f32x8 {
+    type I = i32x8;
+
+    #[inline(always)]
+    fn splat(x: f32) -> Self {
+        f32x8::splat(x)
+    }
+    #[inline(always)]
+    fn new(a: [f32; 8]) -> Self {
+        f32x8::new(a)
+    }
+    #[inline(always)]
+    fn min(self, rhs: Self) -> Self {
+        f32x8::fast_min(self, rhs)
+    }
+    #[inline(always)]
+    fn max(self, rhs: Self) -> Self {
+        f32x8::fast_max(self, rhs)
+    }
+    #[inline(always)]
+    fn simd_lt(self, rhs: Self) -> Self {
+        f32x8::simd_lt(self, rhs)
+    }
+    #[inline(always)]
+    fn simd_gt(self, rhs: Self) -> Self {
+        f32x8::simd_gt(self, rhs)
+    }
+    #[inline(always)]
+    fn simd_ge(self, rhs: Self) -> Self {
+        f32x8::simd_ge(self, rhs)
+    }
+    #[inline(always)]
+    fn and_not(self, rhs: Self) -> Self {
+        self & !rhs
+    }
+    #[inline(always)]
+    fn select(self, if_true: Self, if_false: Self) -> Self {
+        f32x8::select(self, if_true, if_false)
+    }
+    #[inline(always)]
+    fn to_bitmask(self) -> u32 {
+        f32x8::to_bitmask(self)
+    }
+    #[inline(always)]
+    fn any(self) -> bool {
+        f32x8::any(self)
+    }
+    #[inline(always)]
+    fn to_array(self) -> [f32; 8] {
+        f32x8::to_array(self)
+    }
+    #[inline(always)]
+    fn trunc_int(self) -> i32x8 {
+        f32x8::trunc_int(self)
+    }
+    #[inline(always)]
+    fn int_to_float(i: i32x8) -> Self {
+        i.round_float()
+    }
+    #[inline(always)]
+    fn splat_i(x: i32) -> i32x8 {
+        i32x8::splat(x)
+    }
+    #[inline(always)]
+    fn mul_i(a: i32x8, b: i32x8) -> i32x8 {
+        a * b
+    }
+    #[inline(always)]
+    fn gather(data: &[f32], idx: i32x8) -> Self {
+        let last = data.len().saturating_sub(1);
+        let i = idx.to_array();
+        f32x8::new(core::array::from_fn(|l| data.get((i[l].max(0) as usize).min(last)).copied().unwrap_or(0.0)))
+    }
+    #[inline(always)]
+    fn gather_pairs(data: &[f32], idx: i32x8) -> (Self, Self) {
+        if data.len() < 2 {
+            return (f32x8::splat(0.0), f32x8::splat(0.0));
+        }
+        let last = data.len() - 2;
+        let i = idx.to_array().map(|i| (i.max(0) as usize).min(last));
+        (f32x8::new(core::array::from_fn(|l| data[i[l]])), f32x8::new(core::array::from_fn(|l| data[i[l] + 1])))
+    }
+}
+
+#[cfg(target_arch = "x86_64")]
+pub(crate) use avx2::Avx2;
+
+#[cfg(target_arch = "x86_64")]
+mod avx2 {
+    use super::Lanes;
+    use core::arch::x86_64::*;
+    use core::ops::{Add, BitAnd, BitOr, Div, Mul, Sub};
+
+    /// Eight `f32` lanes in one AVX register, for the kernel compiled with AVX2.
+    ///
+    /// **Invariant**: values of this type and calls of its methods exist only on CPUs with
+    /// AVX2. The type is private to the crate, whose only user of it is the
+    /// `#[target_feature(enable = "avx2")]` instance of the packet marcher, called only after
+    /// `is_x86_feature_detected!("avx2")`. Every `unsafe` block below relies on this.
+    #[derive(Clone, Copy)]
+    pub(crate) struct Avx2(__m256);
+
+    /// Eight `i32` lanes in one AVX register (the same invariant as [`Avx2`]).
+    #[derive(Clone, Copy)]
+    pub(crate) struct Avx2I(__m256i);
+
+    macro_rules! binop {
+        ($tr:ident, $f:ident, $intr:ident) => {
+            impl $tr for Avx2 {
+                type Output = Avx2;
+                #[inline(always)]
+                fn $f(self, rhs: Avx2) -> Avx2 {
+                    // SAFETY: AVX is available (the type's invariant).
+                    Avx2(unsafe { $intr(self.0, rhs.0) })
+                }
+            }
+        };
+    }
+    binop!(Add, add, _mm256_add_ps);
+    binop!(Sub, sub, _mm256_sub_ps);
+    binop!(Mul, mul, _mm256_mul_ps);
+    binop!(Div, div, _mm256_div_ps);
+    binop!(BitAnd, bitand, _mm256_and_ps);
+    binop!(BitOr, bitor, _mm256_or_ps);
+
+    impl Add for Avx2I {
+        type Output = Avx2I;
+        #[inline(always)]
+        fn add(self, rhs: Avx2I) -> Avx2I {
+            // SAFETY: AVX2 is available (the type's invariant).
+            Avx2I(unsafe { _mm256_add_epi32(self.0, rhs.0) })
+        }
+    }
+
+    impl Avx2 {
+        /// Ordered, non-signalling comparison `P`: false where either lane is NaN.
+        #[inline(always)]
+        fn cmp<const P: i32>(self, rhs: Avx2) -> Avx2 {
+            // SAFETY: AVX is available (the type's invariant).
+            Avx2(unsafe { _mm256_cmp_ps::<P>(self.0, rhs.0) })
+        }
+    }
+
+    // SAFETY (every `unsafe` block of this impl): AVX and AVX2 are available (the type's
+    // invariant); the intrinsics have no other precondition, except the loads, stores and
+    // gathers, whose pointers are noted there.
+    impl Lanes for Avx2 {
+        type I = Avx2I;
+
+        #[inline(always)]
+        fn splat(x: f32) -> Self {
+            Avx2(unsafe { _mm256_set1_ps(x) })
+        }
+        #[inline(always)]
+        fn new(a: [f32; 8]) -> Self {
+            // `a` is eight readable `f32`; the load needs no alignment.
+            Avx2(unsafe { _mm256_loadu_ps(a.as_ptr()) })
+        }
+        #[inline(always)]
+        fn min(self, rhs: Self) -> Self {
+            // `vminps(self, rhs)`: `self < rhs ? self : rhs`, as `wide`'s `fast_min`.
+            Avx2(unsafe { _mm256_min_ps(self.0, rhs.0) })
+        }
+        #[inline(always)]
+        fn max(self, rhs: Self) -> Self {
+            Avx2(unsafe { _mm256_max_ps(self.0, rhs.0) })
+        }
+        #[inline(always)]
+        fn simd_lt(self, rhs: Self) -> Self {
+            self.cmp::<_CMP_LT_OQ>(rhs)
+        }
+        #[inline(always)]
+        fn simd_gt(self, rhs: Self) -> Self {
+            self.cmp::<_CMP_GT_OQ>(rhs)
+        }
+        #[inline(always)]
+        fn simd_ge(self, rhs: Self) -> Self {
+            self.cmp::<_CMP_GE_OQ>(rhs)
+        }
+        #[inline(always)]
+        fn and_not(self, rhs: Self) -> Self {
+            Avx2(unsafe { _mm256_andnot_ps(rhs.0, self.0) })
+        }
+        #[inline(always)]
+        fn select(self, if_true: Self, if_false: Self) -> Self {
+            // `vblendvps` reads the sign bit, i.e. the whole lane of a mask.
+            Avx2(unsafe { _mm256_blendv_ps(if_false.0, if_true.0, self.0) })
+        }
+        #[inline(always)]
+        fn to_bitmask(self) -> u32 {
+            (unsafe { _mm256_movemask_ps(self.0) }) as u32
+        }
+        #[inline(always)]
+        fn any(self) -> bool {
+            // `vtestps`: ZF is set when no sign bit is.
+            unsafe { _mm256_testz_ps(self.0, self.0) == 0 }
+        }
+        #[inline(always)]
+        fn to_array(self) -> [f32; 8] {
+            let mut a = [0f32; 8];
+            // `a` is 32 writable bytes; the store needs no alignment.
+            unsafe { _mm256_storeu_ps(a.as_mut_ptr(), self.0) };
+            a
+        }
+        #[inline(always)]
+        fn trunc_int(self) -> Avx2I {
+            // `vcvttps2dq`: truncation, exact for the documented range.
+            Avx2I(unsafe { _mm256_cvttps_epi32(self.0) })
+        }
+        #[inline(always)]
+        fn int_to_float(i: Avx2I) -> Self {
+            Avx2(unsafe { _mm256_cvtepi32_ps(i.0) })
+        }
+        #[inline(always)]
+        fn splat_i(x: i32) -> Avx2I {
+            Avx2I(unsafe { _mm256_set1_epi32(x) })
+        }
+        #[inline(always)]
+        fn mul_i(a: Avx2I, b: Avx2I) -> Avx2I {
+            Avx2I(unsafe { _mm256_mullo_epi32(a.0, b.0) })
+        }
+        #[inline(always)]
+        fn gather(data: &[f32], idx: Avx2I) -> Self {
+            if data.is_empty() {
+                return Avx2::splat(0.0);
+            }
+            // Clamp every index to 0 ..= len − 1 (signed max with 0, unsigned min with the
+            // last index: lengths above i32::MAX are never passed, as volumes hold at most
+            // 2²⁸ voxels), so each gathered element lies inside `data`.
+            let last = (data.len() - 1).min(i32::MAX as usize) as i32;
+            unsafe {
+                let i = _mm256_min_epi32(_mm256_max_epi32(idx.0, _mm256_setzero_si256()), _mm256_set1_epi32(last));
+                // SAFETY: every index is in 0 ..= len − 1 (just above), scale 4 is `f32`'s size.
+                Avx2(_mm256_i32gather_ps::<4>(data.as_ptr(), i))
+            }
+        }
+        #[inline(always)]
+        fn gather_pairs(data: &[f32], idx: Avx2I) -> (Self, Self) {
+            if data.len() < 2 {
+                return (Avx2::splat(0.0), Avx2::splat(0.0));
+            }
+            let last = (data.len() - 2).min(i32::MAX as usize) as i32;
+            unsafe {
+                let i = _mm256_min_epi32(_mm256_max_epi32(idx.0, _mm256_setzero_si256()), _mm256_set1_epi32(last));
+                // SAFETY: every index is in 0 ..= len − 2 (just above), so each 8-byte element
+                // (two `f32`, read as one `f64` at byte offset 4·index; gathers need no
+                // alignment) lies inside `data`.
+                let p = data.as_ptr().cast::<f64>();
+                let lo = _mm256_castpd_ps(_mm256_i32gather_pd::<4>(p, _mm256_castsi256_si128(i)));
+                let hi = _mm256_castpd_ps(_mm256_i32gather_pd::<4>(p, _mm256_extracti128_si256::<1>(i)));
+                // lo = a0 b0 a1 b1 | a2 b2 a3 b3, hi = a4 b4 a5 b5 | a6 b6 a7 b7.
+                let a = _mm256_shuffle_ps::<0b10_00_10_00>(lo, hi); // a0 a1 a4 a5 | a2 a3 a6 a7
+                let b = _mm256_shuffle_ps::<0b11_01_11_01>(lo, hi); // b0 b1 b4 b5 | b2 b3 b6 b7
+                let order = |v: __m256| _mm256_castpd_ps(_mm256_permute4x64_pd::<0b11_01_10_00>(_mm256_castps_pd(v)));
+                (Avx2(order(a)), Avx2(order(b)))
+            }
+        }
+    }
+
+    #[cfg(test)]
+    mod tests {
+        use super::{Avx2, Avx2I, Lanes};
+        use wide::{f32x8, i32x8};
+
+        /// Every `Lanes` method of `Avx2` against the portable lanes, inlined into an AVX2
+        /// function as the kernel is.
+        #[target_feature(enable = "avx2")]
+        fn check() {
+            let vals = [0.0, -0.0, 1.0, -1.0, 0.5, 3.7, 1e-40, 1e7, f32::INFINITY, -f32::INFINITY, f32::NAN, 1023.5];
+            let pairs: Vec<(f32, f32)> = vals.iter().flat_map(|&a| vals.iter().map(move |&b| (a, b))).collect();
+            let data: Vec<f32> = (0..100).map(|i| i as f32 * 0.25).collect();
+            let bits = |x: [f32; 8]| x.map(f32::to_bits);
+            for c in pairs.chunks_exact(8) {
+                let a: [f32; 8] = core::array::from_fn(|l| c[l].0);
+                let b: [f32; 8] = core::array::from_fn(|l| c[l].1);
+                let (x, y) = (<Avx2 as Lanes>::new(a), <Avx2 as Lanes>::new(b));
+                let (p, q) = (<f32x8 as Lanes>::new(a), <f32x8 as Lanes>::new(b));
+                let eq = |what: &str, r: Avx2, s: f32x8| {
+                    let (r, s) = (r.to_array(), Lanes::to_array(s));
+                    let ok = (0..8).all(|l| r[l].to_bits() == s[l].to_bits() || (r[l].is_nan() && s[l].is_nan()));
+                    assert!(ok, "{what}: {a:?} {b:?}: {r:?} {s:?}");
+                };
+                eq("add", x + y, p + q);
+                eq("sub", x - y, p - q);
+                eq("mul", x * y, p * q);
+                eq("div", x / y, p / q);
+                eq("min", x.min(y), Lanes::min(p, q));
+                eq("max", x.max(y), Lanes::max(p, q));
+                let (lt, wlt) = (x.simd_lt(y), Lanes::simd_lt(p, q));
+                let (ge, wge) = (x.simd_ge(y), Lanes::simd_ge(p, q));
+                assert_eq!(bits(lt.to_array()), bits(Lanes::to_array(wlt)));
+                assert_eq!(bits(ge.to_array()), bits(Lanes::to_array(wge)));
+                assert_eq!(bits(x.simd_gt(y).to_array()), bits(Lanes::to_array(Lanes::simd_gt(p, q))));
+                assert_eq!(bits(lt.and_not(ge).to_array()), bits(Lanes::to_array(Lanes::and_not(wlt, wge))));
+                eq("select", lt.select(x, y), Lanes::select(wlt, p, q));
+                assert_eq!(lt.to_bitmask(), Lanes::to_bitmask(wlt));
+                assert_eq!(lt.any(), Lanes::any(wlt));
+                // Truncation and gathers on the documented range (clamped like the kernel does).
+                let (g, wg) = (
+                    x.max(Avx2::splat(0.0)).min(Avx2::splat(120.0)),
+                    Lanes::min(Lanes::max(p, f32x8::splat(0.0)), f32x8::splat(120.0)),
+                );
+                let (ti, wti): (Avx2I, i32x8) = (g.trunc_int(), Lanes::trunc_int(wg));
+                eq("trunc", Avx2::int_to_float(ti), <f32x8 as Lanes>::int_to_float(wti));
+                let k = Avx2::mul_i(ti, Avx2::splat_i(3)) + Avx2::splat_i(-20);
+                let wk = <f32x8 as Lanes>::mul_i(wti, <f32x8 as Lanes>::splat_i(3)) + <f32x8 as Lanes>::splat_i(-20);
+                eq("gather", Avx2::gather(&data, k), <f32x8 as Lanes>::gather(&data, wk));
+                eq("gather empty", Avx2::gather(&[], k), <f32x8 as Lanes>::gather(&[], wk));
+                let ((p0, p1), (w0, w1)) = (Avx2::gather_pairs(&data, k), <f32x8 as Lanes>::gather_pairs(&data, wk));
+                eq("pairs 0", p0, w0);
+                eq("pairs 1", p1, w1);
+                let ((p0, _), (w0, _)) =
+                    (Avx2::gather_pairs(&data[..1], k), <f32x8 as Lanes>::gather_pairs(&data[..1], wk));
+                eq("pairs short", p0, w0);
+            }
+        }
+
+        #[test]
+        fn avx2_lanes_equal_portable_lanes() {
+            if std::is_x86_feature_detected!("avx2") {
+                // SAFETY: the CPU supports AVX2 (checked just above).
+                unsafe { check() }
+            }
+        }
+    }
+}

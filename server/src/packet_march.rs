@@ -1,0 +1,390 @@
+//! The packet marcher: eight rays of a 4×2 block of pixels marched together in SIMD lanes
+//! ([`crate::lanes`]: AVX2 where the CPU has it, `wide` elsewhere, chosen at run time).
+//!
+//! Per step, every active lane computes its sample position, clamps it to the voxel lattice,
+//! gathers the eight neighbours and blends them trilinearly, gathers the transfer function's
+//! opacity (and, where any lane is visible, its color) and composites front to back, all in
+//! lanes. Each lane keeps its own sample index, so rays of different lengths, early ray
+//! termination and empty-space leaps (done per lane when a lane enters a new brick, with the
+//! scalar marcher's own [`crate::empty_space::Occupancy`] code) work as in the scalar marcher.
+//! The depth heuristics stay the one scalar definition of [`volwarp_core::heuristics`]: the
+//! samples a lane composites are fed to that lane's [`DepthPicker`] (or
+//! [`FirstPassAccumulator`]) in order.
+//!
+//! Every operation is the scalar marcher's ([`crate::marcher::Marcher::march_ray`]) in the same
+//! order with the same IEEE rounding (no fused multiply-add), so the colors and depths are the
+//! scalar marcher's bit for bit; the tests in `server/tests/packet_march.rs` check this on every
+//! bundled dataset and heuristic.
+
+use crate::lanes::{dispatch, Lanes};
+use crate::marcher::Marcher;
+use crate::radius::FrameRadius;
+use volwarp_core::sample::{over_background, pack_color_f32, Quantizer};
+use volwarp_core::{DepthPicker, FirstPassAccumulator, Heuristic, RayBasis, Vec3, BACKGROUND};
+
+/// Pixels per packet along x and y.
+const PW: usize = 4;
+/// Pixels per packet along y.
+const PH: usize = 2;
+
+/// What a pass does with the samples a lane composites.
+trait Feed {
+    /// Whether [`Feed::feed`] does anything (the lanes are stored to arrays only if so).
+    const ACTIVE: bool;
+    /// Feeds lane `l`'s sample for every bit `l` of `bits`: its `t`, own opacity and
+    /// accumulated opacity after compositing it.
+    fn feed(&mut self, bits: u32, t: &[f32; 8], src_a: &[f32; 8], dst_a: &[f32; 8]);
+}
+
+/// Colors only.
+struct NoFeed;
+
+impl Feed for NoFeed {
+    const ACTIVE: bool = false;
+    #[inline(always)]
+    fn feed(&mut self, _: u32, _: &[f32; 8], _: &[f32; 8], _: &[f32; 8]) {}
+}
+
+impl Feed for [FirstPassAccumulator; 8] {
+    const ACTIVE: bool = true;
+    #[inline(always)]
+    fn feed(&mut self, mut bits: u32, _: &[f32; 8], src_a: &[f32; 8], dst_a: &[f32; 8]) {
+        while bits != 0 {
+            let l = bits.trailing_zeros() as usize & 7;
+            bits &= bits - 1;
+            self[l].feed(src_a[l], dst_a[l]);
+        }
+    }
+}
+
+impl Feed for [DepthPicker; 8] {
+    const ACTIVE: bool = true;
+    #[inline(always)]
+    fn feed(&mut self, mut bits: u32, t: &[f32; 8], src_a: &[f32; 8], dst_a: &[f32; 8]) {
+        while bits != 0 {
+            let l = bits.trailing_zeros() as usize & 7;
+            bits &= bits - 1;
+            self[l].feed(t[l], src_a[l], dst_a[l]);
+        }
+    }
+}
+
+/// The eight rays of a packet, set up exactly as the scalar marcher sets up one ray.
+struct Rays {
+    /// Unit directions (lanes outside the image get the packet's first direction).
+    d: [Vec3; 8],
+    /// `1 / d`.
+    inv_d: [Vec3; 8],
+    /// Box entry.
+    t_enter: [f32; 8],
+    /// Box exit (`None`: the lane misses the box or lies outside the image).
+    t_exit: [Option<f32>; 8],
+    /// Sample count.
+    n: [f32; 8],
+}
+
+/// One axis of the packet's rays, for the empty-space leaps.
+struct Axis<L> {
+    /// Lanes whose `1 / d` along the axis is finite and positive.
+    positive: L,
+    /// Lanes whose `1 / d` along the axis is finite and not positive.
+    negative: L,
+    /// `1 / d` along the axis.
+    inv_d: L,
+    /// The voxel spacing along the axis.
+    spacing: L,
+    /// The eye's coordinate.
+    o: L,
+}
+
+impl<L: Lanes> Axis<L> {
+    #[inline(always)]
+    fn new(rays: &Rays, a: usize, spacing: Vec3, o: Vec3) -> Axis<L> {
+        let all = f32::from_bits(!0);
+        let inv: [f32; 8] = core::array::from_fn(|l| rays.inv_d[l][a]);
+        let pos = inv.map(|v| if v.is_finite() && v > 0.0 { all } else { 0.0 });
+        let neg = inv.map(|v| if v.is_finite() && v <= 0.0 { all } else { 0.0 });
+        Axis {
+            positive: L::new(pos),
+            negative: L::new(neg),
+            inv_d: L::new(inv),
+            spacing: L::splat(spacing[a]),
+            o: L::splat(o[a]),
+        }
+    }
+}
+
+/// The march settings the kernel reads, borrowed from a [`Marcher`].
+pub(crate) struct Kernel<'a> {
+    pub(crate) m: &'a Marcher,
+    /// The volume's values with their padding ([`crate::volume::Volume`]'s `padded_data`).
+    pub(crate) data: &'a [f32],
+    pub(crate) lut: &'a [Vec<f32>; 4],
+    /// [`crate::empty_space::Occupancy::distances`] as `f32`.
+    pub(crate) dist: &'a [f32],
+}
+
+impl Kernel<'_> {
+    fn rays(&self, basis: &RayBasis, o: Vec3, x0: u32, y0: u32, w: u32, h: u32) -> Rays {
+        let mut r =
+            Rays { d: [Vec3::ZERO; 8], inv_d: [Vec3::ZERO; 8], t_enter: [0.0; 8], t_exit: [None; 8], n: [0.0; 8] };
+        let first = basis.dir(x0, y0);
+        for l in 0..8 {
+            let (x, y) = (x0 + (l % PW) as u32, y0 + (l / PW) as u32);
+            if x >= w || y >= h {
+                r.d[l] = first;
+                r.inv_d[l] = 1.0 / first;
+                continue;
+            }
+            let d = basis.dir(x, y);
+            let (ray_n, te, tx) = self.m.ray_setup(o, d);
+            r.d[l] = d;
+            r.inv_d[l] = 1.0 / d;
+            if let Some(tx) = tx {
+                r.t_enter[l] = te;
+                r.t_exit[l] = Some(tx);
+                r.n[l] = ray_n as f32;
+            }
+        }
+        r
+    }
+
+    /// Marches the packet's rays, feeding `feed`; returns each lane's premultiplied color.
+    #[inline(always)]
+    fn march<L: Lanes, F: Feed>(&self, o: Vec3, rays: &Rays, feed: &mut F) -> [[f32; 4]; 8] {
+        let m = self.m;
+        let vol = m.volume();
+        let [nx, ny, nz] = vol.dims();
+        let dt = m.step();
+        let opts = m.options();
+        let occ = m.occupancy();
+        let inv_spacing = m.inv_spacing();
+        let og = o * inv_spacing - 0.5;
+        let dg: [Vec3; 8] = core::array::from_fn(|l| rays.d[l] * inv_spacing);
+        let dgx = L::new(core::array::from_fn(|l| dg[l].x));
+        let dgy = L::new(core::array::from_fn(|l| dg[l].y));
+        let dgz = L::new(core::array::from_fn(|l| dg[l].z));
+        let (ogx, ogy, ogz) = (L::splat(og.x), L::splat(og.y), L::splat(og.z));
+        let te = L::new(rays.t_enter);
+        let n = L::new(rays.n);
+        let (dtl, half, one, zero) = (L::splat(dt), L::splat(0.5), L::splat(1.0), L::splat(0.0));
+        let (mx, my, mz) = (L::splat((nx - 1) as f32), L::splat((ny - 1) as f32), L::splat((nz - 1) as f32));
+        let (snx, snxy) = (L::splat_i(nx as i32), L::splat_i((nx * ny) as i32));
+        let sny = L::splat_i(ny as i32);
+        let (lut_max, lut_scale) =
+            (L::splat((self.lut[3].len().max(1) - 1) as f32), L::splat((self.lut[3].len().max(1) - 1) as f32));
+        let ert = L::splat(opts.early_termination);
+        // No closure calls a lane method here (see `band`).
+        let nb = occ.bricks();
+        let (nbx, nby, nbz) = (L::splat(nb[0] as f32), L::splat(nb[1] as f32), L::splat(nb[2] as f32));
+        let (nbx_m1, nby_m1, nbz_m1) =
+            (L::splat((nb[0] - 1) as f32), L::splat((nb[1] - 1) as f32), L::splat((nb[2] - 1) as f32));
+        let (snbx, snby) = (L::splat_i(nb[0] as i32), L::splat_i(nb[1] as i32));
+        let brick = L::splat(crate::empty_space::BRICK as f32);
+        let sp = vol.spacing();
+        let axes = [Axis::<L>::new(rays, 0, sp, o), Axis::new(rays, 1, sp, o), Axis::new(rays, 2, sp, o)];
+        let skip = opts.skip_empty;
+
+        let mut k = zero;
+        let mut alive = zero.simd_lt(n);
+        let mut t_check = L::splat(f32::NEG_INFINITY);
+        let (mut r, mut g, mut b, mut a) = (zero, zero, zero, zero);
+        loop {
+            // Lanes with samples left. A lane stopped by early termination keeps stepping
+            // (masked out of compositing by `alive`): so the next sample's position depends only
+            // on `k`, not on this sample's gathers, and consecutive steps overlap in the core.
+            let mut running = k.simd_lt(n);
+            let mut t = te + (k + half) * dtl;
+            if skip {
+                // The scalar marcher's skip step, in lanes: lanes at or past the brick face they
+                // last checked look up their brick's distance to the nearest visible brick; a
+                // lane in an invisible brick leaps to its first sample past the empty cube
+                // around it and is checked again there, a lane in a visible one samples (as the
+                // scalar marcher, whatever `t_out` says) and next checks at `t_out`.
+                let mut check = alive & running & t.simd_ge(t_check);
+                while check.any() {
+                    let (px, py, pz) = (ogx + dgx * t, ogy + dgy * t, ogz + dgz * t);
+                    let eighth = L::splat(1.0 / crate::empty_space::BRICK as f32);
+                    let bx = (px * eighth).max(zero).min(nbx_m1).trunc_int();
+                    let by = (py * eighth).max(zero).min(nby_m1).trunc_int();
+                    let bz = (pz * eighth).max(zero).min(nbz_m1).trunc_int();
+                    let bi = bx + L::mul_i(snbx, by + L::mul_i(snby, bz));
+                    let dist = L::gather(self.dist, bi);
+                    let reach = dist.max(one) - one;
+                    let (bxf, byf, bzf) = (L::int_to_float(bx), L::int_to_float(by), L::int_to_float(bz));
+                    let mut t_out = L::splat(f32::INFINITY);
+                    for (bf, nb, ax) in [(bxf, nbx, &axes[0]), (byf, nby, &axes[1]), (bzf, nbz, &axes[2])] {
+                        let hi = bf + reach + one;
+                        let lo = bf - reach;
+                        let up = ax.positive & hi.simd_lt(nb);
+                        let down = ax.negative & bf.simd_ge(reach + one);
+                        let plane = up.select(hi, lo) * brick + half;
+                        let ta = (plane * ax.spacing - ax.o) * ax.inv_d;
+                        t_out = (up | down).select(t_out.min(ta), t_out);
+                    }
+                    let empty = check & dist.simd_gt(zero);
+                    // Resume at the first lattice sample at or after t_out (no progress: one step).
+                    let x = (t_out - te) / dtl - half;
+                    let c = L::int_to_float(x.max(zero).min(n).trunc_int());
+                    let ceil = c + c.simd_lt(x).select(one, zero);
+                    let next = x.simd_ge(n).select(n, x.simd_gt(k + one).select(ceil, k + one));
+                    k = empty.select(next, k);
+                    t_check = check.and_not(empty).select(t_out, t_check);
+                    running = k.simd_lt(n);
+                    t = te + (k + half) * dtl;
+                    check = empty & alive & running & t.simd_ge(t_check);
+                }
+            }
+            let active = alive & running;
+            if !active.any() {
+                break;
+            }
+            // Volume::sample_grid_clamped, in lanes.
+            let gx = (ogx + dgx * t).max(zero).min(mx);
+            let gy = (ogy + dgy * t).max(zero).min(my);
+            let gz = (ogz + dgz * t).max(zero).min(mz);
+            let (xi, yi, zi) = (gx.trunc_int(), gy.trunc_int(), gz.trunc_int());
+            let (xf, yf, zf) = (L::int_to_float(xi), L::int_to_float(yi), L::int_to_float(zi));
+            let (fx, fy, fz) = (gx - xf, gy - yf, gz - zf);
+            // The far neighbours are read at +1, +nx, +nx·ny even at the lattice's last voxel
+            // (the volume's padding keeps the reads inside): there the fraction is exactly 0, so
+            // `c + (far - c) * 0` is `c`, as the scalar marcher's clamped read gives.
+            let base = xi + L::mul_i(snx, yi + L::mul_i(sny, zi));
+            let d = self.data;
+            let (c000, c100) = L::gather_pairs(d, base);
+            let (c010, c110) = L::gather_pairs(d, base + snx);
+            let b2 = base + snxy;
+            let (c001, c101) = L::gather_pairs(d, b2);
+            let (c011, c111) = L::gather_pairs(d, b2 + snx);
+            let c00 = c000 + (c100 - c000) * fx;
+            let c10 = c010 + (c110 - c010) * fx;
+            let c01 = c001 + (c101 - c001) * fx;
+            let c11 = c011 + (c111 - c011) * fx;
+            let c0 = c00 + (c10 - c00) * fy;
+            let c1 = c01 + (c11 - c01) * fy;
+            let v = c0 + (c1 - c0) * fz;
+            // TransferFunction::index, in lanes.
+            let idx = (v * lut_scale + half).max(zero).min(lut_max).trunc_int();
+            let ca = L::gather(&self.lut[3], idx);
+            let vis = active & ca.simd_gt(zero);
+            if vis.any() {
+                let cr = L::gather(&self.lut[0], idx);
+                let cg = L::gather(&self.lut[1], idx);
+                let cb = L::gather(&self.lut[2], idx);
+                let w = one - a;
+                r = vis.select(r + w * cr, r);
+                g = vis.select(g + w * cg, g);
+                b = vis.select(b + w * cb, b);
+                a = vis.select(a + w * ca, a);
+                if F::ACTIVE {
+                    feed.feed(vis.to_bitmask(), &t.to_array(), &ca.to_array(), &a.to_array());
+                }
+                alive = alive.and_not(vis & a.simd_ge(ert));
+            }
+            k = running.select(k + one, k);
+        }
+        let (r, g, b, a) = (r.to_array(), g.to_array(), b.to_array(), a.to_array());
+        core::array::from_fn(|l| [r[l], g[l], b[l], a[l]])
+    }
+
+    /// Marches rows `y0 .. y0 + rows` of the image (rows a multiple of the packet height, or the
+    /// image's last rows) into `t`, `color` and, with `pack`, `packed` (each `w × rows` long or
+    /// empty). `heuristic` `None` renders colors over the background (the ground-truth image).
+    #[allow(clippy::too_many_arguments)]
+    #[inline(always)]
+    fn band<L: Lanes>(
+        &self,
+        basis: &RayBasis,
+        heuristic: Option<Heuristic>,
+        pack: Option<(&Quantizer, FrameRadius)>,
+        y0: u32,
+        t: &mut [f32],
+        color: &mut [u32],
+        packed: &mut [u64],
+    ) {
+        let o = basis.origin();
+        let (w, h) = (basis.eye[3] as u32, basis.corner[3] as u32);
+        let rows = (color.len() / (w as usize).max(1)) as u32;
+        for py in (y0..y0 + rows).step_by(PH) {
+            for px in (0..w).step_by(PW) {
+                let rays = self.rays(basis, o, px, py, w, h);
+                let mut depth = [None; 8];
+                let c = match heuristic {
+                    None => self.march::<L, _>(o, &rays, &mut NoFeed),
+                    Some(hr) => {
+                        // No closure here: one would be compiled without the caller's AVX2
+                        // target feature, and the lanes' methods would not inline into it.
+                        let first = if hr.needs_first_pass() {
+                            let mut acc = [FirstPassAccumulator::new(); 8];
+                            self.march::<L, _>(o, &rays, &mut acc);
+                            Some(acc.map(|a| a.finish()))
+                        } else {
+                            None
+                        };
+                        let mut pickers: [DepthPicker; 8] =
+                            core::array::from_fn(|l| DepthPicker::new(hr, first.map(|f| f[l])));
+                        let c = self.march::<L, _>(o, &rays, &mut pickers);
+                        for l in 0..8 {
+                            depth[l] = rays.t_exit[l].and_then(|te| pickers[l].finish(te));
+                        }
+                        c
+                    }
+                };
+                for l in 0..8 {
+                    let (x, y) = (px + (l % PW) as u32, py + (l / PW) as u32);
+                    if x >= w || y >= y0 + rows {
+                        continue;
+                    }
+                    let i = ((y - y0) * w + x) as usize;
+                    let packed_color = pack_color_f32(c[l]);
+                    if heuristic.is_none() {
+                        if let Some(p) = color.get_mut(i) {
+                            *p = over_background(packed_color, BACKGROUND);
+                        }
+                        continue;
+                    }
+                    if let Some(p) = color.get_mut(i) {
+                        *p = packed_color;
+                    }
+                    if let Some(p) = t.get_mut(i) {
+                        *p = depth[l].unwrap_or(f32::INFINITY);
+                    }
+                    if let (Some((q, radius)), Some(tl), Some(s)) = (pack, depth[l], packed.get_mut(i)) {
+                        let d = rays.d[l];
+                        *s = q.pack(o + d * tl, radius.at(d, tl));
+                    }
+                }
+            }
+        }
+    }
+}
+
+#[inline(always)]
+#[allow(clippy::too_many_arguments)]
+fn band_kernel<L: Lanes>(
+    k: &Kernel<'_>,
+    basis: &RayBasis,
+    heuristic: Option<Heuristic>,
+    pack: Option<(&Quantizer, FrameRadius)>,
+    y0: u32,
+    t: &mut [f32],
+    color: &mut [u32],
+    packed: &mut [u64],
+) {
+    k.band::<L>(basis, heuristic, pack, y0, t, color, packed)
+}
+
+dispatch! {
+    /// Marches the rows of one band with the best lanes this CPU has (see [`Kernel::band`]).
+    #[allow(clippy::too_many_arguments)]
+    fn march_band / march_band_avx2 => band_kernel(
+        k: &Kernel<'_>,
+        basis: &RayBasis,
+        heuristic: Option<Heuristic>,
+        pack: Option<(&Quantizer, FrameRadius)>,
+        y0: u32,
+        t: &mut [f32],
+        color: &mut [u32],
+        packed: &mut [u64],
+    )
+}
