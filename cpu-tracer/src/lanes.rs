@@ -22,9 +22,9 @@ use wide::{f32x8, u32x8};
 /// instance elsewhere. Both compute the same values (see the module docs), so the choice only
 /// changes the speed.
 macro_rules! dispatch {
-    ($(#[$doc:meta])* fn $name:ident / $avx2:ident => $kernel:ident($($arg:ident: $ty:ty),* $(,)?)) => {
+    ($(#[$doc:meta])* fn $name:ident / $avx2:ident => $kernel:ident($($arg:ident: $ty:ty),* $(,)?) $(-> $ret:ty)?) => {
         $(#[$doc])*
-        fn $name($($arg: $ty),*) {
+        fn $name($($arg: $ty),*) $(-> $ret)? {
             #[cfg(target_arch = "x86_64")]
             if std::is_x86_feature_detected!("avx2") {
                 // SAFETY: the CPU supports AVX2 (checked just above).
@@ -40,7 +40,7 @@ macro_rules! dispatch {
         /// The CPU must support AVX2.
         #[cfg(target_arch = "x86_64")]
         #[target_feature(enable = "avx2")]
-        unsafe fn $avx2($($arg: $ty),*) {
+        unsafe fn $avx2($($arg: $ty),*) $(-> $ret)? {
             // `Avx2`'s invariant holds: the caller guarantees AVX2.
             $kernel::<$crate::lanes::Avx2>($($arg),*)
         }
