@@ -57,7 +57,7 @@ pub use point_splat::PointSplat;
 pub use scalar_tracer::ScalarTracer;
 pub use sphere_splat::SphereSplat;
 pub use stale_image::StaleImage;
-pub use route::{AutoSpheres, CostModel, Route};
+pub use route::{AutoSpheres, CostModel, LazyBuild, Route};
 pub use threads::Threads;
 pub use tile_splat::TileSplat;
 

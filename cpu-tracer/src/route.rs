@@ -149,6 +149,16 @@ pub fn unbuilt_scene(frame: &Frame) -> Scene {
     }
 }
 
+/// [`unbuilt_scene`] taking the frame's buffers (no copy): what a client does with a received
+/// frame when its renderer needs no LBVH.
+pub fn into_unbuilt_scene(frame: Frame) -> Scene {
+    let Frame { header, mut samples, mut colors } = frame;
+    let n = samples.len().min(colors.len());
+    samples.truncate(n);
+    colors.truncate(n);
+    Scene { header, deq: Dequantizer::new(header.bounds, header.radius_unit), samples, colors, nodes: Vec::new() }
+}
+
 /// Whether `scene` is unbuilt (see [`unbuilt_scene`]): no nodes although it has two samples or
 /// more.
 pub fn is_unbuilt(scene: &Scene) -> bool {
@@ -187,9 +197,7 @@ pub struct AutoSpheres {
     forced: Option<Route>,
     last: Option<Route>,
     last_estimate: Estimate,
-    builder: Option<ParallelBuilder>,
-    built: Option<(SceneId, Scene)>,
-    threads: usize,
+    lazy: LazyBuild,
 }
 
 impl AutoSpheres {
@@ -203,9 +211,7 @@ impl AutoSpheres {
             forced: None,
             last: None,
             last_estimate: Estimate::default(),
-            builder: None,
-            built: None,
-            threads,
+            lazy: LazyBuild::new(threads),
         }
     }
 
@@ -241,32 +247,61 @@ impl AutoSpheres {
     }
 }
 
-/// The built form of `scene` for the tracer: `scene` itself, or its LBVH built now into
-/// `kept` (and kept while the same unbuilt scene is drawn again).
-fn built_scene<'a>(
-    builder: &mut Option<ParallelBuilder>,
-    kept: &'a mut Option<(SceneId, Scene)>,
+/// Builds the LBVH of unbuilt scenes on demand, once per scene (kept while the same unbuilt
+/// scene is drawn again): for renderers that need the LBVH when a client hands them unbuilt
+/// scenes ([`AutoSpheres`] on its tracing route, or a client whose renderer was switched).
+#[derive(Debug)]
+pub struct LazyBuild {
     threads: usize,
-    scene: &'a Scene,
-) -> &'a Scene {
-    if !is_unbuilt(scene) {
-        return scene;
+    builder: Option<ParallelBuilder>,
+    kept: Option<(SceneId, Scene)>,
+    /// The copy of the scene's samples the builder reads (kept for its buffers).
+    frame: Option<Frame>,
+}
+
+impl LazyBuild {
+    /// Builds on `threads` threads (0: one per core) when needed.
+    pub fn new(threads: usize) -> Self {
+        LazyBuild { threads, builder: None, kept: None, frame: None }
     }
-    let id = SceneId::of(scene);
-    if kept.as_ref().map(|(k, _)| *k) != Some(id) {
-        let frame = Frame { header: scene.header, samples: scene.samples.clone(), colors: scene.colors.clone() };
-        let builder = builder.get_or_insert_with(|| ParallelBuilder::new(threads));
-        let mut s = match kept.take() {
+
+    /// `scene` itself if it is built, else its built form (built now unless kept).
+    pub fn built<'a>(&'a mut self, scene: &'a Scene) -> &'a Scene {
+        if !is_unbuilt(scene) {
+            return scene;
+        }
+        let id = SceneId::of(scene);
+        if self.kept.as_ref().map(|(k, _)| *k) != Some(id) {
+            let frame = self.frame.get_or_insert_with(|| Frame {
+                header: scene.header,
+                samples: Vec::new(),
+                colors: Vec::new(),
+            });
+            frame.header = scene.header;
+            frame.samples.clear();
+            frame.samples.extend_from_slice(&scene.samples);
+            frame.colors.clear();
+            frame.colors.extend_from_slice(&scene.colors);
+            let threads = self.threads;
+            let builder = self.builder.get_or_insert_with(|| ParallelBuilder::new(threads));
+            let mut s = match self.kept.take() {
+                Some((_, s)) => s,
+                None => unbuilt_scene(&Frame { header: scene.header, samples: Vec::new(), colors: Vec::new() }),
+            };
+            builder.build_into(frame, &mut s);
+            self.kept = Some((id, s));
+        }
+        match &self.kept {
             Some((_, s)) => s,
-            None => unbuilt_scene(&Frame { header: scene.header, samples: Vec::new(), colors: Vec::new() }),
-        };
-        builder.build_into(&frame, &mut s);
-        *kept = Some((id, s));
+            None => scene,
+        }
     }
-    match kept {
-        Some((_, s)) => s,
-        None => scene,
-    }
+}
+
+/// Whether the renderer of this name draws unbuilt scenes itself (so a client may skip the
+/// LBVH build when it is the current one).
+pub fn draws_unbuilt(name: &str) -> bool {
+    matches!(name, "spheres" | "splat-tiles")
 }
 
 impl Renderer for AutoSpheres {
@@ -280,7 +315,7 @@ impl Renderer for AutoSpheres {
         match route {
             Route::Splat => self.splat.render(scene, camera, out),
             Route::Trace => {
-                let built = built_scene(&mut self.builder, &mut self.built, self.threads, scene);
+                let built = self.lazy.built(scene);
                 self.tracer.render(built, camera, out);
             }
         }

@@ -473,7 +473,7 @@ struct TileBuf {
 
 impl TileBuf {
     fn new() -> TileBuf {
-        TileBuf { keys: vec![EMPTY; TILE * TILE], dirs: vec![0.0; 3 * PLANE] }
+        TileBuf { keys: vec![EMPTY; (TILE + 1) * TILE + 8], dirs: vec![0.0; 3 * PLANE] }
     }
 }
 
@@ -613,23 +613,27 @@ fn splat_sphere<L: Lanes>(
 }
 
 /// The depth test of the hit lanes `bits` (distances `t`) of sphere `i`: lane `l` is pixel
-/// `base + l` of a row, or of a 4×2 block (`quad`) `base + (l / 4)·TILE + l % 4`.
+/// `base + l` of a row, or of a 4×2 block (`quad`) `base + (l / 4)·TILE + l % 4`. All eight
+/// lanes are written without branches (a lane that did not hit writes back the minimum of its
+/// slot and [`EMPTY`], i.e. the slot: the buffer is padded for the lanes past the tile).
 #[inline(always)]
-fn keep(keys: &mut [u64], mut bits: u32, t: &[f32; 8], i: u32, base: usize, quad: bool, ties: Ties) {
-    while bits != 0 {
-        let l = bits.trailing_zeros() as usize;
-        bits &= bits - 1;
-        let p = if quad { base + (l >> 2) * TILE + (l & 3) } else { base + l };
-        let k = key(t[l], i);
-        if let Some(slot) = keys.get_mut(p) {
-            let better = match ties {
-                Ties::Sorted(samples) if (k ^ *slot) >> 32 == 0 => sorted_before(samples, i, *slot as u32),
-                _ => k < *slot,
-            };
-            if better {
-                *slot = k;
+fn keep(keys: &mut [u64], bits: u32, t: &[f32; 8], i: u32, base: usize, quad: bool, ties: Ties) {
+    let Some(slots) = keys.get_mut(base..base + TILE + 8) else { return };
+    for (l, &t) in t.iter().enumerate() {
+        let p = if quad { (l >> 2) * TILE + (l & 3) } else { l };
+        let hit = bits >> l & 1 != 0;
+        let k = if hit { key(t, i) } else { EMPTY };
+        let old = slots[p];
+        slots[p] = match ties {
+            Ties::Sorted(samples) if hit && (k ^ old) >> 32 == 0 => {
+                if sorted_before(samples, i, old as u32) {
+                    k
+                } else {
+                    old
+                }
             }
-        }
+            _ => k.min(old),
+        };
     }
 }
 
