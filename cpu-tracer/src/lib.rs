@@ -54,10 +54,10 @@ pub use build::sort as parallel_sort;
 pub use build::{build_scene, BuildTimes, Method, ParallelBuilder};
 pub use packet_tracer::PacketTracer;
 pub use point_splat::PointSplat;
+pub use route::{AutoSpheres, CostModel, LazyBuild, Route};
 pub use scalar_tracer::ScalarTracer;
 pub use sphere_splat::SphereSplat;
 pub use stale_image::StaleImage;
-pub use route::{AutoSpheres, CostModel, LazyBuild, Route};
 pub use threads::Threads;
 pub use tile_splat::TileSplat;
 

@@ -20,9 +20,9 @@ use crate::sphere_splat::View;
 use crate::threads::Threads;
 use crate::{PacketTracer, ParallelBuilder, TileSplat};
 use volwarp_core::renderer::{Image, Renderer};
-use volwarp_core::RendererKind;
 use volwarp_core::sample::Dequantizer;
 use volwarp_core::wire::{Frame, FrameHeader};
+use volwarp_core::RendererKind;
 use volwarp_core::{Camera, Scene};
 
 /// Spheres whose bounds the estimate reads (every `n / ESTIMATE_SPHERES`-th one).

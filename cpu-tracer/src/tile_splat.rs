@@ -40,8 +40,8 @@ use crate::{begin_frame_unbuilt_ok as begin_frame, shade, NO_HIT};
 use rayon::prelude::*;
 use volwarp_core::morton::code_of_sample;
 use volwarp_core::renderer::{Image, Renderer};
-use volwarp_core::RendererKind;
 use volwarp_core::sample::Dequantizer;
+use volwarp_core::RendererKind;
 use volwarp_core::{Camera, Scene, Vec3, BACKGROUND};
 
 /// Tile side in pixels: a tile's keys (8 KB) and ray directions (≈ 16 KB) fit in L1.
