@@ -9,7 +9,8 @@ if [ "$(id -u)" != 0 ] && command -v sudo >/dev/null; then SUDO=sudo; fi
 
 # System packages: lavapipe (software Vulkan) for the GPU tests, Xvfb for the window test.
 need=()
-for p in mesa-vulkan-drivers libvulkan1 xvfb xauth x11-apps; do
+# gcc-aarch64-linux-gnu: minifb's build script compiles C for the ARM check of the client.
+for p in mesa-vulkan-drivers libvulkan1 xvfb xauth x11-apps gcc-aarch64-linux-gnu; do
   dpkg -s "$p" >/dev/null 2>&1 || need+=("$p")
 done
 if [ ${#need[@]} -gt 0 ]; then
@@ -20,6 +21,8 @@ fi
 
 # The no_std target core is checked for.
 rustup target list --installed | grep -q thumbv7em-none-eabihf || rustup target add thumbv7em-none-eabihf
+# The ARM (aarch64 Linux) thin-client target the client and its renderers are checked for.
+rustup target list --installed | grep -q aarch64-unknown-linux-gnu || rustup target add aarch64-unknown-linux-gnu
 
 # Fuzz smoke runs need cargo-fuzz and a nightly toolchain.
 if [ "${VOLWARP_NO_FUZZ:-0}" != 1 ]; then

@@ -22,6 +22,9 @@ cargo clippy --workspace --all-targets -- -D warnings
 echo "== no_std build of volwarp-core for thumbv7em-none-eabihf"
 cargo build -p volwarp-core --no-default-features --target thumbv7em-none-eabihf
 
+echo "== ARM thin client: cargo check for aarch64-unknown-linux-gnu (portable SIMD maps to NEON)"
+cargo check --target aarch64-unknown-linux-gnu -p volwarp-cpu-tracer -p volwarp-client
+
 echo "== tests (window tests under Xvfb)"
 xvfb-run -a -s "-screen 0 1280x1024x24" cargo test --workspace
 

@@ -62,7 +62,12 @@ fn run_connected(opts: &Options, addr: &str) -> Result<(), ClientError> {
     let conn = connect(addr, opts.token.as_deref(), timeout)?;
     let home = home_camera(&conn.bounds, opts.size.0, opts.size.1);
     let recorder = opts.record.as_deref().map(Recorder::create).transpose()?;
-    let cfg = NetConfig { latency: Duration::from_millis(opts.latency_ms), build_threads: opts.build_threads, timeout };
+    let cfg = NetConfig {
+        latency: Duration::from_millis(opts.latency_ms),
+        build_threads: opts.build_threads,
+        timeout,
+        lazy_build: !opts.renderer.info().caps.needs_lbvh,
+    };
     let net = Network::start(conn, cfg, recorder.as_ref().map(Recorder::sink))?;
     let mut display = Display::new(net, renderers, recorder.as_ref().map(Recorder::sink));
     let result = if opts.bench {

@@ -68,6 +68,10 @@ pub struct NetConfig {
     pub build_threads: usize,
     /// Longest wait for the next message from the server.
     pub timeout: Duration,
+    /// Hand frames over unbuilt (no LBVH: `volwarp_cpu_tracer::route::into_unbuilt_scene`), for
+    /// a renderer that draws them directly (no `needs_lbvh` in the registry); the display
+    /// builds the LBVH itself if it switches to one that needs it.
+    pub lazy_build: bool,
 }
 
 struct Pending {
@@ -337,9 +341,14 @@ fn build_loop(sh: &Shared, cfg: &NetConfig) {
         let Some(p) = next else { continue };
         let busy = Busy::new(&sh.work_gen);
         let t0 = Instant::now();
-        let mut scene = lock(&sh.recycle).take().unwrap_or_else(|| Scene::empty(&p.frame.header));
-        builder.build_into(&p.frame, &mut scene);
-        drop(p.frame);
+        let scene = if cfg.lazy_build {
+            volwarp_cpu_tracer::route::into_unbuilt_scene(p.frame)
+        } else {
+            let mut scene = lock(&sh.recycle).take().unwrap_or_else(|| Scene::empty(&p.frame.header));
+            builder.build_into(&p.frame, &mut scene);
+            drop(p.frame);
+            scene
+        };
         let build_ms = t0.elapsed().as_secs_f64() * 1e3;
         drop(busy);
         sh.built.fetch_add(1, Ordering::Relaxed);

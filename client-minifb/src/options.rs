@@ -11,7 +11,8 @@ Window controls:
   left drag / arrow keys     orbit around the volume
   right drag / W A S D       pan
   wheel / + -                zoom
-  1..8                       renderer (see --renderer; key k is the k-th of its list)
+  1..9                       renderer (see --renderer; key k is the k-th of its list;
+                             9 is the default, spheres)
   H / Shift+H                next / previous depth heuristic (sent to the server)
   [ ]                        smaller / larger sample radius (sent to the server)
   R                          reset the camera

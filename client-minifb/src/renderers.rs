@@ -11,6 +11,8 @@ pub struct Renderers {
     threads: usize,
     slots: Vec<Option<Box<dyn Renderer>>>,
     current: RendererKind,
+    /// The LBVH of unbuilt scenes (see `NetConfig::lazy_build`) for renderers that need it.
+    lazy: volwarp_cpu_tracer::LazyBuild,
     gpu_error: Option<String>,
 }
 
@@ -45,7 +47,13 @@ impl Renderers {
     pub fn new(kind: RendererKind, threads: usize) -> Result<Renderers, String> {
         let mut slots: Vec<Option<Box<dyn Renderer>>> = RendererKind::ALL.iter().map(|_| None).collect();
         slots[kind.index()] = Some(create(kind, threads)?);
-        Ok(Renderers { threads, slots, current: kind, gpu_error: None })
+        Ok(Renderers {
+            threads,
+            slots,
+            current: kind,
+            gpu_error: None,
+            lazy: volwarp_cpu_tracer::LazyBuild::new(threads),
+        })
     }
 
     /// Switches to `kind`, creating it on first use. On failure (no GPU adapter) the current
@@ -93,8 +101,10 @@ impl Renderers {
         self.current.name()
     }
 
-    /// Draws `scene` for `camera` with the current renderer.
+    /// Draws `scene` for `camera` with the current renderer (building the LBVH of an unbuilt
+    /// scene first if the renderer needs one).
     pub fn render(&mut self, scene: &Scene, camera: &Camera, out: &mut Image) {
+        let scene = if self.current.info().caps.needs_lbvh { self.lazy.built(scene) } else { scene };
         match self.slots[self.current.index()].as_mut() {
             Some(r) => r.render(scene, camera, out),
             None => out.reset_for(camera),
@@ -125,6 +135,19 @@ mod tests {
             r.select_key(k).unwrap();
             assert_eq!(r.kind(), RendererKind::ALL[k - 1]);
         }
-        assert!(r.select_key(9).is_err());
+        r.select_key(9).unwrap();
+        assert_eq!(r.kind(), RendererKind::Spheres);
+        let mut c = Image::new(1, 1);
+        r.render(&scene, &cam, &mut c);
+        assert_eq!(a, c, "the default renderer draws the same image");
+        // An unbuilt scene (lazy build): the exact renderers draw the built scene's image.
+        let unbuilt = volwarp_cpu_tracer::route::unbuilt_scene(&frame);
+        for key in [9, 1, 8] {
+            r.select_key(key).unwrap();
+            let mut d = Image::new(1, 1);
+            r.render(&unbuilt, &cam, &mut d);
+            assert_eq!(a, d, "{} on the unbuilt scene", r.name());
+        }
+        assert!(r.select_key(11).is_err());
     }
 }

@@ -73,9 +73,9 @@ impl Screen {
         !self.window.is_open() || self.window.is_key_down(Key::Escape) || self.window.is_key_down(Key::Q)
     }
 
-    /// Number key 1–8 pressed this frame, if any.
+    /// Number key 1–9 pressed this frame, if any.
     pub fn renderer_key(&self) -> Option<usize> {
-        const KEYS: [(Key, Key); 8] = [
+        const KEYS: [(Key, Key); 9] = [
             (Key::Key1, Key::NumPad1),
             (Key::Key2, Key::NumPad2),
             (Key::Key3, Key::NumPad3),
@@ -84,6 +84,7 @@ impl Screen {
             (Key::Key6, Key::NumPad6),
             (Key::Key7, Key::NumPad7),
             (Key::Key8, Key::NumPad8),
+            (Key::Key9, Key::NumPad9),
         ];
         let w = &self.window;
         KEYS.iter()

@@ -34,6 +34,12 @@ pub enum RendererKind {
     SpheresGpu,
     /// Core's scalar reference traversal per pixel (`spheres-scalar`, key 8).
     SpheresScalar,
+    /// The default: exact tiled splatting or the packet tracer, whichever a measured cost model
+    /// predicts faster for the frame; draws unbuilt scenes (`spheres`, key 9).
+    Spheres,
+    /// Exact object-order sphere splatting in cache-sized screen tiles, no LBVH (`splat-tiles`,
+    /// key 10: no window key).
+    SplatTiles,
 }
 
 /// One row of the registry.
@@ -54,7 +60,7 @@ const fn caps(exact_spheres: bool, needs_lbvh: bool, gpu: bool) -> Capabilities 
 }
 
 /// The registry, in key order (key `k` selects `REGISTRY[k − 1]`).
-pub const REGISTRY: [RendererInfo; 8] = [
+pub const REGISTRY: [RendererInfo; 10] = [
     RendererInfo {
         kind: RendererKind::SpheresCpu,
         name: "spheres-cpu",
@@ -103,11 +109,23 @@ pub const REGISTRY: [RendererInfo; 8] = [
         about: "scalar reference sphere tracer",
         caps: caps(true, true, false),
     },
+    RendererInfo {
+        kind: RendererKind::Spheres,
+        name: "spheres",
+        about: "exact spheres: tiled splatting or the packet tracer, whichever is faster",
+        caps: caps(true, false, false),
+    },
+    RendererInfo {
+        kind: RendererKind::SplatTiles,
+        name: "splat-tiles",
+        about: "exact sphere splatting in screen tiles (no LBVH)",
+        caps: caps(true, false, false),
+    },
 ];
 
 impl RendererKind {
     /// Every renderer, in key order.
-    pub const ALL: [RendererKind; 8] = [
+    pub const ALL: [RendererKind; 10] = [
         RendererKind::SpheresCpu,
         RendererKind::Points1,
         RendererKind::Points2,
@@ -116,10 +134,12 @@ impl RendererKind {
         RendererKind::Stale,
         RendererKind::SpheresGpu,
         RendererKind::SpheresScalar,
+        RendererKind::Spheres,
+        RendererKind::SplatTiles,
     ];
 
     /// The renderer a client starts with.
-    pub const DEFAULT: RendererKind = RendererKind::SpheresCpu;
+    pub const DEFAULT: RendererKind = RendererKind::Spheres;
 
     /// Its row of [`REGISTRY`].
     pub const fn info(self) -> &'static RendererInfo {
@@ -137,6 +157,8 @@ impl RendererKind {
             RendererKind::Stale => 5,
             RendererKind::SpheresGpu => 6,
             RendererKind::SpheresScalar => 7,
+            RendererKind::Spheres => 8,
+            RendererKind::SplatTiles => 9,
         }
     }
 

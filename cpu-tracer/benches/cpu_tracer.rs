@@ -14,7 +14,9 @@ use volwarp_core::renderer::{Image, Renderer};
 use volwarp_core::wire::Frame;
 use volwarp_core::{Camera, Scene};
 use volwarp_cpu_tracer::synthetic::depth_image_frame;
-use volwarp_cpu_tracer::{PacketTracer, ParallelBuilder, PointSplat, ScalarTracer, SphereSplat, StaleImage};
+use volwarp_cpu_tracer::{
+    AutoSpheres, PacketTracer, ParallelBuilder, PointSplat, ScalarTracer, SphereSplat, StaleImage, TileSplat,
+};
 
 #[path = "support/frames.rs"]
 mod frames;
@@ -116,9 +118,91 @@ fn summary(frame: &Frame, what: &str, scene: &Scene) {
     println!();
 }
 
+/// Issue 18's table: the tiled splatter, the default renderer (`spheres`, with the route it
+/// took) and the packet tracer, footprint and paper radius, 10° off and zoomed in, 1024² and
+/// 512², 1 and 2 threads; and the time from a frame's bytes to a drawable scene.
+fn issue18_summary(frame: &Frame, what: &str, scene: &Scene) {
+    let simd = if std::env::var_os("VOLWARP_PORTABLE_SIMD").is_some() {
+        "portable (wide)"
+    } else {
+        "AVX2 where the CPU has it"
+    };
+    println!("\n## issue 18: sphere routes (medians, wall ms; SIMD: {simd})\nframe: {what}");
+    println!("| radius | view | viewport | threads | splat-tiles | spheres (route) | spheres-cpu | splat | packet / spheres |");
+    println!("|---|---|---|---|---|---|---|---|---|");
+    let mut img = Image::new(1, 1);
+    let paper = frames::mri_frame_with(1024, volwarp_server::RadiusModel::Voxel).map(|(f, _)| {
+        let s = Scene::build(&f);
+        (f, s)
+    });
+    let mut sets = vec![("footprint", frame, scene)];
+    if let Some((f, s)) = &paper {
+        sets.push(("paper (voxel)", f, s));
+    }
+    for (radius, frame, scene) in sets {
+        for (view, dolly) in [("10° off", 1.0f32), ("zoomed in (dolly 0.3)", 0.3)] {
+            for res in [1024u32, 512] {
+                let cam = warped(frame, res).dolly(dolly);
+                for threads in [1usize, 2] {
+                    let mut t = TileSplat::new(threads);
+                    let mut a = AutoSpheres::new(threads);
+                    let mut p = PacketTracer::new(threads);
+                    let st = median_secs(11, Duration::from_secs(3), || t.render(scene, &cam, &mut img)) * 1e3;
+                    let sa = median_secs(11, Duration::from_secs(3), || a.render(scene, &cam, &mut img)) * 1e3;
+                    let sp = median_secs(11, Duration::from_secs(3), || p.render(scene, &cam, &mut img)) * 1e3;
+                    let old = if dolly == 1.0 && res == 1024 {
+                        let mut o = SphereSplat::new(threads);
+                        format!(
+                            "{:.1}",
+                            median_secs(11, Duration::from_secs(3), || o.render(scene, &cam, &mut img)) * 1e3
+                        )
+                    } else {
+                        "—".into()
+                    };
+                    let e = a.last_estimate();
+                    println!(
+                        "| {radius} | {view} | {res}² | {threads} | {st:.1} ({:.1} FPS) | {sa:.1} ({:.1} FPS, {:?}, side {:.1} px) | {sp:.1} | {old} | {:.2} |",
+                        1e3 / st,
+                        1e3 / sa,
+                        a.last_route().unwrap_or(volwarp_cpu_tracer::Route::Splat),
+                        (e.covered / e.spheres.max(1.0)).sqrt(),
+                        sp / sa
+                    );
+                }
+            }
+        }
+    }
+    // Frame arrival to a drawable scene: decode the wire bytes, then either nothing more
+    // (the unbuilt scene `spheres` draws) or the parallel LBVH build on 2 threads.
+    let bytes = volwarp_core::wire::encode_to_vec(&volwarp_core::wire::Message::Frame(frame.clone()));
+    let limits = volwarp_core::wire::Limits::default();
+    let decode = || match volwarp_core::wire::read_message(&mut &bytes[..], &limits) {
+        Ok(volwarp_core::wire::Message::Frame(f)) => f,
+        _ => panic!("the encoded frame decodes"),
+    };
+    let d = median_secs(11, Duration::from_secs(3), || drop(decode())) * 1e3;
+    let u = median_secs(11, Duration::from_secs(3), || drop(unbuilt_scene_from(decode()))) * 1e3;
+    let mut b = ParallelBuilder::new(2);
+    let mut sc = b.build(frame);
+    let bt = median_secs(11, Duration::from_secs(3), || b.build_into(&decode(), &mut sc)) * 1e3;
+    println!(
+        "\nframe bytes ({} B) to a drawable scene: decode {d:.2} ms; decode + unbuilt scene {u:.2} ms; decode + LBVH build (2 threads, buffers reused) {bt:.2} ms",
+        bytes.len()
+    );
+}
+
+/// The unbuilt scene of a decoded frame, taking its buffers (no copy).
+fn unbuilt_scene_from(frame: Frame) -> Scene {
+    volwarp_cpu_tracer::route::into_unbuilt_scene(frame)
+}
+
 fn benches(c: &mut Criterion) {
     let (frame, what) = bench_frame();
     let scene = Scene::build(&frame);
+    issue18_summary(&frame, &what, &scene);
+    if std::env::var_os("VOLWARP_BENCH_ISSUE18_ONLY").is_some() {
+        return;
+    }
     if std::env::var_os("VOLWARP_BENCH_NO_SUMMARY").is_none() {
         summary(&frame, &what, &scene);
     }

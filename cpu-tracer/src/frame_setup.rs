@@ -52,6 +52,31 @@ pub(crate) fn begin_frame(scene: &Scene, camera: &Camera, out: &mut Image) -> bo
     true
 }
 
+/// [`begin_frame`] for a renderer that also draws unbuilt scenes (no nodes: samples and
+/// colors of a frame in arrival order, [`crate::route::unbuilt_scene`]).
+pub(crate) fn begin_frame_unbuilt_ok(scene: &Scene, camera: &Camera, out: &mut Image) -> bool {
+    if !scene.nodes.is_empty() || scene.samples.len() < 2 {
+        return begin_frame(scene, camera, out);
+    }
+    if let Err(e) = camera.validate(MAX_VIEWPORT) {
+        warn_once(&WARNED_CAMERA, &format!("unusable camera: {e}"));
+        out.reset_for_unusable(camera, MAX_VIEWPORT);
+        return false;
+    }
+    out.reset_for(camera);
+    // The scene's rules but the node count (none yet).
+    let d = &scene.deq;
+    let ok = scene.colors.len() == scene.samples.len()
+        && scene.samples.len() < Scene::MAX_SAMPLES
+        && d.min.is_finite()
+        && d.step.is_finite()
+        && d.radius_unit.is_finite();
+    if !ok {
+        warn_once(&WARNED_SCENE, "unusable unbuilt scene");
+    }
+    ok
+}
+
 /// The color a renderer shows for a sample-id pixel.
 #[inline(always)]
 pub(crate) fn shade(colors: &[u32], prim: u32) -> u32 {

@@ -22,12 +22,12 @@ use wide::{f32x8, u32x8};
 /// instance elsewhere. Both compute the same values (see the module docs), so the choice only
 /// changes the speed.
 macro_rules! dispatch {
-    ($(#[$doc:meta])* fn $name:ident / $avx2:ident => $kernel:ident($($arg:ident: $ty:ty),* $(,)?)) => {
+    ($(#[$doc:meta])* fn $name:ident / $avx2:ident => $kernel:ident($($arg:ident: $ty:ty),* $(,)?) $(-> $ret:ty)?) => {
         $(#[$doc])*
-        fn $name($($arg: $ty),*) {
+        fn $name($($arg: $ty),*) $(-> $ret)? {
             #[cfg(target_arch = "x86_64")]
-            if std::is_x86_feature_detected!("avx2") {
-                // SAFETY: the CPU supports AVX2 (checked just above).
+            if $crate::lanes::use_avx2() {
+                // SAFETY: the CPU supports AVX2 (`use_avx2` checks).
                 return unsafe { $avx2($($arg),*) };
             }
             $kernel::<wide::f32x8>($($arg),*)
@@ -40,13 +40,31 @@ macro_rules! dispatch {
         /// The CPU must support AVX2.
         #[cfg(target_arch = "x86_64")]
         #[target_feature(enable = "avx2")]
-        unsafe fn $avx2($($arg: $ty),*) {
+        unsafe fn $avx2($($arg: $ty),*) $(-> $ret)? {
             // `Avx2`'s invariant holds: the caller guarantees AVX2.
             $kernel::<$crate::lanes::Avx2>($($arg),*)
         }
     };
 }
 pub(crate) use dispatch;
+
+/// Whether the kernels take their AVX2 instances: the CPU has AVX2 and the environment
+/// variable `VOLWARP_PORTABLE_SIMD` is not set (set it to time the portable `wide` kernels, as
+/// on a CPU without AVX2 or on ARM). Read once.
+#[cfg(target_arch = "x86_64")]
+pub(crate) fn use_avx2() -> bool {
+    use std::sync::atomic::{AtomicU8, Ordering};
+    static STATE: AtomicU8 = AtomicU8::new(0);
+    match STATE.load(Ordering::Relaxed) {
+        1 => true,
+        2 => false,
+        _ => {
+            let yes = std::is_x86_feature_detected!("avx2") && std::env::var_os("VOLWARP_PORTABLE_SIMD").is_none();
+            STATE.store(if yes { 1 } else { 2 }, Ordering::Relaxed);
+            yes
+        }
+    }
+}
 
 /// `RayBasis::dir` for eight pixels whose centres are `(px, py)` (pixel index + 0.5): the same
 /// operations (`corner + du·px + dv·py`, then `d · (1 / sqrt(d·d))`), so the same unit

@@ -6,6 +6,8 @@
 //!
 //! | module | concept | renderer ([`RendererKind`]) |
 //! |---|---|---|
+//! | [`route`] | the default: tiled splatting or packet tracing, chosen per frame by a measured cost model | `spheres` |
+//! | [`tile_splat`] | exact object-order sphere splatting in cache-sized screen tiles (no BVH) | `splat-tiles` |
 //! | [`packet_tracer`] | first-hit sphere tracing with 8-ray SIMD packets (`wide::f32x8`) | `spheres-cpu` |
 //! | [`scalar_tracer`] | core's scalar reference traversal per pixel | `spheres-scalar` |
 //! | [`point_splat`] | ZAL12 2.5D points: fixed N×N squares with a depth test | `points1`, `points2`, `points3` |
@@ -30,17 +32,19 @@
 pub mod build;
 pub mod packet_tracer;
 pub mod point_splat;
+pub mod route;
 pub mod scalar_tracer;
 pub mod sphere_splat;
 pub mod stale_image;
 pub mod synthetic;
 pub mod threads;
+pub mod tile_splat;
 
 mod depth_buffer;
 mod frame_setup;
 mod lanes;
 
-pub(crate) use frame_setup::{begin_frame, shade, trace_ids_with};
+pub(crate) use frame_setup::{begin_frame, begin_frame_unbuilt_ok, shade, trace_ids_with};
 
 /// The parallel LBVH build under its earlier path.
 pub use build as parallel_build;
@@ -50,10 +54,12 @@ pub use build::sort as parallel_sort;
 pub use build::{build_scene, BuildTimes, Method, ParallelBuilder};
 pub use packet_tracer::PacketTracer;
 pub use point_splat::PointSplat;
+pub use route::{AutoSpheres, CostModel, LazyBuild, Route};
 pub use scalar_tracer::ScalarTracer;
 pub use sphere_splat::SphereSplat;
 pub use stale_image::StaleImage;
 pub use threads::Threads;
+pub use tile_splat::TileSplat;
 
 use volwarp_core::renderer::Renderer;
 use volwarp_core::RendererKind;
@@ -76,6 +82,8 @@ pub fn create(kind: RendererKind, threads: usize) -> Option<Box<dyn Renderer + S
         RendererKind::Points2 => Box::new(PointSplat::new(2, threads)),
         RendererKind::Points3 => Box::new(PointSplat::new(3, threads)),
         RendererKind::Stale => Box::new(StaleImage::new(threads)),
+        RendererKind::Spheres => Box::new(AutoSpheres::new(threads)),
+        RendererKind::SplatTiles => Box::new(TileSplat::new(threads)),
         RendererKind::SpheresGpu => return None,
     })
 }

@@ -38,28 +38,28 @@ pub struct SphereSplat {
 const LANES: usize = 8;
 
 /// Per-camera constants of the screen-space bound.
-struct View {
-    basis: RayBasis,
-    eye: Vec3,
-    u: [f64; 3],
-    v: [f64; 3],
-    w: [f64; 3],
+pub(crate) struct View {
+    pub(crate) basis: RayBasis,
+    pub(crate) eye: Vec3,
+    pub(crate) u: [f64; 3],
+    pub(crate) v: [f64; 3],
+    pub(crate) w: [f64; 3],
     /// Pixels per unit slope along x (`w / 2 / tan_x`) and y (`h / 2 / tan_y`).
-    px_x: f64,
-    px_y: f64,
-    half_w: f64,
-    half_h: f64,
-    width: u32,
-    height: u32,
+    pub(crate) px_x: f64,
+    pub(crate) px_y: f64,
+    pub(crate) half_w: f64,
+    pub(crate) half_h: f64,
+    pub(crate) width: u32,
+    pub(crate) height: u32,
 }
 
 #[inline(always)]
-fn dot(a: [f64; 3], b: [f64; 3]) -> f64 {
+pub(crate) fn dot(a: [f64; 3], b: [f64; 3]) -> f64 {
     a[0] * b[0] + a[1] * b[1] + a[2] * b[2]
 }
 
 impl View {
-    fn new(camera: &Camera) -> View {
+    pub(crate) fn new(camera: &Camera) -> View {
         let (u, v, w) = camera.basis();
         let f = |x: Vec3| [x.x as f64, x.y as f64, x.z as f64];
         let tan_y = (camera.fov_y_deg as f64).to_radians() * 0.5;
@@ -81,7 +81,7 @@ impl View {
 
     /// Inclusive pixel ranges `(x0, x1, y0, y1)` that may see the sphere, `None` if none can.
     #[inline(always)]
-    fn bound(&self, c: Vec3, r: f32) -> Option<(u32, u32, u32, u32)> {
+    pub(crate) fn bound(&self, c: Vec3, r: f32) -> Option<(u32, u32, u32, u32)> {
         let rel = [(c.x - self.eye.x) as f64, (c.y - self.eye.y) as f64, (c.z - self.eye.z) as f64];
         let (cx, cy, cz) = (dot(rel, self.u), dot(rel, self.v), dot(rel, self.w));
         // Widen by a relative margin far above f32 rounding of the centre and directions.

@@ -1,0 +1,684 @@
+//! The exact sphere splatter built for the cache (renderer name `splat-tiles`): the same image
+//! as first-hit tracing — core's ray–sphere test for every covered pixel's own primary ray and
+//! core's tie rule — with work that scales with the spheres and the pixels they cover, not with
+//! the image.
+//!
+//! 1. **Bound** (parallel over runs of spheres): each sphere's screen rectangle — the pixels
+//!    whose *centres* lie between the tangents from the eye (`tight_bound`), eight spheres at
+//!    a time in f32 lanes with a widened radius, in f64 for spheres near the eye plane — and,
+//!    per [`GROUP`] consecutive spheres, the union of their rectangles. The scene's order is
+//!    spatially coherent (Morton order when built, the server's image order when not), so a
+//!    group covers a small patch of the screen.
+//! 2. **Bin**: each group goes to the [`TILE`]×[`TILE`] tiles its rectangle overlaps (a serial
+//!    counting sort over a few tens of thousands of groups). A sphere overlapping more than
+//!    [`MAX_TILES`] tiles (large on screen, or touching the eye plane: its rectangle is then the
+//!    whole viewport) goes to a list of large spheres instead, and a group overlapping more
+//!    than [`MAX_GROUP_TILES`] to a list of scattered groups; every tile reads both with a
+//!    rectangle test. Memory: one index per group per tile it overlaps (≤ [`MAX_GROUP_TILES`]),
+//!    one per large sphere or scattered group, 8 bytes of rectangle per sphere; nothing per
+//!    pixel besides the image, whatever the view.
+//! 3. **Splat** (parallel over bands of tiles): per tile, the unit ray directions of its pixels
+//!    (`RayBasis::dir`'s operations, eight at a time) and a `(depth, id)` key per pixel, both in
+//!    a local buffer of about 24 KB that stays in L1; each sphere of its groups whose rectangle
+//!    overlaps the tile tests its pixels in the tile eight at a time with the packet tracer's
+//!    SIMD ray–sphere kernel (`lanes::sphere_hits`, AVX2 dispatch): as 4×2 blocks when the
+//!    rectangle is at most four pixels wide, as rows of 8 otherwise. The tile's ids or colors
+//!    are then written straight into the image: no per-thread image and no merge.
+//!
+//! Tiles without spheres cost one background fill. The keys are `(t bits << 32) | id`, so a
+//! minimum is core's tie rule (equal `t`: the smaller index), and the result does not depend on
+//! the order of the spheres in a tile or on the thread count (tested). An *unbuilt* scene (the
+//! frame's samples in arrival order, no nodes: [`crate::route::unbuilt_scene`]) is drawn too;
+//! equal distances are then broken by the order the LBVH build would give (Morton code, then
+//! index), so the image is the built scene's.
+
+use crate::depth_buffer::{key, key_prim, EMPTY};
+use crate::lanes::{self, ray_dirs, sphere_hits, Lanes};
+use crate::sphere_splat::{dot, View};
+use crate::threads::Threads;
+use crate::{begin_frame_unbuilt_ok as begin_frame, shade, NO_HIT};
+use rayon::prelude::*;
+use volwarp_core::morton::code_of_sample;
+use volwarp_core::renderer::{Image, Renderer};
+use volwarp_core::sample::Dequantizer;
+use volwarp_core::RendererKind;
+use volwarp_core::{Camera, Scene, Vec3, BACKGROUND};
+
+/// Tile side in pixels: a tile's keys (8 KB) and ray directions (≈ 16 KB) fit in L1.
+pub const TILE: usize = 32;
+
+/// A sphere overlapping more tiles than this goes to the shared list of large spheres.
+pub const MAX_TILES: usize = 4;
+
+/// Consecutive spheres binned together (the scene's order is spatially coherent: Morton order
+/// when built, the server's image order when not): a tile lists the groups whose rectangle
+/// (the union of their spheres' but the large ones) overlaps it, and tests each sphere's own
+/// rectangle.
+pub const GROUP: usize = 32;
+
+/// A group overlapping more tiles than this (its spheres far apart on screen) goes to a shared
+/// list that every tile reads, like the large spheres: memory stays one index per group.
+pub const MAX_GROUP_TILES: usize = 16;
+
+/// Row stride of a tile's direction planes: eight floats of padding so that a row's 8-lane
+/// load may start at any column.
+const STRIDE: usize = TILE + 8;
+/// Rows of a direction plane: one of padding for the second row of a 4×2 block.
+const PLANE: usize = STRIDE * (TILE + 1);
+
+/// A sphere's inclusive pixel rectangle; `x0 > x1` when it covers no pixel.
+#[derive(Clone, Copy, Debug, Default)]
+struct Rect {
+    x0: u16,
+    y0: u16,
+    x1: u16,
+    y1: u16,
+}
+
+const NO_RECT: Rect = Rect { x0: 1, y0: 1, x1: 0, y1: 0 };
+
+impl Rect {
+    fn is_empty(&self) -> bool {
+        self.x0 > self.x1
+    }
+
+    /// Whether it overlaps more than [`MAX_TILES`] tiles (then it is drawn from the list of
+    /// large spheres, not from its group).
+    #[inline(always)]
+    fn is_large(&self) -> bool {
+        let (tx0, tx1, ty0, ty1) = self.tiles();
+        (tx1 - tx0 + 1) * (ty1 - ty0 + 1) > MAX_TILES
+    }
+
+    /// The smallest rectangle holding both (`self` may be empty).
+    #[inline(always)]
+    fn union(self, o: Rect) -> Rect {
+        if self.is_empty() {
+            return o;
+        }
+        Rect { x0: self.x0.min(o.x0), y0: self.y0.min(o.y0), x1: self.x1.max(o.x1), y1: self.y1.max(o.y1) }
+    }
+
+    /// Inclusive tile ranges `(tx0, tx1, ty0, ty1)`.
+    #[inline(always)]
+    fn tiles(&self) -> (usize, usize, usize, usize) {
+        (self.x0 as usize / TILE, self.x1 as usize / TILE, self.y0 as usize / TILE, self.y1 as usize / TILE)
+    }
+}
+
+/// The tiled exact sphere splatter (renderer name `splat-tiles`).
+#[derive(Debug)]
+pub struct TileSplat {
+    threads: Threads,
+    rects: Vec<Rect>,
+    /// Per group of [`GROUP`] spheres, the union of its spheres' rectangles but the large ones.
+    group_rects: Vec<Rect>,
+    /// Group indices, tile by tile.
+    lists: Vec<u32>,
+    /// Start of each tile's list in `lists` (`tiles + 2` entries).
+    starts: Vec<u32>,
+    /// Spheres overlapping more than [`MAX_TILES`] tiles.
+    large: Vec<u32>,
+    /// Groups overlapping more than [`MAX_GROUP_TILES`] tiles.
+    scattered: Vec<u32>,
+}
+
+/// The tile grid of a viewport.
+#[derive(Clone, Copy)]
+struct Grid {
+    tx: usize,
+    ty: usize,
+}
+
+impl Grid {
+    fn new(camera: &Camera) -> Grid {
+        Grid { tx: (camera.width as usize).div_ceil(TILE), ty: (camera.height as usize).div_ceil(TILE) }
+    }
+
+    fn tiles(&self) -> usize {
+        self.tx * self.ty
+    }
+}
+
+impl TileSplat {
+    /// A splatter on `threads` threads (0: one per core).
+    pub fn new(threads: usize) -> Self {
+        TileSplat {
+            threads: Threads::new(threads),
+            rects: Vec::new(),
+            group_rects: Vec::new(),
+            lists: Vec::new(),
+            starts: Vec::new(),
+            large: Vec::new(),
+            scattered: Vec::new(),
+        }
+    }
+
+    /// Splats `camera`'s viewport into `ids` (row-major, resized): the first-hit sample index
+    /// per pixel, [`NO_HIT`] where none. `false` if the camera or scene is unusable.
+    pub fn splat_ids(&mut self, scene: &Scene, camera: &Camera, ids: &mut Vec<u32>) -> bool {
+        let mut img = Image { width: 0, height: 0, pixels: std::mem::take(ids) };
+        let ok = begin_frame(scene, camera, &mut img);
+        *ids = img.pixels;
+        ids.fill(NO_HIT);
+        if ok {
+            self.draw(scene, camera, ids, |_, k| key_prim(k).unwrap_or(NO_HIT));
+        }
+        ok
+    }
+
+    /// Entries of the tile lists of the last frame: group indices (at most
+    /// [`MAX_GROUP_TILES`] per group), large spheres and scattered groups (one each).
+    pub fn binned_entries(&self) -> usize {
+        self.lists.len() + self.large.len() + self.scattered.len()
+    }
+
+    /// The number of threads it draws with.
+    pub fn threads(&self) -> usize {
+        self.threads.count()
+    }
+
+    /// Bins and splats the scene, writing `out_of(colors, key)` for every pixel of `out`
+    /// (`width × height` long).
+    fn draw(&mut self, scene: &Scene, camera: &Camera, out: &mut [u32], out_of: impl Fn(&[u32], u64) -> u32 + Sync) {
+        let view = View::new(camera);
+        let grid = Grid::new(camera);
+        self.bin(scene, &view, grid);
+        let (w, h) = (camera.width as usize, camera.height as usize);
+        let (samples, colors) = (&scene.samples[..], &scene.colors[..]);
+        let (lists, starts, rects) = (&self.lists[..], &self.starts[..], &self.rects[..]);
+        let (large, scattered, group_rects) = (&self.large[..], &self.scattered[..], &self.group_rects[..]);
+        let band = |ty: usize, rows: &mut [u32]| {
+            let mut buf = TileBuf::new();
+            for tx in 0..grid.tx {
+                let t = ty * grid.tx + tx;
+                let list = &lists[starts[t] as usize..starts[t + 1] as usize];
+                let (x0, y0) = (tx * TILE, ty * TILE);
+                let (tw, th) = (TILE.min(w - x0), TILE.min(h - y0));
+                let any_large = large.iter().any(|&i| overlaps(rects[i as usize], x0, y0, tw, th))
+                    || scattered.iter().any(|&g| overlaps(group_rects[g as usize], x0, y0, tw, th));
+                if list.is_empty() && !any_large {
+                    let empty = out_of(colors, EMPTY);
+                    for row in rows.chunks_mut(w) {
+                        row[x0..x0 + tw].fill(empty);
+                    }
+                    continue;
+                }
+                let tile = Tile { x0, y0, w: tw, h: th };
+                let lists = Lists { groups: list, large, scattered, rects, group_rects };
+                tile_dispatch(&view, &tile, samples, scene, &lists, &mut buf);
+                for (y, row) in rows.chunks_mut(w).enumerate() {
+                    let keys = &buf.keys[y * TILE..y * TILE + tw];
+                    for (p, &k) in row[x0..x0 + tw].iter_mut().zip(keys) {
+                        *p = out_of(colors, k);
+                    }
+                }
+            }
+        };
+        if self.threads.is_serial() {
+            out.chunks_mut(TILE * w).enumerate().for_each(|(ty, rows)| band(ty, rows));
+        } else {
+            self.threads.install(|| out.par_chunks_mut(TILE * w).enumerate().for_each(|(ty, rows)| band(ty, rows)));
+        }
+    }
+
+    /// Steps 1 and 2: every sphere's rectangle, every group's, and the per-tile lists of
+    /// groups.
+    fn bin(&mut self, scene: &Scene, view: &View, grid: Grid) {
+        let samples = &scene.samples[..];
+        let n = samples.len();
+        let deq = &scene.deq;
+        let groups = n.div_ceil(GROUP);
+        self.rects.resize(n, NO_RECT);
+        self.group_rects.resize(groups, NO_RECT);
+        // 1. rectangles, in parallel over runs of whole groups
+        let per_task = (groups.div_ceil(self.threads.count() * 8)).max(1);
+        let vf = ViewF32::new(view);
+        let bound = |c: usize, rects: &mut [Rect], grects: &mut [Rect]| {
+            for (g, (rects, grect)) in rects.chunks_mut(GROUP).zip(grects.iter_mut()).enumerate() {
+                let base = (c * per_task + g) * GROUP;
+                *grect = bound_dispatch(view, &vf, deq, &samples[base..base + rects.len()], rects);
+            }
+        };
+        if self.threads.is_serial() {
+            bound(0, &mut self.rects, &mut self.group_rects);
+        } else {
+            self.threads.install(|| {
+                self.rects
+                    .par_chunks_mut(per_task * GROUP)
+                    .zip(self.group_rects.par_chunks_mut(per_task))
+                    .enumerate()
+                    .for_each(|(c, (r, g))| bound(c, r, g))
+            });
+        }
+        // 2. groups to tiles (a counting sort, serial: a few tens of thousands of groups), and
+        // the large spheres to their own list
+        let nt = grid.tiles();
+        self.starts.clear();
+        self.starts.resize(nt + 2, 0);
+        self.large.clear();
+        self.scattered.clear();
+        for (g, r) in self.group_rects.iter().enumerate() {
+            if r.is_empty() {
+                continue;
+            }
+            let (tx0, tx1, ty0, ty1) = r.tiles();
+            if (tx1 - tx0 + 1) * (ty1 - ty0 + 1) > MAX_GROUP_TILES {
+                self.scattered.push(g as u32);
+                continue;
+            }
+            for ty in ty0..=ty1 {
+                for tx in tx0..=tx1 {
+                    self.starts[ty * grid.tx + tx + 1] += 1;
+                }
+            }
+        }
+        for t in 0..nt {
+            self.starts[t + 1] += self.starts[t];
+        }
+        self.starts[nt + 1] = self.starts[nt];
+        self.lists.resize(self.starts[nt] as usize, 0);
+        let mut fill = self.starts[..nt].to_vec();
+        for (g, r) in self.group_rects.iter().enumerate() {
+            if r.is_empty() {
+                continue;
+            }
+            let (tx0, tx1, ty0, ty1) = r.tiles();
+            if (tx1 - tx0 + 1) * (ty1 - ty0 + 1) > MAX_GROUP_TILES {
+                continue;
+            }
+            for ty in ty0..=ty1 {
+                for tx in tx0..=tx1 {
+                    let f = &mut fill[ty * grid.tx + tx];
+                    self.lists[*f as usize] = g as u32;
+                    *f += 1;
+                }
+            }
+        }
+        for (i, r) in self.rects.iter().enumerate() {
+            if !r.is_empty() && r.is_large() {
+                self.large.push(i as u32);
+            }
+        }
+    }
+}
+
+/// The inclusive pixel ranges `(x0, x1, y0, y1)` whose pixel centres' rays may hit the sphere
+/// `(c, r)`, `None` if none can: [`View::bound`]'s tangents from the eye (in f64, the radius
+/// widened by a relative 10⁻⁵, far above the f32 rounding of the ray test), but only the pixels
+/// whose *centres* lie within them (the earlier splatter's bound also takes every pixel the
+/// tangents touch: about 25 pixels instead of 9 for a sphere three pixels wide).
+#[inline(always)]
+pub(crate) fn tight_bound(view: &View, c: Vec3, r: f32) -> Option<(u32, u32, u32, u32)> {
+    let rel = [(c.x - view.eye.x) as f64, (c.y - view.eye.y) as f64, (c.z - view.eye.z) as f64];
+    let (cx, cy, cz) = (dot(rel, view.u), dot(rel, view.v), dot(rel, view.w));
+    let r = r as f64 + 1e-5 * (dot(rel, rel).sqrt() + r as f64);
+    if cz + r < 0.0 {
+        return None; // entirely behind the eye: rays (t > 0) cannot reach it
+    }
+    if cz <= r * 1.001 {
+        // Touches the eye plane: the projection is unbounded; the whole viewport.
+        return Some((0, view.width - 1, 0, view.height - 1));
+    }
+    let denom = cz * cz - r * r;
+    let inv = 1.0 / denom;
+    let (sx, sy) = ((cx * cx + denom).sqrt(), (cy * cy + denom).sqrt());
+    let (xl, xh) = ((cx * cz - r * sx) * inv, (cx * cz + r * sx) * inv);
+    let (yl, yh) = ((cy * cz - r * sy) * inv, (cy * cz + r * sy) * inv);
+    let (x0, x1) = centre_span(xl * view.px_x + view.half_w, xh * view.px_x + view.half_w, view.width)?;
+    let (y0, y1) = centre_span(view.half_h - yh * view.px_y, view.half_h - yl * view.px_y, view.height)?;
+    Some((x0, x1, y0, y1))
+}
+
+/// `|a|` per lane (`f32::max(a, −a)`).
+#[inline(always)]
+fn lane_abs<L: Lanes>(a: L) -> L {
+    a.max(L::splat(0.0) - a)
+}
+
+/// [`View`]'s constants in f32, for the bounds of eight spheres at once.
+struct ViewF32 {
+    eye: [f32; 3],
+    u: [f32; 3],
+    v: [f32; 3],
+    w: [f32; 3],
+    px_x: f32,
+    px_y: f32,
+    half_w: f32,
+    half_h: f32,
+}
+
+impl ViewF32 {
+    fn new(v: &View) -> ViewF32 {
+        let f = |a: [f64; 3]| [a[0] as f32, a[1] as f32, a[2] as f32];
+        ViewF32 {
+            eye: [v.eye.x, v.eye.y, v.eye.z],
+            u: f(v.u),
+            v: f(v.v),
+            w: f(v.w),
+            px_x: v.px_x as f32,
+            px_y: v.px_y as f32,
+            half_w: v.half_w as f32,
+            half_h: v.half_h as f32,
+        }
+    }
+}
+
+/// The rectangles of `samples` (at most [`GROUP`]) into `rects`, eight at a time in f32
+/// lanes, and the union of those that are not large. [`tight_bound`]'s tangents with the radius
+/// widened by a relative 2·10⁻⁵ of the L1 distance (instead of 10⁻⁵ of the distance: the extra
+/// covers the f32 rounding of the bound itself, about 3·10⁻⁷ of the slope) for spheres at
+/// least two (widened) radii in front of the eye plane; the others (near, behind, NaN) take
+/// [`tight_bound`] in f64.
+#[inline(always)]
+fn bound_group<L: Lanes>(view: &View, vf: &ViewF32, deq: &Dequantizer, samples: &[u64], rects: &mut [Rect]) -> Rect {
+    let mut u = NO_RECT;
+    for (ss, rs) in samples.chunks(8).zip(rects.chunks_mut(8)) {
+        let (mut x, mut y, mut z, mut r) = ([0f32; 8], [0f32; 8], [0f32; 8], [0f32; 8]);
+        for (l, &s) in ss.iter().enumerate() {
+            let c = deq.center(s);
+            (x[l], y[l], z[l], r[l]) = (c.x - vf.eye[0], c.y - vf.eye[1], c.z - vf.eye[2], deq.radius(s));
+        }
+        let (rx, ry, rz, r) = (L::new(x), L::new(y), L::new(z), L::new(r));
+        let cx = rx * L::splat(vf.u[0]) + ry * L::splat(vf.u[1]) + rz * L::splat(vf.u[2]);
+        let cy = rx * L::splat(vf.v[0]) + ry * L::splat(vf.v[1]) + rz * L::splat(vf.v[2]);
+        let cz = rx * L::splat(vf.w[0]) + ry * L::splat(vf.w[1]) + rz * L::splat(vf.w[2]);
+        let rr = r + L::splat(2e-5) * (lane_abs(rx) + lane_abs(ry) + lane_abs(rz) + r);
+        let far = cz.simd_gt(L::splat(2.0) * rr);
+        let denom = cz * cz - rr * rr;
+        let inv = L::splat(1.0) / denom;
+        let (sx, sy) = ((cx * cx + denom).sqrt(), (cy * cy + denom).sqrt());
+        let (xl, xh) = ((cx * cz - rr * sx) * inv, (cx * cz + rr * sx) * inv);
+        let (yl, yh) = ((cy * cz - rr * sy) * inv, (cy * cz + rr * sy) * inv);
+        let x0 = (xl * L::splat(vf.px_x) + L::splat(vf.half_w)).to_array();
+        let x1 = (xh * L::splat(vf.px_x) + L::splat(vf.half_w)).to_array();
+        let y0 = (L::splat(vf.half_h) - yh * L::splat(vf.px_y)).to_array();
+        let y1 = (L::splat(vf.half_h) - yl * L::splat(vf.px_y)).to_array();
+        let far = far.to_bitmask();
+        for (l, (rect, &s)) in rs.iter_mut().zip(ss).enumerate() {
+            let b = if far & (1 << l) != 0 {
+                match (
+                    centre_span(x0[l] as f64, x1[l] as f64, view.width),
+                    centre_span(y0[l] as f64, y1[l] as f64, view.height),
+                ) {
+                    (Some((a, b)), Some((c, d))) => Some((a, b, c, d)),
+                    _ => None,
+                }
+            } else {
+                tight_bound(view, deq.center(s), deq.radius(s))
+            };
+            *rect = match b {
+                Some((x0, x1, y0, y1)) => Rect { x0: x0 as u16, y0: y0 as u16, x1: x1 as u16, y1: y1 as u16 },
+                None => NO_RECT,
+            };
+            if !rect.is_empty() && !rect.is_large() {
+                u = u.union(*rect);
+            }
+        }
+    }
+    u
+}
+
+lanes::dispatch! {
+    /// [`bound_group`] on the best lanes this CPU has.
+    fn bound_dispatch / bound_avx2 => bound_group(
+        view: &View,
+        vf: &ViewF32,
+        deq: &Dequantizer,
+        samples: &[u64],
+        rects: &mut [Rect],
+    ) -> Rect
+}
+
+/// The pixels `i < n` whose centre `i + 0.5` lies in `[a, b]`, widened by 0.01 pixel, as an
+/// inclusive range; `None` if there are none (or `a`, `b` are NaN).
+#[inline(always)]
+fn centre_span(a: f64, b: f64, n: u32) -> Option<(u32, u32)> {
+    // Clamp first (NaN fails the comparisons and gives `None`), then floor and ceil by
+    // truncation of values ≥ −1.
+    let lo = (a - 0.51).max(-1.0);
+    let hi = (b - 0.49).min(n as f64);
+    if !(lo <= hi) || !(hi >= 0.0) || !(lo < n as f64) {
+        return None;
+    }
+    let l = lo as i64; // trunc; ceil below
+    let l = if (l as f64) < lo { l + 1 } else { l }.max(0);
+    let h = (hi as i64).min(n as i64 - 1); // hi ≥ 0: trunc is floor
+    if l > h {
+        return None;
+    }
+    Some((l as u32, h as u32))
+}
+
+/// Whether `r` overlaps the tile at `(x0, y0)` of `w × h` pixels.
+#[inline(always)]
+fn overlaps(r: Rect, x0: usize, y0: usize, w: usize, h: usize) -> bool {
+    !r.is_empty() && (r.x0 as usize) < x0 + w && r.x1 as usize >= x0 && (r.y0 as usize) < y0 + h && r.y1 as usize >= y0
+}
+
+/// A tile's place in the image.
+struct Tile {
+    x0: usize,
+    y0: usize,
+    w: usize,
+    h: usize,
+}
+
+/// A tile's local buffers: its pixels' keys and unit ray directions (three planes of
+/// `TILE + 1` rows of [`STRIDE`] floats; padding is zero and never tested).
+struct TileBuf {
+    keys: Vec<u64>,
+    dirs: Vec<f32>,
+}
+
+impl TileBuf {
+    fn new() -> TileBuf {
+        TileBuf { keys: vec![EMPTY; (TILE + 1) * TILE + 8], dirs: vec![0.0; 3 * PLANE] }
+    }
+}
+
+/// The first eight floats of `s` (at least eight long): one bounds check, one load.
+#[inline(always)]
+fn load<L: Lanes>(s: &[f32]) -> L {
+    match s.first_chunk::<8>() {
+        Some(a) => L::new(*a),
+        None => L::splat(0.0),
+    }
+}
+
+/// Four floats from `s` and four from `s[STRIDE..]`: a 4×2 block of a direction plane.
+#[inline(always)]
+fn load_4x2<L: Lanes>(s: &[f32]) -> L {
+    match (s.first_chunk::<4>(), s.get(STRIDE..).and_then(|r| r.first_chunk::<4>())) {
+        (Some(a), Some(b)) => L::new([a[0], a[1], a[2], a[3], b[0], b[1], b[2], b[3]]),
+        _ => L::splat(0.0),
+    }
+}
+
+/// Step 3 for one tile: its directions, then every sphere of `list` and every sphere of
+/// `large` that overlaps it, into `buf.keys`.
+#[allow(clippy::too_many_arguments)]
+#[inline(always)]
+fn splat_tile<L: Lanes>(view: &View, tile: &Tile, samples: &[u64], scene: &Scene, lists: &Lists, buf: &mut TileBuf) {
+    let b = &view.basis;
+    // Directions: exactly `RayBasis::dir` (pixel centres x + l + 0.5, exact in f32).
+    let lane_c = L::new([0.5, 1.5, 2.5, 3.5, 4.5, 5.5, 6.5, 7.5]);
+    for y in 0..tile.h {
+        let py = L::splat((tile.y0 + y) as f32 + 0.5);
+        for x in (0..tile.w).step_by(8) {
+            let d = ray_dirs(b, L::splat((tile.x0 + x) as f32) + lane_c, py);
+            let n = (tile.w - x).min(8);
+            for (a, d) in d.iter().enumerate() {
+                let at = a * PLANE + y * STRIDE + x;
+                buf.dirs[at..at + n].copy_from_slice(&d.to_array()[..n]);
+            }
+        }
+    }
+    buf.keys.fill(EMPTY);
+    let o = [b.eye[0], b.eye[1], b.eye[2]];
+    let deq = &scene.deq;
+    let lane = L::new([0.0, 1.0, 2.0, 3.0, 4.0, 5.0, 6.0, 7.0]);
+    let lane4 = L::new([0.0, 1.0, 2.0, 3.0, 0.0, 1.0, 2.0, 3.0]);
+    let row2 = L::new([0.0, 0.0, 0.0, 0.0, 1.0, 1.0, 1.0, 1.0]);
+    let (tx1, ty1) = (tile.x0 + tile.w - 1, tile.y0 + tile.h - 1);
+    let ties = if scene.nodes.is_empty() { Ties::Sorted(samples) } else { Ties::Index };
+    let k = Kernel { ties, o, lane, lane4, row2, tx1, ty1 };
+    let rects = lists.rects;
+    let n = samples.len();
+    for &g in lists.groups.iter().chain(lists.scattered) {
+        let g = g as usize;
+        if !overlaps(lists.group_rects[g], tile.x0, tile.y0, tile.w, tile.h) {
+            continue;
+        }
+        for i in g * GROUP..(g * GROUP + GROUP).min(n) {
+            let r = rects[i];
+            if overlaps(r, tile.x0, tile.y0, tile.w, tile.h) && !r.is_large() {
+                splat_sphere(&k, tile, samples, deq, rects, i as u32, &buf.dirs, &mut buf.keys);
+            }
+        }
+    }
+    for &i in lists.large {
+        if overlaps(rects[i as usize], tile.x0, tile.y0, tile.w, tile.h) {
+            splat_sphere(&k, tile, samples, deq, rects, i, &buf.dirs, &mut buf.keys);
+        }
+    }
+}
+
+/// What a tile reads of the binning.
+struct Lists<'a> {
+    /// The groups binned to the tile.
+    groups: &'a [u32],
+    large: &'a [u32],
+    scattered: &'a [u32],
+    rects: &'a [Rect],
+    group_rects: &'a [Rect],
+}
+
+/// The per-tile constants of [`splat_sphere`].
+struct Kernel<'a, L> {
+    ties: Ties<'a>,
+    o: [f32; 3],
+    lane: L,
+    lane4: L,
+    row2: L,
+    tx1: usize,
+    ty1: usize,
+}
+
+/// One sphere `i` into a tile's keys (no closures here: they would be compiled without the
+/// caller's AVX2 target feature).
+#[allow(clippy::too_many_arguments)]
+#[inline(always)]
+fn splat_sphere<L: Lanes>(
+    k: &Kernel<'_, L>,
+    tile: &Tile,
+    samples: &[u64],
+    deq: &Dequantizer,
+    rects: &[Rect],
+    i: u32,
+    dirs: &[f32],
+    keys: &mut [u64],
+) {
+    let r = rects[i as usize];
+    // The rectangle clipped to the tile, in tile coordinates.
+    let x0 = (r.x0 as usize).max(tile.x0) - tile.x0;
+    let x1 = (r.x1 as usize).min(k.tx1) - tile.x0;
+    let y0 = (r.y0 as usize).max(tile.y0) - tile.y0;
+    let y1 = (r.y1 as usize).min(k.ty1) - tile.y0;
+    let s = samples[i as usize];
+    let (c, rad) = (deq.center(s), deq.radius(s));
+    if x1 - x0 < 4 {
+        // 4×2 blocks: lane l is pixel (x0 + l % 4, y + l / 4).
+        let wmask = k.lane4.simd_lt(L::splat((x1 - x0 + 1) as f32));
+        for y in (y0..=y1).step_by(2) {
+            let active = wmask & k.row2.simd_lt(L::splat((y1 - y + 1).min(2) as f32));
+            let at = y * STRIDE + x0;
+            let d = [load_4x2(&dirs[at..]), load_4x2(&dirs[PLANE + at..]), load_4x2(&dirs[2 * PLANE + at..])];
+            if let Some((t, m)) = sphere_hits(&k.o, &d, c, rad, active) {
+                keep(keys, m.to_bitmask(), &t.to_array(), i, y * TILE + x0, true, k.ties);
+            }
+        }
+    } else {
+        for y in y0..=y1 {
+            for x in (x0..=x1).step_by(8) {
+                let active = k.lane.simd_lt(L::splat((x1 - x + 1).min(8) as f32));
+                let at = y * STRIDE + x;
+                let d = [load(&dirs[at..]), load(&dirs[PLANE + at..]), load(&dirs[2 * PLANE + at..])];
+                if let Some((t, m)) = sphere_hits(&k.o, &d, c, rad, active) {
+                    keep(keys, m.to_bitmask(), &t.to_array(), i, y * TILE + x, false, k.ties);
+                }
+            }
+        }
+    }
+}
+
+/// The depth test of the hit lanes `bits` (distances `t`) of sphere `i`: lane `l` is pixel
+/// `base + l` of a row, or of a 4×2 block (`quad`) `base + (l / 4)·TILE + l % 4`. All eight
+/// lanes are written without branches (a lane that did not hit writes back the minimum of its
+/// slot and [`EMPTY`], i.e. the slot: the buffer is padded for the lanes past the tile).
+#[inline(always)]
+fn keep(keys: &mut [u64], bits: u32, t: &[f32; 8], i: u32, base: usize, quad: bool, ties: Ties) {
+    let Some(slots) = keys.get_mut(base..base + TILE + 8) else { return };
+    for (l, &t) in t.iter().enumerate() {
+        let p = if quad { (l >> 2) * TILE + (l & 3) } else { l };
+        let hit = bits >> l & 1 != 0;
+        let k = if hit { key(t, i) } else { EMPTY };
+        let old = slots[p];
+        slots[p] = match ties {
+            Ties::Sorted(samples) if hit && (k ^ old) >> 32 == 0 => {
+                if sorted_before(samples, i, old as u32) {
+                    k
+                } else {
+                    old
+                }
+            }
+            _ => k.min(old),
+        };
+    }
+}
+
+/// How equal distances are broken.
+#[derive(Clone, Copy)]
+enum Ties<'a> {
+    /// By sample index (core's tie rule on the scene as given).
+    Index,
+    /// The samples (of an unbuilt scene, in frame order) as the LBVH build would order them:
+    /// by `(Morton code, index)`, so the same sphere wins as in the built scene.
+    Sorted(&'a [u64]),
+}
+
+/// Whether sample `a` comes before sample `b` in the built scene's order (`(code, index)`,
+/// the stable sort of the build).
+#[inline(never)]
+#[cold]
+fn sorted_before(samples: &[u64], a: u32, b: u32) -> bool {
+    let code = |i: u32| samples.get(i as usize).map_or(u64::MAX, |&s| code_of_sample(s));
+    (code(a), a) < (code(b), b)
+}
+
+lanes::dispatch! {
+    /// [`splat_tile`] on the best lanes this CPU has (AVX2 widens the vectors; the operations,
+    /// and so the image, stay the same).
+    fn tile_dispatch / tile_avx2 => splat_tile(
+        view: &View,
+        tile: &Tile,
+        samples: &[u64],
+        scene: &Scene,
+        lists: &Lists,
+        buf: &mut TileBuf,
+    )
+}
+
+impl Renderer for TileSplat {
+    fn kind(&self) -> RendererKind {
+        RendererKind::SplatTiles
+    }
+
+    fn render(&mut self, scene: &Scene, camera: &Camera, out: &mut Image) {
+        if begin_frame(scene, camera, out) {
+            self.draw(scene, camera, &mut out.pixels, |colors, k| {
+                key_prim(k).map_or(BACKGROUND, |id| shade(colors, id))
+            });
+        }
+    }
+}
