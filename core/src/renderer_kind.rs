@@ -233,7 +233,7 @@ mod tests {
             assert_eq!(RendererKind::from_name(k.name()), Some(*k));
             assert_eq!(k.name().parse::<RendererKind>(), Ok(*k));
         }
-        let mut names: [&str; 8] = REGISTRY.map(|r| r.name);
+        let mut names = REGISTRY.map(|r| r.name);
         names.sort_unstable();
         assert!(names.windows(2).all(|w| w[0] != w[1]), "names are unique");
         assert_eq!(RendererKind::from_key(0), None);

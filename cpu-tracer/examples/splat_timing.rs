@@ -60,7 +60,8 @@ fn main() {
         let f = frame(volwarp_server::RadiusModel::default(), &dir).expect("the MRI frame");
         let scene = Scene::build(&f);
         let cam = f.header.camera.orbit(10.0, 0.0).with_viewport(1024, 1024);
-        let mut r = volwarp_cpu_tracer::renderer_by_name(what, threads).expect("a renderer name");
+        let kind = volwarp_core::RendererKind::from_name(what).expect("a renderer name");
+        let mut r = volwarp_cpu_tracer::create(kind, threads).expect("a CPU renderer");
         let res: u32 = args.get(4).and_then(|s| s.parse().ok()).unwrap_or(1024);
         let cam = cam.with_viewport(res, res);
         r.render(&scene, &cam, &mut img);
