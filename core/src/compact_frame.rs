@@ -292,8 +292,10 @@ fn parse_params(b: &[u8; 24], header: &FrameHeader) -> Result<CompactParams, Wir
         coder,
         raw_len,
     };
-    if !(p.depth_min.is_finite() && p.depth_step > 0.0 && p.depth_step.is_finite())
-        || !depth_of(&p, DEPTH_CODE_MAX).is_finite()
+    if !(p.depth_min.is_finite()
+        && p.depth_step > 0.0
+        && p.depth_step.is_finite()
+        && depth_of(&p, DEPTH_CODE_MAX).is_finite())
     {
         return Err(WireError::Compact(CompactError::BadDepth));
     }
