@@ -237,7 +237,7 @@ mod tests {
         names.sort_unstable();
         assert!(names.windows(2).all(|w| w[0] != w[1]), "names are unique");
         assert_eq!(RendererKind::from_key(0), None);
-        assert_eq!(RendererKind::from_key(9), None);
+        assert_eq!(RendererKind::from_key(REGISTRY.len() + 1), None);
         assert!("nope".parse::<RendererKind>().is_err());
         assert_eq!(RendererKind::points(2), Some(RendererKind::Points2));
         assert_eq!(RendererKind::points(4), None);

@@ -64,7 +64,7 @@ fn code_paths(text: &str) -> Vec<String> {
             TOP.contains(&first)
                 && s.contains('/')
                 && !s.contains(|c: char| c.is_whitespace() || "*{}<>$|:?".contains(c))
-                && s.rsplit('/').next().is_some_and(|f| f.contains('.'))
+                && s.rsplit('/').next().is_some_and(|f| f.contains('.') && !f.starts_with('.'))
         })
         .map(str::to_string)
         .collect()
