@@ -67,6 +67,7 @@ fn run_connected(opts: &Options, addr: &str) -> Result<(), ClientError> {
         build_threads: opts.build_threads,
         timeout,
         lazy_build: !opts.renderer.info().caps.needs_lbvh,
+        bandwidth_mbps: (opts.bandwidth_mbps > 0.0).then_some(opts.bandwidth_mbps),
     };
     let net = Network::start(conn, cfg, recorder.as_ref().map(Recorder::sink))?;
     let mut display = Display::new(net, renderers, recorder.as_ref().map(Recorder::sink));

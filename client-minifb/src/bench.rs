@@ -190,14 +190,15 @@ pub fn run(opts: &Options, display: &mut Display, home: Camera) -> Result<BenchS
         age_ms_median: median(ages),
     };
     println!(
-        "volwarp-client bench: {}x{}, renderer {}, {} tracer thread(s), {} build thread(s), server delay {} ms, latency {} ms",
+        "volwarp-client bench: {}x{}, renderer {}, {} tracer thread(s), {} build thread(s), server delay {} ms, latency {} ms, link {}",
         home.width,
         home.height,
         display.renderers.name(),
         opts.tracer_threads(),
         opts.build_threads,
         opts.server_delay_ms,
-        opts.latency_ms
+        opts.latency_ms,
+        if opts.bandwidth_mbps > 0.0 { format!("{} Mbit/s", opts.bandwidth_mbps) } else { "unthrottled".into() }
     );
     print!("{s}");
     Ok(s)

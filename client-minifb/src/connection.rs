@@ -57,7 +57,7 @@ pub fn wire_err(e: WireError) -> ClientError {
 /// A clean close before the first byte is [`ClientError::Gone`]; allocates only what `limits`
 /// allows.
 pub fn read_message_bytes(
-    stream: &mut TcpStream,
+    stream: &mut impl Read,
     limits: &Limits,
     what: &str,
 ) -> Result<(Vec<u8>, Message), ClientError> {
@@ -67,7 +67,7 @@ pub fn read_message_bytes(
 /// [`read_message_bytes`], calling `mark` once the header has arrived and keeping what it
 /// returns (e.g. a "decoding" guard) alive until the payload is read and decoded.
 pub fn read_message_bytes_marked<G>(
-    stream: &mut TcpStream,
+    stream: &mut impl Read,
     limits: &Limits,
     what: &str,
     mark: impl FnOnce() -> G,
@@ -98,14 +98,14 @@ pub fn read_message_bytes_marked<G>(
 }
 
 /// Encodes and sends a CameraRequest.
-pub fn send_request(stream: &mut TcpStream, req: &CameraRequest) -> io::Result<()> {
+pub fn send_request(stream: &mut impl Write, req: &CameraRequest) -> io::Result<()> {
     let mut buf = Vec::with_capacity(HEADER_LEN + wire::CAMERA_REQUEST_LEN);
     let _ = wire::write_camera_request(&mut wire::VecWriter(&mut buf), req);
     stream.write_all(&buf)
 }
 
 /// Sends Bye (best effort).
-pub fn send_bye(stream: &mut TcpStream) {
+pub fn send_bye(stream: &mut impl Write) {
     let mut buf = Vec::new();
     let _ = wire::write_bye(&mut wire::VecWriter(&mut buf));
     let _ = stream.write_all(&buf);

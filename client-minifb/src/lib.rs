@@ -8,6 +8,7 @@
 //! |---|---|
 //! | [`connection`] | TCP connect, Hello exchange, the probe frame that gives the volume bounds |
 //! | [`network`] | the network thread: receive, delay (`--latency-ms`), LBVH build, newest-camera writer |
+//! | [`link`] | the link model of `--bandwidth-mbps`: a token bucket on the socket's reads and writes |
 //! | [`display`] | one display frame: swap in the newest scene without waiting, draw it for the current camera |
 //! | [`renderers`] | the interchangeable renderers and live switching (GPU opened lazily) |
 //! | [`controls`] | orbit, pan and zoom; the home view of a volume |
@@ -30,6 +31,7 @@ pub mod display;
 pub mod error;
 pub mod feed_server;
 pub mod headless;
+pub mod link;
 pub mod network;
 pub mod options;
 pub mod record;

@@ -15,8 +15,10 @@
 
 use crate::connection::{read_message_bytes_marked, send_bye, send_request, server_error, Connection};
 use crate::error::ClientError;
+use crate::link::{Throttled, TokenBucket};
 use crate::record::RecordSink;
 use std::collections::VecDeque;
+use std::io::{Read, Write};
 use std::net::{Shutdown, TcpStream};
 use std::sync::atomic::{AtomicBool, AtomicU64, Ordering};
 use std::sync::{Arc, Condvar, Mutex, MutexGuard};
@@ -72,6 +74,9 @@ pub struct NetConfig {
     /// a renderer that draws them directly (no `needs_lbvh` in the registry); the display
     /// builds the LBVH itself if it switches to one that needs it.
     pub lazy_build: bool,
+    /// Link rate in Mbit/s that the socket's reads and writes are throttled to
+    /// (`--bandwidth-mbps`; [`crate::link`]); `None`: loopback speed.
+    pub bandwidth_mbps: Option<f64>,
 }
 
 struct Pending {
@@ -171,10 +176,14 @@ impl Network {
         let spawn_err = |e: std::io::Error| ClientError::Io(format!("cannot start a network thread: {e}"));
         let mut threads = Vec::new();
         let (sh, limits) = (shared.clone(), conn.limits);
+        let (read_mbps, write_mbps) = (cfg.bandwidth_mbps, cfg.bandwidth_mbps);
         threads.push(
             std::thread::Builder::new()
                 .name("volwarp-net-read".into())
-                .spawn(move || read_loop(&sh, rs, limits, recorder))
+                .spawn(move || match link(read_mbps) {
+                    Some(b) => read_loop(&sh, Throttled::new(rs, b), limits, recorder),
+                    None => read_loop(&sh, rs, limits, recorder),
+                })
                 .map_err(spawn_err)?,
         );
         let sh = shared.clone();
@@ -189,7 +198,10 @@ impl Network {
         threads.push(
             std::thread::Builder::new()
                 .name("volwarp-net-write".into())
-                .spawn(move || write_loop(&sh, ws))
+                .spawn(move || match link(write_mbps) {
+                    Some(b) => write_loop(&sh, Throttled::new(ws, b)),
+                    None => write_loop(&sh, ws),
+                })
                 .map_err(spawn_err)?,
         );
         Ok(Network { shared, stream, threads })
@@ -273,7 +285,12 @@ impl Drop for Network {
     }
 }
 
-fn read_loop(sh: &Shared, mut stream: TcpStream, limits: Limits, recorder: Option<RecordSink>) {
+/// The token bucket of `--bandwidth-mbps` (one per direction).
+fn link(mbps: Option<f64>) -> Option<TokenBucket> {
+    mbps.and_then(TokenBucket::from_mbps)
+}
+
+fn read_loop(sh: &Shared, mut stream: impl Read, limits: Limits, recorder: Option<RecordSink>) {
     loop {
         let got = read_message_bytes_marked(&mut stream, &limits, "waiting for a frame", || Busy::new(&sh.work_gen));
         if sh.stop.load(Ordering::SeqCst) {
@@ -371,7 +388,7 @@ fn build_loop(sh: &Shared, cfg: &NetConfig) {
     }
 }
 
-fn write_loop(sh: &Shared, mut stream: TcpStream) {
+fn write_loop(sh: &Shared, mut stream: impl Write) {
     let mut seq = 0u64;
     let mut last_send: Option<Instant> = None;
     loop {

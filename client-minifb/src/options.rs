@@ -93,6 +93,10 @@ pub struct Options {
     /// Extra delay of every received frame before it is built and shown, in ms.
     #[arg(long, value_name = "MS", default_value_t = 0)]
     pub latency_ms: u64,
+    /// Throttle the connection to a link of this many Mbit/s (a token bucket on the socket's
+    /// reads and writes; 0: unthrottled): shows what a slow network does to frame age.
+    #[arg(long, value_name = "MBPS", default_value_t = 0.0)]
+    pub bandwidth_mbps: f64,
     /// Display frame rate limit (0: none). Default: 60 in the window, none headless.
     #[arg(long)]
     pub fps: Option<u32>,
@@ -149,6 +153,9 @@ impl Options {
         }
         if !(self.seconds > 0.0 && self.seconds < 3600.0) {
             return Err(ClientError::Usage("--seconds must be in (0, 3600)".into()));
+        }
+        if !(self.bandwidth_mbps >= 0.0 && self.bandwidth_mbps.is_finite()) {
+            return Err(ClientError::Usage("--bandwidth-mbps must be a finite number ≥ 0 (0: unthrottled)".into()));
         }
         Ok(())
     }

@@ -72,13 +72,13 @@ fn server_speaking_another_version() {
         use std::io::Write;
         let _ = read_msg(&mut s);
         let mut hello = encode(&Message::Hello(Hello::new(0)));
-        hello[4..6].copy_from_slice(&2u16.to_le_bytes());
+        hello[4..6].copy_from_slice(&(wire::VERSION + 1).to_le_bytes());
         hello[10..12].copy_from_slice(&[0, 0]);
         s.write_all(&hello).unwrap();
         std::thread::sleep(Duration::from_millis(500));
     });
     let out = run_headless(&addr);
-    assert_clean_failure(&out, "protocol version 2");
+    assert_clean_failure(&out, &format!("protocol version {}", wire::VERSION + 1));
 }
 
 #[test]

@@ -36,7 +36,13 @@ fn writer_sends_only_the_newest_camera_throttled() {
     let home = home_camera(&conn.bounds, 32, 32);
     let net = Network::start(
         conn,
-        NetConfig { latency: Duration::ZERO, build_threads: 1, timeout: Duration::from_secs(10), lazy_build: false },
+        NetConfig {
+            latency: Duration::ZERO,
+            build_threads: 1,
+            timeout: Duration::from_secs(10),
+            lazy_build: false,
+            bandwidth_mbps: None,
+        },
         None,
     )
     .unwrap();

@@ -364,9 +364,22 @@ mod codec {
         }
     }
 
-    /// The MED (LOCO-I median edge detector) prediction from the left `a`, upper `b` and
-    /// upper-left `c` neighbours, each present or not; `last` when none is.
+    /// MED with all three neighbours present.
     #[inline(always)]
+    fn med3(a: i32, b: i32, c: i32) -> i32 {
+        if c >= a.max(b) {
+            a.min(b)
+        } else if c <= a.min(b) {
+            a.max(b)
+        } else {
+            a + b - c
+        }
+    }
+
+    /// The MED (LOCO-I median edge detector) prediction from the left `a`, upper `b` and
+    /// upper-left `c` neighbours, each present or not; `last` when none is (the statement of
+    /// the rule in `docs/wire-format.md`; `Context::predict` computes it for all channels at once).
+    #[cfg(test)]
     fn med(a: Option<i32>, b: Option<i32>, c: Option<i32>, last: i32) -> i32 {
         match (a, b, c) {
             (Some(a), Some(b), Some(c)) => {
@@ -439,21 +452,25 @@ mod codec {
             } else {
                 None
             };
-            let depth = med(
-                left.map(|c| c.depth as i32),
-                up.map(|c| c.depth as i32),
-                ul.map(|c| c.depth as i32),
-                self.last.depth as i32,
-            );
-            let mut color = [0i32; 4];
-            for (k, v) in color.iter_mut().enumerate() {
-                *v = med(
-                    left.map(|c| c.color[k] as i32),
-                    up.map(|c| c.color[k] as i32),
-                    ul.map(|c| c.color[k] as i32),
-                    self.last.color[k] as i32,
-                );
-            }
+            // Which neighbours exist is decided once per pixel, then every channel is
+            // predicted the same way (the same values as `med` per channel).
+            let v =
+                |c: &Cell| [c.depth as i32, c.color[0] as i32, c.color[1] as i32, c.color[2] as i32, c.color[3] as i32];
+            let p: [i32; 5] = match (left, up, ul) {
+                (Some(a), Some(b), Some(c)) => {
+                    let (a, b, c) = (v(&a), v(&b), v(&c));
+                    core::array::from_fn(|k| med3(a[k], b[k], c[k]))
+                }
+                (Some(a), Some(b), None) => {
+                    let (a, b) = (v(&a), v(&b));
+                    core::array::from_fn(|k| (a[k] + b[k]) >> 1)
+                }
+                (Some(a), None, _) => v(&a),
+                (None, Some(b), _) => v(&b),
+                (None, None, Some(c)) => v(&c),
+                (None, None, None) => v(&self.last),
+            };
+            let (depth, color) = (p[0], [p[1], p[2], p[3], p[4]]);
             Prediction { depth, color }
         }
 
@@ -858,6 +875,40 @@ mod codec {
         }
         debug_assert_eq!(i, n);
         Ok(Frame { header: *header, samples, colors })
+    }
+
+    #[cfg(test)]
+    mod tests {
+        use super::*;
+
+        #[test]
+        fn the_context_predicts_the_med_of_the_neighbours_that_exist() {
+            // Pixel (1, 1) of a 3-wide frame under every pattern of present upper-left (0, 0),
+            // upper (1, 0) and left (0, 1) neighbours, against `med` per channel.
+            let vals = [(700u16, [10u8, 200, 30, 255]), (650, [40, 180, 90, 128]), (690, [25, 150, 60, 7])];
+            for pattern in 0..8u32 {
+                let mut ctx = Context::new(3);
+                let mut cells: [Option<(u16, [u8; 4])>; 3] = [None; 3];
+                for (k, &(x, y)) in [(0u32, 0u32), (1, 0), (0, 1)].iter().enumerate() {
+                    if pattern & (1 << k) != 0 {
+                        ctx.record(x, y, vals[k].0, vals[k].1);
+                        cells[k] = Some(vals[k]);
+                    }
+                }
+                let last = cells.iter().rev().flatten().next().copied().unwrap_or((0, [0; 4]));
+                let p = ctx.predict(1, 1);
+                let [ul, up, left] = cells;
+                assert_eq!(
+                    p.depth,
+                    med(left.map(|c| c.0 as i32), up.map(|c| c.0 as i32), ul.map(|c| c.0 as i32), last.0 as i32),
+                    "pattern {pattern}"
+                );
+                for k in 0..4 {
+                    let ch = |c: Option<(u16, [u8; 4])>| c.map(|c| c.1[k] as i32);
+                    assert_eq!(p.color[k], med(ch(left), ch(up), ch(ul), last.1[k] as i32), "pattern {pattern}");
+                }
+            }
+        }
     }
 }
 #[cfg(feature = "alloc")]
