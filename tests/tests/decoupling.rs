@@ -23,7 +23,13 @@ fn display_keeps_running_while_a_slow_server_and_latency_delay_frames() {
     let server = volwarp_server::Server::bind(config, volwarp_server::Dataset::default_bundled()).unwrap().spawn();
     let conn = connect(&server.local_addr().to_string(), None, Duration::from_secs(20)).unwrap();
     let home = home_camera(&conn.bounds, 96, 72);
-    let cfg = NetConfig { latency, build_threads: 1, timeout: Duration::from_secs(20), lazy_build: false };
+    let cfg = NetConfig {
+        latency,
+        build_threads: 1,
+        timeout: Duration::from_secs(20),
+        lazy_build: false,
+        bandwidth_mbps: None,
+    };
     let net = Network::start(conn, cfg, None).unwrap();
     let mut d = Display::new(net, Renderers::new(volwarp_core::RendererKind::SpheresCpu, 1).unwrap(), None);
     let view = |yaw: f32| View { camera: home.orbit(yaw, 0.0), heuristic: Heuristic::Threshold, radius_scale: 1.0 };
