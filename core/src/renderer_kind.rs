@@ -1,5 +1,5 @@
 //! The one registry of renderers: every way of drawing a scene that volwarp offers, with its
-//! name (CSV files, `--renderer`, the window title), its key in the client (1–8) and what it can
+//! name (CSV files, `--renderer`, the window title), its key in the client (1–10; the window has keys 1–9) and what it can
 //! do. The client, the evaluation and every command line read this table; adding a renderer is
 //! one entry here plus its constructor (the compiler points at the `match`es that need it).
 
@@ -167,12 +167,12 @@ impl RendererKind {
         self.info().name
     }
 
-    /// Its key in the client (1–8).
+    /// Its key in the client (1–10).
     pub const fn key(self) -> usize {
         self.index() + 1
     }
 
-    /// The renderer of a client key (1–8).
+    /// The renderer of a client key (1–10).
     pub fn from_key(key: usize) -> Option<RendererKind> {
         key.checked_sub(1).and_then(|i| Self::ALL.get(i)).copied()
     }
