@@ -107,7 +107,12 @@ fn a_slower_server_never_improves_the_stale_frame_on_a_steady_orbit() {
 fn frames_are_charged_their_real_encoded_bytes() {
     let ds = &small()[0];
     let m = Marcher::from_dataset(ds);
-    let req = CameraRequest { seq: 1, camera: m.default_camera(SIZE, SIZE), heuristic: Heuristic::Threshold, radius_scale: 1.0 };
+    let req = CameraRequest {
+        seq: 1,
+        camera: m.default_camera(SIZE, SIZE),
+        heuristic: Heuristic::Threshold,
+        radius_scale: 1.0,
+    };
     let frame = m.render_frame(&req).0;
     assert!(frame.header.count > 0);
     assert_eq!(frame_wire_len(frame.header.count), encode_to_vec(&Message::Frame(frame)).len() as u64);
@@ -133,12 +138,20 @@ fn bad_input_is_a_clear_error() {
 
     let dir = std::env::temp_dir().join(format!("volwarp-session-bad-{}", std::process::id()));
     std::fs::create_dir_all(&dir).unwrap();
-    let cam = Camera::look_at(volwarp_core::Vec3::new(0.0, 0.0, 3.0), volwarp_core::Vec3::ZERO, volwarp_core::Vec3::Y, 30.0, 64, 64);
+    let cam = Camera::look_at(
+        volwarp_core::Vec3::new(0.0, 0.0, 3.0),
+        volwarp_core::Vec3::ZERO,
+        volwarp_core::Vec3::Y,
+        30.0,
+        64,
+        64,
+    );
     let record = |cams: &[Camera]| {
         let mut v = Vec::new();
         write_magic(&mut VecWriter(&mut v)).unwrap();
         for (i, c) in cams.iter().enumerate() {
-            let request = CameraRequest { seq: i as u64, camera: *c, heuristic: Heuristic::Threshold, radius_scale: 1.0 };
+            let request =
+                CameraRequest { seq: i as u64, camera: *c, heuristic: Heuristic::Threshold, radius_scale: 1.0 };
             write_entry(&mut VecWriter(&mut v), &Entry::Camera { t_us: i as u64 * 33_000, request }).unwrap();
         }
         v

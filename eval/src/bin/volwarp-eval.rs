@@ -157,7 +157,7 @@ enum Cmd {
         #[command(flatten)]
         sel: Selection,
         #[command(flatten)]
-        s: SessionArgs,
+        s: Box<SessionArgs>,
     },
     /// Measure the server's frame time per dataset and each method's draw time on this machine
     /// and write them as a calibration file for `session --calibration`.
@@ -351,12 +351,13 @@ fn run(cli: Cli) -> Result<(), ErrorBox> {
             report::failures(&Marcher::from_dataset(&ds), &ds.name, heuristic(&h)?, size, &mut r, &common.out)
         }
         Cmd::Session { common, sel, s } => {
-            let opts = session_options(s, common.threads)?;
+            let opts = session_options(*s, common.threads)?;
             let datasets = sel.datasets(&common)?;
             volwarp_eval::session::run(&datasets, &opts, &common.out).map(|_| ())
         }
         Cmd::SessionCalibrate { volume, sel, size, runs, threads, out } => {
-            let datasets = if sel.all { report::shared_datasets(&sel.data_dir)? } else { vec![load(volume.as_deref(), None)?] };
+            let datasets =
+                if sel.all { report::shared_datasets(&sel.data_dir)? } else { vec![load(volume.as_deref(), None)?] };
             let cal = volwarp_eval::session::calibrate(&datasets, size, runs, threads)?;
             std::fs::write(&out, cal.to_csv()).map_err(|e| format!("{}: {e}", out.display()))?;
             log::info!("wrote {}", out.display());

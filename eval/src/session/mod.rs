@@ -105,8 +105,10 @@ pub fn simulate_all(datasets: &[Dataset], opts: &SessionOptions) -> Result<Vec<R
         let marcher = Marcher::from_dataset(ds);
         let mut truths = TruthCache::default();
         for (size, sms, mbps) in settings(opts) {
-            let server_ms = sms.or_else(|| opts.calibration.server_ms(&ds.name, size)).unwrap_or(opts.cfg.net.server_ms);
-            let draw_ms = methods.iter().map(|m| (m.name().to_string(), opts.calibration.draw_ms(m.name(), size))).collect();
+            let server_ms =
+                sms.or_else(|| opts.calibration.server_ms(&ds.name, size)).unwrap_or(opts.cfg.net.server_ms);
+            let draw_ms =
+                methods.iter().map(|m| (m.name().to_string(), opts.calibration.draw_ms(m.name(), size))).collect();
             let cfg = SessionConfig {
                 size,
                 net: NetworkModel { server_ms, mbps, ..opts.cfg.net },
@@ -121,11 +123,12 @@ pub fn simulate_all(datasets: &[Dataset], opts: &SessionOptions) -> Result<Vec<R
                     sc.name
                 );
                 let mut progress = |done: usize, n: usize| {
-                    if done == n || done % 10 == 0 {
+                    if done == n || done.is_multiple_of(10) {
                         eprint!("\r{label}: tick {done}/{n} ({:.0} s)   ", t0.elapsed().as_secs_f64());
                     }
                 };
-                let result = run_session(&marcher, sc, &cfg, policy.as_mut(), &mut methods, &mut truths, &mut progress)?;
+                let result =
+                    run_session(&marcher, sc, &cfg, policy.as_mut(), &mut methods, &mut truths, &mut progress)?;
                 eprintln!();
                 runs.push(Run {
                     key: RunKey {
@@ -191,4 +194,3 @@ pub fn calibrate(datasets: &[Dataset], size: u32, runs: usize, threads: usize) -
     }
     Ok(cal)
 }
-

@@ -72,13 +72,13 @@ impl NetworkModel {
 
     /// Checks the figures: a clear error for a bandwidth of 0, negative or NaN times.
     pub fn check(&self) -> Result<(), ErrorBox> {
-        if !(self.mbps > 0.0) {
+        if self.mbps.is_nan() || self.mbps <= 0.0 {
             return Err(format!("bandwidth must be above 0 Mbit/s (got {})", self.mbps).into());
         }
-        if !(self.server_ms >= 0.0 && self.server_ms.is_finite()) {
+        if !self.server_ms.is_finite() || self.server_ms < 0.0 {
             return Err(format!("server ms must be a finite figure ≥ 0 (got {})", self.server_ms).into());
         }
-        if !(self.latency_ms >= 0.0 && self.latency_ms.is_finite()) {
+        if !self.latency_ms.is_finite() || self.latency_ms < 0.0 {
             return Err(format!("latency must be a finite figure ≥ 0 ms (got {})", self.latency_ms).into());
         }
         Ok(())
@@ -148,7 +148,7 @@ impl Calibration {
             }
             let size: u32 = f[2].parse().map_err(|_| bad())?;
             let ms: f64 = f[3].parse().map_err(|_| bad())?;
-            if !(ms.is_finite() && ms >= 0.0) {
+            if !ms.is_finite() || ms < 0.0 {
                 return Err(format!("line {}: ms must be finite and ≥ 0", i + 1).into());
             }
             c.ms.insert((f[0].into(), f[1].into(), size), ms);

@@ -114,7 +114,7 @@ fn mean(v: impl Iterator<Item = f64>) -> f64 {
 }
 
 /// Per-method statistics over rows (pooled).
-pub fn summarize<'a>(rows: &[&'a TickRow]) -> Vec<Summary> {
+pub fn summarize(rows: &[&TickRow]) -> Vec<Summary> {
     method_names(rows.iter().copied())
         .into_iter()
         .map(|m| {
@@ -255,10 +255,8 @@ pub fn summary_markdown(runs: &[Run]) -> String {
     let configs = distinct(runs.iter().map(|r| (r.key.size, r.key.server_ms.to_bits(), r.key.mbps.to_bits())));
     for (size, sms, mbps) in configs {
         let (sms, mbps) = (f64::from_bits(sms), f64::from_bits(mbps));
-        let sel: Vec<&Run> = runs
-            .iter()
-            .filter(|r| r.key.size == size && r.key.server_ms == sms && r.key.mbps == mbps)
-            .collect();
+        let sel: Vec<&Run> =
+            runs.iter().filter(|r| r.key.size == size && r.key.server_ms == sms && r.key.mbps == mbps).collect();
         let lat = sel.first().map_or(0.0, |r| r.key.latency_ms);
         s.push_str(&format!(
             "### {size}², server {sms} ms per frame, {lat} ms one way, {mbps} Mbit/s ({} datasets)\n\n",
@@ -272,9 +270,9 @@ pub fn summary_markdown(runs: &[Run]) -> String {
             let sum = summarize(&rows);
             let stale = sum.iter().find(|x| x.method == "stale").cloned();
             for x in &sum {
-                let (rm, rp) = stale.as_ref().map_or((f64::NAN, f64::NAN), |st| {
-                    (x.mean_flip / st.mean_flip, x.p95_flip / st.p95_flip)
-                });
+                let (rm, rp) = stale
+                    .as_ref()
+                    .map_or((f64::NAN, f64::NAN), |st| (x.mean_flip / st.mean_flip, x.p95_flip / st.p95_flip));
                 s.push_str(&format!(
                     "| {sc} | {} | {:.4} | {:.4} | {:.4} | {:.2} | {:.0} | {:.2} | {:.2} |\n",
                     x.method, x.mean_flip, x.p95_flip, x.max_flip, x.mean_psnr, x.mean_age_ms, rm, rp

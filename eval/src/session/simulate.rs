@@ -56,10 +56,10 @@ impl SessionConfig {
         if self.size == 0 || self.size > MAX_VIEWPORT {
             return Err(format!("size must be 1..={MAX_VIEWPORT} (got {})", self.size).into());
         }
-        if !(self.duration_s > 0.0 && self.duration_s.is_finite() && self.duration_s <= 3600.0) {
+        if !self.duration_s.is_finite() || self.duration_s <= 0.0 || self.duration_s > 3600.0 {
             return Err(format!("duration must be in (0, 3600] s (got {})", self.duration_s).into());
         }
-        if !(self.client.display_hz > 0.0 && self.client.display_hz <= 1000.0) {
+        if !self.client.display_hz.is_finite() || self.client.display_hz <= 0.0 || self.client.display_hz > 1000.0 {
             return Err(format!("display rate must be in (0, 1000] Hz (got {})", self.client.display_hz).into());
         }
         if self.score_every == 0 {
