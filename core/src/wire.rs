@@ -433,13 +433,6 @@ pub fn write_camera_request<W: Write>(w: &mut W, r: &CameraRequest) -> Result<()
     w.write_all(o.bytes()).map_err(io)
 }
 
-/// The encoded length in bytes of a Frame message with `count` samples, message header
-/// included: exactly what [`write_frame`] puts on the wire (the session simulator charges the
-/// network with it).
-pub const fn frame_wire_len(count: u32) -> u64 {
-    HEADER_LEN as u64 + FRAME_FIXED_LEN as u64 + count as u64 * BYTES_PER_SAMPLE as u64
-}
-
 /// Writes a Frame: header, then `samples` and `colors` (equal length, at most `u32::MAX`; the
 /// header's `count` is taken from them).
 pub fn write_frame<W: Write>(w: &mut W, fh: &FrameHeader, samples: &[u64], colors: &[u32]) -> Result<(), WireError> {

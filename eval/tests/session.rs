@@ -1,8 +1,9 @@
 //! The session simulator (issue 13): determinism, exactness where nothing is outdated,
 //! monotonic sanity, bad input, and any raw volume by path.
 
+use volwarp_core::compact_frame::{encode_frame, encoded_size, EncodeOptions, Encoding};
 use volwarp_core::record::{write_entry, write_magic, Entry};
-use volwarp_core::wire::{encode_to_vec, frame_wire_len, CameraRequest, Message, VecWriter};
+use volwarp_core::wire::{CameraRequest, VecWriter};
 use volwarp_core::{Camera, Heuristic};
 use volwarp_eval::session::model::{Calibration, ClientModel, NetworkModel};
 use volwarp_eval::session::paths::CameraPath;
@@ -24,6 +25,7 @@ fn opts(scenarios: &[&str], net: NetworkModel) -> SessionOptions {
             score_every: 2,
             heuristic: Heuristic::Threshold,
             exact_when_still: true,
+            encoding: Encoding::Compact,
         },
         server_ms: None,
         calibration: Calibration::default(),
@@ -115,14 +117,19 @@ fn frames_are_charged_their_real_encoded_bytes() {
     };
     let frame = m.render_frame(&req).0;
     assert!(frame.header.count > 0);
-    assert_eq!(frame_wire_len(frame.header.count), encode_to_vec(&Message::Frame(frame)).len() as u64);
-    // And a slower link makes frames older.
-    let age = |mbps: f64| {
-        let runs = simulate_all(&small(), &opts(&["orbit"], NetworkModel { server_ms: 100.0, latency_ms: 10.0, mbps }))
-            .unwrap();
+    let o = EncodeOptions::default();
+    for enc in [Encoding::Raw12, Encoding::Compact] {
+        assert_eq!(encoded_size(&frame, enc, &o), encode_frame(&frame, enc, &o).0.len(), "{enc:?}");
+    }
+    // A slower link makes frames older, and the smaller encoding makes them younger.
+    let age = |mbps: f64, encoding: Encoding| {
+        let mut op = opts(&["orbit"], NetworkModel { server_ms: 100.0, latency_ms: 10.0, mbps });
+        op.cfg.encoding = encoding;
+        let runs = simulate_all(&small(), &op).unwrap();
         runs[0].result.rows.iter().map(|r| r.frame_age_ms).sum::<f64>()
     };
-    assert!(age(0.2) > age(1000.0));
+    assert!(age(0.2, Encoding::Raw12) > age(1000.0, Encoding::Raw12));
+    assert!(age(0.2, Encoding::Compact) < age(0.2, Encoding::Raw12));
 }
 
 #[test]

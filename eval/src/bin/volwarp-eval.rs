@@ -246,6 +246,9 @@ struct SessionArgs {
     /// Warp even where the camera equals the frame's (by default the frame itself is shown).
     #[arg(long)]
     always_warp: bool,
+    /// The frames' wire encoding, charged on the link: compact (the server's default) or raw12.
+    #[arg(long, default_value = "compact")]
+    encoding: String,
 }
 
 fn session_options(s: SessionArgs, threads: usize) -> Result<volwarp_eval::session::SessionOptions, ErrorBox> {
@@ -272,6 +275,8 @@ fn session_options(s: SessionArgs, threads: usize) -> Result<volwarp_eval::sessi
             score_every: s.score_every,
             heuristic: heuristic(&s.heuristic)?,
             exact_when_still: !s.always_warp,
+            encoding: volwarp_core::compact_frame::Encoding::from_name(&s.encoding)
+                .ok_or_else(|| format!("unknown encoding {:?}; compact or raw12", s.encoding))?,
         },
         server_ms: s.server_ms,
         calibration,

@@ -10,7 +10,8 @@
 //! 2. **Server**: when idle, it takes the newest request that arrived and that it has not
 //!    served yet (waiting for one if there is none), lets its [`ServerPolicy`] pick the camera,
 //!    renders the frame (the real marcher, so the frame's real sample count and bytes) in
-//!    `server_ms`, writes it to the link (blocking; the frame's encoded bytes at `mbps`) and
+//!    `server_ms`, writes it to the link (blocking; the frame's encoded bytes in the session's
+//!    encoding, `compact_frame::encoded_size`, at `mbps`) and
 //!    only then takes the next request. The frame arrives `latency_ms` after the write ends.
 //! 3. **Client**: each method draws for the camera of a tick with the newest frame arrived by
 //!    then. A draw of `d` ms takes `ceil(d / tick)` ticks (at least one); a draw that fits in one
@@ -26,7 +27,8 @@ use super::paths::{CameraPath, MAX_VIEWPORT};
 use crate::{ErrorBox, Metrics};
 use rayon::prelude::*;
 use std::collections::HashMap;
-use volwarp_core::wire::{frame_wire_len, CameraRequest};
+use volwarp_core::compact_frame::{encoded_size, EncodeOptions, Encoding};
+use volwarp_core::wire::CameraRequest;
 use volwarp_core::{Camera, Heuristic, Image, RendererKind};
 use volwarp_server::Marcher;
 
@@ -47,6 +49,8 @@ pub struct SessionConfig {
     pub heuristic: Heuristic,
     /// Show the frame itself where the camera equals the frame's camera.
     pub exact_when_still: bool,
+    /// The frames' wire encoding (the server's default is compact).
+    pub encoding: Encoding,
 }
 
 impl SessionConfig {
@@ -210,7 +214,7 @@ pub fn serve(
             camera: cams[0],
             request_ms: 0.0,
             start_ms: 0.0,
-            bytes: frame_wire_len(first.header.count),
+            bytes: encoded_size(&first, cfg.encoding, &EncodeOptions::default()) as u64,
             arrive_ms: 0.0,
         },
         first,
@@ -241,7 +245,7 @@ pub fn serve(
         served = j + 1;
         let seq = out.len();
         let frame = render(camera, seq);
-        let bytes = frame_wire_len(frame.header.count);
+        let bytes = encoded_size(&frame, cfg.encoding, &EncodeOptions::default()) as u64;
         let write_end = s + net.server_ms + net.transfer_ms(bytes);
         let arrive_ms = write_end + net.latency_ms;
         if arrive_ms <= end_ms {
