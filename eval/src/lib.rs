@@ -17,6 +17,7 @@
 //! | [`representation_size`] | error against position bits, radius bits and samples kept |
 //! | [`radius_model`] | accuracy against tracing speed for the server's sphere radius models |
 //! | [`failure_modes`] | the cases where the methods break down |
+//! | [`session`] | the session simulator: latency hiding over time as a user sees it |
 //! | [`csv`] | small CSV writer |
 //! | [`report`] | the `volwarp-eval` commands: files, charts, markdown |
 #![deny(missing_docs)]
@@ -32,6 +33,7 @@ pub mod radius_model;
 pub mod report;
 pub mod representation_size;
 pub mod roster;
+pub mod session;
 pub mod table1;
 
 pub use metrics::{is_defined, Metrics};

@@ -7,6 +7,8 @@
 //! volwarp-eval bits     [--volume FILE] --out DIR
 //! volwarp-eval radius   [--volume FILE | --all] --out DIR
 //! volwarp-eval failures [--volume FILE] --out DIR
+//! volwarp-eval session  [--volume FILE | --all] [--scenarios orbit,stop-and-go,dolly,look-around] --out DIR
+//! volwarp-eval session-calibrate [--volume FILE | --all] [--size 512] --out FILE
 //! volwarp-eval replot   --dir DIR
 //! volwarp-eval fixtures --out eval/fixtures
 //! ```
@@ -147,6 +149,37 @@ enum Cmd {
         #[arg(long, default_value = "threshold")]
         heuristic: String,
     },
+    /// Simulate sessions (camera path, server, network, client) and score what each method
+    /// shows at every display tick against the truth.
+    Session {
+        #[command(flatten)]
+        common: Common,
+        #[command(flatten)]
+        sel: Selection,
+        #[command(flatten)]
+        s: Box<SessionArgs>,
+    },
+    /// Measure the server's frame time per dataset and each method's draw time on this machine
+    /// and write them as a calibration file for `session --calibration`.
+    SessionCalibrate {
+        /// Volume file; default: the bundled dataset.
+        #[arg(long)]
+        volume: Option<PathBuf>,
+        #[command(flatten)]
+        sel: Selection,
+        /// Viewport side.
+        #[arg(long, default_value_t = 512)]
+        size: u32,
+        /// Timed runs (median).
+        #[arg(long, default_value_t = 5)]
+        runs: usize,
+        /// Threads per CPU renderer (0: all cores).
+        #[arg(long, default_value_t = 0)]
+        threads: usize,
+        /// The calibration file to write.
+        #[arg(long)]
+        out: PathBuf,
+    },
     /// Redraw the charts of a quality run from its quality.csv.
     Replot {
         /// The folder of the run (with quality.csv).
@@ -159,6 +192,100 @@ enum Cmd {
         #[arg(long)]
         out: PathBuf,
     },
+}
+
+/// The settings of `volwarp-eval session`.
+#[derive(Args, Clone)]
+struct SessionArgs {
+    /// Scenarios, comma-separated: orbit, stop-and-go, dolly, look-around (each with an
+    /// optional :DEG_PER_S), or record:FILE (a `volwarp-client --record` file).
+    #[arg(long, default_value = "orbit,stop-and-go,dolly,look-around")]
+    scenarios: String,
+    /// Methods, comma-separated, or `all`.
+    #[arg(long, default_value = "all")]
+    methods: String,
+    /// Viewport side.
+    #[arg(long, default_value_t = 512)]
+    size: u32,
+    /// Session length, seconds.
+    #[arg(long, default_value_t = 6.0)]
+    duration: f64,
+    /// Server ms per frame (default 500, or the calibration file's figure for the dataset).
+    #[arg(long)]
+    server_ms: Option<f64>,
+    /// One-way network latency, ms.
+    #[arg(long, default_value_t = 50.0)]
+    latency_ms: f64,
+    /// Bandwidth, Mbit/s (`inf`: no transfer time).
+    #[arg(long, default_value_t = 100.0)]
+    mbps: f64,
+    /// Display rate, Hz.
+    #[arg(long, default_value_t = 30.0)]
+    display_hz: f64,
+    /// Score every n-th display tick (3: 10 Hz scoring of a 30 Hz display).
+    #[arg(long, default_value_t = 3)]
+    score_every: usize,
+    /// Depth heuristic of the frames.
+    #[arg(long, default_value = "threshold")]
+    heuristic: String,
+    /// What the server renders for.
+    #[arg(long, default_value = "last-received")]
+    policy: String,
+    /// Calibration file (`session-calibrate`): draw ms per method, server ms per dataset.
+    #[arg(long)]
+    calibration: Option<PathBuf>,
+    /// Sweep the server ms per frame over these values (comma-separated).
+    #[arg(long, value_delimiter = ',')]
+    sweep_server_ms: Vec<f64>,
+    /// Sweep the bandwidth (Mbit/s) over these values, at each of `--sweep-sizes`.
+    #[arg(long, value_delimiter = ',')]
+    sweep_mbps: Vec<f64>,
+    /// Viewport sides of the bandwidth sweep (default: `--size`).
+    #[arg(long, value_delimiter = ',')]
+    sweep_sizes: Vec<u32>,
+    /// Warp even where the camera equals the frame's (by default the frame itself is shown).
+    #[arg(long)]
+    always_warp: bool,
+    /// The frames' wire encoding, charged on the link: compact (the server's default) or raw12.
+    #[arg(long, default_value = "compact")]
+    encoding: String,
+}
+
+fn session_options(s: SessionArgs, threads: usize) -> Result<volwarp_eval::session::SessionOptions, ErrorBox> {
+    use volwarp_eval::session::{model, paths, simulate::SessionConfig, SessionOptions, Sweep};
+    let calibration = match &s.calibration {
+        Some(p) => model::Calibration::load(p)?,
+        None => model::Calibration::default(),
+    };
+    let sweep = match (s.sweep_server_ms.is_empty(), s.sweep_mbps.is_empty()) {
+        (true, true) => Sweep::None,
+        (false, true) => Sweep::Server(s.sweep_server_ms),
+        (true, false) => {
+            let sizes = if s.sweep_sizes.is_empty() { vec![s.size] } else { s.sweep_sizes };
+            Sweep::Bandwidth(s.sweep_mbps, sizes)
+        }
+        (false, false) => return Err("sweep one of --sweep-server-ms and --sweep-mbps at a time".into()),
+    };
+    Ok(SessionOptions {
+        cfg: SessionConfig {
+            size: s.size,
+            duration_s: s.duration,
+            net: model::NetworkModel { server_ms: 500.0, latency_ms: s.latency_ms, mbps: s.mbps },
+            client: model::ClientModel { display_hz: s.display_hz, draw_ms: Default::default() },
+            score_every: s.score_every,
+            heuristic: heuristic(&s.heuristic)?,
+            exact_when_still: !s.always_warp,
+            encoding: volwarp_core::compact_frame::Encoding::from_name(&s.encoding)
+                .ok_or_else(|| format!("unknown encoding {:?}; compact or raw12", s.encoding))?,
+        },
+        server_ms: s.server_ms,
+        calibration,
+        scenarios: paths::parse_list(&s.scenarios)?,
+        methods: s.methods,
+        threads,
+        policy: s.policy,
+        sweep,
+    })
 }
 
 fn load(volume: Option<&Path>, tf: Option<&Path>) -> Result<Dataset, ErrorBox> {
@@ -227,6 +354,19 @@ fn run(cli: Cli) -> Result<(), ErrorBox> {
             let ds = load(common.volume.as_deref(), common.tf.as_deref())?;
             let mut r = roster(RosterOptions { threads: common.threads, gpu: !common.no_gpu });
             report::failures(&Marcher::from_dataset(&ds), &ds.name, heuristic(&h)?, size, &mut r, &common.out)
+        }
+        Cmd::Session { common, sel, s } => {
+            let opts = session_options(*s, common.threads)?;
+            let datasets = sel.datasets(&common)?;
+            volwarp_eval::session::run(&datasets, &opts, &common.out).map(|_| ())
+        }
+        Cmd::SessionCalibrate { volume, sel, size, runs, threads, out } => {
+            let datasets =
+                if sel.all { report::shared_datasets(&sel.data_dir)? } else { vec![load(volume.as_deref(), None)?] };
+            let cal = volwarp_eval::session::calibrate(&datasets, size, runs, threads)?;
+            std::fs::write(&out, cal.to_csv()).map_err(|e| format!("{}: {e}", out.display()))?;
+            log::info!("wrote {}", out.display());
+            Ok(())
         }
         Cmd::Fixtures { out } => report::fixtures(&out),
         Cmd::Replot { dir } => report::replot(&dir),

@@ -1,0 +1,196 @@
+//! The session simulator (issue 13): what a user sees while dragging the camera as the server
+//! renders at its own pace and frames cross a network.
+//!
+//! A session is a dataset, a camera path over time ([`paths`]), a server, network and client
+//! model ([`model`]), and the methods the client may show ([`methods`]). The simulated clock
+//! ([`simulate`]) decides which frame each method holds at each display tick; the truth (the
+//! server's marcher for the camera of that tick) scores it. [`report`] writes the CSV files,
+//! the summary and the charts.
+//!
+//! | module | concept |
+//! |---|---|
+//! | [`paths`] | steady orbit, stop-and-go, dolly, look-around, recorded paths |
+//! | [`model`] | server policy, network, client draw times, the calibration file |
+//! | [`methods`] | the methods compared (one registry entry each) |
+//! | [`simulate`] | the simulated clock and event loop, truth cache |
+//! | [`report`] | `session.csv`, summaries, charts, worst-tick strips |
+
+pub mod methods;
+pub mod model;
+pub mod paths;
+pub mod report;
+pub mod simulate;
+
+use crate::ErrorBox;
+use model::{server_policy, Calibration, ClientModel, NetworkModel};
+use paths::CameraPath;
+use report::{Run, RunKey};
+use simulate::{run_session, SessionConfig, TruthCache};
+use std::path::Path;
+use std::time::Instant;
+use volwarp_core::{Heuristic, Image};
+use volwarp_server::dataset::Dataset;
+use volwarp_server::Marcher;
+
+/// What to sweep besides the base setting.
+#[derive(Clone, Debug, PartialEq)]
+pub enum Sweep {
+    /// One setting.
+    None,
+    /// Server ms per frame.
+    Server(Vec<f64>),
+    /// Bandwidths (Mbit/s) at each viewport side.
+    Bandwidth(Vec<f64>, Vec<u32>),
+}
+
+/// Options of [`run`].
+pub struct SessionOptions {
+    /// The base setting (size, duration, network, client, scoring).
+    pub cfg: SessionConfig,
+    /// Server ms given on the command line (else the calibration's figure for the dataset and
+    /// size, else the base setting's).
+    pub server_ms: Option<f64>,
+    /// Measured draw and server times.
+    pub calibration: Calibration,
+    /// The scenarios.
+    pub scenarios: Vec<CameraPath>,
+    /// Method list (`all` or names).
+    pub methods: String,
+    /// Threads per CPU renderer (0: all cores).
+    pub threads: usize,
+    /// Server policy name.
+    pub policy: String,
+    /// The sweep.
+    pub sweep: Sweep,
+}
+
+/// Runs every session (datasets × scenarios × sweep settings) and writes the files into `out`.
+pub fn run(datasets: &[Dataset], opts: &SessionOptions, out: &Path) -> Result<Vec<Run>, ErrorBox> {
+    let runs = simulate_all(datasets, opts)?;
+    let sweep = match opts.sweep {
+        Sweep::None => None,
+        Sweep::Server(_) => Some("server"),
+        Sweep::Bandwidth(..) => Some("bandwidth"),
+    };
+    report::write_all(&runs, out, sweep)?;
+    log::info!("wrote {}", out.join("session.csv").display());
+    Ok(runs)
+}
+
+/// The settings of a sweep: `(size, server ms or None for the default, mbps)`.
+fn settings(opts: &SessionOptions) -> Vec<(u32, Option<f64>, f64)> {
+    let c = &opts.cfg;
+    match &opts.sweep {
+        Sweep::None => vec![(c.size, opts.server_ms, c.net.mbps)],
+        Sweep::Server(v) => v.iter().map(|&s| (c.size, Some(s), c.net.mbps)).collect(),
+        Sweep::Bandwidth(b, sizes) => {
+            sizes.iter().flat_map(|&sz| b.iter().map(move |&m| (sz, opts.server_ms, m))).collect()
+        }
+    }
+}
+
+/// Runs every session without writing files.
+pub fn simulate_all(datasets: &[Dataset], opts: &SessionOptions) -> Result<Vec<Run>, ErrorBox> {
+    // Check everything before the first long render.
+    let mut methods = methods::make_methods(&opts.methods, opts.threads)?;
+    let mut policy = server_policy(&opts.policy)?;
+    for (size, sms, mbps) in settings(opts) {
+        let net = NetworkModel { server_ms: sms.unwrap_or(opts.cfg.net.server_ms), mbps, ..opts.cfg.net };
+        SessionConfig { size, net, ..opts.cfg.clone() }.check()?;
+    }
+    let mut runs = Vec::new();
+    let total = datasets.len() * opts.scenarios.len() * settings(opts).len();
+    let t0 = Instant::now();
+    for ds in datasets {
+        let marcher = Marcher::from_dataset(ds);
+        let mut truths = TruthCache::default();
+        for (size, sms, mbps) in settings(opts) {
+            let server_ms =
+                sms.or_else(|| opts.calibration.server_ms(&ds.name, size)).unwrap_or(opts.cfg.net.server_ms);
+            let draw_ms =
+                methods.iter().map(|m| (m.name().to_string(), opts.calibration.draw_ms(m.name(), size))).collect();
+            let cfg = SessionConfig {
+                size,
+                net: NetworkModel { server_ms, mbps, ..opts.cfg.net },
+                client: ClientModel { draw_ms, ..opts.cfg.client.clone() },
+                ..opts.cfg.clone()
+            };
+            for sc in &opts.scenarios {
+                let label = format!(
+                    "[{}/{total}] {} {} {size}² server {server_ms} ms {mbps} Mbit/s",
+                    runs.len() + 1,
+                    ds.name,
+                    sc.name
+                );
+                let mut progress = |done: usize, n: usize| {
+                    if done == n || done.is_multiple_of(10) {
+                        eprint!("\r{label}: tick {done}/{n} ({:.0} s)   ", t0.elapsed().as_secs_f64());
+                    }
+                };
+                let result =
+                    run_session(&marcher, sc, &cfg, policy.as_mut(), &mut methods, &mut truths, &mut progress)?;
+                eprintln!();
+                runs.push(Run {
+                    key: RunKey {
+                        dataset: ds.name.clone(),
+                        scenario: sc.name.clone(),
+                        policy: policy.name().into(),
+                        size,
+                        server_ms,
+                        latency_ms: cfg.net.latency_ms,
+                        mbps,
+                    },
+                    result,
+                });
+            }
+        }
+    }
+    Ok(runs)
+}
+
+/// Measures the server's frame time per dataset and each method's draw time at `size` on this
+/// machine (medians of `runs`; the frame of the default camera drawn 10° away) and returns
+/// them as a [`Calibration`]. This reads the wall clock; the simulation only reads its result.
+pub fn calibrate(datasets: &[Dataset], size: u32, runs: usize, threads: usize) -> Result<Calibration, ErrorBox> {
+    let mut cal = Calibration::default();
+    let mut draw: Vec<(String, Vec<f64>)> = Vec::new();
+    for ds in datasets {
+        let marcher = Marcher::from_dataset(ds);
+        let c0 = marcher.default_camera(size, size);
+        let mut ms = Vec::new();
+        let mut frame = None;
+        for _ in 0..runs.max(1) {
+            let t = Instant::now();
+            frame = Some(crate::quality::frame_for(&marcher, &c0, Heuristic::Threshold));
+            ms.push(t.elapsed().as_secs_f64() * 1e3);
+        }
+        let server = crate::median(&mut ms).unwrap_or(0.0);
+        cal.ms.insert(("server".into(), ds.name.clone(), size), server);
+        log::info!("{}: server {server:.1} ms per frame at {size}²", ds.name);
+        let held = methods::HeldFrame::new(frame.ok_or("no frame")?);
+        let cam = c0.orbit(10.0, 0.0);
+        for m in methods::METHODS.iter() {
+            let mut method = (m.make)(threads);
+            let mut img = Image::new(0, 0);
+            method.draw(&[&held], &cam, &mut img);
+            let mut t: Vec<f64> = (0..runs.max(1))
+                .map(|_| {
+                    let s = Instant::now();
+                    method.draw(&[&held], &cam, &mut img);
+                    s.elapsed().as_secs_f64() * 1e3
+                })
+                .collect();
+            let med = crate::median(&mut t).unwrap_or(0.0);
+            match draw.iter_mut().find(|(n, _)| n == m.name) {
+                Some((_, v)) => v.push(med),
+                None => draw.push((m.name.into(), vec![med])),
+            }
+        }
+    }
+    for (name, mut v) in draw {
+        let med = crate::median(&mut v).unwrap_or(0.0);
+        log::info!("{name}: {med:.2} ms per draw at {size}² (median over datasets)");
+        cal.ms.insert(("client".into(), name, size), med);
+    }
+    Ok(cal)
+}

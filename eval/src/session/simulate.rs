@@ -1,0 +1,338 @@
+//! The simulated clock and the event loop of one session.
+//!
+//! Nothing here reads the wall clock: every time is simulated, in milliseconds, from the
+//! models; the same inputs give the same rows, bit for bit.
+//!
+//! 1. **Display ticks** at `k / display_hz`; the camera of tick `k` is the path's. At time 0
+//!    the client already holds a frame for the first camera (the user looks at a finished
+//!    image, then starts to move). At every later tick whose camera differs from the last one
+//!    sent, the client sends a request, which reaches the server `latency_ms` later.
+//! 2. **Server**: when idle, it takes the newest request that arrived and that it has not
+//!    served yet (waiting for one if there is none), lets its [`ServerPolicy`] pick the camera,
+//!    renders the frame (the real marcher, so the frame's real sample count and bytes) in
+//!    `server_ms`, writes it to the link (blocking; the frame's encoded bytes in the session's
+//!    encoding, `compact_frame::encoded_size`, at `mbps`) and
+//!    only then takes the next request. The frame arrives `latency_ms` after the write ends.
+//! 3. **Client**: each method draws for the camera of a tick with the newest frame arrived by
+//!    then. A draw of `d` ms takes `ceil(d / tick)` ticks (at least one); a draw that fits in one
+//!    tick is shown at the tick it started at, a slower one is shown when done and its previous
+//!    image stays up until then. Where the camera equals the frame's camera the client shows
+//!    the frame itself (`exact_when_still`): warping starts when the camera moves.
+//! 4. **Scoring** every `score_every`-th tick: the truth (the marcher's image for that tick's
+//!    camera, cached between methods and runs) against what each method shows.
+
+use super::methods::{HeldFrame, Method};
+use super::model::{ClientModel, NetworkModel, Request, ServerPolicy};
+use super::paths::{CameraPath, MAX_VIEWPORT};
+use crate::{ErrorBox, Metrics};
+use rayon::prelude::*;
+use std::collections::HashMap;
+use volwarp_core::compact_frame::{encoded_size, EncodeOptions, Encoding};
+use volwarp_core::wire::CameraRequest;
+use volwarp_core::{Camera, Heuristic, Image, RendererKind};
+use volwarp_server::Marcher;
+
+/// What a session runs with besides the dataset, the path and the methods.
+#[derive(Clone, Debug, PartialEq)]
+pub struct SessionConfig {
+    /// Viewport side (square).
+    pub size: u32,
+    /// Length of the session, seconds (a recorded path uses its own length, at most this).
+    pub duration_s: f64,
+    /// Server and network.
+    pub net: NetworkModel,
+    /// Display rate and draw times.
+    pub client: ClientModel,
+    /// Score every n-th display tick (1: every tick).
+    pub score_every: usize,
+    /// The frames' depth heuristic.
+    pub heuristic: Heuristic,
+    /// Show the frame itself where the camera equals the frame's camera.
+    pub exact_when_still: bool,
+    /// The frames' wire encoding (the server's default is compact).
+    pub encoding: Encoding,
+}
+
+impl SessionConfig {
+    /// Checks the figures (a clear error for each bad one).
+    pub fn check(&self) -> Result<(), ErrorBox> {
+        self.net.check()?;
+        if self.size == 0 || self.size > MAX_VIEWPORT {
+            return Err(format!("size must be 1..={MAX_VIEWPORT} (got {})", self.size).into());
+        }
+        if !self.duration_s.is_finite() || self.duration_s <= 0.0 || self.duration_s > 3600.0 {
+            return Err(format!("duration must be in (0, 3600] s (got {})", self.duration_s).into());
+        }
+        if !self.client.display_hz.is_finite() || self.client.display_hz <= 0.0 || self.client.display_hz > 1000.0 {
+            return Err(format!("display rate must be in (0, 1000] Hz (got {})", self.client.display_hz).into());
+        }
+        if self.score_every == 0 {
+            return Err("score-every must be at least 1".into());
+        }
+        Ok(())
+    }
+}
+
+/// One frame the server sent.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct FrameEvent {
+    /// 0 for the frame the client holds at the start, then 1, 2, …
+    pub seq: usize,
+    /// The camera it was rendered for.
+    pub camera: Camera,
+    /// When the newest request it serves was sent, ms.
+    pub request_ms: f64,
+    /// When rendering started, ms.
+    pub start_ms: f64,
+    /// Encoded bytes on the wire.
+    pub bytes: u64,
+    /// When it arrived at the client, ms.
+    pub arrive_ms: f64,
+}
+
+/// One scored tick of one method.
+#[derive(Clone, Debug, PartialEq)]
+pub struct TickRow {
+    /// Method name.
+    pub method: String,
+    /// Display tick.
+    pub tick: usize,
+    /// Its time, s.
+    pub time_s: f64,
+    /// Sequence number of the frame shown.
+    pub frame_seq: usize,
+    /// Age of the frame shown: the tick's time minus when the camera it was rendered for was
+    /// requested, ms.
+    pub frame_age_ms: f64,
+    /// The method's draw time, ms.
+    pub draw_ms: f64,
+    /// Scores against the truth.
+    pub metrics: Metrics,
+}
+
+/// The tick of a method that went worst.
+#[derive(Clone, Debug)]
+pub struct Worst {
+    /// Method name.
+    pub method: String,
+    /// Display tick.
+    pub tick: usize,
+    /// Its FLIP.
+    pub flip: f64,
+    /// The truth.
+    pub truth: Image,
+    /// What the method showed.
+    pub shown: Image,
+}
+
+/// Everything one session produced.
+#[derive(Clone, Debug, Default)]
+pub struct SessionResult {
+    /// The scored rows, tick by tick, methods in order.
+    pub rows: Vec<TickRow>,
+    /// The frames, in order of arrival.
+    pub frames: Vec<FrameEvent>,
+    /// The worst tick of each method.
+    pub worst: Vec<Worst>,
+}
+
+/// Ground-truth images by camera (bit pattern), shared between methods and runs of one dataset.
+#[derive(Default)]
+pub struct TruthCache {
+    map: HashMap<[u32; 11], Image>,
+    /// Truths rendered (misses).
+    pub rendered: usize,
+}
+
+fn camera_key(c: &Camera) -> [u32; 11] {
+    let f = |v: f32| v.to_bits();
+    [
+        f(c.eye.x),
+        f(c.eye.y),
+        f(c.eye.z),
+        f(c.target.x),
+        f(c.target.y),
+        f(c.target.z),
+        f(c.up.x),
+        f(c.up.y),
+        f(c.up.z),
+        f(c.fov_y_deg),
+        c.width ^ (c.height << 16),
+    ]
+}
+
+impl TruthCache {
+    /// The truth for a camera (rendered on a miss).
+    pub fn get(&mut self, marcher: &Marcher, camera: &Camera) -> &Image {
+        let key = camera_key(camera);
+        if !self.map.contains_key(&key) {
+            self.rendered += 1;
+            self.map.insert(key, marcher.render_image(camera));
+        }
+        &self.map[&key]
+    }
+
+    /// Forgets every truth (between datasets).
+    pub fn clear(&mut self) {
+        self.map.clear();
+    }
+}
+
+/// The display ticks' cameras of a path (a clear error for an unusable camera).
+pub fn tick_cameras(marcher: &Marcher, path: &CameraPath, cfg: &SessionConfig) -> Result<Vec<Camera>, ErrorBox> {
+    let c0 = marcher.default_camera(cfg.size, cfg.size);
+    let duration = path.recorded_duration().map_or(cfg.duration_s, |d| d.min(cfg.duration_s));
+    let n = (duration * cfg.client.display_hz + 1e-9).floor() as usize + 1;
+    (0..n)
+        .map(|k| {
+            let c = path.camera(&c0, k as f64 / cfg.client.display_hz);
+            c.validate(MAX_VIEWPORT).map_err(|e| format!("scenario {}: camera at tick {k}: {e}", path.name))?;
+            Ok(c)
+        })
+        .collect()
+}
+
+/// Runs the server and the network over the ticks' cameras: the frames in order of arrival,
+/// each with its rendered frame. The first is the frame the client holds at time 0.
+pub fn serve(
+    marcher: &Marcher,
+    cams: &[Camera],
+    cfg: &SessionConfig,
+    policy: &mut dyn ServerPolicy,
+) -> Vec<(FrameEvent, volwarp_core::wire::Frame)> {
+    let tick_ms = 1e3 / cfg.client.display_hz;
+    let end_ms = (cams.len() - 1) as f64 * tick_ms;
+    let net = cfg.net;
+    let render = |camera: Camera, seq: usize| {
+        let req = CameraRequest { seq: seq as u64, camera, heuristic: cfg.heuristic, radius_scale: 1.0 };
+        marcher.render_frame(&req).0
+    };
+    let first = render(cams[0], 0);
+    let mut out = vec![(
+        FrameEvent {
+            seq: 0,
+            camera: cams[0],
+            request_ms: 0.0,
+            start_ms: 0.0,
+            bytes: encoded_size(&first, cfg.encoding, &EncodeOptions::default()) as u64,
+            arrive_ms: 0.0,
+        },
+        first,
+    )];
+    // The requests: a tick whose camera differs from the last one sent.
+    let mut requests: Vec<Request> = Vec::new();
+    let mut last = cams[0];
+    for (k, c) in cams.iter().enumerate().skip(1) {
+        if *c != last {
+            requests.push(Request { tick: k, sent_ms: k as f64 * tick_ms, camera: *c });
+            last = *c;
+        }
+    }
+    let arrival = |r: &Request| r.sent_ms + net.latency_ms;
+    let mut s = 0.0f64;
+    let mut served = 0usize; // requests[..served] were seen by the server
+    while served < requests.len() {
+        // The newest request arrived by `s`, else wait for the next one.
+        let mut j = served;
+        while j + 1 < requests.len() && arrival(&requests[j + 1]) <= s {
+            j += 1;
+        }
+        s = s.max(arrival(&requests[j]));
+        if s + net.server_ms + net.latency_ms > end_ms {
+            break; // it would arrive after the session
+        }
+        let camera = policy.camera(&requests[..=j], s);
+        served = j + 1;
+        let seq = out.len();
+        let frame = render(camera, seq);
+        let bytes = encoded_size(&frame, cfg.encoding, &EncodeOptions::default()) as u64;
+        let write_end = s + net.server_ms + net.transfer_ms(bytes);
+        let arrive_ms = write_end + net.latency_ms;
+        if arrive_ms <= end_ms {
+            out.push((
+                FrameEvent { seq, camera, request_ms: requests[j].sent_ms, start_ms: s, bytes, arrive_ms },
+                frame,
+            ));
+        }
+        s = write_end;
+    }
+    out
+}
+
+/// Runs one session. `progress` gets a line per scored tick.
+#[allow(clippy::too_many_arguments)]
+pub fn run_session(
+    marcher: &Marcher,
+    path: &CameraPath,
+    cfg: &SessionConfig,
+    policy: &mut dyn ServerPolicy,
+    methods: &mut [Box<dyn Method>],
+    truths: &mut TruthCache,
+    progress: &mut dyn FnMut(usize, usize),
+) -> Result<SessionResult, ErrorBox> {
+    cfg.check()?;
+    let cams = tick_cameras(marcher, path, cfg)?;
+    let tick_ms = 1e3 / cfg.client.display_hz;
+    let served = serve(marcher, &cams, cfg, policy);
+    let frames: Vec<FrameEvent> = served.iter().map(|(e, _)| *e).collect();
+    let held: Vec<HeldFrame> = served.into_iter().map(|(_, f)| HeldFrame::new(f)).collect();
+    let mut exact = volwarp_cpu_tracer::create(RendererKind::Stale, 0).ok_or("the stale renderer is missing")?;
+    let draw: Vec<(f64, usize)> = methods
+        .iter()
+        .map(|m| {
+            let ms = cfg.client.draw_ms.get(m.name()).copied().unwrap_or(0.0);
+            (ms, cfg.client.ticks_per_draw(ms))
+        })
+        .collect();
+    let scored: Vec<usize> = (0..cams.len()).step_by(cfg.score_every).collect();
+    let mut result = SessionResult { frames: frames.clone(), ..Default::default() };
+    let mut worst: Vec<Option<Worst>> = vec![None; methods.len()];
+    let mut images: Vec<Image> = (0..methods.len()).map(|_| Image::new(0, 0)).collect();
+    for (done, &j) in scored.iter().enumerate() {
+        let mut shown_frame = Vec::with_capacity(methods.len());
+        for (mi, m) in methods.iter_mut().enumerate() {
+            let n = draw[mi].1;
+            // The newest draw finished by tick j started at a multiple of n.
+            let k = if j + 1 >= n { ((j + 1) / n - 1) * n } else { 0 };
+            let t_k = k as f64 * tick_ms;
+            let fi = frames.partition_point(|f| f.arrive_ms <= t_k).saturating_sub(1);
+            let cam = &cams[k];
+            if cfg.exact_when_still && *cam == frames[fi].camera {
+                exact.render(&held[fi].scene, cam, &mut images[mi]);
+            } else {
+                m.draw(&[&held[fi]], cam, &mut images[mi]);
+            }
+            shown_frame.push(fi);
+        }
+        let truth = truths.get(marcher, &cams[j]);
+        let metrics: Vec<Metrics> = images
+            .par_iter()
+            .map(|img| Metrics::of(truth, img).unwrap_or(Metrics { psnr: 0.0, ssim: 0.0, flip: 1.0 }))
+            .collect();
+        let t_j = j as f64 * tick_ms;
+        for (mi, m) in methods.iter().enumerate() {
+            let f = &frames[shown_frame[mi]];
+            result.rows.push(TickRow {
+                method: m.name().into(),
+                tick: j,
+                time_s: t_j * 1e-3,
+                frame_seq: f.seq,
+                frame_age_ms: t_j - f.request_ms,
+                draw_ms: draw[mi].0,
+                metrics: metrics[mi],
+            });
+            if worst[mi].as_ref().is_none_or(|w| metrics[mi].flip > w.flip) {
+                worst[mi] = Some(Worst {
+                    method: m.name().into(),
+                    tick: j,
+                    flip: metrics[mi].flip,
+                    truth: truth.clone(),
+                    shown: images[mi].clone(),
+                });
+            }
+        }
+        progress(done + 1, scored.len());
+    }
+    result.worst = worst.into_iter().flatten().collect();
+    Ok(result)
+}

@@ -1,0 +1,218 @@
+//! The session simulator (issue 13): determinism, exactness where nothing is outdated,
+//! monotonic sanity, bad input, and any raw volume by path.
+
+use volwarp_core::compact_frame::{encode_frame, encoded_size, EncodeOptions, Encoding};
+use volwarp_core::record::{write_entry, write_magic, Entry};
+use volwarp_core::wire::{CameraRequest, VecWriter};
+use volwarp_core::{Camera, Heuristic};
+use volwarp_eval::session::model::{Calibration, ClientModel, NetworkModel};
+use volwarp_eval::session::paths::CameraPath;
+use volwarp_eval::session::report::{session_table, Run};
+use volwarp_eval::session::simulate::SessionConfig;
+use volwarp_eval::session::{simulate_all, SessionOptions, Sweep};
+use volwarp_server::dataset::Dataset;
+use volwarp_server::Marcher;
+
+const SIZE: u32 = 32;
+
+fn opts(scenarios: &[&str], net: NetworkModel) -> SessionOptions {
+    SessionOptions {
+        cfg: SessionConfig {
+            size: SIZE,
+            duration_s: 2.0,
+            net,
+            client: ClientModel { display_hz: 30.0, draw_ms: Default::default() },
+            score_every: 2,
+            heuristic: Heuristic::Threshold,
+            exact_when_still: true,
+            encoding: Encoding::Compact,
+        },
+        server_ms: None,
+        calibration: Calibration::default(),
+        scenarios: scenarios.iter().map(|s| CameraPath::parse(s).unwrap()).collect(),
+        methods: "all".into(),
+        threads: 1,
+        policy: "last-received".into(),
+        sweep: Sweep::None,
+    }
+}
+
+fn small() -> Vec<Dataset> {
+    vec![Dataset::marschner_lobb(24)]
+}
+
+fn mean_flip(runs: &[Run], method: &str) -> f64 {
+    let f: Vec<f64> =
+        runs.iter().flat_map(|r| &r.result.rows).filter(|r| r.method == method).map(|r| r.metrics.flip).collect();
+    f.iter().sum::<f64>() / f.len() as f64
+}
+
+#[test]
+fn two_runs_give_the_same_csv_bytes() {
+    let o = opts(&["orbit", "stop-and-go"], NetworkModel { server_ms: 300.0, latency_ms: 50.0, mbps: 0.5 });
+    let a = session_table(&simulate_all(&small(), &o).unwrap()).to_csv();
+    let b = session_table(&simulate_all(&small(), &o).unwrap()).to_csv();
+    assert_eq!(a, b);
+    assert!(a.starts_with("dataset,scenario,"), "{}", &a[..80]);
+    let header: Vec<&str> = a.lines().next().unwrap().split(',').collect();
+    assert!(header.contains(&"method") && header.contains(&"flip"));
+    // 2 scenarios × 61 ticks (2 s at 30 Hz) scored every 2nd (31) × 6 methods, plus the header.
+    assert_eq!(a.lines().count(), 1 + 2 * 31 * 6);
+    // The moving scenario is not trivially exact: the session measures something.
+    let runs = simulate_all(&small(), &o).unwrap();
+    assert!(mean_flip(&runs, "stale") > 0.0);
+}
+
+#[test]
+fn an_instant_server_and_network_show_the_truth_at_every_tick() {
+    let o = opts(
+        &["orbit:60", "stop-and-go", "dolly", "look-around"],
+        NetworkModel { server_ms: 0.0, latency_ms: 0.0, mbps: f64::INFINITY },
+    );
+    let runs = simulate_all(&small(), &o).unwrap();
+    for r in &runs {
+        assert!(r.result.frames.len() > 10, "{}: a frame per moving tick", r.key.scenario);
+        for row in &r.result.rows {
+            assert_eq!(row.metrics.flip, 0.0, "{} {} tick {}", r.key.scenario, row.method, row.tick);
+            if r.key.scenario.starts_with("orbit") {
+                // Always moving: a new frame every tick. (In a stop the frame is older but exact.)
+                assert_eq!(row.frame_age_ms, 0.0);
+            }
+        }
+    }
+}
+
+#[test]
+fn a_camera_that_never_moves_shows_the_truth_with_a_slow_server() {
+    let mut o = opts(&[], NetworkModel::DEFAULT);
+    o.scenarios = vec![CameraPath::still()];
+    let runs = simulate_all(&small(), &o).unwrap();
+    assert_eq!(runs[0].result.frames.len(), 1, "nothing to request");
+    assert!(runs[0].result.rows.iter().all(|r| r.metrics.flip == 0.0));
+}
+
+#[test]
+fn a_slower_server_never_improves_the_stale_frame_on_a_steady_orbit() {
+    let mut prev = -1.0;
+    for server_ms in [0.0, 100.0, 300.0, 1000.0] {
+        let mut o = opts(&["orbit"], NetworkModel { server_ms, latency_ms: 50.0, mbps: 100.0 });
+        o.cfg.score_every = 1;
+        o.cfg.duration_s = 3.0;
+        let f = mean_flip(&simulate_all(&small(), &o).unwrap(), "stale");
+        assert!(f >= prev, "server {server_ms} ms: stale mean FLIP {f} < {prev}");
+        prev = f;
+    }
+    assert!(prev > 0.0);
+}
+
+#[test]
+fn frames_are_charged_their_real_encoded_bytes() {
+    let ds = &small()[0];
+    let m = Marcher::from_dataset(ds);
+    let req = CameraRequest {
+        seq: 1,
+        camera: m.default_camera(SIZE, SIZE),
+        heuristic: Heuristic::Threshold,
+        radius_scale: 1.0,
+    };
+    let frame = m.render_frame(&req).0;
+    assert!(frame.header.count > 0);
+    let o = EncodeOptions::default();
+    for enc in [Encoding::Raw12, Encoding::Compact] {
+        assert_eq!(encoded_size(&frame, enc, &o), encode_frame(&frame, enc, &o).0.len(), "{enc:?}");
+    }
+    // A slower link makes frames older, and the smaller encoding makes them younger.
+    let age = |mbps: f64, encoding: Encoding| {
+        let mut op = opts(&["orbit"], NetworkModel { server_ms: 100.0, latency_ms: 10.0, mbps });
+        op.cfg.encoding = encoding;
+        let runs = simulate_all(&small(), &op).unwrap();
+        runs[0].result.rows.iter().map(|r| r.frame_age_ms).sum::<f64>()
+    };
+    assert!(age(0.2, Encoding::Raw12) > age(1000.0, Encoding::Raw12));
+    assert!(age(0.2, Encoding::Compact) < age(0.2, Encoding::Raw12));
+}
+
+#[test]
+fn bad_input_is_a_clear_error() {
+    let e = CameraPath::parse("barrel-roll").unwrap_err().to_string();
+    assert!(e.contains("unknown scenario") && e.contains("barrel-roll"), "{e}");
+    let o = opts(&["orbit"], NetworkModel { mbps: 0.0, ..NetworkModel::DEFAULT });
+    let e = simulate_all(&small(), &o).err().unwrap().to_string();
+    assert!(e.contains("bandwidth"), "{e}");
+    let mut o = opts(&["orbit"], NetworkModel::DEFAULT);
+    o.methods = "stale,warp9".into();
+    assert!(simulate_all(&small(), &o).err().unwrap().to_string().contains("warp9"));
+
+    let dir = std::env::temp_dir().join(format!("volwarp-session-bad-{}", std::process::id()));
+    std::fs::create_dir_all(&dir).unwrap();
+    let cam = Camera::look_at(
+        volwarp_core::Vec3::new(0.0, 0.0, 3.0),
+        volwarp_core::Vec3::ZERO,
+        volwarp_core::Vec3::Y,
+        30.0,
+        64,
+        64,
+    );
+    let record = |cams: &[Camera]| {
+        let mut v = Vec::new();
+        write_magic(&mut VecWriter(&mut v)).unwrap();
+        for (i, c) in cams.iter().enumerate() {
+            let request =
+                CameraRequest { seq: i as u64, camera: *c, heuristic: Heuristic::Threshold, radius_scale: 1.0 };
+            write_entry(&mut VecWriter(&mut v), &Entry::Camera { t_us: i as u64 * 33_000, request }).unwrap();
+        }
+        v
+    };
+    let good = record(&[cam, cam.orbit(5.0, 0.0), cam.orbit(10.0, 0.0)]);
+    let ok = dir.join("ok.vwrec");
+    std::fs::write(&ok, &good).unwrap();
+    let p = CameraPath::parse(&format!("record:{}", ok.display())).unwrap();
+    assert_eq!(p.recorded_duration(), Some(0.066));
+    let cut = dir.join("cut.vwrec");
+    std::fs::write(&cut, &good[..good.len() - 7]).unwrap();
+    let e = CameraPath::parse(&format!("record:{}", cut.display())).unwrap_err().to_string();
+    assert!(e.contains("cut.vwrec"), "{e}");
+    let nan = dir.join("nan.vwrec");
+    let mut bad = cam;
+    bad.eye.x = f32::NAN;
+    std::fs::write(&nan, record(&[cam, bad])).unwrap();
+    let e = CameraPath::parse(&format!("record:{}", nan.display())).unwrap_err().to_string();
+    assert!(e.contains("nan.vwrec") && (e.contains("NaN") || e.contains("camera")), "{e}");
+    assert!(CameraPath::parse(&format!("record:{}", dir.join("missing.vwrec").display())).is_err());
+    std::fs::remove_dir_all(&dir).ok();
+}
+
+#[test]
+fn a_uint16_volume_with_non_cubic_dimensions_runs_by_path_and_writes_the_files() {
+    let dir = std::env::temp_dir().join(format!("volwarp-session-u16-{}", std::process::id()));
+    std::fs::create_dir_all(&dir).unwrap();
+    let (nx, ny, nz) = (20usize, 14usize, 9usize);
+    let mut bytes = Vec::with_capacity(nx * ny * nz * 2);
+    for z in 0..nz {
+        for y in 0..ny {
+            for x in 0..nx {
+                let (dx, dy, dz) = (x as f32 - 9.5, y as f32 - 6.5, z as f32 - 4.0);
+                let v = (40000.0 * (-(dx * dx + dy * dy + dz * dz) / 30.0).exp()) as u16;
+                bytes.extend_from_slice(&v.to_le_bytes());
+            }
+        }
+    }
+    let path = dir.join("blob_20x14x9_uint16.raw");
+    std::fs::write(&path, bytes).unwrap();
+    let ds = Dataset::load(&path, None).unwrap();
+    let mut o = opts(&["orbit", "look-around"], NetworkModel::DEFAULT);
+    o.cfg.duration_s = 1.0;
+    let out = dir.join("out");
+    let runs = volwarp_eval::session::run(&[ds], &o, &out).unwrap();
+    assert_eq!(runs.len(), 2);
+    for f in ["session.csv", "summary.csv", "summary.md", "frames.csv", "speed_accuracy.png"] {
+        assert!(out.join(f).is_file(), "{f}");
+    }
+    let charts: Vec<_> = std::fs::read_dir(&out)
+        .unwrap()
+        .filter_map(|e| e.ok())
+        .filter(|e| e.file_name().to_string_lossy().starts_with("flip_time_"))
+        .collect();
+    assert_eq!(charts.len(), 1);
+    std::fs::remove_dir_all(&dir).ok();
+}
