@@ -67,9 +67,9 @@ pub struct Options {
     /// Threads of the network thread's LBVH build (0: all cores).
     #[arg(long, value_name = "N", default_value_t = 1)]
     pub build_threads: usize,
-    /// Renderer, in key order (keys 1–8): spheres-cpu, points1, points2, points3, splat (exact
+    /// Renderer, in key order (keys 1–9, 0): spheres-cpu, points1, points2, points3, splat (exact
     /// sphere splatting), stale (unwarped frame), spheres-gpu (GPU opened on first use),
-    /// spheres-scalar.
+    /// spheres-scalar, spheres-fill and splat-fill (holes filled from the stale frame).
     #[arg(long, value_name = "NAME", default_value_t = RendererKind::DEFAULT, value_parser = parse_renderer)]
     pub renderer: RendererKind,
     /// Depth heuristic the server uses: entrance, exit, midpoint, threshold, peak, gradient,
