@@ -69,6 +69,10 @@ impl SampleIds for SphereSplat {
 pub struct FillOptions {
     /// Fill from the stale frame for the pixel's view direction (stage 3).
     pub stale: bool,
+    /// Fill (stages 2–4) only pixels inside the newest frame's silhouette: between the first and
+    /// last pixel it covers in their row *and* in their column. Outside it, an empty pixel is
+    /// more often empty space the warp got right than a hole (measured: `docs/results.md`).
+    pub enclosed_only: bool,
     /// Pull-push levels (stage 4); 0 turns it off, at most [`FillOptions::MAX_LEVELS`].
     pub pull_push_levels: u32,
 }
@@ -78,7 +82,7 @@ impl FillOptions {
     pub const MAX_LEVELS: u32 = 6;
 
     /// The default of the `*-fill` renderers (chosen by measurement, `docs/results.md`).
-    pub const DEFAULT: FillOptions = FillOptions { stale: true, pull_push_levels: 0 };
+    pub const DEFAULT: FillOptions = FillOptions { stale: true, enclosed_only: true, pull_push_levels: 0 };
 }
 
 impl Default for FillOptions {
@@ -149,6 +153,9 @@ impl<R: SampleIds> HoleFill<R> {
         self.state.clear();
         let colors = &newest.colors;
         self.state.extend(self.ids.iter().map(|&id| if id == NO_HIT { UNFILLED } else { filled(shade(colors, id)) }));
+        if self.opts.enclosed_only {
+            block_outside_silhouette(&mut self.state, w, camera.height as usize);
+        }
         // 2. Older frames, newest first, only where nothing is yet.
         let basis = camera.ray_basis();
         for older in scenes.iter().take(MAX_FRAMES).skip(1) {
@@ -175,7 +182,7 @@ impl<R: SampleIds> HoleFill<R> {
             self.pull_push(camera.width as usize, camera.height as usize);
         }
         for (p, &s) in out.pixels.iter_mut().zip(&self.state) {
-            if s != UNFILLED {
+            if s & FILLED != 0 {
                 *p = s as u32;
             }
         }
@@ -233,7 +240,7 @@ impl<R: SampleIds> HoleFill<R> {
         l0.clear();
         l0.extend(self.state.iter().map(|&s| {
             let c = rgb(s as u32);
-            [c[0], c[1], c[2], if s == UNFILLED { 0.0 } else { 1.0 }]
+            [c[0], c[1], c[2], if s & FILLED != 0 { 1.0 } else { 0.0 }]
         }));
         // Pull: the weighted mean color of the children; weight min(1, Σw / 2), so a block
         // half covered counts as covered.
@@ -307,11 +314,35 @@ const BAND: usize = 8;
 
 /// A pixel no stage has filled yet (a filled pixel has bit 32 set).
 const UNFILLED: u64 = 0;
+/// The bit of a filled pixel.
+const FILLED: u64 = 1 << 32;
+/// An empty pixel the fill stages leave alone (outside the silhouette): the background.
+const BLOCKED: u64 = 1 << 33;
 
 /// A filled pixel of color `c`.
 #[inline(always)]
 fn filled(c: u32) -> u64 {
-    (1 << 32) | c as u64
+    FILLED | c as u64
+}
+
+/// Marks the unfilled pixels outside the covered pixels' row and column spans [`BLOCKED`].
+fn block_outside_silhouette(state: &mut [u64], w: usize, h: usize) {
+    let mut cols = vec![(usize::MAX, 0usize); w];
+    let mut rows = vec![(usize::MAX, 0usize); h];
+    for (j, &s) in state.iter().enumerate() {
+        if s & FILLED != 0 {
+            let (x, y) = (j % w, j / w);
+            cols[x] = (cols[x].0.min(y), cols[x].1.max(y));
+            rows[y] = (rows[y].0.min(x), rows[y].1.max(x));
+        }
+    }
+    for (j, s) in state.iter_mut().enumerate() {
+        let (x, y) = (j % w, j / w);
+        let inside = rows[y].0 <= x && x <= rows[y].1 && cols[x].0 <= y && y <= cols[x].1;
+        if *s == UNFILLED && !inside {
+            *s = BLOCKED;
+        }
+    }
 }
 
 /// RGB of a packed color in 0..=1.

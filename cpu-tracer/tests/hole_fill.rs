@@ -43,9 +43,9 @@ fn fill(opts: FillOptions) -> HoleFill<PacketTracer> {
     HoleFill::new(PacketTracer::new(1), RendererKind::SpheresFill, opts, 1)
 }
 
-const STALE_ONLY: FillOptions = FillOptions { stale: true, pull_push_levels: 0 };
-const ALL_STAGES: FillOptions = FillOptions { stale: true, pull_push_levels: 3 };
-const FRAMES_ONLY: FillOptions = FillOptions { stale: false, pull_push_levels: 0 };
+const STALE_ONLY: FillOptions = FillOptions { stale: true, enclosed_only: true, pull_push_levels: 0 };
+const ALL_STAGES: FillOptions = FillOptions { stale: true, enclosed_only: true, pull_push_levels: 3 };
+const FRAMES_ONLY: FillOptions = FillOptions { stale: false, enclosed_only: false, pull_push_levels: 0 };
 
 #[test]
 fn fill_keeps_covered_pixels_and_fills_holes_on_a_turn() {
@@ -54,7 +54,7 @@ fn fill_keeps_covered_pixels_and_fills_holes_on_a_turn() {
     let cam = frame.header.camera.orbit(25.0, 10.0);
     let plain = render(&mut PacketTracer::new(1), &scene, &cam);
     let id = ids(&scene, &cam);
-    for opts in [STALE_ONLY, ALL_STAGES, FillOptions { stale: false, pull_push_levels: 2 }] {
+    for opts in [STALE_ONLY, ALL_STAGES, FillOptions { stale: false, enclosed_only: true, pull_push_levels: 2 }] {
         let filled = render(&mut fill(opts), &scene, &cam);
         assert_eq!((filled.width, filled.height), (plain.width, plain.height));
         let mut holes_filled = 0;
@@ -67,6 +67,16 @@ fn fill_keeps_covered_pixels_and_fills_holes_on_a_turn() {
         }
         assert!(holes_filled > 20, "{opts:?}: only {holes_filled} holes filled");
     }
+    // Enclosed only: nothing outside the covered pixels' row span is filled.
+    let filled = render(&mut fill(STALE_ONLY), &scene, &cam);
+    let w = cam.width as usize;
+    for (y, row) in id.chunks(w).enumerate() {
+        let Some(first) = row.iter().position(|&d| d != NO_HIT) else {
+            assert!(filled.pixels[y * w..(y + 1) * w].iter().all(|&p| p == BACKGROUND));
+            continue;
+        };
+        assert!(filled.pixels[y * w..y * w + first].iter().all(|&p| p == BACKGROUND), "row {y}");
+    }
 }
 
 #[test]
@@ -75,7 +85,8 @@ fn stale_fill_at_the_frame_camera_is_the_stale_image() {
     let scene = Scene::build(&frame);
     let cam = frame.header.camera;
     let stale = render(&mut StaleImage::new(1), &scene, &cam);
-    let filled = render(&mut fill(STALE_ONLY), &scene, &cam);
+    let everywhere = FillOptions { enclosed_only: false, ..STALE_ONLY };
+    let filled = render(&mut fill(everywhere), &scene, &cam);
     let id = ids(&scene, &cam);
     let holes = id.iter().filter(|&&d| d == NO_HIT).count();
     assert!(holes > 100, "small spheres leave holes: {holes}");
@@ -94,7 +105,7 @@ fn every_cpu_sphere_renderer_fills_the_same_image() {
     let older = Scene::build(&older_frame);
     for (yaw, pitch) in [(0.0, 0.0), (15.0, 5.0), (40.0, -20.0), (180.0, 0.0)] {
         let cam = frame.header.camera.orbit(yaw, pitch);
-        for opts in [STALE_ONLY, ALL_STAGES, FRAMES_ONLY] {
+        for opts in [STALE_ONLY, ALL_STAGES, FRAMES_ONLY, FillOptions { enclosed_only: false, ..ALL_STAGES }] {
             let mut packet = fill(opts);
             let mut scalar = HoleFill::new(ScalarTracer::new(2), RendererKind::SpheresFill, opts, 2);
             let mut splat = HoleFill::new(SphereSplat::new(1), RendererKind::SplatFill, opts, 1);

@@ -4,7 +4,8 @@
 //! truth, for
 //!
 //! * `stale`, `points2`, `points3`, `spheres-cpu`, `spheres-fill` (the registry's),
-//! * `fill+guard G`: `spheres-fill` of a frame rendered for a guard band of fraction G,
+//! * `fill+guard0.1`: `spheres-fill` of a frame rendered for a guard band of fraction 0.1,
+//! * `fill-everywhere`: `spheres-fill` that also fills outside the silhouette,
 //! * `fill K=2 steady`: `spheres-fill` with the previous frame (rendered at −20°) kept,
 //! * `fill K=2 reversal`: the same with the previous frame at +20° (the camera came back),
 //!
@@ -46,7 +47,7 @@ fn main() {
         "spheres-fill",
         "fill-pp3",
         "fill+guard0.1",
-        "fill+guard0.2",
+        "fill-everywhere",
         "fill K=2 steady",
         "fill K=2 reversal",
     ];
@@ -56,7 +57,7 @@ fn main() {
         let m = Marcher::from_dataset(ds);
         let c0 = m.default_camera(size, size);
         let scene = build_scene(&frame_for(&m, &c0, h));
-        let guards: Vec<(Scene, f32)> = [0.1f32, 0.2]
+        let guards: Vec<(Scene, f32)> = [0.1f32]
             .iter()
             .map(|&g| {
                 let gb = GuardBand::new(&c0, g, 8192).unwrap();
@@ -67,13 +68,11 @@ fn main() {
         let prev_steady = build_scene(&frame_for(&m, &orbit(&c0, -20.0), h));
         let prev_back = build_scene(&frame_for(&m, &orbit(&c0, 20.0), h));
         eprintln!(
-            "{}: {} samples; guard 0.1: {} ({:.2}×), 0.2: {} ({:.2}×)",
+            "{}: {} samples; guard 0.1: {} ({:.2}×)",
             ds.name,
             scene.samples.len(),
             guards[0].0.samples.len(),
-            guards[0].0.samples.len() as f64 / scene.samples.len() as f64,
-            guards[1].0.samples.len(),
-            guards[1].0.samples.len() as f64 / scene.samples.len() as f64
+            guards[0].0.samples.len() as f64 / scene.samples.len() as f64
         );
         let mut plain: Vec<Box<dyn Renderer + Send>> = [
             RendererKind::Stale,
@@ -89,7 +88,13 @@ fn main() {
         let mut pp = HoleFill::new(
             PacketTracer::new(0),
             RendererKind::SpheresFill,
-            FillOptions { stale: true, pull_push_levels: 3 },
+            FillOptions { stale: true, enclosed_only: true, pull_push_levels: 3 },
+            0,
+        );
+        let mut everywhere = HoleFill::new(
+            PacketTracer::new(0),
+            RendererKind::SpheresFill,
+            FillOptions { enclosed_only: false, ..FillOptions::DEFAULT },
             0,
         );
         for (ai, &a) in ANGLES.iter().enumerate() {
@@ -107,6 +112,8 @@ fn main() {
                 fill.render(gs, &cam, &mut img);
                 scores.push(flip(&truth, &img));
             }
+            everywhere.render(&scene, &cam, &mut img);
+            scores.push(flip(&truth, &img));
             fill.render_set(&[&scene, &prev_steady], &cam, &mut img);
             scores.push(flip(&truth, &img));
             fill.render_set(&[&scene, &prev_back], &cam, &mut img);

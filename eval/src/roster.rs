@@ -70,8 +70,8 @@ pub fn roster(opts: RosterOptions) -> Vec<Entry> {
 /// The hole-filling variants measured beside `spheres-fill` (issue 19): the stale frame plus
 /// 3 levels of pull-push, and pull-push alone.
 pub const FILL_VARIANTS: [(&str, FillOptions); 2] = [
-    ("spheres-fill-pp3", FillOptions { stale: true, pull_push_levels: 3 }),
-    ("spheres-pp3", FillOptions { stale: false, pull_push_levels: 3 }),
+    ("spheres-fill-pp3", FillOptions { stale: true, enclosed_only: true, pull_push_levels: 3 }),
+    ("spheres-pp3", FillOptions { stale: false, enclosed_only: true, pull_push_levels: 3 }),
 ];
 
 #[cfg(feature = "gpu")]
