@@ -258,8 +258,8 @@ impl<R: SampleIds> HoleFill<R> {
                         let (x, y) = (2 * px + dx, 2 * py + dy);
                         if x < cw && y < ch {
                             let c = child[y * cw + x];
-                            for i in 0..3 {
-                                acc[i] += c[i] * c[3];
+                            for (a, v) in acc.iter_mut().zip(&c[..3]) {
+                                *a += v * c[3];
                             }
                             acc[3] += c[3];
                         }
@@ -288,8 +288,8 @@ impl<R: SampleIds> HoleFill<R> {
                     let (wc, wp) = (c[3], p[3] * (1.0 - c[3]));
                     let sum = wc + wp;
                     if sum > 0.0 {
-                        for i in 0..3 {
-                            c[i] = (c[i] * wc + p[i] * wp) / sum;
+                        for (v, pv) in c[..3].iter_mut().zip(&p[..3]) {
+                            *v = (*v * wc + pv * wp) / sum;
                         }
                         c[3] = sum;
                     }
