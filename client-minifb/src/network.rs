@@ -8,7 +8,10 @@
 //!   of the scene the display dropped) and puts the scene in a one-element slot;
 //! * **writer** — sends the newest view (camera, heuristic, radius scale) as a CameraRequest:
 //!   at most every [`THROTTLE`], only when it changed, and again whenever a frame arrives so
-//!   the server always has work. Newest only: there is never a queue of cameras.
+//!   the server always has work. Newest only: there is never a queue of cameras. With
+//!   `--predict` it sends the camera core's `prediction` expects for when the frame will be
+//!   shown (horizon: the smoothed request-to-ready time the builder measures); with `--guard G`
+//!   the camera widened by a guard band (core's `guard`).
 //!
 //! The display loop only ever `try_lock`s the slot ([`Network::take_scene`]); every lock the
 //! display takes is held for a few instructions.
@@ -24,9 +27,12 @@ use std::sync::atomic::{AtomicBool, AtomicU64, Ordering};
 use std::sync::{Arc, Condvar, Mutex, MutexGuard};
 use std::thread::JoinHandle;
 use std::time::{Duration, Instant};
+use volwarp_core::guard::GuardBand;
+use volwarp_core::prediction::Predictor;
 use volwarp_core::wire::{CameraRequest, Frame, Limits, Message};
 use volwarp_core::{Camera, Heuristic, Scene};
 use volwarp_cpu_tracer::ParallelBuilder;
+use volwarp_cpu_tracer::MAX_VIEWPORT;
 
 /// Shortest time between two camera requests.
 pub const THROTTLE: Duration = Duration::from_millis(30);
@@ -77,6 +83,12 @@ pub struct NetConfig {
     /// Link rate in Mbit/s that the socket's reads and writes are throttled to
     /// (`--bandwidth-mbps`; [`crate::link`]); `None`: loopback speed.
     pub bandwidth_mbps: Option<f64>,
+    /// Ask for the camera predicted for when the frame will be shown (core's `prediction`,
+    /// orbit-aware, horizon: the measured request-to-display time) instead of the current one.
+    pub predict: bool,
+    /// Guard band: ask for a view wider by this fraction of the display on every side, at the
+    /// same pixel density (core's `guard`; 0: none, at most 0.5).
+    pub guard: f32,
 }
 
 struct Pending {
@@ -106,6 +118,8 @@ struct Shared {
     built: AtomicU64,
     /// Odd while a frame is being decoded or built.
     work_gen: AtomicU64,
+    /// Smoothed time from a request to its scene being ready to show, in µs (0: not measured).
+    request_to_ready_us: AtomicU64,
 }
 
 fn lock<T>(m: &Mutex<T>) -> MutexGuard<'_, T> {
@@ -168,6 +182,7 @@ impl Network {
             frames: AtomicU64::new(0),
             built: AtomicU64::new(0),
             work_gen: AtomicU64::new(0),
+            request_to_ready_us: AtomicU64::new(0),
         });
         let stream = conn.stream;
         let _ = stream.set_read_timeout(Some(cfg.timeout.max(Duration::from_millis(10))));
@@ -195,12 +210,13 @@ impl Network {
                 .map_err(spawn_err)?,
         );
         let sh = shared.clone();
+        let (predict, guard) = (cfg.predict, cfg.guard);
         threads.push(
             std::thread::Builder::new()
                 .name("volwarp-net-write".into())
                 .spawn(move || match link(write_mbps) {
-                    Some(b) => write_loop(&sh, Throttled::new(ws, b)),
-                    None => write_loop(&sh, ws),
+                    Some(b) => write_loop(&sh, Throttled::new(ws, b), predict, guard),
+                    None => write_loop(&sh, ws, predict, guard),
                 })
                 .map_err(spawn_err)?,
         );
@@ -369,6 +385,12 @@ fn build_loop(sh: &Shared, cfg: &NetConfig) {
         let build_ms = t0.elapsed().as_secs_f64() * 1e3;
         drop(busy);
         sh.built.fetch_add(1, Ordering::Relaxed);
+        if let Some(r) = p.requested_at {
+            // Exponential moving average (1/4) of request-to-ready, the prediction horizon.
+            let us = r.elapsed().as_micros().min(u64::MAX as u128) as u64;
+            let old = sh.request_to_ready_us.load(Ordering::Relaxed);
+            sh.request_to_ready_us.store(if old == 0 { us } else { (3 * old + us) / 4 }, Ordering::Relaxed);
+        }
         log::debug!("built scene seq {} ({} samples) in {build_ms:.1} ms", scene.header.seq, scene.samples.len());
         let ready = ReadyScene {
             seq: scene.header.seq,
@@ -388,7 +410,33 @@ fn build_loop(sh: &Shared, cfg: &NetConfig) {
     }
 }
 
-fn write_loop(sh: &Shared, mut stream: impl Write) {
+/// The camera to request for `view` at `now`: predicted for the measured request-to-display
+/// time (`predict`), widened by a guard band (`guard`).
+fn request_camera(
+    sh: &Shared,
+    predictor: &mut Predictor,
+    start: Instant,
+    camera: Camera,
+    predict: bool,
+    guard: f32,
+) -> Camera {
+    let mut cam = camera;
+    if predict {
+        predictor.observe(camera, start.elapsed().as_secs_f64());
+        let horizon = sh.request_to_ready_us.load(Ordering::Relaxed) as f32 * 1e-6;
+        cam = predictor.predict(horizon).unwrap_or(camera);
+    }
+    if guard > 0.0 {
+        if let Ok(g) = GuardBand::new(&cam, guard, MAX_VIEWPORT) {
+            cam = g.camera;
+        }
+    }
+    cam
+}
+
+fn write_loop(sh: &Shared, mut stream: impl Write, predict: bool, guard: f32) {
+    let mut predictor = Predictor::new();
+    let start = Instant::now();
     let mut seq = 0u64;
     let mut last_send: Option<Instant> = None;
     loop {
@@ -418,8 +466,8 @@ fn write_loop(sh: &Shared, mut stream: impl Write) {
             }
         };
         seq += 1;
-        let req =
-            CameraRequest { seq, camera: view.camera, heuristic: view.heuristic, radius_scale: view.radius_scale };
+        let camera = request_camera(sh, &mut predictor, start, view.camera, predict, guard);
+        let req = CameraRequest { seq, camera, heuristic: view.heuristic, radius_scale: view.radius_scale };
         let now = Instant::now();
         {
             let mut s = lock(&sh.sent);

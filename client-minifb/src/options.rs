@@ -67,9 +67,9 @@ pub struct Options {
     /// Threads of the network thread's LBVH build (0: all cores).
     #[arg(long, value_name = "N", default_value_t = 1)]
     pub build_threads: usize,
-    /// Renderer, in key order (keys 1–8): spheres-cpu, points1, points2, points3, splat (exact
+    /// Renderer, in key order (keys 1–9, 0): spheres-cpu, points1, points2, points3, splat (exact
     /// sphere splatting), stale (unwarped frame), spheres-gpu (GPU opened on first use),
-    /// spheres-scalar.
+    /// spheres-scalar, spheres-fill and splat-fill (holes filled from the stale frame).
     #[arg(long, value_name = "NAME", default_value_t = RendererKind::DEFAULT, value_parser = parse_renderer)]
     pub renderer: RendererKind,
     /// Depth heuristic the server uses: entrance, exit, midpoint, threshold, peak, gradient,
@@ -97,6 +97,14 @@ pub struct Options {
     /// reads and writes; 0: unthrottled): shows what a slow network does to frame age.
     #[arg(long, value_name = "MBPS", default_value_t = 0.0)]
     pub bandwidth_mbps: f64,
+    /// Ask the server for the camera predicted for when its frame will be shown (orbit-aware
+    /// extrapolation over the measured request-to-display time) instead of the current one.
+    #[arg(long)]
+    pub predict: bool,
+    /// Guard band: ask for a view wider by this fraction of the window on every side (same
+    /// pixel density, (1 + 2G)² the pixels), so turns reveal samples already sent; 0..=0.5.
+    #[arg(long, value_name = "G", default_value_t = 0.0, value_parser = parse_guard)]
+    pub guard: f32,
     /// Display frame rate limit (0: none). Default: 60 in the window, none headless.
     #[arg(long)]
     pub fps: Option<u32>,
@@ -175,6 +183,16 @@ impl Options {
     }
 }
 
+/// A guard fraction in `0..=0.5` (core's `guard::MAX_GUARD`).
+fn parse_guard(s: &str) -> Result<f32, String> {
+    let g: f32 = s.parse().map_err(|e| format!("{e}"))?;
+    if (0.0..=volwarp_core::guard::MAX_GUARD).contains(&g) {
+        Ok(g)
+    } else {
+        Err(format!("guard must be within 0..={}", volwarp_core::guard::MAX_GUARD))
+    }
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -187,6 +205,15 @@ mod tests {
         assert!(parse_size("99999x10").is_err());
         assert_eq!(parse_heuristic("rel-threshold"), Ok(Heuristic::RelThreshold));
         assert!(parse_heuristic("nope").unwrap_err().contains("threshold"));
+    }
+
+    #[test]
+    fn guard_fractions_are_bounded() {
+        assert_eq!(parse_guard("0.2"), Ok(0.2));
+        assert_eq!(parse_guard("0"), Ok(0.0));
+        for bad in ["-0.1", "0.6", "NaN", "inf", "x"] {
+            assert!(parse_guard(bad).is_err(), "{bad}");
+        }
     }
 
     #[test]

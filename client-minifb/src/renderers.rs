@@ -1,4 +1,4 @@
-//! The interchangeable renderers of the client and their live switching (keys 1–8 of core's
+//! The interchangeable renderers of the client and their live switching (keys 1–9, 0 of core's
 //! [`RendererKind`] registry). Every renderer draws the same scene for the same camera; the GPU
 //! tracer is opened lazily the first time it is chosen, and if no adapter can be opened the
 //! client says so and keeps the current renderer.
@@ -83,7 +83,7 @@ impl Renderers {
         Ok(())
     }
 
-    /// Switches to the renderer of key `1..=8`.
+    /// Switches to the renderer of key `1..=10`.
     pub fn select_key(&mut self, key: usize) -> Result<(), String> {
         match RendererKind::from_key(key) {
             Some(kind) => self.select(kind),
@@ -148,6 +148,6 @@ mod tests {
             r.render(&unbuilt, &cam, &mut d);
             assert_eq!(a, d, "{} on the unbuilt scene", r.name());
         }
-        assert!(r.select_key(11).is_err());
+        assert!(r.select_key(RendererKind::ALL.len() + 1).is_err());
     }
 }

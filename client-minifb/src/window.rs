@@ -216,7 +216,7 @@ pub fn run_live(opts: &Options, display: &mut Display, home: Camera) -> Result<(
     Ok(())
 }
 
-/// Plays a record file in a window at its recorded pace; keys 1–8 switch the renderer.
+/// Plays a record file in a window at its recorded pace; keys 1–0 switch the renderer.
 pub fn run_replay(opts: &Options, replay: &mut Replay, renderers: &mut Renderers) -> Result<(), ClientError> {
     let mut screen = Screen::open("volwarp replay", opts.size.0, opts.size.1, opts.fps.unwrap_or(60))?;
     let mut image = Image::new(1, 1);

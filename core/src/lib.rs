@@ -7,6 +7,8 @@
 //! |---|---|
 //! | [`camera`] | the pinhole camera and its primary rays (one convention for marcher, tracers and shader) |
 //! | [`sample`] | the object-space sample: quantized position + radius in 64 bits, RGBA8 color in 32 |
+//! | [`prediction`] | the camera expected when a requested frame arrives (orbit-aware extrapolation) |
+//! | [`guard`] | guard bands: a wider requested view at the same pixel density |
 //! | [`heuristics`] | the ZAL12 representative-depth heuristics, as state machines |
 //! | [`compact_frame`] | the compact frame encoding: coverage mask, predicted depths, radii and colors, zstd (≈3 B/sample) |
 //! | [`compaction`] | stable removal of empty (radius 0) samples |
@@ -38,6 +40,7 @@ extern crate std;
 pub mod camera;
 pub mod compact_frame;
 pub mod compaction;
+pub mod guard;
 pub mod heuristics;
 #[cfg(feature = "alloc")]
 pub mod image_diff;
@@ -45,6 +48,7 @@ pub mod lbvh;
 pub mod morton;
 #[cfg(feature = "png")]
 pub mod png;
+pub mod prediction;
 pub mod record;
 #[cfg(feature = "alloc")]
 pub mod renderer;

@@ -1,5 +1,5 @@
 //! The one registry of renderers: every way of drawing a scene that volwarp offers, with its
-//! name (CSV files, `--renderer`, the window title), its key in the client (1–10; the window has keys 1–9) and what it can
+//! name (CSV files, `--renderer`, the window title), its key in the client (1–12) and what it can
 //! do. The client, the evaluation and every command line read this table; adding a renderer is
 //! one entry here plus its constructor (the compiler points at the `match`es that need it).
 
@@ -40,6 +40,11 @@ pub enum RendererKind {
     /// Exact object-order sphere splatting in cache-sized screen tiles, no LBVH (`splat-tiles`,
     /// key 10: no window key).
     SplatTiles,
+    /// The packet tracer with hole filling: pixels no sample covers show the stale frame for
+    /// that view direction (`spheres-fill`, key 11: no window key; `volwarp_cpu_tracer::hole_fill`).
+    SpheresFill,
+    /// The exact splatter with the same hole filling (`splat-fill`, key 12).
+    SplatFill,
 }
 
 /// One row of the registry.
@@ -60,7 +65,7 @@ const fn caps(exact_spheres: bool, needs_lbvh: bool, gpu: bool) -> Capabilities 
 }
 
 /// The registry, in key order (key `k` selects `REGISTRY[k − 1]`).
-pub const REGISTRY: [RendererInfo; 10] = [
+pub const REGISTRY: [RendererInfo; RendererKind::COUNT] = [
     RendererInfo {
         kind: RendererKind::SpheresCpu,
         name: "spheres-cpu",
@@ -121,11 +126,26 @@ pub const REGISTRY: [RendererInfo; 10] = [
         about: "exact sphere splatting in screen tiles (no LBVH)",
         caps: caps(true, false, false),
     },
+    RendererInfo {
+        kind: RendererKind::SpheresFill,
+        name: "spheres-fill",
+        about: "SIMD sphere tracer, holes filled from the stale frame",
+        caps: caps(false, true, false),
+    },
+    RendererInfo {
+        kind: RendererKind::SplatFill,
+        name: "splat-fill",
+        about: "exact sphere splatting, holes filled from the stale frame",
+        caps: caps(false, false, false),
+    },
 ];
 
 impl RendererKind {
+    /// How many renderers the registry has.
+    pub const COUNT: usize = 12;
+
     /// Every renderer, in key order.
-    pub const ALL: [RendererKind; 10] = [
+    pub const ALL: [RendererKind; RendererKind::COUNT] = [
         RendererKind::SpheresCpu,
         RendererKind::Points1,
         RendererKind::Points2,
@@ -136,6 +156,8 @@ impl RendererKind {
         RendererKind::SpheresScalar,
         RendererKind::Spheres,
         RendererKind::SplatTiles,
+        RendererKind::SpheresFill,
+        RendererKind::SplatFill,
     ];
 
     /// The renderer a client starts with.
@@ -159,6 +181,8 @@ impl RendererKind {
             RendererKind::SpheresScalar => 7,
             RendererKind::Spheres => 8,
             RendererKind::SplatTiles => 9,
+            RendererKind::SpheresFill => 10,
+            RendererKind::SplatFill => 11,
         }
     }
 
@@ -167,12 +191,12 @@ impl RendererKind {
         self.info().name
     }
 
-    /// Its key in the client (1–10).
+    /// Its key in the client (1–12; the window has keys 1–9).
     pub const fn key(self) -> usize {
         self.index() + 1
     }
 
-    /// The renderer of a client key (1–10).
+    /// The renderer of a client key (1–12).
     pub fn from_key(key: usize) -> Option<RendererKind> {
         key.checked_sub(1).and_then(|i| Self::ALL.get(i)).copied()
     }

@@ -15,6 +15,7 @@
 //! | [`stale_image`] | the frame as it was rendered, not warped | `stale` |
 //! | [`build`] (also `parallel_build`) | rayon LBVH build, byte-identical to `Scene::build` | — |
 //! | [`build::sort`] (also `parallel_sort`) | the parallel stable radix sort it uses | — |
+//! | [`hole_fill`] | sphere renderers whose empty pixels are filled (older frames, the stale frame by direction, pull-push) | `spheres-fill`, `splat-fill` |
 //! | [`synthetic`] | synthetic frames and clouds for tests and benchmarks | — |
 //! | [`threads`] | a renderer's own thread count | — |
 //! | `frame_setup` | what every renderer does first: validate camera and scene, size and clear the output | — |
@@ -30,6 +31,7 @@
 #![allow(clippy::neg_cmp_op_on_partial_ord)]
 
 pub mod build;
+pub mod hole_fill;
 pub mod packet_tracer;
 pub mod point_splat;
 pub mod route;
@@ -52,6 +54,8 @@ pub use build as parallel_build;
 pub use build::sort as parallel_sort;
 
 pub use build::{build_scene, BuildTimes, Method, ParallelBuilder};
+
+pub use hole_fill::{FillOptions, HoleFill, SampleIds};
 pub use packet_tracer::PacketTracer;
 pub use point_splat::PointSplat;
 pub use route::{AutoSpheres, CostModel, LazyBuild, Route};
@@ -84,6 +88,12 @@ pub fn create(kind: RendererKind, threads: usize) -> Option<Box<dyn Renderer + S
         RendererKind::Stale => Box::new(StaleImage::new(threads)),
         RendererKind::Spheres => Box::new(AutoSpheres::new(threads)),
         RendererKind::SplatTiles => Box::new(TileSplat::new(threads)),
+        RendererKind::SpheresFill => {
+            Box::new(HoleFill::new(PacketTracer::new(threads), kind, FillOptions::DEFAULT, threads))
+        }
+        RendererKind::SplatFill => {
+            Box::new(HoleFill::new(SphereSplat::new(threads), kind, FillOptions::DEFAULT, threads))
+        }
         RendererKind::SpheresGpu => return None,
     })
 }

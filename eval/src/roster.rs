@@ -1,10 +1,12 @@
 //! Every renderer the evaluation compares, under its CSV name: the stale image, points with
 //! N = 1, 2, 3, the CPU sphere tracer (and its radius variants ×0.5 and ×2), the GPU sphere
-//! tracer where an adapter opens, and the exact sphere splatter.
+//! tracer where an adapter opens, the exact sphere splatter, and the hole-filling tracer
+//! (`spheres-fill`) with its variants.
 
 use volwarp_core::renderer::Renderer;
 use volwarp_core::wire::Frame;
 use volwarp_core::{RendererKind, Scene};
+use volwarp_cpu_tracer::{FillOptions, HoleFill, PacketTracer};
 
 /// The radius scales of the sphere-size variants (`spheres-cpu-r0.5`, `spheres-cpu-r2`).
 pub const RADIUS_VARIANTS: [f32; 2] = [0.5, 2.0];
@@ -57,8 +59,20 @@ pub fn roster(opts: RosterOptions) -> Vec<Entry> {
     for s in RADIUS_VARIANTS {
         v.push(Entry { name: format!("{SpheresCpu}-r{s}"), radius_scale: s, ..entry(SpheresCpu, t) });
     }
+    v.push(entry(SpheresFill, t));
+    for (name, opts) in FILL_VARIANTS {
+        let renderer = Box::new(HoleFill::new(PacketTracer::new(t), SpheresFill, opts, t));
+        v.push(Entry { name: name.into(), radius_scale: 1.0, gpu: false, renderer });
+    }
     v
 }
+
+/// The hole-filling variants measured beside `spheres-fill` (issue 19): the stale frame plus
+/// 3 levels of pull-push, and pull-push alone.
+pub const FILL_VARIANTS: [(&str, FillOptions); 2] = [
+    ("spheres-fill-pp3", FillOptions { stale: true, enclosed_only: true, pull_push_levels: 3 }),
+    ("spheres-pp3", FillOptions { stale: false, enclosed_only: true, pull_push_levels: 3 }),
+];
 
 #[cfg(feature = "gpu")]
 fn gpu_entry() -> Option<Entry> {

@@ -1,0 +1,247 @@
+//! Camera prediction (issue 19, lever 1): the camera a client expects to show when the frame it
+//! asks for now arrives, extrapolated from its two most recent cameras.
+//!
+//! **Orbit-aware.** A volwarp camera moves about its target (drag to orbit, wheel to dolly), so
+//! the eye is extrapolated in spherical coordinates about the target, not along a straight
+//! line: azimuth about the newest camera's up axis and elevation change at constant angular
+//! velocity, the distance at a constant *rate* (a dolly by the same factor per step), and the
+//! target itself at constant velocity. A camera that orbits (or dollies) at constant speed is
+//! therefore predicted exactly, up to float rounding. Up, field of view and viewport are the
+//! newest camera's.
+//!
+//! **Bounded.** The horizon is clamped to [`MAX_HORIZON_S`], the extrapolated turn to
+//! [`MAX_TURN_DEG`] per axis and the zoom to [`MAX_ZOOM`]× either way; the elevation stays
+//! [`POLE_MARGIN_DEG`] off the poles. Anything that is not finite, a non-positive time step or
+//! a predicted camera that does not validate gives back the newest camera unchanged: never NaN.
+
+use crate::camera::Camera;
+use glam::Vec3;
+
+/// The longest horizon extrapolated, in seconds.
+pub const MAX_HORIZON_S: f32 = 1.0;
+/// The largest extrapolated azimuth or elevation change, in degrees.
+pub const MAX_TURN_DEG: f32 = 90.0;
+/// The largest extrapolated zoom factor (either way).
+pub const MAX_ZOOM: f32 = 4.0;
+/// How far from straight above or below the target the predicted eye stays, in degrees.
+pub const POLE_MARGIN_DEG: f32 = 1.0;
+
+/// A camera and the time it was shown, in seconds on any clock.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct TimedCamera {
+    /// The camera.
+    pub camera: Camera,
+    /// When, in seconds.
+    pub t: f64,
+}
+
+/// The eye about the target in spherical coordinates over an orthonormal frame `(e1, e2, up)`.
+struct Spherical {
+    azimuth: f32,
+    elevation: f32,
+    distance: f32,
+}
+
+fn spherical(rel: Vec3, e1: Vec3, e2: Vec3, up: Vec3) -> Option<Spherical> {
+    let distance = rel.length();
+    if !(distance > 1e-20) || !distance.is_finite() {
+        return None;
+    }
+    let s = (rel.dot(up) / distance).clamp(-1.0, 1.0);
+    Some(Spherical { azimuth: libm::atan2f(rel.dot(e2), rel.dot(e1)), elevation: libm::asinf(s), distance })
+}
+
+/// An angle difference wrapped into `(-π, π]`.
+fn wrap(a: f32) -> f32 {
+    let two_pi = 2.0 * core::f32::consts::PI;
+    let mut a = a % two_pi;
+    if a > core::f32::consts::PI {
+        a -= two_pi;
+    } else if a <= -core::f32::consts::PI {
+        a += two_pi;
+    }
+    a
+}
+
+/// The camera expected `horizon_s` seconds after `newest`, extrapolating the motion from
+/// `previous` to `newest` (see the module docs). Returns `newest.camera` for a zero horizon, a
+/// stationary camera or anything unusable.
+pub fn predict(previous: &TimedCamera, newest: &TimedCamera, horizon_s: f32) -> Camera {
+    let cur = newest.camera;
+    let dt = (newest.t - previous.t) as f32;
+    let h = if horizon_s.is_finite() { horizon_s.clamp(0.0, MAX_HORIZON_S) } else { 0.0 };
+    let still = previous.camera.eye == cur.eye && previous.camera.target == cur.target;
+    if !(dt > 1e-6) || !dt.is_finite() || h == 0.0 || still {
+        return cur;
+    }
+    let up = cur.up.normalize_or_zero();
+    if up == Vec3::ZERO {
+        return cur;
+    }
+    let e1 = up.any_orthonormal_vector();
+    let e2 = up.cross(e1);
+    let (Some(a), Some(b)) = (
+        spherical(previous.camera.eye - previous.camera.target, e1, e2, up),
+        spherical(cur.eye - cur.target, e1, e2, up),
+    ) else {
+        return cur;
+    };
+    let k = h / dt;
+    let max_turn = MAX_TURN_DEG.to_radians();
+    let d_az = (wrap(b.azimuth - a.azimuth) * k).clamp(-max_turn, max_turn);
+    let d_el = ((b.elevation - a.elevation) * k).clamp(-max_turn, max_turn);
+    let pole = core::f32::consts::FRAC_PI_2 - POLE_MARGIN_DEG.to_radians();
+    let el = (b.elevation + d_el).clamp(-pole, pole);
+    let az = b.azimuth + d_az;
+    let zoom = libm::powf(b.distance / a.distance, k).clamp(1.0 / MAX_ZOOM, MAX_ZOOM);
+    let dist = b.distance * zoom;
+    let target = cur.target + (cur.target - previous.camera.target) * k;
+    let (ce, se) = (libm::cosf(el), libm::sinf(el));
+    let dir = e1 * (ce * libm::cosf(az)) + e2 * (ce * libm::sinf(az)) + up * se;
+    let predicted = Camera { eye: target + dir * dist, target, ..cur };
+    match predicted.validate(u32::MAX) {
+        Ok(()) => predicted,
+        Err(_) => cur,
+    }
+}
+
+/// The two most recent cameras of a moving view, for [`predict`].
+#[derive(Clone, Copy, Debug, Default, PartialEq)]
+pub struct Predictor {
+    previous: Option<TimedCamera>,
+    newest: Option<TimedCamera>,
+}
+
+impl Predictor {
+    /// No camera seen yet.
+    pub const fn new() -> Self {
+        Predictor { previous: None, newest: None }
+    }
+
+    /// Records the camera shown at `t` seconds. A camera equal to the newest one only moves
+    /// the newest one's time forward when the view has stopped (so a still view predicts no
+    /// motion); a time that does not increase is ignored.
+    pub fn observe(&mut self, camera: Camera, t: f64) {
+        if let Some(n) = self.newest {
+            if !(t > n.t) {
+                return;
+            }
+            if n.camera == camera {
+                // Still: the motion from `previous` is over once the view has held still.
+                self.previous = Some(n);
+                self.newest = Some(TimedCamera { camera, t });
+                return;
+            }
+        }
+        self.previous = self.newest;
+        self.newest = Some(TimedCamera { camera, t });
+    }
+
+    /// The camera expected `horizon_s` after the newest one (the newest itself with fewer than
+    /// two cameras seen); `None` before any.
+    pub fn predict(&self, horizon_s: f32) -> Option<Camera> {
+        let n = self.newest?;
+        Some(match self.previous {
+            Some(p) => predict(&p, &n, horizon_s),
+            None => n.camera,
+        })
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn close(a: &Camera, b: &Camera, tol: f32) -> bool {
+        (a.eye - b.eye).length() <= tol && (a.target - b.target).length() <= tol && a.up == b.up
+    }
+
+    fn base() -> Camera {
+        Camera::framing(Vec3::ZERO, Vec3::new(2.0, 3.0, 1.5), 30.0, 20.0, 40.0, 64, 48)
+    }
+
+    #[test]
+    fn exact_on_constant_velocity_orbits_and_dollies() {
+        let c0 = base();
+        // 30 °/s yaw, 10 °/s pitch, zoom by 0.9 per 0.1 s, each on its own and, for yaw, with a
+        // dolly at the same time.
+        type Path = fn(&Camera, f32) -> Camera;
+        let paths: [(&str, Path); 4] = [
+            ("yaw", |c, t| c.orbit(30.0 * t, 0.0)),
+            ("pitch", |c, t| c.orbit(0.0, 10.0 * t)),
+            ("dolly", |c, t| c.dolly(libm::powf(0.9, t / 0.1))),
+            ("yaw+dolly", |c, t| c.orbit(-45.0 * t, 0.0).dolly(libm::powf(1.1, t / 0.1))),
+        ];
+        for (name, path) in paths {
+            for (t0, t1, h) in [(0.0, 0.033, 0.1), (0.2, 0.25, 0.55), (1.0, 1.1, 0.2)] {
+                let prev = TimedCamera { camera: path(&c0, t0), t: t0 as f64 };
+                let cur = TimedCamera { camera: path(&c0, t1), t: t1 as f64 };
+                let got = predict(&prev, &cur, h);
+                let want = path(&c0, t1 + h);
+                let scale = (want.eye - want.target).length();
+                assert!(close(&got, &want, 2e-4 * scale), "{name} {t0}->{t1} +{h}: {got:?} vs {want:?}");
+            }
+        }
+    }
+
+    #[test]
+    fn moving_target_is_extrapolated_linearly() {
+        let c0 = base();
+        let shift = |c: &Camera, d: Vec3| Camera { eye: c.eye + d, target: c.target + d, ..*c };
+        let prev = TimedCamera { camera: c0, t: 0.0 };
+        let cur = TimedCamera { camera: shift(&c0, Vec3::new(0.1, 0.0, -0.2)), t: 0.1 };
+        let got = predict(&prev, &cur, 0.2);
+        assert!(close(&got, &shift(&c0, Vec3::new(0.3, 0.0, -0.6)), 1e-4), "{got:?}");
+    }
+
+    #[test]
+    fn stationary_reversal_and_bad_input_give_finite_cameras() {
+        let c0 = base();
+        let t = |camera, t| TimedCamera { camera, t };
+        // Stationary: exactly the newest camera.
+        assert_eq!(predict(&t(c0, 0.0), &t(c0, 0.1), 0.3), c0);
+        // A reversal: the last step's direction is extrapolated, never NaN, within the limit.
+        let a = c0.orbit(5.0, 0.0);
+        let got = predict(&t(a, 0.0), &t(c0, 0.05), 0.5);
+        assert!(got.validate(u32::MAX).is_ok());
+        assert!(close(&got, &c0.orbit(-50.0, 0.0), 1e-3 * (c0.eye - c0.target).length()), "{got:?}");
+        let got = predict(&t(a, 0.0), &t(c0, 0.01), 0.5);
+        assert!(close(&got, &c0.orbit(-MAX_TURN_DEG, 0.0), 1e-3 * (c0.eye - c0.target).length()), "{got:?}");
+        // Zero, negative, NaN or infinite time steps and horizons: the newest camera.
+        for (t0, t1, h) in
+            [(0.0, 0.0, 0.1), (1.0, 0.5, 0.1), (f64::NAN, 0.1, 0.1), (0.0, 0.1, f32::NAN), (0.0, 0.1, -1.0)]
+        {
+            assert_eq!(predict(&t(a, t0), &t(c0, t1), h), c0);
+        }
+        // A huge horizon is clamped; a far zoom is bounded.
+        let got = predict(&t(c0.dolly(0.01), 0.0), &t(c0, 0.01), f32::INFINITY);
+        assert_eq!(got, c0, "an infinite horizon is not extrapolated");
+        let got = predict(&t(c0.dolly(0.01), 0.0), &t(c0, 0.01), 10.0);
+        let d = (got.eye - got.target).length() / (c0.eye - c0.target).length();
+        assert!((d - MAX_ZOOM).abs() < 1e-3, "{d}");
+        // Over the pole: the elevation stays off it.
+        let high = c0.orbit(0.0, 80.0);
+        let got = predict(&t(c0, 0.0), &t(high, 0.1), 0.5);
+        assert!(got.validate(u32::MAX).is_ok(), "{got:?}");
+        // A NaN camera (which validate rejects upstream) still gives a finite answer.
+        let nan = Camera { eye: Vec3::NAN, ..c0 };
+        assert_eq!(predict(&t(nan, 0.0), &t(c0, 0.1), 0.2), c0);
+    }
+
+    #[test]
+    fn predictor_keeps_two_cameras_and_stops_with_the_view() {
+        let c0 = base();
+        let mut p = Predictor::new();
+        assert_eq!(p.predict(0.1), None);
+        p.observe(c0, 0.0);
+        assert_eq!(p.predict(0.1), Some(c0));
+        let c1 = c0.orbit(3.0, 0.0);
+        p.observe(c1, 0.1);
+        let got = p.predict(0.1).unwrap();
+        assert!(close(&got, &c0.orbit(6.0, 0.0), 1e-3), "{got:?}");
+        p.observe(c1, 0.05); // time going back: ignored
+        assert!(close(&p.predict(0.1).unwrap(), &got, 0.0));
+        p.observe(c1, 0.2); // held still: no motion predicted
+        assert_eq!(p.predict(0.1), Some(c1));
+    }
+}

@@ -1,0 +1,363 @@
+//! Hole filling: what a sphere renderer shows where no sample of the newest frame covers a
+//! pixel (issue 19, levers 3 and 5). A post-pass over the sample-id buffer, so every CPU
+//! renderer that yields ids ([`SampleIds`]: the packet tracer, the scalar tracer, the exact
+//! splatter) can use it, and every one of them draws the same filled image (the ids are the
+//! same, and every later stage is shared).
+//!
+//! A pixel's color comes from the first of these that has one:
+//!
+//! 1. **the newest frame**'s first hit (what the wrapped renderer draws);
+//! 2. **older frames** (multi-frame filling, [`HoleFill::render_set`]): the first hit of the
+//!    pixel's ray against each older scene in turn, newest first (core's scalar traversal, so
+//!    the result does not depend on the wrapped renderer); an older sample never replaces a
+//!    pixel the newest frame covers, even where it is closer;
+//! 3. **the stale frame for that view direction** ([`FillOptions::stale`]): the newest frame
+//!    as the server rendered it (its samples splatted one pixel each with the frame's own
+//!    camera, what the `stale` renderer shows), looked up where the pixel's ray crosses the
+//!    frame's focal plane (the plane through the frame camera's target, facing it). For a pure
+//!    rotation of the camera this is exact; for an orbit about the target it is the stale image
+//!    moved with the target. So a pixel the warp knows nothing about shows what a send-image
+//!    system would show, never the background through the volume;
+//! 4. **pull-push** ([`FillOptions::pull_push_levels`], Grossman and Dally 1998): the filled
+//!    pixels averaged over 2ᴸ-pixel blocks and pushed back into the remaining holes, weighted
+//!    by coverage and blended over the background, so cracks up to about 2ᴸ pixels close and
+//!    silhouettes soften by at most as much;
+//! 5. the background.
+//!
+//! Memory per pixel: a `u32` id, a `u64` fill state, a `u32` frame pixel and (with pull-push)
+//! about 21 B of floats;
+//! a client keeping `K` frames holds `K` scenes of ≈ 44 B per sample (`Scene::resident_bytes`).
+
+use crate::depth_buffer::{DepthBuffer, Projector};
+use crate::point_splat::splat_points;
+use crate::threads::Threads;
+use crate::{begin_frame, shade, PacketTracer, ScalarTracer, SphereSplat, MAX_VIEWPORT, NO_HIT};
+use volwarp_core::renderer::{Image, Renderer};
+use volwarp_core::sample::pack_color_f32;
+use volwarp_core::{Camera, RendererKind, Scene, BACKGROUND};
+
+/// The most frames [`HoleFill::render_set`] uses (newest included); more are ignored.
+pub const MAX_FRAMES: usize = 8;
+
+/// A renderer that can give the first-hit sample id of every pixel.
+pub trait SampleIds: Send {
+    /// Fills `ids` (resized to the camera's viewport) with the first-hit sorted sample index per
+    /// pixel, [`NO_HIT`] where none; `false` if the camera or scene is unusable.
+    fn sample_ids(&mut self, scene: &Scene, camera: &Camera, ids: &mut Vec<u32>) -> bool;
+}
+
+impl SampleIds for PacketTracer {
+    fn sample_ids(&mut self, scene: &Scene, camera: &Camera, ids: &mut Vec<u32>) -> bool {
+        self.trace_ids(scene, camera, ids)
+    }
+}
+
+impl SampleIds for ScalarTracer {
+    fn sample_ids(&mut self, scene: &Scene, camera: &Camera, ids: &mut Vec<u32>) -> bool {
+        self.trace_ids(scene, camera, ids)
+    }
+}
+
+impl SampleIds for SphereSplat {
+    fn sample_ids(&mut self, scene: &Scene, camera: &Camera, ids: &mut Vec<u32>) -> bool {
+        self.splat_ids(scene, camera, ids)
+    }
+}
+
+/// Which fill stages run after the frames' own samples.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub struct FillOptions {
+    /// Fill from the stale frame for the pixel's view direction (stage 3).
+    pub stale: bool,
+    /// Fill (stages 2–4) only pixels inside the newest frame's silhouette: between the first and
+    /// last pixel it covers in their row *and* in their column. Outside it, an empty pixel is
+    /// more often empty space the warp got right than a hole (measured: `docs/results.md`).
+    pub enclosed_only: bool,
+    /// Pull-push levels (stage 4); 0 turns it off, at most [`FillOptions::MAX_LEVELS`].
+    pub pull_push_levels: u32,
+}
+
+impl FillOptions {
+    /// The most pull-push levels (holes up to 2⁶ = 64 pixels).
+    pub const MAX_LEVELS: u32 = 6;
+
+    /// The default of the `*-fill` renderers (chosen by measurement, `docs/results.md`).
+    pub const DEFAULT: FillOptions = FillOptions { stale: true, enclosed_only: true, pull_push_levels: 0 };
+}
+
+impl Default for FillOptions {
+    fn default() -> Self {
+        Self::DEFAULT
+    }
+}
+
+/// A sphere renderer with hole filling (renderer names `spheres-fill`, `splat-fill`).
+#[derive(Debug)]
+pub struct HoleFill<R> {
+    inner: R,
+    kind: RendererKind,
+    opts: FillOptions,
+    threads: Threads,
+    ids: Vec<u32>,
+    /// Per pixel: [`UNFILLED`], or the color a frame's sample or a fill stage gave it.
+    state: Vec<u64>,
+    depth: DepthBuffer,
+    frame: Vec<u32>,
+    pyramid: Vec<Vec<[f32; 4]>>,
+}
+
+/// The packet tracer with hole filling (`spheres-fill`).
+pub type SpheresFill = HoleFill<PacketTracer>;
+
+impl<R: SampleIds> HoleFill<R> {
+    /// Wraps `inner`, reporting itself as `kind`, filling with `opts` on `threads` threads.
+    pub fn new(inner: R, kind: RendererKind, opts: FillOptions, threads: usize) -> Self {
+        let opts = FillOptions { pull_push_levels: opts.pull_push_levels.min(FillOptions::MAX_LEVELS), ..opts };
+        HoleFill {
+            inner,
+            kind,
+            opts,
+            threads: Threads::new(threads),
+            ids: Vec::new(),
+            state: Vec::new(),
+            depth: DepthBuffer::default(),
+            frame: Vec::new(),
+            pyramid: Vec::new(),
+        }
+    }
+
+    /// The fill stages it runs.
+    pub fn options(&self) -> FillOptions {
+        self.opts
+    }
+
+    /// Changes the fill stages.
+    pub fn set_options(&mut self, opts: FillOptions) {
+        self.opts = FillOptions { pull_push_levels: opts.pull_push_levels.min(FillOptions::MAX_LEVELS), ..opts };
+    }
+
+    /// Draws the newest scene `scenes[0]` for `camera` and fills the pixels it leaves empty
+    /// from the older scenes `scenes[1..]` (newest first; at most [`MAX_FRAMES`] in all), then
+    /// with the enabled fill stages. An older scene that is inconsistent ([`Scene::check`]) is
+    /// skipped; an unusable newest scene or camera draws the background like every renderer.
+    pub fn render_set(&mut self, scenes: &[&Scene], camera: &Camera, out: &mut Image) {
+        let Some(newest) = scenes.first() else {
+            out.reset_for_unusable(camera, MAX_VIEWPORT);
+            return;
+        };
+        if !begin_frame(newest, camera, out) || !self.inner.sample_ids(newest, camera, &mut self.ids) {
+            return;
+        }
+        let w = camera.width as usize;
+        // 1. The newest frame.
+        self.state.clear();
+        let colors = &newest.colors;
+        self.state.extend(self.ids.iter().map(|&id| if id == NO_HIT { UNFILLED } else { filled(shade(colors, id)) }));
+        if self.opts.enclosed_only {
+            block_outside_silhouette(&mut self.state, w, camera.height as usize);
+        }
+        // 2. Older frames, newest first, only where nothing is yet.
+        let basis = camera.ray_basis();
+        for older in scenes.iter().take(MAX_FRAMES).skip(1) {
+            if older.check().is_err() || older.samples.is_empty() {
+                continue;
+            }
+            let l = older.lbvh();
+            let colors = &older.colors;
+            self.threads.for_each_chunk(&mut self.state, w * BAND, |band, px| {
+                for (i, p) in px.iter_mut().enumerate().filter(|(_, p)| **p == UNFILLED) {
+                    let j = band * w * BAND + i;
+                    if let Some(hit) = l.trace(&basis.ray((j % w) as u32, (j / w) as u32)) {
+                        *p = filled(shade(colors, hit.prim));
+                    }
+                }
+            });
+        }
+        // 3. The stale frame for the view direction.
+        if self.opts.stale {
+            self.stale_fill(newest, camera);
+        }
+        // 4. Pull-push.
+        if self.opts.pull_push_levels > 0 && self.state.contains(&UNFILLED) {
+            self.pull_push(camera.width as usize, camera.height as usize);
+        }
+        for (p, &s) in out.pixels.iter_mut().zip(&self.state) {
+            if s & FILLED != 0 {
+                *p = s as u32;
+            }
+        }
+    }
+
+    /// Stage 3: unfilled pixels take the newest frame's stale color where their ray crosses the
+    /// frame's focal plane (the frame's background where it had nothing there).
+    fn stale_fill(&mut self, scene: &Scene, camera: &Camera) {
+        let fc = scene.header.camera;
+        if fc.validate(MAX_VIEWPORT).is_err() {
+            return;
+        }
+        let (fw, fh) = (fc.width, fc.height);
+        let len = fw as usize * fh as usize;
+        self.depth.reset(len, &self.threads);
+        let proj = Projector::new(&fc);
+        splat_points(scene, &proj, 1, fw, fh, &self.depth, &self.threads);
+        self.frame.resize(len, 0);
+        self.depth.resolve(&scene.colors, &mut self.frame, &self.threads);
+        let (_, _, fwd) = fc.basis();
+        // The focal plane: points q with q·fwd = target·fwd.
+        let plane = fc.target.dot(fwd);
+        let basis = camera.ray_basis();
+        let eye = camera.eye;
+        let w = camera.width as usize;
+        let frame = &self.frame;
+        self.threads.for_each_chunk(&mut self.state, w * BAND, |band, px| {
+            for (i, p) in px.iter_mut().enumerate().filter(|(_, p)| **p == UNFILLED) {
+                let j = band * w * BAND + i;
+                let d = basis.dir((j % w) as u32, (j / w) as u32);
+                let denom = d.dot(fwd);
+                let t = (plane - eye.dot(fwd)) / denom;
+                // A ray that does not reach the plane ahead: take its direction from the
+                // frame's eye instead (exact for a rotation about the eye).
+                let q = if denom > 1e-6 && t > 0.0 { eye + d * t } else { fc.eye + d };
+                let Some((x, y, _)) = proj.project(q) else { continue };
+                if x >= 0.0 && y >= 0.0 && x < fw as f32 && y < fh as f32 {
+                    *p = filled(frame[y as usize * fw as usize + x as usize]);
+                }
+            }
+        });
+    }
+
+    /// Stage 4: pull-push over the filled pixels into the unfilled ones.
+    fn pull_push(&mut self, w: usize, h: usize) {
+        let levels = self.opts.pull_push_levels as usize;
+        self.pyramid.resize_with(levels + 1, Vec::new);
+        let mut dims = vec![(w, h)];
+        for k in 0..levels {
+            let (pw, ph) = dims[k];
+            dims.push((pw.div_ceil(2), ph.div_ceil(2)));
+        }
+        // Level 0: RGB (opaque pixels) and weight 1 where filled.
+        let l0 = &mut self.pyramid[0];
+        l0.clear();
+        l0.extend(self.state.iter().map(|&s| {
+            let c = rgb(s as u32);
+            [c[0], c[1], c[2], if s & FILLED != 0 { 1.0 } else { 0.0 }]
+        }));
+        // Pull: the weighted mean color of the children; weight min(1, Σw / 2), so a block
+        // half covered counts as covered.
+        for k in 0..levels {
+            let (cw, ch) = dims[k];
+            let (pw, ph) = dims[k + 1];
+            let (lo, hi) = self.pyramid.split_at_mut(k + 1);
+            let (child, parent) = (&lo[k], &mut hi[0]);
+            parent.clear();
+            parent.resize(pw * ph, [0.0; 4]);
+            for py in 0..ph {
+                for px in 0..pw {
+                    let mut acc = [0.0f32; 4];
+                    for (dx, dy) in [(0, 0), (1, 0), (0, 1), (1, 1)] {
+                        let (x, y) = (2 * px + dx, 2 * py + dy);
+                        if x < cw && y < ch {
+                            let c = child[y * cw + x];
+                            for (a, v) in acc.iter_mut().zip(&c[..3]) {
+                                *a += v * c[3];
+                            }
+                            acc[3] += c[3];
+                        }
+                    }
+                    if acc[3] > 0.0 {
+                        let inv = 1.0 / acc[3];
+                        parent[py * pw + px] = [acc[0] * inv, acc[1] * inv, acc[2] * inv, (acc[3] * 0.5).min(1.0)];
+                    }
+                }
+            }
+        }
+        // Push: each level's partly covered pixels take the rest of their weight from their
+        // parent (already pushed), coarsest first.
+        for k in (0..levels).rev() {
+            let (cw, ch) = dims[k];
+            let pw = dims[k + 1].0;
+            let (lo, hi) = self.pyramid.split_at_mut(k + 1);
+            let (child, parent) = (&mut lo[k], &hi[0]);
+            for y in 0..ch {
+                for x in 0..cw {
+                    let c = &mut child[y * cw + x];
+                    if c[3] >= 1.0 {
+                        continue;
+                    }
+                    let p = parent[(y / 2) * pw + x / 2];
+                    let (wc, wp) = (c[3], p[3] * (1.0 - c[3]));
+                    let sum = wc + wp;
+                    if sum > 0.0 {
+                        for (v, pv) in c[..3].iter_mut().zip(&p[..3]) {
+                            *v = (*v * wc + pv * wp) / sum;
+                        }
+                        c[3] = sum;
+                    }
+                }
+            }
+        }
+        // Holes: the pushed color over the background by its weight.
+        let bg = rgb(BACKGROUND);
+        for (s, c) in self.state.iter_mut().zip(&self.pyramid[0]) {
+            if *s != UNFILLED || !(c[3] > 0.0) {
+                continue;
+            }
+            let a = c[3].min(1.0);
+            let mix = |i: usize| c[i] * a + bg[i] * (1.0 - a);
+            *s = filled(pack_color_f32([mix(0), mix(1), mix(2), 1.0]));
+        }
+    }
+}
+
+/// Rows per parallel work unit of the fill passes.
+const BAND: usize = 8;
+
+/// A pixel no stage has filled yet (a filled pixel has bit 32 set).
+const UNFILLED: u64 = 0;
+/// The bit of a filled pixel.
+const FILLED: u64 = 1 << 32;
+/// An empty pixel the fill stages leave alone (outside the silhouette): the background.
+const BLOCKED: u64 = 1 << 33;
+
+/// A filled pixel of color `c`.
+#[inline(always)]
+fn filled(c: u32) -> u64 {
+    FILLED | c as u64
+}
+
+/// Marks the unfilled pixels outside the covered pixels' row and column spans [`BLOCKED`].
+fn block_outside_silhouette(state: &mut [u64], w: usize, h: usize) {
+    let mut cols = vec![(usize::MAX, 0usize); w];
+    let mut rows = vec![(usize::MAX, 0usize); h];
+    for (j, &s) in state.iter().enumerate() {
+        if s & FILLED != 0 {
+            let (x, y) = (j % w, j / w);
+            cols[x] = (cols[x].0.min(y), cols[x].1.max(y));
+            rows[y] = (rows[y].0.min(x), rows[y].1.max(x));
+        }
+    }
+    for (j, s) in state.iter_mut().enumerate() {
+        let (x, y) = (j % w, j / w);
+        let inside = rows[y].0 <= x && x <= rows[y].1 && cols[x].0 <= y && y <= cols[x].1;
+        if *s == UNFILLED && !inside {
+            *s = BLOCKED;
+        }
+    }
+}
+
+/// RGB of a packed color in 0..=1.
+#[inline(always)]
+fn rgb(c: u32) -> [f32; 3] {
+    let [r, g, b, _] = c.to_le_bytes();
+    [r as f32 / 255.0, g as f32 / 255.0, b as f32 / 255.0]
+}
+
+impl<R: SampleIds> Renderer for HoleFill<R> {
+    fn kind(&self) -> RendererKind {
+        self.kind
+    }
+
+    fn render(&mut self, scene: &Scene, camera: &Camera, out: &mut Image) {
+        self.render_set(&[scene], camera, out);
+    }
+}
