@@ -38,15 +38,16 @@ const SCAN_BLOCK: u32 = 2048;
 const SLOT: u64 = 256;
 const MAX_SLOTS: u64 = 32;
 
+/// The build's uniform (`BuildParams` in `prelude.wgsl`).
 #[repr(C)]
 #[derive(Clone, Copy, Debug, Pod, Zeroable)]
-struct BuildParams {
-    n: u32,
-    shift: u32,
-    tiles: u32,
-    count: u32,
-    deq_min: [f32; 4],
-    deq_step: [f32; 4],
+pub(crate) struct BuildParams {
+    pub n: u32,
+    pub shift: u32,
+    pub tiles: u32,
+    pub count: u32,
+    pub deq_min: [f32; 4],
+    pub deq_step: [f32; 4],
 }
 
 struct Pipelines {
@@ -103,7 +104,7 @@ impl LbvhBuilder {
         let scope = ctx.device.push_error_scope(wgpu::ErrorFilter::Validation);
         let module = ctx.device.create_shader_module(wgpu::ShaderModuleDescriptor {
             label: Some("lbvh.wgsl"),
-            source: wgpu::ShaderSource::Wgsl(include_str!("lbvh.wgsl").into()),
+            source: wgpu::ShaderSource::Wgsl(crate::layout::shader(include_str!("lbvh.wgsl")).into()),
         });
         let pipe = |entry: &'static str| {
             ctx.device.create_compute_pipeline(&wgpu::ComputePipelineDescriptor {

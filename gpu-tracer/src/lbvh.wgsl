@@ -13,32 +13,17 @@
 // 1-D kernels may be dispatched as a 2-D grid (to stay under the 65535 workgroups-per-dimension
 // limit); `linear_id` folds it back.
 
-struct BuildParams {
-    n: u32,
-    shift: u32,
-    tiles: u32,
-    count: u32,
-    // Dequantizer: min.xyz, step.xyz, radius unit in step.w.
-    deq_min: vec4<f32>,
-    deq_step: vec4<f32>,
-}
-
-struct Node {
-    min: vec3<f32>,
-    left: u32,
-    max: vec3<f32>,
-    right: u32,
-}
+// Node, BuildParams, PackedSample and the shared functions come from `prelude.wgsl`.
 
 @group(0) @binding(0) var<uniform> P: BuildParams;
-@group(0) @binding(1) var<storage, read> samples_in: array<vec2<u32>>;
+@group(0) @binding(1) var<storage, read> samples_in: array<PackedSample>;
 @group(0) @binding(2) var<storage, read> colors_in: array<u32>;
 @group(0) @binding(3) var<storage, read> keys_src: array<vec4<u32>>;
 @group(0) @binding(4) var<storage, read_write> keys_dst: array<vec4<u32>>;
 @group(0) @binding(5) var<storage, read_write> hist: array<u32>;
 @group(0) @binding(6) var<storage, read_write> scan_data: array<u32>;
 @group(0) @binding(7) var<storage, read_write> scan_sums: array<u32>;
-@group(0) @binding(8) var<storage, read_write> samples_out: array<vec2<u32>>;
+@group(0) @binding(8) var<storage, read_write> samples_out: array<PackedSample>;
 @group(0) @binding(9) var<storage, read_write> colors_out: array<u32>;
 @group(0) @binding(10) var<storage, read_write> nodes: array<Node>;
 @group(0) @binding(11) var<storage, read_write> parents: array<u32>;
@@ -50,9 +35,7 @@ struct Node {
 // coherence then guarantees it reads the one value stored there.
 @group(0) @binding(13) var<storage, read_write> boxes: array<atomic<u32>>;
 
-const LEAF_BIT: u32 = 0x80000000u;
 const NO_PARENT: u32 = 0xffffffffu;
-const POS_MASK: u32 = 0x3ffffu;
 // Keys per radix tile (one invocation walks its tile serially, which keeps the sort stable).
 const TILE: u32 = 128u;
 const BUCKETS: u32 = 256u;
@@ -65,11 +48,8 @@ fn linear_id(wid: vec3<u32>, nwg: vec3<u32>, lidx: u32, wg_size: u32) -> u32 {
 
 // ---- 1. Morton keys --------------------------------------------------------------------------
 
-fn coords(s: vec2<u32>) -> vec3<u32> {
-    let x = s.x & POS_MASK;
-    let y = (s.x >> 18u) | ((s.y & 0xfu) << 14u);
-    let z = (s.y >> 4u) & POS_MASK;
-    return vec3<u32>(x, y, z);
+fn coords(s: PackedSample) -> vec3<u32> {
+    return sample_coords(s);
 }
 
 @compute @workgroup_size(64)
@@ -321,13 +301,8 @@ fn karras(
 
 // ---- 5. bottom-up fit ------------------------------------------------------------------------
 
-fn center(s: vec2<u32>) -> vec3<f32> {
-    let q = coords(s);
-    return vec3<f32>(
-        P.deq_min.x + f32(q.x) * P.deq_step.x,
-        P.deq_min.y + f32(q.y) * P.deq_step.y,
-        P.deq_min.z + f32(q.z) * P.deq_step.z,
-    );
+fn center(s: PackedSample) -> vec3<f32> {
+    return sample_center(s, P.deq_min, P.deq_step);
 }
 
 struct Box {
@@ -339,7 +314,7 @@ struct Box {
 fn leaf_box(k: u32) -> Box {
     let s = samples_out[k];
     let c = center(s);
-    let r = f32(s.y >> 22u) * P.deq_step.w;
+    let r = sample_radius(s, P.deq_step);
     let k20 = 1.0 / 1048576.0;
     let pad = vec3<f32>((abs(c.x) + r) * k20, (abs(c.y) + r) * k20, (abs(c.z) + r) * k20);
     return Box(

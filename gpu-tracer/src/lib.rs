@@ -10,6 +10,7 @@
 //! | [`adapter`] | picking a GPU (a real one first, a software one as the fallback) |
 //! | [`tracer`] | [`GpuTracer`]: the sphere tracer (`trace.wgsl`), a [`Renderer`] named `spheres-gpu` |
 //! | [`lbvh`] | the LBVH build on the GPU (`lbvh.wgsl`): Morton codes, radix sort, Karras, fit |
+//! | [`layout`] | the shared WGSL prelude (`prelude.wgsl`): one definition of every shared layout |
 //! | [`buffers`] | buffers reused across frames, readback |
 //! | [`synthetic`] | synthetic sample clouds (a bumpy surface) for tests and benchmarks |
 //!
@@ -23,6 +24,7 @@
 
 pub mod adapter;
 pub mod buffers;
+pub mod layout;
 pub mod lbvh;
 pub mod synthetic;
 pub mod tracer;

@@ -129,7 +129,7 @@ impl GpuTracer {
         let scope = ctx.device.push_error_scope(wgpu::ErrorFilter::Validation);
         let module = ctx.device.create_shader_module(wgpu::ShaderModuleDescriptor {
             label: Some("trace.wgsl"),
-            source: wgpu::ShaderSource::Wgsl(include_str!("trace.wgsl").into()),
+            source: wgpu::ShaderSource::Wgsl(crate::layout::shader(include_str!("trace.wgsl")).into()),
         });
         let pipeline = ctx.device.create_compute_pipeline(&wgpu::ComputePipelineDescriptor {
             label: Some("trace"),
