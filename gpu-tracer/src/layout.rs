@@ -112,7 +112,7 @@ mod tests {
             &s,
             "BuildParams",
             size_of::<BuildParams>(),
-            fields!(BuildParams: n, shift, tiles, count, deq_min, deq_step),
+            fields!(BuildParams: n, shift, blocks, count, deq_min, deq_step),
         );
         // The packed sample: one little-endian u64 read as two u32 words.
         let aliases: Vec<&str> = PRELUDE.lines().filter(|l| l.starts_with("alias PackedSample")).collect();

@@ -2,8 +2,9 @@
 //
 // 1. `make_keys`: Morton code of each packed sample (all 54 bits, as two u32 words) and its
 //    index, laid out exactly like `volwarp_core::morton::SortKey` (code lo, code hi, index, 0);
-// 2. a stable LSD radix sort over 7 passes of 8 bits (`radix_count`, `scan_blocks`/`scan_add`,
-//    `radix_scatter`), so keys end up ordered by (code, index), exactly the CPU order;
+// 2. a stable LSD radix sort over 7 passes of 8 bits, reduce-then-scan (`radix_upsweep`,
+//    `scan_blocks`/`scan_add`, `radix_downsweep`), so keys end up ordered by (code, index),
+//    exactly the CPU order;
 // 3. `reorder`: samples and colors into leaf order;
 // 4. `karras`: children and parent links of every internal node (Karras 2012), the same
 //    δ with the index tie-break as `lbvh::karras_node`;
@@ -36,8 +37,10 @@
 @group(0) @binding(13) var<storage, read_write> boxes: array<atomic<u32>>;
 
 const NO_PARENT: u32 = 0xffffffffu;
-// Keys per radix tile (one invocation walks its tile serially, which keeps the sort stable).
-const TILE: u32 = 128u;
+// The radix sort's workgroups: 256 invocations × 4 keys = a block of 1024 keys.
+const SORT_WG: u32 = 256u;
+const SORT_ITEMS: u32 = 4u;
+const SORT_BLOCK: u32 = 1024u;
 const BUCKETS: u32 = 256u;
 const SCAN_ITEMS: u32 = 8u;
 const SCAN_BLOCK: u32 = 2048u;
@@ -80,7 +83,16 @@ fn make_keys(
     keys_dst[i] = vec4<u32>(lo, hi, i, 0u);
 }
 
-// ---- 2. stable LSD radix sort ----------------------------------------------------------------
+// ---- 2. radix sort: reduce-then-scan, 8-bit digits ---------------------------------------------
+//
+// Per pass (8 bits of the code, 7 passes): `radix_upsweep` counts each block's digits in a
+// workgroup-shared histogram and stores column `block` of the digit-major histogram
+// (`hist[digit * blocks + block]`); a device-wide exclusive scan (`scan_blocks`/`scan_add`)
+// turns it into every (digit, block)'s first output position; `radix_downsweep` sorts its block
+// locally and stably by the digit (four 2-bit splits, each a workgroup-wide prefix sum in shared
+// memory: portable, no subgroup operations) and scatters each key to its digit's position plus
+// its rank among the block's keys of that digit. Stable, so keys end up ordered by
+// (code, index), the CPU's order.
 
 fn digit(k: vec4<u32>, shift: u32) -> u32 {
     var v: u32;
@@ -94,48 +106,131 @@ fn digit(k: vec4<u32>, shift: u32) -> u32 {
     return v & (BUCKETS - 1u);
 }
 
-// Counts the digits of tile t into column t of the digit-major histogram `hist[d * tiles + t]`,
-// whose exclusive prefix sum is then every (digit, tile)'s first output position.
-@compute @workgroup_size(64)
-fn radix_count(
+// The block's digit counts (both kernels); in `radix_downsweep` only the keys that exist.
+var<workgroup> wg_hist: array<atomic<u32>, 256>;
+// The digit of each slot of the block, and the block's slots in their (partly) sorted order.
+var<workgroup> wg_digit: array<u32, 1024>;
+var<workgroup> wg_order: array<u32, 1024>;
+// Per-invocation counts of the four 2-bit values, scanned across the workgroup.
+var<workgroup> wg_split: array<vec4<u32>, 256>;
+// Each digit's first local position, and its first global position.
+var<workgroup> wg_start: array<u32, 256>;
+var<workgroup> wg_base: array<u32, 256>;
+
+@compute @workgroup_size(256)
+fn radix_upsweep(
     @builtin(workgroup_id) wid: vec3<u32>,
     @builtin(num_workgroups) nwg: vec3<u32>,
     @builtin(local_invocation_index) lidx: u32,
 ) {
-    let t = linear_id(wid, nwg, lidx, 64u);
-    if t >= P.tiles {
-        return;
+    let block = wid.y * nwg.x + wid.x;
+    atomicStore(&wg_hist[lidx], 0u);
+    workgroupBarrier();
+    let live = block < P.blocks;
+    if live {
+        let base = block * SORT_BLOCK;
+        for (var j = 0u; j < SORT_ITEMS; j++) {
+            let i = base + j * SORT_WG + lidx;
+            if i < P.n {
+                atomicAdd(&wg_hist[digit(keys_src[i], P.shift)], 1u);
+            }
+        }
     }
-    for (var d = 0u; d < BUCKETS; d++) {
-        hist[d * P.tiles + t] = 0u;
-    }
-    let start = t * TILE;
-    let end = min(start + TILE, P.n);
-    for (var i = start; i < end; i++) {
-        let d = digit(keys_src[i], P.shift);
-        hist[d * P.tiles + t] += 1u;
+    workgroupBarrier();
+    if live {
+        hist[lidx * P.blocks + block] = atomicLoad(&wg_hist[lidx]);
     }
 }
 
-// Walks tile t in order and scatters each key to its digit's next slot: stable.
-@compute @workgroup_size(64)
-fn radix_scatter(
+@compute @workgroup_size(256)
+fn radix_downsweep(
     @builtin(workgroup_id) wid: vec3<u32>,
     @builtin(num_workgroups) nwg: vec3<u32>,
     @builtin(local_invocation_index) lidx: u32,
 ) {
-    let t = linear_id(wid, nwg, lidx, 64u);
-    if t >= P.tiles {
-        return;
+    let block = wid.y * nwg.x + wid.x;
+    let live = block < P.blocks;
+    let base = block * SORT_BLOCK;
+    atomicStore(&wg_hist[lidx], 0u);
+    workgroupBarrier();
+    // Invocation `lidx` owns slots 4·lidx … 4·lidx + 3. Slots past the end get digit 255: being
+    // the last slots, a stable sort keeps them after every real key.
+    for (var j = 0u; j < SORT_ITEMS; j++) {
+        let slot = lidx * SORT_ITEMS + j;
+        let i = base + slot;
+        var d = BUCKETS - 1u;
+        if live && i < P.n {
+            d = digit(keys_src[i], P.shift);
+            atomicAdd(&wg_hist[d], 1u);
+        }
+        wg_digit[slot] = d;
+        wg_order[slot] = slot;
     }
-    let start = t * TILE;
-    let end = min(start + TILE, P.n);
-    for (var i = start; i < end; i++) {
-        let k = keys_src[i];
-        let slot = digit(k, P.shift) * P.tiles + t;
-        let pos = hist[slot];
-        hist[slot] = pos + 1u;
-        keys_dst[pos] = k;
+    workgroupBarrier();
+    // Four stable splits by 2 bits of the digit, least significant first (a local LSD sort).
+    for (var r = 0u; r < 8u; r += 2u) {
+        var mine: array<u32, 4>;
+        var bits: array<u32, 4>;
+        var count = vec4<u32>(0u);
+        for (var j = 0u; j < SORT_ITEMS; j++) {
+            let slot = wg_order[lidx * SORT_ITEMS + j];
+            let b = (wg_digit[slot] >> r) & 3u;
+            mine[j] = slot;
+            bits[j] = b;
+            count[b] += 1u;
+        }
+        wg_split[lidx] = count;
+        workgroupBarrier();
+        for (var off = 1u; off < SORT_WG; off <<= 1u) {
+            var add = vec4<u32>(0u);
+            if lidx >= off {
+                add = wg_split[lidx - off];
+            }
+            workgroupBarrier();
+            wg_split[lidx] += add;
+            workgroupBarrier();
+        }
+        let total = wg_split[SORT_WG - 1u];
+        var pos = wg_split[lidx] - count;
+        pos += vec4<u32>(0u, total.x, total.x + total.y, total.x + total.y + total.z);
+        // Everyone has read `wg_order` and `wg_split` before they are overwritten.
+        workgroupBarrier();
+        for (var j = 0u; j < SORT_ITEMS; j++) {
+            let b = bits[j];
+            wg_order[pos[b]] = mine[j];
+            pos[b] += 1u;
+        }
+        workgroupBarrier();
+    }
+    // Each digit's first local position: an exclusive scan of the block's digit counts.
+    let c = atomicLoad(&wg_hist[lidx]);
+    wg_start[lidx] = c;
+    workgroupBarrier();
+    for (var off = 1u; off < BUCKETS; off <<= 1u) {
+        var add = 0u;
+        if lidx >= off {
+            add = wg_start[lidx - off];
+        }
+        workgroupBarrier();
+        wg_start[lidx] += add;
+        workgroupBarrier();
+    }
+    let first = wg_start[lidx] - c;
+    workgroupBarrier();
+    wg_start[lidx] = first;
+    if live {
+        wg_base[lidx] = hist[lidx * P.blocks + block];
+    }
+    workgroupBarrier();
+    // Scatter, neighbouring invocations taking neighbouring positions.
+    for (var j = 0u; j < SORT_ITEMS; j++) {
+        let p = j * SORT_WG + lidx;
+        let slot = wg_order[p];
+        let i = base + slot;
+        if live && i < P.n {
+            let d = wg_digit[slot];
+            keys_dst[wg_base[d] + p - wg_start[d]] = keys_src[i];
+        }
     }
 }
 

@@ -39,7 +39,8 @@ struct TraceParams {
 struct BuildParams {
     n: u32,
     shift: u32,
-    tiles: u32,
+    // Radix blocks (workgroups of the sort, 1024 keys each).
+    blocks: u32,
     count: u32,
     deq_min: vec4<f32>,
     deq_step: vec4<f32>,

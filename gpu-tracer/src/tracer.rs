@@ -380,6 +380,23 @@ impl GpuTracer {
         Ok(scene)
     }
 
+    /// Sorts `keys` on the GPU with the LBVH build's radix sort (stable, by the low 56 bits of
+    /// the code in words 0 and 1; see [`LbvhBuilder::sort_keys`]): for tests and benchmarks.
+    pub fn sort_keys(&mut self, keys: &[[u32; 4]]) -> Result<Vec<[u32; 4]>, GpuError> {
+        if self.builder.is_none() {
+            self.builder = Some(LbvhBuilder::new(&self.ctx)?);
+        }
+        let scope = self.ctx.device.push_error_scope(wgpu::ErrorFilter::Validation);
+        let result = match self.builder.as_mut() {
+            Some(b) => b.sort_keys(&self.ctx, keys, &mut self.staging),
+            None => Err(GpuError::Internal("no builder")),
+        };
+        if let Some(e) = pollster::block_on(scope.pop()).map(|e| e.to_string()).or_else(|| self.ctx.take_error()) {
+            return Err(GpuError::Wgpu(e));
+        }
+        result
+    }
+
     /// Runs only the GPU build of `frame` (its samples already uploaded by a previous
     /// [`GpuTracer::build_scene`] of the same frame), `repeats` times, and returns the mean
     /// time of one build from submit to completion.
