@@ -40,6 +40,9 @@ pub enum RendererKind {
     /// Exact object-order sphere splatting in cache-sized screen tiles, no LBVH (`splat-tiles`,
     /// key 10: no window key).
     SplatTiles,
+    /// The exact sphere splatter as wgpu compute shaders, no LBVH (`splat-gpu`, key 11: no
+    /// window key).
+    SplatGpu,
 }
 
 /// One row of the registry.
@@ -60,7 +63,7 @@ const fn caps(exact_spheres: bool, needs_lbvh: bool, gpu: bool) -> Capabilities 
 }
 
 /// The registry, in key order (key `k` selects `REGISTRY[k − 1]`).
-pub const REGISTRY: [RendererInfo; 10] = [
+pub const REGISTRY: [RendererInfo; 11] = [
     RendererInfo {
         kind: RendererKind::SpheresCpu,
         name: "spheres-cpu",
@@ -121,11 +124,17 @@ pub const REGISTRY: [RendererInfo; 10] = [
         about: "exact sphere splatting in screen tiles (no LBVH)",
         caps: caps(true, false, false),
     },
+    RendererInfo {
+        kind: RendererKind::SplatGpu,
+        name: "splat-gpu",
+        about: "wgpu exact sphere splatting (no LBVH)",
+        caps: caps(true, false, true),
+    },
 ];
 
 impl RendererKind {
     /// Every renderer, in key order.
-    pub const ALL: [RendererKind; 10] = [
+    pub const ALL: [RendererKind; 11] = [
         RendererKind::SpheresCpu,
         RendererKind::Points1,
         RendererKind::Points2,
@@ -136,6 +145,7 @@ impl RendererKind {
         RendererKind::SpheresScalar,
         RendererKind::Spheres,
         RendererKind::SplatTiles,
+        RendererKind::SplatGpu,
     ];
 
     /// The renderer a client starts with.
@@ -159,6 +169,7 @@ impl RendererKind {
             RendererKind::SpheresScalar => 7,
             RendererKind::Spheres => 8,
             RendererKind::SplatTiles => 9,
+            RendererKind::SplatGpu => 10,
         }
     }
 
@@ -237,7 +248,10 @@ mod tests {
         names.sort_unstable();
         assert!(names.windows(2).all(|w| w[0] != w[1]), "names are unique");
         assert_eq!(RendererKind::from_key(0), None);
-        assert_eq!(RendererKind::from_key(9), None);
+        assert_eq!(RendererKind::from_key(REGISTRY.len() + 1), None);
+        // Appended entries keep the existing keys.
+        assert_eq!(RendererKind::from_key(7), Some(RendererKind::SpheresGpu));
+        assert_eq!(RendererKind::from_key(11), Some(RendererKind::SplatGpu));
         assert!("nope".parse::<RendererKind>().is_err());
         assert_eq!(RendererKind::points(2), Some(RendererKind::Points2));
         assert_eq!(RendererKind::points(4), None);

@@ -84,7 +84,7 @@ pub fn create(kind: RendererKind, threads: usize) -> Option<Box<dyn Renderer + S
         RendererKind::Stale => Box::new(StaleImage::new(threads)),
         RendererKind::Spheres => Box::new(AutoSpheres::new(threads)),
         RendererKind::SplatTiles => Box::new(TileSplat::new(threads)),
-        RendererKind::SpheresGpu => return None,
+        RendererKind::SpheresGpu | RendererKind::SplatGpu => return None,
     })
 }
 

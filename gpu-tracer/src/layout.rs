@@ -21,6 +21,7 @@ pub fn shader(body: &str) -> String {
 mod tests {
     use super::*;
     use crate::lbvh::BuildParams;
+    use crate::splat::SplatParams;
     use crate::tracer::TraceParams;
     use std::collections::HashMap;
     use std::mem::{offset_of, size_of};
@@ -114,6 +115,12 @@ mod tests {
             size_of::<BuildParams>(),
             fields!(BuildParams: n, shift, blocks, count, deq_min, deq_step),
         );
+        check(
+            &s,
+            "SplatParams",
+            size_of::<SplatParams>(),
+            fields!(SplatParams: trace, u, v, w, px, mode, pad0, pad1, pad2),
+        );
         // The packed sample: one little-endian u64 read as two u32 words.
         let aliases: Vec<&str> = PRELUDE.lines().filter(|l| l.starts_with("alias PackedSample")).collect();
         assert_eq!(aliases, ["alias PackedSample = vec2<u32>;"]);
@@ -138,8 +145,15 @@ mod tests {
 
     #[test]
     fn every_shader_is_built_on_the_prelude() {
-        for body in [include_str!("trace.wgsl"), include_str!("lbvh.wgsl")] {
-            for s in ["struct Node", "struct RayBasis", "struct TraceParams", "struct BuildParams", "alias "] {
+        for body in [include_str!("trace.wgsl"), include_str!("lbvh.wgsl"), include_str!("splat.wgsl")] {
+            for s in [
+                "struct Node",
+                "struct RayBasis",
+                "struct TraceParams",
+                "struct BuildParams",
+                "struct SplatParams",
+                "alias ",
+            ] {
                 assert!(!body.contains(s), "a shader redeclares `{s}`: it belongs in prelude.wgsl only");
             }
             assert!(shader(body).starts_with(PRELUDE));

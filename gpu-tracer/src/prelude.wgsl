@@ -46,6 +46,23 @@ struct BuildParams {
     deq_step: vec4<f32>,
 }
 
+// `splat::SplatParams`: the splatter's uniform: the trace parameters, then the camera basis
+// and the per-axis pixel scale of the screen-space bound.
+struct SplatParams {
+    trace: TraceParams,
+    // Camera right, up, forward (w unused).
+    u: vec4<f32>,
+    v: vec4<f32>,
+    w: vec4<f32>,
+    // Pixels per unit slope along x and y, half width, half height.
+    px: vec4<f32>,
+    // 0: depth pass, 1: id pass.
+    mode: u32,
+    pad0: u32,
+    pad1: u32,
+    pad2: u32,
+}
+
 const LEAF_BIT: u32 = 0x80000000u;
 const POS_MASK: u32 = 0x3ffffu;
 const NO_HIT: u32 = 0xffffffffu;
