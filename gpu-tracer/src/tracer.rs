@@ -124,6 +124,12 @@ impl GpuTracer {
         Self::with_context(GpuContext::new()?)
     }
 
+    /// On the adapter whose name contains `name` (case-insensitive; `None`: the best there is,
+    /// see [`GpuContext::with_adapter`]); a clear error when none matches or none exists.
+    pub fn with_adapter(name: Option<&str>) -> Result<GpuTracer, GpuError> {
+        Self::with_context(GpuContext::with_adapter(name)?)
+    }
+
     /// A tracer on an already opened device.
     pub fn with_context(ctx: GpuContext) -> Result<GpuTracer, GpuError> {
         let scope = ctx.device.push_error_scope(wgpu::ErrorFilter::Validation);
@@ -192,7 +198,7 @@ impl GpuTracer {
         self.last_build
     }
 
-    fn check_scene(scene: &Scene) -> Result<u32, GpuError> {
+    pub(crate) fn check_scene(scene: &Scene) -> Result<u32, GpuError> {
         scene.check().map_err(|e| {
             GpuError::BadScene(match e {
                 SceneError::CountMismatch => "sample, color and node counts do not match",

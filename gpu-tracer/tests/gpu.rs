@@ -221,3 +221,23 @@ fn the_tracer_can_move_to_another_thread() {
     assert_send::<Box<dyn Renderer + Send>>();
     let _boxed: Option<Box<dyn Renderer + Send>> = tracer().map(|t| Box::new(t) as Box<dyn Renderer + Send>);
 }
+
+#[test]
+fn an_adapter_name_that_matches_nothing_is_a_clear_error() {
+    // No GPU needed: either adapters exist (lavapipe in CI) and the error lists them, or none
+    // does and the error says what to install. Never a panic.
+    let name = "no-such-adapter-3f9c";
+    for e in [
+        GpuTracer::with_adapter(Some(name)).map(|_| ()).unwrap_err(),
+        volwarp_gpu_tracer::GpuSplat::with_adapter(Some(name)).map(|_| ()).unwrap_err(),
+    ] {
+        let msg = e.to_string();
+        eprintln!("{msg}");
+        assert!(matches!(e, volwarp_gpu_tracer::GpuError::NoAdapter(_)), "{e:?}");
+        if msg.contains("found:") {
+            assert!(msg.contains(name), "{msg}");
+        } else {
+            assert!(msg.contains("apt-get install mesa-vulkan-drivers"), "{msg}");
+        }
+    }
+}
