@@ -67,9 +67,9 @@ pub struct Options {
     /// Threads of the network thread's LBVH build (0: all cores).
     #[arg(long, value_name = "N", default_value_t = 1)]
     pub build_threads: usize,
-    /// Renderer, in key order (keys 1–9): spheres-cpu, points1, points2, points3, splat (exact
-    /// sphere splatting), stale (unwarped frame), spheres-gpu (GPU opened on first use),
-    /// spheres-scalar, splat-gpu (GPU exact splatting).
+    /// Renderer, in key order (keys 1–9, then no key): spheres-cpu, points1, points2, points3,
+    /// splat (exact sphere splatting), stale (unwarped frame), spheres-gpu (GPU opened on first
+    /// use), spheres-scalar, spheres (the default), splat-tiles, splat-gpu (GPU exact splatting).
     #[arg(long, value_name = "NAME", default_value_t = RendererKind::DEFAULT, value_parser = parse_renderer)]
     pub renderer: RendererKind,
     /// GPU renderers: the adapter whose name contains NAME (case-insensitive; default: the best
