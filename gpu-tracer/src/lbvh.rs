@@ -378,7 +378,7 @@ impl LbvhBuilder {
         run_steps(ctx, &mut encoder, "radix sort", &steps);
         encoder.copy_buffer_to_buffer(self.keys[PASSES as usize % 2].get()?, 0, staging.get()?, 0, bytes);
         ctx.queue.submit([encoder.finish()]);
-        read_mapped(ctx, staging.get()?, bytes, |d| bytemuck::pod_collect_to_vec::<u8, [u32; 4]>(d))
+        read_mapped(ctx, staging.get()?, bytes, bytemuck::pod_collect_to_vec::<u8, [u32; 4]>)
     }
 
     fn upload(&mut self, ctx: &GpuContext, frame: &Frame) -> Result<Vec<u32>, GpuError> {
