@@ -16,6 +16,7 @@ use std::time::Duration;
 /// Runs the client as the command line says.
 pub fn run(opts: &Options) -> Result<(), ClientError> {
     opts.validate()?;
+    crate::renderers::set_adapter(opts.adapter.clone());
     if let Some(path) = &opts.replay {
         return crate::replay::run(opts, path);
     }

@@ -67,11 +67,16 @@ pub struct Options {
     /// Threads of the network thread's LBVH build (0: all cores).
     #[arg(long, value_name = "N", default_value_t = 1)]
     pub build_threads: usize,
-    /// Renderer, in key order (keys 1–9, 0): spheres-cpu, points1, points2, points3, splat (exact
-    /// sphere splatting), stale (unwarped frame), spheres-gpu (GPU opened on first use),
-    /// spheres-scalar, spheres-fill and splat-fill (holes filled from the stale frame).
+    /// Renderer, in key order (keys 1–9, then no key): spheres-cpu, points1, points2, points3,
+    /// splat (exact sphere splatting), stale (unwarped frame), spheres-gpu (GPU opened on first
+    /// use), spheres-scalar, spheres (the default), splat-tiles, spheres-fill and splat-fill
+    /// (holes filled from the stale frame), splat-gpu (GPU exact splatting).
     #[arg(long, value_name = "NAME", default_value_t = RendererKind::DEFAULT, value_parser = parse_renderer)]
     pub renderer: RendererKind,
+    /// GPU renderers: the adapter whose name contains NAME (case-insensitive; default: the best
+    /// there is, a real GPU before a software one). The adapter opened is logged.
+    #[arg(long, value_name = "NAME")]
+    pub adapter: Option<String>,
     /// Depth heuristic the server uses: entrance, exit, midpoint, threshold, peak, gradient,
     /// rel-threshold, en-ex-mean.
     #[arg(long, value_name = "NAME", default_value = "threshold", value_parser = parse_heuristic)]

@@ -1,4 +1,4 @@
-//! The interchangeable renderers of the client and their live switching (keys 1–9, 0 of core's
+//! The interchangeable renderers of the client and their live switching (keys 1–9 of core's
 //! [`RendererKind`] registry). Every renderer draws the same scene for the same camera; the GPU
 //! tracer is opened lazily the first time it is chosen, and if no adapter can be opened the
 //! client says so and keeps the current renderer.
@@ -16,11 +16,20 @@ pub struct Renderers {
     gpu_error: Option<String>,
 }
 
+/// The GPU adapter the client's `--adapter` asked for (set once, before any GPU renderer opens).
+static ADAPTER: std::sync::OnceLock<Option<String>> = std::sync::OnceLock::new();
+
+/// Makes the GPU renderers open the adapter whose name contains `name` (`None`: the best one).
+/// Only the first call counts.
+pub fn set_adapter(name: Option<String>) {
+    let _ = ADAPTER.set(name);
+}
+
 /// Creates a renderer of the registry with `threads` CPU threads (0: all cores); the GPU tracer
 /// opens an adapter (an error names what to install when none opens).
 pub fn create(kind: RendererKind, threads: usize) -> Result<Box<dyn Renderer>, String> {
-    if kind == RendererKind::SpheresGpu {
-        return create_gpu();
+    if kind.info().caps.gpu {
+        return create_gpu(kind);
     }
     match volwarp_cpu_tracer::create(kind, threads) {
         Some(r) => Ok(r),
@@ -29,16 +38,21 @@ pub fn create(kind: RendererKind, threads: usize) -> Result<Box<dyn Renderer>, S
 }
 
 #[cfg(feature = "gpu")]
-fn create_gpu() -> Result<Box<dyn Renderer>, String> {
-    log::info!("opening the GPU tracer ...");
+fn create_gpu(kind: RendererKind) -> Result<Box<dyn Renderer>, String> {
+    log::info!("opening {kind} ...");
     let t = std::time::Instant::now();
-    let tracer = volwarp_gpu_tracer::GpuTracer::new().map_err(|e| e.to_string())?;
-    log::info!("GPU tracer ready on {} ({:.0} ms)", tracer.context().describe(), t.elapsed().as_secs_f64() * 1e3);
-    Ok(Box::new(tracer))
+    let ctx = volwarp_gpu_tracer::GpuContext::with_adapter(ADAPTER.get().and_then(|a| a.as_deref()))
+        .map_err(|e| e.to_string())?;
+    log::info!("{kind} ready on {} ({:.0} ms)", ctx.describe_driver(), t.elapsed().as_secs_f64() * 1e3);
+    let r: Box<dyn Renderer> = match kind {
+        RendererKind::SplatGpu => Box::new(volwarp_gpu_tracer::GpuSplat::with_context(ctx).map_err(|e| e.to_string())?),
+        _ => Box::new(volwarp_gpu_tracer::GpuTracer::with_context(ctx).map_err(|e| e.to_string())?),
+    };
+    Ok(r)
 }
 
 #[cfg(not(feature = "gpu"))]
-fn create_gpu() -> Result<Box<dyn Renderer>, String> {
+fn create_gpu(_kind: RendererKind) -> Result<Box<dyn Renderer>, String> {
     Err("this client was built without the `gpu` feature".into())
 }
 
@@ -83,7 +97,7 @@ impl Renderers {
         Ok(())
     }
 
-    /// Switches to the renderer of key `1..=10`.
+    /// Switches to the renderer of key `1..=9`.
     pub fn select_key(&mut self, key: usize) -> Result<(), String> {
         match RendererKind::from_key(key) {
             Some(kind) => self.select(kind),

@@ -45,6 +45,9 @@ pub enum RendererKind {
     SpheresFill,
     /// The exact splatter with the same hole filling (`splat-fill`, key 12).
     SplatFill,
+    /// The exact sphere splatter as wgpu compute shaders, no LBVH (`splat-gpu`, key 13: no
+    /// window key).
+    SplatGpu,
 }
 
 /// One row of the registry.
@@ -138,11 +141,17 @@ pub const REGISTRY: [RendererInfo; RendererKind::COUNT] = [
         about: "exact sphere splatting, holes filled from the stale frame",
         caps: caps(false, false, false),
     },
+    RendererInfo {
+        kind: RendererKind::SplatGpu,
+        name: "splat-gpu",
+        about: "wgpu exact sphere splatting (no LBVH)",
+        caps: caps(true, false, true),
+    },
 ];
 
 impl RendererKind {
     /// How many renderers the registry has.
-    pub const COUNT: usize = 12;
+    pub const COUNT: usize = 13;
 
     /// Every renderer, in key order.
     pub const ALL: [RendererKind; RendererKind::COUNT] = [
@@ -158,6 +167,7 @@ impl RendererKind {
         RendererKind::SplatTiles,
         RendererKind::SpheresFill,
         RendererKind::SplatFill,
+        RendererKind::SplatGpu,
     ];
 
     /// The renderer a client starts with.
@@ -183,6 +193,7 @@ impl RendererKind {
             RendererKind::SplatTiles => 9,
             RendererKind::SpheresFill => 10,
             RendererKind::SplatFill => 11,
+            RendererKind::SplatGpu => 12,
         }
     }
 
@@ -262,6 +273,9 @@ mod tests {
         assert!(names.windows(2).all(|w| w[0] != w[1]), "names are unique");
         assert_eq!(RendererKind::from_key(0), None);
         assert_eq!(RendererKind::from_key(REGISTRY.len() + 1), None);
+        // Appended entries keep the existing keys.
+        assert_eq!(RendererKind::from_key(7), Some(RendererKind::SpheresGpu));
+        assert_eq!(RendererKind::from_key(13), Some(RendererKind::SplatGpu));
         assert!("nope".parse::<RendererKind>().is_err());
         assert_eq!(RendererKind::points(2), Some(RendererKind::Points2));
         assert_eq!(RendererKind::points(4), None);

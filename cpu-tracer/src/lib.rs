@@ -94,7 +94,7 @@ pub fn create(kind: RendererKind, threads: usize) -> Option<Box<dyn Renderer + S
         RendererKind::SplatFill => {
             Box::new(HoleFill::new(SphereSplat::new(threads), kind, FillOptions::DEFAULT, threads))
         }
-        RendererKind::SpheresGpu => return None,
+        RendererKind::SpheresGpu | RendererKind::SplatGpu => return None,
     })
 }
 

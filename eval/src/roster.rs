@@ -1,7 +1,7 @@
 //! Every renderer the evaluation compares, under its CSV name: the stale image, points with
 //! N = 1, 2, 3, the CPU sphere tracer (and its radius variants ×0.5 and ×2), the GPU sphere
-//! tracer where an adapter opens, the exact sphere splatter, and the hole-filling tracer
-//! (`spheres-fill`) with its variants.
+//! tracer where an adapter opens, the exact sphere splatter and its GPU twin (`splat-gpu`)
+//! where an adapter opens, and the hole-filling tracer (`spheres-fill`) with its variants.
 
 use volwarp_core::renderer::Renderer;
 use volwarp_core::wire::Frame;
@@ -17,7 +17,7 @@ pub struct Entry {
     pub name: String,
     /// Which scene it draws: the sphere radius as a multiple of the frame's.
     pub radius_scale: f32,
-    /// Whether it is the GPU tracer (slow on a software adapter).
+    /// Whether it runs on the GPU (slow on a software adapter).
     pub gpu: bool,
     /// The renderer.
     pub renderer: Box<dyn Renderer>,
@@ -51,11 +51,12 @@ pub fn roster(opts: RosterOptions) -> Vec<Entry> {
     let t = opts.threads;
     let mut v: Vec<Entry> = [Stale, Points1, Points2, Points3, SpheresCpu].into_iter().map(|k| entry(k, t)).collect();
     if opts.gpu {
-        if let Some(g) = gpu_entry() {
-            v.push(g);
-        }
+        v.extend(gpu_entry(SpheresGpu));
     }
     v.push(entry(Splat, t));
+    if opts.gpu {
+        v.extend(gpu_entry(SplatGpu));
+    }
     for s in RADIUS_VARIANTS {
         v.push(Entry { name: format!("{SpheresCpu}-r{s}"), radius_scale: s, ..entry(SpheresCpu, t) });
     }
@@ -74,28 +75,31 @@ pub const FILL_VARIANTS: [(&str, FillOptions); 2] = [
     ("spheres-pp3", FillOptions { stale: false, enclosed_only: true, pull_push_levels: 3 }),
 ];
 
+/// A GPU renderer of the registry (`spheres-gpu`, `splat-gpu`), if an adapter opens.
 #[cfg(feature = "gpu")]
-fn gpu_entry() -> Option<Entry> {
-    match volwarp_gpu_tracer::GpuTracer::new() {
-        Ok(g) => {
-            log::info!("{} on {}", RendererKind::SpheresGpu, g.context().describe());
-            Some(Entry {
-                name: RendererKind::SpheresGpu.name().into(),
-                radius_scale: 1.0,
-                gpu: true,
-                renderer: Box::new(g),
-            })
-        }
+fn gpu_entry(kind: RendererKind) -> Option<Entry> {
+    let made = match kind {
+        RendererKind::SplatGpu => volwarp_gpu_tracer::GpuSplat::new().map(|g| {
+            log::info!("{kind} on {}", g.context().describe());
+            Box::new(g) as Box<dyn Renderer>
+        }),
+        _ => volwarp_gpu_tracer::GpuTracer::new().map(|g| {
+            log::info!("{kind} on {}", g.context().describe());
+            Box::new(g) as Box<dyn Renderer>
+        }),
+    };
+    match made {
+        Ok(renderer) => Some(Entry { name: kind.name().into(), radius_scale: 1.0, gpu: true, renderer }),
         Err(e) => {
-            log::warn!("spheres-gpu left out: {e}");
+            log::warn!("{kind} left out: {e}");
             None
         }
     }
 }
 
 #[cfg(not(feature = "gpu"))]
-fn gpu_entry() -> Option<Entry> {
-    log::info!("spheres-gpu left out: built without the `gpu` feature");
+fn gpu_entry(kind: RendererKind) -> Option<Entry> {
+    log::info!("{kind} left out: built without the `gpu` feature");
     None
 }
 

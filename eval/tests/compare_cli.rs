@@ -60,6 +60,17 @@ fn compare_replays_a_record_file() {
     let out = Command::new(env!("CARGO_BIN_EXE_volwarp-compare")).arg(dir.join("bad")).output().unwrap();
     assert_eq!(out.status.code(), Some(1));
     assert!(String::from_utf8_lossy(&out.stderr).contains("not a volwarp record file"));
+
+    // An adapter name that matches nothing: a clear error (status 1) naming it, no panic.
+    let out = Command::new(env!("CARGO_BIN_EXE_volwarp-compare"))
+        .arg(&file)
+        .args(["--adapter", "no-such-adapter-3f9c"])
+        .output()
+        .unwrap();
+    let stderr = String::from_utf8_lossy(&out.stderr);
+    assert_eq!(out.status.code(), Some(1), "{stderr}");
+    assert!(stderr.contains("no GPU adapter"), "{stderr}");
+    assert!(!stderr.contains("panicked"), "{stderr}");
     let _ = std::fs::remove_dir_all(&dir);
 }
 

@@ -1,7 +1,8 @@
 //! `cargo bench -p volwarp-gpu-tracer --bench gpu_tracer [-- --quick]`: frames per second of the
-//! GPU tracer at 1024×1024 on a ~620k-sample cloud (the paper's Table 1 size) and the GPU LBVH
-//! build time, on whatever adapter there is; the CPU packet tracer and CPU build for context.
-//! Prints medians over repeated runs.
+//! GPU tracer and the GPU exact splatter (`splat-gpu`) at 1024×1024 on a ~620k-sample cloud (the
+//! paper's Table 1 size) and the GPU LBVH build time, on whatever adapter there is (or the one
+//! `-- --adapter NAME` names; device and driver are printed); the CPU packet tracer and CPU build
+//! for context. Prints medians over repeated runs.
 
 use std::time::{Duration, Instant};
 use volwarp_core::renderer::{Image, Renderer};
@@ -9,7 +10,7 @@ use volwarp_core::wire::Frame;
 use volwarp_core::{Camera, Heuristic, Scene};
 use volwarp_cpu_tracer::PacketTracer;
 use volwarp_gpu_tracer::synthetic::bumpy_surface;
-use volwarp_gpu_tracer::GpuTracer;
+use volwarp_gpu_tracer::{GpuSplat, GpuTracer};
 
 fn median(v: Vec<Duration>) -> Duration {
     let mut secs: Vec<f64> = v.iter().map(Duration::as_secs_f64).collect();
@@ -32,7 +33,22 @@ fn ms(d: Duration) -> f64 {
     d.as_secs_f64() * 1e3
 }
 
-fn bench(gpu: &mut GpuTracer, name: &str, frame: &Frame, cam: &Camera, reps: usize) {
+fn bench_splat(splat: &mut GpuSplat, scene: &Scene, cam: &Camera, reps: usize) {
+    let mut img = Image::new(1, 1);
+    splat.try_render(scene, cam, &mut img).expect("splat"); // upload + warm-up
+    let with_readback = time(reps, || splat.try_render(scene, cam, &mut img).expect("splat"));
+    let frames = reps as u32;
+    let only = median((0..3).map(|_| splat.splat_only(scene, cam, frames).expect("splat") / frames).collect());
+    println!(
+        "render: GPU splat {:.2} FPS with readback ({:.1} ms), {:.2} FPS without ({:.1} ms)",
+        1.0 / with_readback.as_secs_f64(),
+        ms(with_readback),
+        1.0 / only.as_secs_f64(),
+        ms(only)
+    );
+}
+
+fn bench(gpu: &mut GpuTracer, splat: &mut GpuSplat, name: &str, frame: &Frame, cam: &Camera, reps: usize) {
     let n = frame.samples.len();
     println!("\n## {name}: {n} samples, {}x{} view", cam.width, cam.height);
     let cpu_build = time(reps, || Scene::build(frame));
@@ -58,6 +74,7 @@ fn bench(gpu: &mut GpuTracer, name: &str, frame: &Frame, cam: &Camera, reps: usi
     let mut cimg = Image::new(1, 1);
     cpu.render(&scene, cam, &mut cimg);
     let cpu_t = time(reps, || cpu.render(&scene, cam, &mut cimg));
+    bench_splat(splat, &scene, cam, reps);
     println!(
         "render: GPU {:.2} FPS with readback ({:.1} ms), {:.2} FPS trace only ({:.1} ms); CPU packet tracer ({} threads) {:.2} FPS ({:.1} ms)",
         1.0 / with_readback.as_secs_f64(),
@@ -74,18 +91,28 @@ fn main() {
     env_logger::Builder::from_env(env_logger::Env::default().default_filter_or("warn")).init();
     let quick = std::env::args().any(|a| a == "--quick");
     let reps = if quick { 3 } else { 7 };
-    let mut gpu = match GpuTracer::new() {
+    // `--adapter NAME`: the adapter whose name contains NAME (default: the best there is).
+    let argv: Vec<String> = std::env::args().collect();
+    let adapter = argv.iter().position(|a| a == "--adapter").and_then(|i| argv.get(i + 1)).cloned();
+    let mut gpu = match GpuTracer::with_adapter(adapter.as_deref()) {
         Ok(g) => g,
         Err(e) => {
             eprintln!("gpu_tracer bench: {e}");
             std::process::exit(1);
         }
     };
-    println!("adapter: {}", gpu.context().describe());
+    println!("adapter: {}", gpu.context().describe_driver());
+    let mut splat = match GpuSplat::with_adapter(adapter.as_deref()) {
+        Ok(s) => s,
+        Err(e) => {
+            eprintln!("gpu_tracer bench: {e}");
+            std::process::exit(1);
+        }
+    };
     // 790² grid points minus the empty corners: about the paper's 623,584 samples.
     let frame = bumpy_surface(790, 1.5, 1);
     let cam = frame.header.camera.orbit(10.0, 0.0).with_viewport(1024, 1024);
-    bench(&mut gpu, "synthetic bumpy surface", &frame, &cam, reps);
+    bench(&mut gpu, &mut splat, "synthetic bumpy surface", &frame, &cam, reps);
 
     // A real frame where the shared data is there: the MRI marched at 1024² by the server.
     let mri =
@@ -100,6 +127,6 @@ fn main() {
             radius_scale: 1.0,
         };
         let frame = marcher.render_frame(&req).0;
-        bench(&mut gpu, "MRI (colin27), threshold heuristic", &frame, &cam.orbit(10.0, 0.0), reps);
+        bench(&mut gpu, &mut splat, "MRI (colin27), threshold heuristic", &frame, &cam.orbit(10.0, 0.0), reps);
     }
 }

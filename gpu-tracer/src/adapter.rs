@@ -43,6 +43,13 @@ impl GpuContext {
     /// Opens the best adapter there is. Honours wgpu's `WGPU_BACKEND` (e.g. `vulkan`, `gl`) and
     /// `WGPU_ADAPTER_NAME` environment variables.
     pub fn new() -> Result<GpuContext, GpuError> {
+        Self::with_adapter(None)
+    }
+
+    /// Opens the best adapter whose name contains `name` (case-insensitive; `None`: any, or the
+    /// one `WGPU_ADAPTER_NAME` names). When nothing matches, the error lists the adapters that
+    /// were found; when there are none at all, it says what to install.
+    pub fn with_adapter(name: Option<&str>) -> Result<GpuContext, GpuError> {
         // Native APIs first; GL (through EGL) only when they offer nothing, which also keeps
         // EGL's start-up complaints out of the log on machines with Vulkan.
         let mut adapters = Vec::new();
@@ -55,9 +62,17 @@ impl GpuContext {
                 break;
             }
         }
-        let wanted_name = std::env::var("WGPU_ADAPTER_NAME").ok().map(|s| s.to_lowercase());
-        if let Some(w) = &wanted_name {
+        let found: Vec<String> = adapters.iter().map(|a| describe_info(&a.get_info())).collect();
+        let wanted_name = name.map(str::to_string).or_else(|| std::env::var("WGPU_ADAPTER_NAME").ok());
+        if let Some(w) = wanted_name.as_deref().map(str::to_lowercase) {
             adapters.retain(|a| a.get_info().name.to_lowercase().contains(w.as_str()));
+            if adapters.is_empty() && !found.is_empty() {
+                return Err(GpuError::NoAdapter(format!(
+                    "no adapter's name contains {:?}; found: {}",
+                    wanted_name.unwrap_or_default(),
+                    found.join("; ")
+                )));
+            }
         }
         // Compute shaders are all we need; drop adapters that cannot run them.
         adapters.retain(|a| a.get_downlevel_capabilities().flags.contains(wgpu::DownlevelFlags::COMPUTE_SHADERS));
@@ -123,7 +138,12 @@ impl GpuContext {
 
     /// A one-line description: name, backend and type.
     pub fn describe(&self) -> String {
-        format!("{} ({:?}, {:?})", self.info.name, self.info.backend, self.info.device_type)
+        describe_info(&self.info)
+    }
+
+    /// Name, backend, type and driver (for benchmark reports).
+    pub fn describe_driver(&self) -> String {
+        format!("{}, driver {} {}", self.describe(), self.info.driver, self.info.driver_info)
     }
 
     /// Takes the first error wgpu reported outside an error scope, if any.
@@ -140,6 +160,11 @@ impl GpuContext {
     pub fn max_binding(&self) -> u64 {
         self.limits.max_storage_buffer_binding_size.min(self.limits.max_buffer_size)
     }
+}
+
+/// `name (backend, type)`.
+fn describe_info(i: &wgpu::AdapterInfo) -> String {
+    format!("{} ({:?}, {:?})", i.name, i.backend, i.device_type)
 }
 
 impl std::fmt::Debug for GpuContext {

@@ -8,9 +8,13 @@
 //! `sphere_box`/union arithmetic; a GPU that fuses `min + q·step` into an FMA can move a box
 //! coordinate by one ulp (still a valid tree: each box is the union of its children's).
 //!
-//! **Sort.** Each invocation owns a tile of 128 consecutive keys. Per pass: count the tile's
-//! digits into column `t` of a digit-major histogram, exclusive-scan it (a multi-level block
-//! scan), and scatter the tile in order — stable by construction.
+//! **Sort.** Reduce-then-scan over blocks of 1024 keys (a workgroup of 256 invocations × 4
+//! keys), 8-bit digits. Per pass: `radix_upsweep` counts the block's digits in a
+//! workgroup-shared histogram into column `block` of a digit-major histogram; a device-wide
+//! exclusive scan (multi-level block scan) gives every (digit, block) its first output
+//! position; `radix_downsweep` orders the block stably by digit in shared memory (four 2-bit
+//! splits, each a workgroup prefix sum — portable, no subgroup operations) and scatters. No
+//! invocation walks keys serially beyond its own four.
 //!
 //! **Fit.** One invocation per leaf walks up; an atomic counter per node lets the second
 //! arrival fit it. Fitted boxes are exchanged through a separate buffer, cleared first and read
@@ -28,8 +32,8 @@ use volwarp_core::lbvh::Node;
 use volwarp_core::wire::Frame;
 use volwarp_core::Scene;
 
-/// Keys per radix tile (the shader's `TILE`).
-const TILE: u32 = 128;
+/// Keys per radix block, one workgroup (the shader's `SORT_BLOCK`).
+const SORT_BLOCK: u32 = 1024;
 /// Radix passes of 8 bits over the 54-bit code.
 const PASSES: u32 = 7;
 /// Values per scan block (the shader's `SCAN_BLOCK`: 256 invocations × 8).
@@ -38,21 +42,22 @@ const SCAN_BLOCK: u32 = 2048;
 const SLOT: u64 = 256;
 const MAX_SLOTS: u64 = 32;
 
+/// The build's uniform (`BuildParams` in `prelude.wgsl`).
 #[repr(C)]
 #[derive(Clone, Copy, Debug, Pod, Zeroable)]
-struct BuildParams {
-    n: u32,
-    shift: u32,
-    tiles: u32,
-    count: u32,
-    deq_min: [f32; 4],
-    deq_step: [f32; 4],
+pub(crate) struct BuildParams {
+    pub n: u32,
+    pub shift: u32,
+    pub blocks: u32,
+    pub count: u32,
+    pub deq_min: [f32; 4],
+    pub deq_step: [f32; 4],
 }
 
 struct Pipelines {
     make_keys: wgpu::ComputePipeline,
-    radix_count: wgpu::ComputePipeline,
-    radix_scatter: wgpu::ComputePipeline,
+    radix_upsweep: wgpu::ComputePipeline,
+    radix_downsweep: wgpu::ComputePipeline,
     scan_blocks: wgpu::ComputePipeline,
     scan_add: wgpu::ComputePipeline,
     reorder: wgpu::ComputePipeline,
@@ -103,7 +108,7 @@ impl LbvhBuilder {
         let scope = ctx.device.push_error_scope(wgpu::ErrorFilter::Validation);
         let module = ctx.device.create_shader_module(wgpu::ShaderModuleDescriptor {
             label: Some("lbvh.wgsl"),
-            source: wgpu::ShaderSource::Wgsl(include_str!("lbvh.wgsl").into()),
+            source: wgpu::ShaderSource::Wgsl(crate::layout::shader(include_str!("lbvh.wgsl")).into()),
         });
         let pipe = |entry: &'static str| {
             ctx.device.create_compute_pipeline(&wgpu::ComputePipelineDescriptor {
@@ -117,8 +122,8 @@ impl LbvhBuilder {
         };
         let pipes = Pipelines {
             make_keys: pipe("make_keys"),
-            radix_count: pipe("radix_count"),
-            radix_scatter: pipe("radix_scatter"),
+            radix_upsweep: pipe("radix_upsweep"),
+            radix_downsweep: pipe("radix_downsweep"),
             scan_blocks: pipe("scan_blocks"),
             scan_add: pipe("scan_add"),
             reorder: pipe("reorder"),
@@ -136,12 +141,13 @@ impl LbvhBuilder {
         }
         let st = wgpu::BufferUsages::STORAGE;
         let st_dst = st | wgpu::BufferUsages::COPY_DST;
+        let st_io = st_dst | wgpu::BufferUsages::COPY_SRC;
         Ok(LbvhBuilder {
             pipes,
             params,
             samples_in: GrowBuffer::new("unsorted samples", st_dst),
             colors_in: GrowBuffer::new("unsorted colors", st_dst),
-            keys: [GrowBuffer::new("sort keys A", st), GrowBuffer::new("sort keys B", st)],
+            keys: [GrowBuffer::new("sort keys A", st_io), GrowBuffer::new("sort keys B", st_io)],
             levels: Vec::new(),
             parents: GrowBuffer::new("parents", st),
             flags: GrowBuffer::new("fit flags", st_dst),
@@ -149,11 +155,16 @@ impl LbvhBuilder {
         })
     }
 
-    /// Sizes every scratch buffer for `n` samples and writes the uniform slots.
-    fn prepare(&mut self, ctx: &GpuContext, frame: &Frame) -> Result<Vec<u32>, GpuError> {
-        let n = frame.samples.len() as u32;
-        let tiles = n.div_ceil(TILE);
-        let hist_count = tiles
+    /// Sizes the sort's buffers for `n` keys and writes the uniform slots; the scan levels.
+    fn prepare_sort(
+        &mut self,
+        ctx: &GpuContext,
+        n: u32,
+        deq_min: [f32; 4],
+        deq_step: [f32; 4],
+    ) -> Result<Vec<u32>, GpuError> {
+        let blocks = n.div_ceil(SORT_BLOCK);
+        let hist_count = blocks
             .checked_mul(256)
             .filter(|&c| c < u32::MAX / 2)
             .ok_or(GpuError::BadScene("too many samples for the GPU sort"))?;
@@ -162,13 +173,8 @@ impl LbvhBuilder {
             return Err(GpuError::Internal("too many scan levels"));
         }
         let n64 = n as u64;
-        self.samples_in.ensure(ctx, n64 * 8)?;
-        self.colors_in.ensure(ctx, n64 * 4)?;
         self.keys[0].ensure(ctx, n64 * 16)?;
         self.keys[1].ensure(ctx, n64 * 16)?;
-        self.parents.ensure(ctx, (2 * n64 - 1) * 4)?;
-        self.flags.ensure(ctx, (n64 - 1) * 4)?;
-        self.boxes.ensure(ctx, (n64 - 1) * 24)?;
         while self.levels.len() < counts.len() + 1 {
             self.levels.push(GrowBuffer::new("scan level", wgpu::BufferUsages::STORAGE));
         }
@@ -177,15 +183,7 @@ impl LbvhBuilder {
         }
         self.levels[counts.len()].ensure(ctx, 4)?;
 
-        let deq = frame.header.dequantizer();
-        let base = BuildParams {
-            n,
-            shift: 0,
-            tiles,
-            count: 0,
-            deq_min: [deq.min.x, deq.min.y, deq.min.z, 0.0],
-            deq_step: [deq.step.x, deq.step.y, deq.step.z, deq.radius_unit],
-        };
+        let base = BuildParams { n, shift: 0, blocks, count: 0, deq_min, deq_step };
         let mut slots = vec![0u8; (SLOT * MAX_SLOTS) as usize];
         let mut put = |slot: usize, p: BuildParams| {
             let o = slot * SLOT as usize;
@@ -199,6 +197,25 @@ impl LbvhBuilder {
             put(1 + PASSES as usize + l, BuildParams { count: c, ..base });
         }
         ctx.queue.write_buffer(&self.params, 0, &slots);
+        Ok(counts)
+    }
+
+    /// Sizes every scratch buffer for the frame's `n >= 2` samples and writes the uniform slots.
+    fn prepare(&mut self, ctx: &GpuContext, frame: &Frame) -> Result<Vec<u32>, GpuError> {
+        let n = frame.samples.len() as u32;
+        let deq = frame.header.dequantizer();
+        let counts = self.prepare_sort(
+            ctx,
+            n,
+            [deq.min.x, deq.min.y, deq.min.z, 0.0],
+            [deq.step.x, deq.step.y, deq.step.z, deq.radius_unit],
+        )?;
+        let n64 = n as u64;
+        self.samples_in.ensure(ctx, n64 * 8)?;
+        self.colors_in.ensure(ctx, n64 * 4)?;
+        self.parents.ensure(ctx, (2 * n64 - 1) * 4)?;
+        self.flags.ensure(ctx, (n64 - 1) * 4)?;
+        self.boxes.ensure(ctx, (n64 - 1) * 24)?;
         Ok(counts)
     }
 
@@ -238,56 +255,18 @@ impl LbvhBuilder {
     ) -> Result<(), GpuError> {
         let (samples_out, colors_out, nodes) = (out.samples, out.colors, out.nodes);
         let p = &self.pipes;
-        let tiles = n.div_ceil(TILE);
         let keys = [self.keys[0].get()?, self.keys[1].get()?];
-        let hist = self.levels[0].get()?;
         let flags = self.flags.get()?;
         encoder.clear_buffer(flags, 0, Some((n as u64 - 1) * 4));
         encoder.clear_buffer(self.boxes.get()?, 0, Some((n as u64 - 1) * 24));
 
-        let mut steps: Vec<(&wgpu::ComputePipeline, wgpu::BindGroup, u32)> = Vec::new();
+        let mut steps: Vec<Step> = Vec::new();
         steps.push((
             &p.make_keys,
             self.bind(ctx, &p.make_keys, 0, &[(1, self.samples_in.get()?), (4, keys[0])]),
             n.div_ceil(64),
         ));
-        let scan_slot = 1 + PASSES as u64;
-        let mut scan_up = Vec::new();
-        let mut scan_down = Vec::new();
-        for (l, &c) in counts.iter().enumerate() {
-            let data = self.levels[l].get()?;
-            let sums = self.levels[l + 1].get()?;
-            scan_up.push((
-                self.bind(ctx, &p.scan_blocks, scan_slot + l as u64, &[(6, data), (7, sums)]),
-                c.div_ceil(SCAN_BLOCK),
-            ));
-            if l + 1 < counts.len() {
-                scan_down.push((
-                    self.bind(ctx, &p.scan_add, scan_slot + l as u64, &[(6, data), (7, sums)]),
-                    c.div_ceil(256),
-                ));
-            }
-        }
-        for pass in 0..PASSES {
-            let (src, dst) = (keys[pass as usize % 2], keys[(pass as usize + 1) % 2]);
-            let slot = 1 + pass as u64;
-            steps.push((
-                &p.radix_count,
-                self.bind(ctx, &p.radix_count, slot, &[(3, src), (5, hist)]),
-                tiles.div_ceil(64),
-            ));
-            for (bg, g) in &scan_up {
-                steps.push((&p.scan_blocks, bg.clone(), *g));
-            }
-            for (bg, g) in scan_down.iter().rev() {
-                steps.push((&p.scan_add, bg.clone(), *g));
-            }
-            steps.push((
-                &p.radix_scatter,
-                self.bind(ctx, &p.radix_scatter, slot, &[(3, src), (4, dst), (5, hist)]),
-                tiles.div_ceil(64),
-            ));
-        }
+        self.sort_steps(ctx, n, counts, &mut steps)?;
         let sorted = keys[PASSES as usize % 2];
         steps.push((
             &p.reorder,
@@ -322,15 +301,84 @@ impl LbvhBuilder {
             n.div_ceil(64),
         ));
 
-        let mut pass = encoder
-            .begin_compute_pass(&wgpu::ComputePassDescriptor { label: Some("lbvh build"), timestamp_writes: None });
-        for (pipe, bg, groups) in &steps {
-            let (x, y) = grid(ctx, *groups);
-            pass.set_pipeline(pipe);
-            pass.set_bind_group(0, bg, &[]);
-            pass.dispatch_workgroups(x, y, 1);
+        run_steps(ctx, encoder, "lbvh build", &steps);
+        Ok(())
+    }
+
+    /// The dispatches of the radix sort of the `n` keys in `keys[0]` (the result lands in
+    /// `keys[PASSES % 2]`).
+    fn sort_steps<'a>(
+        &'a self,
+        ctx: &GpuContext,
+        n: u32,
+        counts: &[u32],
+        steps: &mut Vec<Step<'a>>,
+    ) -> Result<(), GpuError> {
+        let p = &self.pipes;
+        let blocks = n.div_ceil(SORT_BLOCK);
+        let keys = [self.keys[0].get()?, self.keys[1].get()?];
+        let hist = self.levels[0].get()?;
+        let scan_slot = 1 + PASSES as u64;
+        let mut scan_up = Vec::new();
+        let mut scan_down = Vec::new();
+        for (l, &c) in counts.iter().enumerate() {
+            let data = self.levels[l].get()?;
+            let sums = self.levels[l + 1].get()?;
+            scan_up.push((
+                self.bind(ctx, &p.scan_blocks, scan_slot + l as u64, &[(6, data), (7, sums)]),
+                c.div_ceil(SCAN_BLOCK),
+            ));
+            if l + 1 < counts.len() {
+                scan_down.push((
+                    self.bind(ctx, &p.scan_add, scan_slot + l as u64, &[(6, data), (7, sums)]),
+                    c.div_ceil(256),
+                ));
+            }
+        }
+        for pass in 0..PASSES {
+            let (src, dst) = (keys[pass as usize % 2], keys[(pass as usize + 1) % 2]);
+            let slot = 1 + pass as u64;
+            steps.push((&p.radix_upsweep, self.bind(ctx, &p.radix_upsweep, slot, &[(3, src), (5, hist)]), blocks));
+            for (bg, g) in &scan_up {
+                steps.push((&p.scan_blocks, bg.clone(), *g));
+            }
+            for (bg, g) in scan_down.iter().rev() {
+                steps.push((&p.scan_add, bg.clone(), *g));
+            }
+            steps.push((
+                &p.radix_downsweep,
+                self.bind(ctx, &p.radix_downsweep, slot, &[(3, src), (4, dst), (5, hist)]),
+                blocks,
+            ));
         }
         Ok(())
+    }
+
+    /// Sorts `keys` (laid out like [`volwarp_core::morton::SortKey`]: code low word, code high
+    /// word, payload, 0) on the GPU by their 56 low code bits (the Morton code has 54), stably:
+    /// the sort of the build, on its own, for tests and benchmarks.
+    pub fn sort_keys(
+        &mut self,
+        ctx: &GpuContext,
+        keys: &[[u32; 4]],
+        staging: &mut GrowBuffer,
+    ) -> Result<Vec<[u32; 4]>, GpuError> {
+        let n =
+            u32::try_from(keys.len()).ok().filter(|&n| n < 1 << 30).ok_or(GpuError::BadScene("more than 2^30 keys"))?;
+        if n == 0 {
+            return Ok(Vec::new());
+        }
+        let counts = self.prepare_sort(ctx, n, [0.0; 4], [0.0; 4])?;
+        ctx.queue.write_buffer(self.keys[0].get()?, 0, bytemuck::cast_slice(keys));
+        let mut steps = Vec::new();
+        self.sort_steps(ctx, n, &counts, &mut steps)?;
+        let bytes = n as u64 * 16;
+        staging.ensure(ctx, bytes)?;
+        let mut encoder = ctx.device.create_command_encoder(&Default::default());
+        run_steps(ctx, &mut encoder, "radix sort", &steps);
+        encoder.copy_buffer_to_buffer(self.keys[PASSES as usize % 2].get()?, 0, staging.get()?, 0, bytes);
+        ctx.queue.submit([encoder.finish()]);
+        read_mapped(ctx, staging.get()?, bytes, bytemuck::pod_collect_to_vec::<u8, [u32; 4]>)
     }
 
     fn upload(&mut self, ctx: &GpuContext, frame: &Frame) -> Result<Vec<u32>, GpuError> {
@@ -410,6 +458,21 @@ impl LbvhBuilder {
     }
 }
 
+/// One dispatch: pipeline, bind group, workgroups.
+type Step<'a> = (&'a wgpu::ComputePipeline, wgpu::BindGroup, u32);
+
+/// Records `steps` as one compute pass (wgpu orders the dispatches' storage accesses).
+fn run_steps(ctx: &GpuContext, encoder: &mut wgpu::CommandEncoder, label: &str, steps: &[Step]) {
+    let mut pass =
+        encoder.begin_compute_pass(&wgpu::ComputePassDescriptor { label: Some(label), timestamp_writes: None });
+    for (pipe, bg, groups) in steps {
+        let (x, y) = grid(ctx, *groups);
+        pass.set_pipeline(pipe);
+        pass.set_bind_group(0, bg, &[]);
+        pass.dispatch_workgroups(x, y, 1);
+    }
+}
+
 fn pipe_label(_p: &wgpu::ComputePipeline) -> Option<&'static str> {
     Some("lbvh")
 }
@@ -424,6 +487,8 @@ mod tests {
         assert_eq!(scan_counts(2048), vec![2048]);
         assert_eq!(scan_counts(2049), vec![2049, 2]);
         assert_eq!(scan_counts(256 * 4869), vec![256 * 4869, 609]);
+        // 2.2 M keys: 2149 blocks of 1024, 256 digits each.
+        assert_eq!(scan_counts(256 * 2149), vec![256 * 2149, 269]);
         assert_eq!(scan_counts(1 << 25), vec![1 << 25, 1 << 14, 8]);
     }
 }

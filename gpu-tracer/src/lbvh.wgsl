@@ -2,8 +2,9 @@
 //
 // 1. `make_keys`: Morton code of each packed sample (all 54 bits, as two u32 words) and its
 //    index, laid out exactly like `volwarp_core::morton::SortKey` (code lo, code hi, index, 0);
-// 2. a stable LSD radix sort over 7 passes of 8 bits (`radix_count`, `scan_blocks`/`scan_add`,
-//    `radix_scatter`), so keys end up ordered by (code, index), exactly the CPU order;
+// 2. a stable LSD radix sort over 7 passes of 8 bits, reduce-then-scan (`radix_upsweep`,
+//    `scan_blocks`/`scan_add`, `radix_downsweep`), so keys end up ordered by (code, index),
+//    exactly the CPU order;
 // 3. `reorder`: samples and colors into leaf order;
 // 4. `karras`: children and parent links of every internal node (Karras 2012), the same
 //    δ with the index tie-break as `lbvh::karras_node`;
@@ -13,32 +14,17 @@
 // 1-D kernels may be dispatched as a 2-D grid (to stay under the 65535 workgroups-per-dimension
 // limit); `linear_id` folds it back.
 
-struct BuildParams {
-    n: u32,
-    shift: u32,
-    tiles: u32,
-    count: u32,
-    // Dequantizer: min.xyz, step.xyz, radius unit in step.w.
-    deq_min: vec4<f32>,
-    deq_step: vec4<f32>,
-}
-
-struct Node {
-    min: vec3<f32>,
-    left: u32,
-    max: vec3<f32>,
-    right: u32,
-}
+// Node, BuildParams, PackedSample and the shared functions come from `prelude.wgsl`.
 
 @group(0) @binding(0) var<uniform> P: BuildParams;
-@group(0) @binding(1) var<storage, read> samples_in: array<vec2<u32>>;
+@group(0) @binding(1) var<storage, read> samples_in: array<PackedSample>;
 @group(0) @binding(2) var<storage, read> colors_in: array<u32>;
 @group(0) @binding(3) var<storage, read> keys_src: array<vec4<u32>>;
 @group(0) @binding(4) var<storage, read_write> keys_dst: array<vec4<u32>>;
 @group(0) @binding(5) var<storage, read_write> hist: array<u32>;
 @group(0) @binding(6) var<storage, read_write> scan_data: array<u32>;
 @group(0) @binding(7) var<storage, read_write> scan_sums: array<u32>;
-@group(0) @binding(8) var<storage, read_write> samples_out: array<vec2<u32>>;
+@group(0) @binding(8) var<storage, read_write> samples_out: array<PackedSample>;
 @group(0) @binding(9) var<storage, read_write> colors_out: array<u32>;
 @group(0) @binding(10) var<storage, read_write> nodes: array<Node>;
 @group(0) @binding(11) var<storage, read_write> parents: array<u32>;
@@ -50,11 +36,11 @@ struct Node {
 // coherence then guarantees it reads the one value stored there.
 @group(0) @binding(13) var<storage, read_write> boxes: array<atomic<u32>>;
 
-const LEAF_BIT: u32 = 0x80000000u;
 const NO_PARENT: u32 = 0xffffffffu;
-const POS_MASK: u32 = 0x3ffffu;
-// Keys per radix tile (one invocation walks its tile serially, which keeps the sort stable).
-const TILE: u32 = 128u;
+// The radix sort's workgroups: 256 invocations × 4 keys = a block of 1024 keys.
+const SORT_WG: u32 = 256u;
+const SORT_ITEMS: u32 = 4u;
+const SORT_BLOCK: u32 = 1024u;
 const BUCKETS: u32 = 256u;
 const SCAN_ITEMS: u32 = 8u;
 const SCAN_BLOCK: u32 = 2048u;
@@ -65,11 +51,8 @@ fn linear_id(wid: vec3<u32>, nwg: vec3<u32>, lidx: u32, wg_size: u32) -> u32 {
 
 // ---- 1. Morton keys --------------------------------------------------------------------------
 
-fn coords(s: vec2<u32>) -> vec3<u32> {
-    let x = s.x & POS_MASK;
-    let y = (s.x >> 18u) | ((s.y & 0xfu) << 14u);
-    let z = (s.y >> 4u) & POS_MASK;
-    return vec3<u32>(x, y, z);
+fn coords(s: PackedSample) -> vec3<u32> {
+    return sample_coords(s);
 }
 
 @compute @workgroup_size(64)
@@ -100,7 +83,16 @@ fn make_keys(
     keys_dst[i] = vec4<u32>(lo, hi, i, 0u);
 }
 
-// ---- 2. stable LSD radix sort ----------------------------------------------------------------
+// ---- 2. radix sort: reduce-then-scan, 8-bit digits ---------------------------------------------
+//
+// Per pass (8 bits of the code, 7 passes): `radix_upsweep` counts each block's digits in a
+// workgroup-shared histogram and stores column `block` of the digit-major histogram
+// (`hist[digit * blocks + block]`); a device-wide exclusive scan (`scan_blocks`/`scan_add`)
+// turns it into every (digit, block)'s first output position; `radix_downsweep` sorts its block
+// locally and stably by the digit (four 2-bit splits, each a workgroup-wide prefix sum in shared
+// memory: portable, no subgroup operations) and scatters each key to its digit's position plus
+// its rank among the block's keys of that digit. Stable, so keys end up ordered by
+// (code, index), the CPU's order.
 
 fn digit(k: vec4<u32>, shift: u32) -> u32 {
     var v: u32;
@@ -114,48 +106,131 @@ fn digit(k: vec4<u32>, shift: u32) -> u32 {
     return v & (BUCKETS - 1u);
 }
 
-// Counts the digits of tile t into column t of the digit-major histogram `hist[d * tiles + t]`,
-// whose exclusive prefix sum is then every (digit, tile)'s first output position.
-@compute @workgroup_size(64)
-fn radix_count(
+// The block's digit counts (both kernels); in `radix_downsweep` only the keys that exist.
+var<workgroup> wg_hist: array<atomic<u32>, 256>;
+// The digit of each slot of the block, and the block's slots in their (partly) sorted order.
+var<workgroup> wg_digit: array<u32, 1024>;
+var<workgroup> wg_order: array<u32, 1024>;
+// Per-invocation counts of the four 2-bit values, scanned across the workgroup.
+var<workgroup> wg_split: array<vec4<u32>, 256>;
+// Each digit's first local position, and its first global position.
+var<workgroup> wg_start: array<u32, 256>;
+var<workgroup> wg_base: array<u32, 256>;
+
+@compute @workgroup_size(256)
+fn radix_upsweep(
     @builtin(workgroup_id) wid: vec3<u32>,
     @builtin(num_workgroups) nwg: vec3<u32>,
     @builtin(local_invocation_index) lidx: u32,
 ) {
-    let t = linear_id(wid, nwg, lidx, 64u);
-    if t >= P.tiles {
-        return;
+    let block = wid.y * nwg.x + wid.x;
+    atomicStore(&wg_hist[lidx], 0u);
+    workgroupBarrier();
+    let live = block < P.blocks;
+    if live {
+        let base = block * SORT_BLOCK;
+        for (var j = 0u; j < SORT_ITEMS; j++) {
+            let i = base + j * SORT_WG + lidx;
+            if i < P.n {
+                atomicAdd(&wg_hist[digit(keys_src[i], P.shift)], 1u);
+            }
+        }
     }
-    for (var d = 0u; d < BUCKETS; d++) {
-        hist[d * P.tiles + t] = 0u;
-    }
-    let start = t * TILE;
-    let end = min(start + TILE, P.n);
-    for (var i = start; i < end; i++) {
-        let d = digit(keys_src[i], P.shift);
-        hist[d * P.tiles + t] += 1u;
+    workgroupBarrier();
+    if live {
+        hist[lidx * P.blocks + block] = atomicLoad(&wg_hist[lidx]);
     }
 }
 
-// Walks tile t in order and scatters each key to its digit's next slot: stable.
-@compute @workgroup_size(64)
-fn radix_scatter(
+@compute @workgroup_size(256)
+fn radix_downsweep(
     @builtin(workgroup_id) wid: vec3<u32>,
     @builtin(num_workgroups) nwg: vec3<u32>,
     @builtin(local_invocation_index) lidx: u32,
 ) {
-    let t = linear_id(wid, nwg, lidx, 64u);
-    if t >= P.tiles {
-        return;
+    let block = wid.y * nwg.x + wid.x;
+    let live = block < P.blocks;
+    let base = block * SORT_BLOCK;
+    atomicStore(&wg_hist[lidx], 0u);
+    workgroupBarrier();
+    // Invocation `lidx` owns slots 4·lidx … 4·lidx + 3. Slots past the end get digit 255: being
+    // the last slots, a stable sort keeps them after every real key.
+    for (var j = 0u; j < SORT_ITEMS; j++) {
+        let slot = lidx * SORT_ITEMS + j;
+        let i = base + slot;
+        var d = BUCKETS - 1u;
+        if live && i < P.n {
+            d = digit(keys_src[i], P.shift);
+            atomicAdd(&wg_hist[d], 1u);
+        }
+        wg_digit[slot] = d;
+        wg_order[slot] = slot;
     }
-    let start = t * TILE;
-    let end = min(start + TILE, P.n);
-    for (var i = start; i < end; i++) {
-        let k = keys_src[i];
-        let slot = digit(k, P.shift) * P.tiles + t;
-        let pos = hist[slot];
-        hist[slot] = pos + 1u;
-        keys_dst[pos] = k;
+    workgroupBarrier();
+    // Four stable splits by 2 bits of the digit, least significant first (a local LSD sort).
+    for (var r = 0u; r < 8u; r += 2u) {
+        var mine: array<u32, 4>;
+        var bits: array<u32, 4>;
+        var count = vec4<u32>(0u);
+        for (var j = 0u; j < SORT_ITEMS; j++) {
+            let slot = wg_order[lidx * SORT_ITEMS + j];
+            let b = (wg_digit[slot] >> r) & 3u;
+            mine[j] = slot;
+            bits[j] = b;
+            count[b] += 1u;
+        }
+        wg_split[lidx] = count;
+        workgroupBarrier();
+        for (var off = 1u; off < SORT_WG; off <<= 1u) {
+            var add = vec4<u32>(0u);
+            if lidx >= off {
+                add = wg_split[lidx - off];
+            }
+            workgroupBarrier();
+            wg_split[lidx] += add;
+            workgroupBarrier();
+        }
+        let total = wg_split[SORT_WG - 1u];
+        var pos = wg_split[lidx] - count;
+        pos += vec4<u32>(0u, total.x, total.x + total.y, total.x + total.y + total.z);
+        // Everyone has read `wg_order` and `wg_split` before they are overwritten.
+        workgroupBarrier();
+        for (var j = 0u; j < SORT_ITEMS; j++) {
+            let b = bits[j];
+            wg_order[pos[b]] = mine[j];
+            pos[b] += 1u;
+        }
+        workgroupBarrier();
+    }
+    // Each digit's first local position: an exclusive scan of the block's digit counts.
+    let c = atomicLoad(&wg_hist[lidx]);
+    wg_start[lidx] = c;
+    workgroupBarrier();
+    for (var off = 1u; off < BUCKETS; off <<= 1u) {
+        var add = 0u;
+        if lidx >= off {
+            add = wg_start[lidx - off];
+        }
+        workgroupBarrier();
+        wg_start[lidx] += add;
+        workgroupBarrier();
+    }
+    let first = wg_start[lidx] - c;
+    workgroupBarrier();
+    wg_start[lidx] = first;
+    if live {
+        wg_base[lidx] = hist[lidx * P.blocks + block];
+    }
+    workgroupBarrier();
+    // Scatter, neighbouring invocations taking neighbouring positions.
+    for (var j = 0u; j < SORT_ITEMS; j++) {
+        let p = j * SORT_WG + lidx;
+        let slot = wg_order[p];
+        let i = base + slot;
+        if live && i < P.n {
+            let d = wg_digit[slot];
+            keys_dst[wg_base[d] + p - wg_start[d]] = keys_src[i];
+        }
     }
 }
 
@@ -321,13 +396,8 @@ fn karras(
 
 // ---- 5. bottom-up fit ------------------------------------------------------------------------
 
-fn center(s: vec2<u32>) -> vec3<f32> {
-    let q = coords(s);
-    return vec3<f32>(
-        P.deq_min.x + f32(q.x) * P.deq_step.x,
-        P.deq_min.y + f32(q.y) * P.deq_step.y,
-        P.deq_min.z + f32(q.z) * P.deq_step.z,
-    );
+fn center(s: PackedSample) -> vec3<f32> {
+    return sample_center(s, P.deq_min, P.deq_step);
 }
 
 struct Box {
@@ -339,7 +409,7 @@ struct Box {
 fn leaf_box(k: u32) -> Box {
     let s = samples_out[k];
     let c = center(s);
-    let r = f32(s.y >> 22u) * P.deq_step.w;
+    let r = sample_radius(s, P.deq_step);
     let k20 = 1.0 / 1048576.0;
     let pad = vec3<f32>((abs(c.x) + r) * k20, (abs(c.y) + r) * k20, (abs(c.z) + r) * k20);
     return Box(

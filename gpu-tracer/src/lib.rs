@@ -9,7 +9,9 @@
 //! |---|---|
 //! | [`adapter`] | picking a GPU (a real one first, a software one as the fallback) |
 //! | [`tracer`] | [`GpuTracer`]: the sphere tracer (`trace.wgsl`), a [`Renderer`] named `spheres-gpu` |
+//! | [`splat`] | [`GpuSplat`]: the exact sphere splatter (`splat.wgsl`), a [`Renderer`] named `splat-gpu` |
 //! | [`lbvh`] | the LBVH build on the GPU (`lbvh.wgsl`): Morton codes, radix sort, Karras, fit |
+//! | [`layout`] | the shared WGSL prelude (`prelude.wgsl`): one definition of every shared layout |
 //! | [`buffers`] | buffers reused across frames, readback |
 //! | [`synthetic`] | synthetic sample clouds (a bumpy surface) for tests and benchmarks |
 //!
@@ -23,11 +25,14 @@
 
 pub mod adapter;
 pub mod buffers;
+pub mod layout;
 pub mod lbvh;
+pub mod splat;
 pub mod synthetic;
 pub mod tracer;
 
 pub use adapter::GpuContext;
+pub use splat::GpuSplat;
 pub use tracer::{BuildTiming, GpuTracer};
 
 /// Why the GPU tracer could not do its work.

@@ -6,83 +6,29 @@
 // (traversal.rs) and `sample::over_background`. The only freedom a GPU keeps is fusing a multiply
 // and an add into an FMA (WGSL does not forbid contraction), which can move a result by one ulp.
 
-struct Params {
-    // RayBasis, the same 64 bytes as `volwarp_core::RayBasis` (eye.w = width, corner.w = height).
-    eye: vec4<f32>,
-    corner: vec4<f32>,
-    du: vec4<f32>,
-    dv: vec4<f32>,
-    // Dequantizer: min.xyz, step.xyz, radius unit in step.w.
-    deq_min: vec4<f32>,
-    deq_step: vec4<f32>,
-    width: u32,
-    height: u32,
-    n: u32,
-    background: u32,
-}
+// Node, RayBasis, TraceParams, PackedSample and the shared functions come from `prelude.wgsl`.
 
-// `volwarp_core::lbvh::Node`: 32 bytes, vec3 aligned to 16.
-struct Node {
-    min: vec3<f32>,
-    left: u32,
-    max: vec3<f32>,
-    right: u32,
-}
-
-@group(0) @binding(0) var<uniform> params: Params;
+@group(0) @binding(0) var<uniform> params: TraceParams;
 @group(0) @binding(1) var<storage, read> nodes: array<Node>;
 // Packed samples as (low word, high word) of the little-endian u64.
-@group(0) @binding(2) var<storage, read> samples: array<vec2<u32>>;
+@group(0) @binding(2) var<storage, read> samples: array<PackedSample>;
 @group(0) @binding(3) var<storage, read> colors: array<u32>;
 @group(0) @binding(4) var<storage, read_write> out_pixels: array<u32>;
 
-const LEAF_BIT: u32 = 0x80000000u;
 const STACK_SIZE: u32 = 128u;
-// Stands in for +inf as `t_max` before the first hit: `min(t_far, F32_MAX)` equals
-// `min(t_far, inf)` for every finite `t_far`.
-const F32_MAX: f32 = 3.40282347e38;
 // `volwarp_core::sphere::BOX_T_FAR_SCALE`: the conservative widening of the slab test's far bound.
 const BOX_T_FAR_SCALE: f32 = 1.0000004;
-const POS_MASK: u32 = 0x3ffffu;
 
-
-fn center(s: vec2<u32>) -> vec3<f32> {
-    let x = s.x & POS_MASK;
-    let y = (s.x >> 18u) | ((s.y & 0xfu) << 14u);
-    let z = (s.y >> 4u) & POS_MASK;
-    return vec3<f32>(
-        params.deq_min.x + f32(x) * params.deq_step.x,
-        params.deq_min.y + f32(y) * params.deq_step.y,
-        params.deq_min.z + f32(z) * params.deq_step.z,
-    );
+fn center(s: PackedSample) -> vec3<f32> {
+    return sample_center(s, params.deq_min, params.deq_step);
 }
 
-fn radius(s: vec2<u32>) -> f32 {
-    return f32(s.y >> 22u) * params.deq_step.w;
+fn radius(s: PackedSample) -> f32 {
+    return sample_radius(s, params.deq_step);
 }
 
-// `sphere::intersect`: the nearest t > 0, or -1 for a miss (valid hits are > 0).
 fn intersect(o: vec3<f32>, d: vec3<f32>, c: vec3<f32>, r: f32) -> f32 {
-    let ocx = c.x - o.x;
-    let ocy = c.y - o.y;
-    let ocz = c.z - o.z;
-    let b = ocx * d.x + ocy * d.y + ocz * d.z;
-    let fx = ocx - b * d.x;
-    let fy = ocy - b * d.y;
-    let fz = ocz - b * d.z;
-    let disc = r * r - (fx * fx + fy * fy + fz * fz);
-    if !(disc >= 0.0) {
-        return -1.0;
-    }
-    let s = sqrt(disc);
-    let t0 = b - s;
-    let t1 = b + s;
-    if t0 > 0.0 {
-        return t0;
-    } else if t1 > 0.0 {
-        return t1;
-    }
-    return -1.0;
+    return sphere_intersect(o, d, c, r);
 }
 
 // `sphere::intersect_box`: whether the ray enters the box before `t_max` (entry t in `.y`).
@@ -103,18 +49,6 @@ fn intersect_box(o: vec3<f32>, inv: vec3<f32>, bmin: vec3<f32>, bmax: vec3<f32>,
     return vec2<f32>(0.0, 0.0);
 }
 
-// `sample::over_background`, integer for integer.
-fn over_background(c: u32, bg: u32) -> u32 {
-    let k = 255u - (c >> 24u);
-    var out = 0xff000000u;
-    for (var i = 0u; i < 3u; i++) {
-        let s = (c >> (8u * i)) & 0xffu;
-        let d = (bg >> (8u * i)) & 0xffu;
-        out |= min(s + (k * d + 127u) / 255u, 255u) << (8u * i);
-    }
-    return out;
-}
-
 @compute @workgroup_size(8, 8, 1)
 fn trace(@builtin(global_invocation_id) gid: vec3<u32>) {
     let x = gid.x;
@@ -122,15 +56,8 @@ fn trace(@builtin(global_invocation_id) gid: vec3<u32>) {
     if x >= params.width || y >= params.height {
         return;
     }
-    // `RayBasis::dir`: corner + du*px, then + dv*py, normalized by 1 / sqrt(d·d).
-    let px = f32(x) + 0.5;
-    let py = f32(y) + 0.5;
-    let dx = params.corner.x + params.du.x * px + params.dv.x * py;
-    let dy = params.corner.y + params.du.y * px + params.dv.y * py;
-    let dz = params.corner.z + params.du.z * px + params.dv.z * py;
-    let inv_len = 1.0 / sqrt(dx * dx + dy * dy + dz * dz);
-    let d = vec3<f32>(dx * inv_len, dy * inv_len, dz * inv_len);
-    let o = params.eye.xyz;
+    let d = ray_dir(params.basis, x, y);
+    let o = params.basis.eye.xyz;
 
     let n = params.n;
     var best_t = F32_MAX;

@@ -124,12 +124,18 @@ impl GpuTracer {
         Self::with_context(GpuContext::new()?)
     }
 
+    /// On the adapter whose name contains `name` (case-insensitive; `None`: the best there is,
+    /// see [`GpuContext::with_adapter`]); a clear error when none matches or none exists.
+    pub fn with_adapter(name: Option<&str>) -> Result<GpuTracer, GpuError> {
+        Self::with_context(GpuContext::with_adapter(name)?)
+    }
+
     /// A tracer on an already opened device.
     pub fn with_context(ctx: GpuContext) -> Result<GpuTracer, GpuError> {
         let scope = ctx.device.push_error_scope(wgpu::ErrorFilter::Validation);
         let module = ctx.device.create_shader_module(wgpu::ShaderModuleDescriptor {
             label: Some("trace.wgsl"),
-            source: wgpu::ShaderSource::Wgsl(include_str!("trace.wgsl").into()),
+            source: wgpu::ShaderSource::Wgsl(crate::layout::shader(include_str!("trace.wgsl")).into()),
         });
         let pipeline = ctx.device.create_compute_pipeline(&wgpu::ComputePipelineDescriptor {
             label: Some("trace"),
@@ -192,7 +198,7 @@ impl GpuTracer {
         self.last_build
     }
 
-    fn check_scene(scene: &Scene) -> Result<u32, GpuError> {
+    pub(crate) fn check_scene(scene: &Scene) -> Result<u32, GpuError> {
         scene.check().map_err(|e| {
             GpuError::BadScene(match e {
                 SceneError::CountMismatch => "sample, color and node counts do not match",
@@ -378,6 +384,23 @@ impl GpuTracer {
         self.last_build = timing;
         self.uploaded = Some(SceneKey::of(&scene));
         Ok(scene)
+    }
+
+    /// Sorts `keys` on the GPU with the LBVH build's radix sort (stable, by the low 56 bits of
+    /// the code in words 0 and 1; see [`LbvhBuilder::sort_keys`]): for tests and benchmarks.
+    pub fn sort_keys(&mut self, keys: &[[u32; 4]]) -> Result<Vec<[u32; 4]>, GpuError> {
+        if self.builder.is_none() {
+            self.builder = Some(LbvhBuilder::new(&self.ctx)?);
+        }
+        let scope = self.ctx.device.push_error_scope(wgpu::ErrorFilter::Validation);
+        let result = match self.builder.as_mut() {
+            Some(b) => b.sort_keys(&self.ctx, keys, &mut self.staging),
+            None => Err(GpuError::Internal("no builder")),
+        };
+        if let Some(e) = pollster::block_on(scope.pop()).map(|e| e.to_string()).or_else(|| self.ctx.take_error()) {
+            return Err(GpuError::Wgpu(e));
+        }
+        result
     }
 
     /// Runs only the GPU build of `frame` (its samples already uploaded by a previous

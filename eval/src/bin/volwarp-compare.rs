@@ -1,4 +1,4 @@
-//! `volwarp-compare FILE [--out DIR] [--width W --height H]`: replays a record file through the
+//! `volwarp-compare FILE [--out DIR] [--width W --height H] [--adapter NAME]`: replays a record file through the
 //! CPU and the GPU tracer and reports, per frame and camera, the share of identical pixels, the
 //! largest channel difference and each tracer's time; writes `CPU | GPU | difference` PNGs.
 //!
@@ -39,6 +39,9 @@ struct Args {
     /// Build the GPU side's tree on the CPU too (default: the GPU builds it).
     #[arg(long)]
     cpu_build: bool,
+    /// The GPU adapter whose name contains NAME (case-insensitive; default: the best there is).
+    #[arg(long, value_name = "NAME")]
+    adapter: Option<String>,
 }
 
 struct Job {
@@ -90,8 +93,8 @@ fn run(args: &Args) -> Result<bool, String> {
     if jobs.is_empty() {
         return Err(format!("{}: no frames recorded", args.file.display()));
     }
-    let mut gpu = GpuTracer::new().map_err(|e| e.to_string())?;
-    println!("adapter: {}", gpu.context().describe());
+    let mut gpu = GpuTracer::with_adapter(args.adapter.as_deref()).map_err(|e| e.to_string())?;
+    println!("adapter: {}", gpu.context().describe_driver());
     let mut cpu = PacketTracer::new(0);
     println!("CPU tracer: {}", cpu.name());
     if let Some(dir) = &args.out {
