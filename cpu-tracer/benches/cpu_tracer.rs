@@ -41,8 +41,7 @@ fn median_secs(max_runs: usize, budget: Duration, mut f: impl FnMut()) -> f64 {
         f();
         t.push(s.elapsed().as_secs_f64());
     }
-    t.sort_by(f64::total_cmp);
-    t[t.len() / 2]
+    volwarp_core::stats::median(&mut t).unwrap_or(f64::NAN)
 }
 
 fn warped(frame: &Frame, res: u32) -> Camera {

@@ -28,8 +28,7 @@ struct Scene {
 }
 
 fn median(mut v: Vec<f64>) -> f64 {
-    v.sort_by(f64::total_cmp);
-    v[v.len() / 2]
+    volwarp_core::stats::median(&mut v).unwrap_or(f64::NAN)
 }
 
 fn env_usize(name: &str, default: usize) -> usize {

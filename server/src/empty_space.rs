@@ -196,10 +196,4 @@ impl Occupancy {
     pub fn fraction_occupied(&self) -> f32 {
         self.occupied.iter().filter(|&&o| o).count() as f32 / self.occupied.len().max(1) as f32
     }
-
-    /// The ray parameter where a ray `o + d·t` leaves brick `b` (world space).
-    #[inline]
-    pub fn exit_t(&self, b: [u32; 3], o: Vec3, inv_d: Vec3) -> f32 {
-        self.leap_exit_t(b, 1, o, inv_d)
-    }
 }
