@@ -3,7 +3,7 @@
 # the committed seeds (fuzz/seeds/<target>/; new inputs go to the ignored fuzz/corpus/).
 # Fails on the first finding; the crash input is left under fuzz/artifacts/<target>/.
 #
-# The four volwarp-core targets always run (clean sanitizer build ≈ 3 min on 2 loaded cores).
+# The five volwarp-core targets always run (clean sanitizer build ≈ 3 min on 2 loaded cores).
 # `volume_header` fuzzes the server's parsers and needs the server's dependencies (a clean build of several
 # minutes more): it runs with VOLWARP_FUZZ_VOLUME=1. Its stable mirror runs in `cargo test`.
 # The libFuzzer seed is fixed (VOLWARP_FUZZ_SEED, default 1) so that a CI failure reproduces;
@@ -12,7 +12,7 @@
 set -euo pipefail
 secs="${1:-30}"
 cd "$(dirname "$0")/../fuzz"
-targets=(wire_decode_chunked frame_decode roundtrip lbvh)
+targets=(wire_decode_chunked frame_decode roundtrip lbvh compact_decode)
 features=()
 if [ "${VOLWARP_FUZZ_VOLUME:-0}" = 1 ]; then
   targets+=(volume_header)
