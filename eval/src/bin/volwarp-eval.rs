@@ -38,8 +38,8 @@ struct Common {
     /// Transfer function file (ParaView JSON or text); default: the volume's preset.
     #[arg(long)]
     tf: Option<PathBuf>,
-    /// Output folder.
-    #[arg(long)]
+    /// Output folder (CSV, charts, strips).
+    #[arg(long, default_value = "out/eval")]
     out: PathBuf,
     /// Threads per CPU renderer (0: all cores).
     #[arg(long, default_value_t = 0)]
