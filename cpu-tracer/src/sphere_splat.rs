@@ -82,6 +82,18 @@ impl View {
     /// Inclusive pixel ranges `(x0, x1, y0, y1)` that may see the sphere, `None` if none can.
     #[inline(always)]
     pub(crate) fn bound(&self, c: Vec3, r: f32) -> Option<(u32, u32, u32, u32)> {
+        self.bound_with(c, r, |a, b, n| pixel_span(a, b, 0.0, n))
+    }
+
+    /// The sphere's screen bound with `span` turning each axis' continuous pixel range `[a, b]`
+    /// into inclusive pixel indices below `n` (the one tangent geometry of both splatters).
+    #[inline(always)]
+    pub(crate) fn bound_with(
+        &self,
+        c: Vec3,
+        r: f32,
+        span: impl Fn(f64, f64, u32) -> Option<(u32, u32)>,
+    ) -> Option<(u32, u32, u32, u32)> {
         let rel = [(c.x - self.eye.x) as f64, (c.y - self.eye.y) as f64, (c.z - self.eye.z) as f64];
         let (cx, cy, cz) = (dot(rel, self.u), dot(rel, self.v), dot(rel, self.w));
         // Widen by a relative margin far above f32 rounding of the centre and directions.
@@ -102,8 +114,8 @@ impl View {
         let (xl, xh) = ((cx * cz - r * sx) * inv, (cx * cz + r * sx) * inv);
         let (yl, yh) = ((cy * cz - r * sy) * inv, (cy * cz + r * sy) * inv);
         // Slopes to continuous pixel coordinates: x = (s / tan_x + 1)·w/2, y = (1 − s / tan_y)·h/2.
-        let (x0, x1) = pixel_span(xl * self.px_x + self.half_w, xh * self.px_x + self.half_w, 0.0, self.width)?;
-        let (y0, y1) = pixel_span(self.half_h - yh * self.px_y, self.half_h - yl * self.px_y, 0.0, self.height)?;
+        let (x0, x1) = span(xl * self.px_x + self.half_w, xh * self.px_x + self.half_w, self.width)?;
+        let (y0, y1) = span(self.half_h - yh * self.px_y, self.half_h - yl * self.px_y, self.height)?;
         Some((x0, x1, y0, y1))
     }
 }

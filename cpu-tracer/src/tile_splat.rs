@@ -34,7 +34,7 @@
 
 use crate::depth_buffer::{key, key_prim, EMPTY};
 use crate::lanes::{self, ray_dirs, sphere_hits, Lanes};
-use crate::sphere_splat::{dot, View};
+use crate::sphere_splat::View;
 use crate::threads::Threads;
 use crate::{begin_frame_unbuilt_ok as begin_frame, shade, NO_HIT};
 use rayon::prelude::*;
@@ -310,24 +310,7 @@ impl TileSplat {
 /// tangents touch: about 25 pixels instead of 9 for a sphere three pixels wide).
 #[inline(always)]
 pub(crate) fn tight_bound(view: &View, c: Vec3, r: f32) -> Option<(u32, u32, u32, u32)> {
-    let rel = [(c.x - view.eye.x) as f64, (c.y - view.eye.y) as f64, (c.z - view.eye.z) as f64];
-    let (cx, cy, cz) = (dot(rel, view.u), dot(rel, view.v), dot(rel, view.w));
-    let r = r as f64 + 1e-5 * (dot(rel, rel).sqrt() + r as f64);
-    if cz + r < 0.0 {
-        return None; // entirely behind the eye: rays (t > 0) cannot reach it
-    }
-    if cz <= r * 1.001 {
-        // Touches the eye plane: the projection is unbounded; the whole viewport.
-        return Some((0, view.width - 1, 0, view.height - 1));
-    }
-    let denom = cz * cz - r * r;
-    let inv = 1.0 / denom;
-    let (sx, sy) = ((cx * cx + denom).sqrt(), (cy * cy + denom).sqrt());
-    let (xl, xh) = ((cx * cz - r * sx) * inv, (cx * cz + r * sx) * inv);
-    let (yl, yh) = ((cy * cz - r * sy) * inv, (cy * cz + r * sy) * inv);
-    let (x0, x1) = centre_span(xl * view.px_x + view.half_w, xh * view.px_x + view.half_w, view.width)?;
-    let (y0, y1) = centre_span(view.half_h - yh * view.px_y, view.half_h - yl * view.px_y, view.height)?;
-    Some((x0, x1, y0, y1))
+    view.bound_with(c, r, centre_span)
 }
 
 /// `|a|` per lane (`f32::max(a, −a)`).
