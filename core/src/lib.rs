@@ -9,6 +9,7 @@
 //! | [`sample`] | the object-space sample: quantized position + radius in 64 bits, RGBA8 color in 32 |
 //! | [`prediction`] | the camera expected when a requested frame arrives (orbit-aware extrapolation) |
 //! | [`guard`] | guard bands: a wider requested view at the same pixel density |
+//! | [`warp_radius`] | sphere radii sized by how far the view moved from the frame's camera |
 //! | [`heuristics`] | the ZAL12 representative-depth heuristics, as state machines |
 //! | [`compact_frame`] | the compact frame encoding: coverage mask, predicted depths, radii and colors, zstd (≈3 B/sample) |
 //! | [`compaction`] | stable removal of empty (radius 0) samples |
@@ -59,6 +60,7 @@ pub mod scene;
 pub mod sphere;
 pub mod stats;
 pub mod traversal;
+pub mod warp_radius;
 pub mod wire;
 
 mod math;

@@ -148,6 +148,58 @@ impl Predictor {
     }
 }
 
+/// How far ahead to predict: the time from sending a request to showing its frame, measured
+/// from the frames that arrived, plus half the interval between frames.
+///
+/// A frame is shown from its arrival until the next one arrives, so the camera that minimises
+/// the mean warp over that stretch is the one of its middle: `request→arrival + interval / 2`.
+/// Both terms are exponential moving averages (weight [`Horizon::WEIGHT`] for the newest
+/// measurement); before the first frame the horizon is 0 (no prediction). A client measures its
+/// first frame too (the one it shows before the camera moves), so it predicts from the start.
+#[derive(Clone, Copy, Debug, Default, PartialEq)]
+pub struct Horizon {
+    request_to_arrival_s: f64,
+    interval_s: f64,
+    last_arrival_s: Option<f64>,
+}
+
+impl Horizon {
+    /// Weight of the newest measurement in the moving averages.
+    pub const WEIGHT: f64 = 0.25;
+
+    /// Nothing measured yet.
+    pub const fn new() -> Self {
+        Horizon { request_to_arrival_s: 0.0, interval_s: 0.0, last_arrival_s: None }
+    }
+
+    /// Records a frame whose request was sent at `requested_s` and that arrived (is ready to
+    /// show) at `arrived_s`, on any clock in seconds. Non-finite or negative spans are ignored.
+    pub fn observe(&mut self, requested_s: f64, arrived_s: f64) {
+        let ema = |old: f64, new: f64| if old == 0.0 { new } else { old + (new - old) * Self::WEIGHT };
+        let span = arrived_s - requested_s;
+        if span.is_finite() && span >= 0.0 {
+            self.request_to_arrival_s = ema(self.request_to_arrival_s, span);
+        }
+        if let Some(last) = self.last_arrival_s {
+            let gap = arrived_s - last;
+            if gap.is_finite() && gap > 0.0 {
+                self.interval_s = ema(self.interval_s, gap);
+            }
+        }
+        if arrived_s.is_finite() {
+            self.last_arrival_s = Some(arrived_s);
+        }
+    }
+
+    /// The horizon in seconds (clamped to [`MAX_HORIZON_S`]). Until two frames have arrived
+    /// the interval is taken to be the request-to-arrival time (a server that renders one frame
+    /// at a time delivers them about that far apart, less the round trip).
+    pub fn seconds(&self) -> f32 {
+        let interval = if self.interval_s > 0.0 { self.interval_s } else { self.request_to_arrival_s };
+        ((self.request_to_arrival_s + 0.5 * interval) as f32).clamp(0.0, MAX_HORIZON_S)
+    }
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -243,5 +295,28 @@ mod tests {
         assert!(close(&p.predict(0.1).unwrap(), &got, 0.0));
         p.observe(c1, 0.2); // held still: no motion predicted
         assert_eq!(p.predict(0.1), Some(c1));
+    }
+
+    #[test]
+    fn horizon_is_request_to_arrival_plus_half_the_interval() {
+        let mut h = Horizon::new();
+        assert_eq!(h.seconds(), 0.0);
+        // One frame: its request-to-arrival stands in for the interval too.
+        h.observe(-0.6, 0.0);
+        assert!((h.seconds() - 0.9).abs() < 1e-6, "{}", h.seconds());
+        let mut h = Horizon::new();
+        // Frames requested every 0.5 s, each arriving 0.6 s later: 0.6 + 0.25.
+        for k in 0..40 {
+            let t = k as f64 * 0.5;
+            h.observe(t, t + 0.6);
+        }
+        assert!((h.seconds() - 0.85).abs() < 1e-4, "{}", h.seconds());
+        // Garbage is ignored, and a huge latency is clamped.
+        h.observe(f64::NAN, 1.0);
+        h.observe(5.0, 4.0);
+        assert!(h.seconds().is_finite());
+        let mut slow = Horizon::new();
+        slow.observe(0.0, 30.0);
+        assert_eq!(slow.seconds(), MAX_HORIZON_S);
     }
 }

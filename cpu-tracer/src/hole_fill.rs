@@ -126,6 +126,11 @@ impl<R: SampleIds> HoleFill<R> {
         }
     }
 
+    /// The wrapped renderer (e.g. to set the splatter's radius scale).
+    pub fn inner_mut(&mut self) -> &mut R {
+        &mut self.inner
+    }
+
     /// The fill stages it runs.
     pub fn options(&self) -> FillOptions {
         self.opts

@@ -32,6 +32,8 @@ pub struct SphereSplat {
     /// Every pixel's unit ray direction, computed once per frame: per row, the x, y and z
     /// components of its pixels, each padded by [`LANES`] zeros.
     dirs: Vec<f32>,
+    /// Factor on every sphere's radius (1: the frame's own; see core's `warp_radius`).
+    radius_scale: f32,
 }
 
 /// Lanes per SIMD pixel test.
@@ -123,7 +125,18 @@ impl View {
 impl SphereSplat {
     /// A splatter on `threads` threads (0: one per core).
     pub fn new(threads: usize) -> Self {
-        SphereSplat { threads: Threads::new(threads), keys: Vec::new(), dirs: Vec::new() }
+        SphereSplat { threads: Threads::new(threads), keys: Vec::new(), dirs: Vec::new(), radius_scale: 1.0 }
+    }
+
+    /// Draws every sphere with its radius times `scale` (core's `warp_radius::radius_scale`
+    /// picks it from the warp); a scale that is not finite or not in `(0, 4]` means 1.
+    pub fn set_radius_scale(&mut self, scale: f32) {
+        self.radius_scale = if scale > 0.0 && scale <= 4.0 { scale } else { 1.0 };
+    }
+
+    /// The radius factor in use.
+    pub fn radius_scale(&self) -> f32 {
+        self.radius_scale
     }
 
     /// Splats `camera`'s viewport into `ids` (row-major, resized): the first-hit sample index
@@ -151,6 +164,7 @@ impl SphereSplat {
         self.dirs.resize(3 * seg * camera.height as usize, 0.0);
         self.threads.for_each_chunk(&mut self.dirs, 3 * seg, |y, row| ray_row_dispatch(&view.basis, y as u32, w, row));
         let dirs = &self.dirs[..];
+        let scale = self.radius_scale;
         self.keys.resize_with(n, Vec::new);
         let share = samples.len().div_ceil(n);
         self.threads.for_each_chunk(&mut self.keys, 1, |i, keys| {
@@ -158,7 +172,7 @@ impl SphereSplat {
             keys.clear();
             keys.resize(len, EMPTY);
             let range = (i * share).min(samples.len())..((i + 1) * share).min(samples.len());
-            splat_dispatch(&view, dirs, deq, &samples[range.clone()], range.start as u32, keys)
+            splat_dispatch(&view, dirs, deq, scale, &samples[range.clone()], range.start as u32, keys)
         });
         if let Some((first, rest)) = self.keys.split_first_mut() {
             if !rest.is_empty() {
@@ -206,7 +220,7 @@ fn load<L: Lanes>(s: &[f32]) -> L {
     }
 }
 
-/// Splats `samples` (sample indices from `first` on) into `keys`: for each sphere, every pixel
+/// Splats `samples` (sample indices from `first` on, radii times `scale`) into `keys`: for each sphere, every pixel
 /// of its bound is tested eight pixels of a row at a time, with the pixels' own ray directions
 /// from `dirs` ([`ray_row`]).
 #[inline(always)]
@@ -214,6 +228,7 @@ fn splat_spheres<L: Lanes>(
     view: &View,
     dirs: &[f32],
     deq: &Dequantizer,
+    scale: f32,
     samples: &[u64],
     first: u32,
     keys: &mut [u64],
@@ -224,7 +239,7 @@ fn splat_spheres<L: Lanes>(
     let seg = w + LANES;
     for (j, &s) in samples.iter().enumerate() {
         let k = first + j as u32;
-        let (c, r) = (deq.center(s), deq.radius(s));
+        let (c, r) = (deq.center(s), deq.radius(s) * scale);
         let Some((x0, x1, y0, y1)) = view.bound(c, r) else { continue };
         for y in y0..=y1 {
             let row = &mut keys[y as usize * w..(y as usize + 1) * w];
@@ -257,6 +272,7 @@ lanes::dispatch! {
         view: &View,
         dirs: &[f32],
         deq: &Dequantizer,
+        scale: f32,
         samples: &[u64],
         first: u32,
         keys: &mut [u64],

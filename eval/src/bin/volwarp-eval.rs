@@ -176,6 +176,9 @@ enum Cmd {
         /// Threads per CPU renderer (0: all cores).
         #[arg(long, default_value_t = 0)]
         threads: usize,
+        /// Methods to time, as `session --methods` takes them (`all`, or specs).
+        #[arg(long, default_value = "all")]
+        methods: String,
         /// The calibration file to write.
         #[arg(long)]
         out: PathBuf,
@@ -201,7 +204,9 @@ struct SessionArgs {
     /// optional :DEG_PER_S), or record:FILE (a `volwarp-client --record` file).
     #[arg(long, default_value = "orbit,stop-and-go,dolly,look-around")]
     scenarios: String,
-    /// Methods, comma-separated, or `all`.
+    /// Methods, comma-separated, or `all`: each a renderer with the client's options,
+    /// `RENDERER[+predict][+guard=G][+frames=K]` (e.g. `splat-fill+predict+guard=0.1+frames=2`),
+    /// or `volwarp` (the window client's default method).
     #[arg(long, default_value = "all")]
     methods: String,
     /// Viewport side.
@@ -360,10 +365,10 @@ fn run(cli: Cli) -> Result<(), ErrorBox> {
             let datasets = sel.datasets(&common)?;
             volwarp_eval::session::run(&datasets, &opts, &common.out).map(|_| ())
         }
-        Cmd::SessionCalibrate { volume, sel, size, runs, threads, out } => {
+        Cmd::SessionCalibrate { volume, sel, size, runs, threads, methods, out } => {
             let datasets =
                 if sel.all { report::shared_datasets(&sel.data_dir)? } else { vec![load(volume.as_deref(), None)?] };
-            let cal = volwarp_eval::session::calibrate(&datasets, size, runs, threads)?;
+            let cal = volwarp_eval::session::calibrate(&datasets, size, runs, threads, &methods)?;
             std::fs::write(&out, cal.to_csv()).map_err(|e| format!("{}: {e}", out.display()))?;
             log::info!("wrote {}", out.display());
             Ok(())

@@ -1,10 +1,31 @@
-//! What the client shows: the methods a session compares. A method draws the newest frame it
-//! holds for the camera of now. Adding a method is one entry of [`METHODS`].
+//! What the client shows: the methods a session compares.
+//!
+//! A method is a CPU renderer of the registry (`stale`, `points2`, `splat`, `splat-fill`, …)
+//! plus what the client asks the server for and how many frames it keeps, written as a **method
+//! spec**: `RENDERER[+predict][+guard=G][+frames=K][+adapt]`, e.g. `splat-fill+predict+guard=0.1+frames=2`.
+//!
+//! - `+predict`: the client asks for the camera it expects to show when the frame is on screen
+//!   (core's `prediction`, horizon from core's `prediction::Horizon`), issue 19 lever 1;
+//! - `+guard=G`: it asks for a view widened by `G` of its size on every side at the same pixel
+//!   density (core's `guard`), lever 2;
+//! - `+frames=K`: it keeps the `K` newest frames and fills what the newest does not cover from
+//!   the older ones (cpu-tracer's `hole_fill`, only the `*-fill` renderers), lever 3;
+//! - `+adapt`: it draws spheres sized by how far the view moved from the frame's camera (core's
+//!   `warp_radius`: half the footprint at the frame's camera, growing to the frame's own radius
+//!   by 10°; the splatters only), lever 4.
+//!
+//! [`DEFAULT_METHOD`] (alias `volwarp`) is the method the window client runs by default.
+//! The `stale` method never predicts nor widens: it is what a send-image system shows.
 
+use super::model::RequestPolicy;
 use crate::ErrorBox;
+use volwarp_core::guard::MAX_GUARD;
 use volwarp_core::renderer::Renderer;
 use volwarp_core::wire::Frame;
 use volwarp_core::{Camera, Image, RendererKind, Scene};
+use volwarp_core::warp_radius::radius_scale;
+use volwarp_cpu_tracer::hole_fill::{FillOptions, HoleFill, SampleIds, MAX_FRAMES};
+use volwarp_cpu_tracer::{PacketTracer, SphereSplat};
 
 /// A frame the client holds, with its scene built once for every method.
 pub struct HeldFrame {
@@ -24,22 +45,33 @@ impl HeldFrame {
 
 /// One way of showing the frames the client holds.
 pub trait Method {
-    /// The method's name (CSV, charts).
+    /// The method's name (CSV, charts): its spec.
     fn name(&self) -> &str;
-    /// Draws the frames for `camera`; `frames` holds the received frames, newest last (a
-    /// single-frame method uses the last one; multi-frame methods of later issues use more).
+    /// What the client asks the server for.
+    fn request(&self) -> RequestPolicy {
+        RequestPolicy::NONE
+    }
+    /// How many of the newest frames it keeps (at least 1).
+    fn frames_kept(&self) -> usize {
+        1
+    }
+    /// Draws the frames for `camera`; `frames` holds the frames kept, newest last.
     fn draw(&mut self, frames: &[&HeldFrame], camera: &Camera, out: &mut Image);
 }
 
 /// A method that is one renderer of the registry drawing the newest frame.
 pub struct RendererMethod {
     name: String,
+    request: RequestPolicy,
     renderer: Box<dyn Renderer + Send>,
 }
 
 impl Method for RendererMethod {
     fn name(&self) -> &str {
         &self.name
+    }
+    fn request(&self) -> RequestPolicy {
+        self.request
     }
     fn draw(&mut self, frames: &[&HeldFrame], camera: &Camera, out: &mut Image) {
         match frames.last() {
@@ -49,51 +81,214 @@ impl Method for RendererMethod {
     }
 }
 
-/// A registry entry: the name and how to make the method with `threads` threads.
-pub struct MethodInfo {
-    /// CSV name.
-    pub name: &'static str,
-    /// What it is.
-    pub about: &'static str,
-    /// Makes the method.
-    pub make: fn(threads: usize) -> Box<dyn Method>,
+/// A renderer whose sphere radii the client can scale at draw time.
+pub trait ScaleRadius {
+    /// Sets the factor on every radius (1: the frame's own).
+    fn set_radius_scale(&mut self, scale: f32);
 }
 
-fn renderer(kind: RendererKind, threads: usize) -> Box<dyn Method> {
-    let renderer = volwarp_cpu_tracer::create(kind, threads).expect("a CPU renderer of the registry");
-    Box::new(RendererMethod { name: kind.name().into(), renderer })
-}
-
-/// Every method a session can compare, in the order of the CSV.
-pub const METHODS: [MethodInfo; 6] = [
-    MethodInfo {
-        name: "stale",
-        about: "the last frame as rendered (a send-image system)",
-        make: |t| renderer(RendererKind::Stale, t),
-    },
-    MethodInfo { name: "points1", about: "ZAL12 2.5D points, 1 px", make: |t| renderer(RendererKind::Points1, t) },
-    MethodInfo { name: "points2", about: "ZAL12 2.5D points, 2 px", make: |t| renderer(RendererKind::Points2, t) },
-    MethodInfo { name: "points3", about: "ZAL12 2.5D points, 3 px", make: |t| renderer(RendererKind::Points3, t) },
-    MethodInfo {
-        name: "spheres-cpu",
-        about: "the SIMD packet sphere tracer",
-        make: |t| renderer(RendererKind::SpheresCpu, t),
-    },
-    MethodInfo { name: "splat", about: "exact sphere splatting", make: |t| renderer(RendererKind::Splat, t) },
-];
-
-/// The methods of a comma-separated list (`all`: every one of [`METHODS`]).
-pub fn make_methods(list: &str, threads: usize) -> Result<Vec<Box<dyn Method>>, ErrorBox> {
-    if list == "all" {
-        return Ok(METHODS.iter().map(|m| (m.make)(threads)).collect());
+impl ScaleRadius for SphereSplat {
+    fn set_radius_scale(&mut self, scale: f32) {
+        SphereSplat::set_radius_scale(self, scale);
     }
-    list.split(',')
-        .map(|n| {
-            let n = n.trim();
-            METHODS.iter().find(|m| m.name == n).map(|m| (m.make)(threads)).ok_or_else(|| {
-                let names: Vec<&str> = METHODS.iter().map(|m| m.name).collect();
-                format!("unknown method {n:?}; one of {} or all", names.join(", ")).into()
-            })
-        })
-        .collect()
+}
+
+impl ScaleRadius for PacketTracer {
+    /// The tracer draws the frame's radii (`+adapt` is refused for it).
+    fn set_radius_scale(&mut self, _scale: f32) {}
+}
+
+/// A renderer with the client-side levers: hole filling from several frames (`+frames=K`), or
+/// none (`FillOptions` all off), and warp-sized radii (`+adapt`).
+pub struct FillMethod<R: SampleIds + ScaleRadius> {
+    name: String,
+    request: RequestPolicy,
+    frames: usize,
+    adapt: bool,
+    fill: HoleFill<R>,
+}
+
+impl<R: SampleIds + ScaleRadius> Method for FillMethod<R> {
+    fn name(&self) -> &str {
+        &self.name
+    }
+    fn request(&self) -> RequestPolicy {
+        self.request
+    }
+    fn frames_kept(&self) -> usize {
+        self.frames
+    }
+    fn draw(&mut self, frames: &[&HeldFrame], camera: &Camera, out: &mut Image) {
+        let scenes: Vec<&Scene> = frames.iter().rev().take(self.frames).map(|f| &f.scene).collect();
+        if let (true, Some(newest)) = (self.adapt, scenes.first()) {
+            self.fill.inner_mut().set_radius_scale(radius_scale(&newest.header.camera, camera));
+        }
+        self.fill.render_set(&scenes, camera, out);
+    }
+}
+
+/// A parsed method spec (see the module docs).
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct MethodSpec {
+    /// The renderer.
+    pub renderer: RendererKind,
+    /// What the client asks for.
+    pub request: RequestPolicy,
+    /// Frames kept (1 unless a `*-fill` renderer).
+    pub frames: usize,
+    /// Warp-sized radii (core's `warp_radius`; the splatters only).
+    pub adapt: bool,
+}
+
+/// The method the window client runs by default and the sessions' `volwarp` alias, chosen on
+/// the session results (`docs/results.md`, "Warps that beat the stale frame").
+pub const DEFAULT_METHOD: &str = "splat-fill+predict+guard=0.1+frames=2";
+
+/// The methods of `all`: what a send-image system shows, the 2.5D points of ZAL12, the exact
+/// sphere renderers, and volwarp's default.
+pub const ALL: [&str; 7] = ["stale", "points1", "points2", "points3", "spheres-cpu", "splat", "volwarp"];
+
+impl MethodSpec {
+    /// Parses `RENDERER[+predict][+guard=G][+frames=K][+adapt]` or the alias `volwarp`.
+    pub fn parse(spec: &str) -> Result<MethodSpec, ErrorBox> {
+        let spec = spec.trim();
+        let spec = if spec == "volwarp" { DEFAULT_METHOD } else { spec };
+        let mut parts = spec.split('+');
+        let base = parts.next().unwrap_or_default();
+        let renderer = RendererKind::from_name(base)
+            .filter(|k| !k.info().caps.gpu)
+            .ok_or_else(|| format!("unknown method {base:?}: not a CPU renderer of the registry"))?;
+        let mut m = MethodSpec { renderer, request: RequestPolicy::NONE, frames: 1, adapt: false };
+        for p in parts {
+            match p.split_once('=') {
+                None if p == "predict" => m.request.predict = true,
+                None if p == "adapt" => m.adapt = true,
+                Some(("guard", g)) => {
+                    let g: f32 = g.parse().map_err(|_| format!("{spec}: guard {g:?} is not a number"))?;
+                    if !(0.0..=MAX_GUARD).contains(&g) {
+                        return Err(format!("{spec}: guard must be within 0..={MAX_GUARD}").into());
+                    }
+                    m.request.guard = g;
+                }
+                Some(("frames", k)) => {
+                    let k: usize = k.parse().map_err(|_| format!("{spec}: frames {k:?} is not a count"))?;
+                    if !(1..=MAX_FRAMES).contains(&k) {
+                        return Err(format!("{spec}: frames must be within 1..={MAX_FRAMES}").into());
+                    }
+                    m.frames = k;
+                }
+                _ => return Err(format!("{spec}: unknown option {p:?} (predict, guard=G, frames=K, adapt)").into()),
+            }
+        }
+        let fills = matches!(renderer, RendererKind::SpheresFill | RendererKind::SplatFill);
+        if m.frames > 1 && !fills {
+            return Err(format!("{spec}: frames=K needs a hole-filling renderer (splat-fill, spheres-fill)").into());
+        }
+        if m.adapt && !matches!(renderer, RendererKind::Splat | RendererKind::SplatFill) {
+            return Err(format!("{spec}: adapt (warp-sized radii) needs a splatter (splat, splat-fill)").into());
+        }
+        if renderer == RendererKind::Stale && m.request != RequestPolicy::NONE {
+            return Err(format!("{spec}: the stale frame shows the frame as rendered; it cannot predict or widen").into());
+        }
+        Ok(m)
+    }
+
+    /// The spec's canonical text.
+    pub fn name(&self) -> String {
+        let mut s = self.renderer.name().to_string();
+        if self.request.predict {
+            s.push_str("+predict");
+        }
+        if self.request.guard > 0.0 {
+            s.push_str(&format!("+guard={}", self.request.guard));
+        }
+        if self.frames > 1 {
+            s.push_str(&format!("+frames={}", self.frames));
+        }
+        if self.adapt {
+            s.push_str("+adapt");
+        }
+        s
+    }
+
+    /// Makes the method with `threads` threads per renderer; `name` is what the CSV calls it.
+    pub fn make(&self, name: &str, threads: usize) -> Box<dyn Method> {
+        let (name, request, frames, adapt, t) = (name.to_string(), self.request, self.frames, self.adapt, threads);
+        // `splat+adapt` is the splatter with every fill stage off.
+        let none = FillOptions { stale: false, enclosed_only: false, pull_push_levels: 0 };
+        match (self.renderer, adapt) {
+            (RendererKind::SplatFill, _) => {
+                let fill = HoleFill::new(SphereSplat::new(t), RendererKind::SplatFill, FillOptions::DEFAULT, t);
+                Box::new(FillMethod { name, request, frames, adapt, fill })
+            }
+            (RendererKind::Splat, true) => {
+                let fill = HoleFill::new(SphereSplat::new(t), RendererKind::Splat, none, t);
+                Box::new(FillMethod { name, request, frames, adapt, fill })
+            }
+            (RendererKind::SpheresFill, _) => {
+                let fill = HoleFill::new(PacketTracer::new(t), RendererKind::SpheresFill, FillOptions::DEFAULT, t);
+                Box::new(FillMethod { name, request, frames, adapt, fill })
+            }
+            (kind, _) => {
+                let renderer = volwarp_cpu_tracer::create(kind, t).expect("parse admits only CPU renderers");
+                Box::new(RendererMethod { name, request, renderer })
+            }
+        }
+    }
+}
+
+/// The methods of a comma-separated list of specs (`all`: [`ALL`]). The alias `volwarp` keeps
+/// its name in the CSV; every other spec is named canonically.
+pub fn make_methods(list: &str, threads: usize) -> Result<Vec<Box<dyn Method>>, ErrorBox> {
+    let names: Vec<&str> = if list.trim() == "all" { ALL.to_vec() } else { list.split(',').collect() };
+    let mut out: Vec<Box<dyn Method>> = Vec::new();
+    for n in names {
+        let spec = MethodSpec::parse(n)?;
+        let name = if n.trim() == "volwarp" { "volwarp".to_string() } else { spec.name() };
+        if out.iter().any(|m| m.name() == name) {
+            return Err(format!("method {name} is listed twice").into());
+        }
+        out.push(spec.make(&name, threads));
+    }
+    Ok(out)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn specs_parse_and_name_canonically() {
+        let m = MethodSpec::parse("splat-fill+frames=3+guard=0.2+predict").unwrap();
+        assert_eq!(m.renderer, RendererKind::SplatFill);
+        assert_eq!(m.request, RequestPolicy { predict: true, guard: 0.2 });
+        assert_eq!(m.frames, 3);
+        assert_eq!(m.name(), "splat-fill+predict+guard=0.2+frames=3");
+        let a = MethodSpec::parse("splat+adapt+predict").unwrap();
+        assert!(a.adapt && a.request.predict);
+        assert_eq!(a.name(), "splat+predict+adapt");
+        assert_eq!(MethodSpec::parse(&m.name()).unwrap(), m);
+        assert_eq!(MethodSpec::parse("volwarp").unwrap(), MethodSpec::parse(DEFAULT_METHOD).unwrap());
+        assert_eq!(MethodSpec::parse("points2").unwrap().request, RequestPolicy::NONE);
+    }
+
+    #[test]
+    fn bad_specs_are_clear_errors() {
+        for bad in [
+            "nope",
+            "spheres-gpu",
+            "splat+guard=0.7",
+            "splat+guard=x",
+            "splat+frames=2",
+            "splat-fill+frames=0",
+            "splat-fill+frames=99",
+            "splat+zoom",
+            "stale+predict",
+            "points2+adapt",
+            "spheres-fill+adapt",
+        ] {
+            assert!(MethodSpec::parse(bad).is_err(), "{bad}");
+        }
+        assert!(make_methods("splat,splat", 1).is_err());
+    }
 }

@@ -150,8 +150,15 @@ pub fn simulate_all(datasets: &[Dataset], opts: &SessionOptions) -> Result<Vec<R
 
 /// Measures the server's frame time per dataset and each method's draw time at `size` on this
 /// machine (medians of `runs`; the frame of the default camera drawn 10° away) and returns
-/// them as a [`Calibration`]. This reads the wall clock; the simulation only reads its result.
-pub fn calibrate(datasets: &[Dataset], size: u32, runs: usize, threads: usize) -> Result<Calibration, ErrorBox> {
+/// them as a [`Calibration`] (`list`: the methods, as `session --methods` takes them; a
+/// multi-frame method draws the one frame here). This reads the wall clock; the simulation only reads its result.
+pub fn calibrate(
+    datasets: &[Dataset],
+    size: u32,
+    runs: usize,
+    threads: usize,
+    list: &str,
+) -> Result<Calibration, ErrorBox> {
     let mut cal = Calibration::default();
     let mut draw: Vec<(String, Vec<f64>)> = Vec::new();
     for ds in datasets {
@@ -169,8 +176,7 @@ pub fn calibrate(datasets: &[Dataset], size: u32, runs: usize, threads: usize) -
         log::info!("{}: server {server:.1} ms per frame at {size}²", ds.name);
         let held = methods::HeldFrame::new(frame.ok_or("no frame")?);
         let cam = c0.orbit(10.0, 0.0);
-        for m in methods::METHODS.iter() {
-            let mut method = (m.make)(threads);
+        for mut method in methods::make_methods(list, threads)? {
             let mut img = Image::new(0, 0);
             method.draw(&[&held], &cam, &mut img);
             let mut t: Vec<f64> = (0..runs.max(1))
@@ -181,9 +187,9 @@ pub fn calibrate(datasets: &[Dataset], size: u32, runs: usize, threads: usize) -
                 })
                 .collect();
             let med = crate::median(&mut t).unwrap_or(0.0);
-            match draw.iter_mut().find(|(n, _)| n == m.name) {
+            match draw.iter_mut().find(|(n, _)| n == method.name()) {
                 Some((_, v)) => v.push(med),
-                None => draw.push((m.name.into(), vec![med])),
+                None => draw.push((method.name().into(), vec![med])),
             }
         }
     }

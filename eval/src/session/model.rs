@@ -55,6 +55,23 @@ pub fn server_policy(name: &str) -> Result<Box<dyn ServerPolicy>, ErrorBox> {
     }
 }
 
+/// What the client asks the server for (issue 19's levers 1 and 2): the camera it shows, or
+/// the camera it expects to show when the frame is on screen (`predict`), widened by a guard
+/// band of `guard` of its size on every side. The policy of each method of a session; the
+/// frames of each distinct policy are served separately.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct RequestPolicy {
+    /// Ask for the predicted camera.
+    pub predict: bool,
+    /// Guard band fraction (0: none).
+    pub guard: f32,
+}
+
+impl RequestPolicy {
+    /// Asks for the camera shown (what a send-image system does).
+    pub const NONE: RequestPolicy = RequestPolicy { predict: false, guard: 0.0 };
+}
+
 /// The server and the network.
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct NetworkModel {
@@ -171,9 +188,16 @@ impl Calibration {
     }
 
     /// A method's draw time at a size: measured, else the default figure scaled by pixels.
+    /// A method spec not measured takes its renderer's figure (the part before the first `+`;
+    /// the alias `volwarp`: its spec's).
     pub fn draw_ms(&self, method: &str, size: u32) -> f64 {
         if let Some(ms) = self.ms.get(&("client".into(), method.into(), size)) {
             return *ms;
+        }
+        let spec = if method == "volwarp" { super::methods::DEFAULT_METHOD } else { method };
+        let renderer = spec.split('+').next().unwrap_or(spec);
+        if renderer != method {
+            return self.draw_ms(renderer, size);
         }
         let base = DEFAULT_DRAW_MS_512.iter().find(|(n, _)| *n == method).map_or(1.0, |x| x.1);
         base * (size as f64 / 512.0).powi(2)

@@ -22,13 +22,16 @@
 //!    camera, cached between methods and runs) against what each method shows.
 
 use super::methods::{HeldFrame, Method};
-use super::model::{ClientModel, NetworkModel, Request, ServerPolicy};
+use super::model::{ClientModel, NetworkModel, Request, RequestPolicy, ServerPolicy};
 use super::paths::{CameraPath, MAX_VIEWPORT};
 use crate::{ErrorBox, Metrics};
 use rayon::prelude::*;
 use std::collections::HashMap;
 use volwarp_core::compact_frame::{encoded_size, EncodeOptions, Encoding};
 use volwarp_core::wire::CameraRequest;
+use volwarp_core::guard::GuardBand;
+use volwarp_core::prediction::{Horizon, Predictor};
+use volwarp_core::renderer::Renderer;
 use volwarp_core::{Camera, Heuristic, Image, RendererKind};
 use volwarp_server::Marcher;
 
@@ -78,8 +81,12 @@ impl SessionConfig {
 pub struct FrameEvent {
     /// 0 for the frame the client holds at the start, then 1, 2, …
     pub seq: usize,
-    /// The camera it was rendered for.
+    /// The camera it was rendered for (guard band included).
     pub camera: Camera,
+    /// The view it shows exactly: the (predicted) camera asked for, before the guard band.
+    pub view: Camera,
+    /// Where `view`'s pixels start in the frame's (`(0, 0)` without a guard band).
+    pub guard_offset: (u32, u32),
     /// When the newest request it serves was sent, ms.
     pub request_ms: f64,
     /// When rendering started, ms.
@@ -192,13 +199,37 @@ pub fn tick_cameras(marcher: &Marcher, path: &CameraPath, cfg: &SessionConfig) -
         .collect()
 }
 
-/// Runs the server and the network over the ticks' cameras: the frames in order of arrival,
-/// each with its rendered frame. The first is the frame the client holds at time 0.
+/// The requests a client with `policy` sends over the ticks' cameras: one at every tick whose
+/// camera differs from the previous tick's, and, when it predicts, one more at the first tick
+/// the camera holds still (so the server renders the still view, not the overshoot of the last
+/// prediction). Their cameras are the ticks' own; [`serve`] predicts and widens them.
+fn requests(cams: &[Camera], tick_ms: f64, policy: RequestPolicy) -> Vec<Request> {
+    let mut out = Vec::new();
+    for k in 1..cams.len() {
+        let moved = cams[k] != cams[k - 1];
+        let stopped = policy.predict && !moved && (k < 2 || cams[k - 1] != cams[k - 2]);
+        if moved || stopped {
+            out.push(Request { tick: k, sent_ms: k as f64 * tick_ms, camera: cams[k] });
+        }
+    }
+    out
+}
+
+/// Runs the server and the network over the ticks' cameras for a client asking with
+/// `request`: the frames in order of arrival, each with its rendered frame. The first is the
+/// frame the client holds at time 0 (rendered for the first camera as shown, no guard band;
+/// requested a round trip, a render and its transfer before).
+///
+/// With `request.predict`, the request sent at a tick carries the camera core's
+/// [`Predictor`] expects after the [`Horizon`] the client has measured from the frames that
+/// arrived before it was sent (the cameras of the ticks it sent requests at are what the
+/// predictor observed); with a guard band, that camera widened ([`GuardBand`]).
 pub fn serve(
     marcher: &Marcher,
     cams: &[Camera],
     cfg: &SessionConfig,
     policy: &mut dyn ServerPolicy,
+    request: RequestPolicy,
 ) -> Vec<(FrameEvent, volwarp_core::wire::Frame)> {
     let tick_ms = 1e3 / cfg.client.display_hz;
     let end_ms = (cams.len() - 1) as f64 * tick_ms;
@@ -212,6 +243,8 @@ pub fn serve(
         FrameEvent {
             seq: 0,
             camera: cams[0],
+            view: cams[0],
+            guard_offset: (0, 0),
             request_ms: 0.0,
             start_ms: 0.0,
             bytes: encoded_size(&first, cfg.encoding, &EncodeOptions::default()) as u64,
@@ -219,15 +252,36 @@ pub fn serve(
         },
         first,
     )];
-    // The requests: a tick whose camera differs from the last one sent.
-    let mut requests: Vec<Request> = Vec::new();
-    let mut last = cams[0];
-    for (k, c) in cams.iter().enumerate().skip(1) {
-        if *c != last {
-            requests.push(Request { tick: k, sent_ms: k as f64 * tick_ms, camera: *c });
-            last = *c;
+    let first_ms = 2.0 * net.latency_ms + net.server_ms + net.transfer_ms(out[0].0.bytes);
+    let mut requests = requests(cams, tick_ms, request);
+    // The client side: what each request asks for, in the order they are sent.
+    let mut predictor = Predictor::new();
+    let mut asked: Vec<Option<(Camera, Camera, (u32, u32))>> = vec![None; requests.len()];
+    let mut ask = |i: usize, requests: &mut [Request], out: &[(FrameEvent, volwarp_core::wire::Frame)]| {
+        // Requests are asked in order; catch the predictor up to request i.
+        let first_unasked = asked.iter().position(Option::is_none).unwrap_or(asked.len());
+        for r in first_unasked..=i {
+            let sent = requests[r].sent_ms;
+            let mut view = requests[r].camera;
+            if request.predict {
+                predictor.observe(view, sent * 1e-3);
+                // The first frame: requested one round trip, render and transfer before 0.
+                let mut h = Horizon::new();
+                h.observe(-first_ms * 1e-3, 0.0);
+                for (f, _) in out.iter().skip(1).filter(|(f, _)| f.arrive_ms <= sent) {
+                    h.observe(f.request_ms * 1e-3, f.arrive_ms * 1e-3);
+                }
+                view = predictor.predict(h.seconds()).unwrap_or(view);
+            }
+            let (camera, offset) = match GuardBand::new(&view, request.guard, MAX_VIEWPORT) {
+                Ok(g) if request.guard > 0.0 => (g.camera, (g.x0, g.y0)),
+                _ => (view, (0, 0)),
+            };
+            asked[r] = Some((camera, view, offset));
+            requests[r].camera = camera;
         }
-    }
+        asked[i].expect("asked above")
+    };
     let arrival = |r: &Request| r.sent_ms + net.latency_ms;
     let mut s = 0.0f64;
     let mut served = 0usize; // requests[..served] were seen by the server
@@ -241,6 +295,7 @@ pub fn serve(
         if s + net.server_ms + net.latency_ms > end_ms {
             break; // it would arrive after the session
         }
+        let (_, view, guard_offset) = ask(j, &mut requests, &out);
         let camera = policy.camera(&requests[..=j], s);
         served = j + 1;
         let seq = out.len();
@@ -249,14 +304,49 @@ pub fn serve(
         let write_end = s + net.server_ms + net.transfer_ms(bytes);
         let arrive_ms = write_end + net.latency_ms;
         if arrive_ms <= end_ms {
+            let view = if camera == requests[j].camera { view } else { camera };
+            let guard_offset = if camera == requests[j].camera { guard_offset } else { (0, 0) };
             out.push((
-                FrameEvent { seq, camera, request_ms: requests[j].sent_ms, start_ms: s, bytes, arrive_ms },
+                FrameEvent {
+                    seq,
+                    camera,
+                    view,
+                    guard_offset,
+                    request_ms: requests[j].sent_ms,
+                    start_ms: s,
+                    bytes,
+                    arrive_ms,
+                },
                 frame,
             ));
         }
         s = write_end;
     }
     out
+}
+
+/// The frame's own image for its [`FrameEvent::view`]: the frame as rendered, cropped to the
+/// view where a guard band widened it.
+fn exact_view(exact: &mut dyn Renderer, held: &HeldFrame, f: &FrameEvent, out: &mut Image, tmp: &mut Image) {
+    if f.camera == f.view {
+        exact.render(&held.scene, &f.view, out);
+        return;
+    }
+    exact.render(&held.scene, &f.camera, tmp);
+    let (w, h) = (f.view.width, f.view.height);
+    out.reset_for(&f.view);
+    for y in 0..h {
+        let src = ((y + f.guard_offset.1) * tmp.width + f.guard_offset.0) as usize;
+        let dst = (y * w) as usize;
+        out.pixels[dst..dst + w as usize].copy_from_slice(&tmp.pixels[src..src + w as usize]);
+    }
+}
+
+/// The frames served to the clients of one request policy, built once for every method of it.
+struct Stream {
+    request: RequestPolicy,
+    frames: Vec<FrameEvent>,
+    held: Vec<HeldFrame>,
 }
 
 /// Runs one session. `progress` gets a line per scored tick.
@@ -273,10 +363,25 @@ pub fn run_session(
     cfg.check()?;
     let cams = tick_cameras(marcher, path, cfg)?;
     let tick_ms = 1e3 / cfg.client.display_hz;
-    let served = serve(marcher, &cams, cfg, policy);
-    let frames: Vec<FrameEvent> = served.iter().map(|(e, _)| *e).collect();
-    let held: Vec<HeldFrame> = served.into_iter().map(|(_, f)| HeldFrame::new(f)).collect();
+    // One stream of frames per distinct request policy (the first method's is the result's).
+    let mut streams: Vec<Stream> = Vec::new();
+    let mut stream_of = Vec::with_capacity(methods.len());
+    for m in methods.iter() {
+        let r = m.request();
+        let i = match streams.iter().position(|s| s.request == r) {
+            Some(i) => i,
+            None => {
+                let served = serve(marcher, &cams, cfg, policy, r);
+                let frames = served.iter().map(|(e, _)| *e).collect();
+                let held = served.into_iter().map(|(_, f)| HeldFrame::new(f)).collect();
+                streams.push(Stream { request: r, frames, held });
+                streams.len() - 1
+            }
+        };
+        stream_of.push(i);
+    }
     let mut exact = volwarp_cpu_tracer::create(RendererKind::Stale, 0).ok_or("the stale renderer is missing")?;
+    let mut tmp = Image::new(0, 0);
     let draw: Vec<(f64, usize)> = methods
         .iter()
         .map(|m| {
@@ -285,22 +390,28 @@ pub fn run_session(
         })
         .collect();
     let scored: Vec<usize> = (0..cams.len()).step_by(cfg.score_every).collect();
-    let mut result = SessionResult { frames: frames.clone(), ..Default::default() };
+    let mut result = SessionResult {
+        frames: streams.first().map(|s| s.frames.clone()).unwrap_or_default(),
+        ..Default::default()
+    };
     let mut worst: Vec<Option<Worst>> = vec![None; methods.len()];
     let mut images: Vec<Image> = (0..methods.len()).map(|_| Image::new(0, 0)).collect();
     for (done, &j) in scored.iter().enumerate() {
         let mut shown_frame = Vec::with_capacity(methods.len());
         for (mi, m) in methods.iter_mut().enumerate() {
+            let st = &streams[stream_of[mi]];
             let n = draw[mi].1;
             // The newest draw finished by tick j started at a multiple of n.
             let k = if j + 1 >= n { ((j + 1) / n - 1) * n } else { 0 };
             let t_k = k as f64 * tick_ms;
-            let fi = frames.partition_point(|f| f.arrive_ms <= t_k).saturating_sub(1);
+            let fi = st.frames.partition_point(|f| f.arrive_ms <= t_k).saturating_sub(1);
             let cam = &cams[k];
-            if cfg.exact_when_still && *cam == frames[fi].camera {
-                exact.render(&held[fi].scene, cam, &mut images[mi]);
+            if cfg.exact_when_still && *cam == st.frames[fi].view {
+                exact_view(exact.as_mut(), &st.held[fi], &st.frames[fi], &mut images[mi], &mut tmp);
             } else {
-                m.draw(&[&held[fi]], cam, &mut images[mi]);
+                let kept = m.frames_kept().max(1);
+                let held: Vec<&HeldFrame> = st.held[(fi + 1).saturating_sub(kept)..=fi].iter().collect();
+                m.draw(&held, cam, &mut images[mi]);
             }
             shown_frame.push(fi);
         }
@@ -311,7 +422,7 @@ pub fn run_session(
             .collect();
         let t_j = j as f64 * tick_ms;
         for (mi, m) in methods.iter().enumerate() {
-            let f = &frames[shown_frame[mi]];
+            let f = &streams[stream_of[mi]].frames[shown_frame[mi]];
             result.rows.push(TickRow {
                 method: m.name().into(),
                 tick: j,
