@@ -59,7 +59,13 @@ pub fn run(opts: &Options) -> Result<(), ClientError> {
 
 fn run_connected(opts: &Options, addr: &str) -> Result<(), ClientError> {
     let timeout = Duration::from_secs(opts.timeout_s.max(1));
-    let renderers = Renderers::new(opts.renderer, opts.tracer_threads()).map_err(ClientError::Renderer)?;
+    let mut renderers = Renderers::new(opts.renderer, opts.tracer_threads()).map_err(ClientError::Renderer)?;
+    renderers.set_adaptive_radius(opts.adapt);
+    log::info!(
+        "renderer {} with {}",
+        opts.renderer,
+        crate::window::levers(opts.predict, opts.guard, renderers.adaptive_radius())
+    );
     let conn = connect(addr, opts.token.as_deref(), timeout)?;
     let home = home_camera(&conn.bounds, opts.size.0, opts.size.1);
     let recorder = opts.record.as_deref().map(Recorder::create).transpose()?;

@@ -10,7 +10,8 @@
 //!   at most every [`THROTTLE`], only when it changed, and again whenever a frame arrives so
 //!   the server always has work. Newest only: there is never a queue of cameras. With
 //!   `--predict` it sends the camera core's `prediction` expects for when the frame will be
-//!   shown (horizon: the smoothed request-to-ready time the builder measures); with `--guard G`
+//!   shown (horizon: core's `prediction::Horizon`, the smoothed request-to-ready time the
+//!   builder measures plus half the smoothed interval between frames); with `--guard G`
 //!   the camera widened by a guard band (core's `guard`).
 //!
 //! The display loop only ever `try_lock`s the slot ([`Network::take_scene`]); every lock the
@@ -28,7 +29,7 @@ use std::sync::{Arc, Condvar, Mutex, MutexGuard};
 use std::thread::JoinHandle;
 use std::time::{Duration, Instant};
 use volwarp_core::guard::GuardBand;
-use volwarp_core::prediction::Predictor;
+use volwarp_core::prediction::{Horizon, Predictor};
 use volwarp_core::wire::{CameraRequest, Frame, Limits, Message};
 use volwarp_core::{Camera, Heuristic, Scene};
 use volwarp_cpu_tracer::ParallelBuilder;
@@ -84,7 +85,8 @@ pub struct NetConfig {
     /// (`--bandwidth-mbps`; [`crate::link`]); `None`: loopback speed.
     pub bandwidth_mbps: Option<f64>,
     /// Ask for the camera predicted for when the frame will be shown (core's `prediction`,
-    /// orbit-aware, horizon: the measured request-to-display time) instead of the current one.
+    /// orbit-aware, horizon: the measured request-to-ready time plus half the frame interval)
+    /// instead of the current one.
     pub predict: bool,
     /// Guard band: ask for a view wider by this fraction of the display on every side, at the
     /// same pixel density (core's `guard`; 0: none, at most 0.5).
@@ -102,6 +104,11 @@ struct ViewSlot {
     view: Option<View>,
     changed: bool,
     frame_arrived: bool,
+    /// Every camera the display showed, timed (so motion that starts after a still spell is
+    /// measured from the last still display frame, not from the last request).
+    predictor: Predictor,
+    /// The predictor's clock.
+    t0: Option<Instant>,
 }
 
 struct Shared {
@@ -118,8 +125,9 @@ struct Shared {
     built: AtomicU64,
     /// Odd while a frame is being decoded or built.
     work_gen: AtomicU64,
-    /// Smoothed time from a request to its scene being ready to show, in µs (0: not measured).
-    request_to_ready_us: AtomicU64,
+    /// The prediction horizon measured from the frames built (request-to-ready, frame
+    /// interval), and the instant its clock starts.
+    horizon: Mutex<(Horizon, Instant)>,
 }
 
 fn lock<T>(m: &Mutex<T>) -> MutexGuard<'_, T> {
@@ -182,7 +190,7 @@ impl Network {
             frames: AtomicU64::new(0),
             built: AtomicU64::new(0),
             work_gen: AtomicU64::new(0),
-            request_to_ready_us: AtomicU64::new(0),
+            horizon: Mutex::new((Horizon::new(), Instant::now())),
         });
         let stream = conn.stream;
         let _ = stream.set_read_timeout(Some(cfg.timeout.max(Duration::from_millis(10))));
@@ -227,6 +235,9 @@ impl Network {
     /// differs from the last one. Never waits on the network.
     pub fn set_view(&self, view: View) {
         let mut g = lock(&self.shared.view);
+        let now = Instant::now();
+        let t0 = *g.t0.get_or_insert(now);
+        g.predictor.observe(view.camera, now.saturating_duration_since(t0).as_secs_f64());
         if g.view != Some(view) {
             g.view = Some(view);
             g.changed = true;
@@ -386,10 +397,12 @@ fn build_loop(sh: &Shared, cfg: &NetConfig) {
         drop(busy);
         sh.built.fetch_add(1, Ordering::Relaxed);
         if let Some(r) = p.requested_at {
-            // Exponential moving average (1/4) of request-to-ready, the prediction horizon.
-            let us = r.elapsed().as_micros().min(u64::MAX as u128) as u64;
-            let old = sh.request_to_ready_us.load(Ordering::Relaxed);
-            sh.request_to_ready_us.store(if old == 0 { us } else { (3 * old + us) / 4 }, Ordering::Relaxed);
+            // The prediction horizon: request-to-ready plus half the interval between frames
+            // (core's `prediction::Horizon`), on the clock of the horizon's creation.
+            let mut h = lock(&sh.horizon);
+            let t0 = h.1;
+            let secs = |t: Instant| t.saturating_duration_since(t0).as_secs_f64();
+            h.0.observe(secs(r), secs(Instant::now()));
         }
         log::debug!("built scene seq {} ({} samples) in {build_ms:.1} ms", scene.header.seq, scene.samples.len());
         let ready = ReadyScene {
@@ -410,20 +423,13 @@ fn build_loop(sh: &Shared, cfg: &NetConfig) {
     }
 }
 
-/// The camera to request for `view` at `now`: predicted for the measured request-to-display
-/// time (`predict`), widened by a guard band (`guard`).
-fn request_camera(
-    sh: &Shared,
-    predictor: &mut Predictor,
-    start: Instant,
-    camera: Camera,
-    predict: bool,
-    guard: f32,
-) -> Camera {
+/// The camera to request for `camera`: predicted for the measured horizon (`predict`; the
+/// display's own predictor, which has seen every camera shown), widened by a guard band
+/// (`guard`).
+fn request_camera(sh: &Shared, predictor: &Predictor, camera: Camera, predict: bool, guard: f32) -> Camera {
     let mut cam = camera;
     if predict {
-        predictor.observe(camera, start.elapsed().as_secs_f64());
-        let horizon = sh.request_to_ready_us.load(Ordering::Relaxed) as f32 * 1e-6;
+        let horizon = lock(&sh.horizon).0.seconds();
         cam = predictor.predict(horizon).unwrap_or(camera);
     }
     if guard > 0.0 {
@@ -435,12 +441,10 @@ fn request_camera(
 }
 
 fn write_loop(sh: &Shared, mut stream: impl Write, predict: bool, guard: f32) {
-    let mut predictor = Predictor::new();
-    let start = Instant::now();
     let mut seq = 0u64;
     let mut last_send: Option<Instant> = None;
     loop {
-        let view = {
+        let (view, predictor) = {
             let mut g = lock(&sh.view);
             loop {
                 if sh.stop.load(Ordering::SeqCst) {
@@ -458,7 +462,7 @@ fn write_loop(sh: &Shared, mut stream: impl Write, predict: bool, guard: f32) {
                         None => {
                             g.changed = false;
                             g.frame_arrived = false;
-                            break v;
+                            break (v, g.predictor);
                         }
                     }
                 }
@@ -466,7 +470,7 @@ fn write_loop(sh: &Shared, mut stream: impl Write, predict: bool, guard: f32) {
             }
         };
         seq += 1;
-        let camera = request_camera(sh, &mut predictor, start, view.camera, predict, guard);
+        let camera = request_camera(sh, &predictor, view.camera, predict, guard);
         let req = CameraRequest { seq, camera, heuristic: view.heuristic, radius_scale: view.radius_scale };
         let now = Instant::now();
         {

@@ -5,6 +5,9 @@ use clap::Parser;
 use std::path::PathBuf;
 use volwarp_core::{Heuristic, RendererKind};
 
+/// The default guard band (`--guard`), chosen on the session results (`docs/results.md`).
+pub const DEFAULT_GUARD: f32 = 0.1;
+
 /// The window controls, printed by `--help`.
 pub const CONTROLS: &str = "\
 Window controls:
@@ -18,7 +21,8 @@ Window controls:
   R                          reset the camera
   Esc / Q                    quit
 The title shows display FPS, server frames per second, the age of the shown frame (time since
-its camera was requested), its sample count, the renderer and the heuristic.
+its camera was requested), its sample count, the renderer, the heuristic and the warp levers
+that are on (predict, guard, adapt).
 
 Without --connect the client starts the real volwarp-server program (found beside this client,
 on PATH or in $VOLWARP_SERVER) on 127.0.0.1 (random port); it serves the bundled dataset, or
@@ -103,13 +107,19 @@ pub struct Options {
     #[arg(long, value_name = "MBPS", default_value_t = 0.0)]
     pub bandwidth_mbps: f64,
     /// Ask the server for the camera predicted for when its frame will be shown (orbit-aware
-    /// extrapolation over the measured request-to-display time) instead of the current one.
-    #[arg(long)]
+    /// extrapolation over the measured request-to-display time plus half the frame interval)
+    /// instead of the current one: `--predict false` turns it off.
+    #[arg(long, value_name = "BOOL", default_value_t = true, action = clap::ArgAction::Set)]
     pub predict: bool,
     /// Guard band: ask for a view wider by this fraction of the window on every side (same
     /// pixel density, (1 + 2G)² the pixels), so turns reveal samples already sent; 0..=0.5.
-    #[arg(long, value_name = "G", default_value_t = 0.0, value_parser = parse_guard)]
+    #[arg(long, value_name = "G", default_value_t = DEFAULT_GUARD, value_parser = parse_guard)]
     pub guard: f32,
+    /// Size spheres by how far the view moved from the frame's camera (half the footprint at
+    /// the frame's own camera, so it is shown exactly; the frame's radius from a 10° turn on;
+    /// the splatters only): `--adapt false` draws the frame's radii.
+    #[arg(long, value_name = "BOOL", default_value_t = true, action = clap::ArgAction::Set)]
+    pub adapt: bool,
     /// Display frame rate limit (0: none). Default: 60 in the window, none headless.
     #[arg(long)]
     pub fps: Option<u32>,

@@ -14,6 +14,8 @@ pub struct Renderers {
     /// The LBVH of unbuilt scenes (see `NetConfig::lazy_build`) for renderers that need it.
     lazy: volwarp_cpu_tracer::LazyBuild,
     gpu_error: Option<String>,
+    /// Warp-sized radii (`--adapt`) for the renderers that can.
+    adaptive: bool,
 }
 
 /// The GPU adapter the client's `--adapter` asked for (set once, before any GPU renderer opens).
@@ -67,7 +69,23 @@ impl Renderers {
             current: kind,
             gpu_error: None,
             lazy: volwarp_cpu_tracer::LazyBuild::new(threads),
+            adaptive: false,
         })
+    }
+
+    /// Sizes spheres by the warp (core's `warp_radius`) in every renderer that can, now and
+    /// for those created later.
+    pub fn set_adaptive_radius(&mut self, on: bool) {
+        self.adaptive = on;
+        for r in self.slots.iter_mut().flatten() {
+            r.set_adaptive_radius(on);
+        }
+    }
+
+    /// Whether the current renderer sizes spheres by the warp.
+    pub fn adaptive_radius(&mut self) -> bool {
+        let on = self.adaptive;
+        self.slots[self.current.index()].as_mut().is_some_and(|r| on && r.set_adaptive_radius(on))
     }
 
     /// Switches to `kind`, creating it on first use. On failure (no GPU adapter) the current
@@ -79,7 +97,10 @@ impl Renderers {
                 return Err(e.clone());
             }
             match create(kind, self.threads) {
-                Ok(r) => self.slots[i] = Some(r),
+                Ok(mut r) => {
+                    r.set_adaptive_radius(self.adaptive);
+                    self.slots[i] = Some(r);
+                }
                 Err(e) => {
                     let e = format!("{kind} unavailable: {e}; staying on {}", self.name());
                     log::warn!("{e}");

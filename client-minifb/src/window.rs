@@ -115,6 +115,26 @@ pub fn title(
     )
 }
 
+/// The warp levers that are on, for the title (issue 19): camera prediction, the guard band,
+/// warp-sized radii (only where the current renderer can), or `no levers`.
+pub fn levers(predict: bool, guard: f32, adaptive_radius: bool) -> String {
+    let mut on = Vec::new();
+    if predict {
+        on.push("predict".to_string());
+    }
+    if guard > 0.0 {
+        on.push(format!("guard {guard}"));
+    }
+    if adaptive_radius {
+        on.push("adapt".to_string());
+    }
+    if on.is_empty() {
+        "no levers".into()
+    } else {
+        on.join(" + ")
+    }
+}
+
 /// Runs the live window until it is closed (or `--frames` display frames).
 pub fn run_live(opts: &Options, display: &mut Display, home: Camera) -> Result<(), ClientError> {
     let fps = opts.fps.unwrap_or(60);
@@ -209,7 +229,8 @@ pub fn run_live(opts: &Options, display: &mut Display, home: Camera) -> Result<(
                 display.renderers.name(),
                 heuristic,
             );
-            screen.window.set_title(&t);
+            let l = levers(opts.predict, opts.guard, display.renderers.adaptive_radius());
+            screen.window.set_title(&format!("{t} | {l}"));
         }
     }
     log::info!("window closed after {frames} display frames");
@@ -267,5 +288,7 @@ mod tests {
         for part in ["60 FPS", "1.5 FPS", "812 ms", "123456 samples", "splat", "gradient"] {
             assert!(t.contains(part), "{t}");
         }
+        assert_eq!(levers(true, 0.1, true), "predict + guard 0.1 + adapt");
+        assert_eq!(levers(false, 0.0, false), "no levers");
     }
 }

@@ -75,4 +75,12 @@ pub trait Renderer {
     /// Draws `scene` as seen from `camera` into `out`, which it first resizes to the camera's
     /// viewport and clears to [`BACKGROUND`].
     fn render(&mut self, scene: &Scene, camera: &Camera, out: &mut Image);
+
+    /// Sizes spheres by the warp (core's [`crate::warp_radius`]: half the footprint at the
+    /// frame's own camera, the frame's radius from a 10° turn on) when `on`. Returns whether
+    /// this renderer can (by default it cannot and draws the frame's radii).
+    fn set_adaptive_radius(&mut self, on: bool) -> bool {
+        let _ = on;
+        false
+    }
 }

@@ -357,9 +357,13 @@ fn rgb(c: u32) -> [f32; 3] {
     [r as f32 / 255.0, g as f32 / 255.0, b as f32 / 255.0]
 }
 
-impl<R: SampleIds> Renderer for HoleFill<R> {
+impl<R: SampleIds + Renderer> Renderer for HoleFill<R> {
     fn kind(&self) -> RendererKind {
         self.kind
+    }
+
+    fn set_adaptive_radius(&mut self, on: bool) -> bool {
+        self.inner.set_adaptive_radius(on)
     }
 
     fn render(&mut self, scene: &Scene, camera: &Camera, out: &mut Image) {

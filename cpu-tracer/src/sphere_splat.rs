@@ -19,6 +19,7 @@ use crate::threads::Threads;
 use crate::{begin_frame, shade, NO_HIT};
 use volwarp_core::renderer::{Image, Renderer};
 use volwarp_core::sample::Dequantizer;
+use volwarp_core::warp_radius::radius_scale;
 use volwarp_core::RendererKind;
 use volwarp_core::{Camera, RayBasis, Scene, Vec3, BACKGROUND};
 
@@ -34,6 +35,8 @@ pub struct SphereSplat {
     dirs: Vec<f32>,
     /// Factor on every sphere's radius (1: the frame's own; see core's `warp_radius`).
     radius_scale: f32,
+    /// Size the radius by the warp (`warp_radius::radius_scale`) instead of `radius_scale`.
+    adaptive: bool,
 }
 
 /// Lanes per SIMD pixel test.
@@ -125,7 +128,7 @@ impl View {
 impl SphereSplat {
     /// A splatter on `threads` threads (0: one per core).
     pub fn new(threads: usize) -> Self {
-        SphereSplat { threads: Threads::new(threads), keys: Vec::new(), dirs: Vec::new(), radius_scale: 1.0 }
+        SphereSplat { threads: Threads::new(threads), keys: Vec::new(), dirs: Vec::new(), radius_scale: 1.0, adaptive: false }
     }
 
     /// Draws every sphere with its radius times `scale` (core's `warp_radius::radius_scale`
@@ -134,7 +137,7 @@ impl SphereSplat {
         self.radius_scale = if scale > 0.0 && scale <= 4.0 { scale } else { 1.0 };
     }
 
-    /// The radius factor in use.
+    /// The radius factor set (with [`Renderer::set_adaptive_radius`] on, each draw picks its own).
     pub fn radius_scale(&self) -> f32 {
         self.radius_scale
     }
@@ -164,7 +167,7 @@ impl SphereSplat {
         self.dirs.resize(3 * seg * camera.height as usize, 0.0);
         self.threads.for_each_chunk(&mut self.dirs, 3 * seg, |y, row| ray_row_dispatch(&view.basis, y as u32, w, row));
         let dirs = &self.dirs[..];
-        let scale = self.radius_scale;
+        let scale = if self.adaptive { radius_scale(&scene.header.camera, camera) } else { self.radius_scale };
         self.keys.resize_with(n, Vec::new);
         let share = samples.len().div_ceil(n);
         self.threads.for_each_chunk(&mut self.keys, 1, |i, keys| {
@@ -282,6 +285,11 @@ lanes::dispatch! {
 impl Renderer for SphereSplat {
     fn kind(&self) -> RendererKind {
         RendererKind::Splat
+    }
+
+    fn set_adaptive_radius(&mut self, on: bool) -> bool {
+        self.adaptive = on;
+        true
     }
 
     fn render(&mut self, scene: &Scene, camera: &Camera, out: &mut Image) {

@@ -23,7 +23,6 @@ use volwarp_core::guard::MAX_GUARD;
 use volwarp_core::renderer::Renderer;
 use volwarp_core::wire::Frame;
 use volwarp_core::{Camera, Image, RendererKind, Scene};
-use volwarp_core::warp_radius::radius_scale;
 use volwarp_cpu_tracer::hole_fill::{FillOptions, HoleFill, SampleIds, MAX_FRAMES};
 use volwarp_cpu_tracer::{PacketTracer, SphereSplat};
 
@@ -81,34 +80,16 @@ impl Method for RendererMethod {
     }
 }
 
-/// A renderer whose sphere radii the client can scale at draw time.
-pub trait ScaleRadius {
-    /// Sets the factor on every radius (1: the frame's own).
-    fn set_radius_scale(&mut self, scale: f32);
-}
-
-impl ScaleRadius for SphereSplat {
-    fn set_radius_scale(&mut self, scale: f32) {
-        SphereSplat::set_radius_scale(self, scale);
-    }
-}
-
-impl ScaleRadius for PacketTracer {
-    /// The tracer draws the frame's radii (`+adapt` is refused for it).
-    fn set_radius_scale(&mut self, _scale: f32) {}
-}
-
 /// A renderer with the client-side levers: hole filling from several frames (`+frames=K`), or
 /// none (`FillOptions` all off), and warp-sized radii (`+adapt`).
-pub struct FillMethod<R: SampleIds + ScaleRadius> {
+pub struct FillMethod<R: SampleIds + Renderer> {
     name: String,
     request: RequestPolicy,
     frames: usize,
-    adapt: bool,
     fill: HoleFill<R>,
 }
 
-impl<R: SampleIds + ScaleRadius> Method for FillMethod<R> {
+impl<R: SampleIds + Renderer> Method for FillMethod<R> {
     fn name(&self) -> &str {
         &self.name
     }
@@ -120,9 +101,6 @@ impl<R: SampleIds + ScaleRadius> Method for FillMethod<R> {
     }
     fn draw(&mut self, frames: &[&HeldFrame], camera: &Camera, out: &mut Image) {
         let scenes: Vec<&Scene> = frames.iter().rev().take(self.frames).map(|f| &f.scene).collect();
-        if let (true, Some(newest)) = (self.adapt, scenes.first()) {
-            self.fill.inner_mut().set_radius_scale(radius_scale(&newest.header.camera, camera));
-        }
         self.fill.render_set(&scenes, camera, out);
     }
 }
@@ -216,19 +194,22 @@ impl MethodSpec {
         let (name, request, frames, adapt, t) = (name.to_string(), self.request, self.frames, self.adapt, threads);
         // `splat+adapt` is the splatter with every fill stage off.
         let none = FillOptions { stale: false, enclosed_only: false, pull_push_levels: 0 };
+        let fill_method = |renderer, kind, opts| -> Box<dyn Method> {
+            let mut fill = HoleFill::new(renderer, kind, opts, t);
+            fill.set_adaptive_radius(adapt);
+            Box::new(FillMethod { name: name.clone(), request, frames, fill })
+        };
         match (self.renderer, adapt) {
             (RendererKind::SplatFill, _) => {
-                let fill = HoleFill::new(SphereSplat::new(t), RendererKind::SplatFill, FillOptions::DEFAULT, t);
-                Box::new(FillMethod { name, request, frames, adapt, fill })
+                fill_method(SphereSplat::new(t), RendererKind::SplatFill, FillOptions::DEFAULT)
             }
-            (RendererKind::Splat, true) => {
-                let fill = HoleFill::new(SphereSplat::new(t), RendererKind::Splat, none, t);
-                Box::new(FillMethod { name, request, frames, adapt, fill })
-            }
-            (RendererKind::SpheresFill, _) => {
-                let fill = HoleFill::new(PacketTracer::new(t), RendererKind::SpheresFill, FillOptions::DEFAULT, t);
-                Box::new(FillMethod { name, request, frames, adapt, fill })
-            }
+            (RendererKind::Splat, true) => fill_method(SphereSplat::new(t), RendererKind::Splat, none),
+            (RendererKind::SpheresFill, _) => Box::new(FillMethod {
+                name,
+                request,
+                frames,
+                fill: HoleFill::new(PacketTracer::new(t), RendererKind::SpheresFill, FillOptions::DEFAULT, t),
+            }),
             (kind, _) => {
                 let renderer = volwarp_cpu_tracer::create(kind, t).expect("parse admits only CPU renderers");
                 Box::new(RendererMethod { name, request, renderer })

@@ -222,8 +222,9 @@ fn requests(cams: &[Camera], tick_ms: f64, policy: RequestPolicy) -> Vec<Request
 ///
 /// With `request.predict`, the request sent at a tick carries the camera core's
 /// [`Predictor`] expects after the [`Horizon`] the client has measured from the frames that
-/// arrived before it was sent (the cameras of the ticks it sent requests at are what the
-/// predictor observed); with a guard band, that camera widened ([`GuardBand`]).
+/// arrived before it was sent (the predictor has observed the camera of every tick up to it,
+/// as the window client's display does); with a guard band, that camera widened
+/// ([`GuardBand`]).
 pub fn serve(
     marcher: &Marcher,
     cams: &[Camera],
@@ -256,6 +257,7 @@ pub fn serve(
     let mut requests = requests(cams, tick_ms, request);
     // The client side: what each request asks for, in the order they are sent.
     let mut predictor = Predictor::new();
+    let mut observed = 0usize; // ticks the predictor has seen
     let mut asked: Vec<Option<(Camera, Camera, (u32, u32))>> = vec![None; requests.len()];
     let mut ask = |i: usize, requests: &mut [Request], out: &[(FrameEvent, volwarp_core::wire::Frame)]| {
         // Requests are asked in order; catch the predictor up to request i.
@@ -264,7 +266,11 @@ pub fn serve(
             let sent = requests[r].sent_ms;
             let mut view = requests[r].camera;
             if request.predict {
-                predictor.observe(view, sent * 1e-3);
+                // The display's predictor sees every camera shown, up to the request's tick.
+                for (k, c) in cams.iter().enumerate().take(requests[r].tick + 1).skip(observed) {
+                    predictor.observe(*c, k as f64 * tick_ms * 1e-3);
+                }
+                observed = observed.max(requests[r].tick + 1);
                 // The first frame: requested one round trip, render and transfer before 0.
                 let mut h = Horizon::new();
                 h.observe(-first_ms * 1e-3, 0.0);
