@@ -225,7 +225,12 @@ impl<R: SampleIds> HoleFill<R> {
                 let q = if denom > 1e-6 && t > 0.0 { eye + d * t } else { fc.eye + d };
                 let Some((x, y, _)) = proj.project(q) else { continue };
                 if x >= 0.0 && y >= 0.0 && x < fw as f32 && y < fh as f32 {
-                    *p = filled(frame[y as usize * fw as usize + x as usize]);
+                    // Where the frame showed background too, the pixel stays a hole (for
+                    // pull-push; the background otherwise, as before).
+                    let c = frame[y as usize * fw as usize + x as usize];
+                    if c != BACKGROUND {
+                        *p = filled(c);
+                    }
                 }
             }
         });

@@ -19,12 +19,14 @@
 //! | [`failure_modes`] | the cases where the methods break down |
 //! | [`session`] | the session simulator: latency hiding over time as a user sees it |
 //! | [`csv`] | small CSV writer |
+//! | [`demo_strip`] | the README demo's truth / stale / volwarp strip from a recorded session |
 //! | [`report`] | the `volwarp-eval` commands: files, charts, markdown |
 #![deny(missing_docs)]
 
 pub mod camera_paths;
 pub mod charts;
 pub mod csv;
+pub mod demo_strip;
 pub mod failure_modes;
 pub mod image_io;
 pub mod metrics;

@@ -1,7 +1,8 @@
 //! Every renderer the evaluation compares, under its CSV name: the stale image, points with
 //! N = 1, 2, 3, the CPU sphere tracer (and its radius variants ×0.5 and ×2), the GPU sphere
 //! tracer where an adapter opens, the exact sphere splatter and its GPU twin (`splat-gpu`)
-//! where an adapter opens, and the hole-filling tracer (`spheres-fill`) with its variants.
+//! where an adapter opens, the hole-filling tracer (`spheres-fill`) with its variants, and
+//! `volwarp`, the window client's default drawing (hole-filling splatter, warp-sized radii).
 
 use volwarp_core::renderer::Renderer;
 use volwarp_core::wire::Frame;
@@ -61,12 +62,20 @@ pub fn roster(opts: RosterOptions) -> Vec<Entry> {
         v.push(Entry { name: format!("{SpheresCpu}-r{s}"), radius_scale: s, ..entry(SpheresCpu, t) });
     }
     v.push(entry(SpheresFill, t));
+    // The window client's default drawing: the hole-filling splatter with warp-sized radii.
+    let mut renderer = volwarp_cpu_tracer::create(SplatFill, t).expect("a CPU renderer");
+    renderer.set_adaptive_radius(true);
+    v.push(Entry { name: DEFAULT_NAME.into(), radius_scale: 1.0, gpu: false, renderer });
     for (name, opts) in FILL_VARIANTS {
         let renderer = Box::new(HoleFill::new(PacketTracer::new(t), SpheresFill, opts, t));
         v.push(Entry { name: name.into(), radius_scale: 1.0, gpu: false, renderer });
     }
     v
 }
+
+/// The CSV name of the window client's default drawing (`splat-fill` with warp-sized radii,
+/// core's `warp_radius`); in sessions the `volwarp` method adds prediction and the guard band.
+pub const DEFAULT_NAME: &str = "volwarp";
 
 /// The hole-filling variants measured beside `spheres-fill` (issue 19): the stale frame plus
 /// 3 levels of pull-push, and pull-push alone.

@@ -8,6 +8,7 @@
 //! volwarp-eval radius   [--volume FILE | --all] --out DIR
 //! volwarp-eval failures [--volume FILE] --out DIR
 //! volwarp-eval session  [--volume FILE | --all] [--scenarios orbit,stop-and-go,dolly,look-around] --out DIR
+//! volwarp-eval strip --record FILE [--volume FILE] --out strip.png
 //! volwarp-eval session-calibrate [--volume FILE | --all] [--size 512] --out FILE
 //! volwarp-eval replot   --dir DIR
 //! volwarp-eval fixtures --out eval/fixtures
@@ -183,6 +184,23 @@ enum Cmd {
         #[arg(long)]
         out: PathBuf,
     },
+    /// Truth | stale | volwarp side by side for a few display frames of a recorded client
+    /// session (`volwarp-client --record`), with their ꟻLIP in a CSV beside the PNG.
+    Strip {
+        /// The record file.
+        #[arg(long)]
+        record: PathBuf,
+        /// The volume the server served (the truth is its marcher's render); default: the
+        /// bundled dataset.
+        #[arg(long)]
+        volume: Option<PathBuf>,
+        /// Rows (display frames).
+        #[arg(long, default_value_t = 4)]
+        rows: usize,
+        /// The PNG to write (the CSV goes beside it).
+        #[arg(long)]
+        out: PathBuf,
+    },
     /// Redraw the charts of a quality run from its quality.csv.
     Replot {
         /// The folder of the run (with quality.csv).
@@ -205,7 +223,7 @@ struct SessionArgs {
     #[arg(long, default_value = "orbit,stop-and-go,dolly,look-around")]
     scenarios: String,
     /// Methods, comma-separated, or `all`: each a renderer with the client's options,
-    /// `RENDERER[+predict][+guard=G][+frames=K]` (e.g. `splat-fill+predict+guard=0.1+frames=2`),
+    /// `RENDERER[+predict][+guard=G][+frames=K][+adapt][+pp=L]` (e.g. `splat-fill+predict+guard=0.1+frames=2`),
     /// or `volwarp` (the window client's default method).
     #[arg(long, default_value = "all")]
     methods: String,
@@ -370,6 +388,21 @@ fn run(cli: Cli) -> Result<(), ErrorBox> {
                 if sel.all { report::shared_datasets(&sel.data_dir)? } else { vec![load(volume.as_deref(), None)?] };
             let cal = volwarp_eval::session::calibrate(&datasets, size, runs, threads, &methods)?;
             std::fs::write(&out, cal.to_csv()).map_err(|e| format!("{}: {e}", out.display()))?;
+            log::info!("wrote {}", out.display());
+            Ok(())
+        }
+        Cmd::Strip { record, volume, rows, out } => {
+            let ds = load(volume.as_deref(), None)?;
+            let rows = volwarp_eval::demo_strip::write_strip(&Marcher::from_dataset(&ds), &record, rows, &out)?;
+            for r in &rows {
+                log::info!(
+                    "t {:.2} s, frame {}: FLIP stale {:.4}, volwarp {:.4}",
+                    r.t_s,
+                    r.frame_seq,
+                    r.stale_flip,
+                    r.volwarp_flip
+                );
+            }
             log::info!("wrote {}", out.display());
             Ok(())
         }

@@ -2,7 +2,7 @@
 //!
 //! A method is a CPU renderer of the registry (`stale`, `points2`, `splat`, `splat-fill`, …)
 //! plus what the client asks the server for and how many frames it keeps, written as a **method
-//! spec**: `RENDERER[+predict][+guard=G][+frames=K][+adapt]`, e.g. `splat-fill+predict+guard=0.1+frames=2`.
+//! spec**: `RENDERER[+predict][+guard=G][+frames=K][+adapt][+pp=L]`, e.g. `splat-fill+predict+guard=0.1+frames=2`.
 //!
 //! - `+predict`: the client asks for the camera it expects to show when the frame is on screen
 //!   (core's `prediction`, horizon from core's `prediction::Horizon`), issue 19 lever 1;
@@ -12,7 +12,9 @@
 //!   the older ones (cpu-tracer's `hole_fill`, only the `*-fill` renderers), lever 3;
 //! - `+adapt`: it draws spheres sized by how far the view moved from the frame's camera (core's
 //!   `warp_radius`: half the footprint at the frame's camera, growing to the frame's own radius
-//!   by 10°; the splatters only), lever 4.
+//!   by 10°; the splatters only), lever 4;
+//! - `+pp=L`: pull-push over `L` levels into the holes left inside the silhouette (only the
+//!   `*-fill` renderers), lever 5.
 //!
 //! [`DEFAULT_METHOD`] (alias `volwarp`) is the method the window client runs by default.
 //! The `stale` method never predicts nor widens: it is what a send-image system shows.
@@ -116,6 +118,8 @@ pub struct MethodSpec {
     pub frames: usize,
     /// Warp-sized radii (core's `warp_radius`; the splatters only).
     pub adapt: bool,
+    /// Pull-push levels after the other fill stages (`*-fill` renderers only; 0: none).
+    pub pull_push: u32,
 }
 
 /// The method the window client runs by default and the sessions' `volwarp` alias, chosen on
@@ -127,7 +131,7 @@ pub const DEFAULT_METHOD: &str = "splat-fill+predict+guard=0.1+frames=2";
 pub const ALL: [&str; 7] = ["stale", "points1", "points2", "points3", "spheres-cpu", "splat", "volwarp"];
 
 impl MethodSpec {
-    /// Parses `RENDERER[+predict][+guard=G][+frames=K][+adapt]` or the alias `volwarp`.
+    /// Parses `RENDERER[+predict][+guard=G][+frames=K][+adapt][+pp=L]` or the alias `volwarp`.
     pub fn parse(spec: &str) -> Result<MethodSpec, ErrorBox> {
         let spec = spec.trim();
         let spec = if spec == "volwarp" { DEFAULT_METHOD } else { spec };
@@ -136,7 +140,7 @@ impl MethodSpec {
         let renderer = RendererKind::from_name(base)
             .filter(|k| !k.info().caps.gpu)
             .ok_or_else(|| format!("unknown method {base:?}: not a CPU renderer of the registry"))?;
-        let mut m = MethodSpec { renderer, request: RequestPolicy::NONE, frames: 1, adapt: false };
+        let mut m = MethodSpec { renderer, request: RequestPolicy::NONE, frames: 1, adapt: false, pull_push: 0 };
         for p in parts {
             match p.split_once('=') {
                 None if p == "predict" => m.request.predict = true,
@@ -147,6 +151,13 @@ impl MethodSpec {
                         return Err(format!("{spec}: guard must be within 0..={MAX_GUARD}").into());
                     }
                     m.request.guard = g;
+                }
+                Some(("pp", l)) => {
+                    let l: u32 = l.parse().map_err(|_| format!("{spec}: pp {l:?} is not a count"))?;
+                    if l > FillOptions::MAX_LEVELS {
+                        return Err(format!("{spec}: pp must be within 0..={}", FillOptions::MAX_LEVELS).into());
+                    }
+                    m.pull_push = l;
                 }
                 Some(("frames", k)) => {
                     let k: usize = k.parse().map_err(|_| format!("{spec}: frames {k:?} is not a count"))?;
@@ -159,8 +170,8 @@ impl MethodSpec {
             }
         }
         let fills = matches!(renderer, RendererKind::SpheresFill | RendererKind::SplatFill);
-        if m.frames > 1 && !fills {
-            return Err(format!("{spec}: frames=K needs a hole-filling renderer (splat-fill, spheres-fill)").into());
+        if (m.frames > 1 || m.pull_push > 0) && !fills {
+            return Err(format!("{spec}: frames=K and pp=L need a hole-filling renderer (splat-fill, spheres-fill)").into());
         }
         if m.adapt && !matches!(renderer, RendererKind::Splat | RendererKind::SplatFill) {
             return Err(format!("{spec}: adapt (warp-sized radii) needs a splatter (splat, splat-fill)").into());
@@ -186,6 +197,9 @@ impl MethodSpec {
         if self.adapt {
             s.push_str("+adapt");
         }
+        if self.pull_push > 0 {
+            s.push_str(&format!("+pp={}", self.pull_push));
+        }
         s
     }
 
@@ -194,6 +208,7 @@ impl MethodSpec {
         let (name, request, frames, adapt, t) = (name.to_string(), self.request, self.frames, self.adapt, threads);
         // `splat+adapt` is the splatter with every fill stage off.
         let none = FillOptions { stale: false, enclosed_only: false, pull_push_levels: 0 };
+        let fill_opts = FillOptions { pull_push_levels: self.pull_push, ..FillOptions::DEFAULT };
         let fill_method = |renderer, kind, opts| -> Box<dyn Method> {
             let mut fill = HoleFill::new(renderer, kind, opts, t);
             fill.set_adaptive_radius(adapt);
@@ -201,14 +216,14 @@ impl MethodSpec {
         };
         match (self.renderer, adapt) {
             (RendererKind::SplatFill, _) => {
-                fill_method(SphereSplat::new(t), RendererKind::SplatFill, FillOptions::DEFAULT)
+                fill_method(SphereSplat::new(t), RendererKind::SplatFill, fill_opts)
             }
             (RendererKind::Splat, true) => fill_method(SphereSplat::new(t), RendererKind::Splat, none),
             (RendererKind::SpheresFill, _) => Box::new(FillMethod {
                 name,
                 request,
                 frames,
-                fill: HoleFill::new(PacketTracer::new(t), RendererKind::SpheresFill, FillOptions::DEFAULT, t),
+                fill: HoleFill::new(PacketTracer::new(t), RendererKind::SpheresFill, fill_opts, t),
             }),
             (kind, _) => {
                 let renderer = volwarp_cpu_tracer::create(kind, t).expect("parse admits only CPU renderers");
@@ -267,6 +282,8 @@ mod tests {
             "stale+predict",
             "points2+adapt",
             "spheres-fill+adapt",
+            "splat+pp=2",
+            "splat-fill+pp=9",
         ] {
             assert!(MethodSpec::parse(bad).is_err(), "{bad}");
         }

@@ -1,0 +1,115 @@
+//! The README demo's side-by-side strip (issue 19): for a few display frames of a recorded
+//! client session (`volwarp-client --record`), the truth (the server's marcher for the camera
+//! shown), the stale frame (the newest frame as rendered, unwarped, cropped to the display where
+//! it has a guard band: what a send-image system shows, except that volwarp asked for a
+//! predicted camera, so this column flatters the send-image system) and
+//! what volwarp's default drawing showed (the hole-filling splatter with warp-sized radii).
+//!
+//! The rows are display frames whose camera differs from the newest frame's (where warping has
+//! work to do), spread evenly over the recording. Each row is scored with ꟻLIP against the truth
+//! and the scores go to a CSV file beside the PNG.
+
+use crate::{ErrorBox, Metrics};
+use std::path::Path;
+use volwarp_core::record::{read_entry, read_magic, Entry};
+use volwarp_core::renderer::Renderer;
+use volwarp_core::wire::{Frame, Limits};
+use volwarp_core::{Camera, Image, RendererKind};
+use volwarp_server::Marcher;
+
+/// The largest viewport a recorded camera may have.
+const MAX_VIEWPORT: u32 = 4096;
+
+/// One row of the strip: the display frame's time and the scores of stale and volwarp.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct StripRow {
+    /// Seconds since the recording started.
+    pub t_s: f64,
+    /// Sequence number of the newest frame held then.
+    pub frame_seq: u64,
+    /// ꟻLIP of the stale frame against the truth.
+    pub stale_flip: f64,
+    /// ꟻLIP of volwarp's default drawing against the truth.
+    pub volwarp_flip: f64,
+}
+
+/// The display frames of a record with the newest frame held at each, in order.
+fn displayed(record: &Path) -> Result<(Vec<Frame>, Vec<(f64, Camera, usize)>), ErrorBox> {
+    let bytes = std::fs::read(record).map_err(|e| format!("{}: {e}", record.display()))?;
+    let mut r: &[u8] = &bytes;
+    let bad = |e: volwarp_core::record::RecordError| format!("{}: {e}", record.display());
+    read_magic(&mut r).map_err(bad)?;
+    let limits = Limits::for_frames(MAX_VIEWPORT);
+    let (mut frames, mut shown) = (Vec::new(), Vec::new());
+    while let Some(e) = read_entry(&mut r, &limits).map_err(bad)? {
+        match e {
+            Entry::Frame { frame, .. } => frames.push(frame),
+            Entry::Camera { t_us, request } => {
+                request.camera.validate(MAX_VIEWPORT).map_err(|e| format!("{}: camera: {e}", record.display()))?;
+                if let Some(i) = frames.len().checked_sub(1) {
+                    shown.push((t_us as f64 * 1e-6, request.camera, i));
+                }
+            }
+        }
+    }
+    Ok((frames, shown))
+}
+
+/// The frame as rendered, unwarped, at the display's size: where the client asked for a guard
+/// band (the frame is larger than the display), its centre crop; else resized to the display.
+fn stale_view(stale: &mut dyn Renderer, scene: &volwarp_core::Scene, display: &Camera, out: &mut Image) {
+    let fc = scene.header.camera;
+    if fc.width <= display.width || fc.height <= display.height {
+        stale.render(scene, display, out);
+        return;
+    }
+    let mut full = Image::new(0, 0);
+    stale.render(scene, &fc, &mut full);
+    let (x0, y0) = ((fc.width - display.width) / 2, (fc.height - display.height) / 2);
+    out.reset_for(display);
+    let w = display.width as usize;
+    for y in 0..display.height {
+        let src = ((y + y0) * fc.width + x0) as usize;
+        out.pixels[y as usize * w..(y as usize + 1) * w].copy_from_slice(&full.pixels[src..src + w]);
+    }
+}
+
+/// Writes `out` (PNG: one row per chosen display frame, truth | stale | volwarp) and
+/// `out` with the extension `csv` (the scores), for `rows` display frames of `record`;
+/// `marcher` renders the truth. Returns the rows.
+pub fn write_strip(marcher: &Marcher, record: &Path, rows: usize, out: &Path) -> Result<Vec<StripRow>, ErrorBox> {
+    let (frames, shown) = displayed(record)?;
+    // Display frames that warp: the camera is not the newest frame's own.
+    let warping: Vec<&(f64, Camera, usize)> =
+        shown.iter().filter(|(_, c, i)| *c != frames[*i].header.camera && frames[*i].header.camera.width > 0).collect();
+    if warping.is_empty() {
+        return Err(format!("{}: no display frame warps a received frame (did the camera move?)", record.display()).into());
+    }
+    let n = rows.clamp(1, warping.len());
+    let picks: Vec<&(f64, Camera, usize)> = (0..n).map(|k| warping[(2 * k + 1) * warping.len() / (2 * n)]).collect();
+    let mut stale = volwarp_cpu_tracer::create(RendererKind::Stale, 0).ok_or("no stale renderer")?;
+    let mut volwarp = volwarp_cpu_tracer::create(RendererKind::SplatFill, 0).ok_or("no splat-fill renderer")?;
+    volwarp.set_adaptive_radius(true);
+    let mut images: Vec<[Image; 3]> = Vec::new();
+    let mut out_rows = Vec::new();
+    for &&(t, camera, fi) in &picks {
+        let frame = &frames[fi];
+        let scene = volwarp_cpu_tracer::build_scene(frame);
+        let truth = marcher.render_image(&camera);
+        let (mut a, mut b) = (Image::new(0, 0), Image::new(0, 0));
+        stale_view(stale.as_mut(), &scene, &camera, &mut a);
+        volwarp.render(&scene, &camera, &mut b);
+        let flip = |img: &Image| Metrics::of(&truth, img).map_or(1.0, |m| m.flip);
+        out_rows.push(StripRow { t_s: t, frame_seq: frame.header.seq, stale_flip: flip(&a), volwarp_flip: flip(&b) });
+        images.push([truth, a, b]);
+    }
+    let grid: Vec<Vec<&Image>> = images.iter().map(|r| r.iter().collect()).collect();
+    crate::image_io::strip(&grid, 4, u32::MAX).save_png(out).map_err(|e| format!("{}: {e:?}", out.display()))?;
+    let mut csv = String::from("t_s,frame_seq,stale_flip,volwarp_flip\n");
+    for r in &out_rows {
+        csv.push_str(&format!("{:.3},{},{:.4},{:.4}\n", r.t_s, r.frame_seq, r.stale_flip, r.volwarp_flip));
+    }
+    let csv_path = out.with_extension("csv");
+    std::fs::write(&csv_path, csv).map_err(|e| format!("{}: {e}", csv_path.display()))?;
+    Ok(out_rows)
+}
