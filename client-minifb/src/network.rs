@@ -429,7 +429,8 @@ fn build_loop(sh: &Shared, cfg: &NetConfig) {
 fn request_camera(sh: &Shared, predictor: &Predictor, camera: Camera, predict: bool, guard: f32) -> Camera {
     let mut cam = camera;
     if predict {
-        let horizon = lock(&sh.horizon).0.seconds();
+        // The display runs at about 60 Hz (a tick of ~16 ms) in the window.
+        let horizon = lock(&sh.horizon).0.seconds(1.0 / 60.0);
         cam = predictor.predict(horizon).unwrap_or(camera);
     }
     if guard > 0.0 {

@@ -152,7 +152,8 @@ impl Predictor {
 /// from the frames that arrived, plus half the interval between frames.
 ///
 /// A frame is shown from its arrival until the next one arrives, so the camera that minimises
-/// the mean warp over that stretch is the one of its middle: `request→arrival + interval / 2`.
+/// the mean warp over that stretch is the one of its middle: `request→arrival + interval / 2`
+/// (less half a display tick, see [`Horizon::seconds`]).
 /// Both terms are exponential moving averages (weight [`Horizon::WEIGHT`] for the newest
 /// measurement); before the first frame the horizon is 0 (no prediction). A client measures its
 /// first frame too (the one it shows before the camera moves), so it predicts from the start.
@@ -191,12 +192,17 @@ impl Horizon {
         }
     }
 
-    /// The horizon in seconds (clamped to [`MAX_HORIZON_S`]). Until two frames have arrived
-    /// the interval is taken to be the request-to-arrival time (a server that renders one frame
-    /// at a time delivers them about that far apart, less the round trip).
-    pub fn seconds(&self) -> f32 {
+    /// The horizon in seconds for a display that shows a new image every `display_s` seconds
+    /// (clamped to [`MAX_HORIZON_S`]): a frame is on screen at the display ticks from its
+    /// arrival until the next frame's, on average `(interval − display_s) / 2` after its
+    /// arrival (0 when frames come at least once per tick). Until two frames have arrived the
+    /// interval is taken to be the request-to-arrival time (a server that renders one frame at
+    /// a time delivers them about that far apart, less the round trip).
+    pub fn seconds(&self, display_s: f32) -> f32 {
         let interval = if self.interval_s > 0.0 { self.interval_s } else { self.request_to_arrival_s };
-        ((self.request_to_arrival_s + 0.5 * interval) as f32).clamp(0.0, MAX_HORIZON_S)
+        let display = if display_s.is_finite() { display_s.max(0.0) as f64 } else { 0.0 };
+        let shown = 0.5 * (interval - display).max(0.0);
+        ((self.request_to_arrival_s + shown) as f32).clamp(0.0, MAX_HORIZON_S)
     }
 }
 
@@ -300,23 +306,27 @@ mod tests {
     #[test]
     fn horizon_is_request_to_arrival_plus_half_the_interval() {
         let mut h = Horizon::new();
-        assert_eq!(h.seconds(), 0.0);
+        assert_eq!(h.seconds(0.0), 0.0);
         // One frame: its request-to-arrival stands in for the interval too.
         h.observe(-0.6, 0.0);
-        assert!((h.seconds() - 0.9).abs() < 1e-6, "{}", h.seconds());
+        assert!((h.seconds(0.0) - 0.9).abs() < 1e-6, "{}", h.seconds(0.0));
+        assert!((h.seconds(0.2) - 0.8).abs() < 1e-6, "{}", h.seconds(0.2));
         let mut h = Horizon::new();
         // Frames requested every 0.5 s, each arriving 0.6 s later: 0.6 + 0.25.
         for k in 0..40 {
             let t = k as f64 * 0.5;
             h.observe(t, t + 0.6);
         }
-        assert!((h.seconds() - 0.85).abs() < 1e-4, "{}", h.seconds());
+        assert!((h.seconds(0.0) - 0.85).abs() < 1e-4, "{}", h.seconds(0.0));
+        // Frames at least once per display tick: request-to-arrival only.
+        assert!((h.seconds(0.5) - 0.6).abs() < 1e-4, "{}", h.seconds(0.5));
+        assert!((h.seconds(f32::NAN) - 0.85).abs() < 1e-4);
         // Garbage is ignored, and a huge latency is clamped.
         h.observe(f64::NAN, 1.0);
         h.observe(5.0, 4.0);
-        assert!(h.seconds().is_finite());
+        assert!(h.seconds(0.0).is_finite());
         let mut slow = Horizon::new();
         slow.observe(0.0, 30.0);
-        assert_eq!(slow.seconds(), MAX_HORIZON_S);
+        assert_eq!(slow.seconds(0.016), MAX_HORIZON_S);
     }
 }

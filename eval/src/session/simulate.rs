@@ -277,7 +277,7 @@ pub fn serve(
                 for (f, _) in out.iter().skip(1).filter(|(f, _)| f.arrive_ms <= sent) {
                     h.observe(f.request_ms * 1e-3, f.arrive_ms * 1e-3);
                 }
-                view = predictor.predict(h.seconds()).unwrap_or(view);
+                view = predictor.predict(h.seconds((tick_ms * 1e-3) as f32)).unwrap_or(view);
             }
             let (camera, offset) = match GuardBand::new(&view, request.guard, MAX_VIEWPORT) {
                 Ok(g) if request.guard > 0.0 => (g.camera, (g.x0, g.y0)),
