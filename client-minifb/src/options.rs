@@ -15,7 +15,8 @@ Window controls:
   right drag / W A S D       pan
   wheel / + -                zoom
   1..9                       renderer (see --renderer; key k is the k-th of its list;
-                             9 is the default, spheres)
+                             9 is spheres, the fastest exact route)
+  0                          the default renderer, splat-fill
   H / Shift+H                next / previous depth heuristic (sent to the server)
   [ ]                        smaller / larger sample radius (sent to the server)
   R                          reset the camera
@@ -73,8 +74,9 @@ pub struct Options {
     pub build_threads: usize,
     /// Renderer, in key order (keys 1–9, then no key): spheres-cpu, points1, points2, points3,
     /// splat (exact sphere splatting), stale (unwarped frame), spheres-gpu (GPU opened on first
-    /// use), spheres-scalar, spheres (the default), splat-tiles, spheres-fill and splat-fill
-    /// (holes filled from the stale frame), splat-gpu (GPU exact splatting).
+    /// use), spheres-scalar, spheres (the fastest exact route: tiles or tracer), splat-tiles,
+    /// spheres-fill and splat-fill (holes filled from the stale frame; splat-fill is the
+    /// default), splat-gpu (GPU exact splatting).
     #[arg(long, value_name = "NAME", default_value_t = RendererKind::DEFAULT, value_parser = parse_renderer)]
     pub renderer: RendererKind,
     /// GPU renderers: the adapter whose name contains NAME (case-insensitive; default: the best

@@ -177,7 +177,7 @@ mod tests {
         assert_eq!(a, c, "the default renderer draws the same image");
         // An unbuilt scene (lazy build): the exact renderers draw the built scene's image.
         let unbuilt = volwarp_cpu_tracer::route::unbuilt_scene(&frame);
-        for key in [9, 1, 8] {
+        for key in [9, 1, 8, 5] {
             r.select_key(key).unwrap();
             let mut d = Image::new(1, 1);
             r.render(&unbuilt, &cam, &mut d);

@@ -32,6 +32,9 @@ pub struct Replay {
     frames: VecDeque<Frame>,
     scene: Option<Scene>,
     builder: ParallelBuilder,
+    /// Hand scenes over unbuilt (as the live client does for a renderer that needs no LBVH),
+    /// so that replay draws the very same images.
+    lazy: bool,
     warned: bool,
 }
 
@@ -47,8 +50,15 @@ impl Replay {
             frames: VecDeque::new(),
             scene: None,
             builder: ParallelBuilder::new(build_threads),
+            lazy: false,
             warned: false,
         })
+    }
+
+    /// Hands scenes over unbuilt (`true`) or built, as the live client does for the renderer.
+    pub fn set_lazy_build(&mut self, lazy: bool) {
+        self.lazy = lazy;
+        self.scene = None;
     }
 
     /// The next camera entry (time in µs and the request), storing the frames before it.
@@ -91,6 +101,7 @@ impl Replay {
             return self.scene.as_ref();
         }
         match self.scene.as_mut() {
+            _ if self.lazy => self.scene = Some(volwarp_cpu_tracer::route::unbuilt_scene(frame)),
             Some(s) => self.builder.build_into(frame, s),
             None => self.scene = Some(self.builder.build(frame)),
         }
@@ -122,6 +133,8 @@ pub fn draw(replay: &mut Replay, renderers: &mut Renderers, req: &CameraRequest,
 pub fn run(opts: &Options, path: &Path) -> Result<(), ClientError> {
     let mut replay = Replay::open(path, opts.build_threads)?;
     let mut renderers = Renderers::new(opts.renderer, opts.tracer_threads()).map_err(ClientError::Renderer)?;
+    renderers.set_adaptive_radius(opts.adapt);
+    replay.set_lazy_build(!opts.renderer.info().caps.needs_lbvh);
     if !opts.headless {
         return crate::window::run_replay(opts, &mut replay, &mut renderers);
     }

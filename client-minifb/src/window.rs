@@ -73,8 +73,12 @@ impl Screen {
         !self.window.is_open() || self.window.is_key_down(Key::Escape) || self.window.is_key_down(Key::Q)
     }
 
-    /// Number key 1–9 pressed this frame, if any.
+    /// Number key 0–9 pressed this frame, if any (0: the default renderer).
     pub fn renderer_key(&self) -> Option<usize> {
+        let w = &self.window;
+        if w.is_key_pressed(Key::Key0, KeyRepeat::No) || w.is_key_pressed(Key::NumPad0, KeyRepeat::No) {
+            return Some(0);
+        }
         const KEYS: [(Key, Key); 9] = [
             (Key::Key1, Key::NumPad1),
             (Key::Key2, Key::NumPad2),
@@ -86,7 +90,6 @@ impl Screen {
             (Key::Key8, Key::NumPad8),
             (Key::Key9, Key::NumPad9),
         ];
-        let w = &self.window;
         KEYS.iter()
             .position(|(a, b)| w.is_key_pressed(*a, KeyRepeat::No) || w.is_key_pressed(*b, KeyRepeat::No))
             .map(|i| i + 1)
@@ -156,8 +159,14 @@ pub fn run_live(opts: &Options, display: &mut Display, home: Camera) -> Result<(
         last = now;
         let w = &screen.window;
         // Input.
-        if let Some(k) = screen.renderer_key() {
-            let _ = display.renderers.select_key(k);
+        match screen.renderer_key() {
+            Some(0) => {
+                let _ = display.renderers.select(volwarp_core::RendererKind::DEFAULT);
+            }
+            Some(k) => {
+                let _ = display.renderers.select_key(k);
+            }
+            None => {}
         }
         if w.is_key_pressed(Key::H, KeyRepeat::No) {
             let back = w.is_key_down(Key::LeftShift) || w.is_key_down(Key::RightShift);

@@ -69,7 +69,7 @@ fn headless_orbit_writes_frames_that_differ_and_replay_reproduces_them() {
         assert!(cols[1].parse::<f64>().unwrap() >= 0.0);
         assert!(cols[2].parse::<f64>().unwrap() >= 0.0, "frame age known: {l}");
         assert!(cols[3].parse::<usize>().unwrap() > 0);
-        assert_eq!(cols[4], "spheres");
+        assert_eq!(cols[4], volwarp_core::RendererKind::DEFAULT.name());
     }
     // Paced at 12 FPS the display swaps in newer frames as they arrive (replay must follow).
     let seqs: std::collections::BTreeSet<&str> = lines[1..].iter().map(|l| l.split(',').nth(6).unwrap()).collect();

@@ -170,8 +170,10 @@ impl RendererKind {
         RendererKind::SplatGpu,
     ];
 
-    /// The renderer a client starts with.
-    pub const DEFAULT: RendererKind = RendererKind::Spheres;
+    /// The renderer a client starts with: the exact splatter with hole filling (with the
+    /// client's default warp-sized radii and prediction the most accurate method of the session
+    /// results, `docs/results.md`).
+    pub const DEFAULT: RendererKind = RendererKind::SplatFill;
 
     /// Its row of [`REGISTRY`].
     pub const fn info(self) -> &'static RendererInfo {

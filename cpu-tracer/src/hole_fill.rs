@@ -31,7 +31,9 @@
 use crate::depth_buffer::{DepthBuffer, Projector};
 use crate::point_splat::splat_points;
 use crate::threads::Threads;
-use crate::{begin_frame, shade, PacketTracer, ScalarTracer, SphereSplat, MAX_VIEWPORT, NO_HIT};
+use crate::{
+    begin_frame_unbuilt_ok as begin_frame, shade, PacketTracer, ScalarTracer, SphereSplat, MAX_VIEWPORT, NO_HIT,
+};
 use volwarp_core::renderer::{Image, Renderer};
 use volwarp_core::sample::pack_color_f32;
 use volwarp_core::{Camera, RendererKind, Scene, BACKGROUND};

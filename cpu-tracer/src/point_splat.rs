@@ -4,7 +4,7 @@
 //! pixels whose centres are nearest the projected point. Equal depths go to the smaller sample
 //! index, so the image does not depend on the thread count.
 
-use crate::begin_frame;
+use crate::begin_frame_unbuilt_ok as begin_frame;
 use crate::depth_buffer::{key, DepthBuffer, Projector};
 use crate::threads::Threads;
 use volwarp_core::renderer::{Image, Renderer};

@@ -16,7 +16,7 @@
 use crate::depth_buffer::{key, key_prim, pixel_span, EMPTY};
 use crate::lanes::{self, ray_dirs, sphere_hits, Lanes};
 use crate::threads::Threads;
-use crate::{begin_frame, shade, NO_HIT};
+use crate::{begin_frame_unbuilt_ok as begin_frame, shade, NO_HIT};
 use volwarp_core::renderer::{Image, Renderer};
 use volwarp_core::sample::Dequantizer;
 use volwarp_core::warp_radius::radius_scale;
@@ -128,7 +128,13 @@ impl View {
 impl SphereSplat {
     /// A splatter on `threads` threads (0: one per core).
     pub fn new(threads: usize) -> Self {
-        SphereSplat { threads: Threads::new(threads), keys: Vec::new(), dirs: Vec::new(), radius_scale: 1.0, adaptive: false }
+        SphereSplat {
+            threads: Threads::new(threads),
+            keys: Vec::new(),
+            dirs: Vec::new(),
+            radius_scale: 1.0,
+            adaptive: false,
+        }
     }
 
     /// Draws every sphere with its radius times `scale` (core's `warp_radius::radius_scale`

@@ -7,7 +7,7 @@
 use crate::depth_buffer::{DepthBuffer, Projector};
 use crate::point_splat::splat_points;
 use crate::threads::Threads;
-use crate::{begin_frame, MAX_VIEWPORT};
+use crate::{begin_frame_unbuilt_ok as begin_frame, MAX_VIEWPORT};
 use volwarp_core::renderer::{Image, Renderer};
 use volwarp_core::RendererKind;
 use volwarp_core::{Camera, Scene};

@@ -9,7 +9,9 @@
 //! * `fill K=2 steady`: `spheres-fill` with the previous frame (rendered at −20°) kept,
 //! * `fill K=2 reversal`: the same with the previous frame at +20° (the camera came back),
 //!
-//! and `--time` times `render_set` with K = 1, 2, 4 frames at 512² and 1024².
+//! and `--time` times `render_set` with K = 1, 2, 4 frames at 512² and 1024², for the packet
+//! tracer's fill and for `volwarp` (the window client's default: the splatter's fill with
+//! warp-sized radii), beside plain `spheres-cpu` and `splat`.
 //!
 //! ```sh
 //! cargo run --release -p volwarp-eval --example warps -- ../shared/data rel-threshold
@@ -20,7 +22,7 @@ use std::time::Instant;
 use volwarp_core::guard::GuardBand;
 use volwarp_core::renderer::Renderer;
 use volwarp_core::{Heuristic, Image, RendererKind, Scene};
-use volwarp_cpu_tracer::{build_scene, create, FillOptions, HoleFill, PacketTracer};
+use volwarp_cpu_tracer::{build_scene, create, FillOptions, HoleFill, PacketTracer, SampleIds, SphereSplat};
 use volwarp_eval::camera_paths::orbit;
 use volwarp_eval::quality::frame_for;
 use volwarp_eval::{median, Metrics};
@@ -137,28 +139,53 @@ fn main() {
             let scenes: Vec<Scene> =
                 [0.0f32, -10.0, -20.0, -30.0].iter().map(|&a| build_scene(&frame_for(&m, &orbit(&c0, a), h))).collect();
             let cam = orbit(&c0, 10.0);
-            for k in [1usize, 2, 4] {
-                let set: Vec<&Scene> = scenes.iter().take(k).collect();
-                let mut fill = HoleFill::new(PacketTracer::new(0), RendererKind::SpheresFill, FillOptions::DEFAULT, 0);
-                let mut img = Image::new(0, 0);
-                fill.render_set(&set, &cam, &mut img);
-                let mut ms: Vec<f64> = (0..7)
-                    .map(|_| {
-                        let t = Instant::now();
-                        fill.render_set(&set, &cam, &mut img);
-                        t.elapsed().as_secs_f64() * 1e3
-                    })
-                    .collect();
-                let bytes: usize = set.iter().map(|s| s.resident_bytes()).sum();
-                let n: usize = set.iter().map(|s| s.samples.len()).sum();
-                println!(
-                    "time {} {size}² K={k}: {:.1} ms median of 7 (plain spheres-cpu below); {n} samples, {:.1} MB resident, {:.1} B/sample",
-                    ds.name,
-                    median(&mut ms).unwrap_or(0.0),
-                    bytes as f64 / 1e6,
-                    bytes as f64 / n.max(1) as f64
-                );
+            // The fill around the packet tracer (`spheres-fill`) and the window client's default
+            // drawing (`volwarp`: the splatter with warp-sized radii), K = 1, 2, 4 frames.
+            let makers: [(&str, fn() -> Box<dyn FillSet>); 2] = [
+                ("spheres-fill", || {
+                    Box::new(HoleFill::new(PacketTracer::new(0), RendererKind::SpheresFill, FillOptions::DEFAULT, 0))
+                }),
+                ("volwarp", || {
+                    let mut f = HoleFill::new(SphereSplat::new(0), RendererKind::SplatFill, FillOptions::DEFAULT, 0);
+                    f.set_adaptive_radius(true);
+                    Box::new(f)
+                }),
+            ];
+            for (name, make) in makers {
+                for k in [1usize, 2, 4] {
+                    let set: Vec<&Scene> = scenes.iter().take(k).collect();
+                    let mut fill = make();
+                    let mut img = Image::new(0, 0);
+                    fill.draw(&set, &cam, &mut img);
+                    let mut ms: Vec<f64> = (0..7)
+                        .map(|_| {
+                            let t = Instant::now();
+                            fill.draw(&set, &cam, &mut img);
+                            t.elapsed().as_secs_f64() * 1e3
+                        })
+                        .collect();
+                    let bytes: usize = set.iter().map(|s| s.resident_bytes()).sum();
+                    let n: usize = set.iter().map(|s| s.samples.len()).sum();
+                    println!(
+                        "time {} {size}² {name} K={k}: {:.1} ms median of 7; {n} samples, {:.1} MB resident, {:.1} B/sample",
+                        ds.name,
+                        median(&mut ms).unwrap_or(0.0),
+                        bytes as f64 / 1e6,
+                        bytes as f64 / n.max(1) as f64
+                    );
+                }
             }
+            let mut sp = SphereSplat::new(0);
+            let mut img = Image::new(0, 0);
+            sp.render(&scenes[0], &cam, &mut img);
+            let mut ms: Vec<f64> = (0..7)
+                .map(|_| {
+                    let s = Instant::now();
+                    sp.render(&scenes[0], &cam, &mut img);
+                    s.elapsed().as_secs_f64() * 1e3
+                })
+                .collect();
+            println!("time {} {size}² splat: {:.1} ms", ds.name, median(&mut ms).unwrap_or(0.0));
             let mut t = PacketTracer::new(0);
             let mut img = Image::new(0, 0);
             t.render(&scenes[0], &cam, &mut img);
@@ -171,5 +198,16 @@ fn main() {
                 .collect();
             println!("time {} {size}² spheres-cpu: {:.1} ms", ds.name, median(&mut ms).unwrap_or(0.0));
         }
+    }
+}
+
+/// A hole-filling renderer drawing a set of frames (the tracer's and the splatter's).
+trait FillSet {
+    fn draw(&mut self, scenes: &[&Scene], camera: &volwarp_core::Camera, out: &mut Image);
+}
+
+impl<R: SampleIds + Renderer> FillSet for HoleFill<R> {
+    fn draw(&mut self, scenes: &[&Scene], camera: &volwarp_core::Camera, out: &mut Image) {
+        self.render_set(scenes, camera, out);
     }
 }

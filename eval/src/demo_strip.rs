@@ -83,7 +83,9 @@ pub fn write_strip(marcher: &Marcher, record: &Path, rows: usize, out: &Path) ->
     let warping: Vec<&(f64, Camera, usize)> =
         shown.iter().filter(|(_, c, i)| *c != frames[*i].header.camera && frames[*i].header.camera.width > 0).collect();
     if warping.is_empty() {
-        return Err(format!("{}: no display frame warps a received frame (did the camera move?)", record.display()).into());
+        return Err(
+            format!("{}: no display frame warps a received frame (did the camera move?)", record.display()).into()
+        );
     }
     let n = rows.clamp(1, warping.len());
     let picks: Vec<&(f64, Camera, usize)> = (0..n).map(|k| warping[(2 * k + 1) * warping.len() / (2 * n)]).collect();

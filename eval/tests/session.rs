@@ -116,8 +116,7 @@ fn prediction_keeps_a_still_camera_exact_and_stops_with_it() {
     o.methods = "splat+predict+adapt".into();
     let runs = simulate_all(&small(), &o).unwrap();
     // Ticks 2.2 s to 2.5 s: the camera stopped at 1.5 s, so frames of the still view arrived.
-    let late: Vec<f64> =
-        runs[0].result.rows.iter().filter(|r| r.time_s >= 2.2).map(|r| r.metrics.flip).collect();
+    let late: Vec<f64> = runs[0].result.rows.iter().filter(|r| r.time_s >= 2.2).map(|r| r.metrics.flip).collect();
     assert!(!late.is_empty() && late.iter().all(|&f| f == 0.0), "{late:?}");
     assert!(runs[0].result.rows.iter().all(|r| r.metrics.flip.is_finite()));
 }

@@ -171,13 +171,17 @@ impl MethodSpec {
         }
         let fills = matches!(renderer, RendererKind::SpheresFill | RendererKind::SplatFill);
         if (m.frames > 1 || m.pull_push > 0) && !fills {
-            return Err(format!("{spec}: frames=K and pp=L need a hole-filling renderer (splat-fill, spheres-fill)").into());
+            return Err(
+                format!("{spec}: frames=K and pp=L need a hole-filling renderer (splat-fill, spheres-fill)").into()
+            );
         }
         if m.adapt && !matches!(renderer, RendererKind::Splat | RendererKind::SplatFill) {
             return Err(format!("{spec}: adapt (warp-sized radii) needs a splatter (splat, splat-fill)").into());
         }
         if renderer == RendererKind::Stale && m.request != RequestPolicy::NONE {
-            return Err(format!("{spec}: the stale frame shows the frame as rendered; it cannot predict or widen").into());
+            return Err(
+                format!("{spec}: the stale frame shows the frame as rendered; it cannot predict or widen").into()
+            );
         }
         Ok(m)
     }
@@ -215,9 +219,7 @@ impl MethodSpec {
             Box::new(FillMethod { name: name.clone(), request, frames, fill })
         };
         match (self.renderer, adapt) {
-            (RendererKind::SplatFill, _) => {
-                fill_method(SphereSplat::new(t), RendererKind::SplatFill, fill_opts)
-            }
+            (RendererKind::SplatFill, _) => fill_method(SphereSplat::new(t), RendererKind::SplatFill, fill_opts),
             (RendererKind::Splat, true) => fill_method(SphereSplat::new(t), RendererKind::Splat, none),
             (RendererKind::SpheresFill, _) => Box::new(FillMethod {
                 name,

@@ -28,10 +28,10 @@ use crate::{ErrorBox, Metrics};
 use rayon::prelude::*;
 use std::collections::HashMap;
 use volwarp_core::compact_frame::{encoded_size, EncodeOptions, Encoding};
-use volwarp_core::wire::CameraRequest;
 use volwarp_core::guard::GuardBand;
 use volwarp_core::prediction::{Horizon, Predictor};
 use volwarp_core::renderer::Renderer;
+use volwarp_core::wire::CameraRequest;
 use volwarp_core::{Camera, Heuristic, Image, RendererKind};
 use volwarp_server::Marcher;
 
@@ -396,10 +396,8 @@ pub fn run_session(
         })
         .collect();
     let scored: Vec<usize> = (0..cams.len()).step_by(cfg.score_every).collect();
-    let mut result = SessionResult {
-        frames: streams.first().map(|s| s.frames.clone()).unwrap_or_default(),
-        ..Default::default()
-    };
+    let mut result =
+        SessionResult { frames: streams.first().map(|s| s.frames.clone()).unwrap_or_default(), ..Default::default() };
     let mut worst: Vec<Option<Worst>> = vec![None; methods.len()];
     let mut images: Vec<Image> = (0..methods.len()).map(|_| Image::new(0, 0)).collect();
     for (done, &j) in scored.iter().enumerate() {
