@@ -30,6 +30,7 @@
 
 use crate::depth_buffer::{DepthBuffer, Projector};
 use crate::point_splat::splat_points;
+use crate::route::SceneId;
 use crate::threads::Threads;
 use crate::{
     begin_frame_unbuilt_ok as begin_frame, shade, PacketTracer, ScalarTracer, SphereSplat, MAX_VIEWPORT, NO_HIT,
@@ -105,6 +106,9 @@ pub struct HoleFill<R> {
     state: Vec<u64>,
     depth: DepthBuffer,
     frame: Vec<u32>,
+    /// The scene `frame` (its stale image) was splatted from: it depends on the frame only,
+    /// so it is made once per frame, not per draw.
+    frame_of: Option<SceneId>,
     pyramid: Vec<Vec<[f32; 4]>>,
 }
 
@@ -124,6 +128,7 @@ impl<R: SampleIds> HoleFill<R> {
             state: Vec::new(),
             depth: DepthBuffer::default(),
             frame: Vec::new(),
+            frame_of: None,
             pyramid: Vec::new(),
         }
     }
@@ -204,11 +209,15 @@ impl<R: SampleIds> HoleFill<R> {
         }
         let (fw, fh) = (fc.width, fc.height);
         let len = fw as usize * fh as usize;
-        self.depth.reset(len, &self.threads);
         let proj = Projector::new(&fc);
-        splat_points(scene, &proj, 1, fw, fh, &self.depth, &self.threads);
-        self.frame.resize(len, 0);
-        self.depth.resolve(&scene.colors, &mut self.frame, &self.threads);
+        let id = SceneId::of(scene);
+        if self.frame_of != Some(id) || self.frame.len() != len {
+            self.depth.reset(len, &self.threads);
+            splat_points(scene, &proj, 1, fw, fh, &self.depth, &self.threads);
+            self.frame.resize(len, 0);
+            self.depth.resolve(&scene.colors, &mut self.frame, &self.threads);
+            self.frame_of = Some(id);
+        }
         let (_, _, fwd) = fc.basis();
         // The focal plane: points q with q·fwd = target·fwd.
         let plane = fc.target.dot(fwd);

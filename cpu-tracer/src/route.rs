@@ -165,9 +165,10 @@ pub fn is_unbuilt(scene: &Scene) -> bool {
     scene.nodes.is_empty() && scene.samples.len() >= 2
 }
 
-/// What identifies the unbuilt scene a kept LBVH was built from.
+/// What identifies the scene something was derived from (the unbuilt scene a kept LBVH was
+/// built from, the frame a hole filler's stale image was splatted from).
 #[derive(Clone, Copy, Debug, PartialEq)]
-struct SceneId {
+pub(crate) struct SceneId {
     header: FrameHeader,
     ptr: usize,
     len: usize,
@@ -176,7 +177,7 @@ struct SceneId {
 }
 
 impl SceneId {
-    fn of(scene: &Scene) -> SceneId {
+    pub(crate) fn of(scene: &Scene) -> SceneId {
         SceneId {
             header: scene.header,
             ptr: scene.samples.as_ptr() as usize,
