@@ -122,6 +122,29 @@ fn prediction_keeps_a_still_camera_exact_and_stops_with_it() {
 }
 
 #[test]
+fn session_csv_reads_back_into_the_same_rows() {
+    let o = opts(&["orbit", "dolly"], NetworkModel { server_ms: 200.0, latency_ms: 20.0, mbps: f64::INFINITY });
+    let runs = simulate_all(&small(), &o).unwrap();
+    let dir = std::env::temp_dir().join(format!("volwarp-session-csv-{}", std::process::id()));
+    std::fs::create_dir_all(&dir).unwrap();
+    let path = dir.join("session.csv");
+    session_table(&runs).write(&path).unwrap();
+    let back = volwarp_eval::session::report::load_session_csv(&path, None).unwrap();
+    assert_eq!(back.len(), runs.len());
+    for (a, b) in runs.iter().zip(&back) {
+        assert_eq!(a.key, b.key);
+        assert_eq!(a.result.rows.len(), b.result.rows.len());
+        for (x, y) in a.result.rows.iter().zip(&b.result.rows) {
+            assert_eq!((&x.method, x.tick, x.frame_seq), (&y.method, y.tick, y.frame_seq));
+            assert!((x.metrics.flip - y.metrics.flip).abs() <= 5e-5, "{} vs {}", x.metrics.flip, y.metrics.flip);
+        }
+    }
+    std::fs::write(&path, "dataset,nope\n1,2\n").unwrap();
+    assert!(volwarp_eval::session::report::load_session_csv(&path, None).is_err());
+    std::fs::remove_dir_all(&dir).ok();
+}
+
+#[test]
 fn a_camera_that_never_moves_shows_the_truth_with_a_slow_server() {
     let mut o = opts(&[], NetworkModel::DEFAULT);
     o.scenarios = vec![CameraPath::still()];

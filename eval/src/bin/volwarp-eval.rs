@@ -201,6 +201,19 @@ enum Cmd {
         #[arg(long)]
         out: PathBuf,
     },
+    /// Redraw a session run's summaries and speed-vs-accuracy chart from its session.csv
+    /// (with --calibration: with those draw times).
+    SessionReplot {
+        /// The session.csv.
+        #[arg(long)]
+        csv: PathBuf,
+        /// Calibration file (`session-calibrate`) whose draw times replace the CSV's.
+        #[arg(long)]
+        calibration: Option<PathBuf>,
+        /// Output folder.
+        #[arg(long)]
+        out: PathBuf,
+    },
     /// Redraw the charts of a quality run from its quality.csv.
     Replot {
         /// The folder of the run (with quality.csv).
@@ -405,6 +418,10 @@ fn run(cli: Cli) -> Result<(), ErrorBox> {
             }
             log::info!("wrote {}", out.display());
             Ok(())
+        }
+        Cmd::SessionReplot { csv, calibration, out } => {
+            let cal = calibration.as_deref().map(volwarp_eval::session::model::Calibration::load).transpose()?;
+            volwarp_eval::session::report::replot(&csv, cal.as_ref(), &out)
         }
         Cmd::Fixtures { out } => report::fixtures(&out),
         Cmd::Replot { dir } => report::replot(&dir),

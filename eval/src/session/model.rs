@@ -141,8 +141,17 @@ pub struct Calibration {
 /// The client draw times at 512² used when no calibration file is given: the medians of
 /// `docs/results.md` (2 threads; Table "Mean FLIP over the five datasets"), scaled with the
 /// pixel count at other sizes.
-pub const DEFAULT_DRAW_MS_512: [(&str, f64); 6] =
-    [("stale", 0.9), ("points1", 0.7), ("points2", 1.1), ("points3", 1.3), ("spheres-cpu", 4.4), ("splat", 2.8)];
+/// `splat-fill` (with warp-sized radii: `volwarp`) is splat's figure times 1.57, the ratio
+/// of the two measured in one `session-calibrate` run (tooth, 512², 2 threads; `docs/perf.md`).
+pub const DEFAULT_DRAW_MS_512: [(&str, f64); 7] = [
+    ("stale", 0.9),
+    ("points1", 0.7),
+    ("points2", 1.1),
+    ("points3", 1.3),
+    ("spheres-cpu", 4.4),
+    ("splat", 2.8),
+    ("splat-fill", 4.4),
+];
 
 impl Calibration {
     /// Reads a calibration file (a clear error for a malformed line).

@@ -455,6 +455,75 @@ pub fn worst_strip(run: &Run, path: &Path) -> Result<(), ErrorBox> {
     Ok(())
 }
 
+/// Reads a `session.csv` back into runs (their rows; no frame timelines or worst ticks), in
+/// the order the sessions appear. With `calibration`, every row's draw time is replaced by the
+/// calibration's figure for its method and size (to redraw the speed chart with measured
+/// draw times: the scores do not depend on them while every draw fits a display tick).
+pub fn load_session_csv(path: &Path, calibration: Option<&super::model::Calibration>) -> Result<Vec<Run>, ErrorBox> {
+    let text = std::fs::read_to_string(path).map_err(|e| format!("{}: {e}", path.display()))?;
+    let mut lines = text.lines();
+    let header: Vec<&str> = lines.next().unwrap_or_default().split(',').collect();
+    if header != SESSION_COLUMNS {
+        return Err(format!("{}: not a session.csv (columns {:?})", path.display(), header).into());
+    }
+    let mut runs: Vec<Run> = Vec::new();
+    for (i, line) in lines.enumerate() {
+        let f: Vec<&str> = line.split(',').collect();
+        let bad = || format!("{}: line {}: malformed", path.display(), i + 2);
+        if f.len() != SESSION_COLUMNS.len() {
+            return Err(bad().into());
+        }
+        let p = |j: usize| -> Result<f64, ErrorBox> {
+            match f[j] {
+                "inf" => Ok(f64::INFINITY),
+                v => v.parse::<f64>().map_err(|_| bad().into()),
+            }
+        };
+        let key = RunKey {
+            dataset: f[0].into(),
+            scenario: f[1].into(),
+            policy: f[2].into(),
+            size: f[3].parse().map_err(|_| bad())?,
+            server_ms: p(4)?,
+            latency_ms: p(5)?,
+            mbps: p(6)?,
+        };
+        let draw_ms = match calibration {
+            Some(c) => c.draw_ms(f[7], key.size),
+            None => p(12)?,
+        };
+        let row = TickRow {
+            method: f[7].into(),
+            tick: f[8].parse().map_err(|_| bad())?,
+            time_s: p(9)?,
+            frame_seq: f[10].parse().map_err(|_| bad())?,
+            frame_age_ms: p(11)?,
+            draw_ms,
+            metrics: crate::Metrics { psnr: p(13)?, ssim: p(14)?, flip: p(15)? },
+        };
+        match runs.last_mut() {
+            Some(r) if r.key == key => r.result.rows.push(row),
+            _ => runs.push(Run { key, result: SessionResult { rows: vec![row], ..Default::default() } }),
+        }
+    }
+    Ok(runs)
+}
+
+/// Redraws the summaries and the speed-vs-accuracy (or sweep) chart of a session run from its
+/// `session.csv` (see [`load_session_csv`]) into `out`.
+pub fn replot(csv: &Path, calibration: Option<&super::model::Calibration>, out: &Path) -> Result<(), ErrorBox> {
+    let runs = load_session_csv(csv, calibration)?;
+    std::fs::create_dir_all(out).map_err(|e| format!("{}: {e}", out.display()))?;
+    summary_table(&runs).write(&out.join("summary.csv"))?;
+    std::fs::write(out.join("summary.md"), summary_markdown(&runs))?;
+    let size = runs.first().map_or(0, |r| r.key.size);
+    speed_accuracy_chart(
+        &runs,
+        &format!("speed vs accuracy, {size}², every dataset and scenario"),
+        &out.join("speed_accuracy.png"),
+    )
+}
+
 /// Writes every file of a run into `out`.
 pub fn write_all(runs: &[Run], out: &Path, sweep: Option<&str>) -> Result<(), ErrorBox> {
     std::fs::create_dir_all(out).map_err(|e| format!("{}: {e}", out.display()))?;
