@@ -9,7 +9,8 @@
 //! * `fill K=2 steady`: `spheres-fill` with the previous frame (rendered at −20°) kept,
 //! * `fill K=2 reversal`: the same with the previous frame at +20° (the camera came back),
 //!
-//! and `--time` times `render_set` with K = 1, 2, 4 frames at 512² and 1024², for the packet
+//! and `--time` (`--time-only`: nothing else) times `render_set` with K = 1, 2, 4 frames at
+//! 512² and 1024², for the packet
 //! tracer's fill and for `volwarp` (the window client's default: the splatter's fill with
 //! warp-sized radii), beside plain `spheres-cpu` and `splat`.
 //!
@@ -38,9 +39,14 @@ fn main() {
     let args: Vec<String> = std::env::args().collect();
     let dir = args.get(1).map_or("../shared/data", |s| s.as_str());
     let h: Heuristic = args.get(2).map_or(Heuristic::Threshold, |s| Heuristic::from_name(s).expect("a heuristic"));
-    let time = args.iter().any(|a| a == "--time");
+    let time_only = args.iter().any(|a| a == "--time-only");
+    let time = time_only || args.iter().any(|a| a == "--time");
     let size = 512;
     let datasets = volwarp_eval::report::shared_datasets(Path::new(dir)).expect("datasets");
+    if time_only {
+        timings(&datasets[0], h);
+        return;
+    }
     let names = [
         "stale",
         "points2",
@@ -132,7 +138,13 @@ fn main() {
         println!("| {n} | {} |", sums[i].map(|v| format!("{v:.4}")).join(" | "));
     }
     if time {
-        let ds = &datasets[0];
+        timings(&datasets[0], h);
+    }
+}
+
+/// The fill's draw times with K = 1, 2, 4 frames (see the module docs).
+fn timings(ds: &volwarp_server::dataset::Dataset, h: Heuristic) {
+    {
         let m = Marcher::from_dataset(ds);
         for size in [512u32, 1024] {
             let c0 = m.default_camera(size, size);
