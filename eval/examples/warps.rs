@@ -153,7 +153,7 @@ fn timings(ds: &volwarp_server::dataset::Dataset, h: Heuristic) {
             let cam = orbit(&c0, 10.0);
             // The fill around the packet tracer (`spheres-fill`) and the window client's default
             // drawing (`volwarp`: the splatter with warp-sized radii), K = 1, 2, 4 frames.
-            let makers: [(&str, fn() -> Box<dyn FillSet>); 2] = [
+            let makers: [(&str, MakeFill); 2] = [
                 ("spheres-fill", || {
                     Box::new(HoleFill::new(PacketTracer::new(0), RendererKind::SpheresFill, FillOptions::DEFAULT, 0))
                 }),
@@ -212,6 +212,9 @@ fn timings(ds: &volwarp_server::dataset::Dataset, h: Heuristic) {
         }
     }
 }
+
+/// Makes a hole-filling renderer.
+type MakeFill = fn() -> Box<dyn FillSet>;
 
 /// A hole-filling renderer drawing a set of frames (the tracer's and the splatter's).
 trait FillSet {

@@ -33,8 +33,11 @@ pub struct StripRow {
     pub volwarp_flip: f64,
 }
 
+/// A display frame of a record: its time in seconds, its camera, the index of the newest frame.
+type Shown = (f64, Camera, usize);
+
 /// The display frames of a record with the newest frame held at each, in order.
-fn displayed(record: &Path) -> Result<(Vec<Frame>, Vec<(f64, Camera, usize)>), ErrorBox> {
+fn displayed(record: &Path) -> Result<(Vec<Frame>, Vec<Shown>), ErrorBox> {
     let bytes = std::fs::read(record).map_err(|e| format!("{}: {e}", record.display()))?;
     let mut r: &[u8] = &bytes;
     let bad = |e: volwarp_core::record::RecordError| format!("{}: {e}", record.display());
@@ -80,7 +83,7 @@ fn stale_view(stale: &mut dyn Renderer, scene: &volwarp_core::Scene, display: &C
 pub fn write_strip(marcher: &Marcher, record: &Path, rows: usize, out: &Path) -> Result<Vec<StripRow>, ErrorBox> {
     let (frames, shown) = displayed(record)?;
     // Display frames that warp: the camera is not the newest frame's own.
-    let warping: Vec<&(f64, Camera, usize)> =
+    let warping: Vec<&Shown> =
         shown.iter().filter(|(_, c, i)| *c != frames[*i].header.camera && frames[*i].header.camera.width > 0).collect();
     if warping.is_empty() {
         return Err(
@@ -88,7 +91,7 @@ pub fn write_strip(marcher: &Marcher, record: &Path, rows: usize, out: &Path) ->
         );
     }
     let n = rows.clamp(1, warping.len());
-    let picks: Vec<&(f64, Camera, usize)> = (0..n).map(|k| warping[(2 * k + 1) * warping.len() / (2 * n)]).collect();
+    let picks: Vec<&Shown> = (0..n).map(|k| warping[(2 * k + 1) * warping.len() / (2 * n)]).collect();
     let mut stale = volwarp_cpu_tracer::create(RendererKind::Stale, 0).ok_or("no stale renderer")?;
     let mut volwarp = volwarp_cpu_tracer::create(RendererKind::SplatFill, 0).ok_or("no splat-fill renderer")?;
     volwarp.set_adaptive_radius(true);
