@@ -290,7 +290,12 @@ pub fn frame_decode(data: &[u8]) {
     match body {
         Ok(()) => {
             check_frame(&fh, &samples[..n], &colors[..n], &LIMITS);
-            let f = Frame { header: fh, samples: samples[..n].to_vec(), colors: colors[..n].to_vec() };
+            let f = Frame {
+                header: fh,
+                samples: samples[..n].to_vec(),
+                colors: colors[..n].to_vec(),
+                segments: Vec::new(),
+            };
             assert_eq!(whole, Ok(Message::Frame(f)));
         }
         Err(e) => {
@@ -481,7 +486,7 @@ pub fn lbvh_frame(b: &mut Bytes) -> Option<Frame> {
         render_us: 0,
         count: n as u32,
     };
-    Some(Frame { header, samples, colors })
+    Some(Frame { header, samples, colors, segments: Vec::new() })
 }
 
 /// The next ray of the `lbvh` target: a selector byte picks raw origin and direction, a ray

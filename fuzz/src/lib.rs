@@ -65,7 +65,7 @@ pub fn arb_message(u: &mut Unstructured) -> Result<Message> {
                 render_us: u.arbitrary()?,
                 count: n as u32,
             };
-            Message::Frame(Frame { header, samples, colors })
+            Message::Frame(Frame { header, samples, colors, segments: Vec::new() })
         }
         3 => {
             let code = u.arbitrary()?;
