@@ -3,12 +3,13 @@
 //! A layered frame carries up to K samples per pixel of the frame's camera, one per depth
 //! segment, each with its own premultiplied color and opacity. Where the exact splatter
 //! ([`crate::sphere_splat`]) draws each sample as a sphere and keeps the first hit, this
-//! renderer draws each sample as its **source pixel's footprint**: the rectangle the frame
-//! camera's pixel frustum cuts from the plane through the sample's centre facing the frame
-//! camera (the supersegment of volumetric depth images, Frey, Sadlo and Ertl 2013, flattened
-//! to its representative depth), widened by [`OWN_MARGIN`] pixels against rounding cracks. The
-//! rectangle is projected into the new camera and every output pixel whose centre lies inside
-//! the projected quad takes the sample. Footprints of one depth tile the plane, so nothing is
+//! renderer draws each sample as its **source pixel's footprint**: the quadrilateral the frame
+//! camera's pixel frustum cuts from the plane through the sample's centre facing the new eye
+//! (the supersegment of volumetric depth images, Frey, Sadlo and Ertl 2013, flattened to its
+//! representative depth), widened by [`OWN_MARGIN`] pixels against rounding cracks. The quad is
+//! projected into the new camera and every output pixel whose centre lies inside it takes the
+//! sample. (A plane facing the frame's camera instead shrinks footprints seen obliquely and
+//! opens cracks between them; `docs/perf.md`, issue 14.) Footprints of one depth tile the plane, so nothing is
 //! counted twice where neighbouring segments lie at similar depths, and at the frame's own
 //! camera every pixel takes exactly its own segments: the image is the server's render up to
 //! 8-bit rounding. (A first version tested each pixel of the sphere's bound exactly and kept
@@ -21,12 +22,11 @@
 //! `C += (1 − A)·c`, stopping once `A` ≥ [`OPAQUE`]. Zero-opacity segments add nothing (no
 //! division by opacity anywhere, so no NaN). Pixels nothing covers show the background.
 //!
-//! Work: the footprints are drawn serially (a few operations per sample), the lists composited
-//! in parallel. Memory: `8 × cap + 1` bytes per output pixel, `cap` = twice the most segments
-//! any source pixel has (4 to [`LIST`]), and 1 byte per source pixel.
+//! Work: the footprints are drawn serially (four projections and a few edge tests per sample,
+//! in `f32`), the lists composited in parallel. Memory: `8 × LIST + 1` bytes per output pixel.
 
 use crate::begin_frame_unbuilt_ok;
-use crate::sphere_splat::{dot, View};
+use crate::sphere_splat::View;
 use crate::threads::Threads;
 use volwarp_core::renderer::{Image, Renderer};
 use volwarp_core::sample::{over_background, pack_color_f32};
@@ -69,8 +69,6 @@ pub struct LayerSplat {
     keys: Vec<u64>,
     /// Per output pixel the number of keys.
     count: Vec<u8>,
-    /// Per source pixel its number of samples.
-    per_source: Vec<u8>,
 }
 
 impl LayerSplat {
@@ -81,21 +79,50 @@ impl LayerSplat {
 
     /// A layered splatter with another footprint width.
     pub fn with_options(threads: usize, opts: LayerOptions) -> Self {
-        LayerSplat { threads: Threads::new(threads), opts, keys: Vec::new(), count: Vec::new(), per_source: Vec::new() }
+        LayerSplat { threads: Threads::new(threads), opts, keys: Vec::new(), count: Vec::new() }
     }
 }
 
-/// Continuous image coordinates of `p` in `view`'s camera (pixel `(x, y)` spans
-/// `[x, x + 1) × [y, y + 1)`), `None` at or behind the eye plane.
-#[inline(always)]
-fn project(view: &View, p: [f64; 3]) -> Option<(f64, f64)> {
-    let rel = [p[0] - view.eye.x as f64, p[1] - view.eye.y as f64, p[2] - view.eye.z as f64];
-    let z = dot(rel, view.w);
-    if !(z > 1e-9) {
-        return None;
+/// A camera's projection in `f32`.
+struct Proj {
+    eye: Vec3,
+    u: Vec3,
+    v: Vec3,
+    w: Vec3,
+    px_x: f32,
+    px_y: f32,
+    half_w: f32,
+    half_h: f32,
+}
+
+impl Proj {
+    fn new(view: &View) -> Proj {
+        let f = |a: [f64; 3]| Vec3::new(a[0] as f32, a[1] as f32, a[2] as f32);
+        Proj {
+            eye: view.eye,
+            u: f(view.u),
+            v: f(view.v),
+            w: f(view.w),
+            px_x: view.px_x as f32,
+            px_y: view.px_y as f32,
+            half_w: view.half_w as f32,
+            half_h: view.half_h as f32,
+        }
     }
-    let inv = 1.0 / z;
-    Some((dot(rel, view.u) * inv * view.px_x + view.half_w, view.half_h - dot(rel, view.v) * inv * view.px_y))
+
+    /// Continuous image coordinates of `p` (pixel `(x, y)` spans `[x, x + 1) × [y, y + 1)`),
+    /// `None` at or behind the eye plane or for a non-finite point.
+    #[inline(always)]
+    fn project(&self, p: Vec3) -> Option<(f32, f32)> {
+        let rel = p - self.eye;
+        let z = rel.dot(self.w);
+        if !(z > 1e-6) {
+            return None;
+        }
+        let inv = 1.0 / z;
+        let (x, y) = (rel.dot(self.u) * inv * self.px_x + self.half_w, self.half_h - rel.dot(self.v) * inv * self.px_y);
+        (x.is_finite() && y.is_finite()).then_some((x, y))
+    }
 }
 
 /// The depth key: the centre's distance from the eye (ordered bits of a non-negative float)
@@ -136,80 +163,75 @@ impl Renderer for LayerSplat {
             return;
         }
         let (w, h) = (camera.width as usize, camera.height as usize);
-        let view = View::new(camera);
-        let source = View::new(&scene.header.camera);
         let deq = &scene.deq;
-        let (sw, sh) = (source.width as usize, source.height as usize);
-        // Each sample's source pixel, and the most samples any source pixel has.
-        self.per_source.clear();
-        self.per_source.resize(sw * sh, 0);
-        let f = |v: Vec3| [v.x as f64, v.y as f64, v.z as f64];
-        let pixel_of = |c: Vec3| match project(&source, f(c)) {
-            Some((x, y)) if x >= 0.0 && y >= 0.0 && x < sw as f64 && y < sh as f64 => Some((x as usize, y as usize)),
-            _ => None,
-        };
-        for &s in &scene.samples {
-            if let Some((x, y)) = pixel_of(deq.center(s)) {
-                let c = &mut self.per_source[y * sw + x];
-                *c = c.saturating_add(1);
-            }
-        }
-        let most = self.per_source.iter().copied().max().unwrap_or(0) as usize;
-        let cap = (2 * most).clamp(4, LIST);
+        let cap = LIST;
         self.count.clear();
         self.count.resize(w * h, 0);
         self.keys.resize(w * h * cap, u64::MAX);
-        // Half the footprint's side at unit depth, per axis, as a vector of the source basis.
-        let half = self.opts.own.clamp(0.0, 4.0) as f64;
-        let (hx, hy) = (half / source.px_x, half / source.px_y);
-        let eye = f(view.eye);
+        let view = Proj::new(&View::new(camera));
+        let source = View::new(&scene.header.camera);
+        let src = Proj::new(&source);
+        // Half the footprint's side per unit of source depth, along the source's u and v.
+        let half = self.opts.own.clamp(0.0, 4.0);
+        let (hx, hy) = (half / source.px_x as f32, half / source.px_y as f32);
+        let (su, sv) = (src.u * hx, src.v * hy);
         for (id, &s) in scene.samples.iter().enumerate() {
             let c = deq.center(s);
-            if pixel_of(c).is_none() {
+            let rel = c - src.eye;
+            let z = rel.dot(src.w);
+            // The plane's normal (not normalised: only ratios of dot products with it are used).
+            let n = c - view.eye;
+            let dist2 = n.length_squared();
+            if !(z > 0.0 && dist2 > 0.0) {
                 continue;
             }
-            let cf = f(c);
-            let rel = [cf[0] - source.eye.x as f64, cf[1] - source.eye.y as f64, cf[2] - source.eye.z as f64];
-            let z = dot(rel, source.w);
-            let (ux, vy) = (source.u.map(|a| a * z * hx), source.v.map(|a| a * z * hy));
-            // The footprint's corners, in order around it, projected into the new camera.
-            let corner = |sx: f64, sy: f64| project(&view, [0, 1, 2].map(|i| cf[i] + sx * ux[i] + sy * vy[i]));
+            // The source pixel's frustum (the ray through the centre, ± half a pixel per axis)
+            // cut by the plane through the centre facing the new eye.
+            let axis = rel / z;
+            let num = n.dot(rel);
+            let corner = |sx: f32, sy: f32| {
+                let dir = axis + su * sx + sv * sy;
+                let den = n.dot(dir);
+                // A corner ray within 5° of the plane (the new eye sees the footprint edge-on):
+                // skip the sample.
+                if !(den > 0.0 && den * den > 0.0076 * dist2 * dir.length_squared()) {
+                    return None;
+                }
+                view.project(src.eye + dir * (num / den))
+            };
+            // Its corners, in order around it, in the new camera's image.
             let (Some(q0), Some(q1), Some(q2), Some(q3)) =
                 (corner(-1.0, -1.0), corner(1.0, -1.0), corner(1.0, 1.0), corner(-1.0, 1.0))
             else {
                 continue;
             };
             let quad = [q0, q1, q2, q3];
-            let (mut x0, mut x1, mut y0, mut y1) = (f64::INFINITY, f64::NEG_INFINITY, f64::INFINITY, f64::NEG_INFINITY);
-            for &(x, y) in &quad {
-                x0 = x0.min(x);
-                x1 = x1.max(x);
-                y0 = y0.min(y);
-                y1 = y1.max(y);
-            }
+            let x0 = q0.0.min(q1.0).min(q2.0).min(q3.0);
+            let x1 = q0.0.max(q1.0).max(q2.0).max(q3.0);
+            let y0 = q0.1.min(q1.1).min(q2.1).min(q3.1);
+            let y1 = q0.1.max(q1.1).max(q2.1).max(q3.1);
             // Pixel centres x + ½ within [x0, x1].
-            let (xa, xb) = ((x0 - 0.5).ceil().max(0.0), (x1 - 0.5).floor().min(w as f64 - 1.0));
-            let (ya, yb) = ((y0 - 0.5).ceil().max(0.0), (y1 - 0.5).floor().min(h as f64 - 1.0));
+            let (xa, xb) = ((x0 - 0.5).ceil().max(0.0), (x1 - 0.5).floor().min(w as f32 - 1.0));
+            let (ya, yb) = ((y0 - 0.5).ceil().max(0.0), (y1 - 0.5).floor().min(h as f32 - 1.0));
             if !(xa <= xb && ya <= yb) {
                 continue;
             }
             // Edge functions, signed by the quad's orientation.
             let area = (q1.0 - q0.0) * (q2.1 - q0.1) - (q2.0 - q0.0) * (q1.1 - q0.1);
             let sign = if area < 0.0 { -1.0 } else { 1.0 };
-            let dist = {
-                let d = [cf[0] - eye[0], cf[1] - eye[1], cf[2] - eye[2]];
-                dot(d, d).sqrt() as f32
-            };
-            let k = key(dist, id as u32);
+            let edges: [(f32, f32, f32); 4] = core::array::from_fn(|e| {
+                let (a, b) = (quad[e], quad[(e + 1) & 3]);
+                // sign · ((b − a) × (p − a)) ≥ 0  ⇔  A·px + B·py + C ≥ 0
+                let (ex, ey) = ((b.0 - a.0) * sign, (b.1 - a.1) * sign);
+                (-ey, ex, ey * a.0 - ex * a.1)
+            });
+            // Squared distance: the same order, no square root.
+            let k = key(dist2, id as u32);
             for y in ya as usize..=yb as usize {
-                let py = y as f64 + 0.5;
+                let py = y as f32 + 0.5;
                 for x in xa as usize..=xb as usize {
-                    let px = x as f64 + 0.5;
-                    let inside = (0..4).all(|e| {
-                        let (a, b) = (quad[e], quad[(e + 1) & 3]);
-                        sign * ((b.0 - a.0) * (py - a.1) - (b.1 - a.1) * (px - a.0)) >= 0.0
-                    });
-                    if inside {
+                    let px = x as f32 + 0.5;
+                    if edges.iter().all(|&(a, b, c)| a * px + b * py + c >= 0.0) {
                         let i = y * w + x;
                         insert(&mut self.keys[i * cap..(i + 1) * cap], &mut self.count[i], k);
                     }
@@ -222,6 +244,9 @@ impl Renderer for LayerSplat {
                 let i = band * BAND * w + j;
                 let mut list = [0u64; LIST];
                 let n = count[i] as usize;
+                if n == 0 {
+                    continue;
+                }
                 list[..n].copy_from_slice(&keys[i * cap..i * cap + n]);
                 let list = &mut list[..n];
                 list.sort_unstable();
