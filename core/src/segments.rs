@@ -24,6 +24,11 @@
 /// Most segments per pixel a frame may carry (the wire's and the marcher's cap).
 pub const MAX_LAYERS: usize = 16;
 
+/// The segments per pixel a client asks for by default with the `splat-layers` renderer,
+/// chosen by measurement (`docs/perf.md` and `docs/results.md`, issue 14): against K = 2 it
+/// lowers the mean ꟻLIP at 10–30° by 10–12 % for about twice the samples and bytes.
+pub const DEFAULT_LAYERS: usize = 4;
+
 /// A gap of more than this many marcher steps without a visible sample separates segments.
 pub const GAP_STEPS: f32 = 1.5;
 
