@@ -80,7 +80,9 @@ fn frame() -> impl Strategy<Value = Frame> {
 fn message() -> impl Strategy<Value = Message> {
     prop_oneof![
         (any::<u16>(), any::<u32>(), prop::collection::vec(any::<u8>(), 0..=64)).prop_map(|(version, caps, token)| {
-            Message::Hello(Hello { version, capabilities: caps, token: Default::default() }.with_token(&token).unwrap())
+            Message::Hello(
+                Hello { version, capabilities: caps, token: Default::default(), layers: 1 }.with_token(&token).unwrap(),
+            )
         }),
         (any::<u64>(), camera(), heuristic(), float())
             .prop_map(|(seq, cam, h, rs)| checks::camera_request(seq, cam, h, rs)),
