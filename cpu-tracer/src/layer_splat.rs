@@ -110,17 +110,16 @@ impl Proj {
         }
     }
 
-    /// Continuous image coordinates of `p` (pixel `(x, y)` spans `[x, x + 1) × [y, y + 1)`),
-    /// `None` at or behind the eye plane or for a non-finite point.
+    /// Continuous image coordinates (pixel `(x, y)` spans `[x, x + 1) × [y, y + 1)`) of the point
+    /// whose offset from the eye has components `c` along the camera's (u, v, w); `None` at or
+    /// behind the eye plane or for a non-finite point.
     #[inline(always)]
-    fn project(&self, p: Vec3) -> Option<(f32, f32)> {
-        let rel = p - self.eye;
-        let z = rel.dot(self.w);
-        if !(z > 1e-6) {
+    fn image(&self, c: Vec3) -> Option<(f32, f32)> {
+        if !(c.z > 1e-6) {
             return None;
         }
-        let inv = 1.0 / z;
-        let (x, y) = (rel.dot(self.u) * inv * self.px_x + self.half_w, self.half_h - rel.dot(self.v) * inv * self.px_y);
+        let inv = 1.0 / c.z;
+        let (x, y) = (c.x * inv * self.px_x + self.half_w, self.half_h - c.y * inv * self.px_y);
         (x.is_finite() && y.is_finite()).then_some((x, y))
     }
 }
@@ -175,6 +174,11 @@ impl Renderer for LayerSplat {
         let half = self.opts.own.clamp(0.0, 4.0);
         let (hx, hy) = (half / source.px_x as f32, half / source.px_y as f32);
         let (su, sv) = (src.u * hx, src.v * hy);
+        // Everything is expressed in the new camera's basis: a point's image coordinates are
+        // its (u, v, w) components relative to the new eye. A corner ray's direction is
+        // `axis ± su ± sv`, so its components are the axis's plus per-frame constants.
+        let basis = |x: Vec3| Vec3::new(x.dot(view.u), x.dot(view.v), x.dot(view.w));
+        let (bu, bv, e) = (basis(su), basis(sv), basis(src.eye - view.eye));
         for (id, &s) in scene.samples.iter().enumerate() {
             let c = deq.center(s);
             let rel = c - src.eye;
@@ -186,18 +190,22 @@ impl Renderer for LayerSplat {
                 continue;
             }
             // The source pixel's frustum (the ray through the centre, ± half a pixel per axis)
-            // cut by the plane through the centre facing the new eye.
+            // cut by the plane through the centre facing the new eye: corner `p = eye_s + λ·dir`
+            // with `λ = n·rel / n·dir`.
             let axis = rel / z;
             let num = n.dot(rel);
+            let (an, un, vn) = (axis.dot(n), su.dot(n), sv.dot(n));
+            // A corner ray within 5° of the plane (the new eye sees the footprint edge-on):
+            // skip the sample (the corners' directions are the axis's within half a pixel).
+            let edge_on = 0.0076 * dist2 * axis.length_squared();
+            let ba = basis(axis);
             let corner = |sx: f32, sy: f32| {
-                let dir = axis + su * sx + sv * sy;
-                let den = n.dot(dir);
-                // A corner ray within 5° of the plane (the new eye sees the footprint edge-on):
-                // skip the sample.
-                if !(den > 0.0 && den * den > 0.0076 * dist2 * dir.length_squared()) {
+                let den = an + sx * un + sy * vn;
+                if !(den > 0.0 && den * den > edge_on) {
                     return None;
                 }
-                view.project(src.eye + dir * (num / den))
+                let p = e + (ba + bu * sx + bv * sy) * (num / den);
+                view.image(p)
             };
             // Its corners, in order around it, in the new camera's image.
             let (Some(q0), Some(q1), Some(q2), Some(q3)) =
