@@ -268,6 +268,9 @@ pub fn frame_decode(data: &[u8]) {
     }
     let fh = match wire::read_frame_header(&mut r, &h, &LIMITS) {
         Ok(fh) => fh,
+        // A layered frame (version 3): only `read_message` reads it (the `frame_decode` of
+        // layered frames is `read_message` itself, checked by the other targets).
+        Err(WireError::Layers(volwarp_core::segments::LayerError::Layered)) => return,
         Err(_) => {
             assert!(read_message(&mut &data[..], &LIMITS).is_err(), "read_message accepts what the frame path refused");
             return;
