@@ -8,8 +8,9 @@
 //!   opacities),
 //!
 //! then prints samples and bytes per frame (raw12 and compact, the server's C zstd), and with
-//! `--time` the client draw time at 512² on one thread of `splat` on the one-sample frame and
-//! `splat-layers` on each layered one (median of `--runs`, default 9), at 10°.
+//! `--time` the server's march time per frame (all cores) and the client draw time at 512² on
+//! one thread of `splat` on the one-sample frame and `splat-layers` on each layered one (medians
+//! of `--runs`, default 9), at 10°.
 //!
 //! ```sh
 //! cargo run --release -p volwarp-eval --example layers -- ../shared/data --layers 2,4,8 --time
@@ -71,8 +72,21 @@ fn main() {
         frames.extend(layers.iter().map(|&k| (k, m.render_frame_layers(&req, k).0)));
         for (k, f) in &frames {
             let (raw, compact) = bytes(&m, &req, f);
+            // The server's march and compaction (all cores), median of `runs`, with `--time`.
+            let march = if time {
+                let mut ms: Vec<f64> = (0..runs)
+                    .map(|_| {
+                        let t = Instant::now();
+                        std::hint::black_box(m.render_frame_layers(&req, *k));
+                        t.elapsed().as_secs_f64() * 1e3
+                    })
+                    .collect();
+                format!(" {:.1} |", median(&mut ms).unwrap_or(0.0))
+            } else {
+                String::new()
+            };
             budget.push(format!(
-                "| {} | {k} | {} | {:.2} | {raw} | {compact} | {:.2} |",
+                "| {} | {k} | {} | {:.2} | {raw} | {compact} | {:.2} |{march}",
                 ds.name,
                 f.samples.len(),
                 f.samples.len() as f64 / one.samples.len().max(1) as f64,
@@ -133,8 +147,9 @@ fn main() {
     for (i, n) in names.iter().enumerate() {
         println!("| {n} | {} |", sums[i].map(|(p, f)| format!("{p:.1} / {f:.4}")).join(" | "));
     }
-    println!("\n| dataset | K | samples | × K=1 | raw12 bytes | compact bytes | compact B/sample |");
-    println!("|---|---|---|---|---|---|---|");
+    let march = if time { " server march ms |" } else { "" };
+    println!("\n| dataset | K | samples | × K=1 | raw12 bytes | compact bytes | compact B/sample |{march}");
+    println!("|---|---|---|---|---|---|---|{}", if time { "---|" } else { "" });
     for r in &budget {
         println!("{r}");
     }

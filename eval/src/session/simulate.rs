@@ -390,7 +390,9 @@ pub fn run_session(
         };
         stream_of.push(i);
     }
-    let mut exact = volwarp_cpu_tracer::create(RendererKind::Stale, 0).ok_or("the stale renderer is missing")?;
+    // Layered frames (issue 14) are shown as they were rendered by compositing their segments.
+    let exact_kind = if cfg.layers > 1 { RendererKind::SplatLayers } else { RendererKind::Stale };
+    let mut exact = volwarp_cpu_tracer::create(exact_kind, 0).ok_or("the stale renderer is missing")?;
     let mut tmp = Image::new(0, 0);
     let draw: Vec<(f64, usize)> = methods
         .iter()
