@@ -422,7 +422,11 @@ fn serve(sh: &Shared, stream: &TcpStream, id: u64) -> String {
             return format!("cannot send Hello: {e}");
         }
     }
-    log::info!("client {id}: hello (version {}, capabilities {:#x})", hello.version, hello.capabilities);
+    log::info!(
+        "client {id}: hello (version {}, capabilities {:#x}, {layers} segments per pixel)",
+        hello.version,
+        hello.capabilities
+    );
     let _ = stream.set_read_timeout(Some(cfg.idle_timeout.max(Duration::from_millis(1))));
 
     let slot = Arc::new((Mutex::new(Slot::default()), Condvar::new()));
