@@ -1,7 +1,7 @@
 //! Putting the client together: a `volwarp-server` child process or `--connect`, connection, network thread,
 //! renderers, recorder, and one of the window / headless / bench loops.
 
-use crate::connection::connect;
+use crate::connection::connect_layers;
 use crate::controls::home_camera;
 use crate::display::Display;
 use crate::error::ClientError;
@@ -66,7 +66,7 @@ fn run_connected(opts: &Options, addr: &str) -> Result<(), ClientError> {
         opts.renderer,
         crate::window::levers(opts.predict, opts.guard, renderers.adaptive_radius())
     );
-    let conn = connect(addr, opts.token.as_deref(), timeout)?;
+    let conn = connect_layers(addr, opts.token.as_deref(), timeout, opts.layers())?;
     let home = home_camera(&conn.bounds, opts.size.0, opts.size.1);
     let recorder = opts.record.as_deref().map(Recorder::create).transpose()?;
     let cfg = NetConfig {

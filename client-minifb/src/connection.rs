@@ -128,6 +128,18 @@ fn probe_camera() -> Camera {
 /// Connects to `addr`, exchanges Hello and asks for the probe frame; `timeout` bounds each
 /// step.
 pub fn connect(addr: &str, token: Option<&str>, timeout: Duration) -> Result<Connection, ClientError> {
+    connect_layers(addr, token, timeout, 1)
+}
+
+/// [`connect`] asking for layered frames of at most `layers` segments per pixel (issue 14; 1:
+/// one sample per pixel). The server answers with the count it will render (at most this),
+/// and the connection's limits refuse frames with more.
+pub fn connect_layers(
+    addr: &str,
+    token: Option<&str>,
+    timeout: Duration,
+    layers: u8,
+) -> Result<Connection, ClientError> {
     let sock = resolve(addr)?;
     let timeout = timeout.max(Duration::from_millis(10));
     let mut stream = TcpStream::connect_timeout(&sock, timeout)
@@ -135,10 +147,11 @@ pub fn connect(addr: &str, token: Option<&str>, timeout: Duration) -> Result<Con
     let _ = stream.set_nodelay(true);
     stream.set_read_timeout(Some(timeout)).map_err(|e| ClientError::Connect(e.to_string()))?;
     stream.set_write_timeout(Some(timeout)).map_err(|e| ClientError::Connect(e.to_string()))?;
-    let limits = Limits::default();
+    let mut limits = Limits::default().with_layers(layers);
 
     // Ask for CompactFrames (about 3 bytes per sample instead of 12; the server decides).
-    let mut hello = Hello::new(wire::CAP_COMPACT | if cfg!(feature = "gpu") { wire::CAP_GPU } else { 0 });
+    let mut hello =
+        Hello::new(wire::CAP_COMPACT | if cfg!(feature = "gpu") { wire::CAP_GPU } else { 0 }).with_layers(layers);
     if let Some(t) = token {
         hello =
             hello.with_token(t.as_bytes()).map_err(|_| ClientError::Usage("--token is longer than 64 bytes".into()))?;
@@ -159,6 +172,8 @@ pub fn connect(addr: &str, token: Option<&str>, timeout: Duration) -> Result<Con
         )));
     }
 
+    // The negotiated maximum: a frame with more segments per pixel is a typed error.
+    limits = limits.with_layers(server_hello.layers.min(limits.max_layers));
     let probe = CameraRequest { seq: 0, camera: probe_camera(), heuristic: Heuristic::Threshold, radius_scale: 1.0 };
     send_request(&mut stream, &probe).map_err(|e| io_err("sending the probe request", &e))?;
     let bounds = match read_message_bytes(&mut stream, &limits, "waiting for the probe frame")?.1 {

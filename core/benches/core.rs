@@ -51,6 +51,7 @@ fn depth_image_frame() -> Frame {
         },
         samples,
         colors,
+        segments: Vec::new(),
     }
 }
 

@@ -716,7 +716,10 @@ mod codec {
     /// value says which form the bytes are in.
     pub fn encode_frame(frame: &Frame, encoding: Encoding, opts: &EncodeOptions) -> (Vec<u8>, Encoding) {
         if encoding == Encoding::Compact {
-            if let Ok(b) = encode(frame, opts) {
+            // A layered frame (issue 14) goes as one CompactFrame per layer.
+            let layered = !frame.segments.is_empty();
+            let compact = if layered { crate::segments::encode_layered(frame, opts) } else { encode(frame, opts) };
+            if let Ok(b) = compact {
                 return (b, Encoding::Compact);
             }
         }
@@ -727,7 +730,12 @@ mod codec {
     /// model or session simulator should charge for it.
     pub fn encoded_size(frame: &Frame, encoding: Encoding, opts: &EncodeOptions) -> usize {
         match encoding {
-            Encoding::Raw12 => HEADER_LEN + FRAME_FIXED_LEN + frame.samples.len() * crate::wire::BYTES_PER_SAMPLE,
+            Encoding::Raw12 => {
+                HEADER_LEN
+                    + FRAME_FIXED_LEN
+                    + frame.samples.len() * crate::wire::BYTES_PER_SAMPLE
+                    + frame.segments.len()
+            }
             Encoding::Compact => encode_frame(frame, encoding, opts).0.len(),
         }
     }
@@ -874,7 +882,7 @@ mod codec {
             }
         }
         debug_assert_eq!(i, n);
-        Ok(Frame { header: *header, samples, colors })
+        Ok(Frame::new(*header, samples, colors))
     }
 
     #[cfg(test)]

@@ -12,6 +12,7 @@
 //! | [`warp_radius`] | sphere radii sized by how far the view moved from the frame's camera |
 //! | [`heuristics`] | the ZAL12 representative-depth heuristics, as state machines |
 //! | [`compact_frame`] | the compact frame encoding: coverage mask, predicted depths, radii and colors, zstd (≈3 B/sample) |
+//! | [`segments`] | layered samples: a ray cut into depth segments, their wire checks and compact form (issue 14) |
 //! | [`compaction`] | stable removal of empty (radius 0) samples |
 //! | [`morton`] | Morton codes of quantized positions and their radix sort |
 //! | [`lbvh`] | Karras-style LBVH over the sorted codes, built into caller buffers |
@@ -57,6 +58,7 @@ pub mod renderer_kind;
 pub mod sample;
 #[cfg(feature = "alloc")]
 pub mod scene;
+pub mod segments;
 pub mod sphere;
 pub mod stats;
 pub mod traversal;

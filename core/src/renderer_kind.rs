@@ -48,6 +48,10 @@ pub enum RendererKind {
     /// The exact sphere splatter as wgpu compute shaders, no LBVH (`splat-gpu`, key 13: no
     /// window key).
     SplatGpu,
+    /// Layered samples (issue 14): every segment a sphere hits, owned by the output ray where
+    /// it passes through the segment's own source pixel, composited front to back; no LBVH
+    /// (`splat-layers`, key 14: no window key).
+    SplatLayers,
 }
 
 /// One row of the registry.
@@ -147,11 +151,17 @@ pub const REGISTRY: [RendererInfo; RendererKind::COUNT] = [
         about: "wgpu exact sphere splatting (no LBVH)",
         caps: caps(true, false, true),
     },
+    RendererInfo {
+        kind: RendererKind::SplatLayers,
+        name: "splat-layers",
+        about: "layered samples composited front to back (no LBVH)",
+        caps: caps(false, false, false),
+    },
 ];
 
 impl RendererKind {
     /// How many renderers the registry has.
-    pub const COUNT: usize = 13;
+    pub const COUNT: usize = 14;
 
     /// Every renderer, in key order.
     pub const ALL: [RendererKind; RendererKind::COUNT] = [
@@ -168,6 +178,7 @@ impl RendererKind {
         RendererKind::SpheresFill,
         RendererKind::SplatFill,
         RendererKind::SplatGpu,
+        RendererKind::SplatLayers,
     ];
 
     /// The renderer a client starts with: the exact splatter with hole filling (with the
@@ -196,6 +207,7 @@ impl RendererKind {
             RendererKind::SpheresFill => 10,
             RendererKind::SplatFill => 11,
             RendererKind::SplatGpu => 12,
+            RendererKind::SplatLayers => 13,
         }
     }
 
@@ -278,6 +290,7 @@ mod tests {
         // Appended entries keep the existing keys.
         assert_eq!(RendererKind::from_key(7), Some(RendererKind::SpheresGpu));
         assert_eq!(RendererKind::from_key(13), Some(RendererKind::SplatGpu));
+        assert_eq!(RendererKind::from_key(14), Some(RendererKind::SplatLayers));
         assert!("nope".parse::<RendererKind>().is_err());
         assert_eq!(RendererKind::points(2), Some(RendererKind::Points2));
         assert_eq!(RendererKind::points(4), None);

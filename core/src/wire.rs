@@ -17,8 +17,10 @@ use glam::Vec3;
 
 /// The four magic bytes that start every message.
 pub const MAGIC: [u8; 4] = *b"VWRP";
-/// The protocol version this crate speaks (and writes in every header).
-pub const VERSION: u16 = 2;
+/// The protocol version this crate speaks (and writes in every header). Version 3 (issue 14)
+/// added layered frames: a layer count in a Frame's byte 57 and a segment-index plane after its
+/// colors, the LayeredCompactFrame message (type 7) and the layer count in the Hello.
+pub const VERSION: u16 = 3;
 /// The oldest version a receiver accepts: version 2 only added the CompactFrame message and the
 /// [`CAP_COMPACT`] bit, so every version-1 message is read as it was (old record files replay).
 pub const MIN_VERSION: u16 = 1;
@@ -58,6 +60,9 @@ pub enum MsgType {
     Bye = 5,
     /// Server to client: one frame in the compact encoding (version 2; `crate::compact_frame`).
     CompactFrame = 6,
+    /// Server to client: a layered frame in the compact encoding, one CompactFrame per layer
+    /// (version 3; `crate::segments`).
+    LayeredCompactFrame = 7,
 }
 
 impl MsgType {
@@ -70,6 +75,7 @@ impl MsgType {
             4 => MsgType::Error,
             5 => MsgType::Bye,
             6 => MsgType::CompactFrame,
+            7 => MsgType::LayeredCompactFrame,
             _ => return None,
         })
     }
@@ -93,6 +99,9 @@ pub struct Limits {
     pub max_samples: u32,
     /// Largest viewport width or height.
     pub max_viewport: u32,
+    /// Most segments per pixel a layered frame may carry (the negotiated maximum; 1: only
+    /// one-sample-per-pixel frames).
+    pub max_layers: u8,
 }
 
 impl Limits {
@@ -108,12 +117,26 @@ impl Limits {
             max_payload: if max_payload > u32::MAX as u64 { u32::MAX } else { max_payload as u32 },
             max_samples,
             max_viewport,
+            max_layers: crate::segments::MAX_LAYERS as u8,
         }
+    }
+
+    /// These limits with at most `layers` segments per pixel (clamped to
+    /// `1..=`[`crate::segments::MAX_LAYERS`]).
+    pub const fn with_layers(mut self, layers: u8) -> Limits {
+        self.max_layers = if layers == 0 {
+            1
+        } else if layers as usize > crate::segments::MAX_LAYERS {
+            crate::segments::MAX_LAYERS as u8
+        } else {
+            layers
+        };
+        self
     }
 
     /// Limits for a server reading client messages: nothing larger than an Error message.
     pub const fn for_requests(max_viewport: u32) -> Limits {
-        Limits { max_payload: (4 + MAX_ERROR_TEXT) as u32, max_samples: 0, max_viewport }
+        Limits { max_payload: (4 + MAX_ERROR_TEXT) as u32, max_samples: 0, max_viewport, max_layers: 1 }
     }
 }
 
@@ -174,6 +197,8 @@ pub enum WireError {
     BufferTooSmall,
     /// A CompactFrame's own fields or body are invalid.
     Compact(crate::compact_frame::CompactError),
+    /// A layered frame's segments are invalid (version 3).
+    Layers(crate::segments::LayerError),
 }
 
 impl core::fmt::Display for WireError {
@@ -199,6 +224,7 @@ impl core::fmt::Display for WireError {
             WireError::BadToken => f.write_str("token too long"),
             WireError::BufferTooSmall => f.write_str("buffers too small for the frame"),
             WireError::Compact(e) => write!(f, "{e}"),
+            WireError::Layers(e) => write!(f, "{e}"),
         }
     }
 }
@@ -228,12 +254,21 @@ pub struct Hello {
     pub capabilities: u32,
     /// Access token (empty if none).
     pub token: heapless::Vec<u8, MAX_TOKEN>,
+    /// Layered frames (version 3): in a client's Hello the most segments per pixel it accepts
+    /// and asks for, in the server's answer the count it will render (1: one sample per pixel,
+    /// as before; 0 on the wire reads as 1).
+    pub layers: u8,
 }
 
 impl Hello {
     /// A Hello of this version with no token.
     pub fn new(capabilities: u32) -> Self {
-        Hello { version: VERSION, capabilities, token: heapless::Vec::new() }
+        Hello { version: VERSION, capabilities, token: heapless::Vec::new(), layers: 1 }
+    }
+    /// Sets the layer count (clamped to `1..=`[`crate::segments::MAX_LAYERS`]).
+    pub fn with_layers(mut self, layers: u8) -> Self {
+        self.layers = layers.clamp(1, crate::segments::MAX_LAYERS as u8);
+        self
     }
     /// Sets the token; `Err` if it is longer than [`MAX_TOKEN`].
     pub fn with_token(mut self, token: &[u8]) -> Result<Self, WireError> {
@@ -414,7 +449,7 @@ pub fn write_header<W: Write>(w: &mut W, ty: MsgType, len: u32) -> Result<(), Wi
 pub fn write_hello<W: Write>(w: &mut W, h: &Hello) -> Result<(), WireError> {
     let mut o = Out::<{ 9 + MAX_TOKEN }>::new();
     o.put(&h.version.to_le_bytes());
-    o.put(&[0, 0]);
+    o.put(&(h.layers as u16).to_le_bytes());
     o.put(&h.capabilities.to_le_bytes());
     o.put(&[h.token.len() as u8]);
     o.put(&h.token);
@@ -436,27 +471,35 @@ pub fn write_camera_request<W: Write>(w: &mut W, r: &CameraRequest) -> Result<()
 /// Writes a Frame: header, then `samples` and `colors` (equal length, at most `u32::MAX`; the
 /// header's `count` is taken from them).
 pub fn write_frame<W: Write>(w: &mut W, fh: &FrameHeader, samples: &[u64], colors: &[u32]) -> Result<(), WireError> {
-    if samples.len() != colors.len() {
+    write_frame_layered(w, fh, samples, colors, &[])
+}
+
+/// Writes a Frame with its segment indices (version 3): an empty `segments` writes the
+/// one-sample-per-pixel Frame of [`write_frame`]; otherwise one index per sample follows the
+/// colors and byte 57 holds the layer count (the largest index + 1).
+pub fn write_frame_layered<W: Write>(
+    w: &mut W,
+    fh: &FrameHeader,
+    samples: &[u64],
+    colors: &[u32],
+    segments: &[u8],
+) -> Result<(), WireError> {
+    if samples.len() != colors.len() || !(segments.is_empty() || segments.len() == samples.len()) {
         return Err(WireError::BufferTooSmall);
     }
     let count =
         u32::try_from(samples.len()).map_err(|_| WireError::TooManySamples { count: u32::MAX, limit: u32::MAX })?;
-    let len = FRAME_FIXED_LEN as u64 + count as u64 * BYTES_PER_SAMPLE as u64;
+    let layers = if segments.is_empty() { 0 } else { segments.iter().max().map_or(1, |&m| m.saturating_add(1)) };
+    let per = BYTES_PER_SAMPLE as u64 + u64::from(layers > 0);
+    let len = FRAME_FIXED_LEN as u64 + count as u64 * per;
     let len = u32::try_from(len).map_err(|_| WireError::TooLarge { len: u32::MAX, limit: u32::MAX })?;
-    let mut o = Out::<FRAME_FIXED_LEN>::new();
-    o.put(&fh.seq.to_le_bytes());
-    encode_camera(&mut o, &fh.camera);
-    o.put(&[fh.heuristic.code(), 0, 0, 0]);
-    for v in fh.bounds.min.iter().chain(fh.bounds.max.iter()) {
-        o.put(&v.to_le_bytes());
-    }
-    o.put(&fh.radius_unit.to_le_bytes());
-    o.put(&fh.render_us.to_le_bytes());
-    o.put(&count.to_le_bytes());
+    let mut b = encode_frame_fixed(&FrameHeader { count, ..*fh });
+    b[57] = layers;
     write_header(w, MsgType::Frame, len)?;
-    w.write_all(o.bytes()).map_err(io)?;
+    w.write_all(&b).map_err(io)?;
     write_le_u64s(w, samples)?;
-    write_le_u32s(w, colors)
+    write_le_u32s(w, colors)?;
+    w.write_all(segments).map_err(io)
 }
 
 fn write_le_u64s<W: Write>(w: &mut W, v: &[u64]) -> Result<(), WireError> {
@@ -546,11 +589,14 @@ pub fn parse_header(h: &[u8; HEADER_LEN], limits: &Limits) -> Result<Header, Wir
         MsgType::Hello => (9..=9 + MAX_TOKEN as u32).contains(&len),
         MsgType::CameraRequest => len == CAMERA_REQUEST_LEN as u32,
         MsgType::Frame => {
-            len >= FRAME_FIXED_LEN as u32 && (len - FRAME_FIXED_LEN as u32).is_multiple_of(BYTES_PER_SAMPLE as u32)
+            len >= FRAME_FIXED_LEN as u32
+                && ((len - FRAME_FIXED_LEN as u32).is_multiple_of(BYTES_PER_SAMPLE as u32)
+                    || (len - FRAME_FIXED_LEN as u32).is_multiple_of(BYTES_PER_SAMPLE as u32 + 1))
         }
         MsgType::Error => (4..=4 + MAX_ERROR_TEXT as u32).contains(&len),
         MsgType::Bye => len == 0,
         MsgType::CompactFrame => len >= crate::compact_frame::COMPACT_FIXED_LEN as u32,
+        MsgType::LayeredCompactFrame => len >= FRAME_FIXED_LEN as u32,
     };
     if len > limits.max_payload {
         return Err(WireError::TooLarge { len, limit: limits.max_payload });
@@ -576,14 +622,14 @@ pub fn read_hello<R: Read>(r: &mut R, h: &Header) -> Result<Hello, WireError> {
     let b: [u8; 9 + MAX_TOKEN] = read_fixed(r, len)?;
     let mut c = Cur::new(&b[..len]);
     let version = c.u16();
-    let _reserved = c.u16();
+    let layers = c.u16().clamp(1, crate::segments::MAX_LAYERS as u16) as u8;
     let capabilities = c.u32();
     let tlen = c.u8() as usize;
     if 9 + tlen != len {
         return Err(WireError::BadLength { ty: h.ty, len: h.len });
     }
     let token = heapless::Vec::from_slice(&b[9..9 + tlen]).map_err(|_| WireError::BadToken)?;
-    Ok(Hello { version, capabilities, token })
+    Ok(Hello { version, capabilities, token, layers })
 }
 
 /// Reads a CameraRequest payload (after its header).
@@ -605,20 +651,57 @@ pub fn read_camera_request<R: Read>(r: &mut R, h: &Header, limits: &Limits) -> R
     Ok(CameraRequest { seq, camera, heuristic, radius_scale })
 }
 
-/// Reads the fixed part of a Frame payload (after its header), checking it against the
-/// header's length and the limits. The samples follow; read them with [`read_frame_body`].
+/// Reads the fixed part of a one-sample-per-pixel Frame payload (after its header), checking it
+/// against the header's length and the limits. The samples follow; read them with
+/// [`read_frame_body`]. A layered frame (version 3, byte 57 non-zero) is refused with
+/// [`crate::segments::LayerError::Layered`]: read it with [`read_message`] (feature `alloc`).
 pub fn read_frame_header<R: Read>(r: &mut R, h: &Header, limits: &Limits) -> Result<FrameHeader, WireError> {
+    let (fh, layers) = read_frame_header_layered(r, h, limits)?;
+    if layers != 0 {
+        return Err(WireError::Layers(crate::segments::LayerError::Layered));
+    }
+    Ok(fh)
+}
+
+/// [`read_frame_header`] for any Frame: the header and its layer count (byte 57; 0 for a
+/// one-sample-per-pixel frame, else the count of the segment-index plane that follows the
+/// colors), checked against the length and the limits (layers ≤ `max_layers`, count ≤
+/// layers × pixels).
+pub fn read_frame_header_layered<R: Read>(
+    r: &mut R,
+    h: &Header,
+    limits: &Limits,
+) -> Result<(FrameHeader, u8), WireError> {
     if h.ty != MsgType::Frame || (h.len as usize) < FRAME_FIXED_LEN {
         return Err(WireError::BadLength { ty: h.ty, len: h.len });
     }
     let b: [u8; FRAME_FIXED_LEN] = read_fixed(r, FRAME_FIXED_LEN)?;
     let fh = decode_frame_fixed(&b, limits)?;
-    let expect = FRAME_FIXED_LEN as u64 + fh.count as u64 * BYTES_PER_SAMPLE as u64;
+    let layers = b[57];
+    let per = BYTES_PER_SAMPLE as u64 + u64::from(layers > 0);
+    let expect = FRAME_FIXED_LEN as u64 + fh.count as u64 * per;
     if expect != h.len as u64 {
         return Err(WireError::BadLength { ty: h.ty, len: h.len });
     }
-    check_count(&fh, limits)?;
-    Ok(fh)
+    check_count_layers(&fh, layers, limits)?;
+    Ok((fh, layers))
+}
+
+/// [`check_count`] for a frame of `layers` segments per pixel (0 or 1: one sample per pixel):
+/// the layer count against `limits.max_layers`, the count against `layers × pixels`.
+pub fn check_count_layers(fh: &FrameHeader, layers: u8, limits: &Limits) -> Result<(), WireError> {
+    if layers > limits.max_layers.max(1) {
+        return Err(WireError::Layers(crate::segments::LayerError::TooManyLayers {
+            layers,
+            limit: limits.max_layers.max(1),
+        }));
+    }
+    let pixels = fh.camera.width as u64 * fh.camera.height as u64 * layers.max(1) as u64;
+    let limit = (limits.max_samples as u64).min(pixels) as u32;
+    if fh.count > limit {
+        return Err(WireError::TooManySamples { count: fh.count, limit });
+    }
+    Ok(())
 }
 
 /// The sample count of a frame header against its viewport and the limits.
@@ -750,6 +833,22 @@ mod owned {
         pub samples: Vec<u64>,
         /// Premultiplied RGBA8 colors, one per sample.
         pub colors: Vec<u32>,
+        /// Layered frames (version 3, `crate::segments`): each sample's index among its pixel's
+        /// segments, front to back (a pixel's samples are consecutive, its first has index 0).
+        /// Empty for a one-sample-per-pixel frame.
+        pub segments: Vec<u8>,
+    }
+
+    impl Frame {
+        /// A one-sample-per-pixel frame.
+        pub fn new(header: FrameHeader, samples: Vec<u64>, colors: Vec<u32>) -> Frame {
+            Frame { header, samples, colors, segments: Vec::new() }
+        }
+
+        /// The most segments any pixel has (1 for a one-sample-per-pixel frame).
+        pub fn layers(&self) -> u8 {
+            self.segments.iter().max().map_or(1, |&m| m.saturating_add(1))
+        }
     }
 
     /// Any message.
@@ -780,12 +879,19 @@ mod owned {
             MsgType::Hello => Message::Hello(read_hello(r, h)?),
             MsgType::CameraRequest => Message::CameraRequest(read_camera_request(r, h, limits)?),
             MsgType::Frame => {
-                let header = read_frame_header(r, h, limits)?;
+                let (header, layers) = read_frame_header_layered(r, h, limits)?;
                 let n = header.count as usize;
                 let mut samples = alloc::vec![0u64; n];
                 let mut colors = alloc::vec![0u32; n];
                 read_frame_body(r, &header, &mut samples, &mut colors)?;
-                Message::Frame(Frame { header, samples, colors })
+                let mut segments = Vec::new();
+                if layers > 0 {
+                    segments = alloc::vec![0u8; n];
+                    r.read_exact(&mut segments)?;
+                    crate::segments::validate(&header, &samples, &colors, &segments, layers)
+                        .map_err(WireError::Layers)?;
+                }
+                Message::Frame(Frame { header, samples, colors, segments })
             }
             MsgType::Error => Message::Error(read_error(r, h)?),
             MsgType::Bye => Message::Bye,
@@ -795,6 +901,11 @@ mod owned {
                 r.read_exact(&mut payload)?;
                 Message::Frame(crate::compact_frame::decode_payload(&payload, limits)?)
             }
+            MsgType::LayeredCompactFrame => {
+                let mut payload = alloc::vec![0u8; h.len as usize];
+                r.read_exact(&mut payload)?;
+                Message::Frame(crate::segments::decode_layered_payload(&payload, limits)?)
+            }
         })
     }
 
@@ -803,7 +914,7 @@ mod owned {
         match m {
             Message::Hello(h) => write_hello(w, h),
             Message::CameraRequest(c) => write_camera_request(w, c),
-            Message::Frame(f) => write_frame(w, &f.header, &f.samples, &f.colors),
+            Message::Frame(f) => write_frame_layered(w, &f.header, &f.samples, &f.colors, &f.segments),
             Message::Error(e) => write_error(w, e),
             Message::Bye => write_bye(w),
         }

@@ -63,7 +63,7 @@ fn sphere_frame(w: u32, h: u32, yaw: f32, cut: usize) -> (Frame, RadiusPredictio
         render_us: 777,
         count: samples.len() as u32,
     };
-    (Frame { header, samples, colors }, RadiusPrediction { constant: 0.0, per_depth })
+    (Frame { header, samples, colors, segments: Vec::new() }, RadiusPrediction { constant: 0.0, per_depth })
 }
 
 fn decode_msg(bytes: &[u8], limits: &Limits) -> Result<Frame, WireError> {
@@ -200,6 +200,7 @@ fn empty_and_single_sample_frames_round_trip() {
             header: FrameHeader { count: n as u32, ..frame.header },
             samples: frame.samples[..n].to_vec(),
             colors: frame.colors[..n].to_vec(),
+            segments: Vec::new(),
         };
         let back = decode_msg(&encode(&f, &EncodeOptions::default()).unwrap(), &Limits::default()).unwrap();
         assert_eq!(back.colors, f.colors);

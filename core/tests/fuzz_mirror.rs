@@ -73,14 +73,16 @@ fn frame() -> impl Strategy<Value = Frame> {
                 render_us,
                 count: samples.len() as u32,
             };
-            Frame { header, samples, colors }
+            Frame { header, samples, colors, segments: Vec::new() }
         })
 }
 
 fn message() -> impl Strategy<Value = Message> {
     prop_oneof![
         (any::<u16>(), any::<u32>(), prop::collection::vec(any::<u8>(), 0..=64)).prop_map(|(version, caps, token)| {
-            Message::Hello(Hello { version, capabilities: caps, token: Default::default() }.with_token(&token).unwrap())
+            Message::Hello(
+                Hello { version, capabilities: caps, token: Default::default(), layers: 1 }.with_token(&token).unwrap(),
+            )
         }),
         (any::<u64>(), camera(), heuristic(), float())
             .prop_map(|(seq, cam, h, rs)| checks::camera_request(seq, cam, h, rs)),
@@ -241,7 +243,7 @@ proptest! {
             render_us: 0,
             count: samples.len() as u32,
         };
-        let frame = Frame { header, samples, colors };
+        let frame = Frame { header, samples, colors, segments: Vec::new() };
         checks::check_scene(&frame);
         let scene = Scene::build(&frame);
         for (o, k) in rays {
@@ -361,6 +363,7 @@ fn regression_tiny_sphere_culled_by_rounding_in_the_slab_test() {
         },
         samples,
         colors: vec![1, 2, 3],
+        segments: Vec::new(),
     };
     checks::check_scene(&frame);
     let scene = Scene::build(&frame);
@@ -414,6 +417,7 @@ fn regression_lbvh_domain_excludes_float_extremes() {
         },
         samples: vec![0, u64::MAX, 0x3f_ffff_ffff_ffff],
         colors: vec![0, 0, 0],
+        segments: Vec::new(),
     };
     let scene = Scene::build(&f);
     let mut seen = vec![0u8; 5];
@@ -519,6 +523,7 @@ fn regression_extreme_bounds_decode_to_finite_centers_or_are_rejected() {
         },
         samples: vec![0x3f_ffff_ffff_ffff | (1 << 54)],
         colors: vec![0],
+        segments: Vec::new(),
     };
     let bytes = encode_to_vec(&Message::Frame(f));
     assert_eq!(

@@ -45,6 +45,7 @@ fn frame_of(points: &[(Vec3, u32)], b: Bounds, radius_unit: f32, cam: Camera) ->
         },
         samples,
         colors,
+        segments: Vec::new(),
     }
 }
 

@@ -12,6 +12,7 @@
 //! | [`scalar_tracer`] | core's scalar reference traversal per pixel | `spheres-scalar` |
 //! | [`point_splat`] | ZAL12 2.5D points: fixed N×N squares with a depth test | `points1`, `points2`, `points3` |
 //! | [`sphere_splat`] | exact object-order sphere splatting (no BVH) | `splat` |
+//! | [`layer_splat`] | layered samples (issue 14): segments owned per output ray, composited front to back | `splat-layers` |
 //! | [`stale_image`] | the frame as it was rendered, not warped | `stale` |
 //! | [`build`] (also `parallel_build`) | rayon LBVH build, byte-identical to `Scene::build` | — |
 //! | [`build::sort`] (also `parallel_sort`) | the parallel stable radix sort it uses | — |
@@ -32,6 +33,7 @@
 
 pub mod build;
 pub mod hole_fill;
+pub mod layer_splat;
 pub mod packet_tracer;
 pub mod point_splat;
 pub mod route;
@@ -56,6 +58,7 @@ pub use build::sort as parallel_sort;
 pub use build::{build_scene, BuildTimes, Method, ParallelBuilder};
 
 pub use hole_fill::{FillOptions, HoleFill, SampleIds};
+pub use layer_splat::LayerSplat;
 pub use packet_tracer::PacketTracer;
 pub use point_splat::PointSplat;
 pub use route::{AutoSpheres, CostModel, LazyBuild, Route};
@@ -94,6 +97,7 @@ pub fn create(kind: RendererKind, threads: usize) -> Option<Box<dyn Renderer + S
         RendererKind::SplatFill => {
             Box::new(HoleFill::new(SphereSplat::new(threads), kind, FillOptions::DEFAULT, threads))
         }
+        RendererKind::SplatLayers => Box::new(LayerSplat::new(threads)),
         RendererKind::SpheresGpu | RendererKind::SplatGpu => return None,
     })
 }

@@ -152,7 +152,7 @@ pub fn unbuilt_scene(frame: &Frame) -> Scene {
 /// [`unbuilt_scene`] taking the frame's buffers (no copy): what a client does with a received
 /// frame when its renderer needs no LBVH.
 pub fn into_unbuilt_scene(frame: Frame) -> Scene {
-    let Frame { header, mut samples, mut colors } = frame;
+    let Frame { header, mut samples, mut colors, .. } = frame;
     let n = samples.len().min(colors.len());
     samples.truncate(n);
     colors.truncate(n);
@@ -277,6 +277,7 @@ impl LazyBuild {
                 header: scene.header,
                 samples: Vec::new(),
                 colors: Vec::new(),
+                segments: Vec::new(),
             });
             frame.header = scene.header;
             frame.samples.clear();
@@ -287,7 +288,12 @@ impl LazyBuild {
             let builder = self.builder.get_or_insert_with(|| ParallelBuilder::new(threads));
             let mut s = match self.kept.take() {
                 Some((_, s)) => s,
-                None => unbuilt_scene(&Frame { header: scene.header, samples: Vec::new(), colors: Vec::new() }),
+                None => unbuilt_scene(&Frame {
+                    header: scene.header,
+                    samples: Vec::new(),
+                    colors: Vec::new(),
+                    segments: Vec::new(),
+                }),
             };
             builder.build_into(frame, &mut s);
             self.kept = Some((id, s));

@@ -64,7 +64,7 @@ pub fn frame_from_points(points: &[Point], camera: Camera) -> Frame {
         render_us: 0,
         count: samples.len() as u32,
     };
-    Frame { header, samples, colors }
+    Frame { header, samples, colors, segments: Vec::new() }
 }
 
 fn color_of(rng: &mut SplitMix64, base: Vec3) -> [f32; 4] {

@@ -26,6 +26,7 @@ fn opts(scenarios: &[&str], net: NetworkModel) -> SessionOptions {
             heuristic: Heuristic::Threshold,
             exact_when_still: true,
             encoding: Encoding::Compact,
+            layers: 1,
         },
         server_ms: None,
         calibration: Calibration::default(),

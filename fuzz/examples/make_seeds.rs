@@ -29,7 +29,7 @@ fn frame(n: usize, bounds: Bounds, radius_unit: f32, w: u32, h: u32) -> Message 
         render_us: 1234,
         count: n as u32,
     };
-    Message::Frame(Frame { header, samples, colors })
+    Message::Frame(Frame { header, samples, colors, segments: Vec::new() })
 }
 
 fn main() {

@@ -268,6 +268,9 @@ pub fn frame_decode(data: &[u8]) {
     }
     let fh = match wire::read_frame_header(&mut r, &h, &LIMITS) {
         Ok(fh) => fh,
+        // A layered frame (version 3): only `read_message` reads it (the `frame_decode` of
+        // layered frames is `read_message` itself, checked by the other targets).
+        Err(WireError::Layers(volwarp_core::segments::LayerError::Layered)) => return,
         Err(_) => {
             assert!(read_message(&mut &data[..], &LIMITS).is_err(), "read_message accepts what the frame path refused");
             return;
@@ -290,7 +293,12 @@ pub fn frame_decode(data: &[u8]) {
     match body {
         Ok(()) => {
             check_frame(&fh, &samples[..n], &colors[..n], &LIMITS);
-            let f = Frame { header: fh, samples: samples[..n].to_vec(), colors: colors[..n].to_vec() };
+            let f = Frame {
+                header: fh,
+                samples: samples[..n].to_vec(),
+                colors: colors[..n].to_vec(),
+                segments: Vec::new(),
+            };
             assert_eq!(whole, Ok(Message::Frame(f)));
         }
         Err(e) => {
@@ -481,7 +489,7 @@ pub fn lbvh_frame(b: &mut Bytes) -> Option<Frame> {
         render_us: 0,
         count: n as u32,
     };
-    Some(Frame { header, samples, colors })
+    Some(Frame { header, samples, colors, segments: Vec::new() })
 }
 
 /// The next ray of the `lbvh` target: a selector byte picks raw origin and direction, a ray

@@ -44,7 +44,7 @@ pub fn arb_message(u: &mut Unstructured) -> Result<Message> {
         0 => {
             let n = u.int_in_range(0..=MAX_TOKEN)?;
             let token = u.bytes(n)?;
-            let h = Hello { version: u.arbitrary()?, capabilities: u.arbitrary()?, token: Default::default() };
+            let h = Hello { version: u.arbitrary()?, capabilities: u.arbitrary()?, token: Default::default(), layers: 1 };
             Message::Hello(h.with_token(token).map_err(|_| arbitrary::Error::IncorrectFormat)?)
         }
         1 => checks::camera_request(u.arbitrary()?, camera(u)?, heuristic(u)?, float(u)?),
@@ -65,7 +65,7 @@ pub fn arb_message(u: &mut Unstructured) -> Result<Message> {
                 render_us: u.arbitrary()?,
                 count: n as u32,
             };
-            Message::Frame(Frame { header, samples, colors })
+            Message::Frame(Frame { header, samples, colors, segments: Vec::new() })
         }
         3 => {
             let code = u.arbitrary()?;

@@ -47,5 +47,6 @@ pub fn bumpy_surface(size: u32, radius_scale: f32, seq: u64) -> Frame {
         },
         samples,
         colors,
+        segments: Vec::new(),
     }
 }

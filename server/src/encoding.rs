@@ -28,6 +28,13 @@ pub fn encode_options(marcher: &Marcher, req: &CameraRequest) -> EncodeOptions {
 /// The compact message (header included) of `frame` with C zstd at `level`, or `None` if
 /// the frame does not fit the compact form.
 pub fn encode_compact(frame: &Frame, opts: &EncodeOptions, level: i32) -> Option<Vec<u8>> {
+    if !frame.segments.is_empty() {
+        // A layered frame (issue 14): one compact part per layer, in a LayeredCompactFrame.
+        return volwarp_core::segments::encode_layered_with(frame, |layer| {
+            encode_compact(layer, opts, level).ok_or(compact_frame::EncodeError::BadFrame)
+        })
+        .ok();
+    }
     let planes = compact_frame::build_planes(frame, opts).ok()?;
     let coded = match planes.params.coder {
         Coder::Zstd => zstd::bulk::compress(&planes.body, level).ok()?,

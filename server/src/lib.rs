@@ -46,7 +46,7 @@ pub mod transfer_function;
 pub mod volume;
 
 pub use dataset::Dataset;
-pub use marcher::{default_camera, FrameStats, MarchKernel, MarchOptions, Marcher, PixelBuffer};
+pub use marcher::{default_camera, FrameStats, LayerBuffer, MarchKernel, MarchOptions, Marcher, PixelBuffer};
 pub use radius::RadiusModel;
 pub use server::{Server, ServerConfig, ServerHandle};
 pub use transfer_function::TransferFunction;

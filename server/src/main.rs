@@ -102,6 +102,11 @@ struct DataArgs {
     /// Accumulated opacity at which a ray stops (1 or more: never).
     #[arg(long, global = true, default_value_t = 0.99)]
     early_termination: f32,
+    /// Layered samples (issue 14), 1–16 segments per pixel: for `dump`, the frame's count
+    /// (default 1: one sample per pixel at the heuristic's depth); when serving, the most a
+    /// client may ask for in its Hello (default 16).
+    #[arg(long, global = true, value_parser = clap::value_parser!(u8).range(1..=16))]
+    layers: Option<u8>,
 }
 
 #[derive(Args, Debug)]
@@ -241,6 +246,7 @@ fn run(cli: Cli) -> Result<(), String> {
                 token,
                 frame_delay: (n.frame_delay_ms > 0).then(|| Duration::from_millis(n.frame_delay_ms)),
                 compact: !n.no_compact,
+                layers: cli.data.layers.unwrap_or(volwarp_core::segments::MAX_LAYERS as u8),
             };
             let server = Server::with_marcher(config, std::sync::Arc::new(marcher)).map_err(|e| e.to_string())?;
             println!("listening on {}", server.local_addr());
@@ -271,7 +277,7 @@ fn run(cli: Cli) -> Result<(), String> {
             if !(req.radius_scale > 0.0 && req.radius_scale <= 16.0) {
                 return Err("--radius-scale must be in (0, 16]".into());
             }
-            let (frame, stats) = marcher.render_frame(&req);
+            let (frame, stats) = marcher.render_frame_layers(&req, cli.data.layers.unwrap_or(1) as u32);
             log::info!(
                 "frame: {} samples, march {:.1} ms, compact {:.2} ms",
                 stats.samples,

@@ -25,6 +25,7 @@ use rayon::prelude::*;
 use std::sync::Arc;
 use std::time::Instant;
 use volwarp_core::sample::{over_background, pack_color_f32, Quantizer};
+use volwarp_core::segments::{Segment, Segmenter, MAX_LAYERS};
 use volwarp_core::wire::{CameraRequest, Frame, FrameHeader};
 use volwarp_core::{Camera, DepthPicker, FirstPassAccumulator, Heuristic, Image, Vec3, BACKGROUND};
 
@@ -92,6 +93,33 @@ impl PixelBuffer {
     /// Number of non-empty pixels.
     pub fn nonempty(&self) -> usize {
         self.t.iter().filter(|t| t.is_finite()).count()
+    }
+}
+
+/// The uncompacted result of a layered march (issue 14).
+#[derive(Clone, Debug, PartialEq)]
+pub struct LayerBuffer {
+    /// Width in pixels.
+    pub width: u32,
+    /// Height in pixels.
+    pub height: u32,
+    /// Slots per pixel (the most segments a pixel may have).
+    pub layers: u32,
+    /// Segments per pixel.
+    pub count: Vec<u8>,
+    /// Depth of segment `j` of pixel `i` at `i · layers + j` (`f32::INFINITY` in unused slots).
+    pub t: Vec<f32>,
+    /// Premultiplied RGBA8 of each segment, slots as `t`.
+    pub color: Vec<u32>,
+    /// Packed samples, slots as `t` (empty unless the march packed them).
+    pub packed: Vec<u64>,
+}
+
+impl LayerBuffer {
+    /// Pixel `i`'s segments as `(t, color)`, front to back.
+    pub fn pixel(&self, i: usize) -> impl Iterator<Item = (f32, u32)> + '_ {
+        let k = self.layers as usize;
+        (0..self.count[i] as usize).map(move |j| (self.t[i * k + j], self.color[i * k + j]))
     }
 }
 
@@ -247,6 +275,18 @@ impl Marcher {
     /// ray misses the box).
     #[inline]
     pub fn march_ray(&self, o: Vec3, d: Vec3, mut feed: impl FnMut(f32, f32, f32)) -> ([f32; 4], Option<f32>) {
+        self.march_ray_rgba(o, d, |t, sa, dst| feed(t, sa, dst[3]))
+    }
+
+    /// [`Marcher::march_ray`] feeding `(t, src_a, dst)` with the whole accumulated
+    /// premultiplied color `dst` after the sample (what [`Segmenter`] needs).
+    #[inline]
+    pub fn march_ray_rgba(
+        &self,
+        o: Vec3,
+        d: Vec3,
+        mut feed: impl FnMut(f32, f32, [f32; 4]),
+    ) -> ([f32; 4], Option<f32>) {
         let vol = &*self.volume;
         let inv_d = 1.0 / d;
         let (n, t_enter, Some(t_exit)) = self.ray_setup(o, d) else {
@@ -295,7 +335,7 @@ impl Marcher {
                 g += w * cg;
                 b += w * cb;
                 a += w * ca;
-                feed(t, ca, a);
+                feed(t, ca, [r, g, b, a]);
                 if a >= ert {
                     break;
                 }
@@ -317,6 +357,68 @@ impl Marcher {
         let (c, t_exit) = self.march_ray(o, d, |t, sa, da| picker.feed(t, sa, da));
         let t = t_exit.and_then(|te| picker.finish(te));
         (c, t)
+    }
+
+    /// One ray's layered samples (issue 14): at most `layers` segments, front to back (the
+    /// scalar reference of the packet marcher's layered path).
+    pub fn segments(&self, o: Vec3, d: Vec3, layers: u32) -> Vec<Segment> {
+        let mut seg = Segmenter::new(layers, self.dt);
+        let (_, exit) = self.march_ray_rgba(o, d, |t, _, dst| seg.feed(t, dst));
+        if exit.is_none() {
+            return Vec::new();
+        }
+        seg.finish().to_vec()
+    }
+
+    /// Marches every pixel of `camera` into at most `layers` segments each (parallel over row
+    /// bands, the options' kernel).
+    pub fn march_layers(&self, camera: &Camera, layers: u32) -> LayerBuffer {
+        self.march_layers_impl(camera, layers, None)
+    }
+
+    fn march_layers_impl(&self, camera: &Camera, layers: u32, pack: Option<(&Quantizer, FrameRadius)>) -> LayerBuffer {
+        let k = layers.clamp(1, MAX_LAYERS as u32) as usize;
+        let (w, h) = (camera.width as usize, camera.height as usize);
+        let basis = camera.ray_basis();
+        let o = basis.origin();
+        let mut count = vec![0u8; w * h];
+        let mut t = vec![f32::INFINITY; w * h * k];
+        let mut color = vec![0u32; w * h * k];
+        let mut packed = if pack.is_some() { vec![0u64; w * h * k] } else { Vec::new() };
+        let band = w.max(1) * BAND_ROWS;
+        let mut packed_bands: Vec<&mut [u64]> =
+            if pack.is_some() { packed.chunks_mut(band * k).collect() } else { Vec::new() };
+        packed_bands.resize_with(count.len().div_ceil(band), || &mut []);
+        let kernel = self.kernel();
+        count
+            .par_chunks_mut(band)
+            .zip(t.par_chunks_mut(band * k))
+            .zip(color.par_chunks_mut(band * k))
+            .zip(packed_bands.into_par_iter())
+            .enumerate()
+            .for_each(|(b, (((cb, tb), colb), sb))| {
+                if self.opts.kernel == MarchKernel::Packet {
+                    let y0 = (b * BAND_ROWS) as u32;
+                    let mut out =
+                        crate::packet_march::LayerOut { layers: k, count: cb, t: tb, color: colb, packed: sb };
+                    crate::packet_march::march_band_layers(&kernel, &basis, pack, y0, &mut out);
+                    return;
+                }
+                for (i, c) in cb.iter_mut().enumerate() {
+                    let (x, y) = ((i % w) as u32, (b * BAND_ROWS + i / w) as u32);
+                    let d = basis.dir(x, y);
+                    let segs = self.segments(o, d, k as u32);
+                    *c = segs.len() as u8;
+                    for (j, sg) in segs.iter().enumerate() {
+                        tb[i * k + j] = sg.t;
+                        colb[i * k + j] = pack_color_f32(sg.color);
+                        if let (Some((q, radius)), Some(s)) = (pack, sb.get_mut(i * k + j)) {
+                            *s = q.pack(o + d * sg.t, radius.at(d, sg.t));
+                        }
+                    }
+                }
+            });
+        LayerBuffer { width: camera.width, height: camera.height, layers: k as u32, count, t, color, packed }
     }
 
     /// Marches every pixel of `camera` with `heuristic` (parallel over row bands).
@@ -418,14 +520,63 @@ impl Marcher {
     /// [`RadiusModel`],
     /// quantize over the volume box, compact in parallel.
     pub fn render_frame(&self, req: &CameraRequest) -> (Frame, FrameStats) {
-        let mut frame = Frame { header: self.empty_header(req), samples: Vec::new(), colors: Vec::new() };
+        let mut frame =
+            Frame { header: self.empty_header(req), samples: Vec::new(), colors: Vec::new(), segments: Vec::new() };
         let stats = self.render_frame_into(req, &mut frame);
         (frame, stats)
+    }
+
+    /// A layered frame (issue 14): each pixel's ray cut into at most `layers` segments, each
+    /// one sample at its segment's depth with the segment's own color and opacity, in pixel
+    /// order and front to back within a pixel (`Frame::segments` holds each sample's index).
+    /// `layers` ≤ 1 gives [`Marcher::render_frame`]'s frame exactly (the heuristic's depth).
+    pub fn render_frame_layers(&self, req: &CameraRequest, layers: u32) -> (Frame, FrameStats) {
+        let mut frame = self.empty_frame();
+        let stats = self.render_frame_layers_into(req, layers, &mut frame);
+        (frame, stats)
+    }
+
+    /// [`Marcher::render_frame_layers`] into an existing frame, reusing its memory.
+    pub fn render_frame_layers_into(&self, req: &CameraRequest, layers: u32, frame: &mut Frame) -> FrameStats {
+        frame.segments.clear();
+        if layers <= 1 {
+            return self.render_frame_into(req, frame);
+        }
+        let t0 = Instant::now();
+        let (q, radius) = self.quantizer(req);
+        let radius_unit = radius.unit();
+        let lb = self.march_layers_impl(&req.camera, layers, Some((&q, radius)));
+        let t1 = Instant::now();
+        let k = lb.layers as usize;
+        frame.samples.clear();
+        frame.colors.clear();
+        for (i, &c) in lb.count.iter().enumerate() {
+            for j in 0..c as usize {
+                frame.samples.push(lb.packed[i * k + j]);
+                frame.colors.push(lb.color[i * k + j]);
+                frame.segments.push(j as u8);
+            }
+        }
+        let n = frame.samples.len();
+        let t2 = Instant::now();
+        frame.header = FrameHeader {
+            radius_unit,
+            render_us: (t2 - t0).as_micros().min(u32::MAX as u128) as u32,
+            count: n as u32,
+            ..self.empty_header(req)
+        };
+        FrameStats {
+            march_us: (t1 - t0).as_micros() as u64,
+            compact_us: (t2 - t1).as_micros() as u64,
+            samples: n,
+            pixels: lb.count.len(),
+        }
     }
 
     /// [`Marcher::render_frame`] into an existing frame, reusing the memory of its sample and
     /// color vectors (a server keeps one frame per client).
     pub fn render_frame_into(&self, req: &CameraRequest, frame: &mut Frame) -> FrameStats {
+        frame.segments.clear();
         let t0 = Instant::now();
         let (q, radius) = self.quantizer(req);
         let radius_unit = radius.unit();
@@ -476,7 +627,7 @@ impl Marcher {
             heuristic: Heuristic::Threshold,
             radius_scale: 1.0,
         };
-        Frame { header: self.empty_header(&req), samples: Vec::new(), colors: Vec::new() }
+        Frame { header: self.empty_header(&req), samples: Vec::new(), colors: Vec::new(), segments: Vec::new() }
     }
 
     fn empty_header(&self, req: &CameraRequest) -> FrameHeader {

@@ -20,6 +20,7 @@ use crate::lanes::{dispatch, Lanes};
 use crate::marcher::Marcher;
 use crate::radius::FrameRadius;
 use volwarp_core::sample::{over_background, pack_color_f32, Quantizer};
+use volwarp_core::segments::Segmenter;
 use volwarp_core::{DepthPicker, FirstPassAccumulator, Heuristic, RayBasis, Vec3, BACKGROUND};
 
 /// Pixels per packet along x and y.
@@ -34,6 +35,29 @@ trait Feed {
     /// Feeds lane `l`'s sample for every bit `l` of `bits`: its `t`, own opacity and
     /// accumulated opacity after compositing it.
     fn feed(&mut self, bits: u32, t: &[f32; 8], src_a: &[f32; 8], dst_a: &[f32; 8]);
+    /// Whether the pass wants the accumulated color too ([`Feed::feed_rgba`] instead of
+    /// [`Feed::feed`]).
+    const RGBA: bool = false;
+    /// Feeds lane `l`'s sample for every bit `l` of `bits`: its `t` and the accumulated
+    /// premultiplied color after compositing it (only called where [`Feed::RGBA`]).
+    #[inline(always)]
+    fn feed_rgba(&mut self, _bits: u32, _t: &[f32; 8], _dst: [&[f32; 8]; 4]) {}
+}
+
+/// Layered samples (issue 14): each lane's ray cut into segments.
+impl Feed for [Segmenter; 8] {
+    const ACTIVE: bool = true;
+    const RGBA: bool = true;
+    #[inline(always)]
+    fn feed(&mut self, _: u32, _: &[f32; 8], _: &[f32; 8], _: &[f32; 8]) {}
+    #[inline(always)]
+    fn feed_rgba(&mut self, mut bits: u32, t: &[f32; 8], dst: [&[f32; 8]; 4]) {
+        while bits != 0 {
+            let l = bits.trailing_zeros() as usize & 7;
+            bits &= bits - 1;
+            self[l].feed(t[l], [dst[0][l], dst[1][l], dst[2][l], dst[3][l]]);
+        }
+    }
 }
 
 /// Colors only.
@@ -276,7 +300,10 @@ impl Kernel<'_> {
                 g = vis.select(g + w * cg, g);
                 b = vis.select(b + w * cb, b);
                 a = vis.select(a + w * ca, a);
-                if F::ACTIVE {
+                if F::ACTIVE && F::RGBA {
+                    let dst = [&r.to_array(), &g.to_array(), &b.to_array(), &a.to_array()];
+                    feed.feed_rgba(vis.to_bitmask(), &t.to_array(), dst);
+                } else if F::ACTIVE {
                     feed.feed(vis.to_bitmask(), &t.to_array(), &ca.to_array(), &a.to_array());
                 }
                 alive = alive.and_not(vis & a.simd_ge(ert));
@@ -357,6 +384,89 @@ impl Kernel<'_> {
             }
         }
     }
+}
+
+/// Where a layered band's segments go: per pixel of the band its segment count, and per pixel
+/// `layers` slots of depth, color and (with a quantizer) packed sample.
+pub(crate) struct LayerOut<'a> {
+    pub(crate) layers: usize,
+    pub(crate) count: &'a mut [u8],
+    pub(crate) t: &'a mut [f32],
+    pub(crate) color: &'a mut [u32],
+    pub(crate) packed: &'a mut [u64],
+}
+
+impl Kernel<'_> {
+    /// [`Kernel::band`] for layered samples: rows `y0 ..` of the image (as many as `out.count`
+    /// holds), each ray cut by a [`Segmenter`] into at most `out.layers` segments.
+    #[inline(always)]
+    fn band_layers<L: Lanes>(
+        &self,
+        basis: &RayBasis,
+        pack: Option<(&Quantizer, FrameRadius)>,
+        y0: u32,
+        out: &mut LayerOut<'_>,
+    ) {
+        let o = basis.origin();
+        let (w, h) = (basis.eye[3] as u32, basis.corner[3] as u32);
+        let k = out.layers;
+        let rows = (out.count.len() / (w as usize).max(1)) as u32;
+        let step = self.m.step();
+        for py in (y0..y0 + rows).step_by(PH) {
+            for px in (0..w).step_by(PW) {
+                let rays = self.rays(basis, o, px, py, w, h);
+                let mut segs = [Segmenter::new(k as u32, step); 8];
+                self.march::<L, _>(o, &rays, &mut segs);
+                for (l, seg) in segs.iter_mut().enumerate() {
+                    let (x, y) = (px + (l % PW) as u32, py + (l / PW) as u32);
+                    if x >= w || y >= y0 + rows || rays.t_exit[l].is_none() {
+                        continue;
+                    }
+                    let i = ((y - y0) * w + x) as usize;
+                    let list = seg.finish();
+                    if let Some(c) = out.count.get_mut(i) {
+                        *c = list.len() as u8;
+                    }
+                    for (j, sgm) in list.iter().enumerate() {
+                        let slot = i * k + j;
+                        if let Some(p) = out.t.get_mut(slot) {
+                            *p = sgm.t;
+                        }
+                        if let Some(p) = out.color.get_mut(slot) {
+                            *p = pack_color_f32(sgm.color);
+                        }
+                        if let (Some((q, radius)), Some(s)) = (pack, out.packed.get_mut(slot)) {
+                            let d = rays.d[l];
+                            *s = q.pack(o + d * sgm.t, radius.at(d, sgm.t));
+                        }
+                    }
+                }
+            }
+        }
+    }
+}
+
+#[inline(always)]
+fn band_layers_kernel<L: Lanes>(
+    k: &Kernel<'_>,
+    basis: &RayBasis,
+    pack: Option<(&Quantizer, FrameRadius)>,
+    y0: u32,
+    out: &mut LayerOut<'_>,
+) {
+    k.band_layers::<L>(basis, pack, y0, out)
+}
+
+dispatch! {
+    /// Marches the rows of one band into layered samples with the best lanes this CPU has (see
+    /// [`Kernel::band_layers`]).
+    fn march_band_layers / march_band_layers_avx2 => band_layers_kernel(
+        k: &Kernel<'_>,
+        basis: &RayBasis,
+        pack: Option<(&Quantizer, FrameRadius)>,
+        y0: u32,
+        out: &mut LayerOut<'_>,
+    )
 }
 
 #[inline(always)]

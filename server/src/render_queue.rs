@@ -20,10 +20,10 @@ use volwarp_core::wire::{CameraRequest, Frame};
 
 /// What makes two requests render the same frame (everything but the sequence number).
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
-struct Key([u32; 14]);
+struct Key([u32; 15]);
 
 impl Key {
-    fn of(req: &CameraRequest) -> Key {
+    fn of(req: &CameraRequest, layers: u32) -> Key {
         let c = &req.camera;
         Key([
             c.eye.x.to_bits(),
@@ -40,6 +40,7 @@ impl Key {
             c.height,
             req.heuristic.code() as u32,
             req.radius_scale.to_bits(),
+            layers.max(1),
         ])
     }
 }
@@ -105,7 +106,13 @@ impl RenderQueue {
     /// of an identical request rendered meanwhile; the header is `req`'s (its `seq`).
     /// The stats are the render's (zero times for a copy).
     pub fn render(&self, req: &CameraRequest, frame: &mut Frame) -> FrameStats {
-        let key = Key::of(req);
+        self.render_layers(req, 1, frame)
+    }
+
+    /// [`RenderQueue::render`] of a layered frame with at most `layers` segments per pixel
+    /// ([`Marcher::render_frame_layers_into`]; 1 is [`RenderQueue::render`]).
+    pub fn render_layers(&self, req: &CameraRequest, layers: u32, frame: &mut Frame) -> FrameStats {
+        let key = Key::of(req, layers);
         let mut s = self.lock();
         loop {
             if let Some((k, f)) = &s.last {
@@ -119,6 +126,8 @@ impl RenderQueue {
                     frame.samples.extend_from_slice(&f.samples);
                     frame.colors.clear();
                     frame.colors.extend_from_slice(&f.colors);
+                    frame.segments.clear();
+                    frame.segments.extend_from_slice(&f.segments);
                     return FrameStats {
                         samples: f.samples.len(),
                         pixels: f.header.camera.width as usize * f.header.camera.height as usize,
@@ -135,7 +144,7 @@ impl RenderQueue {
         s.in_flight.push(key);
         drop(s);
         let flight = Flight(self, key);
-        let stats = self.pool.install(|| self.marcher.render_frame_into(req, frame));
+        let stats = self.pool.install(|| self.marcher.render_frame_layers_into(req, layers, frame));
         self.rendered.fetch_add(1, Ordering::Relaxed);
         // Keep a copy for identical requests (published before the flight ends), reusing the
         // previous copy's memory when no client holds it any more.
@@ -147,6 +156,8 @@ impl RenderQueue {
                 f.samples.extend_from_slice(&frame.samples);
                 f.colors.clear();
                 f.colors.extend_from_slice(&frame.colors);
+                f.segments.clear();
+                f.segments.extend_from_slice(&frame.segments);
                 old.take().unwrap_or_else(|| Arc::new(frame.clone()))
             }
             None => Arc::new(frame.clone()),

@@ -58,6 +58,10 @@ pub struct ServerConfig {
     /// Send CompactFrames to clients that ask for them (`CAP_COMPACT` in their Hello);
     /// default true. Off, every client gets 12-byte Frames.
     pub compact: bool,
+    /// Most segments per pixel the server renders for a client that asks for layered frames
+    /// in its Hello (issue 14; 1: one sample per pixel for everyone). Default
+    /// [`volwarp_core::segments::MAX_LAYERS`]: the client chooses.
+    pub layers: u8,
 }
 
 impl Default for ServerConfig {
@@ -74,6 +78,7 @@ impl Default for ServerConfig {
             token: None,
             frame_delay: None,
             compact: true,
+            layers: volwarp_core::segments::MAX_LAYERS as u8,
         }
     }
 }
@@ -380,6 +385,7 @@ fn serve(sh: &Shared, stream: &TcpStream, id: u64) -> String {
         max_payload: cfg.max_message.min(Limits::for_requests(cfg.max_viewport).max_payload),
         max_samples: 0,
         max_viewport: cfg.max_viewport,
+        max_layers: 1,
     };
     // Handshake.
     let handshake_deadline = Instant::now() + cfg.handshake_timeout.max(Duration::from_millis(1));
@@ -407,13 +413,20 @@ fn serve(sh: &Shared, stream: &TcpStream, id: u64) -> String {
     // The encoding: compact if the client asks and the server allows it.
     let compact = cfg.compact && hello.capabilities & wire::CAP_COMPACT != 0;
     let encoding = if compact { Encoding::Compact } else { Encoding::Raw12 };
+    // Layered frames (issue 14): as many segments per pixel as the client asks, up to ours.
+    let layers = hello.layers.clamp(1, cfg.layers.max(1));
     {
         let mut w = embedded_io_adapters::std::FromStd::new(stream);
-        if let Err(e) = wire::write_hello(&mut w, &Hello::new(if compact { wire::CAP_COMPACT } else { 0 })) {
+        let answer = Hello::new(if compact { wire::CAP_COMPACT } else { 0 }).with_layers(layers);
+        if let Err(e) = wire::write_hello(&mut w, &answer) {
             return format!("cannot send Hello: {e}");
         }
     }
-    log::info!("client {id}: hello (version {}, capabilities {:#x})", hello.version, hello.capabilities);
+    log::info!(
+        "client {id}: hello (version {}, capabilities {:#x}, {layers} segments per pixel)",
+        hello.version,
+        hello.capabilities
+    );
     let _ = stream.set_read_timeout(Some(cfg.idle_timeout.max(Duration::from_millis(1))));
 
     let slot = Arc::new((Mutex::new(Slot::default()), Condvar::new()));
@@ -443,14 +456,15 @@ fn serve(sh: &Shared, stream: &TcpStream, id: u64) -> String {
         if let Some(d) = cfg.frame_delay {
             std::thread::sleep(d);
         }
-        let stats = sh.queue.render(&req, &mut frame);
+        let stats = sh.queue.render_layers(&req, layers as u32, &mut frame);
         let t_send = Instant::now();
         let sent = if encoding == Encoding::Compact {
             let (bytes, _) = crate::encoding::encode_frame(&sh.marcher, &req, &frame, encoding);
             io::Write::write_all(&mut out, &bytes).map_err(|e| e.to_string())
         } else {
             let mut w = embedded_io_adapters::std::FromStd::new(&mut out);
-            wire::write_frame(&mut w, &frame.header, &frame.samples, &frame.colors).map_err(|e| e.to_string())
+            wire::write_frame_layered(&mut w, &frame.header, &frame.samples, &frame.colors, &frame.segments)
+                .map_err(|e| e.to_string())
         };
         let sent = sent.and_then(|_| io::Write::flush(&mut out).map_err(|e| e.to_string()));
         if let Err(e) = sent {

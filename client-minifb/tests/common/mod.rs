@@ -148,5 +148,6 @@ pub fn empty_frame(seq: u64) -> Message {
         },
         samples: vec![],
         colors: vec![],
+        segments: Vec::new(),
     })
 }

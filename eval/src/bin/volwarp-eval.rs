@@ -285,6 +285,10 @@ struct SessionArgs {
     /// The frames' wire encoding, charged on the link: compact (the server's default) or raw12.
     #[arg(long, default_value = "compact")]
     encoding: String,
+    /// Segments per pixel of the server's frames (issue 14, layered samples, 1–16; method
+    /// `splat-layers` composites them; 1: one sample per pixel).
+    #[arg(long, default_value_t = 1, value_parser = clap::value_parser!(u32).range(1..=16))]
+    layers: u32,
 }
 
 fn session_options(s: SessionArgs, threads: usize) -> Result<volwarp_eval::session::SessionOptions, ErrorBox> {
@@ -313,6 +317,7 @@ fn session_options(s: SessionArgs, threads: usize) -> Result<volwarp_eval::sessi
             exact_when_still: !s.always_warp,
             encoding: volwarp_core::compact_frame::Encoding::from_name(&s.encoding)
                 .ok_or_else(|| format!("unknown encoding {:?}; compact or raw12", s.encoding))?,
+            layers: s.layers,
         },
         server_ms: s.server_ms,
         calibration,

@@ -54,6 +54,8 @@ pub struct SessionConfig {
     pub exact_when_still: bool,
     /// The frames' wire encoding (the server's default is compact).
     pub encoding: Encoding,
+    /// Segments per pixel of the frames (issue 14; 1: one sample per pixel).
+    pub layers: u32,
 }
 
 impl SessionConfig {
@@ -237,7 +239,7 @@ pub fn serve(
     let net = cfg.net;
     let render = |camera: Camera, seq: usize| {
         let req = CameraRequest { seq: seq as u64, camera, heuristic: cfg.heuristic, radius_scale: 1.0 };
-        marcher.render_frame(&req).0
+        marcher.render_frame_layers(&req, cfg.layers).0
     };
     let first = render(cams[0], 0);
     let mut out = vec![(
@@ -388,7 +390,9 @@ pub fn run_session(
         };
         stream_of.push(i);
     }
-    let mut exact = volwarp_cpu_tracer::create(RendererKind::Stale, 0).ok_or("the stale renderer is missing")?;
+    // Layered frames (issue 14) are shown as they were rendered by compositing their segments.
+    let exact_kind = if cfg.layers > 1 { RendererKind::SplatLayers } else { RendererKind::Stale };
+    let mut exact = volwarp_cpu_tracer::create(exact_kind, 0).ok_or("the stale renderer is missing")?;
     let mut tmp = Image::new(0, 0);
     let draw: Vec<(f64, usize)> = methods
         .iter()

@@ -1,0 +1,482 @@
+//! Layered samples (issue 14): a ray cut into at most K depth segments, each with its own
+//! composited premultiplied color and opacity and a representative depth.
+//!
+//! The marcher feeds every sample it composites, front to back, with [`Segmenter::feed`]: the
+//! ray parameter `t` and the accumulated premultiplied color `dst` **after** compositing it (so
+//! the segmenter sees exactly the marcher's own arithmetic, and the segments composited front to
+//! back give the ray's color again, up to rounding). [`Segmenter::finish`] closes the last
+//! segment; early ray termination therefore never drops the segment being built.
+//!
+//! **Where a ray is cut.** A new segment starts before a sample when segments are left and
+//! either
+//! - the samples since the last one were empty (a gap of more than [`GAP_STEPS`] steps) and the
+//!   open segment holds at least [`MIN_CUT_ALPHA`] of opacity: skin and the bone behind it
+//!   become separate segments; or
+//! - the accumulated opacity passed the next of the levels `j / K` (`j = 1 … K−1`): a thick
+//!   layer is split into slabs of equal opacity, so each keeps its own parallax.
+//!
+//! **A segment's depth** is its opacity-weighted mean `t` (each sample weighted by what it added
+//! to the accumulated opacity), so it lies inside the segment's sample interval and segments
+//! come strictly front to back. Its color is `(dst_end − dst_start) / (1 − α_start)`: composited
+//! front to back (`C += (1 − A)·c`, `A += (1 − A)·α`) the segments give `dst_end` exactly in
+//! real arithmetic.
+
+/// Most segments per pixel a frame may carry (the wire's and the marcher's cap).
+pub const MAX_LAYERS: usize = 16;
+
+/// The segments per pixel a client asks for by default with the `splat-layers` renderer,
+/// chosen by measurement (`docs/perf.md` and `docs/results.md`, issue 14): against K = 2 it
+/// lowers the mean ꟻLIP at 10–30° by 10–12 % for about twice the samples and bytes.
+pub const DEFAULT_LAYERS: usize = 4;
+
+/// A gap of more than this many marcher steps without a visible sample separates segments.
+pub const GAP_STEPS: f32 = 1.5;
+
+/// Opacity a segment must hold before a gap may close it (smaller pieces are merged into the
+/// next one, so noise does not use up the K segments).
+pub const MIN_CUT_ALPHA: f32 = 0.02;
+
+/// Total opacity at or below which a segment is dropped as empty (the heuristics' empty-ray
+/// rule, [`crate::heuristics::EMPTY_ALPHA`]).
+pub const EMPTY_ALPHA: f32 = crate::heuristics::EMPTY_ALPHA;
+
+/// One depth segment of a ray.
+#[derive(Clone, Copy, Debug, Default, PartialEq)]
+pub struct Segment {
+    /// Representative depth (ray parameter along the unit ray).
+    pub t: f32,
+    /// Premultiplied RGBA in `[0, 1]`, with `r, g, b ≤ a`.
+    pub color: [f32; 4],
+}
+
+/// Cuts one ray into at most `k` segments (see the module docs).
+#[derive(Clone, Copy, Debug)]
+pub struct Segmenter {
+    k: u8,
+    gap: f32,
+    count: u8,
+    out: [Segment; MAX_LAYERS],
+    start: [f32; 4],
+    last: [f32; 4],
+    last_t: f32,
+    weight: f32,
+    weighted_t: f32,
+    open: bool,
+}
+
+impl Segmenter {
+    /// A segmenter for at most `k` segments (clamped to `1..=MAX_LAYERS`) of a ray sampled every
+    /// `step` (world units).
+    pub fn new(k: u32, step: f32) -> Self {
+        let k = k.clamp(1, MAX_LAYERS as u32) as u8;
+        let gap = if step.is_finite() && step > 0.0 { GAP_STEPS * step } else { f32::INFINITY };
+        Segmenter {
+            k,
+            gap,
+            count: 0,
+            out: [Segment::default(); MAX_LAYERS],
+            start: [0.0; 4],
+            last: [0.0; 4],
+            last_t: f32::NEG_INFINITY,
+            weight: 0.0,
+            weighted_t: 0.0,
+            open: false,
+        }
+    }
+
+    /// Feeds one composited sample: its `t` and the accumulated premultiplied color after it.
+    #[inline]
+    pub fn feed(&mut self, t: f32, dst: [f32; 4]) {
+        let prev_a = self.last[3];
+        if self.open && self.count + 1 < self.k {
+            let seg_a = prev_a - self.start[3];
+            let level = (self.count + 1) as f32 / self.k as f32;
+            let gap = t - self.last_t > self.gap && seg_a >= MIN_CUT_ALPHA;
+            if gap || prev_a >= level {
+                self.close();
+            }
+        }
+        if !self.open {
+            self.open = true;
+            self.start = self.last;
+            self.weight = 0.0;
+            self.weighted_t = 0.0;
+        }
+        let w = dst[3] - prev_a;
+        if w > 0.0 {
+            self.weight += w;
+            self.weighted_t += w * t;
+        }
+        self.last = dst;
+        self.last_t = t;
+    }
+
+    fn close(&mut self) {
+        self.open = false;
+        let a0 = self.start[3];
+        let keep = 1.0 - a0;
+        let alpha = self.last[3] - a0;
+        if !(alpha > EMPTY_ALPHA && keep > 1e-6 && self.weight > 0.0) || self.count >= self.k {
+            return;
+        }
+        let inv = 1.0 / keep;
+        let a = (alpha * inv).clamp(0.0, 1.0);
+        let c = |i: usize| ((self.last[i] - self.start[i]) * inv).clamp(0.0, a);
+        let t = self.weighted_t / self.weight;
+        // Rounding may put the mean a hair outside the interval; keep the order strict.
+        let t = match self.count.checked_sub(1) {
+            Some(p) if !(t > self.out[p as usize].t) => self.out[p as usize].t.next_up(),
+            _ => t,
+        };
+        self.out[self.count as usize] = Segment { t, color: [c(0), c(1), c(2), a] };
+        self.count += 1;
+    }
+
+    /// Closes the last segment and returns the ray's segments, front to back (none for an
+    /// empty ray).
+    pub fn finish(&mut self) -> &[Segment] {
+        if self.open {
+            self.close();
+        }
+        &self.out[..self.count as usize]
+    }
+}
+
+/// Composites premultiplied segment colors front to back: `C += (1 − A)·c`. The order of the
+/// slice is the compositing order.
+pub fn composite(colors: impl IntoIterator<Item = [f32; 4]>) -> [f32; 4] {
+    let mut acc = [0.0f32; 4];
+    for c in colors {
+        let w = 1.0 - acc[3];
+        for i in 0..4 {
+            acc[i] += w * c[i];
+        }
+    }
+    acc
+}
+
+/// Why a layered frame's segments were refused (`WireError::Layers`).
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum LayerError {
+    /// The frame has more segments per pixel than the receiver negotiated (or than
+    /// [`MAX_LAYERS`]).
+    TooManyLayers {
+        /// The frame's layer count.
+        layers: u8,
+        /// The receiver's maximum.
+        limit: u8,
+    },
+    /// Sample `index`'s segment index is not 0 (a new pixel) or the previous one + 1, or is not
+    /// below the frame's layer count.
+    BadIndex {
+        /// The sample.
+        index: usize,
+    },
+    /// Sample `index` is not strictly behind the previous segment of its pixel (depths unsorted
+    /// or overlapping), or not on the same pixel's ray.
+    Unsorted {
+        /// The sample.
+        index: usize,
+    },
+    /// Sample `index`'s premultiplied color has a channel above its opacity (an opacity-
+    /// normalised color above 1).
+    Opacity {
+        /// The sample.
+        index: usize,
+    },
+    /// The segment plane's length differs from the sample count, or a layer's part of a
+    /// LayeredCompactFrame disagrees with the frame (header, nesting of the layers' masks).
+    Inconsistent,
+    /// A layered frame where only a one-sample-per-pixel frame can be read (the allocation-free
+    /// `wire::read_frame_header`).
+    Layered,
+}
+
+impl core::fmt::Display for LayerError {
+    fn fmt(&self, f: &mut core::fmt::Formatter<'_>) -> core::fmt::Result {
+        match self {
+            LayerError::TooManyLayers { layers, limit } => {
+                write!(f, "layered frame with {layers} segments per pixel, over the negotiated {limit}")
+            }
+            LayerError::BadIndex { index } => write!(f, "layered frame: bad segment index at sample {index}"),
+            LayerError::Unsorted { index } => {
+                write!(f, "layered frame: sample {index} is not behind its pixel's previous segment")
+            }
+            LayerError::Opacity { index } => write!(f, "layered frame: sample {index} has color above its opacity"),
+            LayerError::Inconsistent => f.write_str("layered frame: segment data inconsistent with the frame"),
+            LayerError::Layered => f.write_str("layered frame where a one-sample-per-pixel frame was expected"),
+        }
+    }
+}
+
+#[cfg(feature = "std")]
+impl std::error::Error for LayerError {}
+
+/// Checks a layered frame's segments (what every receiver relies on): one index per sample; a
+/// pixel's samples consecutive with indices 0, 1, 2, … below `layers`; each strictly farther
+/// from the camera's eye than the previous one of its pixel and on its ray (within a tenth of
+/// the distance); premultiplied colors with no channel above the opacity.
+pub fn validate(
+    header: &crate::wire::FrameHeader,
+    samples: &[u64],
+    colors: &[u32],
+    segments: &[u8],
+    layers: u8,
+) -> Result<(), LayerError> {
+    if segments.len() != samples.len() || colors.len() != samples.len() {
+        return Err(LayerError::Inconsistent);
+    }
+    if layers as usize > MAX_LAYERS {
+        return Err(LayerError::TooManyLayers { layers, limit: MAX_LAYERS as u8 });
+    }
+    let deq = header.dequantizer();
+    let eye = header.camera.eye;
+    let mut prev: Option<(glam::Vec3, f32)> = None;
+    for (i, (&seg, (&s, &c))) in segments.iter().zip(samples.iter().zip(colors)).enumerate() {
+        let [r, g, b, a] = c.to_le_bytes();
+        if r > a || g > a || b > a {
+            return Err(LayerError::Opacity { index: i });
+        }
+        if seg >= layers.max(1) {
+            return Err(LayerError::BadIndex { index: i });
+        }
+        let rel = deq.center(s) - eye;
+        let dist = rel.length();
+        if seg == 0 {
+            prev = Some((rel, dist));
+            continue;
+        }
+        let Some((prel, pdist)) = prev else { return Err(LayerError::BadIndex { index: i }) };
+        if i == 0 || segments[i - 1] != seg - 1 {
+            return Err(LayerError::BadIndex { index: i });
+        }
+        // Strictly behind, and on the same ray from the eye: the previous point's direction
+        // reaches this one's within a tenth of the distance.
+        let on_ray = (rel - prel * (dist / pdist)).length() <= 0.1 * dist;
+        if !(dist > pdist) || !on_ray {
+            return Err(LayerError::Unsorted { index: i });
+        }
+        prev = Some((rel, dist));
+    }
+    Ok(())
+}
+
+#[cfg(feature = "alloc")]
+pub use layered_compact::*;
+
+/// The LayeredCompactFrame message (type 7): a layered frame as one CompactFrame per layer.
+#[cfg(feature = "alloc")]
+mod layered_compact {
+    use super::*;
+    use crate::compact_frame::{self, EncodeError, EncodeOptions, COMPACT_FIXED_LEN};
+    use crate::wire::{decode_frame_fixed, encode_frame_fixed, Frame, Limits, MsgType, WireError};
+    use crate::wire::{FRAME_FIXED_LEN, HEADER_LEN};
+    use alloc::vec;
+    use alloc::vec::Vec;
+
+    /// Layer `l` of a layered frame: its samples with segment index `l`, in pixel order.
+    pub fn layer_frame(frame: &Frame, l: u8) -> Frame {
+        let mut samples = Vec::new();
+        let mut colors = Vec::new();
+        for ((&s, &c), &seg) in frame.samples.iter().zip(&frame.colors).zip(&frame.segments) {
+            if seg == l {
+                samples.push(s);
+                colors.push(c);
+            }
+        }
+        let header = crate::wire::FrameHeader { count: samples.len() as u32, ..frame.header };
+        Frame::new(header, samples, colors)
+    }
+
+    /// Encodes a layered frame (non-empty `segments`) as one LayeredCompactFrame message
+    /// (header included): the frame's fixed part with the layer count in byte 57, then per layer
+    /// a `u32` length and that layer's CompactFrame payload.
+    pub fn encode_layered(frame: &Frame, opts: &EncodeOptions) -> Result<Vec<u8>, EncodeError> {
+        encode_layered_with(frame, |layer| compact_frame::encode(layer, opts))
+    }
+
+    /// [`encode_layered`] with `encode` making each layer's CompactFrame message (header
+    /// included), e.g. with another zstd implementation.
+    pub fn encode_layered_with(
+        frame: &Frame,
+        mut encode: impl FnMut(&Frame) -> Result<Vec<u8>, EncodeError>,
+    ) -> Result<Vec<u8>, EncodeError> {
+        if frame.segments.len() != frame.samples.len() || frame.samples.len() != frame.colors.len() {
+            return Err(EncodeError::BadFrame);
+        }
+        let layers = frame.layers();
+        let mut fixed =
+            encode_frame_fixed(&crate::wire::FrameHeader { count: frame.samples.len() as u32, ..frame.header });
+        fixed[57] = layers;
+        let mut payload = Vec::from(fixed);
+        for l in 0..layers {
+            let msg = encode(&layer_frame(frame, l))?;
+            if msg.len() < HEADER_LEN {
+                return Err(EncodeError::BadFrame);
+            }
+            let part = &msg[HEADER_LEN..];
+            payload.extend_from_slice(&(part.len() as u32).to_le_bytes());
+            payload.extend_from_slice(part);
+        }
+        let len = u32::try_from(payload.len()).map_err(|_| EncodeError::DepthRange)?;
+        let mut out = Vec::with_capacity(HEADER_LEN + payload.len());
+        out.extend_from_slice(&crate::wire::MAGIC);
+        out.extend_from_slice(&crate::wire::VERSION.to_le_bytes());
+        out.push(MsgType::LayeredCompactFrame as u8);
+        out.push(0);
+        out.extend_from_slice(&len.to_le_bytes());
+        out.extend_from_slice(&payload);
+        Ok(out)
+    }
+
+    /// Decodes a LayeredCompactFrame payload (after the 12-byte header) into a layered frame:
+    /// each layer's CompactFrame is decoded as usual (same bounds on what it allocates), must
+    /// carry the frame's own fixed part (but its count) and a coverage mask inside the previous
+    /// layer's, the counts must add up, and the merged frame must pass [`validate`].
+    pub fn decode_layered_payload(payload: &[u8], limits: &Limits) -> Result<Frame, WireError> {
+        let bad_len = WireError::BadLength { ty: MsgType::LayeredCompactFrame, len: payload.len() as u32 };
+        let inconsistent = WireError::Layers(LayerError::Inconsistent);
+        let fixed: &[u8; FRAME_FIXED_LEN] =
+            payload.get(..FRAME_FIXED_LEN).ok_or(bad_len)?.try_into().map_err(|_| bad_len)?;
+        let header = decode_frame_fixed(fixed, limits)?;
+        let layers = fixed[57];
+        if layers == 0 {
+            return Err(WireError::Layers(LayerError::BadIndex { index: 0 }));
+        }
+        crate::wire::check_count_layers(&header, layers, limits)?;
+        let (w, h) = (header.camera.width as usize, header.camera.height as usize);
+        let mlen = (w * h).div_ceil(8);
+        let mut rest = &payload[FRAME_FIXED_LEN..];
+        let mut parts: Vec<(Vec<u8>, Frame)> = Vec::with_capacity(layers as usize);
+        let mut total = 0u64;
+        for _ in 0..layers {
+            let len_bytes: [u8; 4] = rest.get(..4).ok_or(bad_len)?.try_into().map_err(|_| bad_len)?;
+            let len = u32::from_le_bytes(len_bytes) as usize;
+            let part = rest.get(4..4 + len).ok_or(bad_len)?;
+            rest = &rest[4 + len..];
+            // The layer's fixed part is the frame's but the layer count (byte 57) and the count.
+            if part.len() < COMPACT_FIXED_LEN || part[..57] != fixed[..57] || part[58..92] != fixed[58..92] {
+                return Err(inconsistent);
+            }
+            let (sub, params) = compact_frame::read_params(part, limits)?;
+            total += sub.count as u64;
+            if total > header.count as u64 {
+                return Err(inconsistent);
+            }
+            let body = compact_frame::decompress(&part[COMPACT_FIXED_LEN..], &params)?;
+            let f = compact_frame::decode_body(&sub, &params, &body)?;
+            let mask = body[..mlen].to_vec();
+            if let Some((prev, _)) = parts.last() {
+                if mask.iter().zip(prev).any(|(m, p)| m & !p != 0) {
+                    return Err(inconsistent);
+                }
+            }
+            parts.push((mask, f));
+        }
+        if !rest.is_empty() || total != header.count as u64 {
+            return Err(inconsistent);
+        }
+        // Merge in pixel order, each pixel's layers front to back.
+        let n = header.count as usize;
+        let (mut samples, mut colors, mut segments) = (vec![0u64; n], vec![0u32; n], vec![0u8; n]);
+        let mut cursor = vec![0usize; layers as usize];
+        let mut i = 0;
+        let (first_mask, _) = &parts[0];
+        for (byte_i, &byte) in first_mask.iter().enumerate() {
+            let mut bits = byte;
+            while bits != 0 {
+                let bit = bits.trailing_zeros() as usize;
+                bits &= bits - 1;
+                let px = byte_i * 8 + bit;
+                for (l, (mask, f)) in parts.iter().enumerate() {
+                    if mask[px >> 3] & (1 << (px & 7)) == 0 {
+                        break;
+                    }
+                    let k = cursor[l];
+                    cursor[l] += 1;
+                    let (Some(&s), Some(&c), Some(slot)) = (f.samples.get(k), f.colors.get(k), samples.get_mut(i))
+                    else {
+                        return Err(inconsistent);
+                    };
+                    *slot = s;
+                    colors[i] = c;
+                    segments[i] = l as u8;
+                    i += 1;
+                }
+            }
+        }
+        if i != n {
+            return Err(inconsistent);
+        }
+        validate(&header, &samples, &colors, &segments, layers).map_err(WireError::Layers)?;
+        Ok(Frame { header, samples, colors, segments })
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// Composites a profile of (t, premultiplied rgba) samples as the marcher does and
+    /// segments it.
+    fn run(k: u32, samples: &[(f32, [f32; 4])]) -> (Segs, [f32; 4]) {
+        let mut s = Segmenter::new(k, 1.0);
+        let mut acc = [0.0f32; 4];
+        for &(t, c) in samples {
+            let w = 1.0 - acc[3];
+            for i in 0..4 {
+                acc[i] += w * c[i];
+            }
+            s.feed(t, acc);
+        }
+        let segs = s.finish();
+        let mut out = Segs { n: segs.len(), s: [Segment::default(); MAX_LAYERS] };
+        out.s[..segs.len()].copy_from_slice(segs);
+        (out, acc)
+    }
+
+    struct Segs {
+        n: usize,
+        s: [Segment; MAX_LAYERS],
+    }
+
+    #[test]
+    fn segments_recomposite_to_the_ray_and_split_at_gaps() {
+        let c = |a: f32| [0.5 * a, 0.25 * a, 0.1 * a, a];
+        let profile = [(1.0, c(0.1)), (2.0, c(0.2)), (6.0, c(0.3)), (7.0, c(0.3)), (12.0, c(0.5))];
+        let (segs, acc) = run(4, &profile);
+        assert_eq!(segs.n, 3, "three runs separated by gaps");
+        let back = composite(segs.s[..segs.n].iter().map(|s| s.color));
+        for i in 0..4 {
+            assert!((back[i] - acc[i]).abs() < 1e-6, "{back:?} vs {acc:?}");
+        }
+        for w in segs.s[..segs.n].windows(2) {
+            assert!(w[0].t < w[1].t);
+        }
+        assert!(segs.s[0].t > 1.0 && segs.s[0].t < 2.0);
+    }
+
+    #[test]
+    fn one_layer_is_the_whole_ray_and_k_caps_the_count() {
+        let c = |a: f32| [a, a, a, a];
+        let profile: [(f32, [f32; 4]); 8] = core::array::from_fn(|i| (i as f32 * 3.0, c(0.2)));
+        let (one, acc) = run(1, &profile);
+        assert_eq!(one.n, 1);
+        assert!((one.s[0].color[3] - acc[3]).abs() < 1e-6);
+        for k in 2..6 {
+            let (segs, _) = run(k, &profile);
+            assert_eq!(segs.n, k as usize);
+        }
+    }
+
+    #[test]
+    fn an_opaque_first_sample_gives_one_segment_and_an_empty_ray_none() {
+        let (segs, _) = run(8, &[(0.5, [1.0, 0.0, 0.0, 1.0])]);
+        assert_eq!(segs.n, 1);
+        assert_eq!(segs.s[0].color, [1.0, 0.0, 0.0, 1.0]);
+        let (none, _) = run(8, &[]);
+        assert_eq!(none.n, 0);
+        let (zero, _) = run(8, &[(1.0, [0.0; 4]), (5.0, [0.0; 4])]);
+        assert_eq!(zero.n, 0, "zero-opacity samples make no segment");
+    }
+}

@@ -1,0 +1,199 @@
+//! Layered frames on the wire (issue 14, version 3): round trips through the 12-byte form and
+//! the LayeredCompactFrame, and every kind of bad segment data as a typed error.
+
+use volwarp_core::compact_frame::{self, EncodeOptions, Encoding};
+use volwarp_core::sample::{pack_color, Quantizer};
+use volwarp_core::segments::{validate, LayerError, MAX_LAYERS};
+use volwarp_core::wire::{self, Frame, FrameHeader, Hello, Limits, Message, WireError};
+use volwarp_core::{Bounds, Camera, Heuristic, Vec3};
+
+/// A 16×16 frame of up to `k` segments per pixel (pixel-dependent counts, some empty pixels),
+/// each on its pixel's ray, 0.3 apart, with valid premultiplied colors.
+fn layered(k: u8) -> Frame {
+    let camera = Camera::look_at(Vec3::new(0.5, 0.5, 3.0), Vec3::splat(0.5), Vec3::Y, 30.0, 16, 16);
+    let bounds = Bounds::new(Vec3::new(-1.0, -1.0, -1.0), Vec3::new(2.0, 2.0, 2.0));
+    let q = Quantizer::new(bounds, 0.001);
+    let basis = camera.ray_basis();
+    let (mut samples, mut colors, mut segments) = (Vec::new(), Vec::new(), Vec::new());
+    for y in 0..16u32 {
+        for x in 0..16u32 {
+            let n = ((x * 7 + y * 3) % (k as u32 + 1)) as u8;
+            let d = basis.dir(x, y);
+            for j in 0..n {
+                let t = 2.0 + 0.3 * j as f32 + 0.01 * x as f32;
+                samples.push(q.pack(camera.eye + d * t, 0.004));
+                let a = 40 + 50 * j + x as u8;
+                colors.push(pack_color(a / 2, a / 3, a, a));
+                segments.push(j);
+            }
+        }
+    }
+    let header = FrameHeader {
+        seq: 9,
+        camera,
+        heuristic: Heuristic::Threshold,
+        bounds,
+        radius_unit: 0.001,
+        render_us: 5,
+        count: samples.len() as u32,
+    };
+    Frame { header, samples, colors, segments }
+}
+
+fn decode(bytes: &[u8], limits: &Limits) -> Result<Frame, WireError> {
+    match wire::read_message(&mut &bytes[..], limits)? {
+        Message::Frame(f) => Ok(f),
+        other => panic!("not a frame: {other:?}"),
+    }
+}
+
+fn raw(f: &Frame) -> Vec<u8> {
+    wire::encode_to_vec(&Message::Frame(f.clone()))
+}
+
+#[test]
+fn layered_frames_round_trip_in_both_encodings() {
+    let f = layered(3);
+    assert_eq!(f.layers(), 3);
+    validate(&f.header, &f.samples, &f.colors, &f.segments, 3).unwrap();
+    let bytes = raw(&f);
+    assert_eq!(bytes[12 + 57], 3, "layer count in byte 57");
+    assert_eq!(bytes.len(), 12 + 96 + 13 * f.samples.len());
+    assert_eq!(decode(&bytes, &Limits::default()).unwrap(), f);
+
+    let (compact, got) = compact_frame::encode_frame(&f, Encoding::Compact, &EncodeOptions::default());
+    assert_eq!(got, Encoding::Compact, "the compact form carries segments");
+    assert_eq!(compact[6], wire::MsgType::LayeredCompactFrame as u8);
+    assert!(compact.len() < bytes.len() / 2, "{} compact bytes against {} raw", compact.len(), bytes.len());
+    let back = decode(&compact, &Limits::default()).unwrap();
+    assert_eq!(back.colors, f.colors);
+    assert_eq!(back.segments, f.segments);
+    assert_eq!(back.header, f.header);
+    let (da, db) = (f.header.dequantizer(), back.header.dequantizer());
+    for (a, b) in f.samples.iter().zip(&back.samples) {
+        assert!((da.center(*a) - db.center(*b)).length() < 0.002, "positions move by less than a depth step");
+        assert_eq!(volwarp_core::sample::radius_code(*a), volwarp_core::sample::radius_code(*b));
+    }
+    // A one-sample-per-pixel frame is written exactly as before (byte 57 zero, no plane).
+    let plain = Frame::new(f.header, f.samples.clone(), f.colors.clone());
+    let pb = raw(&plain);
+    assert_eq!(pb[12 + 57], 0);
+    assert_eq!(pb.len(), 12 + 96 + 12 * f.samples.len());
+}
+
+#[test]
+fn hello_carries_the_layer_count() {
+    let h = Hello::new(wire::CAP_COMPACT).with_layers(6);
+    let b = wire::encode_to_vec(&Message::Hello(h.clone()));
+    assert_eq!(u16::from_le_bytes([b[14], b[15]]), 6);
+    assert_eq!(wire::read_message(&mut &b[..], &Limits::default()).unwrap(), Message::Hello(h));
+    assert_eq!(Hello::new(0).with_layers(200).layers, MAX_LAYERS as u8);
+}
+
+#[test]
+fn more_layers_than_negotiated_is_a_typed_error() {
+    let f = layered(4);
+    for bytes in [raw(&f), compact_frame::encode_frame(&f, Encoding::Compact, &EncodeOptions::default()).0] {
+        let e = decode(&bytes, &Limits::default().with_layers(2)).unwrap_err();
+        assert_eq!(e, WireError::Layers(LayerError::TooManyLayers { layers: 4, limit: 2 }));
+        assert!(decode(&bytes, &Limits::default().with_layers(4)).is_ok());
+    }
+    // The allocation-free reader refuses a layered frame instead of misreading it.
+    let bytes = raw(&f);
+    let mut r = &bytes[..];
+    let h = wire::read_header(&mut r, &Limits::default()).unwrap();
+    let e = wire::read_frame_header(&mut r, &h, &Limits::default()).unwrap_err();
+    assert_eq!(e, WireError::Layers(LayerError::Layered));
+}
+
+/// Offset of sample `i`'s color and segment index in a raw layered message.
+fn offsets(f: &Frame, i: usize) -> (usize, usize) {
+    let n = f.samples.len();
+    (12 + 96 + 8 * n + 4 * i, 12 + 96 + 12 * n + i)
+}
+
+#[test]
+fn bad_segment_data_is_a_typed_error() {
+    let f = layered(3);
+    let lim = Limits::default();
+    // A second segment (index 1) to corrupt.
+    let i = f.segments.iter().position(|&s| s == 1).unwrap();
+    let (color_at, seg_at) = offsets(&f, i);
+
+    // Opacity above 1 once normalised: a color channel above alpha.
+    let mut b = raw(&f);
+    b[color_at] = b[color_at + 3].saturating_add(1).max(1);
+    b[color_at + 3] = b[color_at] - 1;
+    assert_eq!(decode(&b, &lim).unwrap_err(), WireError::Layers(LayerError::Opacity { index: i }));
+
+    // Unsorted depths: swap the two segments of a pixel.
+    let mut g = f.clone();
+    g.samples.swap(i - 1, i);
+    assert_eq!(decode(&raw(&g), &lim).unwrap_err(), WireError::Layers(LayerError::Unsorted { index: i }));
+
+    // Overlapping depths: both segments at one depth.
+    let mut g = f.clone();
+    g.samples[i] = g.samples[i - 1];
+    assert_eq!(decode(&raw(&g), &lim).unwrap_err(), WireError::Layers(LayerError::Unsorted { index: i }));
+
+    // A segment on another pixel's ray.
+    let mut g = f.clone();
+    let other = f.samples.iter().rposition(|&s| s != f.samples[i - 1]).unwrap();
+    g.samples[i] = f.samples[other];
+    assert!(matches!(decode(&raw(&g), &lim), Err(WireError::Layers(LayerError::Unsorted { .. }))));
+
+    // Segment indices: a gap, and one at or above the layer count.
+    let mut b = raw(&f);
+    b[seg_at] = 2;
+    assert_eq!(decode(&b, &lim).unwrap_err(), WireError::Layers(LayerError::BadIndex { index: i }));
+    let mut b = raw(&f);
+    b[12 + 57] = 2;
+    assert!(matches!(decode(&b, &lim), Err(WireError::Layers(LayerError::BadIndex { .. }))));
+
+    // More samples than layers × pixels.
+    let mut b = raw(&f);
+    b[12 + 57] = 1;
+    let n = (16 * 16 + 1) as u32;
+    let mut big = b[..12 + 96].to_vec();
+    big[12 + 92..12 + 96].copy_from_slice(&n.to_le_bytes());
+    big.extend(std::iter::repeat_n(0u8, 13 * n as usize));
+    let len = (big.len() - 12) as u32;
+    big[8..12].copy_from_slice(&len.to_le_bytes());
+    assert!(matches!(decode(&big, &lim), Err(WireError::TooManySamples { .. })));
+}
+
+#[test]
+fn a_corrupt_layered_compact_frame_is_a_typed_error() {
+    let f = layered(3);
+    let (b, _) = compact_frame::encode_frame(&f, Encoding::Compact, &EncodeOptions::default());
+    let lim = Limits::default();
+    // Every truncation and every single-byte change: an error or a valid frame, never a panic.
+    for cut in (0..b.len()).step_by(7) {
+        let _ = decode(&b[..cut], &lim);
+    }
+    let mut errors = 0;
+    for i in (12..b.len()).step_by(3) {
+        let mut c = b.clone();
+        c[i] ^= 0x5a;
+        match decode(&c, &lim) {
+            Ok(g) => validate(&g.header, &g.samples, &g.colors, &g.segments, g.layers()).unwrap(),
+            Err(_) => errors += 1,
+        }
+    }
+    assert!(errors > 0);
+    // Layers whose masks are not nested: swap the first two layers' parts.
+    let layers = b[12 + 57] as usize;
+    assert_eq!(layers, 3);
+    let mut parts = Vec::new();
+    let mut at = 12 + 96;
+    for _ in 0..layers {
+        let len = u32::from_le_bytes(b[at..at + 4].try_into().unwrap()) as usize;
+        parts.push(b[at..at + 4 + len].to_vec());
+        at += 4 + len;
+    }
+    let mut swapped = b[..12 + 96].to_vec();
+    for p in [&parts[1], &parts[0], &parts[2]] {
+        swapped.extend_from_slice(p);
+    }
+    assert_eq!(decode(&swapped, &lim).unwrap_err(), WireError::Layers(LayerError::Inconsistent));
+}

@@ -1,0 +1,310 @@
+//! Layered samples composited front to back (issue 14; renderer `splat-layers`).
+//!
+//! A layered frame carries up to K samples per pixel of the frame's camera, one per depth
+//! segment, each with its own premultiplied color and opacity. Where the exact splatter
+//! ([`crate::sphere_splat`]) draws each sample as a sphere and keeps the first hit, this
+//! renderer draws each sample as its **source pixel's footprint**: the quadrilateral the frame
+//! camera's pixel frustum cuts from the plane through the sample's centre facing the new eye
+//! (the supersegment of volumetric depth images, Frey, Sadlo and Ertl 2013, flattened to its
+//! representative depth), widened by [`OWN_MARGIN`] pixels against rounding cracks. The quad is
+//! projected into the new camera and every output pixel whose centre lies inside it takes the
+//! sample. (A plane facing the frame's camera instead shrinks footprints seen obliquely and
+//! opens cracks between them; `docs/perf.md`, issue 14.) Footprints of one depth tile the plane, so nothing is
+//! counted twice where neighbouring segments lie at similar depths, and at the frame's own
+//! camera every pixel takes exactly its own segments: the image is the server's render up to
+//! 8-bit rounding. (A first version tested each pixel of the sphere's bound exactly and kept
+//! the hits whose point nearest the centre projected into the sample's own pixel: the same rule
+//! about 10× slower; `docs/perf.md`, issue 14.) The spheres' radii are not used.
+//!
+//! Per output pixel the samples go to a short list (the nearest, at most [`LIST`], as
+//! `(distance from the eye, sample id)` keys); the list is sorted (ties by id, so the result
+//! does not depend on the order of the samples) and composited front to back,
+//! `C += (1 − A)·c`, stopping once `A` ≥ [`OPAQUE`]. Zero-opacity segments add nothing (no
+//! division by opacity anywhere, so no NaN). Pixels nothing covers show the background.
+//!
+//! Work: the footprints are drawn serially (four projections and a few edge tests per sample,
+//! in `f32`), the lists composited in parallel. Memory: `8 × LIST + 1` bytes per output pixel.
+
+use crate::begin_frame_unbuilt_ok;
+use crate::sphere_splat::View;
+use crate::threads::Threads;
+use volwarp_core::renderer::{Image, Renderer};
+use volwarp_core::sample::{over_background, pack_color_f32};
+use volwarp_core::{Camera, RendererKind, Scene, Vec3, BACKGROUND};
+
+/// Most segments kept per output pixel (the nearest ones).
+pub const LIST: usize = 16;
+
+/// Accumulated opacity at which a pixel's compositing stops.
+pub const OPAQUE: f32 = 0.999;
+
+/// How far (in source pixels) beyond its own pixel a sample's footprint reaches: closes the
+/// cracks rounding would leave between neighbouring pixels' footprints.
+pub const OWN_MARGIN: f32 = 0.05;
+
+/// Output rows per compositing task.
+const BAND: usize = 16;
+
+/// How wide a sample's footprint is (see the module docs).
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct LayerOptions {
+    /// Half the footprint's side, in source pixels: 0.5 is the source pixel itself; the default
+    /// adds [`OWN_MARGIN`]. Measured (`docs/perf.md`, issue 14): 0.7 double-counts more than it
+    /// fills.
+    pub own: f32,
+}
+
+impl Default for LayerOptions {
+    fn default() -> Self {
+        LayerOptions { own: 0.5 + OWN_MARGIN }
+    }
+}
+
+/// The layered splatter (renderer name `splat-layers`).
+#[derive(Debug)]
+pub struct LayerSplat {
+    threads: Threads,
+    opts: LayerOptions,
+    /// Per output pixel `cap` keys.
+    keys: Vec<u64>,
+    /// Per output pixel the number of keys.
+    count: Vec<u8>,
+}
+
+impl LayerSplat {
+    /// A layered splatter on `threads` threads (0: one per core).
+    pub fn new(threads: usize) -> Self {
+        LayerSplat::with_options(threads, LayerOptions::default())
+    }
+
+    /// A layered splatter with another footprint width.
+    pub fn with_options(threads: usize, opts: LayerOptions) -> Self {
+        LayerSplat { threads: Threads::new(threads), opts, keys: Vec::new(), count: Vec::new() }
+    }
+}
+
+/// A camera's projection in `f32`.
+struct Proj {
+    eye: Vec3,
+    u: Vec3,
+    v: Vec3,
+    w: Vec3,
+    px_x: f32,
+    px_y: f32,
+    half_w: f32,
+    half_h: f32,
+}
+
+impl Proj {
+    fn new(view: &View) -> Proj {
+        let f = |a: [f64; 3]| Vec3::new(a[0] as f32, a[1] as f32, a[2] as f32);
+        Proj {
+            eye: view.eye,
+            u: f(view.u),
+            v: f(view.v),
+            w: f(view.w),
+            px_x: view.px_x as f32,
+            px_y: view.px_y as f32,
+            half_w: view.half_w as f32,
+            half_h: view.half_h as f32,
+        }
+    }
+
+    /// Continuous image coordinates (pixel `(x, y)` spans `[x, x + 1) × [y, y + 1)`) of the point
+    /// whose offset from the eye has components `c` along the camera's (u, v, w); `None` at or
+    /// behind the eye plane or for a non-finite point.
+    #[inline(always)]
+    fn image(&self, c: Vec3) -> Option<(f32, f32)> {
+        if !(c.z > 1e-6) {
+            return None;
+        }
+        let inv = 1.0 / c.z;
+        let (x, y) = (c.x * inv * self.px_x + self.half_w, self.half_h - c.y * inv * self.px_y);
+        (x.is_finite() && y.is_finite()).then_some((x, y))
+    }
+}
+
+/// The depth key: the centre's distance from the eye (ordered bits of a non-negative float)
+/// and the sample id.
+#[inline(always)]
+fn key(dist: f32, id: u32) -> u64 {
+    ((dist.max(0.0).to_bits() as u64) << 32) | id as u64
+}
+
+/// Inserts `key` into a list of `cap` slots holding `n`, keeping the `cap` smallest.
+#[inline(always)]
+fn insert(slots: &mut [u64], n: &mut u8, key: u64) {
+    let len = *n as usize;
+    if len < slots.len() {
+        slots[len] = key;
+        *n += 1;
+        return;
+    }
+    let (mut worst, mut at) = (0u64, 0usize);
+    for (i, &k) in slots.iter().enumerate() {
+        if k >= worst {
+            worst = k;
+            at = i;
+        }
+    }
+    if key < worst {
+        slots[at] = key;
+    }
+}
+
+impl Renderer for LayerSplat {
+    fn kind(&self) -> RendererKind {
+        RendererKind::SplatLayers
+    }
+
+    fn render(&mut self, scene: &Scene, camera: &Camera, out: &mut Image) {
+        if !begin_frame_unbuilt_ok(scene, camera, out) {
+            return;
+        }
+        let (w, h) = (camera.width as usize, camera.height as usize);
+        let deq = &scene.deq;
+        let cap = LIST;
+        self.count.clear();
+        self.count.resize(w * h, 0);
+        self.keys.resize(w * h * cap, u64::MAX);
+        let view = Proj::new(&View::new(camera));
+        let source = View::new(&scene.header.camera);
+        let src = Proj::new(&source);
+        // Half the footprint's side per unit of source depth, along the source's u and v.
+        let half = self.opts.own.clamp(0.0, 4.0);
+        let (hx, hy) = (half / source.px_x as f32, half / source.px_y as f32);
+        let (su, sv) = (src.u * hx, src.v * hy);
+        // Everything is expressed in the new camera's basis: a point's image coordinates are
+        // its (u, v, w) components relative to the new eye. A corner ray's direction is
+        // `axis ± su ± sv`, so its components are the axis's plus per-frame constants.
+        let basis = |x: Vec3| Vec3::new(x.dot(view.u), x.dot(view.v), x.dot(view.w));
+        let (bu, bv, e) = (basis(su), basis(sv), basis(src.eye - view.eye));
+        for (id, &s) in scene.samples.iter().enumerate() {
+            let c = deq.center(s);
+            let rel = c - src.eye;
+            let z = rel.dot(src.w);
+            // The plane's normal (not normalised: only ratios of dot products with it are used).
+            let n = c - view.eye;
+            let dist2 = n.length_squared();
+            if !(z > 0.0 && dist2 > 0.0) {
+                continue;
+            }
+            // The source pixel's frustum (the ray through the centre, ± half a pixel per axis)
+            // cut by the plane through the centre facing the new eye: corner `p = eye_s + λ·dir`
+            // with `λ = n·rel / n·dir`.
+            let axis = rel / z;
+            let num = n.dot(rel);
+            let (an, un, vn) = (axis.dot(n), su.dot(n), sv.dot(n));
+            // A corner ray within 5° of the plane (the new eye sees the footprint edge-on):
+            // skip the sample (the corners' directions are the axis's within half a pixel).
+            let edge_on = 0.0076 * dist2 * axis.length_squared();
+            let ba = basis(axis);
+            let corner = |sx: f32, sy: f32| {
+                let den = an + sx * un + sy * vn;
+                if !(den > 0.0 && den * den > edge_on) {
+                    return None;
+                }
+                let p = e + (ba + bu * sx + bv * sy) * (num / den);
+                view.image(p)
+            };
+            // Its corners, in order around it, in the new camera's image.
+            let (Some(q0), Some(q1), Some(q2), Some(q3)) =
+                (corner(-1.0, -1.0), corner(1.0, -1.0), corner(1.0, 1.0), corner(-1.0, 1.0))
+            else {
+                continue;
+            };
+            let quad = [q0, q1, q2, q3];
+            let x0 = q0.0.min(q1.0).min(q2.0).min(q3.0);
+            let x1 = q0.0.max(q1.0).max(q2.0).max(q3.0);
+            let y0 = q0.1.min(q1.1).min(q2.1).min(q3.1);
+            let y1 = q0.1.max(q1.1).max(q2.1).max(q3.1);
+            // Pixel centres x + ½ within [x0, x1].
+            let (xa, xb) = ((x0 - 0.5).ceil().max(0.0), (x1 - 0.5).floor().min(w as f32 - 1.0));
+            let (ya, yb) = ((y0 - 0.5).ceil().max(0.0), (y1 - 0.5).floor().min(h as f32 - 1.0));
+            if !(xa <= xb && ya <= yb) {
+                continue;
+            }
+            // Edge functions, signed by the quad's orientation.
+            let area = (q1.0 - q0.0) * (q2.1 - q0.1) - (q2.0 - q0.0) * (q1.1 - q0.1);
+            let sign = if area < 0.0 { -1.0 } else { 1.0 };
+            let edges: [(f32, f32, f32); 4] = core::array::from_fn(|e| {
+                let (a, b) = (quad[e], quad[(e + 1) & 3]);
+                // sign · ((b − a) × (p − a)) ≥ 0  ⇔  A·px + B·py + C ≥ 0
+                let (ex, ey) = ((b.0 - a.0) * sign, (b.1 - a.1) * sign);
+                (-ey, ex, ey * a.0 - ex * a.1)
+            });
+            // Squared distance: the same order, no square root.
+            let k = key(dist2, id as u32);
+            for y in ya as usize..=yb as usize {
+                let py = y as f32 + 0.5;
+                for x in xa as usize..=xb as usize {
+                    let px = x as f32 + 0.5;
+                    if edges.iter().all(|&(a, b, c)| a * px + b * py + c >= 0.0) {
+                        let i = y * w + x;
+                        insert(&mut self.keys[i * cap..(i + 1) * cap], &mut self.count[i], k);
+                    }
+                }
+            }
+        }
+        let (keys, count, colors) = (&self.keys[..], &self.count[..], &scene.colors[..]);
+        self.threads.for_each_chunk(&mut out.pixels, BAND * w, |band, px| {
+            for (j, p) in px.iter_mut().enumerate() {
+                let i = band * BAND * w + j;
+                let mut list = [0u64; LIST];
+                let n = count[i] as usize;
+                if n == 0 {
+                    continue;
+                }
+                list[..n].copy_from_slice(&keys[i * cap..i * cap + n]);
+                let list = &mut list[..n];
+                list.sort_unstable();
+                *p = composite_keys(list, colors);
+            }
+        });
+    }
+}
+
+/// The pixel of a sorted list of keys: their samples' colors composited front to back over the
+/// background.
+fn composite_keys(keys: &[u64], colors: &[u32]) -> u32 {
+    if keys.is_empty() {
+        return BACKGROUND;
+    }
+    let mut acc = [0.0f32; 4];
+    for &k in keys {
+        let Some(&c) = colors.get(k as u32 as usize) else { continue };
+        let c = c.to_le_bytes();
+        let wgt = (1.0 - acc[3]) * (1.0 / 255.0);
+        for i in 0..4 {
+            acc[i] += wgt * c[i] as f32;
+        }
+        if acc[3] >= OPAQUE {
+            break;
+        }
+    }
+    over_background(pack_color_f32(acc), BACKGROUND)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn the_short_list_keeps_the_nearest() {
+        let mut slots = [0u64; 6];
+        let mut n = 0u8;
+        for k in (0..40u64).rev() {
+            insert(&mut slots, &mut n, k * 3);
+        }
+        slots.sort_unstable();
+        assert_eq!(n, 6);
+        assert_eq!(slots.to_vec(), (0..6u64).map(|k| k * 3).collect::<Vec<_>>());
+    }
+
+    #[test]
+    fn compositing_zero_opacity_gives_the_background_and_no_nan() {
+        let colors = [0u32, 0, 0];
+        assert_eq!(composite_keys(&[key(1.0, 0), key(2.0, 1), key(3.0, 2)], &colors), BACKGROUND);
+        assert_eq!(composite_keys(&[], &colors), BACKGROUND);
+    }
+}

@@ -1,0 +1,115 @@
+//! Layered samples (issue 14) from the marcher: the packet marcher's segments against the scalar
+//! marcher's, K = 1 against today's frames, segments recomposited against the ground truth,
+//! and the transparent and opaque extremes.
+
+use std::path::Path;
+use std::sync::Arc;
+use volwarp_core::sample::{over_background, pack_color_f32};
+use volwarp_core::segments::{composite, validate};
+use volwarp_core::wire::CameraRequest;
+use volwarp_core::{Camera, Heuristic, Vec3, BACKGROUND};
+use volwarp_server::transfer_function::TransferFunction;
+use volwarp_server::{Dataset, MarchKernel, MarchOptions, Marcher, Volume};
+
+fn data(name: &str) -> std::path::PathBuf {
+    Path::new(env!("CARGO_MANIFEST_DIR")).join("..").join(name)
+}
+
+fn datasets() -> Vec<Dataset> {
+    vec![
+        Dataset::load(data("data/ct_head_quarter.nhdr"), None).unwrap(),
+        Dataset::load(data("data/neghip_64x64x64_uint8.raw"), None).unwrap(),
+        Dataset::marschner_lobb(41),
+    ]
+}
+
+fn request(m: &Marcher, size: u32, yaw: f32) -> CameraRequest {
+    CameraRequest {
+        seq: 3,
+        camera: m.default_camera(size, size).orbit(yaw, 10.0),
+        heuristic: Heuristic::Threshold,
+        radius_scale: 1.0,
+    }
+}
+
+fn unpack(c: u32) -> [f32; 4] {
+    c.to_le_bytes().map(|b| b as f32 / 255.0)
+}
+
+#[test]
+fn packet_and_scalar_marchers_give_the_same_segments() {
+    for ds in datasets() {
+        let packet = Marcher::with_options(ds.volume.clone(), &ds.tf, MarchOptions::default());
+        let scalar =
+            packet.with_transfer_function(&ds.tf, MarchOptions { kernel: MarchKernel::Scalar, ..packet.options() });
+        for k in [2, 4, 7] {
+            let req = request(&packet, 37, 20.0);
+            let a = packet.march_layers(&req.camera, k);
+            let b = scalar.march_layers(&req.camera, k);
+            assert_eq!(a.count, b.count, "{} K={k}: segment counts", ds.name);
+            assert_eq!(a.color, b.color, "{} K={k}: colors", ds.name);
+            let same = a.t.iter().zip(&b.t).all(|(x, y)| x.to_bits() == y.to_bits());
+            assert!(same, "{} K={k}: depths", ds.name);
+            assert!(a.count.iter().any(|&c| c > 1), "{} K={k}: no pixel has two segments", ds.name);
+            assert!(a.count.iter().all(|&c| c as u32 <= k));
+        }
+    }
+}
+
+#[test]
+fn one_layer_is_todays_frame_bit_for_bit() {
+    for ds in datasets() {
+        let m = Marcher::from_dataset(&ds);
+        let req = request(&m, 48, 30.0);
+        let (today, _) = m.render_frame(&req);
+        let (mut one, _) = m.render_frame_layers(&req, 1);
+        one.header.render_us = today.header.render_us;
+        assert!(one == today, "{}: K = 1 differs from today's frame", ds.name);
+        assert!(one.segments.is_empty());
+    }
+}
+
+#[test]
+fn layered_frames_are_valid_and_recomposite_to_the_ground_truth() {
+    for ds in datasets() {
+        let m = Marcher::from_dataset(&ds);
+        let req = request(&m, 40, -15.0);
+        let (frame, stats) = m.render_frame_layers(&req, 4);
+        assert_eq!(stats.samples, frame.samples.len());
+        validate(&frame.header, &frame.samples, &frame.colors, &frame.segments, frame.layers()).unwrap();
+        assert!(frame.layers() > 1, "{}", ds.name);
+        // Per pixel, the 8-bit segments composited front to back against the marcher's image.
+        let truth = m.render_image(&req.camera);
+        let lb = m.march_layers(&req.camera, 4);
+        let mut worst = 0u8;
+        for (i, &px) in truth.pixels.iter().enumerate() {
+            let c = composite(lb.pixel(i).map(|(_, c)| unpack(c)));
+            let shown = over_background(pack_color_f32(c), BACKGROUND);
+            for (a, b) in shown.to_le_bytes().into_iter().zip(px.to_le_bytes()) {
+                worst = worst.max(a.abs_diff(b));
+            }
+        }
+        assert!(worst <= 3, "{}: a recomposited channel is {worst} steps off", ds.name);
+    }
+}
+
+#[test]
+fn a_transparent_volume_has_no_segments_and_an_opaque_one_one_per_pixel() {
+    let vol = Arc::new(Volume::from_values("box", [16; 3], Vec3::ONE, vec![7.0; 16 * 16 * 16]).unwrap());
+    let cam = Camera::look_at(Vec3::new(8.0, 8.0, 40.0), Vec3::new(8.0, 8.0, 0.0), Vec3::Y, 20.0, 24, 24);
+    for kernel in [MarchKernel::Packet, MarchKernel::Scalar] {
+        let opts = MarchOptions { kernel, ..MarchOptions::default() };
+        let clear = TransferFunction::from_points("c", &[(0.0, [1.0, 0.5, 0.25])], &[(0.0, 0.0)]);
+        let lb = Marcher::with_options(vol.clone(), &clear, opts).march_layers(&cam, 8);
+        assert!(lb.count.iter().all(|&c| c == 0), "{kernel:?}: transparent volume made segments");
+        let solid = TransferFunction::from_points("o", &[(0.0, [1.0, 0.5, 0.25])], &[(0.0, 1.0)]);
+        let m = Marcher::with_options(vol.clone(), &solid, opts);
+        let lb = m.march_layers(&cam, 8);
+        let truth = m.march(&cam, Heuristic::Threshold);
+        for (i, &c) in lb.count.iter().enumerate() {
+            let hit = truth.t[i].is_finite();
+            assert_eq!(c, u8::from(hit), "{kernel:?}: pixel {i}");
+        }
+        assert!(lb.count.contains(&1));
+    }
+}
