@@ -260,7 +260,7 @@ pub fn serve(
     // The client side: what each request asks for, in the order they are sent.
     let mut predictor = Predictor::new();
     let mut observed = 0usize; // ticks the predictor has seen
-    // Per request once asked: the camera sent, the view it shows exactly, the guard offset.
+                               // Per request once asked: the camera sent, the view it shows exactly, the guard offset.
     type Asked = (Camera, Camera, (u32, u32));
     let mut asked: Vec<Option<Asked>> = vec![None; requests.len()];
     let mut ask = |i: usize, requests: &mut [Request], out: &[(FrameEvent, volwarp_core::wire::Frame)]| {
