@@ -6,7 +6,7 @@ use std::path::PathBuf;
 use volwarp_core::{Heuristic, RendererKind};
 
 /// The default guard band (`--guard`), chosen on the session results (`docs/results.md`).
-pub const DEFAULT_GUARD: f32 = 0.1;
+pub const DEFAULT_GUARD: f32 = 0.0;
 
 /// The window controls, printed by `--help`.
 pub const CONTROLS: &str = "\

@@ -124,7 +124,7 @@ pub struct MethodSpec {
 
 /// The method the window client runs by default and the sessions' `volwarp` alias, chosen on
 /// the session results (`docs/results.md`, "Warps that beat the stale frame").
-pub const DEFAULT_METHOD: &str = "splat-fill+predict+guard=0.1+adapt";
+pub const DEFAULT_METHOD: &str = "splat-fill+predict+adapt";
 
 /// The methods of `all`: what a send-image system shows, the 2.5D points of ZAL12, the exact
 /// sphere renderers, and volwarp's default.
