@@ -107,27 +107,56 @@ fn med3(a: i32, b: i32, c: i32) -> i32 {
     (a + b - c).clamp(a.min(b), a.max(b))
 }
 
-/// Per byte of two packed colors: `f(a, b)`.
+// Colors are predicted four channels at once, one per 16-bit lane of a `u64` ("spread" form:
+// channel k in bits 16k..16k+8). Lanes never carry into each other: every intermediate value
+// stays below 2^15.
+const LANE_LOW: u64 = 0x00ff_00ff_00ff_00ff;
+const LANE_HIGH: u64 = 0x8000_8000_8000_8000;
+const LANE_BIAS: u64 = 0x0100_0100_0100_0100;
+
+/// RGBA8 to spread form.
 #[inline(always)]
-fn per_channel2(a: u32, b: u32, f: impl Fn(i32, i32) -> i32) -> u32 {
-    let mut out = 0u32;
-    for k in 0..4 {
-        let s = 8 * k;
-        out |= (f((a >> s & 0xff) as i32, (b >> s & 0xff) as i32) as u32 & 0xff) << s;
-    }
-    out
+fn spread(c: u32) -> u64 {
+    let x = c as u64;
+    let x = (x | x << 16) & 0x0000_ffff_0000_ffff;
+    (x | x << 8) & LANE_LOW
 }
 
-/// Per byte of three packed colors: MED.
+/// Spread form (lanes < 256) back to RGBA8.
 #[inline(always)]
-fn med3_color(a: u32, b: u32, c: u32) -> u32 {
-    let mut out = 0u32;
-    for k in 0..4 {
-        let s = 8 * k;
-        let m = med3((a >> s & 0xff) as i32, (b >> s & 0xff) as i32, (c >> s & 0xff) as i32);
-        out |= (m as u32 & 0xff) << s;
-    }
-    out
+fn unspread(x: u64) -> u32 {
+    let x = (x | x >> 8) & 0x0000_ffff_0000_ffff;
+    (x | x >> 16) as u32
+}
+
+/// All-ones in the lanes where `a ≥ b`.
+#[inline(always)]
+fn lanes_ge(a: u64, b: u64) -> u64 {
+    ((((a | LANE_HIGH) - b) & LANE_HIGH) >> 15) * 0xffff
+}
+
+/// Per-lane minimum and maximum.
+#[inline(always)]
+fn lanes_min_max(a: u64, b: u64) -> (u64, u64) {
+    let ge = lanes_ge(a, b);
+    let x = (a ^ b) & ge;
+    (a ^ x, b ^ x)
+}
+
+/// Per-lane MED with all three neighbours present: `clamp(a + b − c, min, max)`.
+#[inline(always)]
+fn med3_lanes(a: u64, b: u64, c: u64) -> u64 {
+    let (lo, hi) = lanes_min_max(a, b);
+    let x = a + b + LANE_BIAS - c;
+    let (y, _) = lanes_min_max(x, hi + LANE_BIAS);
+    let (_, z) = lanes_min_max(y, lo + LANE_BIAS);
+    z - LANE_BIAS
+}
+
+/// Per-lane `(a + b) >> 1`.
+#[inline(always)]
+fn avg_lanes(a: u64, b: u64) -> u64 {
+    ((a + b) >> 1) & LANE_LOW
 }
 
 /// Bit `j` of the coverage mask.
@@ -143,10 +172,10 @@ struct Rows {
     w: u64,
     prev_d: Vec<u16>,
     cur_d: Vec<u16>,
-    prev_c: Vec<u32>,
-    cur_c: Vec<u32>,
+    prev_c: Vec<u64>,
+    cur_c: Vec<u64>,
     last_d: u16,
-    last_c: u32,
+    last_c: u64,
     last_idx: u64,
     y: u64,
     row_start: u64,
@@ -185,9 +214,10 @@ impl Rows {
         x
     }
 
-    /// The predicted depth code and color of pixel `idx` at column `x` of the current row.
+    /// The predicted depth code and color (spread form) of pixel `idx` at column `x` of the
+    /// current row.
     #[inline(always)]
-    fn predict(&self, mask: &[u8], idx: u64, x: u64) -> (u16, u32) {
+    fn predict(&self, mask: &[u8], idx: u64, x: u64) -> (u16, u64) {
         let xs = x as usize;
         let has_left = x > 0 && self.last_idx.wrapping_add(1) == idx;
         let has_up = self.y > 0 && bit(mask, idx - self.w);
@@ -197,9 +227,9 @@ impl Rows {
                 let (ad, ac) = (self.last_d, self.last_c);
                 if bit(mask, idx - self.w - 1) {
                     let (cd, cc) = (self.prev_d[xs - 1], self.prev_c[xs - 1]);
-                    (med3(ad as i32, bd as i32, cd as i32) as u16, med3_color(ac, bc, cc))
+                    (med3(ad as i32, bd as i32, cd as i32) as u16, med3_lanes(ac, bc, cc))
                 } else {
-                    (((ad as u32 + bd as u32) >> 1) as u16, per_channel2(ac, bc, |a, b| (a + b) >> 1))
+                    (((ad as u32 + bd as u32) >> 1) as u16, avg_lanes(ac, bc))
                 }
             } else {
                 (bd, bc)
@@ -212,9 +242,9 @@ impl Rows {
         }
     }
 
-    /// Records pixel `idx` (column `x`)'s true depth code and color.
+    /// Records pixel `idx` (column `x`)'s true depth code and color (spread form).
     #[inline(always)]
-    fn record(&mut self, idx: u64, x: u64, d: u16, c: u32) {
+    fn record(&mut self, idx: u64, x: u64, d: u16, c: u64) {
         self.cur_d[x as usize] = d;
         self.cur_c[x as usize] = c;
         self.last_d = d;
@@ -294,27 +324,33 @@ fn decode_predicted<'a>(
     samples.resize(n, 0);
     colors.clear();
     colors.resize(n, 0);
-    let mut rows = Rows::new(w);
+    // The covered pixels' indices first (the count was checked), so the loop below runs over
+    // `0..n` with every plane `n` long and no bounds to check.
     let mut i = 0usize;
     for (wi, chunk) in mask.chunks(8).enumerate() {
         let mut word = [0u8; 8];
         word[..chunk.len()].copy_from_slice(chunk);
         let mut bits = u64::from_le_bytes(word);
         while bits != 0 {
-            let idx = wi as u64 * 64 + bits.trailing_zeros() as u64;
+            samples[i] = wi as u64 * 64 + bits.trailing_zeros() as u64;
             bits &= bits - 1;
-            let x = rows.seek(idx);
-            let (pd, pc) = rows.predict(mask, idx, x);
-            let code = pd.wrapping_add(dlo[i] as u16 | (dhi[i] as u16) << 8);
-            let res = u32::from_le_bytes([cr[i], cg[i], cb[i], ca[i]]);
-            let c = per_channel2(pc, res, |p, r| p.wrapping_add(r));
-            colors[i] = c;
-            samples[i] = code as u64 | x << 16 | rows.y << 40;
-            rows.record(idx, x, code, c);
             i += 1;
         }
     }
-    debug_assert_eq!(i, n);
+    let mut rows = Rows::new(w);
+    let samples = &mut samples[..n];
+    let colors = &mut colors[..n];
+    for i in 0..n {
+        let idx = samples[i];
+        let x = rows.seek(idx);
+        let (pd, pc) = rows.predict(mask, idx, x);
+        let code = pd.wrapping_add(dlo[i] as u16 | (dhi[i] as u16) << 8);
+        let res = spread(u32::from_le_bytes([cr[i], cg[i], cb[i], ca[i]]));
+        let c = (pc + res) & LANE_LOW;
+        colors[i] = unspread(c);
+        samples[i] = code as u64 | x << 16 | rows.y << 40;
+        rows.record(idx, x, code, c);
+    }
     Ok((rlo, rhi))
 }
 
@@ -507,8 +543,8 @@ pub(crate) fn build_planes(frame: &Frame, opts: &EncodeOptions) -> Result<Planes
         let dres = codes[i].wrapping_sub(pd);
         dlo[i] = dres as u8;
         dhi[i] = (dres >> 8) as u8;
-        let c = frame.colors[i];
-        let r = per_channel2(c, pc, |a, b| a.wrapping_sub(b)).to_le_bytes();
+        let c = spread(frame.colors[i]);
+        let r = unspread((c + LANE_BIAS - pc) & LANE_LOW).to_le_bytes();
         cr[i] = r[0];
         cg[i] = r[1];
         cb[i] = r[2];
