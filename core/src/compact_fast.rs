@@ -74,26 +74,6 @@ impl Geo {
         let inv = 1.0 / sqrt(dx * dx + dy * dy + dz * dz);
         [dx * inv, dy * inv, dz * inv]
     }
-
-    /// `Quantizer::radius_code` without branches (the same value: 0 for a radius ≤ 0 or NaN,
-    /// else the rounded code clamped to `1..=RADIUS_MAX`).
-    #[inline(always)]
-    fn radius_code(&self, radius: f32) -> u32 {
-        let f = radius / self.radius_unit + 0.5;
-        let c = f.clamp(1.0, RADIUS_MAX as f32) as i32 as u32;
-        if radius > 0.0 {
-            c
-        } else {
-            0
-        }
-    }
-
-    /// The model's radius code of a sample at depth `t` whose ray has `dir · forward = dfwd`
-    /// (`Geometry::radius_code` of the reference).
-    #[inline(always)]
-    fn model_code(&self, model: &RadiusPrediction, t: f32, dfwd: f32) -> u32 {
-        self.radius_code(model.constant + model.per_depth * (t * dfwd))
-    }
 }
 
 #[inline(always)]
@@ -430,6 +410,127 @@ fn place_lanes<const L: usize>(geo: &Geo, params: &CompactParams, lo: &[u8], hi:
 
 // ---------------------------------------------------------------- encoding
 
+/// The reference's `Projector` (world point to pixel) with the dequantizer, as plain floats.
+struct Proj {
+    u: [f32; 3],
+    v: [f32; 3],
+    w: [f32; 3],
+    tan_x: f32,
+    tan_y: f32,
+    width: f32,
+    height: f32,
+    columns: u64,
+    dmin: [f32; 3],
+    dstep: [f32; 3],
+}
+
+impl Proj {
+    fn new(cam: &crate::camera::Camera, _geo: &Geo, deq: &Dequantizer) -> Proj {
+        let (u, v, w) = cam.basis();
+        let tan_y = crate::math::tan(cam.fov_y_deg.to_radians() * 0.5);
+        Proj {
+            u: u.to_array(),
+            v: v.to_array(),
+            w: w.to_array(),
+            tan_x: tan_y * cam.aspect(),
+            tan_y,
+            width: cam.width as f32,
+            height: cam.height as f32,
+            columns: cam.width as u64,
+            dmin: deq.min.to_array(),
+            dstep: deq.step.to_array(),
+        }
+    }
+
+    /// Pass 1 of [`build_planes`] for `L` samples: pixel index, depth along the pixel's ray
+    /// and `dir · forward` of each; whether every sample projected into the viewport, in front,
+    /// to a finite depth.
+    #[inline(always)]
+    fn project_lanes<const L: usize>(
+        &self,
+        geo: &Geo,
+        s: &[u64],
+        pix: &mut [u64],
+        depth: &mut [f32],
+        dfwd: &mut [f32],
+    ) -> bool {
+        let (s, pix, depth, dfwd) = (&s[..L], &mut pix[..L], &mut depth[..L], &mut dfwd[..L]);
+        let mut rel = [[0f32; L]; 3];
+        let mut xf = [0f32; L];
+        let mut yf = [0f32; L];
+        let mut inside = [false; L];
+        for l in 0..L {
+            let (qx, qy, qz) = crate::sample::unpack_position(s[l]);
+            let q = [qx as f32, qy as f32, qz as f32];
+            for k in 0..3 {
+                rel[k][l] = (self.dmin[k] + q[k] * self.dstep[k]) - geo.eye[k];
+            }
+            let r = [rel[0][l], rel[1][l], rel[2][l]];
+            let z = dot(r, self.w);
+            let sx = dot(r, self.u) / (z * self.tan_x);
+            let sy = dot(r, self.v) / (z * self.tan_y);
+            xf[l] = (sx + 1.0) * 0.5 * self.width;
+            yf[l] = (1.0 - sy) * 0.5 * self.height;
+            inside[l] = z > 1e-6 && xf[l] >= 0.0 && yf[l] >= 0.0 && xf[l] < self.width && yf[l] < self.height;
+        }
+        // Inside the viewport `as i32` truncates as the reference's `as u32`; outside, the
+        // value is never used (the reference encoder takes over).
+        let mut xi = [0i32; L];
+        let mut yi = [0i32; L];
+        for l in 0..L {
+            xi[l] = xf[l].max(0.0).min(self.width) as i32;
+            yi[l] = yf[l].max(0.0).min(self.height) as i32;
+        }
+        let mut ok = true;
+        for l in 0..L {
+            let d = geo.dir(xi[l] as u32, yi[l] as u32);
+            let r = [rel[0][l], rel[1][l], rel[2][l]];
+            let t = dot(r, d);
+            ok &= inside[l] & t.is_finite();
+            pix[l] = yi[l] as u64 * self.columns + xi[l] as u64;
+            depth[l] = t;
+            dfwd[l] = dot(d, geo.forward);
+        }
+        ok
+    }
+}
+
+/// Pass 2 of [`build_planes`] for `L` samples: depth codes and radius residuals (a map,
+/// written type by type so the compiler vectorizes it).
+#[inline(always)]
+#[allow(clippy::too_many_arguments)]
+fn code_lanes<const L: usize>(
+    geo: &Geo,
+    params: &CompactParams,
+    s: &[u64],
+    t: &[f32],
+    f: &[f32],
+    codes: &mut [u16],
+    rlo: &mut [u8],
+    rhi: &mut [u8],
+) {
+    let (s, t, f, codes, rlo, rhi) = (&s[..L], &t[..L], &f[..L], &mut codes[..L], &mut rlo[..L], &mut rhi[..L]);
+    // The reference's `clamp(0, 65535) as u32`: `max` first sends NaN to 0 as it does.
+    let mut ci = [0i32; L];
+    for l in 0..L {
+        ci[l] = ((t[l] - params.depth_min) / params.depth_step + 0.5).max(0.0).min(DEPTH_CODE_MAX as f32) as i32;
+    }
+    let model = params.radius;
+    let mut rf = [0f32; L];
+    for l in 0..L {
+        let td = depth_of(params, ci[l] as u32);
+        let r = model.constant + model.per_depth * (td * f[l]);
+        let x = r / geo.radius_unit + 0.5;
+        rf[l] = if r > 0.0 { x.max(1.0).min(RADIUS_MAX as f32) } else { 0.0 };
+    }
+    for l in 0..L {
+        codes[l] = ci[l] as u16;
+        let rres = crate::sample::radius_code(s[l]).wrapping_sub(rf[l] as i32 as u32) & RADIUS_MAX;
+        rlo[l] = rres as u8;
+        rhi[l] = (rres >> 8) as u8;
+    }
+}
+
 /// Splits a frame into the compact form's mask and residual planes: the fast path of
 /// `compact_frame::build_planes_reference` (the same planes, or the reference's error).
 #[inline(never)]
@@ -448,35 +549,23 @@ pub(crate) fn build_planes(frame: &Frame, opts: &EncodeOptions) -> Result<Planes
     let (w, hgt) = (cam.width, cam.height);
     let geo = Geo::new(h);
     let deq = Dequantizer::new(h.bounds, h.radius_unit);
-    let (u, v, wv) = cam.basis();
-    let (u, v, wv) = (u.to_array(), v.to_array(), wv.to_array());
-    let tan_y = crate::math::tan(cam.fov_y_deg.to_radians() * 0.5);
-    let tan_x = tan_y * cam.aspect();
-    let (wf, hf) = (w as f32, hgt as f32);
-    let (dmin, dstep) = (deq.min.to_array(), deq.step.to_array());
+    let proj = Proj::new(cam, &geo, &deq);
     // Pass 1, a branch-free map: each sample's pixel, depth along that pixel's ray and
     // `dir · forward` (the reference's `Projector::pixel` and `RayBasis::dir`, op for op).
     let mut pix = vec![0u64; n];
     let mut depth = vec![0f32; n];
     let mut dfwd = vec![0f32; n];
     let mut ok = true;
-    for (((&s, px), t), f) in frame.samples.iter().zip(&mut pix).zip(&mut depth).zip(&mut dfwd) {
-        let (qx, qy, qz) = crate::sample::unpack_position(s);
-        let p = [dmin[0] + qx as f32 * dstep[0], dmin[1] + qy as f32 * dstep[1], dmin[2] + qz as f32 * dstep[2]];
-        let rel = [p[0] - geo.eye[0], p[1] - geo.eye[1], p[2] - geo.eye[2]];
-        let z = dot(rel, wv);
-        let sx = dot(rel, u) / (z * tan_x);
-        let sy = dot(rel, v) / (z * tan_y);
-        let xf = (sx + 1.0) * 0.5 * wf;
-        let yf = (1.0 - sy) * 0.5 * hf;
-        let inside = z > 1e-6 && xf >= 0.0 && yf >= 0.0 && xf < wf && yf < hf;
-        let (x, y) = (xf as u32, yf as u32);
-        let d = geo.dir(x, y);
-        let tt = dot(rel, d);
-        ok &= inside & tt.is_finite();
-        *px = y as u64 * w as u64 + x as u64;
-        *t = tt;
-        *f = dot(d, geo.forward);
+    let mut s = frame.samples.chunks_exact(LANES);
+    let mut px = pix.chunks_exact_mut(LANES);
+    let mut t = depth.chunks_exact_mut(LANES);
+    let mut f = dfwd.chunks_exact_mut(LANES);
+    for (((s, px), t), f) in (&mut s).zip(&mut px).zip(&mut t).zip(&mut f) {
+        ok &= proj.project_lanes::<LANES>(&geo, s, px, t, f);
+    }
+    let (s, px, t, f) = (s.remainder(), px.into_remainder(), t.into_remainder(), f.into_remainder());
+    for k in 0..s.len() {
+        ok &= proj.project_lanes::<1>(&geo, &s[k..], &mut px[k..], &mut t[k..], &mut f[k..]);
     }
     // Strictly increasing pixels (one sample per pixel, in pixel order).
     ok &= pix.windows(2).all(|p| p[0] < p[1]);
@@ -522,14 +611,22 @@ pub(crate) fn build_planes(frame: &Frame, opts: &EncodeOptions) -> Result<Planes
     let (cr, rest) = rest.split_at_mut(n);
     let (cg, rest) = rest.split_at_mut(n);
     let (cb, ca) = rest.split_at_mut(n);
-    let inv_max = DEPTH_CODE_MAX as f32;
-    for i in 0..n {
-        let code = ((depth[i] - t_lo) / step + 0.5).clamp(0.0, inv_max) as u32;
-        codes[i] = code as u16;
-        let rpred = geo.model_code(&params.radius, depth_of(&params, code), dfwd[i]);
-        let rres = crate::sample::radius_code(frame.samples[i]).wrapping_sub(rpred) & RADIUS_MAX;
-        rlo[i] = rres as u8;
-        rhi[i] = (rres >> 8) as u8;
+    {
+        let mut it = frame
+            .samples
+            .chunks_exact(LANES)
+            .zip(depth.chunks_exact(LANES))
+            .zip(dfwd.chunks_exact(LANES))
+            .zip(codes.chunks_exact_mut(LANES))
+            .zip(rlo.chunks_exact_mut(LANES).zip(rhi.chunks_exact_mut(LANES)));
+        for ((((s, t), f), c), (lo, hi)) in &mut it {
+            code_lanes::<LANES>(&geo, &params, s, t, f, c, lo, hi);
+        }
+        let k = n - n % LANES;
+        for i in k..n {
+            let (lo, hi) = (&mut rlo[i..], &mut rhi[i..]);
+            code_lanes::<1>(&geo, &params, &frame.samples[i..], &depth[i..], &dfwd[i..], &mut codes[i..], lo, hi);
+        }
     }
     for &idx in &pix {
         mask[(idx >> 3) as usize] |= 1 << (idx & 7);

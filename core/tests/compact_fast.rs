@@ -66,7 +66,7 @@ fn random_frame(seed: u64, w: u32, h: u32, hole: f32) -> (Frame, RadiusPredictio
                 t0 = t0.max(a.min(b));
                 t1 = t1.min(a.max(b));
             }
-            if !(t0 < t1) {
+            if t0.partial_cmp(&t1) != Some(std::cmp::Ordering::Less) {
                 continue;
             }
             let smooth = 0.5 + (x as f32 * 0.05).sin() * 0.2 + (y as f32 * 0.03).cos() * 0.15;
