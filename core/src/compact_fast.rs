@@ -300,26 +300,24 @@ fn decode_predicted<'a>(
     if rhi.iter().fold(0u8, |m, &b| m | b) > (RADIUS_MAX >> 8) as u8 {
         return Err(WireError::Compact(CompactError::BadRadiusResidual));
     }
+    // Filled by pushing, not zeroed first (the count was checked: exactly n pushes each).
     samples.clear();
-    samples.resize(n, 0);
+    samples.reserve_exact(n);
     colors.clear();
-    colors.resize(n, 0);
-    // The covered pixels' indices first (the count was checked), so the loop below runs over
-    // `0..n` with every plane `n` long and no bounds to check.
-    let mut i = 0usize;
+    colors.reserve_exact(n);
+    // The covered pixels' indices first, so the loop below runs over `0..n` with every plane
+    // `n` long and no bounds to check.
     for (wi, chunk) in mask.chunks(8).enumerate() {
         let mut word = [0u8; 8];
         word[..chunk.len()].copy_from_slice(chunk);
         let mut bits = u64::from_le_bytes(word);
         while bits != 0 {
-            samples[i] = wi as u64 * 64 + bits.trailing_zeros() as u64;
+            samples.push(wi as u64 * 64 + bits.trailing_zeros() as u64);
             bits &= bits - 1;
-            i += 1;
         }
     }
     let mut rows = Rows::new(w);
     let samples = &mut samples[..n];
-    let colors = &mut colors[..n];
     for i in 0..n {
         let idx = samples[i];
         let x = rows.seek(idx);
@@ -327,7 +325,7 @@ fn decode_predicted<'a>(
         let code = pd.wrapping_add(dlo[i] as u16 | (dhi[i] as u16) << 8);
         let res = spread(u32::from_le_bytes([cr[i], cg[i], cb[i], ca[i]]));
         let c = (pc + res) & LANE_LOW;
-        colors[i] = unspread(c);
+        colors.push(unspread(c));
         samples[i] = code as u64 | x << 16 | rows.y << 40;
         rows.record(idx, x, code, c);
     }

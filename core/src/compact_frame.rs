@@ -804,9 +804,8 @@ mod codec {
         if params.coder != Coder::Zstd {
             return decompress_ruzstd(coded, params);
         }
-        let mut body = vec![0u8; raw_len];
         if coded.is_empty() {
-            return if raw_len == 0 { Ok(body) } else { Err(corrupt) };
+            return if raw_len == 0 { Ok(Vec::new()) } else { Err(corrupt) };
         }
         if zstd_safe::find_frame_compressed_size(coded) != Ok(coded.len()) {
             return Err(corrupt);
@@ -817,7 +816,9 @@ mod codec {
             Err(_) => return Err(corrupt),
         }
         let mut dctx = zstd_safe::DCtx::try_create().ok_or(corrupt)?;
-        match dctx.decompress(&mut body[..], coded) {
+        // zstd writes into the spare capacity (nothing is zeroed first) and sets the length.
+        let mut body = Vec::with_capacity(raw_len);
+        match dctx.decompress(&mut body, coded) {
             Ok(written) if written == raw_len => Ok(body),
             _ => Err(corrupt),
         }
