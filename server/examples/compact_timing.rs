@@ -77,11 +77,21 @@ fn main() {
         raw.len()
     );
     println!("on-CPU ms (one thread), median of {runs}:");
-    let row = |name: &str, ms: f64| println!("  {name:<44} {ms:8.2} ms  {:7.1} M samples/s", ms_per(ms));
+    let row = |name: &str, ms: f64| println!("  {name:<52} {ms:8.2} ms  {:7.1} M samples/s", ms_per(ms));
     row("planes (build_planes, fast)", median_ms(runs, || compact_frame::build_planes(&frame, &opts)));
     row("planes (build_planes_reference)", median_ms(runs, || compact_frame::build_planes_reference(&frame, &opts)));
     row("C zstd level 1 compress", median_ms(runs, || zstd::bulk::compress(&planes.body, ZSTD_LEVEL)));
     row("lz4_flex compress", median_ms(runs, || lz4_flex::compress(&planes.body)));
+    // Other zstd levels: size, compression and (C) decompression time.
+    for level in [-4, -1, 3] {
+        let z = zstd::bulk::compress(&planes.body, level).expect("zstd");
+        let bps = (HEADER_LEN + compact_frame::COMPACT_FIXED_LEN + z.len()) as f64 / n as f64;
+        row(
+            &format!("C zstd level {level} compress ({} B, {bps:.3} B/sample)", z.len()),
+            median_ms(runs, || zstd::bulk::compress(&planes.body, level)),
+        );
+        row(&format!("C zstd level {level} decompress"), median_ms(runs, || compact_frame::decompress_c(&z, &params)));
+    }
     row("encode total (encode_compact)", median_ms(runs, || encode_compact(&frame, &opts, ZSTD_LEVEL)));
     row("ruzstd decompress", median_ms(runs, || compact_frame::decompress_ruzstd(coded, &params)));
     row("decompress (the build's: C zstd with std)", median_ms(runs, || compact_frame::decompress(coded, &params)));
