@@ -1,7 +1,9 @@
 //! The fast paths of the compact frame codec (issue 16, speed): [`build_planes`] and
 //! [`decode_body`] give exactly what `compact_frame::build_planes_reference` and
 //! `compact_frame::decode_body_reference` give (the same body bytes, the same decoded frame,
-//! the same errors; tested in `core/tests/compact_frame.rs`), in a fraction of the time.
+//! the same errors; tested in `core/tests/compact_fast.rs` on random frames and bodies and in
+//! `server/tests/compact_fast.rs` on the marcher's), in about half the time or less
+//! (`docs/perf.md`, "Issue 16 (speed)").
 //!
 //! What makes them fast, and why the result cannot differ:
 //!
@@ -10,7 +12,8 @@
 //!   bits `idx − w` and `idx − w − 1`), and their values from two row buffers, so no per-column
 //!   tags or saved cells are kept. The rule is the one of `docs/wire-format.md`; "left only" and
 //!   "no neighbour" both predict the previously visited pixel's values, and a full MED is
-//!   `clamp(a + b − c, min(a, b), max(a, b))` (the LOCO-I identity), computed without branches.
+//!   `clamp(a + b − c, min(a, b), max(a, b))` (the LOCO-I identity), computed without branches,
+//!   for the four color channels at once in the 16-bit lanes of a `u64`.
 //! * **Two passes.** The sequential part (prediction, which depends on the previous pixel) only
 //!   produces depth codes and colors; the geometry (ray direction with its square root, the
 //!   position along the ray, quantization, the radius model) runs afterwards as an independent
@@ -32,8 +35,8 @@ use crate::wire::{Frame, FrameHeader, WireError};
 use alloc::vec;
 use alloc::vec::Vec;
 
-/// The geometry of one frame as plain floats: the ray basis, the view direction, the
-/// quantizer and the depth and radius parameters.
+/// The geometry of one frame as plain floats: the ray basis, the view direction and the
+/// quantizer.
 #[derive(Clone, Copy)]
 struct Geo {
     corner: [f32; 3],
@@ -423,7 +426,7 @@ struct Proj {
 }
 
 impl Proj {
-    fn new(cam: &crate::camera::Camera, _geo: &Geo, deq: &Dequantizer) -> Proj {
+    fn new(cam: &crate::camera::Camera, deq: &Dequantizer) -> Proj {
         let (u, v, w) = cam.basis();
         let tan_y = crate::math::tan(cam.fov_y_deg.to_radians() * 0.5);
         Proj {
@@ -547,7 +550,7 @@ pub(crate) fn build_planes(frame: &Frame, opts: &EncodeOptions) -> Result<Planes
     let (w, hgt) = (cam.width, cam.height);
     let geo = Geo::new(h);
     let deq = Dequantizer::new(h.bounds, h.radius_unit);
-    let proj = Proj::new(cam, &geo, &deq);
+    let proj = Proj::new(cam, &deq);
     // Pass 1, a branch-free map: each sample's pixel, depth along that pixel's ray and
     // `dir · forward` (the reference's `Projector::pixel` and `RayBasis::dir`, op for op).
     let mut pix = vec![0u64; n];
