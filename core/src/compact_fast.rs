@@ -79,6 +79,18 @@ impl Geo {
     }
 }
 
+/// `v as u32` for `v` in `[0, 2²³)` (callers clamp first), in float operations the compiler
+/// vectorizes (Rust's saturating `as` stays scalar on SSE2): `(v + 2²³) − 2²³` is `v` rounded
+/// to the nearest integer, one less if that rounded up, and the integer is then the low
+/// mantissa bits of itself + 2²³. Exact for every such `v` (tested against `as`).
+#[inline(always)]
+fn trunc_small(v: f32) -> u32 {
+    const M: f32 = 8_388_608.0;
+    let r = (v + M) - M;
+    let t = if r > v { r - 1.0 } else { r };
+    (t + M).to_bits() & 0x7f_ffff
+}
+
 #[inline(always)]
 fn dot(a: [f32; 3], b: [f32; 3]) -> f32 {
     a[0] * b[0] + a[1] * b[1] + a[2] * b[2]
@@ -392,16 +404,16 @@ fn place_lanes<const L: usize>(geo: &Geo, params: &CompactParams, lo: &[u8], hi:
         let f = r / geo.radius_unit + 0.5;
         rf[l] = if r > 0.0 { f.max(1.0).min(RADIUS_MAX as f32) } else { 0.0 };
     }
-    let mut qi = [[0i32; L]; 3];
-    let mut ri = [0i32; L];
+    let mut qi = [[0u32; L]; 3];
+    let mut ri = [0u32; L];
     for l in 0..L {
         for k in 0..3 {
-            qi[k][l] = qf[k][l] as i32;
+            qi[k][l] = trunc_small(qf[k][l]);
         }
-        ri[l] = rf[l] as i32;
+        ri[l] = trunc_small(rf[l]);
     }
     for l in 0..L {
-        let rcode = (ri[l] as u32).wrapping_add(lo[l] as u32 | (hi[l] as u32) << 8) & RADIUS_MAX;
+        let rcode = ri[l].wrapping_add(lo[l] as u32 | (hi[l] as u32) << 8) & RADIUS_MAX;
         s[l] = qi[0][l] as u64
             | (qi[1][l] as u64) << POS_BITS
             | (qi[2][l] as u64) << (2 * POS_BITS)
@@ -512,21 +524,21 @@ fn code_lanes<const L: usize>(
 ) {
     let (s, t, f, codes, rlo, rhi) = (&s[..L], &t[..L], &f[..L], &mut codes[..L], &mut rlo[..L], &mut rhi[..L]);
     // The reference's `clamp(0, 65535) as u32`: `max` first sends NaN to 0 as it does.
-    let mut ci = [0i32; L];
+    let mut ci = [0u32; L];
     for l in 0..L {
-        ci[l] = ((t[l] - params.depth_min) / params.depth_step + 0.5).max(0.0).min(DEPTH_CODE_MAX as f32) as i32;
+        ci[l] = trunc_small(((t[l] - params.depth_min) / params.depth_step + 0.5).max(0.0).min(DEPTH_CODE_MAX as f32));
     }
     let model = params.radius;
     let mut rf = [0f32; L];
     for l in 0..L {
-        let td = depth_of(params, ci[l] as u32);
+        let td = depth_of(params, ci[l]);
         let r = model.constant + model.per_depth * (td * f[l]);
         let x = r / geo.radius_unit + 0.5;
         rf[l] = if r > 0.0 { x.max(1.0).min(RADIUS_MAX as f32) } else { 0.0 };
     }
     for l in 0..L {
         codes[l] = ci[l] as u16;
-        let rres = crate::sample::radius_code(s[l]).wrapping_sub(rf[l] as i32 as u32) & RADIUS_MAX;
+        let rres = crate::sample::radius_code(s[l]).wrapping_sub(trunc_small(rf[l])) & RADIUS_MAX;
         rlo[l] = rres as u8;
         rhi[l] = (rres >> 8) as u8;
     }
@@ -650,4 +662,30 @@ pub(crate) fn build_planes(frame: &Frame, opts: &EncodeOptions) -> Result<Planes
         rows.record(idx, x, codes[i], c);
     }
     Ok(Planes { params, body })
+}
+
+#[cfg(test)]
+mod tests {
+    use super::trunc_small;
+
+    #[test]
+    fn trunc_small_is_as_u32_below_2_pow_23() {
+        let mut v = 0.0f32;
+        while v < 300_000.0 {
+            for x in [v, f32::from_bits(v.to_bits() + 1), v + 0.5, v + 0.25, v + 0.75, v + 0.999] {
+                assert_eq!(trunc_small(x), x as u32, "{x}");
+            }
+            v += 1.0;
+        }
+        for x in [0.0, 1e-30, 0.49999997, 0.5, 0.50000006, 8_388_606.5, 8_388_607.0] {
+            assert_eq!(trunc_small(x), x as u32, "{x}");
+        }
+        // Every float in [0, 2^23) with a fractional part near .5 or .0, across all exponents.
+        let mut bits = 0u32;
+        while f32::from_bits(bits) < 8_388_608.0 {
+            let x = f32::from_bits(bits);
+            assert_eq!(trunc_small(x), x as u32, "{x}");
+            bits += 4093;
+        }
+    }
 }
