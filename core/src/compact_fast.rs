@@ -262,7 +262,7 @@ pub(crate) fn decode_body(header: &FrameHeader, params: &CompactParams, body: &[
     let mut colors = Vec::new();
     let (rlo, rhi) = decode_predicted(header, body, &mut samples, &mut colors)?;
     place(header, params, rlo, rhi, &mut samples);
-    Ok(Frame { header: *header, samples, colors })
+    Ok(Frame { header: *header, samples, colors, segments: Vec::new() })
 }
 
 /// The sequential part of decoding: checks the mask and the radius residuals, undoes the

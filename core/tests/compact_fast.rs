@@ -93,7 +93,7 @@ fn random_frame(seed: u64, w: u32, h: u32, hole: f32) -> (Frame, RadiusPredictio
         render_us: 5,
         count: samples.len() as u32,
     };
-    (Frame { header, samples, colors }, RadiusPrediction { constant: 0.0, per_depth })
+    (Frame { header, samples, colors, segments: Vec::new() }, RadiusPrediction { constant: 0.0, per_depth })
 }
 
 /// The fast encoder gives the reference's planes, and the fast decoder the reference's frame
