@@ -214,15 +214,17 @@ pub fn position_bound(header: &FrameHeader, params: &CompactParams) -> f32 {
 
 /// The depth of a code.
 #[inline(always)]
-fn depth_of(params: &CompactParams, code: u32) -> f32 {
+pub(crate) fn depth_of(params: &CompactParams, code: u32) -> f32 {
     params.depth_min + code as f32 * params.depth_step
 }
 
 /// The most bytes one `wire::read_message` may allocate under `limits` when the message is a
 /// CompactFrame: the payload, the decompressed body (mask and 8 bytes per sample), the
-/// frame's 12 bytes per sample, a row of predictor state, and ruzstd's buffers (a window of at
-/// most max(body, [`MIN_ZSTD_WINDOW`]), one [`DECODE_STEP`], one 128 KiB block and its tables).
-/// The fuzz targets check every decode against it.
+/// frame's 12 bytes per sample, two rows of predictor state (20 bytes per column), and
+/// ruzstd's buffers (a window of at most max(body, [`MIN_ZSTD_WINDOW`]), one [`DECODE_STEP`],
+/// one 128 KiB block and its tables; with the feature `zstd-c` the C library instead holds a
+/// fixed ~160 KiB context, outside Rust's allocator). The fuzz targets check every decode
+/// against it.
 pub fn decode_alloc_bound(limits: &Limits) -> u64 {
     let samples = limits.max_samples as u64;
     let vp = limits.max_viewport as u64;
@@ -230,7 +232,7 @@ pub fn decode_alloc_bound(limits: &Limits) -> u64 {
     limits.max_payload as u64
         + body
         + 12 * samples
-        + 16 * vp
+        + 24 * vp
         + body.max(MIN_ZSTD_WINDOW)
         + DECODE_STEP as u64
         + (256 << 10)
@@ -243,7 +245,7 @@ pub fn mask_len(width: u32, height: u32) -> u64 {
 }
 
 #[cfg(feature = "alloc")]
-fn params_valid(p: &CompactParams) -> bool {
+pub(crate) fn params_valid(p: &CompactParams) -> bool {
     p.depth_min.is_finite()
         && p.depth_step > 0.0
         && p.depth_step.is_finite()
@@ -572,7 +574,15 @@ mod codec {
 
     /// Splits a frame into the compact form's mask and residual planes (everything but the
     /// entropy coding). Samples must be one per pixel of the frame's camera, in pixel order.
+    /// The fast path (`core/src/compact_fast.rs`): the same planes, or the same error, as
+    /// [`build_planes_reference`].
     pub fn build_planes(frame: &Frame, opts: &EncodeOptions) -> Result<Planes, EncodeError> {
+        crate::compact_fast::build_planes(frame, opts)
+    }
+
+    /// The simple scalar form of [`build_planes`], one sample at a time (the oracle the fast
+    /// path is tested against).
+    pub fn build_planes_reference(frame: &Frame, opts: &EncodeOptions) -> Result<Planes, EncodeError> {
         let h = &frame.header;
         let cam = &h.camera;
         let n = frame.samples.len();
@@ -681,6 +691,14 @@ mod codec {
         }
     }
 
+    /// Entropy codes a body as one zstd frame with the C zstd library at `level` (what
+    /// `volwarp-server` sends: about 10× ruzstd's encoder's speed at a better ratio).
+    #[cfg(feature = "zstd-c")]
+    pub fn compress_c(body: &[u8], level: i32) -> Vec<u8> {
+        // Only allocation failure can make the library fail on a buffer of its own bound.
+        zstd::bulk::compress(body, level).unwrap_or_else(|_| compress(body, Coder::Zstd))
+    }
+
     /// The whole CompactFrame message (12-byte header and payload) from the frame's header, the
     /// parameters and the entropy-coded body.
     pub fn assemble(header: &FrameHeader, params: &CompactParams, coded: &[u8]) -> Result<Vec<u8>, EncodeError> {
@@ -745,7 +763,7 @@ mod codec {
     /// Decodes a CompactFrame payload (the bytes after the 12-byte message header) into an
     /// ordinary frame. Allocates at most the payload's decompressed length (`⌈w·h/8⌉ + 8·count`,
     /// both bounded by the validated header and `limits`), the 12 bytes per sample of the result,
-    /// and a row of predictor state (`12 · width` bytes).
+    /// and two rows of predictor state (`20 · width` bytes).
     pub fn decode_payload(payload: &[u8], limits: &Limits) -> Result<Frame, WireError> {
         let len = payload.len() as u32;
         let bad_len = WireError::BadLength { ty: MsgType::CompactFrame, len };
@@ -761,8 +779,56 @@ mod codec {
         decode_body(&header, &params, &body)
     }
 
-    /// Undoes the entropy coding into a buffer of exactly `params.raw_len` bytes.
+    /// Undoes the entropy coding into a buffer of exactly `params.raw_len` bytes: with the C
+    /// zstd library where the feature `zstd-c` is on (std clients; [`decompress_c`]), else with
+    /// ruzstd ([`decompress_ruzstd`]). Both give the same body for any frame both accept.
     pub fn decompress(coded: &[u8], params: &CompactParams) -> Result<Vec<u8>, WireError> {
+        #[cfg(feature = "zstd-c")]
+        {
+            decompress_c(coded, params)
+        }
+        #[cfg(not(feature = "zstd-c"))]
+        {
+            decompress_ruzstd(coded, params)
+        }
+    }
+
+    /// [`decompress`] with the C zstd library: one zstd frame that fills a buffer of exactly
+    /// `params.raw_len` bytes, decoded in one call straight into it (no window buffer; the
+    /// library's own state is a fixed ~160 KiB decompression context, outside Rust's
+    /// allocator). Anything but exactly one frame whose stated content size (if any) is the
+    /// body length is refused before decoding.
+    #[cfg(feature = "zstd-c")]
+    pub fn decompress_c(coded: &[u8], params: &CompactParams) -> Result<Vec<u8>, WireError> {
+        use zstd::zstd_safe;
+        let raw_len = params.raw_len as usize;
+        let corrupt = WireError::Compact(CompactError::Corrupt);
+        if params.coder != Coder::Zstd {
+            return decompress_ruzstd(coded, params);
+        }
+        if coded.is_empty() {
+            return if raw_len == 0 { Ok(Vec::new()) } else { Err(corrupt) };
+        }
+        if zstd_safe::find_frame_compressed_size(coded) != Ok(coded.len()) {
+            return Err(corrupt);
+        }
+        match zstd_safe::get_frame_content_size(coded) {
+            Ok(Some(size)) if size != raw_len as u64 => return Err(corrupt),
+            Ok(_) => {}
+            Err(_) => return Err(corrupt),
+        }
+        let mut dctx = zstd_safe::DCtx::try_create().ok_or(corrupt)?;
+        // zstd writes into the spare capacity (nothing is zeroed first) and sets the length.
+        let mut body = Vec::with_capacity(raw_len);
+        match dctx.decompress(&mut body, coded) {
+            Ok(written) if written == raw_len => Ok(body),
+            _ => Err(corrupt),
+        }
+    }
+
+    /// [`decompress`] with ruzstd (pure Rust, no_std + alloc): decoded a step at a time into a
+    /// buffer of exactly `params.raw_len` bytes, the window capped at the body's length.
+    pub fn decompress_ruzstd(coded: &[u8], params: &CompactParams) -> Result<Vec<u8>, WireError> {
         let raw_len = params.raw_len as usize;
         let corrupt = WireError::Compact(CompactError::Corrupt);
         match params.coder {
@@ -809,8 +875,20 @@ mod codec {
         }
     }
 
-    /// Rebuilds the frame from the header, the parameters and the decompressed body.
+    /// Rebuilds the frame from the header, the parameters and the decompressed body. The fast
+    /// path (`core/src/compact_fast.rs`): the same frame, or the same error, as
+    /// [`decode_body_reference`].
     pub fn decode_body(header: &FrameHeader, params: &CompactParams, body: &[u8]) -> Result<Frame, WireError> {
+        crate::compact_fast::decode_body(header, params, body)
+    }
+
+    /// The simple scalar form of [`decode_body`], one sample at a time (the oracle the fast
+    /// path is tested against).
+    pub fn decode_body_reference(
+        header: &FrameHeader,
+        params: &CompactParams,
+        body: &[u8],
+    ) -> Result<Frame, WireError> {
         let n = header.count as usize;
         let (w, h) = (header.camera.width, header.camera.height);
         let pixels = w as u64 * h as u64;

@@ -65,6 +65,8 @@ pub mod traversal;
 pub mod warp_radius;
 pub mod wire;
 
+#[cfg(feature = "alloc")]
+mod compact_fast;
 mod math;
 
 pub use camera::{Camera, CameraError, Ray, RayBasis};

@@ -79,8 +79,8 @@ impl Bounds {
 /// Turns positions and radii into packed samples for one frame.
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct Quantizer {
-    min: Vec3,
-    scale: Vec3,
+    pub(crate) min: Vec3,
+    pub(crate) scale: Vec3,
     radius_unit: f32,
 }
 

@@ -1,9 +1,10 @@
 //! `cargo bench -p volwarp-server --bench compact`: the compact frame encoding (issue 16) of a
-//! 1024² MRI frame (the framing of the `server` bench, about 620k samples), on one thread:
-//! building the residual planes, entropy coding them (C zstd level 1, the server's; ruzstd's
-//! pure-Rust encoder, core's default; lz4_flex), and decoding on the client (ruzstd
-//! decompression + reconstruction, and the whole `decode_payload`), against the 12-byte
-//! form's decode.
+//! 1024² MRI frame (the framing of the `server` bench, about 630k samples), on one thread:
+//! building the residual planes (the fast path and its scalar reference), entropy coding them
+//! (C zstd level 1, the server's; ruzstd's pure-Rust encoder, core's default; lz4_flex), and
+//! decoding on the client (C zstd decompression, what std clients use, and ruzstd, the no_std
+//! one; reconstruction, fast and reference; the whole `decode_payload`), against the 12-byte
+//! form's decode. `--example compact_timing` measures the same steps in on-CPU time.
 //!
 //! Skipped with a message when the shared data set is absent.
 
@@ -53,21 +54,33 @@ fn benches(c: &mut Criterion) {
         g.bench_function("encode_planes", |b| {
             b.iter(|| compact_frame::build_planes(black_box(&frame), &opts).unwrap())
         });
+        g.bench_function("encode_planes_reference", |b| {
+            b.iter(|| compact_frame::build_planes_reference(black_box(&frame), &opts).unwrap())
+        });
         g.bench_function("encode_zstd1", |b| b.iter(|| zstd::bulk::compress(black_box(&planes.body), 1).unwrap()));
         g.bench_function("encode_total_zstd1", |b| b.iter(|| encode_compact(black_box(&frame), &opts, 1).unwrap()));
         g.bench_function("encode_ruzstd", |b| b.iter(|| compact_frame::compress(black_box(&planes.body), Coder::Zstd)));
         g.bench_function("encode_lz4_flex", |b| b.iter(|| lz4_flex::compress(black_box(&planes.body))));
         let params = planes.params;
-        g.bench_function("decode_ruzstd", |b| b.iter(|| compact_frame::decompress(black_box(&ruz), &params).unwrap()));
+        g.bench_function("decode_ruzstd", |b| {
+            b.iter(|| compact_frame::decompress_ruzstd(black_box(&ruz), &params).unwrap())
+        });
         g.bench_function("decode_ruzstd_of_zstd1", |b| {
             let coded = &bytes[HEADER_LEN + compact_frame::COMPACT_FIXED_LEN..];
-            b.iter(|| compact_frame::decompress(black_box(coded), &params).unwrap())
+            b.iter(|| compact_frame::decompress_ruzstd(black_box(coded), &params).unwrap())
+        });
+        g.bench_function("decode_czstd_of_zstd1", |b| {
+            let coded = &bytes[HEADER_LEN + compact_frame::COMPACT_FIXED_LEN..];
+            b.iter(|| compact_frame::decompress_c(black_box(coded), &params).unwrap())
         });
         g.bench_function("decode_lz4_flex", |b| {
             b.iter(|| lz4_flex::decompress(black_box(&lz4), planes.body.len()).unwrap())
         });
         g.bench_function("decode_body", |b| {
             b.iter(|| compact_frame::decode_body(black_box(&frame.header), &params, &planes.body).unwrap())
+        });
+        g.bench_function("decode_body_reference", |b| {
+            b.iter(|| compact_frame::decode_body_reference(black_box(&frame.header), &params, &planes.body).unwrap())
         });
         let lim = Limits::default();
         g.bench_function("decode_total", |b| {

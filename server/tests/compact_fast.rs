@@ -1,0 +1,61 @@
+//! The compact codec's fast paths on real frames of the marcher (issue 16, speed): the fast
+//! encoder gives the scalar reference's planes byte for byte, the fast reconstruction the
+//! reference's frame bit for bit, and C zstd (what std clients decompress with) the same body as
+//! ruzstd (no_std clients), on the bundled CT head and, where `../shared/data` has it, the MRI.
+
+use volwarp_core::compact_frame::{
+    build_planes, build_planes_reference, decode_body, decode_body_reference, decode_payload, decompress_c,
+    decompress_ruzstd, read_params, COMPACT_FIXED_LEN,
+};
+use volwarp_core::wire::{CameraRequest, FrameHeader, Limits, HEADER_LEN};
+use volwarp_core::Heuristic;
+use volwarp_server::encoding::{encode_compact, encode_options, ZSTD_LEVEL};
+use volwarp_server::{Dataset, Marcher};
+
+const MRI: &str = concat!(env!("CARGO_MANIFEST_DIR"), "/../../shared/data/mri_colin27_181x217x181_uint8.raw");
+
+fn check(m: &Marcher, name: &str) {
+    let mut checked = 0;
+    for (size, yaw, pitch, dolly, heuristic) in [
+        (256, 0.0, 0.0, 1.0, Heuristic::Threshold),
+        (320, 35.0, -20.0, 0.7, Heuristic::RelThreshold),
+        (200, 170.0, 40.0, 0.5, Heuristic::Threshold),
+    ] {
+        let camera = m.default_camera(size, size * 3 / 4).orbit(yaw, pitch).dolly(dolly);
+        let req = CameraRequest { seq: 1, camera, heuristic, radius_scale: 1.0 };
+        let (frame, _) = m.render_frame(&req);
+        assert!(frame.samples.len() > 1000, "{name}: a real frame");
+        let opts = encode_options(m, &req);
+        let fast = build_planes(&frame, &opts);
+        assert_eq!(fast, build_planes_reference(&frame, &opts), "{name} {size} {yaw}: encoders differ");
+        let Ok(planes) = fast else { continue };
+        let header = FrameHeader { count: frame.samples.len() as u32, ..frame.header };
+        let a = decode_body(&header, &planes.params, &planes.body).unwrap();
+        let b = decode_body_reference(&header, &planes.params, &planes.body).unwrap();
+        assert!(a == b, "{name} {size} {yaw}: decoders differ");
+        assert_eq!(a.colors, frame.colors);
+        // The server's message: both decompressors give the body, and the whole decode the frame.
+        let bytes = encode_compact(&frame, &opts, ZSTD_LEVEL).unwrap();
+        let (_, params) = read_params(&bytes[HEADER_LEN..], &Limits::default()).unwrap();
+        let coded = &bytes[HEADER_LEN + COMPACT_FIXED_LEN..];
+        assert_eq!(decompress_c(coded, &params).unwrap(), planes.body);
+        assert_eq!(decompress_ruzstd(coded, &params).unwrap(), planes.body);
+        assert!(decode_payload(&bytes[HEADER_LEN..], &Limits::default()).unwrap() == a);
+        checked += 1;
+    }
+    assert!(checked >= 2, "{name}: most real frames fit the compact form");
+}
+
+#[test]
+fn fast_codec_equals_the_reference_on_the_ct_head() {
+    check(&Marcher::from_dataset(&Dataset::default_bundled()), "ct_head");
+}
+
+#[test]
+fn fast_codec_equals_the_reference_on_the_mri() {
+    let Ok(ds) = Dataset::load(MRI, None) else {
+        eprintln!("skipped: {MRI} not found");
+        return;
+    };
+    check(&Marcher::from_dataset(&ds), "mri");
+}
