@@ -2,7 +2,7 @@
 # The real pipeline in one command: the volwarp client starts the real volwarp-server program as
 # a child process on a free loopback port (the bundled MRI head, slowed to ~3 frames/s so that
 # latency hiding is visible) and talks to it over TCP, with the default warp levers on
-# (prediction, guard band, warp-sized radii; see the title bar). Opens a window where a display
+# (prediction and warp-sized radii; see the title bar). Opens a window where a display
 # exists; headless it writes PNG frames of a 90° orbit at 30 FPS (and timings.csv) into
 # out/demo/, records the session, and writes out/demo/strip.png: truth | stale | volwarp for
 # four of the displayed frames (their FLIP in out/demo/strip.csv).
