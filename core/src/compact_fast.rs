@@ -26,8 +26,8 @@
 //!   the reference encoder, which returns its exact error.
 
 use crate::compact_frame::{
-    build_planes_reference, depth_of, mask_len, params_valid, CompactError, CompactParams, EncodeError, EncodeOptions,
-    Planes, RadiusPrediction, DEPTH_CODE_MAX, PLANE_BYTES_PER_SAMPLE,
+    build_planes_reference, depth_of, frame_params, mask_len, CompactError, CompactParams, EncodeError, EncodeOptions,
+    Planes, DEPTH_CODE_MAX, PLANE_BYTES_PER_SAMPLE,
 };
 use crate::math::sqrt;
 use crate::sample::{Dequantizer, Quantizer, POS_BITS, POS_MAX, RADIUS_MAX};
@@ -559,7 +559,7 @@ pub(crate) fn build_planes(frame: &Frame, opts: &EncodeOptions) -> Result<Planes
     {
         return Err(EncodeError::BadFrame);
     }
-    let (w, hgt) = (cam.width, cam.height);
+    let w = cam.width;
     let geo = Geo::new(h);
     let deq = Dequantizer::new(h.bounds, h.radius_unit);
     let proj = Proj::new(cam, &deq);
@@ -585,34 +585,8 @@ pub(crate) fn build_planes(frame: &Frame, opts: &EncodeOptions) -> Result<Planes
     if !ok {
         return build_planes_reference(frame, opts);
     }
-    let (mut t_lo, mut t_hi) =
-        depth.iter().fold((f32::INFINITY, f32::NEG_INFINITY), |(lo, hi), &t| (lo.min(t), hi.max(t)));
-    if n == 0 {
-        (t_lo, t_hi) = (0.0, 0.0);
-    }
-    let ext = (h.bounds.max() - h.bounds.min()).max_element();
-    let bits = opts.depth_bits.clamp(1, 16);
-    let mut step = ext / (1u32 << bits) as f32;
-    step = step.max((t_hi - t_lo) / DEPTH_CODE_MAX as f32);
-    if !(step > 0.0 && step.is_finite()) {
-        step = if (t_hi - t_lo) > 0.0 { (t_hi - t_lo) / DEPTH_CODE_MAX as f32 } else { 1.0 };
-    }
-    let radius = opts.radius.unwrap_or_else(|| RadiusPrediction::fit(frame));
-    let mlen = mask_len(w, hgt) as usize;
-    let raw_len = mlen + PLANE_BYTES_PER_SAMPLE * n;
-    let mut params = CompactParams {
-        depth_min: t_lo,
-        depth_step: step,
-        radius,
-        coder: opts.coder,
-        raw_len: u32::try_from(raw_len).map_err(|_| EncodeError::DepthRange)?,
-    };
-    if !params_valid(&params) {
-        params.radius = RadiusPrediction::default();
-        if !params_valid(&params) {
-            return Err(EncodeError::DepthRange);
-        }
-    }
+    let range = depth.iter().fold((f32::INFINITY, f32::NEG_INFINITY), |(lo, hi), &t| (lo.min(t), hi.max(t)));
+    let (params, mlen, raw_len) = frame_params(frame, opts, range)?;
     // Pass 2, a map: depth codes and radius residuals (neither depends on a neighbour).
     let mut codes = vec![0u16; n];
     let mut body = vec![0u8; raw_len];

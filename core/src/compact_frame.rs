@@ -580,6 +580,45 @@ mod codec {
         crate::compact_fast::build_planes(frame, opts)
     }
 
+    /// The parameters of a frame's planes from the depth range `(t_lo, t_hi)` of its samples
+    /// (ignored for an empty frame), with the mask's and the whole body's length in bytes. One
+    /// definition for the reference and the fast encoder (`compact_fast`), so both write the same
+    /// bytes.
+    pub(crate) fn frame_params(
+        frame: &Frame,
+        opts: &EncodeOptions,
+        (t_lo, t_hi): (f32, f32),
+    ) -> Result<(CompactParams, usize, usize), EncodeError> {
+        let h = &frame.header;
+        let n = frame.samples.len();
+        let (t_lo, t_hi) = if n == 0 { (0.0, 0.0) } else { (t_lo, t_hi) };
+        let ext = (h.bounds.max() - h.bounds.min()).max_element();
+        let bits = opts.depth_bits.clamp(1, 16);
+        let mut step = ext / (1u32 << bits) as f32;
+        step = step.max((t_hi - t_lo) / DEPTH_CODE_MAX as f32);
+        if !(step > 0.0 && step.is_finite()) {
+            step = if (t_hi - t_lo) > 0.0 { (t_hi - t_lo) / DEPTH_CODE_MAX as f32 } else { 1.0 };
+        }
+        let radius = opts.radius.unwrap_or_else(|| RadiusPrediction::fit(frame));
+        let mlen = mask_len(h.camera.width, h.camera.height) as usize;
+        let raw_len = mlen + PLANE_BYTES_PER_SAMPLE * n;
+        let mut params = CompactParams {
+            depth_min: t_lo,
+            depth_step: step,
+            radius,
+            coder: opts.coder,
+            raw_len: u32::try_from(raw_len).map_err(|_| EncodeError::DepthRange)?,
+        };
+        if !params_valid(&params) {
+            // A step that makes the top code overflow, or a model that is not finite: no model.
+            params.radius = RadiusPrediction::default();
+            if !params_valid(&params) {
+                return Err(EncodeError::DepthRange);
+            }
+        }
+        Ok((params, mlen, raw_len))
+    }
+
     /// The simple scalar form of [`build_planes`], one sample at a time (the oracle the fast
     /// path is tested against).
     pub fn build_planes_reference(frame: &Frame, opts: &EncodeOptions) -> Result<Planes, EncodeError> {
@@ -594,7 +633,7 @@ mod codec {
         {
             return Err(EncodeError::BadFrame);
         }
-        let (w, hgt) = (cam.width, cam.height);
+        let w = cam.width;
         let geo = Geometry::new(h);
         let proj = Projector::new(cam);
         let deq = Dequantizer::new(h.bounds, h.radius_unit);
@@ -620,33 +659,7 @@ mod codec {
             pix.push((x, y));
             depth.push(t);
         }
-        if n == 0 {
-            (t_lo, t_hi) = (0.0, 0.0);
-        }
-        let ext = (h.bounds.max() - h.bounds.min()).max_element();
-        let bits = opts.depth_bits.clamp(1, 16);
-        let mut step = ext / (1u32 << bits) as f32;
-        step = step.max((t_hi - t_lo) / DEPTH_CODE_MAX as f32);
-        if !(step > 0.0 && step.is_finite()) {
-            step = if (t_hi - t_lo) > 0.0 { (t_hi - t_lo) / DEPTH_CODE_MAX as f32 } else { 1.0 };
-        }
-        let radius = opts.radius.unwrap_or_else(|| RadiusPrediction::fit(frame));
-        let mlen = mask_len(w, hgt) as usize;
-        let raw_len = mlen + PLANE_BYTES_PER_SAMPLE * n;
-        let mut params = CompactParams {
-            depth_min: t_lo,
-            depth_step: step,
-            radius,
-            coder: opts.coder,
-            raw_len: u32::try_from(raw_len).map_err(|_| EncodeError::DepthRange)?,
-        };
-        if !params_valid(&params) {
-            // A step that makes the top code overflow, or a model that is not finite: no model.
-            params.radius = RadiusPrediction::default();
-            if !params_valid(&params) {
-                return Err(EncodeError::DepthRange);
-            }
-        }
+        let (params, mlen, raw_len) = frame_params(frame, opts, (t_lo, t_hi))?;
         // Pass 2: the planes.
         let mut body = vec![0u8; raw_len];
         let (mask, planes) = body.split_at_mut(mlen);
@@ -662,7 +675,8 @@ mod codec {
             let (x, y) = pix[i];
             let idx = y as usize * w as usize + x as usize;
             mask[idx >> 3] |= 1 << (idx & 7);
-            let code = ((depth[i] - t_lo) / step + 0.5).clamp(0.0, DEPTH_CODE_MAX as f32) as u32 as u16;
+            let code = ((depth[i] - params.depth_min) / params.depth_step + 0.5).clamp(0.0, DEPTH_CODE_MAX as f32)
+                as u32 as u16;
             let pred = ctx.predict(x, y);
             let dres = code.wrapping_sub(pred.depth as u16);
             dlo[i] = dres as u8;
