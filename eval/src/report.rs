@@ -75,7 +75,8 @@ fn quality_table(rows: &[Row]) -> Table {
     t
 }
 
-fn mean(v: impl Iterator<Item = f64>) -> f64 {
+/// The mean of `v` (NaN when empty).
+pub(crate) fn mean(v: impl Iterator<Item = f64>) -> f64 {
     let (mut s, mut n) = (0.0, 0usize);
     for x in v {
         s += x;

@@ -559,18 +559,7 @@ impl Marcher {
         }
         let n = frame.samples.len();
         let t2 = Instant::now();
-        frame.header = FrameHeader {
-            radius_unit,
-            render_us: (t2 - t0).as_micros().min(u32::MAX as u128) as u32,
-            count: n as u32,
-            ..self.empty_header(req)
-        };
-        FrameStats {
-            march_us: (t1 - t0).as_micros() as u64,
-            compact_us: (t2 - t1).as_micros() as u64,
-            samples: n,
-            pixels: lb.count.len(),
-        }
+        self.finish_frame(req, frame, radius_unit, [t0, t1, t2], n, lb.count.len())
     }
 
     /// [`Marcher::render_frame`] into an existing frame, reusing the memory of its sample and
@@ -584,6 +573,21 @@ impl Marcher {
         let t1 = Instant::now();
         let n = compaction::compact_into_vecs(&packed, &pb.color, &mut frame.samples, &mut frame.colors);
         let t2 = Instant::now();
+        self.finish_frame(req, frame, radius_unit, [t0, t1, t2], n, pb.t.len())
+    }
+
+    /// Fills the header of a frame whose `n` samples are in place and says what rendering it
+    /// took: the instants are the start, the end of the march and the end of compaction;
+    /// `pixels` is the viewport's pixel count.
+    fn finish_frame(
+        &self,
+        req: &CameraRequest,
+        frame: &mut Frame,
+        radius_unit: f32,
+        [t0, t1, t2]: [Instant; 3],
+        n: usize,
+        pixels: usize,
+    ) -> FrameStats {
         frame.header = FrameHeader {
             radius_unit,
             render_us: (t2 - t0).as_micros().min(u32::MAX as u128) as u32,
@@ -594,7 +598,7 @@ impl Marcher {
             march_us: (t1 - t0).as_micros() as u64,
             compact_us: (t2 - t1).as_micros() as u64,
             samples: n,
-            pixels: pb.t.len(),
+            pixels,
         }
     }
 

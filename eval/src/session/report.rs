@@ -7,6 +7,7 @@ use crate::charts::{self, Legend, Mark, Panel, Series, XAxis};
 use crate::csv::{num, Table};
 use crate::image_io::{downscale, strip};
 use crate::metrics::diff::difference_image;
+use crate::report::mean;
 use crate::ErrorBox;
 use std::path::Path;
 
@@ -100,19 +101,6 @@ pub fn percentile(v: &[f64], p: f64) -> f64 {
     s[rank.min(s.len()) - 1]
 }
 
-fn mean(v: impl Iterator<Item = f64>) -> f64 {
-    let (mut s, mut n) = (0.0, 0usize);
-    for x in v {
-        s += x;
-        n += 1;
-    }
-    if n == 0 {
-        f64::NAN
-    } else {
-        s / n as f64
-    }
-}
-
 /// Per-method statistics over rows (pooled).
 pub fn summarize(rows: &[&TickRow]) -> Vec<Summary> {
     method_names(rows.iter().copied())
@@ -132,6 +120,14 @@ pub fn summarize(rows: &[&TickRow]) -> Vec<Summary> {
             }
         })
         .collect()
+}
+
+/// The columns of a [`RunKey`], first in every table of a run ([`key_fields`] fills them).
+const KEY_COLUMNS: [&str; 7] = ["dataset", "scenario", "policy", "size", "server_ms", "latency_ms", "mbps"];
+
+/// [`KEY_COLUMNS`] followed by `rest`.
+fn with_key_columns(rest: &[&'static str]) -> Vec<&'static str> {
+    KEY_COLUMNS.iter().chain(rest).copied().collect()
 }
 
 fn key_fields(k: &RunKey) -> Vec<String> {
@@ -170,20 +166,7 @@ pub fn session_table(runs: &[Run]) -> Table {
 }
 
 fn frames_table(runs: &[Run]) -> Table {
-    let mut t = Table::new(&[
-        "dataset",
-        "scenario",
-        "policy",
-        "size",
-        "server_ms",
-        "latency_ms",
-        "mbps",
-        "seq",
-        "request_ms",
-        "start_ms",
-        "bytes",
-        "arrive_ms",
-    ]);
+    let mut t = Table::new(&with_key_columns(&["seq", "request_ms", "start_ms", "bytes", "arrive_ms"]));
     for run in runs {
         for f in &run.result.frames {
             let mut v = key_fields(&run.key);
@@ -201,14 +184,7 @@ fn frames_table(runs: &[Run]) -> Table {
 }
 
 fn summary_table(runs: &[Run]) -> Table {
-    let mut t = Table::new(&[
-        "dataset",
-        "scenario",
-        "policy",
-        "size",
-        "server_ms",
-        "latency_ms",
-        "mbps",
+    let mut t = Table::new(&with_key_columns(&[
         "method",
         "mean_flip",
         "p95_flip",
@@ -217,7 +193,7 @@ fn summary_table(runs: &[Run]) -> Table {
         "mean_age_ms",
         "draw_ms",
         "ticks",
-    ]);
+    ]));
     for run in runs {
         let rows: Vec<&TickRow> = run.result.rows.iter().collect();
         for s in summarize(&rows) {
