@@ -218,33 +218,7 @@ impl<R: SampleIds> HoleFill<R> {
             self.depth.resolve(&scene.colors, &mut self.frame, &self.threads);
             self.frame_of = Some(id);
         }
-        let (_, _, fwd) = fc.basis();
-        // The focal plane: points q with q·fwd = target·fwd.
-        let plane = fc.target.dot(fwd);
-        let basis = camera.ray_basis();
-        let eye = camera.eye;
-        let w = camera.width as usize;
-        let frame = &self.frame;
-        self.threads.for_each_chunk(&mut self.state, w * BAND, |band, px| {
-            for (i, p) in px.iter_mut().enumerate().filter(|(_, p)| **p == UNFILLED) {
-                let j = band * w * BAND + i;
-                let d = basis.dir((j % w) as u32, (j / w) as u32);
-                let denom = d.dot(fwd);
-                let t = (plane - eye.dot(fwd)) / denom;
-                // A ray that does not reach the plane ahead: take its direction from the
-                // frame's eye instead (exact for a rotation about the eye).
-                let q = if denom > 1e-6 && t > 0.0 { eye + d * t } else { fc.eye + d };
-                let Some((x, y, _)) = proj.project(q) else { continue };
-                if x >= 0.0 && y >= 0.0 && x < fw as f32 && y < fh as f32 {
-                    // Where the frame showed background too, the pixel stays a hole (for
-                    // pull-push; the background otherwise, as before).
-                    let c = frame[y as usize * fw as usize + x as usize];
-                    if c != BACKGROUND {
-                        *p = filled(c);
-                    }
-                }
-            }
-        });
+        stale_lookup(&self.frame, &fc, camera, &mut self.state, &self.threads);
     }
 
     /// Stage 4: pull-push over the filled pixels into the unfilled ones.
@@ -330,24 +304,62 @@ impl<R: SampleIds> HoleFill<R> {
     }
 }
 
+/// Stage 3 of the fill (shared with the layered splatter): every [`UNFILLED`] pixel of `state`
+/// (laid out for `camera`) takes the color of `frame` (an image for the frame camera `fc`)
+/// where the pixel's ray crosses `fc`'s focal plane; where `frame` shows background the pixel
+/// stays unfilled.
+pub(crate) fn stale_lookup(frame: &[u32], fc: &Camera, camera: &Camera, state: &mut [u64], threads: &Threads) {
+    let (fw, fh) = (fc.width, fc.height);
+    if frame.len() != fw as usize * fh as usize {
+        return;
+    }
+    let proj = Projector::new(fc);
+    let (_, _, fwd) = fc.basis();
+    // The focal plane: points q with q·fwd = target·fwd.
+    let plane = fc.target.dot(fwd);
+    let basis = camera.ray_basis();
+    let eye = camera.eye;
+    let w = camera.width as usize;
+    threads.for_each_chunk(state, w * BAND, |band, px| {
+        for (i, p) in px.iter_mut().enumerate().filter(|(_, p)| **p == UNFILLED) {
+            let j = band * w * BAND + i;
+            let d = basis.dir((j % w) as u32, (j / w) as u32);
+            let denom = d.dot(fwd);
+            let t = (plane - eye.dot(fwd)) / denom;
+            // A ray that does not reach the plane ahead: take its direction from the
+            // frame's eye instead (exact for a rotation about the eye).
+            let q = if denom > 1e-6 && t > 0.0 { eye + d * t } else { fc.eye + d };
+            let Some((x, y, _)) = proj.project(q) else { continue };
+            if x >= 0.0 && y >= 0.0 && x < fw as f32 && y < fh as f32 {
+                // Where the frame showed background too, the pixel stays a hole (for
+                // pull-push; the background otherwise, as before).
+                let c = frame[y as usize * fw as usize + x as usize];
+                if c != BACKGROUND {
+                    *p = filled(c);
+                }
+            }
+        }
+    });
+}
+
 /// Rows per parallel work unit of the fill passes.
 const BAND: usize = 8;
 
 /// A pixel no stage has filled yet (a filled pixel has bit 32 set).
-const UNFILLED: u64 = 0;
+pub(crate) const UNFILLED: u64 = 0;
 /// The bit of a filled pixel.
-const FILLED: u64 = 1 << 32;
+pub(crate) const FILLED: u64 = 1 << 32;
 /// An empty pixel the fill stages leave alone (outside the silhouette): the background.
 const BLOCKED: u64 = 1 << 33;
 
 /// A filled pixel of color `c`.
 #[inline(always)]
-fn filled(c: u32) -> u64 {
+pub(crate) fn filled(c: u32) -> u64 {
     FILLED | c as u64
 }
 
 /// Marks the unfilled pixels outside the covered pixels' row and column spans [`BLOCKED`].
-fn block_outside_silhouette(state: &mut [u64], w: usize, h: usize) {
+pub(crate) fn block_outside_silhouette(state: &mut [u64], w: usize, h: usize) {
     let mut cols = vec![(usize::MAX, 0usize); w];
     let mut rows = vec![(usize::MAX, 0usize); h];
     for (j, &s) in state.iter().enumerate() {

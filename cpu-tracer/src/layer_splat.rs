@@ -22,14 +22,29 @@
 //! `C += (1 − A)·c`, stopping once `A` ≥ [`OPAQUE`]. Zero-opacity segments add nothing (no
 //! division by opacity anywhere, so no NaN). Pixels nothing covers show the background.
 //!
+//! **Hole filling** ([`LayerOptions::fill`], issue 19's lever 5): pixels no segment covers,
+//! inside the covered pixels' row and column spans, take the frame's own composited image for
+//! their view direction (the stale frame, looked up as [`crate::hole_fill`]'s stage 3 does), so
+//! what the warp knows nothing about shows what a send-image system would, not the background.
+//! The frame's image is composited once per frame (the same footprints at the frame's camera).
+//!
+//! **Warp-sized footprints** ([`Renderer::set_adaptive_radius`]): a surface seen from a new
+//! direction spreads its pixels' footprints apart at grazing angles; with adaptive sizing on,
+//! the half side grows by [`LayerOptions::grow_per_degree`] per degree of warp (core's
+//! `warp_radius::warp_angle_deg`) up to [`MAX_OWN`]; at the frame's own camera it is
+//! [`LayerOptions::own`], so the frame is still reproduced there.
+//!
 //! Work: the footprints are drawn serially (four projections and a few edge tests per sample,
 //! in `f32`), the lists composited in parallel. Memory: `8 × LIST + 1` bytes per output pixel.
 
-use crate::begin_frame_unbuilt_ok;
+use crate::hole_fill::{block_outside_silhouette, filled, stale_lookup, FILLED, UNFILLED};
+use crate::route::SceneId;
 use crate::sphere_splat::View;
 use crate::threads::Threads;
+use crate::{begin_frame_unbuilt_ok, MAX_VIEWPORT};
 use volwarp_core::renderer::{Image, Renderer};
 use volwarp_core::sample::{over_background, pack_color_f32};
+use volwarp_core::warp_radius::warp_angle_deg;
 use volwarp_core::{Camera, RendererKind, Scene, Vec3, BACKGROUND};
 
 /// Most segments kept per output pixel (the nearest ones).
@@ -42,6 +57,9 @@ pub const OPAQUE: f32 = 0.999;
 /// cracks rounding would leave between neighbouring pixels' footprints.
 pub const OWN_MARGIN: f32 = 0.05;
 
+/// The widest footprint adaptive sizing grows to by default (half side, source pixels).
+pub const MAX_OWN: f32 = 2.0;
+
 /// Output rows per compositing task.
 const BAND: usize = 16;
 
@@ -52,11 +70,38 @@ pub struct LayerOptions {
     /// adds [`OWN_MARGIN`]. Measured (`docs/perf.md`, issue 14): 0.7 double-counts more than it
     /// fills.
     pub own: f32,
+    /// Fill the pixels no segment covers from the frame's image (see the module docs).
+    pub fill: bool,
+    /// With adaptive sizing on, the half side added per degree of warp (source pixels).
+    pub grow_per_degree: f32,
+    /// Only samples at least this opaque (8-bit alpha) grow: growing a semi-transparent
+    /// segment counts its color twice where footprints overlap.
+    pub grow_min_alpha: u8,
+    /// The widest a grown footprint gets (half side, source pixels).
+    pub max_own: f32,
+}
+
+impl LayerOptions {
+    /// The defaults (chosen by measurement, `docs/results.md`, layered samples).
+    pub const DEFAULT: LayerOptions = LayerOptions {
+        own: 0.5 + OWN_MARGIN,
+        fill: true,
+        grow_per_degree: 0.08,
+        grow_min_alpha: 230,
+        max_own: MAX_OWN,
+    };
+
+    /// The half side of the footprint for a warp of `deg` degrees (adaptive sizing on).
+    pub fn own_at(&self, deg: f32) -> f32 {
+        let grow = if self.grow_per_degree.is_finite() { self.grow_per_degree.max(0.0) } else { 0.0 };
+        let cap = if self.max_own.is_finite() { self.max_own.min(4.0) } else { MAX_OWN };
+        (self.own + grow * deg).min(cap.max(self.own))
+    }
 }
 
 impl Default for LayerOptions {
     fn default() -> Self {
-        LayerOptions { own: 0.5 + OWN_MARGIN }
+        LayerOptions::DEFAULT
     }
 }
 
@@ -69,6 +114,13 @@ pub struct LayerSplat {
     keys: Vec<u64>,
     /// Per output pixel the number of keys.
     count: Vec<u8>,
+    /// Grow the footprints with the warp.
+    adaptive: bool,
+    /// The frame's own composited image (for the fill) and the scene it was made from.
+    frame: Image,
+    frame_of: Option<SceneId>,
+    /// Per output pixel the fill state (`hole_fill`'s encoding).
+    state: Vec<u64>,
 }
 
 impl LayerSplat {
@@ -79,7 +131,26 @@ impl LayerSplat {
 
     /// A layered splatter with another footprint width.
     pub fn with_options(threads: usize, opts: LayerOptions) -> Self {
-        LayerSplat { threads: Threads::new(threads), opts, keys: Vec::new(), count: Vec::new() }
+        LayerSplat {
+            threads: Threads::new(threads),
+            opts,
+            keys: Vec::new(),
+            count: Vec::new(),
+            adaptive: false,
+            frame: Image::new(0, 0),
+            frame_of: None,
+            state: Vec::new(),
+        }
+    }
+
+    /// The options it draws with.
+    pub fn options(&self) -> LayerOptions {
+        self.opts
+    }
+
+    /// Changes the options.
+    pub fn set_options(&mut self, opts: LayerOptions) {
+        self.opts = opts;
     }
 }
 
@@ -157,10 +228,51 @@ impl Renderer for LayerSplat {
         RendererKind::SplatLayers
     }
 
+    fn set_adaptive_radius(&mut self, on: bool) -> bool {
+        self.adaptive = on;
+        true
+    }
+
     fn render(&mut self, scene: &Scene, camera: &Camera, out: &mut Image) {
         if !begin_frame_unbuilt_ok(scene, camera, out) {
             return;
         }
+        let fc = scene.header.camera;
+        let fill = self.opts.fill && fc.validate(MAX_VIEWPORT).is_ok();
+        // The frame's own image first (it uses the same per-pixel lists).
+        if fill && self.frame_of != Some(SceneId::of(scene)) {
+            let mut frame = core::mem::replace(&mut self.frame, Image::new(0, 0));
+            if begin_frame_unbuilt_ok(scene, &fc, &mut frame) {
+                self.draw(scene, &fc, self.opts.own, &mut frame);
+            }
+            self.frame = frame;
+            self.frame_of = Some(SceneId::of(scene));
+        }
+        let grown = if self.adaptive { self.opts.own_at(warp_angle_deg(&fc, camera)) } else { self.opts.own };
+        self.draw(scene, camera, grown, out);
+        if !fill {
+            return;
+        }
+        let (w, h) = (camera.width as usize, camera.height as usize);
+        self.state.clear();
+        self.state.extend(self.count.iter().zip(&out.pixels).map(|(&n, &p)| if n == 0 { UNFILLED } else { filled(p) }));
+        block_outside_silhouette(&mut self.state, w, h);
+        stale_lookup(&self.frame.pixels, &fc, camera, &mut self.state, &self.threads);
+        for (p, &s) in out.pixels.iter_mut().zip(&self.state) {
+            if s & FILLED != 0 {
+                *p = s as u32;
+            }
+        }
+    }
+}
+
+impl LayerSplat {
+    /// Composites `scene` for `camera` into `out` (already sized and cleared to the background)
+    /// with footprints of half side [`LayerOptions::own`] source pixels, `grown` for samples at
+    /// least [`LayerOptions::grow_min_alpha`] opaque; leaves `count` with each output pixel's
+    /// number of segments.
+    fn draw(&mut self, scene: &Scene, camera: &Camera, grown: f32, out: &mut Image) {
+        let own = self.opts.own;
         let (w, h) = (camera.width as usize, camera.height as usize);
         let deq = &scene.deq;
         let cap = LIST;
@@ -171,7 +283,8 @@ impl Renderer for LayerSplat {
         let source = View::new(&scene.header.camera);
         let src = Proj::new(&source);
         // Half the footprint's side per unit of source depth, along the source's u and v.
-        let half = self.opts.own.clamp(0.0, 4.0);
+        let half = if own.is_finite() { own.clamp(0.0, 4.0) } else { 0.5 };
+        let grow_ratio = if half > 0.0 && grown.is_finite() { (grown.clamp(0.0, 4.0) / half).max(1.0) } else { 1.0 };
         let (hx, hy) = (half / source.px_x as f32, half / source.px_y as f32);
         let (su, sv) = (src.u * hx, src.v * hy);
         // Everything is expressed in the new camera's basis: a point's image coordinates are
@@ -198,6 +311,9 @@ impl Renderer for LayerSplat {
             // A corner ray within 5° of the plane (the new eye sees the footprint edge-on):
             // skip the sample (the corners' directions are the axis's within half a pixel).
             let edge_on = 0.0076 * dist2 * axis.length_squared();
+            // Opaque samples may grow (adaptive sizing): the corners scale with the half side.
+            let opaque = scene.colors.get(id).is_some_and(|&c| (c >> 24) as u8 >= self.opts.grow_min_alpha);
+            let r = if opaque && grow_ratio > 1.0 { grow_ratio } else { 1.0 };
             let ba = basis(axis);
             let corner = |sx: f32, sy: f32| {
                 let den = an + sx * un + sy * vn;
@@ -208,8 +324,7 @@ impl Renderer for LayerSplat {
                 view.image(p)
             };
             // Its corners, in order around it, in the new camera's image.
-            let (Some(q0), Some(q1), Some(q2), Some(q3)) =
-                (corner(-1.0, -1.0), corner(1.0, -1.0), corner(1.0, 1.0), corner(-1.0, 1.0))
+            let (Some(q0), Some(q1), Some(q2), Some(q3)) = (corner(-r, -r), corner(r, -r), corner(r, r), corner(-r, r))
             else {
                 continue;
             };

@@ -52,6 +52,20 @@ fn main() {
     if let Some(v) = arg(&args, "--own") {
         lopts.own = v.parse().expect("a distance");
     }
+    if args.iter().any(|a| a == "--no-fill") {
+        lopts.fill = false;
+    }
+    // `--grow G`: footprints grow by G source pixels per degree of warp; `--grow 0`: fixed.
+    if let Some(v) = arg(&args, "--grow") {
+        lopts.grow_per_degree = v.parse().expect("a growth per degree");
+    }
+    if let Some(v) = arg(&args, "--grow-alpha") {
+        lopts.grow_min_alpha = v.parse().expect("an 8-bit alpha");
+    }
+    if let Some(v) = arg(&args, "--max-own") {
+        lopts.max_own = v.parse().expect("a half side");
+    }
+    let adapt = lopts.grow_per_degree > 0.0;
     let datasets = volwarp_eval::report::shared_datasets(Path::new(dir)).expect("datasets");
     let h = Heuristic::Threshold;
     let base =
@@ -97,6 +111,7 @@ fn main() {
         let scenes: Vec<Scene> = frames.iter().map(|(_, f)| volwarp_cpu_tracer::route::unbuilt_scene(f)).collect();
         let mut plain: Vec<Box<dyn Renderer + Send>> = base.iter().map(|&k| create(k, 0).unwrap()).collect();
         let mut layered = volwarp_cpu_tracer::LayerSplat::with_options(0, lopts);
+        layered.set_adaptive_radius(adapt);
         for (ai, &a) in ANGLES.iter().enumerate() {
             let cam = orbit(&c0, a);
             let truth = m.render_image(&cam);
@@ -132,6 +147,7 @@ fn main() {
             };
             let mut splat = create(RendererKind::Splat, 1).unwrap();
             let mut lay = volwarp_cpu_tracer::LayerSplat::with_options(1, lopts);
+            lay.set_adaptive_radius(adapt);
             let base_ms = t(splat.as_mut(), &scene_one);
             let mut row = format!("| {} | {base_ms:.1} |", ds.name);
             for s in &scenes {

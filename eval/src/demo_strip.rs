@@ -3,7 +3,10 @@
 //! shown), the stale frame (the newest frame as rendered, unwarped, cropped to the display where
 //! it has a guard band: what a send-image system shows, except that volwarp asked for a
 //! predicted camera, so this column flatters the send-image system) and
-//! what volwarp's default drawing showed (the hole-filling splatter with warp-sized radii).
+//! what volwarp's default drawing showed: for layered frames (issue 14, the client's default)
+//! the layered splatter with hole filling and warp-grown footprints, for one-sample frames the
+//! hole-filling sphere splatter with warp-sized radii. The stale frame of a layered frame is its
+//! segments composited at the frame's own camera.
 //!
 //! The rows are display frames whose camera differs from the newest frame's (where warping has
 //! work to do), spread evenly over the recording. Each row is scored with ꟻLIP against the truth
@@ -15,6 +18,8 @@ use volwarp_core::record::{read_entry, read_magic, Entry};
 use volwarp_core::renderer::Renderer;
 use volwarp_core::wire::{Frame, Limits};
 use volwarp_core::{Camera, Image, RendererKind};
+use volwarp_cpu_tracer::layer_splat::LayerOptions;
+use volwarp_cpu_tracer::LayerSplat;
 use volwarp_server::Marcher;
 
 /// The largest viewport a recorded camera may have.
@@ -60,9 +65,15 @@ fn displayed(record: &Path) -> Result<(Vec<Frame>, Vec<Shown>), ErrorBox> {
 
 /// The frame as rendered, unwarped, at the display's size: where the client asked for a guard
 /// band (the frame is larger than the display), its centre crop; else resized to the display.
-fn stale_view(stale: &mut dyn Renderer, scene: &volwarp_core::Scene, display: &Camera, out: &mut Image) {
+/// `stale` is the stale renderer, or for a layered frame the layered splatter without fill
+/// (which, drawn for the frame's own camera, composites the frame as rendered).
+fn stale_view(stale: &mut dyn Renderer, layered: bool, scene: &volwarp_core::Scene, display: &Camera, out: &mut Image) {
     let fc = scene.header.camera;
-    if fc.width <= display.width || fc.height <= display.height {
+    if layered && fc.width == display.width && fc.height == display.height {
+        stale.render(scene, &fc, out);
+        return;
+    }
+    if !layered && (fc.width <= display.width || fc.height <= display.height) {
         stale.render(scene, display, out);
         return;
     }
@@ -95,6 +106,10 @@ pub fn write_strip(marcher: &Marcher, record: &Path, rows: usize, out: &Path) ->
     let mut stale = volwarp_cpu_tracer::create(RendererKind::Stale, 0).ok_or("no stale renderer")?;
     let mut volwarp = volwarp_cpu_tracer::create(RendererKind::SplatFill, 0).ok_or("no splat-fill renderer")?;
     volwarp.set_adaptive_radius(true);
+    let no_fill = LayerOptions { fill: false, ..LayerOptions::DEFAULT };
+    let mut stale_layers = LayerSplat::with_options(0, no_fill);
+    let mut layers = LayerSplat::new(0);
+    layers.set_adaptive_radius(true);
     let mut images: Vec<[Image; 3]> = Vec::new();
     let mut out_rows = Vec::new();
     for &&(t, camera, fi) in &picks {
@@ -102,8 +117,13 @@ pub fn write_strip(marcher: &Marcher, record: &Path, rows: usize, out: &Path) ->
         let scene = volwarp_cpu_tracer::build_scene(frame);
         let truth = marcher.render_image(&camera);
         let (mut a, mut b) = (Image::new(0, 0), Image::new(0, 0));
-        stale_view(stale.as_mut(), &scene, &camera, &mut a);
-        volwarp.render(&scene, &camera, &mut b);
+        if frame.segments.is_empty() {
+            stale_view(stale.as_mut(), false, &scene, &camera, &mut a);
+            volwarp.render(&scene, &camera, &mut b);
+        } else {
+            stale_view(&mut stale_layers, true, &scene, &camera, &mut a);
+            layers.render(&scene, &camera, &mut b);
+        }
         let flip = |img: &Image| Metrics::of(&truth, img).map_or(1.0, |m| m.flip);
         out_rows.push(StripRow { t_s: t, frame_seq: frame.header.seq, stale_flip: flip(&a), volwarp_flip: flip(&b) });
         images.push([truth, a, b]);

@@ -129,3 +129,33 @@ fn a_transparent_volume_draws_the_background_and_zero_opacity_no_nan() {
     let img = draw(&mut LayerSplat::new(1), &f, &orbit(&f.header.camera, 5.0));
     assert!(img.pixels.iter().all(|&p| p == BACKGROUND));
 }
+
+#[test]
+fn hole_filling_fills_what_no_segment_covers_and_keeps_the_rest() {
+    use volwarp_cpu_tracer::layer_splat::LayerOptions;
+    let ds = Dataset::load(data("data/ct_head_quarter.nhdr"), None).unwrap();
+    let m = Marcher::from_dataset(&ds);
+    let req = request(&m, 0.0);
+    let (f, _) = m.render_frame_layers(&req, 4);
+    let mut plain = LayerSplat::with_options(2, LayerOptions { fill: false, ..LayerOptions::DEFAULT });
+    let mut filled = LayerSplat::with_options(2, LayerOptions::DEFAULT);
+    assert!(filled.options().fill, "the layered splatter fills by default");
+    // At the frame's own camera nothing is a hole.
+    assert!(draw(&mut plain, &f, &req.camera) == draw(&mut filled, &f, &req.camera));
+    let mut total = 0;
+    for yaw in [40.0, 90.0, 180.0] {
+        let cam = orbit(&req.camera, yaw);
+        let (a, b) = (draw(&mut plain, &f, &cam), draw(&mut filled, &f, &cam));
+        let mut changed = 0;
+        for (&p, &q) in a.pixels.iter().zip(&b.pixels) {
+            if p != q {
+                // Only holes change, and they get the frame's color, not the background.
+                assert_eq!(p, BACKGROUND, "{yaw}°: a covered pixel changed");
+                assert_ne!(q, BACKGROUND);
+                changed += 1;
+            }
+        }
+        total += changed;
+    }
+    assert!(total > 50, "the turns opened holes and the fill filled {total} pixels");
+}

@@ -277,3 +277,23 @@ fn a_uint16_volume_with_non_cubic_dimensions_runs_by_path_and_writes_the_files()
     assert_eq!(charts.len(), 1);
     std::fs::remove_dir_all(&dir).ok();
 }
+
+#[test]
+fn a_method_asking_for_layers_gets_its_own_layered_stream() {
+    // One session, two methods: the one-sample frames' stale image and a client asking for 4
+    // segments per pixel. Each is served its own frames (the layered ones cost more bytes, so
+    // they arrive later on a slow link), and the layered warp beats the stale frame.
+    let mut o = opts(&["orbit"], NetworkModel { server_ms: 300.0, latency_ms: 50.0, mbps: 2.0 });
+    o.cfg.size = 64;
+    o.cfg.duration_s = 3.0;
+    o.methods = "stale,splat-layers+predict+adapt+layers=4".into();
+    let runs = simulate_all(&[Dataset::default_bundled()], &o).unwrap();
+    let rows = &runs[0].result.rows;
+    let age = |m: &str| rows.iter().filter(|r| r.method == m).map(|r| r.frame_age_ms).sum::<f64>();
+    let layered = "splat-layers+predict+adapt+layers=4";
+    assert!(age(layered) > age("stale"), "layered frames are bigger: {} vs {}", age(layered), age("stale"));
+    assert!(mean_flip(&runs, layered) < 0.75 * mean_flip(&runs, "stale"));
+    // At the first tick both show the frame they hold exactly (the layered one up to 8-bit
+    // rounding of its segments).
+    assert!(rows.iter().filter(|r| r.tick == 0).all(|r| r.metrics.flip <= 0.005));
+}

@@ -2,7 +2,8 @@
 //!
 //! A method is a CPU renderer of the registry (`stale`, `points2`, `splat`, `splat-fill`, …)
 //! plus what the client asks the server for and how many frames it keeps, written as a **method
-//! spec**: `RENDERER[+predict][+guard=G][+frames=K][+adapt][+pp=L]`, e.g. `splat-fill+predict+guard=0.1+frames=2`.
+//! spec**: `RENDERER[+predict][+guard=G][+frames=K][+adapt][+pp=L][+layers=K]`, e.g.
+//! `splat-fill+predict+guard=0.1+frames=2` or `splat-layers+predict+adapt+layers=4`.
 //!
 //! - `+predict`: the client asks for the camera it expects to show when the frame is on screen
 //!   (core's `prediction`, horizon from core's `prediction::Horizon`), issue 19 lever 1;
@@ -12,9 +13,11 @@
 //!   the older ones (cpu-tracer's `hole_fill`, only the `*-fill` renderers), lever 3;
 //! - `+adapt`: it draws spheres sized by how far the view moved from the frame's camera (core's
 //!   `warp_radius`: half the footprint at the frame's camera, growing to the frame's own radius
-//!   by 10°; the splatters only), lever 4;
+//!   by 10°; the splatters only; `splat-layers` grows its footprints instead), lever 4;
 //! - `+pp=L`: pull-push over `L` levels into the holes left inside the silhouette (only the
-//!   `*-fill` renderers), lever 5.
+//!   `*-fill` renderers), lever 5;
+//! - `+layers=K`: it asks for frames of `K` segments per pixel (issue 14; drawn by
+//!   `splat-layers`), whatever the session's `--layers`.
 //!
 //! [`DEFAULT_METHOD`] (alias `volwarp`) is the method the window client runs by default.
 //! The `stale` method never predicts nor widens: it is what a send-image system shows.
@@ -23,6 +26,7 @@ use super::model::RequestPolicy;
 use crate::ErrorBox;
 use volwarp_core::guard::MAX_GUARD;
 use volwarp_core::renderer::Renderer;
+use volwarp_core::segments::MAX_LAYERS;
 use volwarp_core::wire::Frame;
 use volwarp_core::{Camera, Image, RendererKind, Scene};
 use volwarp_cpu_tracer::hole_fill::{FillOptions, HoleFill, SampleIds, MAX_FRAMES};
@@ -131,7 +135,8 @@ pub const DEFAULT_METHOD: &str = "splat-fill+predict+adapt";
 pub const ALL: [&str; 7] = ["stale", "points1", "points2", "points3", "spheres-cpu", "splat", "volwarp"];
 
 impl MethodSpec {
-    /// Parses `RENDERER[+predict][+guard=G][+frames=K][+adapt][+pp=L]` or the alias `volwarp`.
+    /// Parses `RENDERER[+predict][+guard=G][+frames=K][+adapt][+pp=L][+layers=K]` or the alias
+    /// `volwarp`.
     pub fn parse(spec: &str) -> Result<MethodSpec, ErrorBox> {
         let spec = spec.trim();
         let spec = if spec == "volwarp" { DEFAULT_METHOD } else { spec };
@@ -159,6 +164,13 @@ impl MethodSpec {
                     }
                     m.pull_push = l;
                 }
+                Some(("layers", k)) => {
+                    let k: u32 = k.parse().map_err(|_| format!("{spec}: layers {k:?} is not a count"))?;
+                    if !(1..=MAX_LAYERS as u32).contains(&k) {
+                        return Err(format!("{spec}: layers must be within 1..={MAX_LAYERS}").into());
+                    }
+                    m.request.layers = k;
+                }
                 Some(("frames", k)) => {
                     let k: usize = k.parse().map_err(|_| format!("{spec}: frames {k:?} is not a count"))?;
                     if !(1..=MAX_FRAMES).contains(&k) {
@@ -166,7 +178,12 @@ impl MethodSpec {
                     }
                     m.frames = k;
                 }
-                _ => return Err(format!("{spec}: unknown option {p:?} (predict, guard=G, frames=K, adapt)").into()),
+                _ => {
+                    return Err(format!(
+                        "{spec}: unknown option {p:?} (predict, guard=G, frames=K, adapt, pp=L, layers=K)"
+                    )
+                    .into())
+                }
             }
         }
         let fills = matches!(renderer, RendererKind::SpheresFill | RendererKind::SplatFill);
@@ -175,8 +192,10 @@ impl MethodSpec {
                 format!("{spec}: frames=K and pp=L need a hole-filling renderer (splat-fill, spheres-fill)").into()
             );
         }
-        if m.adapt && !matches!(renderer, RendererKind::Splat | RendererKind::SplatFill) {
-            return Err(format!("{spec}: adapt (warp-sized radii) needs a splatter (splat, splat-fill)").into());
+        if m.adapt && !matches!(renderer, RendererKind::Splat | RendererKind::SplatFill | RendererKind::SplatLayers) {
+            return Err(
+                format!("{spec}: adapt (warp-sized radii) needs a splatter (splat, splat-fill, splat-layers)").into()
+            );
         }
         if renderer == RendererKind::Stale && m.request != RequestPolicy::NONE {
             return Err(
@@ -204,6 +223,9 @@ impl MethodSpec {
         if self.pull_push > 0 {
             s.push_str(&format!("+pp={}", self.pull_push));
         }
+        if self.request.layers > 0 {
+            s.push_str(&format!("+layers={}", self.request.layers));
+        }
         s
     }
 
@@ -228,7 +250,8 @@ impl MethodSpec {
                 fill: HoleFill::new(PacketTracer::new(t), RendererKind::SpheresFill, fill_opts, t),
             }),
             (kind, _) => {
-                let renderer = volwarp_cpu_tracer::create(kind, t).expect("parse admits only CPU renderers");
+                let mut renderer = volwarp_cpu_tracer::create(kind, t).expect("parse admits only CPU renderers");
+                renderer.set_adaptive_radius(adapt);
                 Box::new(RendererMethod { name, request, renderer })
             }
         }
@@ -259,7 +282,7 @@ mod tests {
     fn specs_parse_and_name_canonically() {
         let m = MethodSpec::parse("splat-fill+frames=3+guard=0.2+predict").unwrap();
         assert_eq!(m.renderer, RendererKind::SplatFill);
-        assert_eq!(m.request, RequestPolicy { predict: true, guard: 0.2 });
+        assert_eq!(m.request, RequestPolicy { predict: true, guard: 0.2, layers: 0 });
         assert_eq!(m.frames, 3);
         assert_eq!(m.name(), "splat-fill+predict+guard=0.2+frames=3");
         let a = MethodSpec::parse("splat+adapt+predict").unwrap();
@@ -268,6 +291,10 @@ mod tests {
         assert_eq!(MethodSpec::parse(&m.name()).unwrap(), m);
         assert_eq!(MethodSpec::parse("volwarp").unwrap(), MethodSpec::parse(DEFAULT_METHOD).unwrap());
         assert_eq!(MethodSpec::parse("points2").unwrap().request, RequestPolicy::NONE);
+        let l = MethodSpec::parse("splat-layers+layers=4+adapt+predict").unwrap();
+        assert_eq!(l.request, RequestPolicy { predict: true, guard: 0.0, layers: 4 });
+        assert_eq!(l.name(), "splat-layers+predict+adapt+layers=4");
+        assert_eq!(MethodSpec::parse(&l.name()).unwrap(), l);
     }
 
     #[test]
@@ -286,6 +313,9 @@ mod tests {
             "spheres-fill+adapt",
             "splat+pp=2",
             "splat-fill+pp=9",
+            "splat-layers+layers=0",
+            "splat-layers+layers=17",
+            "splat-layers+layers=x",
         ] {
             assert!(MethodSpec::parse(bad).is_err(), "{bad}");
         }

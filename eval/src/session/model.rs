@@ -65,11 +65,13 @@ pub struct RequestPolicy {
     pub predict: bool,
     /// Guard band fraction (0: none).
     pub guard: f32,
+    /// Segments per pixel it asks for (issue 14; 0: the session's `--layers`).
+    pub layers: u32,
 }
 
 impl RequestPolicy {
     /// Asks for the camera shown (what a send-image system does).
-    pub const NONE: RequestPolicy = RequestPolicy { predict: false, guard: 0.0 };
+    pub const NONE: RequestPolicy = RequestPolicy { predict: false, guard: 0.0, layers: 0 };
 }
 
 /// The server and the network.

@@ -237,9 +237,10 @@ pub fn serve(
     let tick_ms = 1e3 / cfg.client.display_hz;
     let end_ms = (cams.len() - 1) as f64 * tick_ms;
     let net = cfg.net;
+    let layers = stream_layers(cfg, request);
     let render = |camera: Camera, seq: usize| {
         let req = CameraRequest { seq: seq as u64, camera, heuristic: cfg.heuristic, radius_scale: 1.0 };
-        marcher.render_frame_layers(&req, cfg.layers).0
+        marcher.render_frame_layers(&req, layers).0
     };
     let first = render(cams[0], 0);
     let mut out = vec![(
@@ -335,6 +336,15 @@ pub fn serve(
     out
 }
 
+/// Segments per pixel of the frames served to a client asking with `request`.
+fn stream_layers(cfg: &SessionConfig, request: RequestPolicy) -> u32 {
+    if request.layers > 0 {
+        request.layers
+    } else {
+        cfg.layers
+    }
+}
+
 /// The frame's own image for its [`FrameEvent::view`]: the frame as rendered, cropped to the
 /// view where a guard band widened it.
 fn exact_view(exact: &mut dyn Renderer, held: &HeldFrame, f: &FrameEvent, out: &mut Image, tmp: &mut Image) {
@@ -391,8 +401,9 @@ pub fn run_session(
         stream_of.push(i);
     }
     // Layered frames (issue 14) are shown as they were rendered by compositing their segments.
-    let exact_kind = if cfg.layers > 1 { RendererKind::SplatLayers } else { RendererKind::Stale };
-    let mut exact = volwarp_cpu_tracer::create(exact_kind, 0).ok_or("the stale renderer is missing")?;
+    let mut exact_one = volwarp_cpu_tracer::create(RendererKind::Stale, 0).ok_or("the stale renderer is missing")?;
+    let mut exact_layers =
+        volwarp_cpu_tracer::create(RendererKind::SplatLayers, 0).ok_or("the layered splatter is missing")?;
     let mut tmp = Image::new(0, 0);
     let draw: Vec<(f64, usize)> = methods
         .iter()
@@ -417,6 +428,7 @@ pub fn run_session(
             let fi = st.frames.partition_point(|f| f.arrive_ms <= t_k).saturating_sub(1);
             let cam = &cams[k];
             if cfg.exact_when_still && *cam == st.frames[fi].view {
+                let exact = if stream_layers(cfg, st.request) > 1 { &mut exact_layers } else { &mut exact_one };
                 exact_view(exact.as_mut(), &st.held[fi], &st.frames[fi], &mut images[mi], &mut tmp);
             } else {
                 let kept = m.frames_kept().max(1);
