@@ -16,7 +16,7 @@ Window controls:
   wheel / + -                zoom
   1..9                       renderer (see --renderer; key k is the k-th of its list;
                              9 is spheres, the fastest exact route)
-  0                          the default renderer, splat-fill
+  0                          the default renderer, splat-layers
   H / Shift+H                next / previous depth heuristic (sent to the server)
   [ ]                        smaller / larger sample radius (sent to the server)
   R                          reset the camera
@@ -75,8 +75,9 @@ pub struct Options {
     /// Renderer, in key order (keys 1–9, then no key): spheres-cpu, points1, points2, points3,
     /// splat (exact sphere splatting), stale (unwarped frame), spheres-gpu (GPU opened on first
     /// use), spheres-scalar, spheres (the fastest exact route: tiles or tracer), splat-tiles,
-    /// spheres-fill and splat-fill (holes filled from the stale frame; splat-fill is the
-    /// default), splat-gpu (GPU exact splatting).
+    /// spheres-fill and splat-fill (holes filled from the stale frame), splat-gpu (GPU exact
+    /// splatting), splat-layers (layered frames composited front to back, holes filled: the
+    /// default; it asks the server for 4 segments per pixel).
     #[arg(long, value_name = "NAME", default_value_t = RendererKind::DEFAULT, value_parser = parse_renderer)]
     pub renderer: RendererKind,
     /// GPU renderers: the adapter whose name contains NAME (case-insensitive; default: the best
@@ -119,7 +120,8 @@ pub struct Options {
     pub guard: f32,
     /// Size spheres by how far the view moved from the frame's camera (half the footprint at
     /// the frame's own camera, so it is shown exactly; the frame's radius from a 10° turn on;
-    /// the splatters only): `--adapt false` draws the frame's radii.
+    /// the splatters only; `splat-layers` grows the footprints of opaque segments instead):
+    /// `--adapt false` draws the frame's radii.
     #[arg(long, value_name = "BOOL", default_value_t = true, action = clap::ArgAction::Set)]
     pub adapt: bool,
     /// Display frame rate limit (0: none). Default: 60 in the window, none headless.

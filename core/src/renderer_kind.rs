@@ -181,10 +181,11 @@ impl RendererKind {
         RendererKind::SplatLayers,
     ];
 
-    /// The renderer a client starts with: the exact splatter with hole filling (with the
-    /// client's default warp-sized radii and prediction the most accurate method of the session
-    /// results, `docs/results.md`).
-    pub const DEFAULT: RendererKind = RendererKind::SplatFill;
+    /// The renderer a client starts with: the layered splatter (issue 14; the client then asks
+    /// for 4 segments per pixel), with hole filling and, with the client's default prediction
+    /// and warp-grown footprints, the most accurate method of the session results
+    /// (`docs/results.md`, "Layered frames as the default").
+    pub const DEFAULT: RendererKind = RendererKind::SplatLayers;
 
     /// Its row of [`REGISTRY`].
     pub const fn info(self) -> &'static RendererInfo {

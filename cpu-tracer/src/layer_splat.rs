@@ -6,7 +6,7 @@
 //! renderer draws each sample as its **source pixel's footprint**: the quadrilateral the frame
 //! camera's pixel frustum cuts from the plane through the sample's centre facing the new eye
 //! (the supersegment of volumetric depth images, Frey, Sadlo and Ertl 2013, flattened to its
-//! representative depth), widened by [`OWN_MARGIN`] pixels against rounding cracks. The quad is
+//! representative depth), widened by [`OWN_MARGIN`] pixels (none by default). The quad is
 //! projected into the new camera and every output pixel whose centre lies inside it takes the
 //! sample. (A plane facing the frame's camera instead shrinks footprints seen obliquely and
 //! opens cracks between them; `docs/perf.md`, issue 14.) Footprints of one depth tile the plane, so nothing is
@@ -34,8 +34,10 @@
 //! `warp_radius::warp_angle_deg`) up to [`MAX_OWN`]; at the frame's own camera it is
 //! [`LayerOptions::own`], so the frame is still reproduced there.
 //!
-//! Work: the footprints are drawn serially (four projections and a few edge tests per sample,
-//! in `f32`), the lists composited in parallel. Memory: `8 × LIST + 1` bytes per output pixel.
+//! Work: the footprints are set up in parallel over samples (four projections per sample, in
+//! `f32`), binned to bands of rows, rasterized in parallel over bands (a few edge tests per
+//! covered pixel) and the lists composited in parallel. Memory: `8 × LIST + 1` bytes per output
+//! pixel and 72 bytes per sample (its footprint) plus 4 per band it touches.
 
 use crate::hole_fill::{block_outside_silhouette, filled, stale_lookup, FILLED, UNFILLED};
 use crate::route::SceneId;
@@ -53,12 +55,35 @@ pub const LIST: usize = 16;
 /// Accumulated opacity at which a pixel's compositing stops.
 pub const OPAQUE: f32 = 0.999;
 
-/// How far (in source pixels) beyond its own pixel a sample's footprint reaches: closes the
-/// cracks rounding would leave between neighbouring pixels' footprints.
-pub const OWN_MARGIN: f32 = 0.05;
+/// How far (in source pixels) beyond its own pixel a sample's footprint reaches. 0: a margin
+/// against rounding cracks (0.05 in issue 14's first version) counts semi-transparent segments
+/// twice along every footprint edge, a grid of bright lines once the view zooms in; without it
+/// the session ꟻLIP of the iron protein's dolly fell from 0.0187 to 0.0064 and the MRI's orbit
+/// from 0.0262 to 0.0200 (`docs/results.md`, "Layered frames as the default").
+pub const OWN_MARGIN: f32 = 0.0;
 
 /// The widest footprint adaptive sizing grows to by default (half side, source pixels).
 pub const MAX_OWN: f32 = 2.0;
+
+/// Output rows per rasterization task (the footprints are binned to bands of these rows).
+const RASTER_BAND: usize = 32;
+
+/// Samples per footprint set-up task.
+const QUAD_CHUNK: usize = 4096;
+
+/// A sample's footprint in the new image: its edge functions, depth key and pixel bounds
+/// (`x[0] > x[1]`: none).
+#[derive(Clone, Copy, Debug)]
+struct Quad {
+    edges: [(f32, f32, f32); 4],
+    key: u64,
+    x: [u32; 2],
+    y: [u32; 2],
+}
+
+impl Quad {
+    const NONE: Quad = Quad { edges: [(0.0, 0.0, 0.0); 4], key: u64::MAX, x: [1, 0], y: [1, 0] };
+}
 
 /// Output rows per compositing task.
 const BAND: usize = 16;
@@ -121,6 +146,9 @@ pub struct LayerSplat {
     frame_of: Option<SceneId>,
     /// Per output pixel the fill state (`hole_fill`'s encoding).
     state: Vec<u64>,
+    /// Per sample its footprint, and per band of rows the footprints that touch it.
+    quads: Vec<Quad>,
+    bins: Vec<Vec<u32>>,
 }
 
 impl LayerSplat {
@@ -140,6 +168,8 @@ impl LayerSplat {
             frame: Image::new(0, 0),
             frame_of: None,
             state: Vec::new(),
+            quads: Vec::new(),
+            bins: Vec::new(),
         }
     }
 
@@ -292,76 +322,122 @@ impl LayerSplat {
         // `axis ± su ± sv`, so its components are the axis's plus per-frame constants.
         let basis = |x: Vec3| Vec3::new(x.dot(view.u), x.dot(view.v), x.dot(view.w));
         let (bu, bv, e) = (basis(su), basis(sv), basis(src.eye - view.eye));
-        for (id, &s) in scene.samples.iter().enumerate() {
-            let c = deq.center(s);
-            let rel = c - src.eye;
-            let z = rel.dot(src.w);
-            // The plane's normal (not normalised: only ratios of dot products with it are used).
-            let n = c - view.eye;
-            let dist2 = n.length_squared();
-            if !(z > 0.0 && dist2 > 0.0) {
-                continue;
-            }
-            // The source pixel's frustum (the ray through the centre, ± half a pixel per axis)
-            // cut by the plane through the centre facing the new eye: corner `p = eye_s + λ·dir`
-            // with `λ = n·rel / n·dir`.
-            let axis = rel / z;
-            let num = n.dot(rel);
-            let (an, un, vn) = (axis.dot(n), su.dot(n), sv.dot(n));
-            // A corner ray within 5° of the plane (the new eye sees the footprint edge-on):
-            // skip the sample (the corners' directions are the axis's within half a pixel).
-            let edge_on = 0.0076 * dist2 * axis.length_squared();
-            // Opaque samples may grow (adaptive sizing): the corners scale with the half side.
-            let opaque = scene.colors.get(id).is_some_and(|&c| (c >> 24) as u8 >= self.opts.grow_min_alpha);
-            let r = if opaque && grow_ratio > 1.0 { grow_ratio } else { 1.0 };
-            let ba = basis(axis);
-            let corner = |sx: f32, sy: f32| {
-                let den = an + sx * un + sy * vn;
-                if !(den > 0.0 && den * den > edge_on) {
-                    return None;
+        let min_alpha = self.opts.grow_min_alpha;
+        let colors = &scene.colors[..];
+        // 1. Every sample's footprint in the new image (in parallel over samples).
+        self.quads.clear();
+        self.quads.resize(scene.samples.len(), Quad::NONE);
+        let samples = &scene.samples[..];
+        self.threads.for_each_chunk(&mut self.quads, QUAD_CHUNK, |chunk, quads| {
+            for (j, q) in quads.iter_mut().enumerate() {
+                let id = chunk * QUAD_CHUNK + j;
+                let c = deq.center(samples[id]);
+                let rel = c - src.eye;
+                let z = rel.dot(src.w);
+                // The plane's normal (not normalised: only ratios of dot products with it are used).
+                let n = c - view.eye;
+                let dist2 = n.length_squared();
+                if !(z > 0.0 && dist2 > 0.0) {
+                    continue;
                 }
-                let p = e + (ba + bu * sx + bv * sy) * (num / den);
-                view.image(p)
-            };
-            // Its corners, in order around it, in the new camera's image.
-            let (Some(q0), Some(q1), Some(q2), Some(q3)) = (corner(-r, -r), corner(r, -r), corner(r, r), corner(-r, r))
-            else {
-                continue;
-            };
-            let quad = [q0, q1, q2, q3];
-            let x0 = q0.0.min(q1.0).min(q2.0).min(q3.0);
-            let x1 = q0.0.max(q1.0).max(q2.0).max(q3.0);
-            let y0 = q0.1.min(q1.1).min(q2.1).min(q3.1);
-            let y1 = q0.1.max(q1.1).max(q2.1).max(q3.1);
-            // Pixel centres x + ½ within [x0, x1].
-            let (xa, xb) = ((x0 - 0.5).ceil().max(0.0), (x1 - 0.5).floor().min(w as f32 - 1.0));
-            let (ya, yb) = ((y0 - 0.5).ceil().max(0.0), (y1 - 0.5).floor().min(h as f32 - 1.0));
-            if !(xa <= xb && ya <= yb) {
-                continue;
-            }
-            // Edge functions, signed by the quad's orientation.
-            let area = (q1.0 - q0.0) * (q2.1 - q0.1) - (q2.0 - q0.0) * (q1.1 - q0.1);
-            let sign = if area < 0.0 { -1.0 } else { 1.0 };
-            let edges: [(f32, f32, f32); 4] = core::array::from_fn(|e| {
-                let (a, b) = (quad[e], quad[(e + 1) & 3]);
-                // sign · ((b − a) × (p − a)) ≥ 0  ⇔  A·px + B·py + C ≥ 0
-                let (ex, ey) = ((b.0 - a.0) * sign, (b.1 - a.1) * sign);
-                (-ey, ex, ey * a.0 - ex * a.1)
-            });
-            // Squared distance: the same order, no square root.
-            let k = key(dist2, id as u32);
-            for y in ya as usize..=yb as usize {
-                let py = y as f32 + 0.5;
-                for x in xa as usize..=xb as usize {
-                    let px = x as f32 + 0.5;
-                    if edges.iter().all(|&(a, b, c)| a * px + b * py + c >= 0.0) {
-                        let i = y * w + x;
-                        insert(&mut self.keys[i * cap..(i + 1) * cap], &mut self.count[i], k);
+                // The source pixel's frustum (the ray through the centre, ± half a pixel per
+                // axis) cut by the plane through the centre facing the new eye: corner
+                // `p = eye_s + λ·dir` with `λ = n·rel / n·dir`.
+                let axis = rel / z;
+                let num = n.dot(rel);
+                let (an, un, vn) = (axis.dot(n), su.dot(n), sv.dot(n));
+                // A corner ray within 5° of the plane (the new eye sees the footprint edge-on):
+                // skip the sample (the corners' directions are the axis's within half a pixel).
+                let edge_on = 0.0076 * dist2 * axis.length_squared();
+                // Opaque samples may grow (adaptive sizing): the corners scale with the half side.
+                let opaque = colors.get(id).is_some_and(|&c| (c >> 24) as u8 >= min_alpha);
+                let r = if opaque && grow_ratio > 1.0 { grow_ratio } else { 1.0 };
+                let ba = basis(axis);
+                let corner = |sx: f32, sy: f32| {
+                    let den = an + sx * un + sy * vn;
+                    if !(den > 0.0 && den * den > edge_on) {
+                        return None;
                     }
+                    let p = e + (ba + bu * sx + bv * sy) * (num / den);
+                    view.image(p)
+                };
+                // Its corners, in order around it, in the new camera's image.
+                let (Some(q0), Some(q1), Some(q2), Some(q3)) =
+                    (corner(-r, -r), corner(r, -r), corner(r, r), corner(-r, r))
+                else {
+                    continue;
+                };
+                let quad = [q0, q1, q2, q3];
+                let x0 = q0.0.min(q1.0).min(q2.0).min(q3.0);
+                let x1 = q0.0.max(q1.0).max(q2.0).max(q3.0);
+                let y0 = q0.1.min(q1.1).min(q2.1).min(q3.1);
+                let y1 = q0.1.max(q1.1).max(q2.1).max(q3.1);
+                // Pixel centres x + ½ within [x0, x1].
+                let (xa, xb) = ((x0 - 0.5).ceil().max(0.0), (x1 - 0.5).floor().min(w as f32 - 1.0));
+                let (ya, yb) = ((y0 - 0.5).ceil().max(0.0), (y1 - 0.5).floor().min(h as f32 - 1.0));
+                if !(xa <= xb && ya <= yb) {
+                    continue;
+                }
+                // Edge functions, signed by the quad's orientation.
+                let area = (q1.0 - q0.0) * (q2.1 - q0.1) - (q2.0 - q0.0) * (q1.1 - q0.1);
+                let sign = if area < 0.0 { -1.0 } else { 1.0 };
+                let edges: [(f32, f32, f32); 4] = core::array::from_fn(|e| {
+                    let (a, b) = (quad[e], quad[(e + 1) & 3]);
+                    // sign · ((b − a) × (p − a)) ≥ 0  ⇔  A·px + B·py + C ≥ 0
+                    let (ex, ey) = ((b.0 - a.0) * sign, (b.1 - a.1) * sign);
+                    (-ey, ex, ey * a.0 - ex * a.1)
+                });
+                // Squared distance: the same order, no square root.
+                *q = Quad { edges, key: key(dist2, id as u32), x: [xa as u32, xb as u32], y: [ya as u32, yb as u32] };
+            }
+        });
+        // 2. Each footprint to the row bands it touches.
+        let bands = h.div_ceil(RASTER_BAND);
+        self.bins.resize_with(bands, Vec::new);
+        self.bins.iter_mut().for_each(Vec::clear);
+        for (id, q) in self.quads.iter().enumerate() {
+            if q.x[0] <= q.x[1] {
+                for b in q.y[0] as usize / RASTER_BAND..=q.y[1] as usize / RASTER_BAND {
+                    self.bins[b].push(id as u32);
                 }
             }
         }
-        let (keys, count, colors) = (&self.keys[..], &self.count[..], &scene.colors[..]);
+        // 3. The bands' pixels take their footprints' keys (in parallel over bands: the lists
+        // keep the nearest keys whatever the order, so the image does not depend on it).
+        let (quads, bins) = (&self.quads[..], &self.bins[..]);
+        let raster = |b: usize, keys: &mut [u64], count: &mut [u8]| {
+            let y_lo = b * RASTER_BAND;
+            for &id in &bins[b] {
+                let q = &quads[id as usize];
+                let (ya, yb) = ((q.y[0] as usize).max(y_lo), (q.y[1] as usize).min(y_lo + RASTER_BAND - 1));
+                for y in ya..=yb {
+                    let py = y as f32 + 0.5;
+                    for x in q.x[0] as usize..=q.x[1] as usize {
+                        let px = x as f32 + 0.5;
+                        if q.edges.iter().all(|&(a, b, c)| a * px + b * py + c >= 0.0) {
+                            let i = (y - y_lo) * w + x;
+                            insert(&mut keys[i * cap..(i + 1) * cap], &mut count[i], q.key);
+                        }
+                    }
+                }
+            }
+        };
+        let (keys, count) = (&mut self.keys[..w * h * cap], &mut self.count[..]);
+        if self.threads.is_serial() {
+            for (b, (k, c)) in keys.chunks_mut(RASTER_BAND * w * cap).zip(count.chunks_mut(RASTER_BAND * w)).enumerate()
+            {
+                raster(b, k, c);
+            }
+        } else {
+            use rayon::prelude::*;
+            self.threads.install(|| {
+                keys.par_chunks_mut(RASTER_BAND * w * cap)
+                    .zip(count.par_chunks_mut(RASTER_BAND * w))
+                    .enumerate()
+                    .for_each(|(b, (k, c))| raster(b, k, c))
+            });
+        }
+        let (keys, count) = (&self.keys[..], &self.count[..]);
         self.threads.for_each_chunk(&mut out.pixels, BAND * w, |band, px| {
             for (j, p) in px.iter_mut().enumerate() {
                 let i = band * BAND * w + j;

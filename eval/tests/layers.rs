@@ -159,3 +159,24 @@ fn hole_filling_fills_what_no_segment_covers_and_keeps_the_rest() {
     }
     assert!(total > 50, "the turns opened holes and the fill filled {total} pixels");
 }
+
+#[test]
+fn one_and_several_threads_draw_the_same_layered_image() {
+    let ds = Dataset::load(data("data/neghip_64x64x64_uint8.raw"), None).unwrap();
+    let m = Marcher::from_dataset(&ds);
+    let req = request(&m, 0.0);
+    let (f, _) = m.render_frame_layers(&req, 4);
+    let (mut one, mut two, mut three) = (LayerSplat::new(1), LayerSplat::new(2), LayerSplat::new(3));
+    for r in [&mut one, &mut two, &mut three] {
+        r.set_adaptive_radius(true);
+    }
+    for yaw in [0.0, 7.0, 25.0] {
+        let cam = orbit(&req.camera, yaw);
+        let a = draw(&mut one, &f, &cam);
+        assert!(a == draw(&mut two, &f, &cam) && a == draw(&mut three, &f, &cam), "{yaw}°");
+    }
+    // An odd viewport (bands of rows that do not divide it).
+    let mut cam = orbit(&req.camera, 9.0);
+    (cam.width, cam.height) = (77, 45);
+    assert!(draw(&mut one, &f, &cam) == draw(&mut two, &f, &cam));
+}

@@ -74,7 +74,17 @@ fn an_instant_server_and_network_show_the_truth_at_every_tick() {
     for r in &runs {
         assert!(r.result.frames.len() > 10, "{}: a frame per moving tick", r.key.scenario);
         for row in &r.result.rows {
-            assert_eq!(row.metrics.flip, 0.0, "{} {} tick {}", r.key.scenario, row.method, row.tick);
+            // The default method's layered frames composite their segments, each rounded to
+            // 8 bits: the truth up to that rounding.
+            let tolerance = if row.method == "volwarp" { 0.01 } else { 0.0 };
+            assert!(
+                row.metrics.flip <= tolerance,
+                "{} {} tick {}: {}",
+                r.key.scenario,
+                row.method,
+                row.tick,
+                row.metrics.flip
+            );
             if r.key.scenario.starts_with("orbit") {
                 // Always moving: a new frame every tick. (In a stop the frame is older but exact.)
                 assert_eq!(row.frame_age_ms, 0.0);

@@ -28,6 +28,7 @@ use report::{Run, RunKey};
 use simulate::{run_session, SessionConfig, TruthCache};
 use std::path::Path;
 use std::time::Instant;
+use volwarp_core::wire::CameraRequest;
 use volwarp_core::{Heuristic, Image};
 use volwarp_server::dataset::Dataset;
 use volwarp_server::Marcher;
@@ -151,7 +152,8 @@ pub fn simulate_all(datasets: &[Dataset], opts: &SessionOptions) -> Result<Vec<R
 /// Measures the server's frame time per dataset and each method's draw time at `size` on this
 /// machine (medians of `runs`; the frame of the default camera drawn 10° away) and returns
 /// them as a [`Calibration`] (`list`: the methods, as `session --methods` takes them; a
-/// multi-frame method draws the one frame here). This reads the wall clock; the simulation only reads its result.
+/// multi-frame method draws the one frame here; a method asking for layers draws a layered
+/// frame of the default camera). This reads the wall clock; the simulation only reads its result.
 pub fn calibrate(
     datasets: &[Dataset],
     size: u32,
@@ -175,8 +177,16 @@ pub fn calibrate(
         cal.ms.insert(("server".into(), ds.name.clone(), size), server);
         log::info!("{}: server {server:.1} ms per frame at {size}²", ds.name);
         let held = methods::HeldFrame::new(frame.ok_or("no frame")?);
+        // Methods that ask for layered frames draw one (issue 14), K segments per pixel.
+        let mut layered: Vec<(u32, methods::HeldFrame)> = Vec::new();
         let cam = c0.orbit(10.0, 0.0);
         for mut method in methods::make_methods(list, threads)? {
+            let k = method.request().layers;
+            if k > 1 && !layered.iter().any(|(n, _)| *n == k) {
+                let req = CameraRequest { seq: 1, camera: c0, heuristic: Heuristic::Threshold, radius_scale: 1.0 };
+                layered.push((k, methods::HeldFrame::new(marcher.render_frame_layers(&req, k).0)));
+            }
+            let held = layered.iter().find(|(n, _)| *n == k).map_or(&held, |(_, f)| f);
             let mut img = Image::new(0, 0);
             method.draw(&[&held], &cam, &mut img);
             let mut t: Vec<f64> = (0..runs.max(1))
