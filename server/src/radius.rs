@@ -165,7 +165,8 @@ pub enum SpreadMeasure {
 }
 
 /// The constants of [`uncertainty_factor`]. Written `gain=G:max=M:opacity=O:measure=sigma|span`
-/// (any subset, `:`-separated; the rest keep [`UncertaintyParams::DEFAULT`]'s values).
+/// (any subset, `:`-separated; a gain not given is 0, `max` 2 and the measure `sigma`; the
+/// empty string is [`UncertaintyParams::DEFAULT`]).
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct UncertaintyParams {
     /// Which spread counts.
@@ -185,10 +186,12 @@ impl Default for UncertaintyParams {
 }
 
 impl UncertaintyParams {
-    /// The constants `--radius uncertainty` uses (chosen by measurement, `docs/results.md`,
-    /// "Samples sized by what is known").
+    /// The constants `--radius uncertainty` uses: the least harmful of the variants measured
+    /// (`docs/results.md`, "Samples sized by what is known": growing by the spread along the ray
+    /// lost to the footprint at every gain, so only the opacity term is on; the footprint
+    /// model stays the default).
     pub const DEFAULT: UncertaintyParams =
-        UncertaintyParams { measure: SpreadMeasure::Sigma, gain: 0.05, opacity_gain: 0.0, max: 2.0 };
+        UncertaintyParams { measure: SpreadMeasure::Sigma, gain: 0.0, opacity_gain: 1.0, max: 2.0 };
 
     /// The parameters with gains made finite and non-negative and `max` in `1..=16`.
     pub fn sanitized(self) -> UncertaintyParams {
@@ -212,7 +215,10 @@ impl FromStr for UncertaintyParams {
     type Err = String;
 
     fn from_str(s: &str) -> Result<Self, Self::Err> {
-        let mut p = UncertaintyParams::DEFAULT;
+        if s.is_empty() {
+            return Ok(UncertaintyParams::DEFAULT);
+        }
+        let mut p = UncertaintyParams { measure: SpreadMeasure::Sigma, gain: 0.0, opacity_gain: 0.0, max: 2.0 };
         for part in s.split(':').filter(|x| !x.is_empty()) {
             let (k, v) =
                 part.split_once('=').ok_or_else(|| format!("uncertainty parameter {part:?}: want KEY=VALUE"))?;
@@ -264,7 +270,7 @@ pub fn uncertainty_factor(u: &Uncertainty, pixel: f32, p: &UncertaintyParams) ->
         SpreadMeasure::Sigma => u.sigma,
         SpreadMeasure::Span => u.span,
     };
-    let grow = if spread > 0.0 { p.gain * (spread / pixel) } else { 0.0 };
+    let grow = if spread > 0.0 && p.gain > 0.0 { p.gain * (spread / pixel) } else { 0.0 };
     let faint = p.opacity_gain * (1.0 - u.alpha).clamp(0.0, 1.0);
     let f = 1.0 + grow + faint;
     if f.is_nan() {
@@ -464,7 +470,8 @@ mod tests {
             assert!(bad.parse::<UncertaintyParams>().is_err(), "{bad}");
         }
         assert_eq!(parse_spec("footprint"), Ok((RadiusModel::Footprint, UncertaintyParams::DEFAULT)));
-        assert_eq!(parse_spec("uncertainty:max=3").map(|(m, p)| (m, p.max)), Ok((RadiusModel::Uncertainty, 3.0)));
+        let three = parse_spec("uncertainty:max=3").map(|(m, p)| (m, p.max, p.gain, p.opacity_gain));
+        assert_eq!(three, Ok((RadiusModel::Uncertainty, 3.0, 0.0, 0.0)));
         assert!(parse_spec("voxel:gain=1").is_err());
         assert!(parse_spec("nope").is_err());
     }

@@ -160,10 +160,12 @@ fn extreme_inputs_give_valid_codes() {
     // The factor itself.
     let u = volwarp_server::radius::Uncertainty { sigma: f32::NAN, span: 1.0, alpha: 0.5 };
     assert_eq!(uncertainty_factor(&u, 1.0, &UncertaintyParams::DEFAULT), 1.0);
+    let p = UncertaintyParams { gain: 0.1, max: 3.0, ..UncertaintyParams::DEFAULT };
     let u = volwarp_server::radius::Uncertainty { sigma: 1.0, span: 1.0, alpha: 1.0 };
-    assert_eq!(uncertainty_factor(&u, 0.0, &UncertaintyParams::DEFAULT), UncertaintyParams::DEFAULT.max);
+    assert_eq!(uncertainty_factor(&u, 0.0, &p), 3.0);
     let inf = volwarp_server::radius::Uncertainty { sigma: f32::INFINITY, span: 1.0, alpha: 1.0 };
-    assert_eq!(uncertainty_factor(&inf, 1.0, &UncertaintyParams::DEFAULT), UncertaintyParams::DEFAULT.max);
+    assert_eq!(uncertainty_factor(&inf, 1.0, &p), 3.0);
+    assert_eq!(uncertainty_factor(&inf, 0.0, &UncertaintyParams { gain: 0.0, ..p }), 1.0);
 }
 
 #[test]
