@@ -10,6 +10,10 @@ use volwarp_server::radius::{uncertainty_factor, FrameRadius, RadiusModel, Sprea
 use volwarp_server::transfer_function::{TransferFunction, LUT_SIZE};
 use volwarp_server::{Dataset, MarchKernel, MarchOptions, Marcher, Volume};
 
+/// Spread only (no opacity term), gain 0.1, cap 2: the base the tests vary.
+const SPREAD: UncertaintyParams =
+    UncertaintyParams { measure: SpreadMeasure::Sigma, gain: 0.1, opacity_gain: 0.0, max: 2.0 };
+
 fn data(name: &str) -> std::path::PathBuf {
     Path::new(env!("CARGO_MANIFEST_DIR")).join("..").join(name)
 }
@@ -87,9 +91,11 @@ fn opaque_surfaces_keep_the_footprint_radius() {
     assert_eq!((u.sigma, u.span, u.alpha), (0.0, 0.0, 1.0));
     assert_eq!(uncertainty_factor(&u, 0.01, &UncertaintyParams::DEFAULT), 1.0);
     // Every sample of a frame: the footprint radius within half a code step of each frame.
-    for h in [Heuristic::Threshold, Heuristic::RelThreshold] {
-        for (fp, un, ua, ub) in radii(&ds, UncertaintyParams::DEFAULT, h) {
-            assert!((fp - un).abs() <= 0.5 * (ua + ub) * 1.001, "{h}: {un} against the footprint {fp}");
+    for p in [UncertaintyParams::DEFAULT, SPREAD] {
+        for h in [Heuristic::Threshold, Heuristic::RelThreshold] {
+            for (fp, un, ua, ub) in radii(&ds, p, h) {
+                assert!((fp - un).abs() <= 0.5 * (ua + ub) * 1.001, "{h}: {un} against the footprint {fp}");
+            }
         }
     }
 }
@@ -97,7 +103,7 @@ fn opaque_surfaces_keep_the_footprint_radius() {
 #[test]
 fn fuzzy_rays_get_larger_spheres_within_the_cap() {
     let ds = Dataset::new(block(), fuzzy_tf());
-    let params = UncertaintyParams { gain: 0.2, max: 3.0, ..UncertaintyParams::DEFAULT };
+    let params = UncertaintyParams { gain: 0.2, max: 3.0, ..SPREAD };
     let m = marcher(&ds, RadiusModel::Uncertainty, params, MarchKernel::Scalar);
     let cam = m.default_camera(9, 9);
     let basis = cam.ray_basis();
@@ -126,7 +132,7 @@ fn fuzzy_rays_get_larger_spheres_within_the_cap() {
 fn extreme_inputs_give_valid_codes() {
     // Empty rays have no sample; huge gains and caps clamp to the code range, never NaN.
     let ds = Dataset::new(block(), fuzzy_tf());
-    let wild = UncertaintyParams { gain: 1e30, opacity_gain: 1e30, max: 16.0, ..UncertaintyParams::DEFAULT };
+    let wild = UncertaintyParams { gain: 1e30, opacity_gain: 1e30, max: 16.0, ..SPREAD };
     let m = marcher(&ds, RadiusModel::Uncertainty, wild, MarchKernel::Packet);
     let (f, req) = frame(&m, Heuristic::Midpoint, 40);
     assert!(!f.samples.is_empty());
@@ -158,9 +164,11 @@ fn extreme_inputs_give_valid_codes() {
         }
     }
     // The factor itself.
-    let u = volwarp_server::radius::Uncertainty { sigma: f32::NAN, span: 1.0, alpha: 0.5 };
+    let u = volwarp_server::radius::Uncertainty { sigma: f32::NAN, span: 1.0, alpha: 1.0 };
+    assert_eq!(uncertainty_factor(&u, 1.0, &SPREAD), 1.0);
+    let u = volwarp_server::radius::Uncertainty { sigma: 1.0, span: 1.0, alpha: f32::NAN };
     assert_eq!(uncertainty_factor(&u, 1.0, &UncertaintyParams::DEFAULT), 1.0);
-    let p = UncertaintyParams { gain: 0.1, max: 3.0, ..UncertaintyParams::DEFAULT };
+    let p = UncertaintyParams { gain: 0.1, max: 3.0, ..SPREAD };
     let u = volwarp_server::radius::Uncertainty { sigma: 1.0, span: 1.0, alpha: 1.0 };
     assert_eq!(uncertainty_factor(&u, 0.0, &p), 3.0);
     let inf = volwarp_server::radius::Uncertainty { sigma: f32::INFINITY, span: 1.0, alpha: 1.0 };
@@ -179,7 +187,7 @@ fn uncertainty_frames_of_the_packet_marcher_equal_the_scalar_marchers() {
     if iron.exists() {
         sets.push(Dataset::load(iron, None).unwrap());
     }
-    let params = UncertaintyParams { gain: 0.1, opacity_gain: 0.5, max: 4.0, ..UncertaintyParams::DEFAULT };
+    let params = UncertaintyParams { gain: 0.1, opacity_gain: 0.5, max: 4.0, ..SPREAD };
     for ds in &sets {
         for p in [params, UncertaintyParams { measure: SpreadMeasure::Span, ..params }] {
             let fast = marcher(ds, RadiusModel::Uncertainty, p, MarchKernel::Packet);
@@ -210,7 +218,7 @@ fn the_frame_unit_makes_room_for_the_cap() {
     let m = Marcher::from_dataset(&ds);
     let cam = m.default_camera(64, 64);
     let b = ds.volume.bounds();
-    let p = UncertaintyParams { max: 3.0, ..UncertaintyParams::DEFAULT };
+    let p = UncertaintyParams { max: 3.0, ..SPREAD };
     let fp = FrameRadius::with_params(RadiusModel::Footprint, p, 1.0, &cam, &b, 0.1, 512.0);
     let un = FrameRadius::with_params(RadiusModel::Uncertainty, p, 1.0, &cam, &b, 0.1, 512.0);
     assert!((un.unit() - 3.0 * fp.unit()).abs() <= 1e-6 * fp.unit());
