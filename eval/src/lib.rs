@@ -37,6 +37,7 @@ pub mod representation_size;
 pub mod roster;
 pub mod session;
 pub mod table1;
+pub mod uncertainty_radius;
 
 pub use metrics::{is_defined, Metrics};
 pub use volwarp_core::stats::median;

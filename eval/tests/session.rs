@@ -17,6 +17,7 @@ const SIZE: u32 = 32;
 
 fn opts(scenarios: &[&str], net: NetworkModel) -> SessionOptions {
     SessionOptions {
+        march: volwarp_server::MarchOptions::default(),
         cfg: SessionConfig {
             size: SIZE,
             duration_s: 2.0,

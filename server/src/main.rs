@@ -85,8 +85,9 @@ struct DataArgs {
     /// rel-threshold, en-ex-mean).
     #[arg(long, global = true, default_value = "threshold")]
     heuristic: String,
-    /// Sphere radius model: `footprint` (a pixel diagonal at the sample's depth) or
-    /// `voxel` (half a voxel diagonal, the seed paper's).
+    /// Sphere radius model: `footprint` (a pixel diagonal at the sample's depth),
+    /// `voxel` (half a voxel diagonal, the seed paper's) or `uncertainty` (the footprint grown
+    /// where the ray's color is spread along it; issue 19 lever 4).
     #[arg(long, global = true, default_value = "footprint")]
     radius: RadiusModel,
     /// Sphere radius as a multiple of the model's (for `dump`; clients send their own).
@@ -225,6 +226,7 @@ fn run(cli: Cli) -> Result<(), String> {
     let opts = MarchOptions {
         step_voxels: cli.data.step,
         radius: cli.data.radius,
+        uncertainty: volwarp_server::radius::UncertaintyParams::DEFAULT,
         kernel,
         skip_empty: cli.data.skip_empty,
         early_termination: cli.data.early_termination,

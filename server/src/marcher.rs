@@ -18,7 +18,7 @@
 
 use crate::compaction;
 use crate::empty_space::{MinMaxGrid, Occupancy};
-use crate::radius::{FrameRadius, RadiusModel};
+use crate::radius::{FrameRadius, RadiusModel, RaySpread, Uncertainty, UncertaintyParams};
 use crate::transfer_function::{TransferFunction, LUT_SIZE};
 use crate::volume::Volume;
 use rayon::prelude::*;
@@ -59,6 +59,8 @@ pub struct MarchOptions {
     pub skip_empty: bool,
     /// How each sample's sphere radius is chosen; default the pixel footprint.
     pub radius: RadiusModel,
+    /// The constants of [`RadiusModel::Uncertainty`] (ignored by the other models).
+    pub uncertainty: UncertaintyParams,
     /// Packet (SIMD) or scalar marching; default [`MarchKernel::Packet`].
     pub kernel: MarchKernel,
 }
@@ -70,6 +72,7 @@ impl Default for MarchOptions {
             early_termination: 0.99,
             skip_empty: true,
             radius: RadiusModel::Footprint,
+            uncertainty: UncertaintyParams::DEFAULT,
             kernel: MarchKernel::Packet,
         }
     }
@@ -359,6 +362,24 @@ impl Marcher {
         (c, t)
     }
 
+    /// [`Marcher::pixel`] and the ray's [`Uncertainty`] (what [`RadiusModel::Uncertainty`]
+    /// sizes the sample by), collected over the samples the depth picker sees.
+    pub fn pixel_spread(&self, o: Vec3, d: Vec3, heuristic: Heuristic) -> ([f32; 4], Option<f32>, Uncertainty) {
+        let first = heuristic.needs_first_pass().then(|| {
+            let mut acc = FirstPassAccumulator::new();
+            self.march_ray(o, d, |_, sa, da| acc.feed(sa, da));
+            acc.finish()
+        });
+        let mut picker = DepthPicker::new(heuristic, first);
+        let mut spread = RaySpread::new();
+        let (c, t_exit) = self.march_ray(o, d, |t, sa, da| {
+            picker.feed(t, sa, da);
+            spread.feed(t, da);
+        });
+        let t = t_exit.and_then(|te| picker.finish(te));
+        (c, t, spread.finish())
+    }
+
     /// One ray's layered samples (issue 14): at most `layers` segments, front to back (the
     /// scalar reference of the packet marcher's layered path).
     pub fn segments(&self, o: Vec3, d: Vec3, layers: u32) -> Vec<Segment> {
@@ -452,14 +473,20 @@ impl Marcher {
                     crate::packet_march::march_band(&kernel, &basis, Some(heuristic), pack, y0, tb, cb, sb);
                     return;
                 }
+                let spread = pack.is_some_and(|(_, r)| r.uses_spread());
                 for (i, (tp, cp)) in tb.iter_mut().zip(cb.iter_mut()).enumerate() {
                     let (x, y) = ((i % w) as u32, (b * BAND_ROWS + i / w) as u32);
                     let d = basis.dir(x, y);
-                    let (c, depth) = self.pixel(o, d, heuristic);
+                    let (c, depth, u) = if spread {
+                        self.pixel_spread(o, d, heuristic)
+                    } else {
+                        let (c, depth) = self.pixel(o, d, heuristic);
+                        (c, depth, Uncertainty::default())
+                    };
                     *cp = pack_color_f32(c);
                     *tp = depth.unwrap_or(f32::INFINITY);
                     if let (Some((q, radius)), Some(t), Some(s)) = (pack, depth, sb.get_mut(i)) {
-                        *s = q.pack(o + d * t, radius.at(d, t));
+                        *s = q.pack(o + d * t, radius.at_ray(d, t, &u));
                     }
                 }
             },
@@ -493,7 +520,9 @@ impl Marcher {
 
     /// The uncompacted packed samples of a marched [`PixelBuffer`] (radius 0 for empty pixels)
     /// and the frame's radius unit: each non-empty pixel's sample at `o + d·t` with radius
-    /// `radius_scale` × the options' [`RadiusModel`], quantized over the volume box.
+    /// `radius_scale` × the options' [`RadiusModel`], quantized over the volume box. Under
+    /// [`RadiusModel::Uncertainty`] each non-empty pixel's ray is marched again (scalar, with
+    /// the request's heuristic) for its [`Uncertainty`].
     pub fn quantize(&self, req: &CameraRequest, pb: &PixelBuffer) -> (Vec<u64>, f32) {
         let (q, radius) = self.quantizer(req);
         let radius_unit = radius.unit();
@@ -507,7 +536,12 @@ impl Marcher {
                     if t.is_finite() {
                         let (x, y) = ((i % w) as u32, (band * BAND_ROWS + i / w) as u32);
                         let d = basis.dir(x, y);
-                        *s = q.pack(o + d * t, radius.at(d, t));
+                        let u = if radius.uses_spread() {
+                            self.pixel_spread(o, d, req.heuristic).2
+                        } else {
+                            Uncertainty::default()
+                        };
+                        *s = q.pack(o + d * t, radius.at_ray(d, t, &u));
                     }
                 }
             },
@@ -607,8 +641,9 @@ impl Marcher {
     pub fn frame_radius(&self, req: &CameraRequest) -> FrameRadius {
         let scale =
             if req.radius_scale.is_finite() && req.radius_scale > 0.0 { req.radius_scale.min(16.0) } else { 1.0 };
-        FrameRadius::new(
+        FrameRadius::with_params(
             self.opts.radius,
+            self.opts.uncertainty,
             scale,
             &req.camera,
             &self.volume.bounds(),

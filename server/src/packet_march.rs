@@ -18,7 +18,7 @@
 
 use crate::lanes::{dispatch, Lanes};
 use crate::marcher::Marcher;
-use crate::radius::FrameRadius;
+use crate::radius::{FrameRadius, RaySpread, Uncertainty};
 use volwarp_core::sample::{over_background, pack_color_f32, Quantizer};
 use volwarp_core::segments::Segmenter;
 use volwarp_core::{DepthPicker, FirstPassAccumulator, Heuristic, RayBasis, Vec3, BACKGROUND};
@@ -89,6 +89,25 @@ impl Feed for [DepthPicker; 8] {
             let l = bits.trailing_zeros() as usize & 7;
             bits &= bits - 1;
             self[l].feed(t[l], src_a[l], dst_a[l]);
+        }
+    }
+}
+
+/// Depth pickers with the rays' spread collectors ([`crate::radius::RadiusModel::Uncertainty`]).
+struct PickSpread {
+    pickers: [DepthPicker; 8],
+    spread: [RaySpread; 8],
+}
+
+impl Feed for PickSpread {
+    const ACTIVE: bool = true;
+    #[inline(always)]
+    fn feed(&mut self, mut bits: u32, t: &[f32; 8], src_a: &[f32; 8], dst_a: &[f32; 8]) {
+        while bits != 0 {
+            let l = bits.trailing_zeros() as usize & 7;
+            bits &= bits - 1;
+            self.pickers[l].feed(t[l], src_a[l], dst_a[l]);
+            self.spread[l].feed(t[l], dst_a[l]);
         }
     }
 }
@@ -336,6 +355,8 @@ impl Kernel<'_> {
             for px in (0..w).step_by(PW) {
                 let rays = self.rays(basis, o, px, py, w, h);
                 let mut depth = [None; 8];
+                let mut unc = [Uncertainty::default(); 8];
+                let spread = pack.is_some_and(|(_, r)| r.uses_spread());
                 let c = match heuristic {
                     None => self.march::<L, _>(o, &rays, &mut NoFeed),
                     Some(hr) => {
@@ -348,13 +369,24 @@ impl Kernel<'_> {
                         } else {
                             None
                         };
-                        let mut pickers: [DepthPicker; 8] =
+                        let pickers: [DepthPicker; 8] =
                             core::array::from_fn(|l| DepthPicker::new(hr, first.map(|f| f[l])));
-                        let c = self.march::<L, _>(o, &rays, &mut pickers);
-                        for l in 0..8 {
-                            depth[l] = rays.t_exit[l].and_then(|te| pickers[l].finish(te));
+                        if spread {
+                            let mut ps = PickSpread { pickers, spread: [RaySpread::new(); 8] };
+                            let c = self.march::<L, _>(o, &rays, &mut ps);
+                            for l in 0..8 {
+                                depth[l] = rays.t_exit[l].and_then(|te| ps.pickers[l].finish(te));
+                                unc[l] = ps.spread[l].finish();
+                            }
+                            c
+                        } else {
+                            let mut pickers = pickers;
+                            let c = self.march::<L, _>(o, &rays, &mut pickers);
+                            for l in 0..8 {
+                                depth[l] = rays.t_exit[l].and_then(|te| pickers[l].finish(te));
+                            }
+                            c
                         }
-                        c
                     }
                 };
                 for l in 0..8 {
@@ -378,7 +410,7 @@ impl Kernel<'_> {
                     }
                     if let (Some((q, radius)), Some(tl), Some(s)) = (pack, depth[l], packed.get_mut(i)) {
                         let d = rays.d[l];
-                        *s = q.pack(o + d * tl, radius.at(d, tl));
+                        *s = q.pack(o + d * tl, radius.at_ray(d, tl, &unc[l]));
                     }
                 }
             }

@@ -142,6 +142,8 @@ fn frame_samples_sit_on_their_rays() {
         (Heuristic::Midpoint, 2.5, RadiusModel::Voxel),
         (Heuristic::Threshold, 1.0, RadiusModel::Footprint),
         (Heuristic::Peak, 0.5, RadiusModel::Footprint),
+        (Heuristic::Threshold, 1.0, RadiusModel::Uncertainty),
+        (Heuristic::RelThreshold, 0.5, RadiusModel::Uncertainty),
     ] {
         let m = base.with_transfer_function(&ds.tf, MarchOptions { radius: model, ..MarchOptions::default() });
         let req = CameraRequest { seq: 3, camera: cam, heuristic: h, radius_scale: scale };
@@ -177,15 +179,18 @@ fn frame_samples_sit_on_their_rays() {
                     let want_r = 0.5 * ds.volume.voxel_diagonal() * scale;
                     assert!((r - want_r).abs() < want_r * 1e-3);
                 }
-                RadiusModel::Footprint => {
+                RadiusModel::Footprint | RadiusModel::Uncertainty => {
                     // A pixel diagonal at the sample's depth: √2 × the distance between this
-                    // pixel's and its right neighbour's rays at the sample's view depth.
+                    // pixel's and its right neighbour's rays at the sample's view depth (the
+                    // uncertainty model: that, times a factor in 1..=max).
                     let (_, _, w) = cam.basis();
                     let z = (p - cam.eye).dot(w);
                     let (d0, d1) = (basis.dir(x, y), basis.dir(x + 1, y));
                     let pitch = (d1 * (z / d1.dot(w)) - d0 * (z / d0.dot(w))).length();
                     let want_r = std::f32::consts::SQRT_2 * pitch * scale;
-                    assert!((r - want_r).abs() <= 0.5 * frame.header.radius_unit + want_r * 1e-3, "{r} vs {want_r}");
+                    let tol = 0.5 * frame.header.radius_unit + want_r * 1e-3;
+                    let max = if model == RadiusModel::Uncertainty { m.options().uncertainty.max } else { 1.0 };
+                    assert!(r >= want_r - tol && r <= max * want_r + tol, "{r} vs {want_r} (×1..={max})");
                 }
             }
             assert_eq!(frame.colors[j], pb.color[i]);

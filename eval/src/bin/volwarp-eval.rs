@@ -6,6 +6,7 @@
 //! volwarp-eval table1   [--volume ../shared/data/mri_colin27_181x217x181_uint8.raw] --out DIR [--results docs/results.md]
 //! volwarp-eval bits     [--volume FILE] --out DIR
 //! volwarp-eval radius   [--volume FILE | --all] --out DIR
+//! volwarp-eval uncertainty [--volume FILE | --all] [--variants footprint,uncertainty:gain=0.05:max=2] --out DIR
 //! volwarp-eval failures [--volume FILE] --out DIR
 //! volwarp-eval session  [--volume FILE | --all] [--scenarios orbit,stop-and-go,dolly,look-around] --out DIR
 //! volwarp-eval strip --record FILE [--volume FILE] --out strip.png
@@ -138,6 +139,24 @@ enum Cmd {
         /// Timed renders per variant (median reported); 0: no timing.
         #[arg(long, default_value_t = 5)]
         runs: usize,
+    },
+    /// Samples sized by what is known (issue 19 lever 4): single warps of frames of each radius
+    /// model, drawn with `splat` and the default drawing (`volwarp`), against the stale frame.
+    Uncertainty {
+        #[command(flatten)]
+        common: Common,
+        #[command(flatten)]
+        sel: Selection,
+        /// Viewport side.
+        #[arg(long, default_value_t = 512)]
+        size: u32,
+        /// Depth heuristic of the frames.
+        #[arg(long, default_value = "threshold")]
+        heuristic: String,
+        /// Radius variants, comma-separated: `footprint`, `voxel`, `uncertainty`, or
+        /// `uncertainty:gain=G:max=M:opacity=O:measure=sigma|span`.
+        #[arg(long, default_value = "footprint,uncertainty")]
+        variants: String,
     },
     /// Drive every renderer through the failure cases; CSV and pictures.
     Failures {
@@ -289,6 +308,10 @@ struct SessionArgs {
     /// `splat-layers` composites them; 1: one sample per pixel).
     #[arg(long, default_value_t = 1, value_parser = clap::value_parser!(u32).range(1..=16))]
     layers: u32,
+    /// The server's sphere radius model: `footprint`, `voxel`, `uncertainty` or
+    /// `uncertainty:gain=G:max=M:opacity=O:measure=sigma|span` (issue 19 lever 4).
+    #[arg(long, default_value = "footprint")]
+    radius: String,
 }
 
 fn session_options(s: SessionArgs, threads: usize) -> Result<volwarp_eval::session::SessionOptions, ErrorBox> {
@@ -306,7 +329,9 @@ fn session_options(s: SessionArgs, threads: usize) -> Result<volwarp_eval::sessi
         }
         (false, false) => return Err("sweep one of --sweep-server-ms and --sweep-mbps at a time".into()),
     };
+    let (radius, uncertainty) = volwarp_server::radius::parse_spec(&s.radius)?;
     Ok(SessionOptions {
+        march: volwarp_server::MarchOptions { radius, uncertainty, ..Default::default() },
         cfg: SessionConfig {
             size: s.size,
             duration_s: s.duration,
@@ -390,6 +415,18 @@ fn run(cli: Cli) -> Result<(), ErrorBox> {
         }
         Cmd::Radius { common, sel, size, heuristic: h, runs } => {
             volwarp_eval::radius_model::run(&sel.datasets(&common)?, heuristic(&h)?, size, runs, &common.out)
+        }
+        Cmd::Uncertainty { common, sel, size, heuristic: h, variants } => {
+            let variants = volwarp_eval::uncertainty_radius::parse_variants(&variants)?;
+            let datasets = sel.datasets(&common)?;
+            volwarp_eval::uncertainty_radius::run(
+                &datasets,
+                heuristic(&h)?,
+                size,
+                &variants,
+                common.threads,
+                &common.out,
+            )
         }
         Cmd::Failures { common, size, heuristic: h } => {
             let ds = load(common.volume.as_deref(), common.tf.as_deref())?;

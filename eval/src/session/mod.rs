@@ -63,6 +63,8 @@ pub struct SessionOptions {
     pub policy: String,
     /// The sweep.
     pub sweep: Sweep,
+    /// The server's march options (its sphere radius model: `session --radius`).
+    pub march: volwarp_server::MarchOptions,
 }
 
 /// Runs every session (datasets × scenarios × sweep settings) and writes the files into `out`.
@@ -103,7 +105,7 @@ pub fn simulate_all(datasets: &[Dataset], opts: &SessionOptions) -> Result<Vec<R
     let total = datasets.len() * opts.scenarios.len() * settings(opts).len();
     let t0 = Instant::now();
     for ds in datasets {
-        let marcher = Marcher::from_dataset(ds);
+        let marcher = Marcher::from_dataset(ds).with_transfer_function(&ds.tf, opts.march);
         let mut truths = TruthCache::default();
         for (size, sms, mbps) in settings(opts) {
             let server_ms =
