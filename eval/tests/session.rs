@@ -156,7 +156,9 @@ fn a_camera_that_never_moves_shows_the_truth_with_a_slow_server() {
     o.scenarios = vec![CameraPath::still()];
     let runs = simulate_all(&small(), &o).unwrap();
     assert_eq!(runs[0].result.frames.len(), 1, "nothing to request");
-    assert!(runs[0].result.rows.iter().all(|r| r.metrics.flip == 0.0));
+    // The default method's layered frame is the truth up to 8-bit rounding of its segments.
+    let tolerance = |m: &str| if m == "volwarp" { 0.01 } else { 0.0 };
+    assert!(runs[0].result.rows.iter().all(|r| r.metrics.flip <= tolerance(&r.method)));
 }
 
 #[test]
