@@ -208,9 +208,8 @@ impl TileSplat {
                 let lists = Lists { groups: list, large, scattered, rects, group_rects };
                 tile_dispatch(&view, &tile, samples, scene, &lists, &mut buf);
                 for (y, row) in rows.chunks_mut(w).enumerate() {
-                    let keys = &buf.keys[y * TILE..y * TILE + tw];
-                    for (p, &k) in row[x0..x0 + tw].iter_mut().zip(keys) {
-                        *p = out_of(colors, k);
+                    for (x, p) in row[x0..x0 + tw].iter_mut().enumerate() {
+                        *p = out_of(colors, buf.key(y * TILE + x));
                     }
                 }
             }
@@ -373,29 +372,46 @@ fn bound_group<L: Lanes>(view: &View, vf: &ViewF32, deq: &Dequantizer, samples: 
         let (sx, sy) = ((cx * cx + denom).sqrt(), (cy * cy + denom).sqrt());
         let (xl, xh) = ((cx * cz - rr * sx) * inv, (cx * cz + rr * sx) * inv);
         let (yl, yh) = ((cy * cz - rr * sy) * inv, (cy * cz + rr * sy) * inv);
-        let x0 = (xl * L::splat(vf.px_x) + L::splat(vf.half_w)).to_array();
-        let x1 = (xh * L::splat(vf.px_x) + L::splat(vf.half_w)).to_array();
-        let y0 = (L::splat(vf.half_h) - yh * L::splat(vf.px_y)).to_array();
-        let y1 = (L::splat(vf.half_h) - yl * L::splat(vf.px_y)).to_array();
-        let far = far.to_bitmask();
+        let x0 = xl * L::splat(vf.px_x) + L::splat(vf.half_w);
+        let x1 = xh * L::splat(vf.px_x) + L::splat(vf.half_w);
+        let y0 = L::splat(vf.half_h) - yh * L::splat(vf.px_y);
+        let y1 = L::splat(vf.half_h) - yl * L::splat(vf.px_y);
+        // [`centre_span`] in f32 lanes, widened from 0.01 to 0.02 pixel so that the f32
+        // rounding of the subtraction (≤ 0.001 pixel below 2¹⁴) never narrows it: the span
+        // holds [`centre_span`]'s of the same bound.
+        let (ax, bx) = (x0 - L::splat(0.52), x1 - L::splat(0.48));
+        let (ay, by) = (y0 - L::splat(0.52), y1 - L::splat(0.48));
+        let (nw, nh) = (L::splat(view.width as f32), L::splat(view.height as f32));
+        let zero = L::splat(0.0);
+        let ok = far
+            & ax.simd_le(bx)
+            & bx.simd_ge(zero)
+            & ax.simd_lt(nw)
+            & ay.simd_le(by)
+            & by.simd_ge(zero)
+            & ay.simd_lt(nh);
+        let (lx, hx) = (ax.fast_max(L::splat(-1.0)).to_array(), bx.fast_min(nw).to_array());
+        let (ly, hy) = (ay.fast_max(L::splat(-1.0)).to_array(), by.fast_min(nh).to_array());
+        let (far, ok) = (far.to_bitmask(), ok.to_bitmask());
         for (l, (rect, &s)) in rs.iter_mut().zip(ss).enumerate() {
-            let b = if far & (1 << l) != 0 {
-                match (
-                    centre_span(x0[l] as f64, x1[l] as f64, view.width),
-                    centre_span(y0[l] as f64, y1[l] as f64, view.height),
-                ) {
-                    (Some((a, b)), Some((c, d))) => Some((a, b, c, d)),
-                    _ => None,
-                }
+            let b = if ok & (1 << l) != 0 {
+                let (x0, x1) = (ceil_clamped(lx[l]), (hx[l] as u32).min(view.width - 1));
+                let (y0, y1) = (ceil_clamped(ly[l]), (hy[l] as u32).min(view.height - 1));
+                (x0 <= x1 && y0 <= y1).then_some((x0, x1, y0, y1))
+            } else if far & (1 << l) != 0 {
+                None
             } else {
                 tight_bound(view, deq.center(s), deq.radius(s))
             };
-            *rect = match b {
+            // Built in a local and stored once: reading `*rect` back after four 16-bit stores
+            // stalled on store forwarding (a fifth of the bound pass).
+            let r = match b {
                 Some((x0, x1, y0, y1)) => Rect { x0: x0 as u16, y0: y0 as u16, x1: x1 as u16, y1: y1 as u16 },
                 None => NO_RECT,
             };
-            if !rect.is_empty() && !rect.is_large() {
-                u = u.union(*rect);
+            *rect = r;
+            if !r.is_empty() && !r.is_large() {
+                u = u.union(r);
             }
         }
     }
@@ -433,6 +449,13 @@ fn centre_span(a: f64, b: f64, n: u32) -> Option<(u32, u32)> {
     Some((l as u32, h as u32))
 }
 
+/// `⌈a⌉`, at least 0, of `a ≥ −1` (truncation: no rounding instruction needed).
+#[inline(always)]
+fn ceil_clamped(a: f32) -> u32 {
+    let l = a as i32;
+    (if (l as f32) < a { l + 1 } else { l }).max(0) as u32
+}
+
 /// Whether `r` overlaps the tile at `(x0, y0)` of `w × h` pixels.
 #[inline(always)]
 fn overlaps(r: Rect, x0: usize, y0: usize, w: usize, h: usize) -> bool {
@@ -450,13 +473,37 @@ struct Tile {
 /// A tile's local buffers: its pixels' keys and unit ray directions (three planes of
 /// `TILE + 1` rows of [`STRIDE`] floats; padding is zero and never tested).
 struct TileBuf {
-    keys: Vec<u64>,
+    /// Per pixel (row stride [`TILE`], one row and eight pixels of padding), the distance of
+    /// the nearest hit so far, `+∞` where none.
+    depth: Vec<f32>,
+    /// Per pixel, the sample of that hit, [`NO_HIT`] where none: with `depth`, the pixel's
+    /// key `(t, id)` ([`TileBuf::key`]).
+    ids: Vec<u32>,
     dirs: Vec<f32>,
 }
 
+/// Length of a tile's depth and id planes.
+const KEYS: usize = (TILE + 1) * TILE + 8;
+
 impl TileBuf {
     fn new() -> TileBuf {
-        TileBuf { keys: vec![EMPTY; (TILE + 1) * TILE + 8], dirs: vec![0.0; 3 * PLANE] }
+        TileBuf { depth: vec![f32::INFINITY; KEYS], ids: vec![NO_HIT; KEYS], dirs: vec![0.0; 3 * PLANE] }
+    }
+
+    /// The depth-test key of tile pixel `p` ([`EMPTY`] where nothing hit).
+    #[inline(always)]
+    fn key(&self, p: usize) -> u64 {
+        key_of(self.depth[p], self.ids[p])
+    }
+}
+
+/// The key of a pixel whose planes hold `(t, id)`.
+#[inline(always)]
+fn key_of(t: f32, id: u32) -> u64 {
+    if id == NO_HIT {
+        EMPTY
+    } else {
+        key(t, id)
     }
 }
 
@@ -472,9 +519,37 @@ fn load<L: Lanes>(s: &[f32]) -> L {
 /// Four floats from `s` and four from `s[STRIDE..]`: a 4×2 block of a direction plane.
 #[inline(always)]
 fn load_4x2<L: Lanes>(s: &[f32]) -> L {
-    match (s.first_chunk::<4>(), s.get(STRIDE..).and_then(|r| r.first_chunk::<4>())) {
-        (Some(a), Some(b)) => L::new([a[0], a[1], a[2], a[3], b[0], b[1], b[2], b[3]]),
-        _ => L::splat(0.0),
+    L::new(quad::<f32, STRIDE>(s))
+}
+
+/// Four values from `s` and four from `s[S..]` (a 4×2 block of a plane of row stride `S`);
+/// zeros if `s` is too short.
+#[inline(always)]
+fn quad<T: Copy + Default, const S: usize>(s: &[T]) -> [T; 8] {
+    match (s.first_chunk::<4>(), s.get(S..).and_then(|r| r.first_chunk::<4>())) {
+        (Some(a), Some(b)) => [a[0], a[1], a[2], a[3], b[0], b[1], b[2], b[3]],
+        _ => [T::default(); 8],
+    }
+}
+
+/// The first eight values of `s`, zeros if it is shorter.
+#[inline(always)]
+fn eight<T: Copy + Default>(s: &[T]) -> [T; 8] {
+    s.first_chunk::<8>().copied().unwrap_or([T::default(); 8])
+}
+
+/// Writes `a` where [`quad`] (with `S` = [`TILE`]) or [`eight`] read it.
+#[inline(always)]
+fn put<T: Copy>(s: &mut [T], a: [T; 8], is_quad: bool) {
+    if is_quad {
+        if let Some(r) = s.first_chunk_mut::<4>() {
+            r.copy_from_slice(&a[..4]);
+        }
+        if let Some(r) = s.get_mut(TILE..).and_then(|r| r.first_chunk_mut::<4>()) {
+            r.copy_from_slice(&a[4..]);
+        }
+    } else if let Some(r) = s.first_chunk_mut::<8>() {
+        *r = a;
     }
 }
 
@@ -497,7 +572,8 @@ fn splat_tile<L: Lanes>(view: &View, tile: &Tile, samples: &[u64], scene: &Scene
             }
         }
     }
-    buf.keys.fill(EMPTY);
+    buf.depth.fill(f32::INFINITY);
+    buf.ids.fill(NO_HIT);
     let o = [b.eye[0], b.eye[1], b.eye[2]];
     let deq = &scene.deq;
     let lane = L::new([0.0, 1.0, 2.0, 3.0, 4.0, 5.0, 6.0, 7.0]);
@@ -516,13 +592,13 @@ fn splat_tile<L: Lanes>(view: &View, tile: &Tile, samples: &[u64], scene: &Scene
         for i in g * GROUP..(g * GROUP + GROUP).min(n) {
             let r = rects[i];
             if overlaps(r, tile.x0, tile.y0, tile.w, tile.h) && !r.is_large() {
-                splat_sphere(&k, tile, samples, deq, rects, i as u32, &buf.dirs, &mut buf.keys);
+                splat_sphere(&k, tile, samples, deq, rects, i as u32, buf);
             }
         }
     }
     for &i in lists.large {
         if overlaps(rects[i as usize], tile.x0, tile.y0, tile.w, tile.h) {
-            splat_sphere(&k, tile, samples, deq, rects, i, &buf.dirs, &mut buf.keys);
+            splat_sphere(&k, tile, samples, deq, rects, i, buf);
         }
     }
 }
@@ -559,9 +635,9 @@ fn splat_sphere<L: Lanes>(
     deq: &Dequantizer,
     rects: &[Rect],
     i: u32,
-    dirs: &[f32],
-    keys: &mut [u64],
+    buf: &mut TileBuf,
 ) {
+    let TileBuf { depth, ids, dirs } = buf;
     let r = rects[i as usize];
     // The rectangle clipped to the tile, in tile coordinates.
     let x0 = (r.x0 as usize).max(tile.x0) - tile.x0;
@@ -578,7 +654,7 @@ fn splat_sphere<L: Lanes>(
             let at = y * STRIDE + x0;
             let d = [load_4x2(&dirs[at..]), load_4x2(&dirs[PLANE + at..]), load_4x2(&dirs[2 * PLANE + at..])];
             if let Some((t, m)) = sphere_hits(&k.o, &d, c, rad, active) {
-                keep(keys, m.to_bitmask(), &t.to_array(), i, y * TILE + x0, true, k.ties);
+                keep(depth, ids, m, t, i, y * TILE + x0, true, k.ties);
             }
         }
     } else {
@@ -588,27 +664,52 @@ fn splat_sphere<L: Lanes>(
                 let at = y * STRIDE + x;
                 let d = [load(&dirs[at..]), load(&dirs[PLANE + at..]), load(&dirs[2 * PLANE + at..])];
                 if let Some((t, m)) = sphere_hits(&k.o, &d, c, rad, active) {
-                    keep(keys, m.to_bitmask(), &t.to_array(), i, y * TILE + x, false, k.ties);
+                    keep(depth, ids, m, t, i, y * TILE + x, false, k.ties);
                 }
             }
         }
     }
 }
 
-/// The depth test of the hit lanes `bits` (distances `t`) of sphere `i`: lane `l` is pixel
-/// `base + l` of a row, or of a 4×2 block (`quad`) `base + (l / 4)·TILE + l % 4`. All eight
-/// lanes are written without branches (a lane that did not hit writes back the minimum of its
-/// slot and [`EMPTY`], i.e. the slot: the buffer is padded for the lanes past the tile).
+/// The depth test of the hit lanes `m` (distances `t`) of sphere `i`: lane `l` is pixel
+/// `base + l` of a row, or of a 4×2 block (`is_quad`) `base + (l / 4)·TILE + l % 4`. In lanes:
+/// a hit nearer than the pixel's depth takes the pixel (its key is then smaller whatever the
+/// ids), and the eight lanes are written back without branches (the planes are padded for the
+/// lanes past the tile, which write back what they read); a hit at *equal* depth takes
+/// [`keep_ties`] (the tie rule, rare).
+#[allow(clippy::too_many_arguments)]
 #[inline(always)]
-fn keep(keys: &mut [u64], bits: u32, t: &[f32; 8], i: u32, base: usize, quad: bool, ties: Ties) {
-    let Some(slots) = keys.get_mut(base..base + TILE + 8) else { return };
+fn keep<L: Lanes>(depth: &mut [f32], ids: &mut [u32], m: L, t: L, i: u32, base: usize, is_quad: bool, ties: Ties) {
+    let (Some(ds), Some(is)) = (depth.get_mut(base..base + TILE + 8), ids.get_mut(base..base + TILE + 8)) else {
+        return;
+    };
+    let (d, id) = if is_quad {
+        (L::new(quad::<f32, TILE>(ds)), L::new_u(quad::<u32, TILE>(is)))
+    } else {
+        (L::new(eight(ds)), L::new_u(eight(is)))
+    };
+    let win = m & t.simd_lt(d);
+    let tie = (m & t.simd_eq(d)).to_bitmask();
+    put(ds, win.select(t, d).to_array(), is_quad);
+    put(is, L::u_to_array(win.select_u(L::splat_u(i), id)), is_quad);
+    if tie != 0 {
+        keep_ties(ds, is, tie, &t.to_array(), i, is_quad, ties);
+    }
+}
+
+/// [`keep`]'s lanes `bits` whose hit is at the pixel's depth: the smaller key wins (core's tie
+/// rule, or the built scene's order for an unbuilt scene).
+#[inline(never)]
+#[cold]
+fn keep_ties(ds: &mut [f32], is: &mut [u32], bits: u32, t: &[f32; 8], i: u32, is_quad: bool, ties: Ties) {
     for (l, &t) in t.iter().enumerate() {
-        let p = if quad { (l >> 2) * TILE + (l & 3) } else { l };
-        let hit = bits >> l & 1 != 0;
-        let k = if hit { key(t, i) } else { EMPTY };
-        let old = slots[p];
-        slots[p] = match ties {
-            Ties::Sorted(samples) if hit && (k ^ old) >> 32 == 0 => {
+        if bits >> l & 1 == 0 {
+            continue;
+        }
+        let p = if is_quad { (l >> 2) * TILE + (l & 3) } else { l };
+        let (k, old) = (key(t, i), key_of(ds[p], is[p]));
+        let new = match ties {
+            Ties::Sorted(samples) if (k ^ old) >> 32 == 0 => {
                 if sorted_before(samples, i, old as u32) {
                     k
                 } else {
@@ -617,6 +718,9 @@ fn keep(keys: &mut [u64], bits: u32, t: &[f32; 8], i: u32, base: usize, quad: bo
             }
             _ => k.min(old),
         };
+        if let Some(id) = key_prim(new) {
+            (ds[p], is[p]) = (f32::from_bits((new >> 32) as u32), id);
+        }
     }
 }
 
