@@ -186,7 +186,7 @@ impl TileSplat {
         *ids = img.pixels;
         ids.fill(NO_HIT);
         if ok {
-            self.draw(scene, camera, ids, |_, k| key_prim(k).unwrap_or(NO_HIT));
+            self.draw(scene, camera, ids, |_, id| id);
         }
         ok
     }
@@ -202,9 +202,10 @@ impl TileSplat {
         self.threads.count()
     }
 
-    /// Bins and splats the scene, writing `out_of(colors, key)` for every pixel of `out`
+    /// Bins and splats the scene, writing `out_of(colors, id)` for every pixel of `out` (`id`:
+    /// the pixel's first-hit sample, [`NO_HIT`] where none)
     /// (`width × height` long).
-    fn draw(&mut self, scene: &Scene, camera: &Camera, out: &mut [u32], out_of: impl Fn(&[u32], u64) -> u32 + Sync) {
+    fn draw(&mut self, scene: &Scene, camera: &Camera, out: &mut [u32], out_of: impl Fn(&[u32], u32) -> u32 + Sync) {
         let view = View::new(camera);
         let grid = Grid::new(camera);
         self.bin(scene, &view, grid);
@@ -225,7 +226,7 @@ impl TileSplat {
                 let any_large = large.iter().any(|&i| overlaps(rects[i as usize], x0, y0, tw, th))
                     || scattered.iter().any(|&g| overlaps(group_rects[g as usize], x0, y0, tw, th));
                 if list.is_empty() && !any_large {
-                    let empty = out_of(colors, EMPTY);
+                    let empty = out_of(colors, NO_HIT);
                     for row in rows.chunks_mut(w) {
                         row[x0..x0 + tw].fill(empty);
                     }
@@ -236,8 +237,8 @@ impl TileSplat {
                 let (p, c) = tile_dispatch(&view, &tile, samples, scene, &lists, &mut buf);
                 counts = (counts.0 + p, counts.1 + c);
                 for (y, row) in rows.chunks_mut(w).enumerate() {
-                    for (x, p) in row[x0..x0 + tw].iter_mut().enumerate() {
-                        *p = out_of(colors, buf.key(y * TILE + x));
+                    for (p, &id) in row[x0..x0 + tw].iter_mut().zip(&buf.ids[y * TILE..y * TILE + tw]) {
+                        *p = out_of(colors, id);
                     }
                 }
             }
@@ -519,12 +520,6 @@ const KEYS: usize = (TILE + 1) * TILE + 8;
 impl TileBuf {
     fn new() -> TileBuf {
         TileBuf { depth: vec![f32::INFINITY; KEYS], ids: vec![NO_HIT; KEYS], dirs: vec![0.0; 3 * PLANE] }
-    }
-
-    /// The depth-test key of tile pixel `p` ([`EMPTY`] where nothing hit).
-    #[inline(always)]
-    fn key(&self, p: usize) -> u64 {
-        key_of(self.depth[p], self.ids[p])
     }
 }
 
@@ -846,9 +841,18 @@ impl Renderer for TileSplat {
 
     fn render(&mut self, scene: &Scene, camera: &Camera, out: &mut Image) {
         if begin_frame(scene, camera, out) {
-            self.draw(scene, camera, &mut out.pixels, |colors, k| {
-                key_prim(k).map_or(BACKGROUND, |id| shade(colors, id))
-            });
+            self.draw(
+                scene,
+                camera,
+                &mut out.pixels,
+                |colors, id| {
+                    if id == NO_HIT {
+                        BACKGROUND
+                    } else {
+                        shade(colors, id)
+                    }
+                },
+            );
         }
     }
 }
