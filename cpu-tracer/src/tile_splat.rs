@@ -18,16 +18,22 @@
 //!    one per large sphere or scattered group, 8 bytes of rectangle per sphere; nothing per
 //!    pixel besides the image, whatever the view.
 //! 3. **Splat** (parallel over bands of tiles): per tile, the unit ray directions of its pixels
-//!    (`RayBasis::dir`'s operations, eight at a time) and a `(depth, id)` key per pixel, both in
-//!    a local buffer of about 24 KB that stays in L1; each sphere of its groups whose rectangle
-//!    overlaps the tile tests its pixels in the tile eight at a time with the packet tracer's
-//!    SIMD ray–sphere kernel (`lanes::sphere_hits`, AVX2 dispatch): as 4×2 blocks when the
-//!    rectangle is at most four pixels wide, as rows of 8 otherwise. The tile's ids or colors
-//!    are then written straight into the image: no per-thread image and no merge.
+//!    (`RayBasis::dir`'s operations, eight at a time) and per pixel the distance and sample of
+//!    its nearest hit so far (an f32 depth plane and a u32 id plane), all in a local buffer of
+//!    about 24 KB that stays in L1; each sphere of its groups whose rectangle overlaps the tile
+//!    tests its pixels in the tile eight at a time with the packet tracer's SIMD ray–sphere
+//!    kernel (`lanes::sphere_hits`, AVX2 dispatch): as 4×2 blocks when the rectangle is at most
+//!    four pixels wide, as rows of 8 otherwise. The depth test runs in the same lanes (a nearer
+//!    hit takes the pixel; a hit at equal depth goes to a cold scalar path with the tie rule).
+//!    A row block of a wider sphere is skipped when a conservative near distance of the sphere
+//!    lies beyond the depth of all its pixels (occlusion culling,
+//!    [`TileSplat::with_culling`]). The tile's ids or colors are then written straight into the
+//!    image: no per-thread image and no merge.
 //!
-//! Tiles without spheres cost one background fill. The keys are `(t bits << 32) | id`, so a
-//! minimum is core's tie rule (equal `t`: the smaller index), and the result does not depend on
-//! the order of the spheres in a tile or on the thread count (tested). An *unbuilt* scene (the
+//! Tiles without spheres cost one background fill. A pixel's `(t, id)` orders as the key
+//! `(t bits << 32) | id`, so its minimum is core's tie rule (equal `t`: the smaller index), and
+//! the result does not depend on the order of the spheres in a tile, on culling or on the
+//! thread count (tested). An *unbuilt* scene (the
 //! frame's samples in arrival order, no nodes: [`crate::route::unbuilt_scene`]) is drawn too;
 //! equal distances are then broken by the order the LBVH build would give (Morton code, then
 //! index), so the image is the built scene's.
