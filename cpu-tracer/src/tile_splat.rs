@@ -130,6 +130,11 @@ pub struct TileSplat {
     starts: Vec<u32>,
     /// Spheres overlapping more than [`MAX_TILES`] tiles.
     large: Vec<u32>,
+    /// Their rectangles (their entries of `rects` are emptied, so a group skips them without
+    /// a test).
+    large_rects: Vec<Rect>,
+    /// Per group, whether it holds a large sphere.
+    group_large: Vec<bool>,
     /// Groups overlapping more than [`MAX_GROUP_TILES`] tiles.
     scattered: Vec<u32>,
 }
@@ -163,6 +168,8 @@ impl TileSplat {
             lists: Vec::new(),
             starts: Vec::new(),
             large: Vec::new(),
+            large_rects: Vec::new(),
+            group_large: Vec::new(),
             scattered: Vec::new(),
         }
     }
@@ -221,6 +228,7 @@ impl TileSplat {
         let (pairs, culled) = (AtomicU64::new(0), AtomicU64::new(0));
         let cull = self.cull;
         let (large, scattered, group_rects) = (&self.large[..], &self.scattered[..], &self.group_rects[..]);
+        let large_rects = &self.large_rects[..];
         let band = |ty: usize, rows: &mut [u32]| {
             let mut buf = TileBuf::new();
             let mut counts = (0u64, 0u64);
@@ -229,7 +237,7 @@ impl TileSplat {
                 let list = &lists[starts[t] as usize..starts[t + 1] as usize];
                 let (x0, y0) = (tx * TILE, ty * TILE);
                 let (tw, th) = (TILE.min(w - x0), TILE.min(h - y0));
-                let any_large = large.iter().any(|&i| overlaps(rects[i as usize], x0, y0, tw, th))
+                let any_large = large_rects.iter().any(|&r| overlaps(r, x0, y0, tw, th))
                     || scattered.iter().any(|&g| overlaps(group_rects[g as usize], x0, y0, tw, th));
                 if list.is_empty() && !any_large {
                     let empty = out_of(colors, NO_HIT);
@@ -239,7 +247,7 @@ impl TileSplat {
                     continue;
                 }
                 let tile = Tile { x0, y0, w: tw, h: th };
-                let lists = Lists { groups: list, large, scattered, rects, group_rects, cull };
+                let lists = Lists { groups: list, large, large_rects, scattered, rects, group_rects, cull };
                 let (p, c) = tile_dispatch(&view, &tile, samples, scene, &lists, &mut buf);
                 counts = (counts.0 + p, counts.1 + c);
                 for (y, row) in rows.chunks_mut(w).enumerate() {
@@ -268,24 +276,27 @@ impl TileSplat {
         let groups = n.div_ceil(GROUP);
         self.rects.resize(n, NO_RECT);
         self.group_rects.resize(groups, NO_RECT);
+        self.group_large.resize(groups, false);
         // 1. rectangles, in parallel over runs of whole groups
         let per_task = (groups.div_ceil(self.threads.count() * 8)).max(1);
         let vf = ViewF32::new(view);
-        let bound = |c: usize, rects: &mut [Rect], grects: &mut [Rect]| {
-            for (g, (rects, grect)) in rects.chunks_mut(GROUP).zip(grects.iter_mut()).enumerate() {
+        let bound = |c: usize, rects: &mut [Rect], grects: &mut [Rect], glarge: &mut [bool]| {
+            let groups = rects.chunks_mut(GROUP).zip(grects.iter_mut().zip(glarge.iter_mut()));
+            for (g, (rects, (grect, glarge))) in groups.enumerate() {
                 let base = (c * per_task + g) * GROUP;
-                *grect = bound_dispatch(view, &vf, deq, &samples[base..base + rects.len()], rects);
+                (*grect, *glarge) = bound_dispatch(view, &vf, deq, &samples[base..base + rects.len()], rects);
             }
         };
         if self.threads.is_serial() {
-            bound(0, &mut self.rects, &mut self.group_rects);
+            bound(0, &mut self.rects, &mut self.group_rects, &mut self.group_large);
         } else {
             self.threads.install(|| {
                 self.rects
                     .par_chunks_mut(per_task * GROUP)
                     .zip(self.group_rects.par_chunks_mut(per_task))
+                    .zip(self.group_large.par_chunks_mut(per_task))
                     .enumerate()
-                    .for_each(|(c, (r, g))| bound(c, r, g))
+                    .for_each(|(c, ((r, g), l))| bound(c, r, g, l))
             });
         }
         // 2. groups to tiles (a counting sort, serial: a few tens of thousands of groups), and
@@ -332,9 +343,15 @@ impl TileSplat {
                 }
             }
         }
-        for (i, r) in self.rects.iter().enumerate() {
-            if !r.is_empty() && r.is_large() {
-                self.large.push(i as u32);
+        self.large_rects.clear();
+        for (g, _) in self.group_large.iter().enumerate().filter(|(_, &l)| l) {
+            for i in g * GROUP..(g * GROUP + GROUP).min(n) {
+                let r = self.rects[i];
+                if !r.is_empty() && r.is_large() {
+                    self.large.push(i as u32);
+                    self.large_rects.push(r);
+                    self.rects[i] = NO_RECT;
+                }
             }
         }
     }
@@ -391,8 +408,14 @@ impl ViewF32 {
 /// least two (widened) radii in front of the eye plane; the others (near, behind, NaN) take
 /// [`tight_bound`] in f64.
 #[inline(always)]
-fn bound_group<L: Lanes>(view: &View, vf: &ViewF32, deq: &Dequantizer, samples: &[u64], rects: &mut [Rect]) -> Rect {
-    let mut u = NO_RECT;
+fn bound_group<L: Lanes>(
+    view: &View,
+    vf: &ViewF32,
+    deq: &Dequantizer,
+    samples: &[u64],
+    rects: &mut [Rect],
+) -> (Rect, bool) {
+    let (mut u, mut any_large) = (NO_RECT, false);
     for (ss, rs) in samples.chunks(8).zip(rects.chunks_mut(8)) {
         let (mut x, mut y, mut z, mut r) = ([0f32; 8], [0f32; 8], [0f32; 8], [0f32; 8]);
         for (l, &s) in ss.iter().enumerate() {
@@ -448,12 +471,16 @@ fn bound_group<L: Lanes>(view: &View, vf: &ViewF32, deq: &Dequantizer, samples: 
                 None => NO_RECT,
             };
             *rect = r;
-            if !r.is_empty() && !r.is_large() {
-                u = u.union(r);
+            if !r.is_empty() {
+                if r.is_large() {
+                    any_large = true;
+                } else {
+                    u = u.union(r);
+                }
             }
         }
     }
-    u
+    (u, any_large)
 }
 
 lanes::dispatch! {
@@ -464,7 +491,7 @@ lanes::dispatch! {
         deq: &Dequantizer,
         samples: &[u64],
         rects: &mut [Rect],
-    ) -> Rect
+    ) -> (Rect, bool)
 }
 
 /// The pixels `i < n` whose centre `i + 0.5` lies in `[a, b]`, widened by 0.01 pixel, as an
@@ -630,17 +657,18 @@ fn splat_tile<L: Lanes>(
             continue;
         }
         for i in g * GROUP..(g * GROUP + GROUP).min(n) {
+            // Large spheres' rectangles are empty here (drawn from `large` below).
             let r = rects[i];
-            if overlaps(r, tile.x0, tile.y0, tile.w, tile.h) && !r.is_large() {
+            if overlaps(r, tile.x0, tile.y0, tile.w, tile.h) {
                 pairs += 1;
-                culled += splat_sphere(&k, tile, samples, deq, rects, i as u32, buf) as u64;
+                culled += splat_sphere(&k, tile, samples, deq, r, i as u32, buf) as u64;
             }
         }
     }
-    for &i in lists.large {
-        if overlaps(rects[i as usize], tile.x0, tile.y0, tile.w, tile.h) {
+    for (&i, &r) in lists.large.iter().zip(lists.large_rects) {
+        if overlaps(r, tile.x0, tile.y0, tile.w, tile.h) {
             pairs += 1;
-            culled += splat_sphere(&k, tile, samples, deq, rects, i, buf) as u64;
+            culled += splat_sphere(&k, tile, samples, deq, r, i, buf) as u64;
         }
     }
     (pairs, culled)
@@ -651,6 +679,7 @@ struct Lists<'a> {
     /// The groups binned to the tile.
     groups: &'a [u32],
     large: &'a [u32],
+    large_rects: &'a [Rect],
     scattered: &'a [u32],
     rects: &'a [Rect],
     group_rects: &'a [Rect],
@@ -679,13 +708,12 @@ fn splat_sphere<L: Lanes>(
     tile: &Tile,
     samples: &[u64],
     deq: &Dequantizer,
-    rects: &[Rect],
+    r: Rect,
     i: u32,
     buf: &mut TileBuf,
 ) -> bool {
     let TileBuf { depth, ids, dirs } = buf;
     let mut all_culled = true;
-    let r = rects[i as usize];
     // The rectangle clipped to the tile, in tile coordinates.
     let x0 = (r.x0 as usize).max(tile.x0) - tile.x0;
     let x1 = (r.x1 as usize).min(k.tx1) - tile.x0;
