@@ -656,12 +656,12 @@ fn splat_tile<L: Lanes>(
         if !overlaps(lists.group_rects[g], tile.x0, tile.y0, tile.w, tile.h) {
             continue;
         }
-        for i in g * GROUP..(g * GROUP + GROUP).min(n) {
-            // Large spheres' rectangles are empty here (drawn from `large` below).
-            let r = rects[i];
+        let first = g * GROUP;
+        // Large spheres' rectangles are empty here (drawn from `large` below).
+        for (j, &r) in rects[first..(first + GROUP).min(n)].iter().enumerate() {
             if overlaps(r, tile.x0, tile.y0, tile.w, tile.h) {
                 pairs += 1;
-                culled += splat_sphere(&k, tile, samples, deq, r, i as u32, buf) as u64;
+                culled += splat_sphere(&k, tile, samples, deq, r, (first + j) as u32, buf) as u64;
             }
         }
     }
