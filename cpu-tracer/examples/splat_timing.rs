@@ -1,7 +1,10 @@
 //! Timing of the sphere routes (tiled splatter, packet tracer, the earlier splatter, the
 //! automatic choice) on the MRI benchmark frame, 10° off, over viewports, radius models and
 //! zooms, with the quantities the route cost model uses:
-//! `cargo run --release -p volwarp-cpu-tracer --example splat_timing [threads] [frame cache dir]`.
+//! `cargo run --release -p volwarp-cpu-tracer --example splat_timing [threads] [frame cache dir]`;
+//! one renderer alone (for profiles and A/B runs):
+//! `… splat_timing threads dir renderer [viewport] [footprint|voxel] [dolly]`, where the renderer
+//! `splat-tiles-nocull` is the tiled splatter without occlusion culling.
 //!
 //! One thread: on-CPU time of the calling thread (robust on a busy machine); more threads:
 //! wall time. Medians of 7. The marched frames are cached in the given folder (default: the
@@ -56,12 +59,32 @@ fn main() {
         v[3]
     };
     if let Some(what) = args.get(3) {
-        // Profiling: one renderer, 1024², footprint frame, 10° off, many times.
-        let f = frame(volwarp_server::RadiusModel::default(), &dir).expect("the MRI frame");
+        // Profiling: one renderer (`what`) at viewport `[4]` (default 1024²), radius model `[5]`
+        // (`footprint` or `voxel`, default footprint), dolly `[6]` (default 1), 10° off, 30
+        // times.
+        let model = match args.get(5).map(String::as_str) {
+            Some("voxel") => volwarp_server::RadiusModel::Voxel,
+            _ => volwarp_server::RadiusModel::default(),
+        };
+        let dolly: f32 = args.get(6).and_then(|s| s.parse().ok()).unwrap_or(1.0);
+        let f = frame(model, &dir).expect("the MRI frame");
         let scene = Scene::build(&f);
-        let cam = f.header.camera.orbit(10.0, 0.0).with_viewport(1024, 1024);
-        let kind = volwarp_core::RendererKind::from_name(what).expect("a renderer name");
-        let mut r = volwarp_cpu_tracer::create(kind, threads).expect("a CPU renderer");
+        let cam = f.header.camera.orbit(10.0, 0.0).dolly(dolly).with_viewport(1024, 1024);
+        // `splat-tiles-nocull`: the tiled splatter without occlusion culling.
+        let mut tiles = (what.starts_with("splat-tiles"))
+            .then(|| TileSplat::new(threads).with_culling(what != "splat-tiles-nocull"));
+        let mut other = match &tiles {
+            Some(_) => None,
+            None => {
+                let kind = volwarp_core::RendererKind::from_name(what).expect("a renderer name");
+                Some(volwarp_cpu_tracer::create(kind, threads).expect("a CPU renderer"))
+            }
+        };
+        let r: &mut dyn Renderer = match (&mut tiles, &mut other) {
+            (Some(t), _) => t,
+            (None, Some(o)) => o.as_mut(),
+            (None, None) => return,
+        };
         let res: u32 = args.get(4).and_then(|s| s.parse().ok()).unwrap_or(1024);
         let cam = cam.with_viewport(res, res);
         r.render(&scene, &cam, &mut img);
@@ -74,6 +97,13 @@ fn main() {
             t.elapsed().as_secs_f64() * 1e3 / 30.0,
             (cpu_ns().unwrap_or(0) - c) as f64 / 1e6 / 30.0
         );
+        if let Some(t) = &tiles {
+            let (pairs, culled) = t.culled();
+            println!(
+                "sphere-tile pairs {pairs}, culled whole {culled} ({:.1} %)",
+                100.0 * culled as f64 / pairs.max(1) as f64
+            );
+        }
         return;
     }
     println!("threads {threads} ({})", if threads == 1 { "on-CPU ms" } else { "wall ms" });

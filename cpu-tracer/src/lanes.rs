@@ -158,6 +158,8 @@ pub(crate) trait Lanes:
     fn select_u(self, if_true: Self::U, if_false: Self::U) -> Self::U;
     /// The `u32` lanes, lane 0 first.
     fn u_to_array(u: Self::U) -> [u32; 8];
+    /// `u32` lanes from `a`, lane 0 first.
+    fn new_u(a: [u32; 8]) -> Self::U;
     /// The lanes, lane 0 first.
     fn to_array(self) -> [f32; 8];
 }
@@ -245,6 +247,10 @@ impl Lanes for f32x8 {
     #[inline(always)]
     fn select_u(self, if_true: u32x8, if_false: u32x8) -> u32x8 {
         bytemuck::cast::<f32x8, u32x8>(self).select(if_true, if_false)
+    }
+    #[inline(always)]
+    fn new_u(a: [u32; 8]) -> u32x8 {
+        u32x8::new(a)
     }
     #[inline(always)]
     fn u_to_array(u: u32x8) -> [u32; 8] {
@@ -407,6 +413,11 @@ mod avx2 {
                 let (t, f) = (_mm256_castsi256_ps(if_true), _mm256_castsi256_ps(if_false));
                 _mm256_castps_si256(_mm256_blendv_ps(f, t, self.0))
             }
+        }
+        #[inline(always)]
+        fn new_u(a: [u32; 8]) -> __m256i {
+            // `a` is 32 readable bytes; the load needs no alignment.
+            unsafe { _mm256_loadu_si256(a.as_ptr().cast()) }
         }
         #[inline(always)]
         fn u_to_array(u: __m256i) -> [u32; 8] {

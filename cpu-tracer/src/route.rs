@@ -80,24 +80,28 @@ pub enum Route {
 
 /// Predicted times of the two routes, in nanoseconds on one thread (both scale alike with
 /// threads), from the estimate's spheres in view `S`, covered pixels `C` and viewport pixels
-/// `P`, with `d = √(C / S)` the mean bound's side in pixels:
+/// `P`:
 ///
-/// * splat: `S · splat_sphere_ns + C · splat_covered_ns`;
-/// * trace: `P · (trace_pixel_ns + trace_side_ns · d) + S · trace_sphere_ns` (a ray visits more
-///   nodes when more spheres share its pixel, and when they are larger).
+/// * splat: `S · splat_sphere_ns + C · splat_covered_ns + P · splat_pixel_ns`;
+/// * trace: `P · trace_pixel_ns + C · trace_covered_ns + S · trace_sphere_ns` (a ray visits
+///   more nodes when more spheres share its pixel).
 ///
-/// The default constants are a fit to `examples/splat_timing.rs` on the MRI benchmark frame
-/// (footprint and voxel radius, 1024² and 512², 10° off; `docs/perf.md`, issue 18).
+/// The default constants are a least-squares fit (relative error) to the twelve views of
+/// `examples/splat_timing.rs` on the MRI benchmark frame (footprint and voxel radius, 10° off
+/// and zoomed in ×0.5 and ×0.25, 1024² and 512²; `docs/perf.md`, issue 18, fifth session); an
+/// earlier form with the tracer growing with the bound's side mispredicted zoomed-in views.
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct CostModel {
     /// Splatter: per sphere in view (bound, binning, set-up, first SIMD test).
     pub splat_sphere_ns: f64,
     /// Splatter: per covered pixel (further SIMD pixel tests, depth test).
     pub splat_covered_ns: f64,
+    /// Splatter: per viewport pixel (directions, clearing and writing the tiles).
+    pub splat_pixel_ns: f64,
     /// Tracer: per viewport pixel.
     pub trace_pixel_ns: f64,
-    /// Tracer: per viewport pixel and pixel of bound side.
-    pub trace_side_ns: f64,
+    /// Tracer: per covered pixel (depth complexity: more nodes and tests per ray).
+    pub trace_covered_ns: f64,
     /// Tracer: per sphere in view.
     pub trace_sphere_ns: f64,
 }
@@ -106,11 +110,12 @@ impl Default for CostModel {
     /// The constants measured on this project's 2-core benchmark machine.
     fn default() -> Self {
         CostModel {
-            splat_sphere_ns: 82.0,
-            splat_covered_ns: 4.9,
-            trace_pixel_ns: 59.0,
-            trace_side_ns: 20.8,
-            trace_sphere_ns: 85.0,
+            splat_sphere_ns: 38.0,
+            splat_covered_ns: 1.87,
+            splat_pixel_ns: 22.7,
+            trace_pixel_ns: 90.2,
+            trace_covered_ns: 1.31,
+            trace_sphere_ns: 117.0,
         }
     }
 }
@@ -118,9 +123,10 @@ impl Default for CostModel {
 impl CostModel {
     /// Predicted nanoseconds of each route, `(splat, trace)`.
     pub fn predict(&self, e: &Estimate) -> (f64, f64) {
-        let side = if e.spheres > 0.0 { (e.covered / e.spheres).sqrt() } else { 0.0 };
-        let splat = e.spheres * self.splat_sphere_ns + e.covered * self.splat_covered_ns;
-        let trace = e.pixels * (self.trace_pixel_ns + self.trace_side_ns * side) + e.spheres * self.trace_sphere_ns;
+        let splat =
+            e.spheres * self.splat_sphere_ns + e.covered * self.splat_covered_ns + e.pixels * self.splat_pixel_ns;
+        let trace =
+            e.pixels * self.trace_pixel_ns + e.covered * self.trace_covered_ns + e.spheres * self.trace_sphere_ns;
         (splat, trace)
     }
 

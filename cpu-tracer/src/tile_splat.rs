@@ -18,16 +18,22 @@
 //!    one per large sphere or scattered group, 8 bytes of rectangle per sphere; nothing per
 //!    pixel besides the image, whatever the view.
 //! 3. **Splat** (parallel over bands of tiles): per tile, the unit ray directions of its pixels
-//!    (`RayBasis::dir`'s operations, eight at a time) and a `(depth, id)` key per pixel, both in
-//!    a local buffer of about 24 KB that stays in L1; each sphere of its groups whose rectangle
-//!    overlaps the tile tests its pixels in the tile eight at a time with the packet tracer's
-//!    SIMD ray–sphere kernel (`lanes::sphere_hits`, AVX2 dispatch): as 4×2 blocks when the
-//!    rectangle is at most four pixels wide, as rows of 8 otherwise. The tile's ids or colors
-//!    are then written straight into the image: no per-thread image and no merge.
+//!    (`RayBasis::dir`'s operations, eight at a time) and per pixel the distance and sample of
+//!    its nearest hit so far (an f32 depth plane and a u32 id plane), all in a local buffer of
+//!    about 24 KB that stays in L1; each sphere of its groups whose rectangle overlaps the tile
+//!    tests its pixels in the tile eight at a time with the packet tracer's SIMD ray–sphere
+//!    kernel (`lanes::sphere_hits`, AVX2 dispatch): as 4×2 blocks when the rectangle is at most
+//!    four pixels wide, as rows of 8 otherwise. The depth test runs in the same lanes (a nearer
+//!    hit takes the pixel; a hit at equal depth goes to a cold scalar path with the tie rule).
+//!    A row block of a wider sphere is skipped when a conservative near distance of the sphere
+//!    lies beyond the depth of all its pixels (occlusion culling,
+//!    [`TileSplat::with_culling`]). The tile's ids or colors are then written straight into the
+//!    image: no per-thread image and no merge.
 //!
-//! Tiles without spheres cost one background fill. The keys are `(t bits << 32) | id`, so a
-//! minimum is core's tie rule (equal `t`: the smaller index), and the result does not depend on
-//! the order of the spheres in a tile or on the thread count (tested). An *unbuilt* scene (the
+//! Tiles without spheres cost one background fill. A pixel's `(t, id)` orders as the key
+//! `(t bits << 32) | id`, so its minimum is core's tie rule (equal `t`: the smaller index), and
+//! the result does not depend on the order of the spheres in a tile, on culling or on the
+//! thread count (tested). An *unbuilt* scene (the
 //! frame's samples in arrival order, no nodes: [`crate::route::unbuilt_scene`]) is drawn too;
 //! equal distances are then broken by the order the LBVH build would give (Morton code, then
 //! index), so the image is the built scene's.
@@ -38,6 +44,7 @@ use crate::sphere_splat::View;
 use crate::threads::Threads;
 use crate::{begin_frame_unbuilt_ok as begin_frame, shade, NO_HIT};
 use rayon::prelude::*;
+use std::sync::atomic::{AtomicU64, Ordering};
 use volwarp_core::morton::code_of_sample;
 use volwarp_core::renderer::{Image, Renderer};
 use volwarp_core::sample::Dequantizer;
@@ -111,6 +118,10 @@ impl Rect {
 pub struct TileSplat {
     threads: Threads,
     rects: Vec<Rect>,
+    /// Whether a sphere whose near distance lies behind every pixel it could cover is skipped.
+    cull: bool,
+    /// (sphere–tile pairs drawn, of which skipped whole by the depth test) in the last frame.
+    culled: (u64, u64),
     /// Per group of [`GROUP`] spheres, the union of its spheres' rectangles but the large ones.
     group_rects: Vec<Rect>,
     /// Group indices, tile by tile.
@@ -119,6 +130,11 @@ pub struct TileSplat {
     starts: Vec<u32>,
     /// Spheres overlapping more than [`MAX_TILES`] tiles.
     large: Vec<u32>,
+    /// Their rectangles (their entries of `rects` are emptied, so a group skips them without
+    /// a test).
+    large_rects: Vec<Rect>,
+    /// Per group, whether it holds a large sphere.
+    group_large: Vec<bool>,
     /// Groups overlapping more than [`MAX_GROUP_TILES`] tiles.
     scattered: Vec<u32>,
 }
@@ -146,12 +162,33 @@ impl TileSplat {
         TileSplat {
             threads: Threads::new(threads),
             rects: Vec::new(),
+            cull: true,
+            culled: (0, 0),
             group_rects: Vec::new(),
             lists: Vec::new(),
             starts: Vec::new(),
             large: Vec::new(),
+            large_rects: Vec::new(),
+            group_large: Vec::new(),
             scattered: Vec::new(),
         }
+    }
+
+    /// The same splatter with occlusion culling on (the default) or off. With it on, a sphere
+    /// is skipped in a block of pixels (its 4×2 block, or 8 pixels of a row) when a conservative
+    /// lower bound of its hit distances, computed in the bound pass (`√(|c−e|² − r'²) − r'`
+    /// less a relative 10⁻⁴ of the distance, with `r'` the widened radius), lies beyond the
+    /// depth of every pixel of the block: its hits there could only be farther, so the image
+    /// is the same either way (tested); only the time changes.
+    pub fn with_culling(mut self, cull: bool) -> Self {
+        self.cull = cull;
+        self
+    }
+
+    /// Of the last frame: the sphere–tile pairs drawn and how many of them occlusion culling
+    /// skipped whole (no ray test).
+    pub fn culled(&self) -> (u64, u64) {
+        self.culled
     }
 
     /// Splats `camera`'s viewport into `ids` (row-major, resized): the first-hit sample index
@@ -162,7 +199,7 @@ impl TileSplat {
         *ids = img.pixels;
         ids.fill(NO_HIT);
         if ok {
-            self.draw(scene, camera, ids, |_, k| key_prim(k).unwrap_or(NO_HIT));
+            self.draw(scene, camera, ids, |_, id| id);
         }
         ok
     }
@@ -178,48 +215,56 @@ impl TileSplat {
         self.threads.count()
     }
 
-    /// Bins and splats the scene, writing `out_of(colors, key)` for every pixel of `out`
+    /// Bins and splats the scene, writing `out_of(colors, id)` for every pixel of `out` (`id`:
+    /// the pixel's first-hit sample, [`NO_HIT`] where none)
     /// (`width × height` long).
-    fn draw(&mut self, scene: &Scene, camera: &Camera, out: &mut [u32], out_of: impl Fn(&[u32], u64) -> u32 + Sync) {
+    fn draw(&mut self, scene: &Scene, camera: &Camera, out: &mut [u32], out_of: impl Fn(&[u32], u32) -> u32 + Sync) {
         let view = View::new(camera);
         let grid = Grid::new(camera);
         self.bin(scene, &view, grid);
         let (w, h) = (camera.width as usize, camera.height as usize);
         let (samples, colors) = (&scene.samples[..], &scene.colors[..]);
         let (lists, starts, rects) = (&self.lists[..], &self.starts[..], &self.rects[..]);
+        let (pairs, culled) = (AtomicU64::new(0), AtomicU64::new(0));
+        let cull = self.cull;
         let (large, scattered, group_rects) = (&self.large[..], &self.scattered[..], &self.group_rects[..]);
+        let large_rects = &self.large_rects[..];
         let band = |ty: usize, rows: &mut [u32]| {
             let mut buf = TileBuf::new();
+            let mut counts = (0u64, 0u64);
             for tx in 0..grid.tx {
                 let t = ty * grid.tx + tx;
                 let list = &lists[starts[t] as usize..starts[t + 1] as usize];
                 let (x0, y0) = (tx * TILE, ty * TILE);
                 let (tw, th) = (TILE.min(w - x0), TILE.min(h - y0));
-                let any_large = large.iter().any(|&i| overlaps(rects[i as usize], x0, y0, tw, th))
+                let any_large = large_rects.iter().any(|&r| overlaps(r, x0, y0, tw, th))
                     || scattered.iter().any(|&g| overlaps(group_rects[g as usize], x0, y0, tw, th));
                 if list.is_empty() && !any_large {
-                    let empty = out_of(colors, EMPTY);
+                    let empty = out_of(colors, NO_HIT);
                     for row in rows.chunks_mut(w) {
                         row[x0..x0 + tw].fill(empty);
                     }
                     continue;
                 }
                 let tile = Tile { x0, y0, w: tw, h: th };
-                let lists = Lists { groups: list, large, scattered, rects, group_rects };
-                tile_dispatch(&view, &tile, samples, scene, &lists, &mut buf);
+                let lists = Lists { groups: list, large, large_rects, scattered, rects, group_rects, cull };
+                let (p, c) = tile_dispatch(&view, &tile, samples, scene, &lists, &mut buf);
+                counts = (counts.0 + p, counts.1 + c);
                 for (y, row) in rows.chunks_mut(w).enumerate() {
-                    let keys = &buf.keys[y * TILE..y * TILE + tw];
-                    for (p, &k) in row[x0..x0 + tw].iter_mut().zip(keys) {
-                        *p = out_of(colors, k);
+                    for (p, &id) in row[x0..x0 + tw].iter_mut().zip(&buf.ids[y * TILE..y * TILE + tw]) {
+                        *p = out_of(colors, id);
                     }
                 }
             }
+            pairs.fetch_add(counts.0, Ordering::Relaxed);
+            culled.fetch_add(counts.1, Ordering::Relaxed);
         };
         if self.threads.is_serial() {
             out.chunks_mut(TILE * w).enumerate().for_each(|(ty, rows)| band(ty, rows));
         } else {
             self.threads.install(|| out.par_chunks_mut(TILE * w).enumerate().for_each(|(ty, rows)| band(ty, rows)));
         }
+        self.culled = (pairs.into_inner(), culled.into_inner());
     }
 
     /// Steps 1 and 2: every sphere's rectangle, every group's, and the per-tile lists of
@@ -231,24 +276,27 @@ impl TileSplat {
         let groups = n.div_ceil(GROUP);
         self.rects.resize(n, NO_RECT);
         self.group_rects.resize(groups, NO_RECT);
+        self.group_large.resize(groups, false);
         // 1. rectangles, in parallel over runs of whole groups
         let per_task = (groups.div_ceil(self.threads.count() * 8)).max(1);
         let vf = ViewF32::new(view);
-        let bound = |c: usize, rects: &mut [Rect], grects: &mut [Rect]| {
-            for (g, (rects, grect)) in rects.chunks_mut(GROUP).zip(grects.iter_mut()).enumerate() {
+        let bound = |c: usize, rects: &mut [Rect], grects: &mut [Rect], glarge: &mut [bool]| {
+            let groups = rects.chunks_mut(GROUP).zip(grects.iter_mut().zip(glarge.iter_mut()));
+            for (g, (rects, (grect, glarge))) in groups.enumerate() {
                 let base = (c * per_task + g) * GROUP;
-                *grect = bound_dispatch(view, &vf, deq, &samples[base..base + rects.len()], rects);
+                (*grect, *glarge) = bound_dispatch(view, &vf, deq, &samples[base..base + rects.len()], rects);
             }
         };
         if self.threads.is_serial() {
-            bound(0, &mut self.rects, &mut self.group_rects);
+            bound(0, &mut self.rects, &mut self.group_rects, &mut self.group_large);
         } else {
             self.threads.install(|| {
                 self.rects
                     .par_chunks_mut(per_task * GROUP)
                     .zip(self.group_rects.par_chunks_mut(per_task))
+                    .zip(self.group_large.par_chunks_mut(per_task))
                     .enumerate()
-                    .for_each(|(c, (r, g))| bound(c, r, g))
+                    .for_each(|(c, ((r, g), l))| bound(c, r, g, l))
             });
         }
         // 2. groups to tiles (a counting sort, serial: a few tens of thousands of groups), and
@@ -295,9 +343,15 @@ impl TileSplat {
                 }
             }
         }
-        for (i, r) in self.rects.iter().enumerate() {
-            if !r.is_empty() && r.is_large() {
-                self.large.push(i as u32);
+        self.large_rects.clear();
+        for (g, _) in self.group_large.iter().enumerate().filter(|(_, &l)| l) {
+            for i in g * GROUP..(g * GROUP + GROUP).min(n) {
+                let r = self.rects[i];
+                if !r.is_empty() && r.is_large() {
+                    self.large.push(i as u32);
+                    self.large_rects.push(r);
+                    self.rects[i] = NO_RECT;
+                }
             }
         }
     }
@@ -354,8 +408,14 @@ impl ViewF32 {
 /// least two (widened) radii in front of the eye plane; the others (near, behind, NaN) take
 /// [`tight_bound`] in f64.
 #[inline(always)]
-fn bound_group<L: Lanes>(view: &View, vf: &ViewF32, deq: &Dequantizer, samples: &[u64], rects: &mut [Rect]) -> Rect {
-    let mut u = NO_RECT;
+fn bound_group<L: Lanes>(
+    view: &View,
+    vf: &ViewF32,
+    deq: &Dequantizer,
+    samples: &[u64],
+    rects: &mut [Rect],
+) -> (Rect, bool) {
+    let (mut u, mut any_large) = (NO_RECT, false);
     for (ss, rs) in samples.chunks(8).zip(rects.chunks_mut(8)) {
         let (mut x, mut y, mut z, mut r) = ([0f32; 8], [0f32; 8], [0f32; 8], [0f32; 8]);
         for (l, &s) in ss.iter().enumerate() {
@@ -373,33 +433,54 @@ fn bound_group<L: Lanes>(view: &View, vf: &ViewF32, deq: &Dequantizer, samples: 
         let (sx, sy) = ((cx * cx + denom).sqrt(), (cy * cy + denom).sqrt());
         let (xl, xh) = ((cx * cz - rr * sx) * inv, (cx * cz + rr * sx) * inv);
         let (yl, yh) = ((cy * cz - rr * sy) * inv, (cy * cz + rr * sy) * inv);
-        let x0 = (xl * L::splat(vf.px_x) + L::splat(vf.half_w)).to_array();
-        let x1 = (xh * L::splat(vf.px_x) + L::splat(vf.half_w)).to_array();
-        let y0 = (L::splat(vf.half_h) - yh * L::splat(vf.px_y)).to_array();
-        let y1 = (L::splat(vf.half_h) - yl * L::splat(vf.px_y)).to_array();
-        let far = far.to_bitmask();
+        let x0 = xl * L::splat(vf.px_x) + L::splat(vf.half_w);
+        let x1 = xh * L::splat(vf.px_x) + L::splat(vf.half_w);
+        let y0 = L::splat(vf.half_h) - yh * L::splat(vf.px_y);
+        let y1 = L::splat(vf.half_h) - yl * L::splat(vf.px_y);
+        // [`centre_span`] in f32 lanes, widened from 0.01 to 0.02 pixel so that the f32
+        // rounding of the subtraction (≤ 0.001 pixel below 2¹⁴) never narrows it: the span
+        // holds [`centre_span`]'s of the same bound.
+        let (ax, bx) = (x0 - L::splat(0.52), x1 - L::splat(0.48));
+        let (ay, by) = (y0 - L::splat(0.52), y1 - L::splat(0.48));
+        let (nw, nh) = (L::splat(view.width as f32), L::splat(view.height as f32));
+        let zero = L::splat(0.0);
+        let ok = far
+            & ax.simd_le(bx)
+            & bx.simd_ge(zero)
+            & ax.simd_lt(nw)
+            & ay.simd_le(by)
+            & by.simd_ge(zero)
+            & ay.simd_lt(nh);
+        let (lx, hx) = (ax.fast_max(L::splat(-1.0)).to_array(), bx.fast_min(nw).to_array());
+        let (ly, hy) = (ay.fast_max(L::splat(-1.0)).to_array(), by.fast_min(nh).to_array());
+        let (far, ok) = (far.to_bitmask(), ok.to_bitmask());
         for (l, (rect, &s)) in rs.iter_mut().zip(ss).enumerate() {
-            let b = if far & (1 << l) != 0 {
-                match (
-                    centre_span(x0[l] as f64, x1[l] as f64, view.width),
-                    centre_span(y0[l] as f64, y1[l] as f64, view.height),
-                ) {
-                    (Some((a, b)), Some((c, d))) => Some((a, b, c, d)),
-                    _ => None,
-                }
+            let b = if ok & (1 << l) != 0 {
+                let (x0, x1) = (ceil_clamped(lx[l]), (hx[l] as u32).min(view.width - 1));
+                let (y0, y1) = (ceil_clamped(ly[l]), (hy[l] as u32).min(view.height - 1));
+                (x0 <= x1 && y0 <= y1).then_some((x0, x1, y0, y1))
+            } else if far & (1 << l) != 0 {
+                None
             } else {
                 tight_bound(view, deq.center(s), deq.radius(s))
             };
-            *rect = match b {
+            // Built in a local and stored once: reading `*rect` back after four 16-bit stores
+            // stalled on store forwarding (a fifth of the bound pass).
+            let r = match b {
                 Some((x0, x1, y0, y1)) => Rect { x0: x0 as u16, y0: y0 as u16, x1: x1 as u16, y1: y1 as u16 },
                 None => NO_RECT,
             };
-            if !rect.is_empty() && !rect.is_large() {
-                u = u.union(*rect);
+            *rect = r;
+            if !r.is_empty() {
+                if r.is_large() {
+                    any_large = true;
+                } else {
+                    u = u.union(r);
+                }
             }
         }
     }
-    u
+    (u, any_large)
 }
 
 lanes::dispatch! {
@@ -410,7 +491,7 @@ lanes::dispatch! {
         deq: &Dequantizer,
         samples: &[u64],
         rects: &mut [Rect],
-    ) -> Rect
+    ) -> (Rect, bool)
 }
 
 /// The pixels `i < n` whose centre `i + 0.5` lies in `[a, b]`, widened by 0.01 pixel, as an
@@ -433,6 +514,13 @@ fn centre_span(a: f64, b: f64, n: u32) -> Option<(u32, u32)> {
     Some((l as u32, h as u32))
 }
 
+/// `⌈a⌉`, at least 0, of `a ≥ −1` (truncation: no rounding instruction needed).
+#[inline(always)]
+fn ceil_clamped(a: f32) -> u32 {
+    let l = a as i32;
+    (if (l as f32) < a { l + 1 } else { l }).max(0) as u32
+}
+
 /// Whether `r` overlaps the tile at `(x0, y0)` of `w × h` pixels.
 #[inline(always)]
 fn overlaps(r: Rect, x0: usize, y0: usize, w: usize, h: usize) -> bool {
@@ -450,13 +538,31 @@ struct Tile {
 /// A tile's local buffers: its pixels' keys and unit ray directions (three planes of
 /// `TILE + 1` rows of [`STRIDE`] floats; padding is zero and never tested).
 struct TileBuf {
-    keys: Vec<u64>,
+    /// Per pixel (row stride [`TILE`], one row and eight pixels of padding), the distance of
+    /// the nearest hit so far, `+∞` where none.
+    depth: Vec<f32>,
+    /// Per pixel, the sample of that hit, [`NO_HIT`] where none: with `depth`, the pixel's
+    /// key `(t, id)` ([`TileBuf::key`]).
+    ids: Vec<u32>,
     dirs: Vec<f32>,
 }
 
+/// Length of a tile's depth and id planes.
+const KEYS: usize = (TILE + 1) * TILE + 8;
+
 impl TileBuf {
     fn new() -> TileBuf {
-        TileBuf { keys: vec![EMPTY; (TILE + 1) * TILE + 8], dirs: vec![0.0; 3 * PLANE] }
+        TileBuf { depth: vec![f32::INFINITY; KEYS], ids: vec![NO_HIT; KEYS], dirs: vec![0.0; 3 * PLANE] }
+    }
+}
+
+/// The key of a pixel whose planes hold `(t, id)`.
+#[inline(always)]
+fn key_of(t: f32, id: u32) -> u64 {
+    if id == NO_HIT {
+        EMPTY
+    } else {
+        key(t, id)
     }
 }
 
@@ -472,9 +578,37 @@ fn load<L: Lanes>(s: &[f32]) -> L {
 /// Four floats from `s` and four from `s[STRIDE..]`: a 4×2 block of a direction plane.
 #[inline(always)]
 fn load_4x2<L: Lanes>(s: &[f32]) -> L {
-    match (s.first_chunk::<4>(), s.get(STRIDE..).and_then(|r| r.first_chunk::<4>())) {
-        (Some(a), Some(b)) => L::new([a[0], a[1], a[2], a[3], b[0], b[1], b[2], b[3]]),
-        _ => L::splat(0.0),
+    L::new(quad::<f32, STRIDE>(s))
+}
+
+/// Four values from `s` and four from `s[S..]` (a 4×2 block of a plane of row stride `S`);
+/// zeros if `s` is too short.
+#[inline(always)]
+fn quad<T: Copy + Default, const S: usize>(s: &[T]) -> [T; 8] {
+    match (s.first_chunk::<4>(), s.get(S..).and_then(|r| r.first_chunk::<4>())) {
+        (Some(a), Some(b)) => [a[0], a[1], a[2], a[3], b[0], b[1], b[2], b[3]],
+        _ => [T::default(); 8],
+    }
+}
+
+/// The first eight values of `s`, zeros if it is shorter.
+#[inline(always)]
+fn eight<T: Copy + Default>(s: &[T]) -> [T; 8] {
+    s.first_chunk::<8>().copied().unwrap_or([T::default(); 8])
+}
+
+/// Writes `a` where [`quad`] (with `S` = [`TILE`]) or [`eight`] read it.
+#[inline(always)]
+fn put<T: Copy>(s: &mut [T], a: [T; 8], is_quad: bool) {
+    if is_quad {
+        if let Some(r) = s.first_chunk_mut::<4>() {
+            r.copy_from_slice(&a[..4]);
+        }
+        if let Some(r) = s.get_mut(TILE..).and_then(|r| r.first_chunk_mut::<4>()) {
+            r.copy_from_slice(&a[4..]);
+        }
+    } else if let Some(r) = s.first_chunk_mut::<8>() {
+        *r = a;
     }
 }
 
@@ -482,7 +616,14 @@ fn load_4x2<L: Lanes>(s: &[f32]) -> L {
 /// `large` that overlaps it, into `buf.keys`.
 #[allow(clippy::too_many_arguments)]
 #[inline(always)]
-fn splat_tile<L: Lanes>(view: &View, tile: &Tile, samples: &[u64], scene: &Scene, lists: &Lists, buf: &mut TileBuf) {
+fn splat_tile<L: Lanes>(
+    view: &View,
+    tile: &Tile,
+    samples: &[u64],
+    scene: &Scene,
+    lists: &Lists,
+    buf: &mut TileBuf,
+) -> (u64, u64) {
     let b = &view.basis;
     // Directions: exactly `RayBasis::dir` (pixel centres x + l + 0.5, exact in f32).
     let lane_c = L::new([0.5, 1.5, 2.5, 3.5, 4.5, 5.5, 6.5, 7.5]);
@@ -497,7 +638,8 @@ fn splat_tile<L: Lanes>(view: &View, tile: &Tile, samples: &[u64], scene: &Scene
             }
         }
     }
-    buf.keys.fill(EMPTY);
+    buf.depth.fill(f32::INFINITY);
+    buf.ids.fill(NO_HIT);
     let o = [b.eye[0], b.eye[1], b.eye[2]];
     let deq = &scene.deq;
     let lane = L::new([0.0, 1.0, 2.0, 3.0, 4.0, 5.0, 6.0, 7.0]);
@@ -505,7 +647,8 @@ fn splat_tile<L: Lanes>(view: &View, tile: &Tile, samples: &[u64], scene: &Scene
     let row2 = L::new([0.0, 0.0, 0.0, 0.0, 1.0, 1.0, 1.0, 1.0]);
     let (tx1, ty1) = (tile.x0 + tile.w - 1, tile.y0 + tile.h - 1);
     let ties = if scene.nodes.is_empty() { Ties::Sorted(samples) } else { Ties::Index };
-    let k = Kernel { ties, o, lane, lane4, row2, tx1, ty1 };
+    let k = Kernel { ties, o, lane, lane4, row2, tx1, ty1, cull: lists.cull };
+    let (mut pairs, mut culled) = (0u64, 0u64);
     let rects = lists.rects;
     let n = samples.len();
     for &g in lists.groups.iter().chain(lists.scattered) {
@@ -513,18 +656,22 @@ fn splat_tile<L: Lanes>(view: &View, tile: &Tile, samples: &[u64], scene: &Scene
         if !overlaps(lists.group_rects[g], tile.x0, tile.y0, tile.w, tile.h) {
             continue;
         }
-        for i in g * GROUP..(g * GROUP + GROUP).min(n) {
-            let r = rects[i];
-            if overlaps(r, tile.x0, tile.y0, tile.w, tile.h) && !r.is_large() {
-                splat_sphere(&k, tile, samples, deq, rects, i as u32, &buf.dirs, &mut buf.keys);
+        let first = g * GROUP;
+        // Large spheres' rectangles are empty here (drawn from `large` below).
+        for (j, &r) in rects[first..(first + GROUP).min(n)].iter().enumerate() {
+            if overlaps(r, tile.x0, tile.y0, tile.w, tile.h) {
+                pairs += 1;
+                culled += splat_sphere(&k, tile, samples, deq, r, (first + j) as u32, buf) as u64;
             }
         }
     }
-    for &i in lists.large {
-        if overlaps(rects[i as usize], tile.x0, tile.y0, tile.w, tile.h) {
-            splat_sphere(&k, tile, samples, deq, rects, i, &buf.dirs, &mut buf.keys);
+    for (&i, &r) in lists.large.iter().zip(lists.large_rects) {
+        if overlaps(r, tile.x0, tile.y0, tile.w, tile.h) {
+            pairs += 1;
+            culled += splat_sphere(&k, tile, samples, deq, r, i, buf) as u64;
         }
     }
+    (pairs, culled)
 }
 
 /// What a tile reads of the binning.
@@ -532,9 +679,12 @@ struct Lists<'a> {
     /// The groups binned to the tile.
     groups: &'a [u32],
     large: &'a [u32],
+    large_rects: &'a [Rect],
     scattered: &'a [u32],
     rects: &'a [Rect],
     group_rects: &'a [Rect],
+    /// Whether to skip spheres hidden in a block ([`TileSplat::with_culling`]).
+    cull: bool,
 }
 
 /// The per-tile constants of [`splat_sphere`].
@@ -546,10 +696,11 @@ struct Kernel<'a, L> {
     row2: L,
     tx1: usize,
     ty1: usize,
+    cull: bool,
 }
 
 /// One sphere `i` into a tile's keys (no closures here: they would be compiled without the
-/// caller's AVX2 target feature).
+/// caller's AVX2 target feature); `true` if culling skipped every block of it.
 #[allow(clippy::too_many_arguments)]
 #[inline(always)]
 fn splat_sphere<L: Lanes>(
@@ -557,12 +708,12 @@ fn splat_sphere<L: Lanes>(
     tile: &Tile,
     samples: &[u64],
     deq: &Dequantizer,
-    rects: &[Rect],
+    r: Rect,
     i: u32,
-    dirs: &[f32],
-    keys: &mut [u64],
-) {
-    let r = rects[i as usize];
+    buf: &mut TileBuf,
+) -> bool {
+    let TileBuf { depth, ids, dirs } = buf;
+    let mut all_culled = true;
     // The rectangle clipped to the tile, in tile coordinates.
     let x0 = (r.x0 as usize).max(tile.x0) - tile.x0;
     let x1 = (r.x1 as usize).min(k.tx1) - tile.x0;
@@ -575,40 +726,102 @@ fn splat_sphere<L: Lanes>(
         let wmask = k.lane4.simd_lt(L::splat((x1 - x0 + 1) as f32));
         for y in (y0..=y1).step_by(2) {
             let active = wmask & k.row2.simd_lt(L::splat((y1 - y + 1).min(2) as f32));
+            all_culled = false;
             let at = y * STRIDE + x0;
             let d = [load_4x2(&dirs[at..]), load_4x2(&dirs[PLANE + at..]), load_4x2(&dirs[2 * PLANE + at..])];
             if let Some((t, m)) = sphere_hits(&k.o, &d, c, rad, active) {
-                keep(keys, m.to_bitmask(), &t.to_array(), i, y * TILE + x0, true, k.ties);
+                keep(depth, ids, m, t, i, y * TILE + x0, true, k.ties);
             }
         }
     } else {
+        // Culling: a block of lanes whose depths all lie nearer than `near` is skipped.
+        let near = L::splat(if k.cull { near_distance(&k.o, c, rad) } else { 0.0 });
         for y in y0..=y1 {
             for x in (x0..=x1).step_by(8) {
                 let active = k.lane.simd_lt(L::splat((x1 - x + 1).min(8) as f32));
+                if k.cull && !(active & near.simd_le(depth_at(depth, y * TILE + x, false))).any() {
+                    continue;
+                }
+                all_culled = false;
                 let at = y * STRIDE + x;
                 let d = [load(&dirs[at..]), load(&dirs[PLANE + at..]), load(&dirs[2 * PLANE + at..])];
                 if let Some((t, m)) = sphere_hits(&k.o, &d, c, rad, active) {
-                    keep(keys, m.to_bitmask(), &t.to_array(), i, y * TILE + x, false, k.ties);
+                    keep(depth, ids, m, t, i, y * TILE + x, false, k.ties);
                 }
             }
         }
     }
+    all_culled
 }
 
-/// The depth test of the hit lanes `bits` (distances `t`) of sphere `i`: lane `l` is pixel
-/// `base + l` of a row, or of a 4×2 block (`quad`) `base + (l / 4)·TILE + l % 4`. All eight
-/// lanes are written without branches (a lane that did not hit writes back the minimum of its
-/// slot and [`EMPTY`], i.e. the slot: the buffer is padded for the lanes past the tile).
+/// A distance that no hit `t` of [`sphere_hits`] from `o` on the sphere `(c, r)` can be nearer
+/// than (0 if the sphere is within two radii of the eye). With `oc = c − o` as `sphere_hits`
+/// computes it, a hitting ray passes within `r' = r·(1 + 10⁻⁵) + 10⁻⁵·|oc|` of the centre
+/// once rounding is counted (its f32 errors are a few 10⁻⁸·|oc|), so its exact distances are at
+/// least `√(|oc|² − r'²) − r'` and the f32 ones less at most ≈ 10⁻⁶·|oc|; the result keeps a
+/// margin of 10⁻⁴·|oc|.
 #[inline(always)]
-fn keep(keys: &mut [u64], bits: u32, t: &[f32; 8], i: u32, base: usize, quad: bool, ties: Ties) {
-    let Some(slots) = keys.get_mut(base..base + TILE + 8) else { return };
+fn near_distance(o: &[f32; 3], c: Vec3, r: f32) -> f32 {
+    let (x, y, z) = (c.x - o[0], c.y - o[1], c.z - o[2]);
+    let d2 = x * x + y * y + z * z;
+    let d = d2.sqrt();
+    let rr = r + 1e-5 * (r + d);
+    if d > 2.0 * rr {
+        (d2 - rr * rr).sqrt() - rr - 1e-4 * d
+    } else {
+        0.0
+    }
+}
+
+/// The depths of a 4×2 block (`is_quad`) or of 8 pixels of a row at `at` (`+∞` if out of the
+/// plane, which never culls).
+#[inline(always)]
+fn depth_at<L: Lanes>(depth: &[f32], at: usize, is_quad: bool) -> L {
+    match depth.get(at..) {
+        Some(s) if s.len() >= TILE + 8 => L::new(if is_quad { quad::<f32, TILE>(s) } else { eight(s) }),
+        _ => L::splat(f32::INFINITY),
+    }
+}
+
+/// The depth test of the hit lanes `m` (distances `t`) of sphere `i`: lane `l` is pixel
+/// `base + l` of a row, or of a 4×2 block (`is_quad`) `base + (l / 4)·TILE + l % 4`. In lanes:
+/// a hit nearer than the pixel's depth takes the pixel (its key is then smaller whatever the
+/// ids), and the eight lanes are written back without branches (the planes are padded for the
+/// lanes past the tile, which write back what they read); a hit at *equal* depth takes
+/// [`keep_ties`] (the tie rule, rare).
+#[allow(clippy::too_many_arguments)]
+#[inline(always)]
+fn keep<L: Lanes>(depth: &mut [f32], ids: &mut [u32], m: L, t: L, i: u32, base: usize, is_quad: bool, ties: Ties) {
+    let (Some(ds), Some(is)) = (depth.get_mut(base..base + TILE + 8), ids.get_mut(base..base + TILE + 8)) else {
+        return;
+    };
+    let (d, id) = if is_quad {
+        (L::new(quad::<f32, TILE>(ds)), L::new_u(quad::<u32, TILE>(is)))
+    } else {
+        (L::new(eight(ds)), L::new_u(eight(is)))
+    };
+    let win = m & t.simd_lt(d);
+    let tie = (m & t.simd_eq(d)).to_bitmask();
+    put(ds, win.select(t, d).to_array(), is_quad);
+    put(is, L::u_to_array(win.select_u(L::splat_u(i), id)), is_quad);
+    if tie != 0 {
+        keep_ties(ds, is, tie, &t.to_array(), i, is_quad, ties);
+    }
+}
+
+/// [`keep`]'s lanes `bits` whose hit is at the pixel's depth: the smaller key wins (core's tie
+/// rule, or the built scene's order for an unbuilt scene).
+#[inline(never)]
+#[cold]
+fn keep_ties(ds: &mut [f32], is: &mut [u32], bits: u32, t: &[f32; 8], i: u32, is_quad: bool, ties: Ties) {
     for (l, &t) in t.iter().enumerate() {
-        let p = if quad { (l >> 2) * TILE + (l & 3) } else { l };
-        let hit = bits >> l & 1 != 0;
-        let k = if hit { key(t, i) } else { EMPTY };
-        let old = slots[p];
-        slots[p] = match ties {
-            Ties::Sorted(samples) if hit && (k ^ old) >> 32 == 0 => {
+        if bits >> l & 1 == 0 {
+            continue;
+        }
+        let p = if is_quad { (l >> 2) * TILE + (l & 3) } else { l };
+        let (k, old) = (key(t, i), key_of(ds[p], is[p]));
+        let new = match ties {
+            Ties::Sorted(samples) if (k ^ old) >> 32 == 0 => {
                 if sorted_before(samples, i, old as u32) {
                     k
                 } else {
@@ -617,6 +830,9 @@ fn keep(keys: &mut [u64], bits: u32, t: &[f32; 8], i: u32, base: usize, quad: bo
             }
             _ => k.min(old),
         };
+        if let Some(id) = key_prim(new) {
+            (ds[p], is[p]) = (f32::from_bits((new >> 32) as u32), id);
+        }
     }
 }
 
@@ -649,7 +865,7 @@ lanes::dispatch! {
         scene: &Scene,
         lists: &Lists,
         buf: &mut TileBuf,
-    )
+    ) -> (u64, u64)
 }
 
 impl Renderer for TileSplat {
@@ -659,9 +875,18 @@ impl Renderer for TileSplat {
 
     fn render(&mut self, scene: &Scene, camera: &Camera, out: &mut Image) {
         if begin_frame(scene, camera, out) {
-            self.draw(scene, camera, &mut out.pixels, |colors, k| {
-                key_prim(k).map_or(BACKGROUND, |id| shade(colors, id))
-            });
+            self.draw(
+                scene,
+                camera,
+                &mut out.pixels,
+                |colors, id| {
+                    if id == NO_HIT {
+                        BACKGROUND
+                    } else {
+                        shade(colors, id)
+                    }
+                },
+            );
         }
     }
 }
