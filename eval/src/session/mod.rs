@@ -190,11 +190,11 @@ pub fn calibrate(
             }
             let held = layered.iter().find(|(n, _)| *n == k).map_or(&held, |(_, f)| f);
             let mut img = Image::new(0, 0);
-            method.draw(&[&held], &cam, &mut img);
+            method.draw(&[held], &cam, &mut img);
             let mut t: Vec<f64> = (0..runs.max(1))
                 .map(|_| {
                     let s = Instant::now();
-                    method.draw(&[&held], &cam, &mut img);
+                    method.draw(&[held], &cam, &mut img);
                     s.elapsed().as_secs_f64() * 1e3
                 })
                 .collect();

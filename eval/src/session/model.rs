@@ -143,9 +143,12 @@ pub struct Calibration {
 /// The client draw times at 512² used when no calibration file is given: the medians of
 /// `docs/results.md` (2 threads; Table "Mean FLIP over the five datasets"), scaled with the
 /// pixel count at other sizes.
-/// `splat-fill` (with warp-sized radii: `volwarp`) is splat's figure times 1.57, the ratio
-/// of the two measured in one `session-calibrate` run (tooth, 512², 2 threads; `docs/perf.md`).
-pub const DEFAULT_DRAW_MS_512: [(&str, f64); 7] = [
+/// `splat-fill` (with warp-sized radii) is splat's figure times 1.57, the ratio of the two
+/// measured in one `session-calibrate` run (tooth, 512², 2 threads; `docs/perf.md`);
+/// `splat-layers` (4 segments per pixel, hole filling, warp-grown footprints: `volwarp`) is
+/// splat-fill's figure times 2.74, the ratio of the two in one `session-calibrate --all` run
+/// (512², 2 threads; `docs/perf.md`, "Issue 19 and 14 (fifth session)").
+pub const DEFAULT_DRAW_MS_512: [(&str, f64); 8] = [
     ("stale", 0.9),
     ("points1", 0.7),
     ("points2", 1.1),
@@ -153,6 +156,7 @@ pub const DEFAULT_DRAW_MS_512: [(&str, f64); 7] = [
     ("spheres-cpu", 4.4),
     ("splat", 2.8),
     ("splat-fill", 4.4),
+    ("splat-layers", 12.1),
 ];
 
 impl Calibration {
