@@ -37,7 +37,7 @@
 //! Work: the footprints are set up in parallel over samples (four projections per sample, in
 //! `f32`), binned to bands of rows, rasterized in parallel over bands (a few edge tests per
 //! covered pixel) and the lists composited in parallel. Memory: `8 × LIST + 1` bytes per output
-//! pixel and 72 bytes per sample (its footprint) plus 4 per band it touches.
+//! pixel and 48 bytes per sample (its footprint) plus 4 per band it touches.
 
 use crate::hole_fill::{block_outside_silhouette, filled, stale_lookup, FILLED, UNFILLED};
 use crate::route::SceneId;
@@ -71,18 +71,34 @@ const RASTER_BAND: usize = 32;
 /// Samples per footprint set-up task.
 const QUAD_CHUNK: usize = 4096;
 
-/// A sample's footprint in the new image: its edge functions, depth key and pixel bounds
-/// (`x[0] > x[1]`: none).
+/// A sample's footprint in the new image: its corners in order around it, depth key and pixel
+/// bounds (`x[0] > x[1]`: none). 48 bytes: the footprints of a 1024² layered frame are about a
+/// million, and writing and reading them back is a large part of the draw.
 #[derive(Clone, Copy, Debug)]
 struct Quad {
-    edges: [(f32, f32, f32); 4],
+    corners: [(f32, f32); 4],
     key: u64,
-    x: [u32; 2],
-    y: [u32; 2],
+    x: [u16; 2],
+    y: [u16; 2],
 }
 
 impl Quad {
-    const NONE: Quad = Quad { edges: [(0.0, 0.0, 0.0); 4], key: u64::MAX, x: [1, 0], y: [1, 0] };
+    const NONE: Quad = Quad { corners: [(0.0, 0.0); 4], key: u64::MAX, x: [1, 0], y: [1, 0] };
+
+    /// Its edge functions, signed by its orientation: a pixel centre `(px, py)` is inside
+    /// where `a·px + b·py + c ≥ 0` for all four.
+    #[inline(always)]
+    fn edges(&self) -> [(f32, f32, f32); 4] {
+        let q = &self.corners;
+        let area = (q[1].0 - q[0].0) * (q[2].1 - q[0].1) - (q[2].0 - q[0].0) * (q[1].1 - q[0].1);
+        let sign = if area < 0.0 { -1.0 } else { 1.0 };
+        core::array::from_fn(|e| {
+            let (a, b) = (q[e], q[(e + 1) & 3]);
+            // sign · ((b − a) × (p − a)) ≥ 0  ⇔  A·px + B·py + C ≥ 0
+            let (ex, ey) = ((b.0 - a.0) * sign, (b.1 - a.1) * sign);
+            (-ey, ex, ey * a.0 - ex * a.1)
+        })
+    }
 }
 
 /// Output rows per compositing task.
@@ -325,11 +341,14 @@ impl LayerSplat {
         let min_alpha = self.opts.grow_min_alpha;
         let colors = &scene.colors[..];
         // 1. Every sample's footprint in the new image (in parallel over samples).
-        self.quads.clear();
-        self.quads.resize(scene.samples.len(), Quad::NONE);
+        // Every footprint is written below (NONE where there is none): no clearing pass.
+        if self.quads.len() != scene.samples.len() {
+            self.quads.resize(scene.samples.len(), Quad::NONE);
+        }
         let samples = &scene.samples[..];
         self.threads.for_each_chunk(&mut self.quads, QUAD_CHUNK, |chunk, quads| {
             for (j, q) in quads.iter_mut().enumerate() {
+                *q = Quad::NONE;
                 let id = chunk * QUAD_CHUNK + j;
                 let c = deq.center(samples[id]);
                 let rel = c - src.eye;
@@ -378,17 +397,14 @@ impl LayerSplat {
                 if !(xa <= xb && ya <= yb) {
                     continue;
                 }
-                // Edge functions, signed by the quad's orientation.
-                let area = (q1.0 - q0.0) * (q2.1 - q0.1) - (q2.0 - q0.0) * (q1.1 - q0.1);
-                let sign = if area < 0.0 { -1.0 } else { 1.0 };
-                let edges: [(f32, f32, f32); 4] = core::array::from_fn(|e| {
-                    let (a, b) = (quad[e], quad[(e + 1) & 3]);
-                    // sign · ((b − a) × (p − a)) ≥ 0  ⇔  A·px + B·py + C ≥ 0
-                    let (ex, ey) = ((b.0 - a.0) * sign, (b.1 - a.1) * sign);
-                    (-ey, ex, ey * a.0 - ex * a.1)
-                });
-                // Squared distance: the same order, no square root.
-                *q = Quad { edges, key: key(dist2, id as u32), x: [xa as u32, xb as u32], y: [ya as u32, yb as u32] };
+                // Squared distance: the same order, no square root. (Bounds are within the
+                // viewport, at most `MAX_VIEWPORT` < 2¹⁶.)
+                *q = Quad {
+                    corners: quad,
+                    key: key(dist2, id as u32),
+                    x: [xa as u16, xb as u16],
+                    y: [ya as u16, yb as u16],
+                };
             }
         });
         // 2. Each footprint to the row bands it touches.
@@ -409,12 +425,13 @@ impl LayerSplat {
             let y_lo = b * RASTER_BAND;
             for &id in &bins[b] {
                 let q = &quads[id as usize];
+                let edges = q.edges();
                 let (ya, yb) = ((q.y[0] as usize).max(y_lo), (q.y[1] as usize).min(y_lo + RASTER_BAND - 1));
                 for y in ya..=yb {
                     let py = y as f32 + 0.5;
                     for x in q.x[0] as usize..=q.x[1] as usize {
                         let px = x as f32 + 0.5;
-                        if q.edges.iter().all(|&(a, b, c)| a * px + b * py + c >= 0.0) {
+                        if edges.iter().all(|&(a, b, c)| a * px + b * py + c >= 0.0) {
                             let i = (y - y_lo) * w + x;
                             insert(&mut keys[i * cap..(i + 1) * cap], &mut count[i], q.key);
                         }
