@@ -44,6 +44,16 @@ trait Feed {
     fn feed_rgba(&mut self, _bits: u32, _t: &[f32; 8], _dst: [&[f32; 8]; 4]) {}
 }
 
+/// Calls `f(lane)` for every set bit of `bits` (lanes 0..8), lowest first.
+#[inline(always)]
+fn for_lanes(mut bits: u32, mut f: impl FnMut(usize)) {
+    while bits != 0 {
+        let l = bits.trailing_zeros() as usize & 7;
+        bits &= bits - 1;
+        f(l);
+    }
+}
+
 /// Layered samples (issue 14): each lane's ray cut into segments.
 impl Feed for [Segmenter; 8] {
     const ACTIVE: bool = true;
@@ -51,12 +61,10 @@ impl Feed for [Segmenter; 8] {
     #[inline(always)]
     fn feed(&mut self, _: u32, _: &[f32; 8], _: &[f32; 8], _: &[f32; 8]) {}
     #[inline(always)]
-    fn feed_rgba(&mut self, mut bits: u32, t: &[f32; 8], dst: [&[f32; 8]; 4]) {
-        while bits != 0 {
-            let l = bits.trailing_zeros() as usize & 7;
-            bits &= bits - 1;
+    fn feed_rgba(&mut self, bits: u32, t: &[f32; 8], dst: [&[f32; 8]; 4]) {
+        for_lanes(bits, |l| {
             self[l].feed(t[l], [dst[0][l], dst[1][l], dst[2][l], dst[3][l]]);
-        }
+        });
     }
 }
 
@@ -72,24 +80,20 @@ impl Feed for NoFeed {
 impl Feed for [FirstPassAccumulator; 8] {
     const ACTIVE: bool = true;
     #[inline(always)]
-    fn feed(&mut self, mut bits: u32, _: &[f32; 8], src_a: &[f32; 8], dst_a: &[f32; 8]) {
-        while bits != 0 {
-            let l = bits.trailing_zeros() as usize & 7;
-            bits &= bits - 1;
+    fn feed(&mut self, bits: u32, _: &[f32; 8], src_a: &[f32; 8], dst_a: &[f32; 8]) {
+        for_lanes(bits, |l| {
             self[l].feed(src_a[l], dst_a[l]);
-        }
+        });
     }
 }
 
 impl Feed for [DepthPicker; 8] {
     const ACTIVE: bool = true;
     #[inline(always)]
-    fn feed(&mut self, mut bits: u32, t: &[f32; 8], src_a: &[f32; 8], dst_a: &[f32; 8]) {
-        while bits != 0 {
-            let l = bits.trailing_zeros() as usize & 7;
-            bits &= bits - 1;
+    fn feed(&mut self, bits: u32, t: &[f32; 8], src_a: &[f32; 8], dst_a: &[f32; 8]) {
+        for_lanes(bits, |l| {
             self[l].feed(t[l], src_a[l], dst_a[l]);
-        }
+        });
     }
 }
 
@@ -102,13 +106,11 @@ struct PickSpread {
 impl Feed for PickSpread {
     const ACTIVE: bool = true;
     #[inline(always)]
-    fn feed(&mut self, mut bits: u32, t: &[f32; 8], src_a: &[f32; 8], dst_a: &[f32; 8]) {
-        while bits != 0 {
-            let l = bits.trailing_zeros() as usize & 7;
-            bits &= bits - 1;
+    fn feed(&mut self, bits: u32, t: &[f32; 8], src_a: &[f32; 8], dst_a: &[f32; 8]) {
+        for_lanes(bits, |l| {
             self.pickers[l].feed(t[l], src_a[l], dst_a[l]);
             self.spread[l].feed(t[l], dst_a[l]);
-        }
+        });
     }
 }
 
