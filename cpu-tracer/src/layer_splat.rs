@@ -193,11 +193,6 @@ impl LayerSplat {
     pub fn options(&self) -> LayerOptions {
         self.opts
     }
-
-    /// Changes the options.
-    pub fn set_options(&mut self, opts: LayerOptions) {
-        self.opts = opts;
-    }
 }
 
 /// A camera's projection in `f32`.
@@ -293,6 +288,12 @@ impl Renderer for LayerSplat {
             }
             self.frame = frame;
             self.frame_of = Some(SceneId::of(scene));
+        }
+        // At the frame's own camera the filled image is the frame's own (nothing is a hole
+        // there, and footprints do not grow): no second draw.
+        if fill && *camera == fc && self.frame.pixels.len() == out.pixels.len() {
+            out.pixels.copy_from_slice(&self.frame.pixels);
+            return;
         }
         let grown = if self.adaptive { self.opts.own_at(warp_angle_deg(&fc, camera)) } else { self.opts.own };
         self.draw(scene, camera, grown, out);
