@@ -28,9 +28,9 @@ impl StaleImage {
 }
 
 /// Source index along an axis of `src` pixels for destination pixel `i` of `dst` (nearest,
-/// centre to centre).
+/// centre to centre): how the stale image is resized to the requested viewport.
 #[inline(always)]
-fn nearest(i: u32, dst: u32, src: u32) -> usize {
+pub fn nearest(i: u32, dst: u32, src: u32) -> usize {
     (((2 * i as u64 + 1) * src as u64) / (2 * dst as u64)).min(src as u64 - 1) as usize
 }
 

@@ -19,6 +19,7 @@ use volwarp_core::renderer::Renderer;
 use volwarp_core::wire::{Frame, Limits};
 use volwarp_core::{Camera, Image, RendererKind};
 use volwarp_cpu_tracer::layer_splat::LayerOptions;
+use volwarp_cpu_tracer::stale_image::nearest;
 use volwarp_cpu_tracer::LayerSplat;
 use volwarp_server::Marcher;
 
@@ -69,18 +70,29 @@ fn displayed(record: &Path) -> Result<(Vec<Frame>, Vec<Shown>), ErrorBox> {
 /// (which, drawn for the frame's own camera, composites the frame as rendered).
 fn stale_view(stale: &mut dyn Renderer, layered: bool, scene: &volwarp_core::Scene, display: &Camera, out: &mut Image) {
     let fc = scene.header.camera;
-    if layered && fc.width == display.width && fc.height == display.height {
-        stale.render(scene, &fc, out);
-        return;
-    }
-    if !layered && (fc.width <= display.width || fc.height <= display.height) {
+    let guard = fc.width > display.width && fc.height > display.height;
+    if !guard && !layered {
         stale.render(scene, display, out);
         return;
     }
     let mut full = Image::new(0, 0);
     stale.render(scene, &fc, &mut full);
-    let (x0, y0) = ((fc.width - display.width) / 2, (fc.height - display.height) / 2);
     out.reset_for(display);
+    if full.pixels.is_empty() {
+        return; // an unusable frame camera: the background
+    }
+    if !guard {
+        // The layered frame as rendered, resized to the display as the stale renderer resizes.
+        let (dw, dh) = (display.width, display.height);
+        for y in 0..dh {
+            let sy = nearest(y, dh, full.height);
+            for x in 0..dw {
+                out.pixels[(y * dw + x) as usize] = full.pixels[sy * full.width as usize + nearest(x, dw, full.width)];
+            }
+        }
+        return;
+    }
+    let (x0, y0) = ((fc.width - display.width) / 2, (fc.height - display.height) / 2);
     let w = display.width as usize;
     for y in 0..display.height {
         let src = ((y + y0) * fc.width + x0) as usize;
@@ -137,4 +149,41 @@ pub fn write_strip(marcher: &Marcher, record: &Path, rows: usize, out: &Path) ->
     let csv_path = out.with_extension("csv");
     std::fs::write(&csv_path, csv).map_err(|e| format!("{}: {e}", csv_path.display()))?;
     Ok(out_rows)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use volwarp_core::wire::CameraRequest;
+    use volwarp_core::Heuristic;
+    use volwarp_server::dataset::Dataset;
+
+    #[test]
+    fn the_stale_view_of_a_layered_frame_fits_any_display() {
+        let m = Marcher::from_dataset(&Dataset::marschner_lobb(24));
+        let fc = m.default_camera(40, 30);
+        let req = CameraRequest { seq: 1, camera: fc, heuristic: Heuristic::Threshold, radius_scale: 1.0 };
+        let scene = volwarp_cpu_tracer::route::unbuilt_scene(&m.render_frame_layers(&req, 4).0);
+        let mut r = LayerSplat::with_options(1, LayerOptions { fill: false, ..LayerOptions::DEFAULT });
+        let (mut own, mut out) = (Image::new(0, 0), Image::new(0, 0));
+        r.render(&scene, &fc, &mut own);
+        assert!(own.pixels.iter().any(|&p| p != volwarp_core::BACKGROUND));
+        // The display the frame was rendered for: the frame itself.
+        stale_view(&mut r, true, &scene, &fc, &mut out);
+        assert!(out == own);
+        // Another size (larger, or larger along one axis only): resized, nearest pixel.
+        let with = |w: u32, h: u32| Camera { width: w, height: h, ..fc };
+        for (w, h) in [(80, 60), (50, 20), (20, 50)] {
+            stale_view(&mut r, true, &scene, &with(w, h), &mut out);
+            assert_eq!((out.width, out.height), (w, h));
+        }
+        stale_view(&mut r, true, &scene, &with(80, 60), &mut out);
+        for (y, x) in [(0, 0), (7, 13), (29, 39)] {
+            assert_eq!(out.pixels[2 * y * 80 + 2 * x], own.pixels[y * 40 + x]);
+        }
+        // A guard band (the frame larger than the display both ways): its centre crop.
+        stale_view(&mut r, true, &scene, &with(20, 10), &mut out);
+        assert_eq!(out.pixels[0], own.pixels[10 * 40 + 10]);
+        assert_eq!(out.pixels[9 * 20 + 19], own.pixels[19 * 40 + 29]);
+    }
 }
