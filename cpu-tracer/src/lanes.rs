@@ -122,6 +122,10 @@ pub(crate) trait Lanes:
     fn new(a: [f32; 8]) -> Self;
     /// IEEE square root per lane.
     fn sqrt(self) -> Self;
+    /// `f32::floor` per lane.
+    fn floor(self) -> Self;
+    /// `f32::ceil` per lane.
+    fn ceil(self) -> Self;
     /// `f32::min` per lane (a NaN operand gives the other one).
     fn min(self, rhs: Self) -> Self;
     /// `f32::max` per lane (a NaN operand gives the other one).
@@ -179,6 +183,14 @@ impl Lanes for f32x8 {
     #[inline(always)]
     fn sqrt(self) -> Self {
         f32x8::sqrt(self)
+    }
+    #[inline(always)]
+    fn floor(self) -> Self {
+        f32x8::floor(self)
+    }
+    #[inline(always)]
+    fn ceil(self) -> Self {
+        f32x8::ceil(self)
     }
     #[inline(always)]
     fn min(self, rhs: Self) -> Self {
@@ -330,6 +342,16 @@ mod avx2 {
         fn sqrt(self) -> Self {
             // `vsqrtps`: correctly rounded, as `sqrtps`.
             Avx2(unsafe { _mm256_sqrt_ps(self.0) })
+        }
+        #[inline(always)]
+        fn floor(self) -> Self {
+            // `vroundps` toward −∞, as `wide`'s AVX path and `f32::floor`.
+            Avx2(unsafe { _mm256_floor_ps(self.0) })
+        }
+        #[inline(always)]
+        fn ceil(self) -> Self {
+            // `vroundps` toward +∞, as `wide`'s AVX path and `f32::ceil`.
+            Avx2(unsafe { _mm256_ceil_ps(self.0) })
         }
         #[inline(always)]
         fn min(self, rhs: Self) -> Self {

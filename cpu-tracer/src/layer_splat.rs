@@ -40,12 +40,13 @@
 //! pixel and 48 bytes per sample (its footprint) plus 4 per band it touches.
 
 use crate::hole_fill::{block_outside_silhouette, filled, stale_lookup, FILLED, UNFILLED};
+use crate::lanes::{self, Lanes};
 use crate::route::SceneId;
 use crate::sphere_splat::View;
 use crate::threads::Threads;
 use crate::{begin_frame_unbuilt_ok, MAX_VIEWPORT};
 use volwarp_core::renderer::{Image, Renderer};
-use volwarp_core::sample::{over_background, pack_color_f32};
+use volwarp_core::sample::{over_background, pack_color_f32, Dequantizer};
 use volwarp_core::warp_radius::warp_angle_deg;
 use volwarp_core::{Camera, RendererKind, Scene, Vec3, BACKGROUND};
 
@@ -225,6 +226,7 @@ impl Proj {
     /// Continuous image coordinates (pixel `(x, y)` spans `[x, x + 1) × [y, y + 1)`) of the point
     /// whose offset from the eye has components `c` along the camera's (u, v, w); `None` at or
     /// behind the eye plane or for a non-finite point.
+    #[cfg(test)]
     #[inline(always)]
     fn image(&self, c: Vec3) -> Option<(f32, f32)> {
         if !(c.z > 1e-6) {
@@ -262,6 +264,225 @@ fn insert(slots: &mut [u64], n: &mut u8, key: u64) {
     if key < worst {
         slots[at] = key;
     }
+}
+
+/// Per-frame constants of the footprint set-up: the source pixel's half sides and the frame's
+/// eye expressed in the new camera's basis, so a corner's image coordinates are a few
+/// multiply-adds and two divisions.
+struct Setup {
+    deq: Dequantizer,
+    /// The new camera's projection.
+    view: Proj,
+    /// The frame camera's eye and viewing axis.
+    src_eye: Vec3,
+    src_w: Vec3,
+    /// Half a source pixel along the frame camera's u and v per unit of its depth.
+    su: Vec3,
+    sv: Vec3,
+    /// `su`, `sv` and the frame's eye relative to the new one, in the new camera's basis.
+    bu: Vec3,
+    bv: Vec3,
+    e: Vec3,
+    /// How much the corners of a growing (opaque enough) sample scale, and from which alpha.
+    grow_ratio: f32,
+    min_alpha: u8,
+    /// The largest pixel index along x and y.
+    last_x: f32,
+    last_y: f32,
+}
+
+impl Setup {
+    fn new(camera: &Camera, frame_camera: &Camera, deq: &Dequantizer, own: f32, grown: f32, min_alpha: u8) -> Setup {
+        let view = Proj::new(&View::new(camera));
+        let source = View::new(frame_camera);
+        let src = Proj::new(&source);
+        // Half the footprint's side per unit of source depth, along the source's u and v.
+        let half = if own.is_finite() { own.clamp(0.0, 4.0) } else { 0.5 };
+        let grow_ratio = if half > 0.0 && grown.is_finite() { (grown.clamp(0.0, 4.0) / half).max(1.0) } else { 1.0 };
+        let (hx, hy) = (half / source.px_x as f32, half / source.px_y as f32);
+        let (su, sv) = (src.u * hx, src.v * hy);
+        // Everything is expressed in the new camera's basis: a point's image coordinates are
+        // its (u, v, w) components relative to the new eye. A corner ray's direction is
+        // `axis ± su ± sv`, so its components are the axis's plus per-frame constants.
+        let basis = |x: Vec3| Vec3::new(x.dot(view.u), x.dot(view.v), x.dot(view.w));
+        let (bu, bv, e) = (basis(su), basis(sv), basis(src.eye - view.eye));
+        Setup {
+            deq: *deq,
+            src_eye: src.eye,
+            src_w: src.w,
+            su,
+            sv,
+            bu,
+            bv,
+            e,
+            grow_ratio,
+            min_alpha,
+            last_x: camera.width as f32 - 1.0,
+            last_y: camera.height as f32 - 1.0,
+            view,
+        }
+    }
+
+    /// How much the corners of sample `id` scale: `grow_ratio` where its color is at least
+    /// `min_alpha` opaque, else 1.
+    #[inline(always)]
+    fn scale(&self, colors: &[u32], id: usize) -> f32 {
+        let opaque = colors.get(id).is_some_and(|&c| (c >> 24) as u8 >= self.min_alpha);
+        if opaque && self.grow_ratio > 1.0 {
+            self.grow_ratio
+        } else {
+            1.0
+        }
+    }
+
+    /// The footprint of sample `id` (packed `sample`), one at a time: the reference the lanes
+    /// kernel [`footprint_group`] computes eight at a time, bit for bit.
+    #[cfg(test)]
+    fn quad(&self, sample: u64, colors: &[u32], id: usize) -> Quad {
+        let view = &self.view;
+        let c = self.deq.center(sample);
+        let rel = c - self.src_eye;
+        let z = rel.dot(self.src_w);
+        // The plane's normal (not normalised: only ratios of dot products with it are used).
+        let n = c - view.eye;
+        let dist2 = n.length_squared();
+        if !(z > 0.0 && dist2 > 0.0) {
+            return Quad::NONE;
+        }
+        // The source pixel's frustum (the ray through the centre, ± half a pixel per axis)
+        // cut by the plane through the centre facing the new eye: corner
+        // `p = eye_s + λ·dir` with `λ = n·rel / n·dir`.
+        let axis = rel / z;
+        let num = n.dot(rel);
+        let (an, un, vn) = (axis.dot(n), self.su.dot(n), self.sv.dot(n));
+        // A corner ray within 5° of the plane (the new eye sees the footprint edge-on): skip
+        // the sample (the corners' directions are the axis's within half a pixel).
+        let edge_on = 0.0076 * dist2 * axis.length_squared();
+        // Opaque samples may grow (adaptive sizing): the corners scale with the half side.
+        let r = self.scale(colors, id);
+        let ba = Vec3::new(axis.dot(view.u), axis.dot(view.v), axis.dot(view.w));
+        let corner = |sx: f32, sy: f32| {
+            let den = an + sx * un + sy * vn;
+            if !(den > 0.0 && den * den > edge_on) {
+                return None;
+            }
+            let p = self.e + (ba + self.bu * sx + self.bv * sy) * (num / den);
+            view.image(p)
+        };
+        // Its corners, in order around it, in the new camera's image.
+        let (Some(q0), Some(q1), Some(q2), Some(q3)) = (corner(-r, -r), corner(r, -r), corner(r, r), corner(-r, r))
+        else {
+            return Quad::NONE;
+        };
+        let x0 = q0.0.min(q1.0).min(q2.0).min(q3.0);
+        let x1 = q0.0.max(q1.0).max(q2.0).max(q3.0);
+        let y0 = q0.1.min(q1.1).min(q2.1).min(q3.1);
+        let y1 = q0.1.max(q1.1).max(q2.1).max(q3.1);
+        // Pixel centres x + ½ within [x0, x1].
+        let (xa, xb) = ((x0 - 0.5).ceil().max(0.0), (x1 - 0.5).floor().min(self.last_x));
+        let (ya, yb) = ((y0 - 0.5).ceil().max(0.0), (y1 - 0.5).floor().min(self.last_y));
+        if !(xa <= xb && ya <= yb) {
+            return Quad::NONE;
+        }
+        // Squared distance: the same order, no square root. (Bounds are within the viewport,
+        // at most `MAX_VIEWPORT` < 2¹⁶.)
+        Quad {
+            corners: [q0, q1, q2, q3],
+            key: key(dist2, id as u32),
+            x: [xa as u16, xb as u16],
+            y: [ya as u16, yb as u16],
+        }
+    }
+}
+
+/// [`Setup::quad`] for eight samples at once: the same operations in the same order on lanes,
+/// so the same footprints bit for bit (the test `lanes_match_the_scalar_footprints`). `first`
+/// is the id of `samples[0]`; `samples` holds at most eight.
+#[inline(always)]
+fn footprint_group<L: Lanes>(s: &Setup, samples: &[u64], colors: &[u32], first: usize, out: &mut [Quad]) {
+    let (mut cx, mut cy, mut cz, mut rr) = ([0.0f32; 8], [0.0f32; 8], [0.0f32; 8], [1.0f32; 8]);
+    for (i, &smp) in samples.iter().enumerate().take(8) {
+        let c = s.deq.center(smp);
+        (cx[i], cy[i], cz[i]) = (c.x, c.y, c.z);
+        rr[i] = s.scale(colors, first + i);
+    }
+    let sp = L::splat;
+    let (cx, cy, cz, r) = (L::new(cx), L::new(cy), L::new(cz), L::new(rr));
+    let (rx, ry, rz) = (cx - sp(s.src_eye.x), cy - sp(s.src_eye.y), cz - sp(s.src_eye.z));
+    let z = rx * sp(s.src_w.x) + ry * sp(s.src_w.y) + rz * sp(s.src_w.z);
+    let v = &s.view;
+    let (nx, ny, nz) = (cx - sp(v.eye.x), cy - sp(v.eye.y), cz - sp(v.eye.z));
+    let dist2 = nx * nx + ny * ny + nz * nz;
+    let zero = sp(0.0);
+    let mut ok = z.simd_gt(zero) & dist2.simd_gt(zero);
+    let (ax, ay, az) = (rx / z, ry / z, rz / z);
+    let num = nx * rx + ny * ry + nz * rz;
+    let an = ax * nx + ay * ny + az * nz;
+    let un = sp(s.su.x) * nx + sp(s.su.y) * ny + sp(s.su.z) * nz;
+    let vn = sp(s.sv.x) * nx + sp(s.sv.y) * ny + sp(s.sv.z) * nz;
+    let edge_on = sp(0.0076) * dist2 * (ax * ax + ay * ay + az * az);
+    let dot_axis = |b: Vec3| ax * sp(b.x) + ay * sp(b.y) + az * sp(b.z);
+    let (bax, bay, baz) = (dot_axis(v.u), dot_axis(v.v), dot_axis(v.w));
+    let mut xs = [zero; 4];
+    let mut ys = [zero; 4];
+    let neg = zero - r;
+    for (k, (sx, sy)) in [(neg, neg), (r, neg), (r, r), (neg, r)].into_iter().enumerate() {
+        let den = an + sx * un + sy * vn;
+        ok = ok & den.simd_gt(zero) & (den * den).simd_gt(edge_on);
+        let t = num / den;
+        let px = sp(s.e.x) + (bax + sp(s.bu.x) * sx + sp(s.bv.x) * sy) * t;
+        let py = sp(s.e.y) + (bay + sp(s.bu.y) * sx + sp(s.bv.y) * sy) * t;
+        let pz = sp(s.e.z) + (baz + sp(s.bu.z) * sx + sp(s.bv.z) * sy) * t;
+        ok = ok & pz.simd_gt(sp(1e-6));
+        let inv = sp(1.0) / pz;
+        let x = px * inv * sp(v.px_x) + sp(v.half_w);
+        let y = sp(v.half_h) - py * inv * sp(v.px_y);
+        ok = ok & x.is_finite() & y.is_finite();
+        (xs[k], ys[k]) = (x, y);
+    }
+    let x0 = xs[0].min(xs[1]).min(xs[2]).min(xs[3]);
+    let x1 = xs[0].max(xs[1]).max(xs[2]).max(xs[3]);
+    let y0 = ys[0].min(ys[1]).min(ys[2]).min(ys[3]);
+    let y1 = ys[0].max(ys[1]).max(ys[2]).max(ys[3]);
+    let half = sp(0.5);
+    let (xa, xb) = ((x0 - half).ceil().max(zero), (x1 - half).floor().min(sp(s.last_x)));
+    let (ya, yb) = ((y0 - half).ceil().max(zero), (y1 - half).floor().min(sp(s.last_y)));
+    ok = ok & xa.simd_le(xb) & ya.simd_le(yb);
+    let mask = ok.to_bitmask();
+    let xs = xs.map(L::to_array);
+    let ys = ys.map(L::to_array);
+    let (xa, xb, ya, yb, d2) = (xa.to_array(), xb.to_array(), ya.to_array(), yb.to_array(), dist2.to_array());
+    for (i, q) in out.iter_mut().enumerate().take(samples.len().min(8)) {
+        *q = if mask >> i & 1 == 0 {
+            Quad::NONE
+        } else {
+            Quad {
+                corners: core::array::from_fn(|k| (xs[k][i], ys[k][i])),
+                key: key(d2[i], (first + i) as u32),
+                x: [xa[i] as u16, xb[i] as u16],
+                y: [ya[i] as u16, yb[i] as u16],
+            }
+        };
+    }
+}
+
+/// Every footprint of `samples` (ids from `first`) into `out`, eight at a time.
+#[inline(always)]
+fn footprint_lanes<L: Lanes>(s: &Setup, samples: &[u64], colors: &[u32], first: usize, out: &mut [Quad]) {
+    for (g, (smp, q)) in samples.chunks(8).zip(out.chunks_mut(8)).enumerate() {
+        footprint_group::<L>(s, smp, colors, first + 8 * g, q);
+    }
+}
+
+lanes::dispatch! {
+    /// [`footprint_lanes`] on the best lanes this CPU has (the same footprints either way).
+    fn footprints / footprints_avx2 => footprint_lanes(
+        s: &Setup,
+        samples: &[u64],
+        colors: &[u32],
+        first: usize,
+        out: &mut [Quad],
+    )
 }
 
 impl Renderer for LayerSplat {
@@ -326,87 +547,18 @@ impl LayerSplat {
         self.count.clear();
         self.count.resize(w * h, 0);
         self.keys.resize(w * h * cap, u64::MAX);
-        let view = Proj::new(&View::new(camera));
-        let source = View::new(&scene.header.camera);
-        let src = Proj::new(&source);
-        // Half the footprint's side per unit of source depth, along the source's u and v.
-        let half = if own.is_finite() { own.clamp(0.0, 4.0) } else { 0.5 };
-        let grow_ratio = if half > 0.0 && grown.is_finite() { (grown.clamp(0.0, 4.0) / half).max(1.0) } else { 1.0 };
-        let (hx, hy) = (half / source.px_x as f32, half / source.px_y as f32);
-        let (su, sv) = (src.u * hx, src.v * hy);
-        // Everything is expressed in the new camera's basis: a point's image coordinates are
-        // its (u, v, w) components relative to the new eye. A corner ray's direction is
-        // `axis ± su ± sv`, so its components are the axis's plus per-frame constants.
-        let basis = |x: Vec3| Vec3::new(x.dot(view.u), x.dot(view.v), x.dot(view.w));
-        let (bu, bv, e) = (basis(su), basis(sv), basis(src.eye - view.eye));
-        let min_alpha = self.opts.grow_min_alpha;
+        let setup = Setup::new(camera, &scene.header.camera, deq, own, grown, self.opts.grow_min_alpha);
         let colors = &scene.colors[..];
-        // 1. Every sample's footprint in the new image (in parallel over samples).
-        // Every footprint is written below (NONE where there is none): no clearing pass.
+        // 1. Every sample's footprint in the new image (in parallel over samples, eight at a
+        // time in SIMD lanes). Every footprint is written (NONE where there is none): no
+        // clearing pass.
         if self.quads.len() != scene.samples.len() {
             self.quads.resize(scene.samples.len(), Quad::NONE);
         }
         let samples = &scene.samples[..];
         self.threads.for_each_chunk(&mut self.quads, QUAD_CHUNK, |chunk, quads| {
-            for (j, q) in quads.iter_mut().enumerate() {
-                *q = Quad::NONE;
-                let id = chunk * QUAD_CHUNK + j;
-                let c = deq.center(samples[id]);
-                let rel = c - src.eye;
-                let z = rel.dot(src.w);
-                // The plane's normal (not normalised: only ratios of dot products with it are used).
-                let n = c - view.eye;
-                let dist2 = n.length_squared();
-                if !(z > 0.0 && dist2 > 0.0) {
-                    continue;
-                }
-                // The source pixel's frustum (the ray through the centre, ± half a pixel per
-                // axis) cut by the plane through the centre facing the new eye: corner
-                // `p = eye_s + λ·dir` with `λ = n·rel / n·dir`.
-                let axis = rel / z;
-                let num = n.dot(rel);
-                let (an, un, vn) = (axis.dot(n), su.dot(n), sv.dot(n));
-                // A corner ray within 5° of the plane (the new eye sees the footprint edge-on):
-                // skip the sample (the corners' directions are the axis's within half a pixel).
-                let edge_on = 0.0076 * dist2 * axis.length_squared();
-                // Opaque samples may grow (adaptive sizing): the corners scale with the half side.
-                let opaque = colors.get(id).is_some_and(|&c| (c >> 24) as u8 >= min_alpha);
-                let r = if opaque && grow_ratio > 1.0 { grow_ratio } else { 1.0 };
-                let ba = basis(axis);
-                let corner = |sx: f32, sy: f32| {
-                    let den = an + sx * un + sy * vn;
-                    if !(den > 0.0 && den * den > edge_on) {
-                        return None;
-                    }
-                    let p = e + (ba + bu * sx + bv * sy) * (num / den);
-                    view.image(p)
-                };
-                // Its corners, in order around it, in the new camera's image.
-                let (Some(q0), Some(q1), Some(q2), Some(q3)) =
-                    (corner(-r, -r), corner(r, -r), corner(r, r), corner(-r, r))
-                else {
-                    continue;
-                };
-                let quad = [q0, q1, q2, q3];
-                let x0 = q0.0.min(q1.0).min(q2.0).min(q3.0);
-                let x1 = q0.0.max(q1.0).max(q2.0).max(q3.0);
-                let y0 = q0.1.min(q1.1).min(q2.1).min(q3.1);
-                let y1 = q0.1.max(q1.1).max(q2.1).max(q3.1);
-                // Pixel centres x + ½ within [x0, x1].
-                let (xa, xb) = ((x0 - 0.5).ceil().max(0.0), (x1 - 0.5).floor().min(w as f32 - 1.0));
-                let (ya, yb) = ((y0 - 0.5).ceil().max(0.0), (y1 - 0.5).floor().min(h as f32 - 1.0));
-                if !(xa <= xb && ya <= yb) {
-                    continue;
-                }
-                // Squared distance: the same order, no square root. (Bounds are within the
-                // viewport, at most `MAX_VIEWPORT` < 2¹⁶.)
-                *q = Quad {
-                    corners: quad,
-                    key: key(dist2, id as u32),
-                    x: [xa as u16, xb as u16],
-                    y: [ya as u16, yb as u16],
-                };
-            }
+            let first = chunk * QUAD_CHUNK;
+            footprints(&setup, &samples[first..first + quads.len()], colors, first, quads);
         });
         // 2. Each footprint to the row bands it touches.
         let bands = h.div_ceil(RASTER_BAND);
@@ -508,6 +660,53 @@ mod tests {
         slots.sort_unstable();
         assert_eq!(n, 6);
         assert_eq!(slots.to_vec(), (0..6u64).map(|k| k * 3).collect::<Vec<_>>());
+    }
+
+    /// The footprints of a synthetic surface (plus random samples, some behind the eye, some
+    /// degenerate) for `frame_camera`, set up for `camera` by the scalar reference and by the
+    /// lanes kernel on both lane types: the same quads bit for bit.
+    #[test]
+    fn lanes_match_the_scalar_footprints() {
+        use crate::synthetic::{depth_image_frame, SplitMix64};
+        let frame = depth_image_frame(96, 1.0, 7);
+        let fc = frame.header.camera;
+        let deq = Dequantizer::new(frame.header.bounds, frame.header.radius_unit);
+        let mut samples = frame.samples.clone();
+        let mut rng = SplitMix64(3);
+        samples.extend((0..300).map(|_| rng.next_u64()));
+        let colors: Vec<u32> = (0..samples.len()).map(|_| rng.next_u64() as u32).collect();
+        let same = |a: &Quad, b: &Quad| {
+            a.key == b.key
+                && a.x == b.x
+                && a.y == b.y
+                && (a.x[0] > a.x[1]
+                    || a.corners
+                        .iter()
+                        .zip(&b.corners)
+                        .all(|(p, q)| p.0.to_bits() == q.0.to_bits() && p.1.to_bits() == q.1.to_bits()))
+        };
+        let mut drawn = 0;
+        for (deg, grown, size) in
+            [(0.0, 0.5, (96, 96)), (10.0, 1.3, (96, 96)), (35.0, 2.0, (131, 77)), (170.0, 0.5, (96, 96))]
+        {
+            let mut camera = fc.orbit(deg, deg * 0.3);
+            (camera.width, camera.height) = size;
+            let setup = Setup::new(&camera, &fc, &deq, 0.5, grown, 230);
+            let reference: Vec<Quad> =
+                samples.iter().enumerate().map(|(i, &smp)| setup.quad(smp, &colors, i)).collect();
+            drawn += reference.iter().filter(|q| q.x[0] <= q.x[1]).count();
+            let mut portable = vec![Quad::NONE; samples.len()];
+            footprint_lanes::<wide::f32x8>(&setup, &samples, &colors, 0, &mut portable);
+            assert!(reference.iter().zip(&portable).all(|(a, b)| same(a, b)), "portable lanes differ at {deg}°");
+            #[cfg(target_arch = "x86_64")]
+            if lanes::use_avx2() {
+                let mut avx = vec![Quad::NONE; samples.len()];
+                // SAFETY: the CPU has AVX2 (`use_avx2`).
+                unsafe { footprints_avx2(&setup, &samples, &colors, 0, &mut avx) };
+                assert!(reference.iter().zip(&avx).all(|(a, b)| same(a, b)), "AVX2 lanes differ at {deg}°");
+            }
+        }
+        assert!(drawn > 3 * frame.samples.len() / 2, "too few footprints drawn: {drawn}");
     }
 
     #[test]

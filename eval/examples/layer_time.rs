@@ -1,0 +1,99 @@
+//! Client draw time of the layered default against the one-sample splatter (issue 14's budget:
+//! "client draw time at 512² on 1 thread ≤ 2× the one-sample splatter's for the default K"), on
+//! every bundled dataset:
+//!
+//! ```sh
+//! cargo run --release -p volwarp-eval --example layer_time -- ../shared/data [--size 512] [--runs 15] [--threads 1]
+//! ```
+//!
+//! Per dataset the server renders the default camera's one-sample frame (threshold heuristic)
+//! and its layered frame (K = 4, the client's default); the client draws each 10° along the
+//! orbit: `splat` the one-sample frame, `volwarp` the layered one with the default's options
+//! (hole filling and warp-grown footprints, `LayerSplat::new` + adaptive sizing). With
+//! `--threads 1` the figures are the measuring thread's on-CPU time (`CLOCK_THREAD_CPUTIME_ID`:
+//! robust on a machine other builds keep busy), otherwise wall time; medians of `--runs`, the
+//! two renderers alternated draw by draw so load changes hit both alike.
+
+use std::path::Path;
+use std::time::Instant;
+use volwarp_core::renderer::Renderer;
+use volwarp_core::wire::CameraRequest;
+use volwarp_core::{Heuristic, Image, RendererKind};
+use volwarp_cpu_tracer::{create, route::unbuilt_scene, LayerSplat};
+use volwarp_eval::camera_paths::orbit;
+use volwarp_server::Marcher;
+
+fn arg<'a>(args: &'a [String], name: &str) -> Option<&'a str> {
+    args.iter().position(|a| a == name).and_then(|i| args.get(i + 1)).map(|s| s.as_str())
+}
+
+/// Nanoseconds this thread has run (`CLOCK_THREAD_CPUTIME_ID`), if the clock exists.
+fn cpu_ns() -> Option<u64> {
+    let mut ts = libc::timespec { tv_sec: 0, tv_nsec: 0 };
+    // SAFETY: `ts` is a valid, writable timespec for the duration of the call.
+    let rc = unsafe { libc::clock_gettime(libc::CLOCK_THREAD_CPUTIME_ID, &mut ts) };
+    (rc == 0).then(|| ts.tv_sec as u64 * 1_000_000_000 + ts.tv_nsec as u64)
+}
+
+/// Milliseconds of one call of `f`: on-CPU time of this thread when `cpu`, else wall time.
+fn ms(cpu: bool, f: impl FnOnce()) -> f64 {
+    let (c0, t0) = (cpu_ns(), Instant::now());
+    f();
+    match (cpu, c0, cpu_ns()) {
+        (true, Some(a), Some(b)) => (b - a) as f64 / 1e6,
+        _ => t0.elapsed().as_secs_f64() * 1e3,
+    }
+}
+
+fn median(v: &mut [f64]) -> f64 {
+    v.sort_by(f64::total_cmp);
+    v[v.len() / 2]
+}
+
+fn main() {
+    let args: Vec<String> = std::env::args().collect();
+    let dir = args.get(1).map_or("../shared/data", |s| s.as_str());
+    let size: u32 = arg(&args, "--size").map_or(512, |s| s.parse().expect("a size"));
+    let runs: usize = arg(&args, "--runs").map_or(15, |s| s.parse().expect("a run count"));
+    let threads: usize = arg(&args, "--threads").map_or(1, |s| s.parse().expect("a thread count"));
+    let layers: u32 = arg(&args, "--layers").map_or(4, |s| s.parse().expect("a layer count"));
+    let cpu = threads == 1;
+    let datasets = volwarp_eval::report::shared_datasets(Path::new(dir)).expect("datasets");
+    println!(
+        "{size}², {threads} thread(s), {} ms, median of {runs}; volwarp = splat-layers K={layers}, fill, adaptive",
+        if cpu { "on-CPU" } else { "wall" }
+    );
+    println!("| dataset | samples K=1 | samples K={layers} | splat ms | volwarp ms | ratio |");
+    println!("|---|---|---|---|---|---|");
+    let mut ratios = Vec::new();
+    for ds in &datasets {
+        let m = Marcher::from_dataset(ds);
+        let c0 = m.default_camera(size, size);
+        let req = CameraRequest { seq: 1, camera: c0, heuristic: Heuristic::Threshold, radius_scale: 1.0 };
+        let one = unbuilt_scene(&m.render_frame(&req).0);
+        let lay = unbuilt_scene(&m.render_frame_layers(&req, layers).0);
+        let cam = orbit(&c0, 10.0);
+        let mut splat = create(RendererKind::Splat, threads).expect("the CPU splatter");
+        let mut volwarp = LayerSplat::new(threads);
+        volwarp.set_adaptive_radius(true);
+        let (mut a, mut b) = (Image::new(0, 0), Image::new(0, 0));
+        // Warm-up: the layered renderer composites the frame's own image once per frame.
+        splat.render(&one, &cam, &mut a);
+        volwarp.render(&lay, &cam, &mut b);
+        let (mut ta, mut tb) = (Vec::new(), Vec::new());
+        for _ in 0..runs {
+            ta.push(ms(cpu, || splat.render(&one, &cam, &mut a)));
+            tb.push(ms(cpu, || volwarp.render(&lay, &cam, &mut b)));
+        }
+        let (sa, sb) = (median(&mut ta), median(&mut tb));
+        ratios.push(sb / sa);
+        println!(
+            "| {} | {} | {} | {sa:.2} | {sb:.2} | {:.2}× |",
+            ds.name,
+            one.samples.len(),
+            lay.samples.len(),
+            sb / sa
+        );
+    }
+    println!("ratio median over datasets: {:.2}×", median(&mut ratios));
+}
