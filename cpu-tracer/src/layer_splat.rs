@@ -422,7 +422,7 @@ fn footprint_group<L: Lanes>(s: &Setup, samples: &[u64], colors: &[u32], first: 
     let vn = sp(s.sv.x) * nx + sp(s.sv.y) * ny + sp(s.sv.z) * nz;
     let edge_on = sp(0.0076) * dist2 * (ax * ax + ay * ay + az * az);
     let dot_axis = |b: Vec3| ax * sp(b.x) + ay * sp(b.y) + az * sp(b.z);
-    let (bax, bay, baz) = (dot_axis(v.u), dot_axis(v.v), dot_axis(v.w));
+    let (ba_u, ba_v, ba_w) = (dot_axis(v.u), dot_axis(v.v), dot_axis(v.w));
     let mut xs = [zero; 4];
     let mut ys = [zero; 4];
     let neg = zero - r;
@@ -430,9 +430,9 @@ fn footprint_group<L: Lanes>(s: &Setup, samples: &[u64], colors: &[u32], first: 
         let den = an + sx * un + sy * vn;
         ok = ok & den.simd_gt(zero) & (den * den).simd_gt(edge_on);
         let t = num / den;
-        let px = sp(s.e.x) + (bax + sp(s.bu.x) * sx + sp(s.bv.x) * sy) * t;
-        let py = sp(s.e.y) + (bay + sp(s.bu.y) * sx + sp(s.bv.y) * sy) * t;
-        let pz = sp(s.e.z) + (baz + sp(s.bu.z) * sx + sp(s.bv.z) * sy) * t;
+        let px = sp(s.e.x) + (ba_u + sp(s.bu.x) * sx + sp(s.bv.x) * sy) * t;
+        let py = sp(s.e.y) + (ba_v + sp(s.bu.y) * sx + sp(s.bv.y) * sy) * t;
+        let pz = sp(s.e.z) + (ba_w + sp(s.bu.z) * sx + sp(s.bv.z) * sy) * t;
         ok = ok & pz.simd_gt(sp(1e-6));
         let inv = sp(1.0) / pz;
         let x = px * inv * sp(v.px_x) + sp(v.half_w);
