@@ -360,20 +360,26 @@ pub(crate) fn filled(c: u32) -> u64 {
 
 /// Marks the unfilled pixels outside the covered pixels' row and column spans [`BLOCKED`].
 pub(crate) fn block_outside_silhouette(state: &mut [u64], w: usize, h: usize) {
+    if w == 0 || state.len() < w * h {
+        return;
+    }
+    // Per column the first and last covered row, per row the first and last covered column
+    // (row by row: no division per pixel).
     let mut cols = vec![(usize::MAX, 0usize); w];
     let mut rows = vec![(usize::MAX, 0usize); h];
-    for (j, &s) in state.iter().enumerate() {
-        if s & FILLED != 0 {
-            let (x, y) = (j % w, j / w);
-            cols[x] = (cols[x].0.min(y), cols[x].1.max(y));
-            rows[y] = (rows[y].0.min(x), rows[y].1.max(x));
+    for (y, row) in state.chunks_exact(w).take(h).enumerate() {
+        for (x, _) in row.iter().enumerate().filter(|(_, &s)| s & FILLED != 0) {
+            cols[x] = (cols[x].0.min(y), y);
+            rows[y] = (rows[y].0.min(x), x);
         }
     }
-    for (j, s) in state.iter_mut().enumerate() {
-        let (x, y) = (j % w, j / w);
-        let inside = rows[y].0 <= x && x <= rows[y].1 && cols[x].0 <= y && y <= cols[x].1;
-        if *s == UNFILLED && !inside {
-            *s = BLOCKED;
+    for (y, row) in state.chunks_exact_mut(w).take(h).enumerate() {
+        let (x0, x1) = rows[y];
+        for (x, s) in row.iter_mut().enumerate() {
+            let inside = x0 <= x && x <= x1 && cols[x].0 <= y && y <= cols[x].1;
+            if *s == UNFILLED && !inside {
+                *s = BLOCKED;
+            }
         }
     }
 }
@@ -396,5 +402,45 @@ impl<R: SampleIds + Renderer> Renderer for HoleFill<R> {
 
     fn render(&mut self, scene: &Scene, camera: &Camera, out: &mut Image) {
         self.render_set(&[scene], camera, out);
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::synthetic::SplitMix64;
+
+    /// The silhouette rule pixel by pixel, as first written (a division per pixel).
+    fn block_reference(state: &mut [u64], w: usize, h: usize) {
+        let mut cols = vec![(usize::MAX, 0usize); w];
+        let mut rows = vec![(usize::MAX, 0usize); h];
+        for (j, &s) in state.iter().enumerate() {
+            if s & FILLED != 0 {
+                let (x, y) = (j % w, j / w);
+                cols[x] = (cols[x].0.min(y), cols[x].1.max(y));
+                rows[y] = (rows[y].0.min(x), rows[y].1.max(x));
+            }
+        }
+        for (j, s) in state.iter_mut().enumerate() {
+            let (x, y) = (j % w, j / w);
+            let inside = rows[y].0 <= x && x <= rows[y].1 && cols[x].0 <= y && y <= cols[x].1;
+            if *s == UNFILLED && !inside {
+                *s = BLOCKED;
+            }
+        }
+    }
+
+    #[test]
+    fn silhouette_blocking_matches_the_per_pixel_rule() {
+        let mut rng = SplitMix64(5);
+        for (w, h, density) in [(1, 1, 0.5), (7, 5, 0.3), (64, 48, 0.05), (33, 90, 0.6), (16, 16, 0.0)] {
+            let state: Vec<u64> = (0..w * h)
+                .map(|_| if rng.next_f32() < density { filled(rng.next_u64() as u32) } else { UNFILLED })
+                .collect();
+            let (mut a, mut b) = (state.clone(), state);
+            block_outside_silhouette(&mut a, w, h);
+            block_reference(&mut b, w, h);
+            assert_eq!(a, b, "{w}×{h}");
+        }
     }
 }

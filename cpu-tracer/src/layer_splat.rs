@@ -67,43 +67,53 @@ pub const OWN_MARGIN: f32 = 0.0;
 pub const MAX_OWN: f32 = 2.0;
 
 /// Output rows per rasterization task (the footprints are binned to bands of these rows).
-const RASTER_BAND: usize = 32;
+const RASTER_BAND: usize = 8;
+
+/// The band range of a sample without a footprint (first > last).
+const NO_BANDS: u32 = 1;
 
 /// Samples per footprint set-up task.
 const QUAD_CHUNK: usize = 4096;
 
-/// A sample's footprint in the new image: its corners in order around it, depth key and pixel
-/// bounds (`x[0] > x[1]`: none). 48 bytes: the footprints of a 1024² layered frame are about a
-/// million, and writing and reading them back is a large part of the draw.
+/// A sample's footprint in the new image: the edge functions of its quadrilateral, depth key
+/// and pixel bounds (`x[0] > x[1]`: none). 64 bytes, one cache line: the footprints of a 1024²
+/// layered frame are about a million, set up in SIMD lanes and read back by the rasterizer.
 #[derive(Clone, Copy, Debug)]
+#[repr(C, align(64))]
 struct Quad {
-    corners: [(f32, f32); 4],
+    /// Per edge `(A, B, C)`: a pixel centre `(px, py)` is inside where `A·px + B·py + C ≥ 0`
+    /// for all four.
+    edges: [[f32; 3]; 4],
     key: u64,
     x: [u16; 2],
     y: [u16; 2],
 }
 
 impl Quad {
-    const NONE: Quad = Quad { corners: [(0.0, 0.0); 4], key: u64::MAX, x: [1, 0], y: [1, 0] };
+    const NONE: Quad = Quad { edges: [[0.0; 3]; 4], key: u64::MAX, x: [1, 0], y: [1, 0] };
 
-    /// Its edge functions, signed by its orientation: a pixel centre `(px, py)` is inside
-    /// where `a·px + b·py + c ≥ 0` for all four.
+    /// Whether pixel centre `(px, py)` is inside (no branch per edge).
     #[inline(always)]
-    fn edges(&self) -> [(f32, f32, f32); 4] {
-        let q = &self.corners;
-        let area = (q[1].0 - q[0].0) * (q[2].1 - q[0].1) - (q[2].0 - q[0].0) * (q[1].1 - q[0].1);
-        let sign = if area < 0.0 { -1.0 } else { 1.0 };
-        core::array::from_fn(|e| {
-            let (a, b) = (q[e], q[(e + 1) & 3]);
-            // sign · ((b − a) × (p − a)) ≥ 0  ⇔  A·px + B·py + C ≥ 0
-            let (ex, ey) = ((b.0 - a.0) * sign, (b.1 - a.1) * sign);
-            (-ey, ex, ey * a.0 - ex * a.1)
-        })
+    fn covers(&self, px: f32, py: f32) -> bool {
+        let e = &self.edges;
+        let f = |k: usize| e[k][0] * px + e[k][1] * py + e[k][2];
+        (f(0) >= 0.0) & (f(1) >= 0.0) & (f(2) >= 0.0) & (f(3) >= 0.0)
     }
 }
 
-/// Output rows per compositing task.
-const BAND: usize = 16;
+/// The edge functions of the quadrilateral with corners `q` (in order around it), signed by
+/// its orientation: `sign · ((b − a) × (p − a)) ≥ 0` for each edge `a → b`.
+#[cfg(test)]
+fn edges_of(q: [(f32, f32); 4]) -> [[f32; 3]; 4] {
+    let area = (q[1].0 - q[0].0) * (q[2].1 - q[0].1) - (q[2].0 - q[0].0) * (q[1].1 - q[0].1);
+    let sign = if area < 0.0 { -1.0 } else { 1.0 };
+    core::array::from_fn(|e| {
+        let (a, b) = (q[e], q[(e + 1) & 3]);
+        let (ex, ny) = ((b.0 - a.0) * sign, (a.1 - b.1) * sign);
+        // A = −(b − a).y, B = (b − a).x, C = −(A·a.x + B·a.y) written as (b − a).y·a.x − B·a.y.
+        [ny, ex, (b.1 - a.1) * sign * a.0 - ex * a.1]
+    })
+}
 
 /// How wide a sample's footprint is (see the module docs).
 #[derive(Clone, Copy, Debug, PartialEq)]
@@ -152,8 +162,6 @@ impl Default for LayerOptions {
 pub struct LayerSplat {
     threads: Threads,
     opts: LayerOptions,
-    /// Per output pixel `cap` keys.
-    keys: Vec<u64>,
     /// Per output pixel the number of keys.
     count: Vec<u8>,
     /// Grow the footprints with the warp.
@@ -166,6 +174,8 @@ pub struct LayerSplat {
     /// Per sample its footprint, and per band of rows the footprints that touch it.
     quads: Vec<Quad>,
     bins: Vec<Vec<u32>>,
+    /// Per sample the first and last band of rows its footprint touches (`b0 | b1 << 16`).
+    bands: Vec<u32>,
 }
 
 impl LayerSplat {
@@ -179,7 +189,6 @@ impl LayerSplat {
         LayerSplat {
             threads: Threads::new(threads),
             opts,
-            keys: Vec::new(),
             count: Vec::new(),
             adaptive: false,
             frame: Image::new(0, 0),
@@ -187,6 +196,7 @@ impl LayerSplat {
             state: Vec::new(),
             quads: Vec::new(),
             bins: Vec::new(),
+            bands: Vec::new(),
         }
     }
 
@@ -387,7 +397,7 @@ impl Setup {
         // Squared distance: the same order, no square root. (Bounds are within the viewport,
         // at most `MAX_VIEWPORT` < 2¹⁶.)
         Quad {
-            corners: [q0, q1, q2, q3],
+            edges: edges_of([q0, q1, q2, q3]),
             key: key(dist2, id as u32),
             x: [xa as u16, xb as u16],
             y: [ya as u16, yb as u16],
@@ -449,15 +459,21 @@ fn footprint_group<L: Lanes>(s: &Setup, samples: &[u64], colors: &[u32], first: 
     let (ya, yb) = ((y0 - half).ceil().max(zero), (y1 - half).floor().min(sp(s.last_y)));
     ok = ok & xa.simd_le(xb) & ya.simd_le(yb);
     let mask = ok.to_bitmask();
-    let xs = xs.map(L::to_array);
-    let ys = ys.map(L::to_array);
+    // The edge functions, as `edges_of` computes them.
+    let area = (xs[1] - xs[0]) * (ys[2] - ys[0]) - (xs[2] - xs[0]) * (ys[1] - ys[0]);
+    let sign = area.simd_lt(zero).select(sp(-1.0), sp(1.0));
+    let edges: [[[f32; 8]; 3]; 4] = core::array::from_fn(|e| {
+        let (ax, ay, bx, by) = (xs[e], ys[e], xs[(e + 1) & 3], ys[(e + 1) & 3]);
+        let (ex, ny) = ((bx - ax) * sign, (ay - by) * sign);
+        [ny.to_array(), ex.to_array(), ((by - ay) * sign * ax - ex * ay).to_array()]
+    });
     let (xa, xb, ya, yb, d2) = (xa.to_array(), xb.to_array(), ya.to_array(), yb.to_array(), dist2.to_array());
     for (i, q) in out.iter_mut().enumerate().take(samples.len().min(8)) {
         *q = if mask >> i & 1 == 0 {
             Quad::NONE
         } else {
             Quad {
-                corners: core::array::from_fn(|k| (xs[k][i], ys[k][i])),
+                edges: core::array::from_fn(|e| core::array::from_fn(|k| edges[e][k][i])),
                 key: key(d2[i], (first + i) as u32),
                 x: [xa[i] as u16, xb[i] as u16],
                 y: [ya[i] as u16, yb[i] as u16],
@@ -546,7 +562,6 @@ impl LayerSplat {
         let cap = LIST;
         self.count.clear();
         self.count.resize(w * h, 0);
-        self.keys.resize(w * h * cap, u64::MAX);
         let setup = Setup::new(camera, &scene.header.camera, deq, own, grown, self.opts.grow_min_alpha);
         let colors = &scene.colors[..];
         // 1. Every sample's footprint in the new image (in parallel over samples, eight at a
@@ -555,73 +570,132 @@ impl LayerSplat {
         if self.quads.len() != scene.samples.len() {
             self.quads.resize(scene.samples.len(), Quad::NONE);
         }
+        self.bands.resize(scene.samples.len(), NO_BANDS);
         let samples = &scene.samples[..];
-        self.threads.for_each_chunk(&mut self.quads, QUAD_CHUNK, |chunk, quads| {
+        self.threads.for_each_chunk_pair(&mut self.quads, &mut self.bands, QUAD_CHUNK, |chunk, quads, bands| {
             let first = chunk * QUAD_CHUNK;
             footprints(&setup, &samples[first..first + quads.len()], colors, first, quads);
+            // The bands each footprint touches, for the binning below (4 bytes a sample to
+            // read there instead of the 64-byte footprint).
+            for (b, q) in bands.iter_mut().zip(quads.iter()) {
+                *b = if q.x[0] <= q.x[1] {
+                    (q.y[0] as usize / RASTER_BAND) as u32 | ((q.y[1] as usize / RASTER_BAND) as u32) << 16
+                } else {
+                    NO_BANDS
+                };
+            }
         });
         // 2. Each footprint to the row bands it touches.
         let bands = h.div_ceil(RASTER_BAND);
         self.bins.resize_with(bands, Vec::new);
         self.bins.iter_mut().for_each(Vec::clear);
-        for (id, q) in self.quads.iter().enumerate() {
-            if q.x[0] <= q.x[1] {
-                for b in q.y[0] as usize / RASTER_BAND..=q.y[1] as usize / RASTER_BAND {
-                    self.bins[b].push(id as u32);
-                }
+        for (id, &b) in self.bands.iter().enumerate() {
+            for b in (b & 0xffff) as usize..=(b >> 16) as usize {
+                self.bins[b].push(id as u32);
             }
         }
-        // 3. The bands' pixels take their footprints' keys (in parallel over bands: the lists
-        // keep the nearest keys whatever the order, so the image does not depend on it).
+        // 3. Per band of rows: its pixels take their footprints' keys, then the band is
+        // composited while its lists are still in the cache (in parallel over bands: the lists
+        // keep the nearest keys whatever the order, so the image does not depend on it). The
+        // lists live in a band-sized buffer per thread, not one for the whole image.
         let (quads, bins) = (&self.quads[..], &self.bins[..]);
-        let raster = |b: usize, keys: &mut [u64], count: &mut [u8]| {
-            let y_lo = b * RASTER_BAND;
-            for &id in &bins[b] {
-                let q = &quads[id as usize];
-                let edges = q.edges();
-                let (ya, yb) = ((q.y[0] as usize).max(y_lo), (q.y[1] as usize).min(y_lo + RASTER_BAND - 1));
-                for y in ya..=yb {
-                    let py = y as f32 + 0.5;
-                    for x in q.x[0] as usize..=q.x[1] as usize {
-                        let px = x as f32 + 0.5;
-                        if edges.iter().all(|&(a, b, c)| a * px + b * py + c >= 0.0) {
-                            let i = (y - y_lo) * w + x;
-                            insert(&mut keys[i * cap..(i + 1) * cap], &mut count[i], q.key);
+        let band = |b: usize, px: &mut [u32], count: &mut [u8]| {
+            LISTS.with_borrow_mut(|keys| {
+                if keys.len() < RASTER_BAND * w * cap {
+                    keys.resize(RASTER_BAND * w * cap, u64::MAX);
+                }
+                let y_lo = b * RASTER_BAND;
+                for &id in &bins[b] {
+                    let q = &quads[id as usize];
+                    let (ya, yb) = ((q.y[0] as usize).max(y_lo), (q.y[1] as usize).min(y_lo + RASTER_BAND - 1));
+                    for y in ya..=yb {
+                        let py = y as f32 + 0.5;
+                        for x in q.x[0] as usize..=q.x[1] as usize {
+                            let px = x as f32 + 0.5;
+                            if q.covers(px, py) {
+                                let i = (y - y_lo) * w + x;
+                                insert(&mut keys[i * cap..(i + 1) * cap], &mut count[i], q.key);
+                            }
                         }
                     }
                 }
-            }
-        };
-        let (keys, count) = (&mut self.keys[..w * h * cap], &mut self.count[..]);
-        if self.threads.is_serial() {
-            for (b, (k, c)) in keys.chunks_mut(RASTER_BAND * w * cap).zip(count.chunks_mut(RASTER_BAND * w)).enumerate()
-            {
-                raster(b, k, c);
-            }
-        } else {
-            use rayon::prelude::*;
-            self.threads.install(|| {
-                keys.par_chunks_mut(RASTER_BAND * w * cap)
-                    .zip(count.par_chunks_mut(RASTER_BAND * w))
-                    .enumerate()
-                    .for_each(|(b, (k, c))| raster(b, k, c))
-            });
-        }
-        let (keys, count) = (&self.keys[..], &self.count[..]);
-        self.threads.for_each_chunk(&mut out.pixels, BAND * w, |band, px| {
-            for (j, p) in px.iter_mut().enumerate() {
-                let i = band * BAND * w + j;
-                let mut list = [0u64; LIST];
-                let n = count[i] as usize;
-                if n == 0 {
-                    continue;
+                for (i, (p, &n)) in px.iter_mut().zip(count.iter()).enumerate() {
+                    let n = n as usize;
+                    if n > 0 {
+                        let list = &mut keys[i * cap..i * cap + n];
+                        sort_keys(list);
+                        *p = composite_keys(list, colors);
+                    }
                 }
-                list[..n].copy_from_slice(&keys[i * cap..i * cap + n]);
-                let list = &mut list[..n];
-                list.sort_unstable();
-                *p = composite_keys(list, colors);
-            }
-        });
+            })
+        };
+        let count = &mut self.count[..];
+        self.threads.for_each_chunk_pair(&mut out.pixels, count, RASTER_BAND * w, band);
+    }
+}
+
+thread_local! {
+    /// The per-pixel key lists of the band a thread is drawing (`RASTER_BAND` rows × `LIST`).
+    static LISTS: core::cell::RefCell<Vec<u64>> = const { core::cell::RefCell::new(Vec::new()) };
+}
+
+/// Sorts a short list (at most [`LIST`]) of distinct keys: with AVX2 where the CPU has it,
+/// else [`sort_keys_scalar`]. (The keys are distinct: each holds its sample's id.)
+#[inline(always)]
+fn sort_keys(keys: &mut [u64]) {
+    #[cfg(target_arch = "x86_64")]
+    if lanes::use_avx2() {
+        // SAFETY: the CPU has AVX2 (`use_avx2` checks).
+        unsafe { sort_keys_avx2(keys) };
+        return;
+    }
+    sort_keys_scalar(keys);
+}
+
+/// Sorts a short list of distinct keys by rank: each key goes to the place given by how many
+/// keys are smaller (n² comparisons without a branch to mispredict; an insertion sort's
+/// data-dependent branches cost more on these handfuls of keys, `docs/perf.md`).
+#[inline(always)]
+fn sort_keys_scalar(keys: &mut [u64]) {
+    let n = keys.len().min(LIST);
+    let mut tmp = [0u64; LIST];
+    tmp[..n].copy_from_slice(&keys[..n]);
+    for &k in &tmp[..n] {
+        let rank = tmp[..n].iter().map(|&x| (x < k) as usize).sum::<usize>();
+        keys[rank] = k;
+    }
+}
+
+/// [`sort_keys_scalar`] with each key's rank counted in four 4-lane 64-bit comparisons.
+/// Keys are below 2⁶³ (the distance's bits are those of a non-negative `f32`), so the signed
+/// comparison orders them; the unused lanes hold `i64::MAX`, which no key exceeds.
+///
+/// # Safety
+/// The CPU must support AVX2.
+#[cfg(target_arch = "x86_64")]
+#[target_feature(enable = "avx2")]
+unsafe fn sort_keys_avx2(keys: &mut [u64]) {
+    use core::arch::x86_64::*;
+    let n = keys.len().min(LIST);
+    let mut tmp = [i64::MAX; LIST];
+    for (t, &k) in tmp.iter_mut().zip(&keys[..n]) {
+        *t = k as i64;
+    }
+    let p = tmp.as_ptr() as *const __m256i;
+    // SAFETY: `tmp` holds LIST = 16 i64, i.e. four unaligned 256-bit loads.
+    let v = unsafe {
+        [
+            _mm256_loadu_si256(p),
+            _mm256_loadu_si256(p.add(1)),
+            _mm256_loadu_si256(p.add(2)),
+            _mm256_loadu_si256(p.add(3)),
+        ]
+    };
+    for &k in &tmp[..n] {
+        let kk = _mm256_set1_epi64x(k);
+        let less = |x: __m256i| _mm256_movemask_pd(_mm256_castsi256_pd(_mm256_cmpgt_epi64(kk, x))) as u32;
+        let bits = less(v[0]) | less(v[1]) << 4 | less(v[2]) << 8 | less(v[3]) << 12;
+        keys[bits.count_ones() as usize] = k as u64;
     }
 }
 
@@ -680,10 +754,7 @@ mod tests {
                 && a.x == b.x
                 && a.y == b.y
                 && (a.x[0] > a.x[1]
-                    || a.corners
-                        .iter()
-                        .zip(&b.corners)
-                        .all(|(p, q)| p.0.to_bits() == q.0.to_bits() && p.1.to_bits() == q.1.to_bits()))
+                    || a.edges.iter().flatten().zip(b.edges.iter().flatten()).all(|(p, q)| p.to_bits() == q.to_bits()))
         };
         let mut drawn = 0;
         for (deg, grown, size) in
@@ -707,6 +778,36 @@ mod tests {
             }
         }
         assert!(drawn > 3 * frame.samples.len() / 2, "too few footprints drawn: {drawn}");
+    }
+
+    /// Short lists of distinct keys (0 to LIST long, in every order the generator gives, with
+    /// keys near 2⁶³ and equal distances) sort as `sort_unstable` sorts them, on both paths.
+    #[test]
+    fn short_lists_sort_like_the_standard_sort() {
+        use crate::synthetic::SplitMix64;
+        let mut rng = SplitMix64(11);
+        for round in 0..2000 {
+            let n = round % (LIST + 1);
+            let list: Vec<u64> = (0..n)
+                .map(|i| match round % 3 {
+                    0 => rng.next_u64() >> 1,
+                    1 => key(f32::INFINITY, (rng.next_u64() % 1000) as u32 * 20 + i as u32),
+                    _ => key(1.5, i as u32 * 7 + 1) ^ (rng.next_u64() & 0xffff_0000_0000_0000 >> 1),
+                })
+                .collect();
+            let mut distinct = list.clone();
+            distinct.sort_unstable();
+            distinct.dedup();
+            if distinct.len() != list.len() {
+                continue;
+            }
+            let mut a = list.clone();
+            sort_keys_scalar(&mut a);
+            assert_eq!(a, distinct);
+            let mut b = list.clone();
+            sort_keys(&mut b);
+            assert_eq!(b, distinct);
+        }
     }
 
     #[test]

@@ -46,6 +46,25 @@ impl Threads {
         }
     }
 
+    /// Calls `f(index, a_chunk, b_chunk)` for the `chunk_len`-long chunks of `a` and `b`
+    /// taken side by side (the same index ranges; `b` as long as `a`), in parallel on the pool
+    /// or serially on the caller's thread.
+    pub fn for_each_chunk_pair<T: Send, U: Send, F>(&self, a: &mut [T], b: &mut [U], chunk_len: usize, f: F)
+    where
+        F: Fn(usize, &mut [T], &mut [U]) + Sync + Send,
+    {
+        let chunk_len = chunk_len.max(1);
+        match &self.pool {
+            Some(pool) => pool.install(|| {
+                a.par_chunks_mut(chunk_len)
+                    .zip(b.par_chunks_mut(chunk_len))
+                    .enumerate()
+                    .for_each(|(i, (x, y))| f(i, x, y))
+            }),
+            None => a.chunks_mut(chunk_len).zip(b.chunks_mut(chunk_len)).enumerate().for_each(|(i, (x, y))| f(i, x, y)),
+        }
+    }
+
     /// Calls `f(range)` for consecutive ranges of `0..n` at most `grain` long, in parallel on
     /// the pool or serially on the caller's thread.
     pub fn for_each_range<F>(&self, n: usize, grain: usize, f: F)

@@ -3,7 +3,7 @@
 //! every bundled dataset:
 //!
 //! ```sh
-//! cargo run --release -p volwarp-eval --example layer_time -- ../shared/data [--size 512] [--runs 15] [--threads 1]
+//! cargo run --release -p volwarp-eval --example layer_time -- ../shared/data [--size 512] [--runs 15] [--threads 1] [--only NAME]
 //! ```
 //!
 //! Per dataset the server renders the default camera's one-sample frame (threshold heuristic)
@@ -58,7 +58,10 @@ fn main() {
     let threads: usize = arg(&args, "--threads").map_or(1, |s| s.parse().expect("a thread count"));
     let layers: u32 = arg(&args, "--layers").map_or(4, |s| s.parse().expect("a layer count"));
     let cpu = threads == 1;
-    let datasets = volwarp_eval::report::shared_datasets(Path::new(dir)).expect("datasets");
+    let mut datasets = volwarp_eval::report::shared_datasets(Path::new(dir)).expect("datasets");
+    if let Some(only) = arg(&args, "--only") {
+        datasets.retain(|d| d.name.contains(only));
+    }
     println!(
         "{size}², {threads} thread(s), {} ms, median of {runs}; volwarp = splat-layers K={layers}, fill, adaptive",
         if cpu { "on-CPU" } else { "wall" }
