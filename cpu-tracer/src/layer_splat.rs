@@ -666,9 +666,10 @@ fn sort_keys_scalar(keys: &mut [u64]) {
     }
 }
 
-/// [`sort_keys_scalar`] with each key's rank counted in four 4-lane 64-bit comparisons.
-/// Keys are below 2⁶³ (the distance's bits are those of a non-negative `f32`), so the signed
-/// comparison orders them; the unused lanes hold `i64::MAX`, which no key exceeds.
+/// [`sort_keys_scalar`] with the ranks of all keys counted at once: for each key, one 64-bit
+/// comparison against all sixteen slots (four AVX2 registers) adds one to the rank of every
+/// larger key. Keys are below 2⁶³ (the distance's bits are those of a non-negative `f32`), so
+/// the signed comparison orders them; the unused slots hold `i64::MAX` and are not read back.
 ///
 /// # Safety
 /// The CPU must support AVX2.
@@ -691,11 +692,26 @@ unsafe fn sort_keys_avx2(keys: &mut [u64]) {
             _mm256_loadu_si256(p.add(3)),
         ]
     };
+    let mut rank = [_mm256_setzero_si256(); 4];
     for &k in &tmp[..n] {
         let kk = _mm256_set1_epi64x(k);
-        let less = |x: __m256i| _mm256_movemask_pd(_mm256_castsi256_pd(_mm256_cmpgt_epi64(kk, x))) as u32;
-        let bits = less(v[0]) | less(v[1]) << 4 | less(v[2]) << 8 | less(v[3]) << 12;
-        keys[bits.count_ones() as usize] = k as u64;
+        for (r, &x) in rank.iter_mut().zip(&v) {
+            // The comparison is −1 where the slot's key is larger.
+            *r = _mm256_sub_epi64(*r, _mm256_cmpgt_epi64(x, kk));
+        }
+    }
+    let mut ranks = [0u64; LIST];
+    let q = ranks.as_mut_ptr() as *mut __m256i;
+    // SAFETY: `ranks` holds LIST = 16 u64, i.e. four unaligned 256-bit stores.
+    unsafe {
+        for (i, &r) in rank.iter().enumerate() {
+            _mm256_storeu_si256(q.add(i), r);
+        }
+    }
+    for (&k, &r) in tmp[..n].iter().zip(&ranks) {
+        if let Some(slot) = keys.get_mut(r as usize) {
+            *slot = k as u64;
+        }
     }
 }
 
