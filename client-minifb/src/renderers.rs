@@ -48,6 +48,13 @@ fn create_gpu(kind: RendererKind) -> Result<Box<dyn Renderer>, String> {
     log::info!("{kind} ready on {} ({:.0} ms)", ctx.describe_driver(), t.elapsed().as_secs_f64() * 1e3);
     let r: Box<dyn Renderer> = match kind {
         RendererKind::SplatGpu => Box::new(volwarp_gpu_tracer::GpuSplat::with_context(ctx).map_err(|e| e.to_string())?),
+        RendererKind::SplatLayersGpu => Box::new(
+            volwarp_gpu_tracer::GpuLayerSplat::with_context(
+                ctx,
+                volwarp_gpu_tracer::layer_splat::LayerOptions::DEFAULT,
+            )
+            .map_err(|e| e.to_string())?,
+        ),
         _ => Box::new(volwarp_gpu_tracer::GpuTracer::with_context(ctx).map_err(|e| e.to_string())?),
     };
     Ok(r)

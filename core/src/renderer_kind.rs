@@ -52,6 +52,9 @@ pub enum RendererKind {
     /// it passes through the segment's own source pixel, composited front to back; no LBVH
     /// (`splat-layers`, key 14: no window key).
     SplatLayers,
+    /// The layered splatter as wgpu compute shaders: the same footprints, lists, compositing
+    /// and fill as `splat-layers`, the same image (`splat-layers-gpu`, key 15: no window key).
+    SplatLayersGpu,
 }
 
 /// One row of the registry.
@@ -157,11 +160,17 @@ pub const REGISTRY: [RendererInfo; RendererKind::COUNT] = [
         about: "layered samples composited front to back (no LBVH)",
         caps: caps(false, false, false),
     },
+    RendererInfo {
+        kind: RendererKind::SplatLayersGpu,
+        name: "splat-layers-gpu",
+        about: "wgpu layered samples composited front to back (no LBVH)",
+        caps: caps(false, false, true),
+    },
 ];
 
 impl RendererKind {
     /// How many renderers the registry has.
-    pub const COUNT: usize = 14;
+    pub const COUNT: usize = 15;
 
     /// Every renderer, in key order.
     pub const ALL: [RendererKind; RendererKind::COUNT] = [
@@ -179,6 +188,7 @@ impl RendererKind {
         RendererKind::SplatFill,
         RendererKind::SplatGpu,
         RendererKind::SplatLayers,
+        RendererKind::SplatLayersGpu,
     ];
 
     /// The renderer a client starts with: the layered splatter (issue 14; the client then asks
@@ -209,6 +219,7 @@ impl RendererKind {
             RendererKind::SplatFill => 11,
             RendererKind::SplatGpu => 12,
             RendererKind::SplatLayers => 13,
+            RendererKind::SplatLayersGpu => 14,
         }
     }
 
@@ -292,6 +303,7 @@ mod tests {
         assert_eq!(RendererKind::from_key(7), Some(RendererKind::SpheresGpu));
         assert_eq!(RendererKind::from_key(13), Some(RendererKind::SplatGpu));
         assert_eq!(RendererKind::from_key(14), Some(RendererKind::SplatLayers));
+        assert_eq!(RendererKind::from_key(15), Some(RendererKind::SplatLayersGpu));
         assert!("nope".parse::<RendererKind>().is_err());
         assert_eq!(RendererKind::points(2), Some(RendererKind::Points2));
         assert_eq!(RendererKind::points(4), None);

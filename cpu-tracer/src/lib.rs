@@ -98,7 +98,7 @@ pub fn create(kind: RendererKind, threads: usize) -> Option<Box<dyn Renderer + S
             Box::new(HoleFill::new(SphereSplat::new(threads), kind, FillOptions::DEFAULT, threads))
         }
         RendererKind::SplatLayers => Box::new(LayerSplat::new(threads)),
-        RendererKind::SpheresGpu | RendererKind::SplatGpu => return None,
+        RendererKind::SpheresGpu | RendererKind::SplatGpu | RendererKind::SplatLayersGpu => return None,
     })
 }
 

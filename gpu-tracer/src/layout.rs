@@ -20,6 +20,7 @@ pub fn shader(body: &str) -> String {
 #[cfg(test)]
 mod tests {
     use super::*;
+    use crate::layer_splat::LayerParams;
     use crate::lbvh::BuildParams;
     use crate::splat::SplatParams;
     use crate::tracer::TraceParams;
@@ -121,6 +122,14 @@ mod tests {
             size_of::<SplatParams>(),
             fields!(SplatParams: trace, u, v, w, px, mode, pad0, pad1, pad2),
         );
+        check(
+            &s,
+            "LayerParams",
+            size_of::<LayerParams>(),
+            fields!(LayerParams: eye, u, v, w, src_eye, src_w, su, sv, bu, bv, e, proj, deq_min, deq_step, basis,
+                f_eye, f_u, f_v, f_w, f_proj, k, k2, width, height, n, tiles_x, tiles_y, min_alpha, f_width,
+                f_height, background, cap, off_offsets, off_spans),
+        );
         // The packed sample: one little-endian u64 read as two u32 words.
         let aliases: Vec<&str> = PRELUDE.lines().filter(|l| l.starts_with("alias PackedSample")).collect();
         assert_eq!(aliases, ["alias PackedSample = vec2<u32>;"]);
@@ -145,13 +154,19 @@ mod tests {
 
     #[test]
     fn every_shader_is_built_on_the_prelude() {
-        for body in [include_str!("trace.wgsl"), include_str!("lbvh.wgsl"), include_str!("splat.wgsl")] {
+        for body in [
+            include_str!("trace.wgsl"),
+            include_str!("lbvh.wgsl"),
+            include_str!("splat.wgsl"),
+            include_str!("layer_splat.wgsl"),
+        ] {
             for s in [
                 "struct Node",
                 "struct RayBasis",
                 "struct TraceParams",
                 "struct BuildParams",
                 "struct SplatParams",
+                "struct LayerParams",
                 "alias ",
             ] {
                 assert!(!body.contains(s), "a shader redeclares `{s}`: it belongs in prelude.wgsl only");

@@ -10,6 +10,7 @@
 //! | [`adapter`] | picking a GPU (a real one first, a software one as the fallback) |
 //! | [`tracer`] | [`GpuTracer`]: the sphere tracer (`trace.wgsl`), a [`Renderer`] named `spheres-gpu` |
 //! | [`splat`] | [`GpuSplat`]: the exact sphere splatter (`splat.wgsl`), a [`Renderer`] named `splat-gpu` |
+//! | [`layer_splat`] | [`GpuLayerSplat`]: the layered splatter (`layer_splat.wgsl`), a [`Renderer`] named `splat-layers-gpu` |
 //! | [`lbvh`] | the LBVH build on the GPU (`lbvh.wgsl`): Morton codes, radix sort, Karras, fit |
 //! | [`layout`] | the shared WGSL prelude (`prelude.wgsl`): one definition of every shared layout |
 //! | [`buffers`] | buffers reused across frames, readback |
@@ -25,6 +26,7 @@
 
 pub mod adapter;
 pub mod buffers;
+pub mod layer_splat;
 pub mod layout;
 pub mod lbvh;
 pub mod splat;
@@ -32,6 +34,7 @@ pub mod synthetic;
 pub mod tracer;
 
 pub use adapter::GpuContext;
+pub use layer_splat::GpuLayerSplat;
 pub use splat::GpuSplat;
 pub use tracer::{BuildTiming, GpuTracer};
 

@@ -139,3 +139,55 @@ fn over_background(c: u32, bg: u32) -> u32 {
     }
     return out;
 }
+
+// `layer_splat::LayerParams`: the layered splatter's uniform (`layer_splat.wgsl`). Every
+// per-frame constant of the CPU's `LayerSplat::draw` is computed on the host with the CPU's own
+// operations and passed here, so the shader starts from the same f32 values.
+struct LayerParams {
+    // The drawing camera: eye, right, up, forward (w unused).
+    eye: vec4<f32>,
+    u: vec4<f32>,
+    v: vec4<f32>,
+    w: vec4<f32>,
+    // The frame camera's eye and forward.
+    src_eye: vec4<f32>,
+    src_w: vec4<f32>,
+    // Half a source pixel along the source's u and v per unit depth (world), the same in the
+    // drawing camera's basis, and the source eye relative to the drawing eye in that basis.
+    su: vec4<f32>,
+    sv: vec4<f32>,
+    bu: vec4<f32>,
+    bv: vec4<f32>,
+    e: vec4<f32>,
+    // Pixels per unit slope along x and y, half width, half height (drawing camera).
+    proj: vec4<f32>,
+    deq_min: vec4<f32>,
+    deq_step: vec4<f32>,
+    // The drawing camera's rays (the fill's stale lookup).
+    basis: RayBasis,
+    // The frame camera's eye, right, up, forward (the stale lookup's projection).
+    f_eye: vec4<f32>,
+    f_u: vec4<f32>,
+    f_v: vec4<f32>,
+    f_w: vec4<f32>,
+    // Its tan_x, tan_y, width, height.
+    f_proj: vec4<f32>,
+    // Grow ratio, edge-on factor, eye-plane epsilon, 1/255.
+    k: vec4<f32>,
+    // Opaque, the focal plane's numerator (plane − eye·fwd), unused, unused.
+    k2: vec4<f32>,
+    width: u32,
+    height: u32,
+    n: u32,
+    tiles_x: u32,
+    tiles_y: u32,
+    min_alpha: u32,
+    f_width: u32,
+    f_height: u32,
+    background: u32,
+    // Capacity of the tile lists (entries).
+    cap: u32,
+    // Offsets in the work buffer: tile counts, tile offsets (tiles + 1), row and column spans.
+    off_offsets: u32,
+    off_spans: u32,
+}

@@ -1,0 +1,636 @@
+//! The layered splatter on the GPU (`splat-layers-gpu`, issues 14 and 17), mirroring the CPU's
+//! `volwarp_cpu_tracer::layer_splat::LayerSplat` (`layer_splat.wgsl`): each sample of a layered
+//! frame is drawn as its source pixel's footprint quad, every pixel keeps the nearest
+//! [`LIST`] `(dist², id)` keys of the footprints that cover its centre, sorts them and
+//! composites them front to back over the background; with [`LayerOptions::fill`] the pixels
+//! nothing covers inside the covered rows' and columns' spans take the frame's own composite
+//! for their view direction; with adaptive sizing ([`Renderer::set_adaptive_radius`]) opaque
+//! samples' footprints grow with the warp angle. Same options, same image as the CPU.
+//!
+//! Passes (one command buffer per draw, one readback): `setup` (per sample: the footprint's
+//! edge functions, key and pixel bounds; counts per 8×8 tile), `scan` (tile offsets),
+//! `scatter` (sample ids into tile lists), `raster` (per pixel: its tile's footprints into a
+//! private 16-entry list of `(hi, lo)` key pairs, sorted, composited) and `fill` (the
+//! silhouette spans and the stale lookup). The frame's own composite (the fill's stale image)
+//! is drawn by the same passes at the frame camera, once per scene, and kept on the GPU.
+//!
+//! Every per-frame constant (camera bases, the footprint's half-pixel vectors in the new
+//! camera's basis, the grow ratio, the focal plane) is computed here with the CPU's own `f32`
+//! operations and passed in the uniform ([`LayerParams`], declared once in `prelude.wgsl`), so
+//! the shader starts from the CPU's values and repeats its per-sample arithmetic in the same
+//! order. The tile lists' total is not known before the `scan`: they are sized from the last
+//! frame (or `2n` entries), and a frame whose total exceeds that is drawn again with room.
+//!
+//! Memory on the GPU: 64 bytes per sample (footprints) + 12 (sample, color), 4 per tile-list
+//! entry, 12 per output pixel (pixel, count, readback) plus the frame's composite.
+
+use crate::buffers::{grid, read_mapped, GrowBuffer};
+use crate::tracer::{SceneKey, MAX_VIEWPORT};
+use crate::{GpuContext, GpuError};
+use bytemuck::{Pod, Zeroable};
+use std::time::{Duration, Instant};
+use volwarp_core::renderer::{Image, Renderer, BACKGROUND};
+use volwarp_core::warp_radius::warp_angle_deg;
+use volwarp_core::{Camera, RayBasis, RendererKind, Scene, Vec3};
+pub use volwarp_cpu_tracer::layer_splat::{LayerOptions, LIST, OPAQUE};
+
+/// Side of the screen tiles the footprints are binned to (and of the raster's workgroups).
+pub const TILE: u32 = 8;
+
+/// Words at the start of the work buffer before the tile counts (`COUNTS` in the shader).
+const COUNTS: u32 = 16;
+
+/// Uniform slots (frame draw, new-camera draw) are this far apart.
+const SLOT: u64 = 1024;
+
+/// Bytes of one footprint on the GPU (`Quad` in `layer_splat.wgsl`).
+const QUAD_BYTES: u64 = 64;
+
+/// The layered splatter's uniform (`LayerParams` in `prelude.wgsl`; fields described there).
+#[repr(C)]
+#[derive(Clone, Copy, Debug, Pod, Zeroable)]
+pub(crate) struct LayerParams {
+    pub eye: [f32; 4],
+    pub u: [f32; 4],
+    pub v: [f32; 4],
+    pub w: [f32; 4],
+    pub src_eye: [f32; 4],
+    pub src_w: [f32; 4],
+    pub su: [f32; 4],
+    pub sv: [f32; 4],
+    pub bu: [f32; 4],
+    pub bv: [f32; 4],
+    pub e: [f32; 4],
+    pub proj: [f32; 4],
+    pub deq_min: [f32; 4],
+    pub deq_step: [f32; 4],
+    pub basis: RayBasis,
+    pub f_eye: [f32; 4],
+    pub f_u: [f32; 4],
+    pub f_v: [f32; 4],
+    pub f_w: [f32; 4],
+    pub f_proj: [f32; 4],
+    pub k: [f32; 4],
+    pub k2: [f32; 4],
+    pub width: u32,
+    pub height: u32,
+    pub n: u32,
+    pub tiles_x: u32,
+    pub tiles_y: u32,
+    pub min_alpha: u32,
+    pub f_width: u32,
+    pub f_height: u32,
+    pub background: u32,
+    pub cap: u32,
+    pub off_offsets: u32,
+    pub off_spans: u32,
+}
+
+fn v4(v: Vec3) -> [f32; 4] {
+    [v.x, v.y, v.z, 0.0]
+}
+
+/// A camera's projection in `f32`, computed as the CPU's `View::new` then `Proj::new` do.
+struct Proj {
+    eye: Vec3,
+    u: Vec3,
+    v: Vec3,
+    w: Vec3,
+    px_x: f32,
+    px_y: f32,
+    half_w: f32,
+    half_h: f32,
+}
+
+impl Proj {
+    fn new(camera: &Camera) -> Proj {
+        let (u, v, w) = camera.basis();
+        let tan_y = ((camera.fov_y_deg as f64).to_radians() * 0.5).tan();
+        Proj {
+            eye: camera.eye,
+            u,
+            v,
+            w,
+            px_x: (0.5 * camera.width as f64 / (tan_y * camera.aspect() as f64)) as f32,
+            px_y: (0.5 * camera.height as f64 / tan_y) as f32,
+            half_w: (0.5 * camera.width as f64) as f32,
+            half_h: (0.5 * camera.height as f64) as f32,
+        }
+    }
+}
+
+/// The tiles of a viewport.
+fn tiles(w: u32, h: u32) -> (u32, u32) {
+    (w.div_ceil(TILE), h.div_ceil(TILE))
+}
+
+/// Words of the work buffer a draw of `w × h` needs, and where its offsets and spans start.
+fn work_layout(w: u32, h: u32) -> (u64, u32, u32) {
+    let (tx, ty) = tiles(w, h);
+    let t = tx * ty;
+    let off_offsets = COUNTS + t;
+    let off_spans = off_offsets + t + 1;
+    (off_spans as u64 + 2 * (w as u64 + h as u64), off_offsets, off_spans)
+}
+
+/// The scene's sample count if it can be drawn (the CPU's `begin_frame_unbuilt_ok`: a built
+/// scene must pass [`Scene::check`]; an unbuilt one, no nodes, the same rules but the nodes').
+fn check_scene(scene: &Scene) -> Result<u32, GpuError> {
+    if !scene.nodes.is_empty() || scene.samples.len() < 2 {
+        return crate::tracer::GpuTracer::check_scene(scene);
+    }
+    let d = &scene.deq;
+    if scene.colors.len() != scene.samples.len() {
+        return Err(GpuError::BadScene("sample and color counts do not match"));
+    }
+    if scene.samples.len() >= Scene::MAX_SAMPLES {
+        return Err(GpuError::BadScene("more than 2^30 samples"));
+    }
+    if !(d.min.is_finite() && d.step.is_finite() && d.radius_unit.is_finite()) {
+        return Err(GpuError::BadScene("dequantizer is not finite"));
+    }
+    Ok(scene.samples.len() as u32)
+}
+
+/// The uniform of one draw of `scene` for `camera` (its frame camera `fc`) with footprints of
+/// half side `own`, `grown` for the opaque samples: `LayerSplat::draw`'s set-up, line for line.
+fn params(scene: &Scene, camera: &Camera, fc: &Camera, opts: &LayerOptions, grown: f32, cap: u32) -> LayerParams {
+    let own = opts.own;
+    let view = Proj::new(camera);
+    let src = Proj::new(fc);
+    let half = if own.is_finite() { own.clamp(0.0, 4.0) } else { 0.5 };
+    let grow_ratio = if half > 0.0 && grown.is_finite() { (grown.clamp(0.0, 4.0) / half).max(1.0) } else { 1.0 };
+    let (hx, hy) = (half / src.px_x, half / src.px_y);
+    let (su, sv) = (src.u * hx, src.v * hy);
+    let basis = |x: Vec3| Vec3::new(x.dot(view.u), x.dot(view.v), x.dot(view.w));
+    let (bu, bv, e) = (basis(su), basis(sv), basis(src.eye - view.eye));
+    // The stale lookup's frame projection (`depth_buffer::Projector`) and focal plane.
+    let (fu, fv, fwd) = fc.basis();
+    let tan_y = libm::tanf(fc.fov_y_deg.to_radians() * 0.5);
+    let tan_x = tan_y * fc.aspect();
+    let plane = fc.target.dot(fwd);
+    let t_num = plane - camera.eye.dot(fwd);
+    let d = &scene.deq;
+    let (w, h) = (camera.width, camera.height);
+    let (tx, ty) = tiles(w, h);
+    let (_, off_offsets, off_spans) = work_layout(w, h);
+    LayerParams {
+        eye: v4(view.eye),
+        u: v4(view.u),
+        v: v4(view.v),
+        w: v4(view.w),
+        src_eye: v4(src.eye),
+        src_w: v4(src.w),
+        su: v4(su),
+        sv: v4(sv),
+        bu: v4(bu),
+        bv: v4(bv),
+        e: v4(e),
+        proj: [view.px_x, view.px_y, view.half_w, view.half_h],
+        deq_min: [d.min.x, d.min.y, d.min.z, 0.0],
+        deq_step: [d.step.x, d.step.y, d.step.z, d.radius_unit],
+        basis: camera.ray_basis(),
+        f_eye: v4(fc.eye),
+        f_u: v4(fu),
+        f_v: v4(fv),
+        f_w: v4(fwd),
+        f_proj: [tan_x, tan_y, fc.width as f32, fc.height as f32],
+        k: [grow_ratio, 0.0076, 1e-6, 1.0 / 255.0],
+        k2: [OPAQUE, t_num, 0.0, 0.0],
+        width: w,
+        height: h,
+        n: scene.samples.len() as u32,
+        tiles_x: tx,
+        tiles_y: ty,
+        min_alpha: opts.grow_min_alpha as u32,
+        f_width: fc.width,
+        f_height: fc.height,
+        background: BACKGROUND,
+        cap,
+        off_offsets,
+        off_spans,
+    }
+}
+
+/// The GPU layered splatter. Implements [`Renderer`] as `splat-layers-gpu`.
+pub struct GpuLayerSplat {
+    ctx: GpuContext,
+    opts: LayerOptions,
+    adaptive: bool,
+    setup: wgpu::ComputePipeline,
+    scan: wgpu::ComputePipeline,
+    scatter: wgpu::ComputePipeline,
+    raster: wgpu::ComputePipeline,
+    fill: wgpu::ComputePipeline,
+    layout: wgpu::BindGroupLayout,
+    params: wgpu::Buffer,
+    samples: GrowBuffer,
+    colors: GrowBuffer,
+    quads: GrowBuffer,
+    work: GrowBuffer,
+    list: GrowBuffer,
+    out: GrowBuffer,
+    count: GrowBuffer,
+    frame: GrowBuffer,
+    dummy: GrowBuffer,
+    staging: GrowBuffer,
+    /// Tile-list entries the list buffer is sized for.
+    cap: u32,
+    bind_groups: Option<[wgpu::BindGroup; 2]>,
+    uploaded: Option<SceneKey>,
+    uploads: u64,
+    /// The scene and frame camera whose composite `frame` holds.
+    frame_of: Option<(SceneKey, Camera)>,
+    redraws: u64,
+    last_error: Option<String>,
+}
+
+impl std::fmt::Debug for GpuLayerSplat {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.debug_struct("GpuLayerSplat")
+            .field("adapter", &self.ctx.describe())
+            .field("opts", &self.opts)
+            .field("adaptive", &self.adaptive)
+            .field("uploads", &self.uploads)
+            .finish()
+    }
+}
+
+/// What one [`GpuLayerSplat`] call draws: the frame composite, the new camera's image.
+#[derive(Clone, Copy, Debug)]
+struct Plan {
+    draw_frame: bool,
+    draw_view: bool,
+    fill: bool,
+}
+
+impl GpuLayerSplat {
+    /// Opens the best adapter there is (see [`GpuContext::new`]) with the CPU's default
+    /// options.
+    pub fn new() -> Result<GpuLayerSplat, GpuError> {
+        Self::with_context(GpuContext::new()?, LayerOptions::DEFAULT)
+    }
+
+    /// On the adapter whose name contains `name` (any adapter when `None`).
+    pub fn with_adapter(name: Option<&str>) -> Result<GpuLayerSplat, GpuError> {
+        Self::with_context(GpuContext::with_adapter(name)?, LayerOptions::DEFAULT)
+    }
+
+    /// A layered splatter on an already opened device, drawing with `opts` (those of the CPU's
+    /// `LayerSplat::with_options`).
+    pub fn with_context(ctx: GpuContext, opts: LayerOptions) -> Result<GpuLayerSplat, GpuError> {
+        let scope = ctx.device.push_error_scope(wgpu::ErrorFilter::Validation);
+        let consts = format!("const LIST: u32 = {LIST}u;\nconst TILE: u32 = {TILE}u;\n");
+        let module = ctx.device.create_shader_module(wgpu::ShaderModuleDescriptor {
+            label: Some("layer_splat.wgsl"),
+            source: wgpu::ShaderSource::Wgsl(
+                crate::layout::shader(&(consts + include_str!("layer_splat.wgsl"))).into(),
+            ),
+        });
+        let buffer = |binding: u32, ty: wgpu::BufferBindingType| wgpu::BindGroupLayoutEntry {
+            binding,
+            visibility: wgpu::ShaderStages::COMPUTE,
+            ty: wgpu::BindingType::Buffer { ty, has_dynamic_offset: false, min_binding_size: None },
+            count: None,
+        };
+        let read = wgpu::BufferBindingType::Storage { read_only: true };
+        let write = wgpu::BufferBindingType::Storage { read_only: false };
+        let bgl = ctx.device.create_bind_group_layout(&wgpu::BindGroupLayoutDescriptor {
+            label: Some("layer splat"),
+            entries: &[
+                buffer(0, wgpu::BufferBindingType::Uniform),
+                buffer(1, read),
+                buffer(2, read),
+                buffer(3, write),
+                buffer(4, write),
+                buffer(5, write),
+                buffer(6, write),
+                buffer(7, write),
+                buffer(8, read),
+            ],
+        });
+        let layout = ctx.device.create_pipeline_layout(&wgpu::PipelineLayoutDescriptor {
+            label: Some("layer splat"),
+            bind_group_layouts: &[Some(&bgl)],
+            immediate_size: 0,
+        });
+        let pipe = |entry: &'static str| {
+            ctx.device.create_compute_pipeline(&wgpu::ComputePipelineDescriptor {
+                label: Some(entry),
+                layout: Some(&layout),
+                module: &module,
+                entry_point: Some(entry),
+                compilation_options: Default::default(),
+                cache: None,
+            })
+        };
+        let (setup, scan, scatter, raster, fill) =
+            (pipe("setup"), pipe("scan"), pipe("scatter"), pipe("raster"), pipe("fill"));
+        let params = ctx.device.create_buffer(&wgpu::BufferDescriptor {
+            label: Some("layer splat params"),
+            size: 2 * SLOT,
+            usage: wgpu::BufferUsages::UNIFORM | wgpu::BufferUsages::COPY_DST,
+            mapped_at_creation: false,
+        });
+        if let Some(e) = pollster::block_on(scope.pop()) {
+            return Err(GpuError::Shader(e.to_string()));
+        }
+        let st = wgpu::BufferUsages::STORAGE;
+        let st_dst = st | wgpu::BufferUsages::COPY_DST;
+        let st_all = st_dst | wgpu::BufferUsages::COPY_SRC;
+        Ok(GpuLayerSplat {
+            opts,
+            adaptive: false,
+            setup,
+            scan,
+            scatter,
+            raster,
+            fill,
+            layout: bgl,
+            params,
+            samples: GrowBuffer::new("layer samples", st_dst),
+            colors: GrowBuffer::new("layer colors", st_dst),
+            quads: GrowBuffer::new("layer footprints", st),
+            work: GrowBuffer::new("layer tiles", st_all),
+            list: GrowBuffer::new("layer tile lists", st),
+            out: GrowBuffer::new("layer pixels", st_all),
+            count: GrowBuffer::new("layer counts", st),
+            frame: GrowBuffer::new("layer frame", st_all),
+            dummy: GrowBuffer::new("layer dummy", st),
+            staging: GrowBuffer::new("layer readback", wgpu::BufferUsages::MAP_READ | wgpu::BufferUsages::COPY_DST),
+            cap: 0,
+            bind_groups: None,
+            uploaded: None,
+            uploads: 0,
+            frame_of: None,
+            redraws: 0,
+            last_error: None,
+            ctx,
+        })
+    }
+
+    /// The device context.
+    pub fn context(&self) -> &GpuContext {
+        &self.ctx
+    }
+
+    /// The options it draws with.
+    pub fn options(&self) -> LayerOptions {
+        self.opts
+    }
+
+    /// How many times a scene was uploaded (drawing the same scene again uploads nothing).
+    pub fn scene_uploads(&self) -> u64 {
+        self.uploads
+    }
+
+    /// How many draws were repeated because the tile lists needed more room than the last
+    /// frame's.
+    pub fn list_regrowths(&self) -> u64 {
+        self.redraws
+    }
+
+    /// Uploads the scene, sizes the buffers, writes the uniforms; what to draw.
+    fn prepare(&mut self, scene: &Scene, camera: &Camera) -> Result<Plan, GpuError> {
+        camera.validate(MAX_VIEWPORT).map_err(GpuError::BadCamera)?;
+        let n = check_scene(scene)?;
+        let key = SceneKey::of(scene);
+        let len = scene.samples.len() as u64;
+        let mut changed = self.samples.ensure(&self.ctx, len * 8)?;
+        changed |= self.colors.ensure(&self.ctx, len * 4)?;
+        if changed {
+            self.uploaded = None;
+        }
+        if self.uploaded != Some(key) {
+            if n > 0 {
+                self.ctx.queue.write_buffer(self.samples.get()?, 0, bytemuck::cast_slice(&scene.samples));
+                self.ctx.queue.write_buffer(self.colors.get()?, 0, bytemuck::cast_slice(&scene.colors));
+            }
+            self.uploaded = Some(key);
+            self.uploads += 1;
+        }
+        let fc = scene.header.camera;
+        let fill = self.opts.fill && fc.validate(volwarp_cpu_tracer::MAX_VIEWPORT).is_ok();
+        let at_frame = fill && *camera == fc;
+        let (w, h) = (camera.width, camera.height);
+        let (fw, fh) = if fill { (fc.width, fc.height) } else { (0, 0) };
+        let px = (w as u64 * h as u64).max(fw as u64 * fh as u64);
+        changed |= self.quads.ensure(&self.ctx, len * QUAD_BYTES)?;
+        changed |= self.work.ensure(&self.ctx, 4 * work_layout(w, h).0.max(work_layout(fw, fh).0))?;
+        if self.cap == 0 {
+            self.cap = (2 * n).max(4096);
+        }
+        changed |= self.list.ensure(&self.ctx, 4 * self.cap as u64)?;
+        changed |= self.out.ensure(&self.ctx, 4 * w as u64 * h as u64)?;
+        changed |= self.count.ensure(&self.ctx, 4 * px)?;
+        changed |= self.dummy.ensure(&self.ctx, 4)?;
+        if self.frame.ensure(&self.ctx, 4 * fw as u64 * fh as u64)? {
+            changed = true;
+            self.frame_of = None;
+        }
+        self.staging.ensure(&self.ctx, 4 * w as u64 * h as u64 + 256)?;
+        if changed {
+            self.bind_groups = None;
+        }
+        let draw_frame = fill && self.frame_of != Some((key, fc));
+        let plan = Plan { draw_frame, draw_view: !at_frame, fill };
+
+        let grown = if self.adaptive { self.opts.own_at(warp_angle_deg(&fc, camera)) } else { self.opts.own };
+        let size = std::mem::size_of::<LayerParams>();
+        let mut slots = [0u8; 2 * SLOT as usize];
+        if draw_frame {
+            let p = params(scene, &fc, &fc, &self.opts, self.opts.own, self.cap);
+            slots[..size].copy_from_slice(bytemuck::bytes_of(&p));
+        }
+        if plan.draw_view {
+            let p = params(scene, camera, &fc, &self.opts, grown, self.cap);
+            slots[SLOT as usize..SLOT as usize + size].copy_from_slice(bytemuck::bytes_of(&p));
+        }
+        self.ctx.queue.write_buffer(&self.params, 0, &slots);
+
+        if self.bind_groups.is_none() {
+            let make = |slot: u64| -> Result<wgpu::BindGroup, GpuError> {
+                let mut entries = vec![wgpu::BindGroupEntry {
+                    binding: 0,
+                    resource: wgpu::BindingResource::Buffer(wgpu::BufferBinding {
+                        buffer: &self.params,
+                        offset: slot * SLOT,
+                        size: std::num::NonZeroU64::new(size as u64),
+                    }),
+                }];
+                // Slot 0 draws the frame's composite into `frame`; slot 1 the new view into
+                // `out`, reading `frame` for the fill.
+                let (target, stale) = if slot == 0 { (&self.frame, &self.dummy) } else { (&self.out, &self.frame) };
+                for (b, buf) in [
+                    (1, &self.samples),
+                    (2, &self.colors),
+                    (3, &self.quads),
+                    (4, &self.work),
+                    (5, &self.list),
+                    (6, target),
+                    (7, &self.count),
+                    (8, stale),
+                ] {
+                    entries.push(wgpu::BindGroupEntry { binding: b, resource: buf.get()?.as_entire_binding() });
+                }
+                Ok(self.ctx.device.create_bind_group(&wgpu::BindGroupDescriptor {
+                    label: Some("layer splat"),
+                    layout: &self.layout,
+                    entries: &entries,
+                }))
+            };
+            self.bind_groups = Some([make(0)?, make(1)?]);
+        }
+        Ok(plan)
+    }
+
+    /// Encodes one draw (the four passes) of a `w × h` viewport with the uniform of `slot`.
+    fn encode_draw(&self, encoder: &mut wgpu::CommandEncoder, slot: usize, w: u32, h: u32, n: u32, fill: bool) {
+        let Some(bgs) = self.bind_groups.as_ref() else { return };
+        let Ok(work) = self.work.get() else { return };
+        let (words, off_offsets, _) = work_layout(w, h);
+        // The counts (zero) and, after the offsets, the spans (zero: empty).
+        encoder.clear_buffer(work, 4 * COUNTS as u64, Some(4 * (off_offsets - COUNTS) as u64));
+        let spans = 4 * (off_offsets as u64 + (off_offsets - COUNTS) as u64 + 1);
+        encoder.clear_buffer(work, spans, Some(4 * words - spans));
+        let (gx, gy) = grid(&self.ctx, n.div_ceil(64));
+        let (tx, ty) = tiles(w, h);
+        let mut pass = encoder
+            .begin_compute_pass(&wgpu::ComputePassDescriptor { label: Some("layer splat"), timestamp_writes: None });
+        pass.set_bind_group(0, &bgs[slot], &[]);
+        if n > 0 {
+            pass.set_pipeline(&self.setup);
+            pass.dispatch_workgroups(gx, gy, 1);
+        }
+        pass.set_pipeline(&self.scan);
+        pass.dispatch_workgroups(1, 1, 1);
+        if n > 0 {
+            pass.set_pipeline(&self.scatter);
+            pass.dispatch_workgroups(gx, gy, 1);
+        }
+        pass.set_pipeline(&self.raster);
+        pass.dispatch_workgroups(tx, ty, 1);
+        if fill {
+            pass.set_pipeline(&self.fill);
+            pass.dispatch_workgroups(w.div_ceil(8), h.div_ceil(8), 1);
+        }
+    }
+
+    /// Encodes everything `plan` asks for (the work buffer's first word cleared first).
+    fn encode(&self, encoder: &mut wgpu::CommandEncoder, plan: Plan, scene: &Scene, camera: &Camera) {
+        if let Ok(work) = self.work.get() {
+            encoder.clear_buffer(work, 0, Some(4 * COUNTS as u64));
+        }
+        let n = scene.samples.len() as u32;
+        let fc = scene.header.camera;
+        if plan.draw_frame {
+            self.encode_draw(encoder, 0, fc.width, fc.height, n, false);
+        }
+        if plan.draw_view {
+            self.encode_draw(encoder, 1, camera.width, camera.height, n, plan.fill);
+        }
+    }
+
+    /// Renders `scene` (a layered frame's samples, built or not) for `camera` into `out`
+    /// (resized to the viewport), reading the image back. Errors as
+    /// [`crate::GpuTracer::try_render`]: a background image and a typed error.
+    pub fn try_render(&mut self, scene: &Scene, camera: &Camera, out: &mut Image) -> Result<(), GpuError> {
+        if let Err(e) = camera.validate(MAX_VIEWPORT) {
+            out.reset_for_unusable(camera, MAX_VIEWPORT);
+            return Err(GpuError::BadCamera(e));
+        }
+        out.reset_for(camera);
+        let scope = self.ctx.device.push_error_scope(wgpu::ErrorFilter::Validation);
+        let result = self.render_inner(scene, camera, out);
+        let err = pollster::block_on(scope.pop());
+        if let Some(e) = err.map(|e| e.to_string()).or_else(|| self.ctx.take_error()) {
+            out.pixels.fill(BACKGROUND);
+            self.frame_of = None;
+            return Err(GpuError::Wgpu(e));
+        }
+        if result.is_err() {
+            out.pixels.fill(BACKGROUND);
+            self.frame_of = None;
+        }
+        result
+    }
+
+    fn render_inner(&mut self, scene: &Scene, camera: &Camera, out: &mut Image) -> Result<(), GpuError> {
+        loop {
+            let plan = self.prepare(scene, camera)?;
+            let bytes = 4 * camera.width as u64 * camera.height as u64;
+            let mut encoder = self.ctx.device.create_command_encoder(&Default::default());
+            self.encode(&mut encoder, plan, scene, camera);
+            let src = if plan.draw_view { self.out.get()? } else { self.frame.get()? };
+            encoder.copy_buffer_to_buffer(src, 0, self.staging.get()?, 0, bytes);
+            encoder.copy_buffer_to_buffer(self.work.get()?, 0, self.staging.get()?, bytes, 4);
+            self.ctx.queue.submit([encoder.finish()]);
+            let total = read_mapped(&self.ctx, self.staging.get()?, bytes + 4, |data| {
+                let (px, total) = data.split_at(bytes as usize);
+                out.pixels.copy_from_slice(bytemuck::cast_slice(px));
+                u32::from_le_bytes([total[0], total[1], total[2], total[3]])
+            })?;
+            if total <= self.cap {
+                if plan.fill {
+                    self.frame_of = Some((SceneKey::of(scene), scene.header.camera));
+                }
+                return Ok(());
+            }
+            // The tile lists overflowed: grow them and draw again.
+            let limit = (self.ctx.max_binding() / 4).min(u32::MAX as u64) as u32;
+            if total > limit {
+                return Err(GpuError::TooLarge {
+                    what: "layer tile lists",
+                    bytes: 4 * total as u64,
+                    limit: 4 * limit as u64,
+                });
+            }
+            self.cap = total.saturating_add(total / 4).min(limit);
+            self.frame_of = None;
+            self.redraws += 1;
+        }
+    }
+
+    /// Draws `frames` images of `scene` for `camera` back to back without reading them back
+    /// (the frame composite, where the fill needs it, drawn once before), and returns the time
+    /// from first submit to completion.
+    pub fn draw_only(&mut self, scene: &Scene, camera: &Camera, frames: u32) -> Result<Duration, GpuError> {
+        let mut img = Image::new(1, 1);
+        self.try_render(scene, camera, &mut img)?;
+        let plan = self.prepare(scene, camera)?;
+        self.ctx.wait()?;
+        let t0 = Instant::now();
+        for _ in 0..frames {
+            let mut encoder = self.ctx.device.create_command_encoder(&Default::default());
+            self.encode(&mut encoder, plan, scene, camera);
+            self.ctx.queue.submit([encoder.finish()]);
+        }
+        self.ctx.wait()?;
+        Ok(t0.elapsed())
+    }
+}
+
+impl Renderer for GpuLayerSplat {
+    fn kind(&self) -> RendererKind {
+        RendererKind::SplatLayersGpu
+    }
+
+    fn set_adaptive_radius(&mut self, on: bool) -> bool {
+        self.adaptive = on;
+        true
+    }
+
+    /// Renders; a failure leaves the background image and is logged once per distinct error.
+    fn render(&mut self, scene: &Scene, camera: &Camera, out: &mut Image) {
+        match self.try_render(scene, camera, out) {
+            Ok(()) => self.last_error = None,
+            Err(e) => {
+                let msg = e.to_string();
+                if self.last_error.as_deref() != Some(msg.as_str()) {
+                    log::error!("GPU layered splatter: {msg}");
+                    self.last_error = Some(msg);
+                }
+            }
+        }
+    }
+}

@@ -1,0 +1,398 @@
+// The layered splatter on the GPU (`splat-layers-gpu`), mirroring
+// `volwarp_cpu_tracer::layer_splat::LayerSplat` operation by operation (same formulas, same f32
+// order), so it draws the CPU's image:
+//
+// 1. `setup`, one invocation per sample: its footprint (the source pixel's frustum cut by the
+//    plane through the sample's centre facing the new eye, projected), as four edge functions,
+//    its `(dist² bits, id)` key and pixel bounds; each 8×8 screen tile it touches is counted.
+// 2. `scan`, one workgroup: the tiles' counts to offsets (the total too, for the host's
+//    capacity check).
+// 3. `scatter`, one invocation per sample: its id into every tile list it touches (order inside
+//    a tile does not matter: each pixel keeps the LIST nearest keys, ties by id).
+// 4. `raster`, one invocation per pixel: its tile's footprints, the CPU's edge test, the nearest
+//    LIST keys (WGSL has no u64: keys are (hi, lo) pairs), sorted, composited front to back,
+//    over the background; the pixel's count and, for the fill, the covered row/column spans.
+// 5. `fill`, one invocation per pixel: `hole_fill::block_outside_silhouette` + `stale_lookup`.
+//
+// LayerParams, PackedSample, RayBasis and the shared functions come from `prelude.wgsl`; LIST
+// and TILE are prepended by `layer_splat.rs` from the CPU's constants.
+
+@group(0) @binding(0) var<uniform> P: LayerParams;
+@group(0) @binding(1) var<storage, read> samples: array<PackedSample>;
+@group(0) @binding(2) var<storage, read> colors: array<u32>;
+@group(0) @binding(3) var<storage, read_write> quads: array<Quad>;
+// [0]: the largest tile-list total of this submission; then the tile counts, the offsets and
+// the spans at P.off_offsets and P.off_spans.
+@group(0) @binding(4) var<storage, read_write> work: array<atomic<u32>>;
+@group(0) @binding(5) var<storage, read_write> list: array<u32>;
+@group(0) @binding(6) var<storage, read_write> out_pixels: array<u32>;
+@group(0) @binding(7) var<storage, read_write> count: array<u32>;
+// The frame's own composite (the fill's stale image; a dummy while the frame itself is drawn).
+@group(0) @binding(8) var<storage, read> frame: array<u32>;
+
+// A footprint: edge functions (a·px + b·py + c ≥ 0 inside) as a, b, c over the four edges,
+// the key (hi: dist² bits, lo: id), the pixel bounds x0 | x1 << 16, y0 | y1 << 16.
+struct Quad {
+    a: vec4<f32>,
+    b: vec4<f32>,
+    c: vec4<f32>,
+    key_hi: u32,
+    key_lo: u32,
+    xb: u32,
+    yb: u32,
+}
+
+// Where the tile counts start in `work`.
+const COUNTS: u32 = 16u;
+
+fn d3(a: vec3<f32>, b: vec3<f32>) -> f32 {
+    // glam's `Vec3::dot`: (x·x + y·y) + z·z.
+    return a.x * b.x + a.y * b.y + a.z * b.z;
+}
+
+fn finite(x: f32) -> bool {
+    return (bitcast<u32>(x) & 0x7f800000u) != 0x7f800000u;
+}
+
+fn sample_index(wid: vec3<u32>, nwg: vec3<u32>, lidx: u32) -> u32 {
+    return (wid.y * nwg.x + wid.x) * 64u + lidx;
+}
+
+// `Proj::image`: continuous image coordinates of a point given relative to the eye in the
+// camera's basis; ok = false at or behind the eye plane or for a non-finite point.
+struct Img {
+    p: vec2<f32>,
+    ok: bool,
+}
+
+fn image(c: vec3<f32>) -> Img {
+    if !(c.z > P.k.z) {
+        return Img(vec2<f32>(0.0), false);
+    }
+    let inv = 1.0 / c.z;
+    let x = c.x * inv * P.proj.x + P.proj.z;
+    let y = P.proj.w - c.y * inv * P.proj.y;
+    return Img(vec2<f32>(x, y), finite(x) && finite(y));
+}
+
+fn none_quad() -> Quad {
+    return Quad(vec4<f32>(0.0), vec4<f32>(0.0), vec4<f32>(0.0), 0xffffffffu, 0xffffffffu, 1u, 1u);
+}
+
+fn corner(an: f32, un: f32, vn: f32, edge_on: f32, num: f32, ba: vec3<f32>, sx: f32, sy: f32) -> Img {
+    let den = an + sx * un + sy * vn;
+    if !(den > 0.0 && den * den > edge_on) {
+        return Img(vec2<f32>(0.0), false);
+    }
+    let p = P.e.xyz + (ba + P.bu.xyz * sx + P.bv.xyz * sy) * (num / den);
+    return image(p);
+}
+
+// The footprint of sample `id` (the CPU's step 1).
+fn footprint(id: u32) -> Quad {
+    let c = sample_center(samples[id], P.deq_min, P.deq_step);
+    let rel = c - P.src_eye.xyz;
+    let z = d3(rel, P.src_w.xyz);
+    let n = c - P.eye.xyz;
+    let dist2 = d3(n, n);
+    if !(z > 0.0 && dist2 > 0.0) {
+        return none_quad();
+    }
+    let axis = rel / z;
+    let num = d3(n, rel);
+    let an = d3(axis, n);
+    let un = d3(P.su.xyz, n);
+    let vn = d3(P.sv.xyz, n);
+    let edge_on = P.k.y * dist2 * d3(axis, axis);
+    let opaque = (colors[id] >> 24u) >= P.min_alpha;
+    var r = 1.0;
+    if opaque && P.k.x > 1.0 {
+        r = P.k.x;
+    }
+    let ba = vec3<f32>(d3(axis, P.u.xyz), d3(axis, P.v.xyz), d3(axis, P.w.xyz));
+    let c0 = corner(an, un, vn, edge_on, num, ba, -r, -r);
+    let c1 = corner(an, un, vn, edge_on, num, ba, r, -r);
+    let c2 = corner(an, un, vn, edge_on, num, ba, r, r);
+    let c3 = corner(an, un, vn, edge_on, num, ba, -r, r);
+    if !(c0.ok && c1.ok && c2.ok && c3.ok) {
+        return none_quad();
+    }
+    let q0 = c0.p;
+    let q1 = c1.p;
+    let q2 = c2.p;
+    let q3 = c3.p;
+    let x0 = min(min(min(q0.x, q1.x), q2.x), q3.x);
+    let x1 = max(max(max(q0.x, q1.x), q2.x), q3.x);
+    let y0 = min(min(min(q0.y, q1.y), q2.y), q3.y);
+    let y1 = max(max(max(q0.y, q1.y), q2.y), q3.y);
+    let xa = max(ceil(x0 - 0.5), 0.0);
+    let xb = min(floor(x1 - 0.5), f32(P.width) - 1.0);
+    let ya = max(ceil(y0 - 0.5), 0.0);
+    let yb = min(floor(y1 - 0.5), f32(P.height) - 1.0);
+    if !(xa <= xb && ya <= yb) {
+        return none_quad();
+    }
+    // `Quad::edges`, signed by the orientation.
+    let area = (q1.x - q0.x) * (q2.y - q0.y) - (q2.x - q0.x) * (q1.y - q0.y);
+    var sign = 1.0;
+    if area < 0.0 {
+        sign = -1.0;
+    }
+    var q = array<vec2<f32>, 4>(q0, q1, q2, q3);
+    var ea = vec4<f32>(0.0);
+    var eb = vec4<f32>(0.0);
+    var ec = vec4<f32>(0.0);
+    for (var k = 0u; k < 4u; k++) {
+        let a = q[k];
+        let b = q[(k + 1u) & 3u];
+        let ex = (b.x - a.x) * sign;
+        let ey = (b.y - a.y) * sign;
+        ea[k] = -ey;
+        eb[k] = ex;
+        ec[k] = ey * a.x - ex * a.y;
+    }
+    let bx = u32(xa) | (u32(xb) << 16u);
+    let by = u32(ya) | (u32(yb) << 16u);
+    return Quad(ea, eb, ec, bitcast<u32>(dist2), id, bx, by);
+}
+
+@compute @workgroup_size(64)
+fn setup(
+    @builtin(workgroup_id) wid: vec3<u32>,
+    @builtin(num_workgroups) nwg: vec3<u32>,
+    @builtin(local_invocation_index) lidx: u32,
+) {
+    let id = sample_index(wid, nwg, lidx);
+    if id >= P.n {
+        return;
+    }
+    let q = footprint(id);
+    quads[id] = q;
+    let x0 = q.xb & 0xffffu;
+    let x1 = q.xb >> 16u;
+    let y0 = q.yb & 0xffffu;
+    let y1 = q.yb >> 16u;
+    if x0 > x1 {
+        return;
+    }
+    for (var ty = y0 / TILE; ty <= y1 / TILE; ty++) {
+        for (var tx = x0 / TILE; tx <= x1 / TILE; tx++) {
+            atomicAdd(&work[COUNTS + ty * P.tiles_x + tx], 1u);
+        }
+    }
+}
+
+var<workgroup> part: array<u32, 256>;
+
+@compute @workgroup_size(256)
+fn scan(@builtin(local_invocation_index) i: u32) {
+    let t = P.tiles_x * P.tiles_y;
+    let per = (t + 255u) / 256u;
+    let lo = min(i * per, t);
+    let hi = min(lo + per, t);
+    var s = 0u;
+    for (var k = lo; k < hi; k++) {
+        s += atomicLoad(&work[COUNTS + k]);
+    }
+    part[i] = s;
+    workgroupBarrier();
+    if i == 0u {
+        var run = 0u;
+        for (var j = 0u; j < 256u; j++) {
+            let v = part[j];
+            part[j] = run;
+            run += v;
+        }
+        atomicStore(&work[P.off_offsets + t], run);
+        atomicMax(&work[0], run);
+    }
+    workgroupBarrier();
+    var run = part[i];
+    for (var k = lo; k < hi; k++) {
+        let c = atomicLoad(&work[COUNTS + k]);
+        atomicStore(&work[P.off_offsets + k], run);
+        run += c;
+        // The counts become the scatter's cursors.
+        atomicStore(&work[COUNTS + k], 0u);
+    }
+}
+
+@compute @workgroup_size(64)
+fn scatter(
+    @builtin(workgroup_id) wid: vec3<u32>,
+    @builtin(num_workgroups) nwg: vec3<u32>,
+    @builtin(local_invocation_index) lidx: u32,
+) {
+    let id = sample_index(wid, nwg, lidx);
+    if id >= P.n {
+        return;
+    }
+    let xb = quads[id].xb;
+    let yb = quads[id].yb;
+    let x0 = xb & 0xffffu;
+    let x1 = xb >> 16u;
+    let y0 = yb & 0xffffu;
+    let y1 = yb >> 16u;
+    if x0 > x1 {
+        return;
+    }
+    for (var ty = y0 / TILE; ty <= y1 / TILE; ty++) {
+        for (var tx = x0 / TILE; tx <= x1 / TILE; tx++) {
+            let t = ty * P.tiles_x + tx;
+            let at = atomicLoad(&work[P.off_offsets + t]) + atomicAdd(&work[COUNTS + t], 1u);
+            if at < P.cap {
+                list[at] = id;
+            }
+        }
+    }
+}
+
+// Key order: (hi, lo) as one u64.
+fn less(a: vec2<u32>, b: vec2<u32>) -> bool {
+    return a.x < b.x || (a.x == b.x && a.y < b.y);
+}
+
+// `sample::pack_color_f32`'s rounding of one channel.
+fn quantize(v: f32) -> u32 {
+    let f = v * 255.0 + 0.5;
+    if f >= 255.0 {
+        return 255u;
+    } else if f > 0.0 {
+        return u32(f);
+    }
+    return 0u;
+}
+
+@compute @workgroup_size(TILE, TILE, 1)
+fn raster(@builtin(workgroup_id) wid: vec3<u32>, @builtin(local_invocation_id) lid: vec3<u32>) {
+    let x = wid.x * TILE + lid.x;
+    let y = wid.y * TILE + lid.y;
+    let w = P.width;
+    if x >= w || y >= P.height {
+        return;
+    }
+    let t = wid.y * P.tiles_x + wid.x;
+    let lo = atomicLoad(&work[P.off_offsets + t]);
+    let hi = min(atomicLoad(&work[P.off_offsets + t + 1u]), P.cap);
+    let px = f32(x) + 0.5;
+    let py = f32(y) + 0.5;
+    var keys: array<vec2<u32>, LIST>;
+    var n = 0u;
+    for (var j = lo; j < hi; j++) {
+        let q = quads[list[j]];
+        if x < (q.xb & 0xffffu) || x > (q.xb >> 16u) || y < (q.yb & 0xffffu) || y > (q.yb >> 16u) {
+            continue;
+        }
+        var inside = true;
+        for (var e = 0u; e < 4u; e++) {
+            if !(q.a[e] * px + q.b[e] * py + q.c[e] >= 0.0) {
+                inside = false;
+                break;
+            }
+        }
+        if !inside {
+            continue;
+        }
+        let key = vec2<u32>(q.key_hi, q.key_lo);
+        // `layer_splat::insert`: keep the LIST smallest keys.
+        if n < LIST {
+            keys[n] = key;
+            n++;
+        } else {
+            var worst = vec2<u32>(0u, 0u);
+            var at = 0u;
+            for (var i = 0u; i < LIST; i++) {
+                if !less(keys[i], worst) {
+                    worst = keys[i];
+                    at = i;
+                }
+            }
+            if less(key, worst) {
+                keys[at] = key;
+            }
+        }
+    }
+    let p = y * w + x;
+    count[p] = n;
+    if n == 0u {
+        out_pixels[p] = P.background;
+        return;
+    }
+    // The covered row and column spans (for the fill): min as the max of the complement.
+    atomicMax(&work[P.off_spans + 2u * y], ~x);
+    atomicMax(&work[P.off_spans + 2u * y + 1u], x);
+    atomicMax(&work[P.off_spans + 2u * P.height + 2u * x], ~y);
+    atomicMax(&work[P.off_spans + 2u * P.height + 2u * x + 1u], y);
+    // Sorted (insertion sort of at most LIST keys), composited front to back.
+    for (var i = 1u; i < n; i++) {
+        let k = keys[i];
+        var j = i;
+        while j > 0u && less(k, keys[j - 1u]) {
+            keys[j] = keys[j - 1u];
+            j--;
+        }
+        keys[j] = k;
+    }
+    var acc = vec4<f32>(0.0);
+    for (var i = 0u; i < n; i++) {
+        let c = colors[keys[i].y];
+        let wgt = (1.0 - acc.w) * P.k.w;
+        acc.x += wgt * f32(c & 0xffu);
+        acc.y += wgt * f32((c >> 8u) & 0xffu);
+        acc.z += wgt * f32((c >> 16u) & 0xffu);
+        acc.w += wgt * f32(c >> 24u);
+        if acc.w >= P.k2.x {
+            break;
+        }
+    }
+    let packed = quantize(acc.x) | (quantize(acc.y) << 8u) | (quantize(acc.z) << 16u) | (quantize(acc.w) << 24u);
+    out_pixels[p] = over_background(packed, P.background);
+}
+
+@compute @workgroup_size(8, 8, 1)
+fn fill(@builtin(global_invocation_id) gid: vec3<u32>) {
+    let x = gid.x;
+    let y = gid.y;
+    let w = P.width;
+    let h = P.height;
+    if x >= w || y >= h {
+        return;
+    }
+    let p = y * w + x;
+    if count[p] != 0u {
+        return;
+    }
+    // `block_outside_silhouette`: only pixels within the covered row and column spans.
+    let rmin = ~atomicLoad(&work[P.off_spans + 2u * y]);
+    let rmax = atomicLoad(&work[P.off_spans + 2u * y + 1u]);
+    let cmin = ~atomicLoad(&work[P.off_spans + 2u * h + 2u * x]);
+    let cmax = atomicLoad(&work[P.off_spans + 2u * h + 2u * x + 1u]);
+    if !(rmin <= x && x <= rmax && cmin <= y && y <= cmax) {
+        return;
+    }
+    // `stale_lookup`: where the pixel's ray crosses the frame's focal plane.
+    let d = ray_dir(P.basis, x, y);
+    let fwd = P.f_w.xyz;
+    let denom = d3(d, fwd);
+    let t = P.k2.y / denom;
+    var q = P.f_eye.xyz + d;
+    if denom > P.k.z && t > 0.0 {
+        q = P.eye.xyz + d * t;
+    }
+    // `Projector::project`.
+    let rel = q - P.f_eye.xyz;
+    let z = d3(rel, fwd);
+    if !(z > P.k.z) {
+        return;
+    }
+    let sx = d3(rel, P.f_u.xyz) / (z * P.f_proj.x);
+    let sy = d3(rel, P.f_v.xyz) / (z * P.f_proj.y);
+    let fx = (sx + 1.0) * 0.5 * P.f_proj.z;
+    let fy = (1.0 - sy) * 0.5 * P.f_proj.w;
+    if fx >= 0.0 && fy >= 0.0 && fx < P.f_proj.z && fy < P.f_proj.w {
+        let c = frame[u32(fy) * P.f_width + u32(fx)];
+        if c != P.background {
+            out_pixels[p] = c;
+        }
+    }
+}
