@@ -8,21 +8,27 @@
 //! samples' footprints grow with the warp angle. Same options, same image as the CPU.
 //!
 //! Passes (one command buffer per draw, one readback): `setup` (per sample: the footprint's
-//! edge functions, key and pixel bounds; counts per 8×8 tile), `scan` (tile offsets),
-//! `scatter` (sample ids into tile lists), `raster` (per pixel: its tile's footprints into a
-//! private 16-entry list of `(hi, lo)` key pairs, sorted, composited) and `fill` (the
-//! silhouette spans and the stale lookup). The frame's own composite (the fill's stale image)
-//! is drawn by the same passes at the frame camera, once per scene, and kept on the GPU.
+//! edge functions, key and pixel bounds; each pixel whose centre it covers is counted), `scan`
+//! (the pixels' list offsets), `scatter` (per sample again: its id into each covered pixel's
+//! list), `raster` (per pixel: its list's nearest keys in a private 16-entry list of `(hi, lo)`
+//! pairs, sorted, composited) and `fill` (the silhouette spans and the stale lookup). Binning
+//! to pixels rather than screen tiles: a pixel then reads only the footprints that cover it
+//! (about K), where an 8×8 tile made every pixel test its tile's few hundred (the first
+//! version, 60× slower on lavapipe). The frame's own composite (the fill's stale image) is
+//! drawn by the same passes at the frame camera, once per scene, and kept on the GPU.
 //!
 //! Every per-frame constant (camera bases, the footprint's half-pixel vectors in the new
 //! camera's basis, the grow ratio, the focal plane) is computed here with the CPU's own `f32`
 //! operations and passed in the uniform ([`LayerParams`], declared once in `prelude.wgsl`), so
 //! the shader starts from the CPU's values and repeats its per-sample arithmetic in the same
-//! order. The tile lists' total is not known before the `scan`: they are sized from the last
+//! order. The lists' total is not known before the `scan`: they are sized from the last
 //! frame (or `2n` entries), and a frame whose total exceeds that is drawn again with room.
 //!
-//! Memory on the GPU: 64 bytes per sample (footprints) + 12 (sample, color), 4 per tile-list
-//! entry, 12 per output pixel (pixel, count, readback) plus the frame's composite.
+//! Memory on the GPU: 64 bytes per sample (footprints) + 12 (sample, color), 4 per list entry
+//! (a sample per pixel it covers), 24 per output pixel (pixel, count, list count and offset,
+//! readback) plus the frame's composite. The scan is one workgroup (256 invocations, each
+//! summing `w·h/256` counts serially): fine to 1024², a bound to lift with a multi-block scan
+//! (as the LBVH sort's) for much larger viewports on a real GPU.
 
 use crate::buffers::{grid, read_mapped, GrowBuffer};
 use crate::tracer::{SceneKey, MAX_VIEWPORT};
@@ -34,10 +40,7 @@ use volwarp_core::warp_radius::warp_angle_deg;
 use volwarp_core::{Camera, RayBasis, RendererKind, Scene, Vec3};
 pub use volwarp_cpu_tracer::layer_splat::{LayerOptions, LIST, OPAQUE};
 
-/// Side of the screen tiles the footprints are binned to (and of the raster's workgroups).
-pub const TILE: u32 = 8;
-
-/// Words at the start of the work buffer before the tile counts (`COUNTS` in the shader).
+/// Words at the start of the work buffer before the pixels' counts (`COUNTS` in the shader).
 const COUNTS: u32 = 16;
 
 /// Uniform slots (frame draw, new-camera draw) are this far apart.
@@ -75,8 +78,6 @@ pub(crate) struct LayerParams {
     pub width: u32,
     pub height: u32,
     pub n: u32,
-    pub tiles_x: u32,
-    pub tiles_y: u32,
     pub min_alpha: u32,
     pub f_width: u32,
     pub f_height: u32,
@@ -84,6 +85,8 @@ pub(crate) struct LayerParams {
     pub cap: u32,
     pub off_offsets: u32,
     pub off_spans: u32,
+    pub pad0: u32,
+    pub pad1: u32,
 }
 
 fn v4(v: Vec3) -> [f32; 4] {
@@ -119,15 +122,10 @@ impl Proj {
     }
 }
 
-/// The tiles of a viewport.
-fn tiles(w: u32, h: u32) -> (u32, u32) {
-    (w.div_ceil(TILE), h.div_ceil(TILE))
-}
-
-/// Words of the work buffer a draw of `w × h` needs, and where its offsets and spans start.
+/// Words of the work buffer a draw of `w × h` needs, and where its list offsets and spans start
+/// (after [`COUNTS`] words, a count per pixel, then `w·h + 1` offsets, then the spans).
 fn work_layout(w: u32, h: u32) -> (u64, u32, u32) {
-    let (tx, ty) = tiles(w, h);
-    let t = tx * ty;
+    let t = w * h;
     let off_offsets = COUNTS + t;
     let off_spans = off_offsets + t + 1;
     (off_spans as u64 + 2 * (w as u64 + h as u64), off_offsets, off_spans)
@@ -172,7 +170,6 @@ fn params(scene: &Scene, camera: &Camera, fc: &Camera, opts: &LayerOptions, grow
     let t_num = plane - camera.eye.dot(fwd);
     let d = &scene.deq;
     let (w, h) = (camera.width, camera.height);
-    let (tx, ty) = tiles(w, h);
     let (_, off_offsets, off_spans) = work_layout(w, h);
     LayerParams {
         eye: v4(view.eye),
@@ -200,8 +197,6 @@ fn params(scene: &Scene, camera: &Camera, fc: &Camera, opts: &LayerOptions, grow
         width: w,
         height: h,
         n: scene.samples.len() as u32,
-        tiles_x: tx,
-        tiles_y: ty,
         min_alpha: opts.grow_min_alpha as u32,
         f_width: fc.width,
         f_height: fc.height,
@@ -209,6 +204,8 @@ fn params(scene: &Scene, camera: &Camera, fc: &Camera, opts: &LayerOptions, grow
         cap,
         off_offsets,
         off_spans,
+        pad0: 0,
+        pad1: 0,
     }
 }
 
@@ -234,7 +231,7 @@ pub struct GpuLayerSplat {
     frame: GrowBuffer,
     dummy: GrowBuffer,
     staging: GrowBuffer,
-    /// Tile-list entries the list buffer is sized for.
+    /// List entries (all pixels together) the list buffer is sized for.
     cap: u32,
     bind_groups: Option<[wgpu::BindGroup; 2]>,
     uploaded: Option<SceneKey>,
@@ -280,7 +277,7 @@ impl GpuLayerSplat {
     /// `LayerSplat::with_options`).
     pub fn with_context(ctx: GpuContext, opts: LayerOptions) -> Result<GpuLayerSplat, GpuError> {
         let scope = ctx.device.push_error_scope(wgpu::ErrorFilter::Validation);
-        let consts = format!("const LIST: u32 = {LIST}u;\nconst TILE: u32 = {TILE}u;\n");
+        let consts = format!("const LIST: u32 = {LIST}u;\n");
         let module = ctx.device.create_shader_module(wgpu::ShaderModuleDescriptor {
             label: Some("layer_splat.wgsl"),
             source: wgpu::ShaderSource::Wgsl(
@@ -351,8 +348,8 @@ impl GpuLayerSplat {
             samples: GrowBuffer::new("layer samples", st_dst),
             colors: GrowBuffer::new("layer colors", st_dst),
             quads: GrowBuffer::new("layer footprints", st),
-            work: GrowBuffer::new("layer tiles", st_all),
-            list: GrowBuffer::new("layer tile lists", st),
+            work: GrowBuffer::new("layer counts and offsets", st_all),
+            list: GrowBuffer::new("layer pixel lists", st),
             out: GrowBuffer::new("layer pixels", st_all),
             count: GrowBuffer::new("layer counts", st),
             frame: GrowBuffer::new("layer frame", st_all),
@@ -384,7 +381,7 @@ impl GpuLayerSplat {
         self.uploads
     }
 
-    /// How many draws were repeated because the tile lists needed more room than the last
+    /// How many draws were repeated because the pixels' lists needed more room than the last
     /// frame's.
     pub fn list_regrowths(&self) -> u64 {
         self.redraws
@@ -494,7 +491,6 @@ impl GpuLayerSplat {
         let spans = 4 * (off_offsets as u64 + (off_offsets - COUNTS) as u64 + 1);
         encoder.clear_buffer(work, spans, Some(4 * words - spans));
         let (gx, gy) = grid(&self.ctx, n.div_ceil(64));
-        let (tx, ty) = tiles(w, h);
         let mut pass = encoder
             .begin_compute_pass(&wgpu::ComputePassDescriptor { label: Some("layer splat"), timestamp_writes: None });
         pass.set_bind_group(0, &bgs[slot], &[]);
@@ -509,7 +505,7 @@ impl GpuLayerSplat {
             pass.dispatch_workgroups(gx, gy, 1);
         }
         pass.set_pipeline(&self.raster);
-        pass.dispatch_workgroups(tx, ty, 1);
+        pass.dispatch_workgroups(w.div_ceil(8), h.div_ceil(8), 1);
         if fill {
             pass.set_pipeline(&self.fill);
             pass.dispatch_workgroups(w.div_ceil(8), h.div_ceil(8), 1);
@@ -576,11 +572,11 @@ impl GpuLayerSplat {
                 }
                 return Ok(());
             }
-            // The tile lists overflowed: grow them and draw again.
+            // The lists overflowed: grow them and draw again.
             let limit = (self.ctx.max_binding() / 4).min(u32::MAX as u64) as u32;
             if total > limit {
                 return Err(GpuError::TooLarge {
-                    what: "layer tile lists",
+                    what: "layer pixel lists",
                     bytes: 4 * total as u64,
                     limit: 4 * limit as u64,
                 });

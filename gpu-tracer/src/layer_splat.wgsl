@@ -4,25 +4,26 @@
 //
 // 1. `setup`, one invocation per sample: its footprint (the source pixel's frustum cut by the
 //    plane through the sample's centre facing the new eye, projected), as four edge functions,
-//    its `(dist² bits, id)` key and pixel bounds; each 8×8 screen tile it touches is counted.
-// 2. `scan`, one workgroup: the tiles' counts to offsets (the total too, for the host's
+//    its `(dist² bits, id)` key and pixel bounds; each pixel of its bounds whose centre passes
+//    the CPU's edge test is counted.
+// 2. `scan`, one workgroup: the pixels' counts to offsets (the total too, for the host's
 //    capacity check).
-// 3. `scatter`, one invocation per sample: its id into every tile list it touches (order inside
-//    a tile does not matter: each pixel keeps the LIST nearest keys, ties by id).
-// 4. `raster`, one invocation per pixel: its tile's footprints, the CPU's edge test, the nearest
-//    LIST keys (WGSL has no u64: keys are (hi, lo) pairs), sorted, composited front to back,
-//    over the background; the pixel's count and, for the fill, the covered row/column spans.
+// 3. `scatter`, one invocation per sample: the same pixels again, its id into each one's list
+//    (order does not matter: each pixel keeps the LIST nearest keys, ties by id).
+// 4. `raster`, one invocation per pixel: its list's nearest LIST keys (WGSL has no u64: keys are
+//    (hi, lo) pairs), sorted, composited front to back, over the background; the pixel's count
+//    and, for the fill, the covered row/column spans.
 // 5. `fill`, one invocation per pixel: `hole_fill::block_outside_silhouette` + `stale_lookup`.
 //
 // LayerParams, PackedSample, RayBasis and the shared functions come from `prelude.wgsl`; LIST
-// and TILE are prepended by `layer_splat.rs` from the CPU's constants.
+// is prepended by `layer_splat.rs` from the CPU's constant.
 
 @group(0) @binding(0) var<uniform> P: LayerParams;
 @group(0) @binding(1) var<storage, read> samples: array<PackedSample>;
 @group(0) @binding(2) var<storage, read> colors: array<u32>;
 @group(0) @binding(3) var<storage, read_write> quads: array<Quad>;
-// [0]: the largest tile-list total of this submission; then the tile counts, the offsets and
-// the spans at P.off_offsets and P.off_spans.
+// [0]: the largest list total of this submission; then the pixels' counts, their list offsets
+// and the spans at P.off_offsets and P.off_spans.
 @group(0) @binding(4) var<storage, read_write> work: array<atomic<u32>>;
 @group(0) @binding(5) var<storage, read_write> list: array<u32>;
 @group(0) @binding(6) var<storage, read_write> out_pixels: array<u32>;
@@ -42,7 +43,7 @@ struct Quad {
     yb: u32,
 }
 
-// Where the tile counts start in `work`.
+// Where the pixels' counts start in `work`.
 const COUNTS: u32 = 16u;
 
 fn d3(a: vec3<f32>, b: vec3<f32>) -> f32 {
@@ -175,18 +176,32 @@ fn setup(
     if x0 > x1 {
         return;
     }
-    for (var ty = y0 / TILE; ty <= y1 / TILE; ty++) {
-        for (var tx = x0 / TILE; tx <= x1 / TILE; tx++) {
-            atomicAdd(&work[COUNTS + ty * P.tiles_x + tx], 1u);
+    for (var y = y0; y <= y1; y++) {
+        for (var x = x0; x <= x1; x++) {
+            if covers(q, x, y) {
+                atomicAdd(&work[COUNTS + y * P.width + x], 1u);
+            }
         }
     }
+}
+
+// The CPU's rasterization test: the pixel centre inside all four edges.
+fn covers(q: Quad, x: u32, y: u32) -> bool {
+    let px = f32(x) + 0.5;
+    let py = f32(y) + 0.5;
+    for (var e = 0u; e < 4u; e++) {
+        if !(q.a[e] * px + q.b[e] * py + q.c[e] >= 0.0) {
+            return false;
+        }
+    }
+    return true;
 }
 
 var<workgroup> part: array<u32, 256>;
 
 @compute @workgroup_size(256)
 fn scan(@builtin(local_invocation_index) i: u32) {
-    let t = P.tiles_x * P.tiles_y;
+    let t = P.width * P.height;
     let per = (t + 255u) / 256u;
     let lo = min(i * per, t);
     let hi = min(lo + per, t);
@@ -227,21 +242,22 @@ fn scatter(
     if id >= P.n {
         return;
     }
-    let xb = quads[id].xb;
-    let yb = quads[id].yb;
-    let x0 = xb & 0xffffu;
-    let x1 = xb >> 16u;
-    let y0 = yb & 0xffffu;
-    let y1 = yb >> 16u;
+    let q = quads[id];
+    let x0 = q.xb & 0xffffu;
+    let x1 = q.xb >> 16u;
+    let y0 = q.yb & 0xffffu;
+    let y1 = q.yb >> 16u;
     if x0 > x1 {
         return;
     }
-    for (var ty = y0 / TILE; ty <= y1 / TILE; ty++) {
-        for (var tx = x0 / TILE; tx <= x1 / TILE; tx++) {
-            let t = ty * P.tiles_x + tx;
-            let at = atomicLoad(&work[P.off_offsets + t]) + atomicAdd(&work[COUNTS + t], 1u);
-            if at < P.cap {
-                list[at] = id;
+    for (var y = y0; y <= y1; y++) {
+        for (var x = x0; x <= x1; x++) {
+            if covers(q, x, y) {
+                let p = y * P.width + x;
+                let at = atomicLoad(&work[P.off_offsets + p]) + atomicAdd(&work[COUNTS + p], 1u);
+                if at < P.cap {
+                    list[at] = id;
+                }
             }
         }
     }
@@ -263,37 +279,22 @@ fn quantize(v: f32) -> u32 {
     return 0u;
 }
 
-@compute @workgroup_size(TILE, TILE, 1)
-fn raster(@builtin(workgroup_id) wid: vec3<u32>, @builtin(local_invocation_id) lid: vec3<u32>) {
-    let x = wid.x * TILE + lid.x;
-    let y = wid.y * TILE + lid.y;
+@compute @workgroup_size(8, 8, 1)
+fn raster(@builtin(global_invocation_id) gid: vec3<u32>) {
+    let x = gid.x;
+    let y = gid.y;
     let w = P.width;
     if x >= w || y >= P.height {
         return;
     }
-    let t = wid.y * P.tiles_x + wid.x;
-    let lo = atomicLoad(&work[P.off_offsets + t]);
-    let hi = min(atomicLoad(&work[P.off_offsets + t + 1u]), P.cap);
-    let px = f32(x) + 0.5;
-    let py = f32(y) + 0.5;
+    let p = y * w + x;
+    let lo = atomicLoad(&work[P.off_offsets + p]);
+    let hi = min(atomicLoad(&work[P.off_offsets + p + 1u]), P.cap);
     var keys: array<vec2<u32>, LIST>;
     var n = 0u;
     for (var j = lo; j < hi; j++) {
-        let q = quads[list[j]];
-        if x < (q.xb & 0xffffu) || x > (q.xb >> 16u) || y < (q.yb & 0xffffu) || y > (q.yb >> 16u) {
-            continue;
-        }
-        var inside = true;
-        for (var e = 0u; e < 4u; e++) {
-            if !(q.a[e] * px + q.b[e] * py + q.c[e] >= 0.0) {
-                inside = false;
-                break;
-            }
-        }
-        if !inside {
-            continue;
-        }
-        let key = vec2<u32>(q.key_hi, q.key_lo);
+        let id = list[j];
+        let key = vec2<u32>(quads[id].key_hi, id);
         // `layer_splat::insert`: keep the LIST smallest keys.
         if n < LIST {
             keys[n] = key;
@@ -312,7 +313,6 @@ fn raster(@builtin(workgroup_id) wid: vec3<u32>, @builtin(local_invocation_id) l
             }
         }
     }
-    let p = y * w + x;
     count[p] = n;
     if n == 0u {
         out_pixels[p] = P.background;

@@ -179,15 +179,15 @@ struct LayerParams {
     width: u32,
     height: u32,
     n: u32,
-    tiles_x: u32,
-    tiles_y: u32,
     min_alpha: u32,
     f_width: u32,
     f_height: u32,
     background: u32,
-    // Capacity of the tile lists (entries).
+    // Capacity of the pixels' lists (entries, all pixels together).
     cap: u32,
-    // Offsets in the work buffer: tile counts, tile offsets (tiles + 1), row and column spans.
+    // Offsets in the work buffer: the pixels' list offsets (pixels + 1), row and column spans.
     off_offsets: u32,
     off_spans: u32,
+    pad0: u32,
+    pad1: u32,
 }
