@@ -83,10 +83,10 @@ pub(crate) struct LayerParams {
     pub f_height: u32,
     pub background: u32,
     pub cap: u32,
-    pub off_offsets: u32,
     pub off_spans: u32,
     pub pad0: u32,
     pub pad1: u32,
+    pub pad2: u32,
 }
 
 fn v4(v: Vec3) -> [f32; 4] {
@@ -122,13 +122,11 @@ impl Proj {
     }
 }
 
-/// Words of the work buffer a draw of `w × h` needs, and where its list offsets and spans start
-/// (after [`COUNTS`] words, a count per pixel, then `w·h + 1` offsets, then the spans).
-fn work_layout(w: u32, h: u32) -> (u64, u32, u32) {
-    let t = w * h;
-    let off_offsets = COUNTS + t;
-    let off_spans = off_offsets + t + 1;
-    (off_spans as u64 + 2 * (w as u64 + h as u64), off_offsets, off_spans)
+/// Words of the work buffer a draw of `w × h` needs, and where its spans start (after
+/// [`COUNTS`] words, a count per pixel, then the spans).
+fn work_layout(w: u32, h: u32) -> (u64, u32) {
+    let off_spans = COUNTS + w * h;
+    (off_spans as u64 + 2 * (w as u64 + h as u64), off_spans)
 }
 
 /// The scene's sample count if it can be drawn (the CPU's `begin_frame_unbuilt_ok`: a built
@@ -170,7 +168,7 @@ fn params(scene: &Scene, camera: &Camera, fc: &Camera, opts: &LayerOptions, grow
     let t_num = plane - camera.eye.dot(fwd);
     let d = &scene.deq;
     let (w, h) = (camera.width, camera.height);
-    let (_, off_offsets, off_spans) = work_layout(w, h);
+    let (_, off_spans) = work_layout(w, h);
     LayerParams {
         eye: v4(view.eye),
         u: v4(view.u),
@@ -202,10 +200,10 @@ fn params(scene: &Scene, camera: &Camera, fc: &Camera, opts: &LayerOptions, grow
         f_height: fc.height,
         background: BACKGROUND,
         cap,
-        off_offsets,
         off_spans,
         pad0: 0,
         pad1: 0,
+        pad2: 0,
     }
 }
 
@@ -485,11 +483,9 @@ impl GpuLayerSplat {
     fn encode_draw(&self, encoder: &mut wgpu::CommandEncoder, slot: usize, w: u32, h: u32, n: u32, fill: bool) {
         let Some(bgs) = self.bind_groups.as_ref() else { return };
         let Ok(work) = self.work.get() else { return };
-        let (words, off_offsets, _) = work_layout(w, h);
-        // The counts (zero) and, after the offsets, the spans (zero: empty).
-        encoder.clear_buffer(work, 4 * COUNTS as u64, Some(4 * (off_offsets - COUNTS) as u64));
-        let spans = 4 * (off_offsets as u64 + (off_offsets - COUNTS) as u64 + 1);
-        encoder.clear_buffer(work, spans, Some(4 * words - spans));
+        let (words, _) = work_layout(w, h);
+        // The counts and the spans (zero: empty).
+        encoder.clear_buffer(work, 4 * COUNTS as u64, Some(4 * (words - COUNTS as u64)));
         let (gx, gy) = grid(&self.ctx, n.div_ceil(64));
         let mut pass = encoder
             .begin_compute_pass(&wgpu::ComputePassDescriptor { label: Some("layer splat"), timestamp_writes: None });

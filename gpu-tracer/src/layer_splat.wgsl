@@ -6,8 +6,8 @@
 //    plane through the sample's centre facing the new eye, projected), as four edge functions,
 //    its `(dist² bits, id)` key and pixel bounds; each pixel of its bounds whose centre passes
 //    the CPU's edge test is counted.
-// 2. `scan`, one workgroup: the pixels' counts to offsets (the total too, for the host's
-//    capacity check).
+// 2. `scan`, one workgroup: the pixels' counts to list offsets, in place (the total too, for
+//    the host's capacity check).
 // 3. `scatter`, one invocation per sample: the same pixels again, its id into each one's list
 //    (order does not matter: each pixel keeps the LIST nearest keys, ties by id).
 // 4. `raster`, one invocation per pixel: its list's nearest LIST keys (WGSL has no u64: keys are
@@ -22,8 +22,9 @@
 @group(0) @binding(1) var<storage, read> samples: array<PackedSample>;
 @group(0) @binding(2) var<storage, read> colors: array<u32>;
 @group(0) @binding(3) var<storage, read_write> quads: array<Quad>;
-// [0]: the largest list total of this submission; then the pixels' counts, their list offsets
-// and the spans at P.off_offsets and P.off_spans.
+// [0]: the largest list total of this submission (words 1–15 stay zero); then per pixel its
+// count, turned by the scan into its list's offset and by the scatter into its list's end;
+// the spans at P.off_spans.
 @group(0) @binding(4) var<storage, read_write> work: array<atomic<u32>>;
 @group(0) @binding(5) var<storage, read_write> list: array<u32>;
 @group(0) @binding(6) var<storage, read_write> out_pixels: array<u32>;
@@ -218,17 +219,16 @@ fn scan(@builtin(local_invocation_index) i: u32) {
             part[j] = run;
             run += v;
         }
-        atomicStore(&work[P.off_offsets + t], run);
         atomicMax(&work[0], run);
     }
     workgroupBarrier();
+    // In place: each count becomes its pixel's first list entry (the scatter's cursor, which
+    // ends at the next pixel's first entry).
     var run = part[i];
     for (var k = lo; k < hi; k++) {
         let c = atomicLoad(&work[COUNTS + k]);
-        atomicStore(&work[P.off_offsets + k], run);
+        atomicStore(&work[COUNTS + k], run);
         run += c;
-        // The counts become the scatter's cursors.
-        atomicStore(&work[COUNTS + k], 0u);
     }
 }
 
@@ -253,8 +253,7 @@ fn scatter(
     for (var y = y0; y <= y1; y++) {
         for (var x = x0; x <= x1; x++) {
             if covers(q, x, y) {
-                let p = y * P.width + x;
-                let at = atomicLoad(&work[P.off_offsets + p]) + atomicAdd(&work[COUNTS + p], 1u);
+                let at = atomicAdd(&work[COUNTS + y * P.width + x], 1u);
                 if at < P.cap {
                     list[at] = id;
                 }
@@ -288,8 +287,10 @@ fn raster(@builtin(global_invocation_id) gid: vec3<u32>) {
         return;
     }
     let p = y * w + x;
-    let lo = atomicLoad(&work[P.off_offsets + p]);
-    let hi = min(atomicLoad(&work[P.off_offsets + p + 1u]), P.cap);
+    // After the scatter each pixel's cursor is where its list ends and the next one's begins
+    // (`work[COUNTS - 1]`, before the first pixel's, is a zero that is never written).
+    let lo = min(atomicLoad(&work[COUNTS + p - 1u]), P.cap);
+    let hi = min(atomicLoad(&work[COUNTS + p]), P.cap);
     var keys: array<vec2<u32>, LIST>;
     var n = 0u;
     for (var j = lo; j < hi; j++) {
