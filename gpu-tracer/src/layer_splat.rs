@@ -8,13 +8,13 @@
 //! samples' footprints grow with the warp angle. Same options, same image as the CPU.
 //!
 //! Passes (one command buffer per draw, one readback): `setup` (per sample: the footprint's
-//! edge functions, key and pixel bounds; each pixel whose centre it covers is counted), `scan`
+//! edge functions, key and pixel bounds; each pixel whose centre it covers is counted), scans
 //! (the pixels' list offsets), `scatter` (per sample again: its id into each covered pixel's
 //! list), `raster` (per pixel: its list's nearest keys in a private 16-entry list of `(hi, lo)`
 //! pairs, sorted, composited) and `fill` (the silhouette spans and the stale lookup). Binning
 //! to pixels rather than screen tiles: a pixel then reads only the footprints that cover it
 //! (about K), where an 8×8 tile made every pixel test its tile's few hundred (the first
-//! version, 60× slower on lavapipe). The frame's own composite (the fill's stale image) is
+//! version, 10× slower on lavapipe). The frame's own composite (the fill's stale image) is
 //! drawn by the same passes at the frame camera, once per scene, and kept on the GPU.
 //!
 //! Every per-frame constant (camera bases, the footprint's half-pixel vectors in the new
@@ -26,9 +26,8 @@
 //!
 //! Memory on the GPU: 64 bytes per sample (footprints) + 12 (sample, color), 4 per list entry
 //! (a sample per pixel it covers), 24 per output pixel (pixel, count, list count and offset,
-//! readback) plus the frame's composite. The scan is one workgroup (256 invocations, each
-//! summing `w·h/256` counts serially): fine to 1024², a bound to lift with a multi-block scan
-//! (as the LBVH sort's) for much larger viewports on a real GPU.
+//! readback) plus the frame's composite. The scan is reduce-then-scan over blocks of 4096
+//! counts (block sums, one workgroup over the sums, the prefixes written in place).
 
 use crate::buffers::{grid, read_mapped, GrowBuffer};
 use crate::tracer::{SceneKey, MAX_VIEWPORT};
@@ -84,7 +83,7 @@ pub(crate) struct LayerParams {
     pub background: u32,
     pub cap: u32,
     pub off_spans: u32,
-    pub pad0: u32,
+    pub off_sums: u32,
     pub pad1: u32,
     pub pad2: u32,
 }
@@ -122,11 +121,15 @@ impl Proj {
     }
 }
 
-/// Words of the work buffer a draw of `w × h` needs, and where its spans start (after
-/// [`COUNTS`] words, a count per pixel, then the spans).
-fn work_layout(w: u32, h: u32) -> (u64, u32) {
+/// Counts per block of the scan (256 invocations × 16; `SCAN_BLOCK` in the shader).
+const SCAN_BLOCK: u32 = 4096;
+
+/// Words of the work buffer a draw of `w × h` needs, and where its spans and the scan's block
+/// sums start (after [`COUNTS`] words: a count per pixel, the spans, a sum per scan block).
+fn work_layout(w: u32, h: u32) -> (u64, u32, u32) {
     let off_spans = COUNTS + w * h;
-    (off_spans as u64 + 2 * (w as u64 + h as u64), off_spans)
+    let off_sums = off_spans + 2 * (w + h);
+    (off_sums as u64 + (w * h).div_ceil(SCAN_BLOCK) as u64, off_spans, off_sums)
 }
 
 /// The scene's sample count if it can be drawn (the CPU's `begin_frame_unbuilt_ok`: a built
@@ -168,7 +171,7 @@ fn params(scene: &Scene, camera: &Camera, fc: &Camera, opts: &LayerOptions, grow
     let t_num = plane - camera.eye.dot(fwd);
     let d = &scene.deq;
     let (w, h) = (camera.width, camera.height);
-    let (_, off_spans) = work_layout(w, h);
+    let (_, off_spans, off_sums) = work_layout(w, h);
     LayerParams {
         eye: v4(view.eye),
         u: v4(view.u),
@@ -201,7 +204,7 @@ fn params(scene: &Scene, camera: &Camera, fc: &Camera, opts: &LayerOptions, grow
         background: BACKGROUND,
         cap,
         off_spans,
-        pad0: 0,
+        off_sums,
         pad1: 0,
         pad2: 0,
     }
@@ -213,7 +216,9 @@ pub struct GpuLayerSplat {
     opts: LayerOptions,
     adaptive: bool,
     setup: wgpu::ComputePipeline,
-    scan: wgpu::ComputePipeline,
+    scan_blocks: wgpu::ComputePipeline,
+    scan_sums: wgpu::ComputePipeline,
+    scan_apply: wgpu::ComputePipeline,
     scatter: wgpu::ComputePipeline,
     raster: wgpu::ComputePipeline,
     fill: wgpu::ComputePipeline,
@@ -275,7 +280,7 @@ impl GpuLayerSplat {
     /// `LayerSplat::with_options`).
     pub fn with_context(ctx: GpuContext, opts: LayerOptions) -> Result<GpuLayerSplat, GpuError> {
         let scope = ctx.device.push_error_scope(wgpu::ErrorFilter::Validation);
-        let consts = format!("const LIST: u32 = {LIST}u;\n");
+        let consts = format!("const LIST: u32 = {LIST}u;\nconst SCAN_BLOCK: u32 = {SCAN_BLOCK}u;\n");
         let module = ctx.device.create_shader_module(wgpu::ShaderModuleDescriptor {
             label: Some("layer_splat.wgsl"),
             source: wgpu::ShaderSource::Wgsl(
@@ -319,8 +324,8 @@ impl GpuLayerSplat {
                 cache: None,
             })
         };
-        let (setup, scan, scatter, raster, fill) =
-            (pipe("setup"), pipe("scan"), pipe("scatter"), pipe("raster"), pipe("fill"));
+        let (setup, scatter, raster, fill) = (pipe("setup"), pipe("scatter"), pipe("raster"), pipe("fill"));
+        let (scan_blocks, scan_sums, scan_apply) = (pipe("scan_blocks"), pipe("scan_sums"), pipe("scan_apply"));
         let params = ctx.device.create_buffer(&wgpu::BufferDescriptor {
             label: Some("layer splat params"),
             size: 2 * SLOT,
@@ -337,7 +342,9 @@ impl GpuLayerSplat {
             opts,
             adaptive: false,
             setup,
-            scan,
+            scan_blocks,
+            scan_sums,
+            scan_apply,
             scatter,
             raster,
             fill,
@@ -483,8 +490,8 @@ impl GpuLayerSplat {
     fn encode_draw(&self, encoder: &mut wgpu::CommandEncoder, slot: usize, w: u32, h: u32, n: u32, fill: bool) {
         let Some(bgs) = self.bind_groups.as_ref() else { return };
         let Ok(work) = self.work.get() else { return };
-        let (words, _) = work_layout(w, h);
-        // The counts and the spans (zero: empty).
+        let (words, _, _) = work_layout(w, h);
+        // The counts, the spans (zero: empty) and the block sums.
         encoder.clear_buffer(work, 4 * COUNTS as u64, Some(4 * (words - COUNTS as u64)));
         let (gx, gy) = grid(&self.ctx, n.div_ceil(64));
         let mut pass = encoder
@@ -494,8 +501,13 @@ impl GpuLayerSplat {
             pass.set_pipeline(&self.setup);
             pass.dispatch_workgroups(gx, gy, 1);
         }
-        pass.set_pipeline(&self.scan);
+        let (bx, by) = grid(&self.ctx, (w * h).div_ceil(SCAN_BLOCK));
+        pass.set_pipeline(&self.scan_blocks);
+        pass.dispatch_workgroups(bx, by, 1);
+        pass.set_pipeline(&self.scan_sums);
         pass.dispatch_workgroups(1, 1, 1);
+        pass.set_pipeline(&self.scan_apply);
+        pass.dispatch_workgroups(bx, by, 1);
         if n > 0 {
             pass.set_pipeline(&self.scatter);
             pass.dispatch_workgroups(gx, gy, 1);

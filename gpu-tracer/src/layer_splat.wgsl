@@ -6,8 +6,8 @@
 //    plane through the sample's centre facing the new eye, projected), as four edge functions,
 //    its `(dist² bits, id)` key and pixel bounds; each pixel of its bounds whose centre passes
 //    the CPU's edge test is counted.
-// 2. `scan`, one workgroup: the pixels' counts to list offsets, in place (the total too, for
-//    the host's capacity check).
+// 2. `scan_blocks`, `scan_sums`, `scan_apply`: the pixels' counts to list offsets, in place
+//    (the total too, for the host's capacity check).
 // 3. `scatter`, one invocation per sample: the same pixels again, its id into each one's list
 //    (order does not matter: each pixel keeps the LIST nearest keys, ties by id).
 // 4. `raster`, one invocation per pixel: its list's nearest LIST keys (WGSL has no u64: keys are
@@ -16,7 +16,7 @@
 // 5. `fill`, one invocation per pixel: `hole_fill::block_outside_silhouette` + `stale_lookup`.
 //
 // LayerParams, PackedSample, RayBasis and the shared functions come from `prelude.wgsl`; LIST
-// is prepended by `layer_splat.rs` from the CPU's constant.
+// (the CPU's constant) and SCAN_BLOCK are prepended by `layer_splat.rs`.
 
 @group(0) @binding(0) var<uniform> P: LayerParams;
 @group(0) @binding(1) var<storage, read> samples: array<PackedSample>;
@@ -24,7 +24,7 @@
 @group(0) @binding(3) var<storage, read_write> quads: array<Quad>;
 // [0]: the largest list total of this submission (words 1–15 stay zero); then per pixel its
 // count, turned by the scan into its list's offset and by the scatter into its list's end;
-// the spans at P.off_spans.
+// the spans at P.off_spans, the scan's block sums at P.off_sums.
 @group(0) @binding(4) var<storage, read_write> work: array<atomic<u32>>;
 @group(0) @binding(5) var<storage, read_write> list: array<u32>;
 @group(0) @binding(6) var<storage, read_write> out_pixels: array<u32>;
@@ -198,33 +198,96 @@ fn covers(q: Quad, x: u32, y: u32) -> bool {
     return true;
 }
 
+// The scan of the pixels' counts, reduce-then-scan over blocks of SCAN_BLOCK counts (256
+// invocations × 16 consecutive counts each): `scan_blocks` sums each block, `scan_sums` (one
+// workgroup) turns the block sums into block offsets and the total, `scan_apply` writes each
+// count's exclusive prefix in place.
+// (SCAN_BLOCK is prepended by `layer_splat.rs`.)
+const SCAN_PER: u32 = SCAN_BLOCK / 256u;
+
 var<workgroup> part: array<u32, 256>;
 
-@compute @workgroup_size(256)
-fn scan(@builtin(local_invocation_index) i: u32) {
+// Invocation `i`'s 16 counts of block `b`: their sum.
+fn scan_partial(b: u32, i: u32) -> u32 {
     let t = P.width * P.height;
-    let per = (t + 255u) / 256u;
-    let lo = min(i * per, t);
-    let hi = min(lo + per, t);
+    let lo = min(b * SCAN_BLOCK + i * SCAN_PER, t);
+    let hi = min(lo + SCAN_PER, t);
     var s = 0u;
     for (var k = lo; k < hi; k++) {
         s += atomicLoad(&work[COUNTS + k]);
     }
-    part[i] = s;
-    workgroupBarrier();
-    if i == 0u {
-        var run = 0u;
-        for (var j = 0u; j < 256u; j++) {
-            let v = part[j];
-            part[j] = run;
-            run += v;
+    return s;
+}
+
+// Inclusive scan of `part` (Hillis–Steele); every invocation of the workgroup calls it.
+fn scan_part(i: u32) {
+    for (var d = 1u; d < 256u; d <<= 1u) {
+        var v = 0u;
+        if i >= d {
+            v = part[i - d];
         }
-        atomicMax(&work[0], run);
+        workgroupBarrier();
+        part[i] += v;
+        workgroupBarrier();
     }
-    workgroupBarrier();
+}
+
+@compute @workgroup_size(256)
+fn scan_blocks(
+    @builtin(workgroup_id) wid: vec3<u32>,
+    @builtin(num_workgroups) nwg: vec3<u32>,
+    @builtin(local_invocation_index) i: u32,
+) {
+    let b = wid.y * nwg.x + wid.x;
+    part[i] = scan_partial(b, i);
+    scan_part(i);
+    if i == 255u && b * SCAN_BLOCK < P.width * P.height {
+        atomicStore(&work[P.off_sums + b], part[255]);
+    }
+}
+
+@compute @workgroup_size(256)
+fn scan_sums(@builtin(local_invocation_index) i: u32) {
+    let blocks = (P.width * P.height + SCAN_BLOCK - 1u) / SCAN_BLOCK;
+    let per = (blocks + 255u) / 256u;
+    let lo = min(i * per, blocks);
+    let hi = min(lo + per, blocks);
+    var s = 0u;
+    for (var k = lo; k < hi; k++) {
+        s += atomicLoad(&work[P.off_sums + k]);
+    }
+    part[i] = s;
+    scan_part(i);
+    var run = part[i] - s;
+    if i == 255u {
+        atomicMax(&work[0], part[255]);
+    }
+    for (var k = lo; k < hi; k++) {
+        let c = atomicLoad(&work[P.off_sums + k]);
+        atomicStore(&work[P.off_sums + k], run);
+        run += c;
+    }
+}
+
+@compute @workgroup_size(256)
+fn scan_apply(
+    @builtin(workgroup_id) wid: vec3<u32>,
+    @builtin(num_workgroups) nwg: vec3<u32>,
+    @builtin(local_invocation_index) i: u32,
+) {
+    let b = wid.y * nwg.x + wid.x;
+    let s = scan_partial(b, i);
+    part[i] = s;
+    scan_part(i);
+    let t = P.width * P.height;
+    if b * SCAN_BLOCK >= t {
+        return;
+    }
     // In place: each count becomes its pixel's first list entry (the scatter's cursor, which
     // ends at the next pixel's first entry).
-    var run = part[i];
+    var run = atomicLoad(&work[P.off_sums + b]) + part[i] - s;
+    let lo = min(b * SCAN_BLOCK + i * SCAN_PER, t);
+    let hi = min(lo + SCAN_PER, t);
     for (var k = lo; k < hi; k++) {
         let c = atomicLoad(&work[COUNTS + k]);
         atomicStore(&work[COUNTS + k], run);

@@ -185,9 +185,9 @@ struct LayerParams {
     background: u32,
     // Capacity of the pixels' lists (entries, all pixels together).
     cap: u32,
-    // Where the row and column spans start in the work buffer.
+    // Where the row and column spans and the scan's block sums start in the work buffer.
     off_spans: u32,
-    pad0: u32,
+    off_sums: u32,
     pad1: u32,
     pad2: u32,
 }
