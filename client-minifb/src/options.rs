@@ -259,4 +259,15 @@ mod tests {
         let o = Options::parse_from(["volwarp-client", "--headless", "--out", "x", "--renderer", "splat"]);
         assert_eq!(o.validate(), Ok(()));
     }
+
+    #[test]
+    fn the_layered_renderers_ask_for_layers() {
+        let k = volwarp_core::segments::DEFAULT_LAYERS as u8;
+        for (renderer, want) in [("splat-layers", k), ("splat-layers-gpu", k), ("splat", 1)] {
+            let o = Options::parse_from(["volwarp-client", "--renderer", renderer]);
+            assert_eq!(o.layers(), want, "{renderer}");
+        }
+        let o = Options::parse_from(["volwarp-client", "--renderer", "splat-layers-gpu", "--layers", "2"]);
+        assert_eq!(o.layers(), 2);
+    }
 }

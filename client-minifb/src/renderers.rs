@@ -192,4 +192,31 @@ mod tests {
         }
         assert!(r.select_key(RendererKind::ALL.len() + 1).is_err());
     }
+
+    /// The GPU layered splatter opens by name where there is an adapter (lavapipe in CI) and
+    /// draws the CPU's layered image; without one (or without the `gpu` feature) creating it
+    /// is an error that says why, not a panic.
+    #[test]
+    fn the_gpu_layered_splatter_is_created_by_kind() {
+        let frame = depth_image_frame(40, 1.0, 3);
+        let scene = volwarp_cpu_tracer::route::unbuilt_scene(&frame);
+        let cam = frame.header.camera.orbit(6.0, 2.0);
+        match create(RendererKind::SplatLayersGpu, 1) {
+            Ok(mut gpu) => {
+                assert_eq!(gpu.name(), "splat-layers-gpu");
+                assert!(gpu.set_adaptive_radius(true));
+                let mut cpu = create(RendererKind::SplatLayers, 1).unwrap();
+                cpu.set_adaptive_radius(true);
+                let (mut a, mut b) = (Image::new(1, 1), Image::new(1, 1));
+                cpu.render(&scene, &cam, &mut a);
+                gpu.render(&scene, &cam, &mut b);
+                assert!(a.diff(&b).unwrap().meets_target());
+                assert!(a.pixels.iter().any(|&p| p != volwarp_core::BACKGROUND));
+            }
+            Err(e) => {
+                assert!(!cfg!(feature = "gpu") || e.contains("adapter"), "{e}");
+                eprintln!("splat-layers-gpu not opened: {e}");
+            }
+        }
+    }
 }
