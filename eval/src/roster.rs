@@ -84,11 +84,16 @@ pub const FILL_VARIANTS: [(&str, FillOptions); 2] = [
     ("spheres-pp3", FillOptions { stale: false, enclosed_only: true, pull_push_levels: 3 }),
 ];
 
-/// A GPU renderer of the registry (`spheres-gpu`, `splat-gpu`), if an adapter opens.
+/// A GPU renderer of the registry (`spheres-gpu`, `splat-gpu`, `splat-layers-gpu`), if an
+/// adapter opens.
 #[cfg(feature = "gpu")]
 fn gpu_entry(kind: RendererKind) -> Option<Entry> {
     let made = match kind {
         RendererKind::SplatGpu => volwarp_gpu_tracer::GpuSplat::new().map(|g| {
+            log::info!("{kind} on {}", g.context().describe());
+            Box::new(g) as Box<dyn Renderer>
+        }),
+        RendererKind::SplatLayersGpu => volwarp_gpu_tracer::GpuLayerSplat::new().map(|g| {
             log::info!("{kind} on {}", g.context().describe());
             Box::new(g) as Box<dyn Renderer>
         }),
