@@ -14,7 +14,7 @@ use std::time::Instant;
 use volwarp_core::renderer::{Image, Renderer};
 use volwarp_core::wire::{self, Frame, Limits, Message};
 use volwarp_core::Scene;
-use volwarp_cpu_tracer::{route, AutoSpheres, PacketTracer, SphereSplat, TileSplat};
+use volwarp_cpu_tracer::{route, AutoSpheres, DirectSplat, PacketTracer, SphereSplat, TileSplat};
 
 #[path = "../benches/support/frames.rs"]
 mod frames;
@@ -68,22 +68,36 @@ fn main() {
         };
         let dolly: f32 = args.get(6).and_then(|s| s.parse().ok()).unwrap_or(1.0);
         let f = frame(model, &dir).expect("the MRI frame");
-        let scene = Scene::build(&f);
+        // `[7]` = `unbuilt`: the frame's samples in arrival order (the server's scanline order),
+        // as a client draws them with `spheres`; default the built (Morton-ordered) scene.
+        let scene = if args.get(7).map(String::as_str) == Some("unbuilt") {
+            route::unbuilt_scene(&f)
+        } else {
+            Scene::build(&f)
+        };
         let cam = f.header.camera.orbit(10.0, 0.0).dolly(dolly).with_viewport(1024, 1024);
         // `splat-tiles-nocull`: the tiled splatter without occlusion culling.
         let mut tiles = (what.starts_with("splat-tiles"))
             .then(|| TileSplat::new(threads).with_culling(what != "splat-tiles-nocull"));
-        let mut other = match &tiles {
-            Some(_) => None,
-            None => {
+        // `splat-direct`: the splatter in the samples' order (`splat-direct-one`, `-two`: one or
+        // two 4×2 windows for small rectangles instead of the per-frame choice).
+        let mut direct = (what.starts_with("splat-direct")).then(|| match what.as_str() {
+            "splat-direct-one" => DirectSplat::new(threads).with_windows(false),
+            "splat-direct-two" => DirectSplat::new(threads).with_windows(true),
+            _ => DirectSplat::new(threads),
+        });
+        let mut other = match (&tiles, &direct) {
+            (Some(_), _) | (_, Some(_)) => None,
+            (None, None) => {
                 let kind = volwarp_core::RendererKind::from_name(what).expect("a renderer name");
                 Some(volwarp_cpu_tracer::create(kind, threads).expect("a CPU renderer"))
             }
         };
-        let r: &mut dyn Renderer = match (&mut tiles, &mut other) {
-            (Some(t), _) => t,
-            (None, Some(o)) => o.as_mut(),
-            (None, None) => return,
+        let r: &mut dyn Renderer = match (&mut tiles, &mut direct, &mut other) {
+            (Some(t), _, _) => t,
+            (_, Some(d), _) => d,
+            (_, _, Some(o)) => o.as_mut(),
+            _ => return,
         };
         let res: u32 = args.get(4).and_then(|s| s.parse().ok()).unwrap_or(1024);
         let cam = cam.with_viewport(res, res);
@@ -97,6 +111,14 @@ fn main() {
             t.elapsed().as_secs_f64() * 1e3 / 30.0,
             (cpu_ns().unwrap_or(0) - c) as f64 / 1e6 / 30.0
         );
+        if let Some(d) = &direct {
+            println!(
+                "bands {:?}, spheres handed over {}, two windows {}",
+                d.band_rows(),
+                d.handed_over(),
+                d.last_two_windows()
+            );
+        }
         if let Some(t) = &tiles {
             let (pairs, culled) = t.culled();
             println!(

@@ -166,6 +166,10 @@ pub(crate) trait Lanes:
     fn new_u(a: [u32; 8]) -> Self::U;
     /// The lanes, lane 0 first.
     fn to_array(self) -> [f32; 8];
+    /// Lane `l` of the result is lane `idx[l] & 7` of `self` (`vpermps`).
+    fn permute(self, idx: Self::U) -> Self;
+    /// Lane `l` of the result is lane `idx[l] & 7` of `a` (`vpermd`).
+    fn permute_u(a: Self::U, idx: Self::U) -> Self::U;
 }
 
 /// The portable lanes: `wide`'s, whatever it was compiled for.
@@ -271,6 +275,16 @@ impl Lanes for f32x8 {
     #[inline(always)]
     fn to_array(self) -> [f32; 8] {
         f32x8::to_array(self)
+    }
+    #[inline(always)]
+    fn permute(self, idx: u32x8) -> Self {
+        let (a, i) = (f32x8::to_array(self), idx.to_array());
+        f32x8::new(core::array::from_fn(|l| a[(i[l] & 7) as usize]))
+    }
+    #[inline(always)]
+    fn permute_u(a: u32x8, idx: u32x8) -> u32x8 {
+        let (a, i) = (a.to_array(), idx.to_array());
+        u32x8::new(core::array::from_fn(|l| a[(i[l] & 7) as usize]))
     }
 }
 
@@ -455,6 +469,15 @@ mod avx2 {
             unsafe { _mm256_storeu_ps(a.as_mut_ptr(), self.0) };
             a
         }
+        #[inline(always)]
+        fn permute(self, idx: __m256i) -> Self {
+            // `vpermps` reads the low three bits of each index.
+            Avx2(unsafe { _mm256_permutevar8x32_ps(self.0, idx) })
+        }
+        #[inline(always)]
+        fn permute_u(a: __m256i, idx: __m256i) -> __m256i {
+            unsafe { _mm256_permutevar8x32_epi32(a, idx) }
+        }
     }
 
     #[cfg(test)]
@@ -537,6 +560,14 @@ mod avx2 {
                     assert_eq!(Avx2::u_to_array(m.select_u(u, v)), wm.select_u(wu, wv).to_array());
                 }
                 assert_eq!(Avx2::u_to_array(u), wu.to_array());
+            }
+            for k in 0..8u32 {
+                let idx = core::array::from_fn(|l| (l as u32 * 3 + k) ^ (k << 3));
+                let (i, wi) = (Avx2::new_u(idx), <f32x8 as Lanes>::new_u(idx));
+                let x = <Avx2 as Lanes>::new(core::array::from_fn(|l| l as f32 - 2.5));
+                let w = f32x8::new(core::array::from_fn(|l| l as f32 - 2.5));
+                assert_eq!(bits(x.permute(i)), wbits(Lanes::permute(w, wi)), "permute {k}");
+                assert_eq!(Avx2::u_to_array(Avx2::permute_u(v, i)), <f32x8 as Lanes>::permute_u(wv, wi).to_array());
             }
         }
 

@@ -42,6 +42,7 @@ pub mod sphere_splat;
 pub mod stale_image;
 pub mod synthetic;
 pub mod threads;
+pub mod direct_splat;
 pub mod tile_splat;
 
 mod depth_buffer;
@@ -66,6 +67,7 @@ pub use scalar_tracer::ScalarTracer;
 pub use sphere_splat::SphereSplat;
 pub use stale_image::StaleImage;
 pub use threads::Threads;
+pub use direct_splat::DirectSplat;
 pub use tile_splat::TileSplat;
 
 use volwarp_core::renderer::Renderer;

@@ -75,17 +75,17 @@ const PLANE: usize = STRIDE * (TILE + 1);
 
 /// A sphere's inclusive pixel rectangle; `x0 > x1` when it covers no pixel.
 #[derive(Clone, Copy, Debug, Default)]
-struct Rect {
-    x0: u16,
-    y0: u16,
-    x1: u16,
-    y1: u16,
+pub(crate) struct Rect {
+    pub(crate) x0: u16,
+    pub(crate) y0: u16,
+    pub(crate) x1: u16,
+    pub(crate) y1: u16,
 }
 
-const NO_RECT: Rect = Rect { x0: 1, y0: 1, x1: 0, y1: 0 };
+pub(crate) const NO_RECT: Rect = Rect { x0: 1, y0: 1, x1: 0, y1: 0 };
 
 impl Rect {
-    fn is_empty(&self) -> bool {
+    pub(crate) fn is_empty(&self) -> bool {
         self.x0 > self.x1
     }
 
@@ -374,7 +374,7 @@ fn lane_abs<L: Lanes>(a: L) -> L {
 }
 
 /// [`View`]'s constants in f32, for the bounds of eight spheres at once.
-struct ViewF32 {
+pub(crate) struct ViewF32 {
     eye: [f32; 3],
     u: [f32; 3],
     v: [f32; 3],
@@ -386,7 +386,7 @@ struct ViewF32 {
 }
 
 impl ViewF32 {
-    fn new(v: &View) -> ViewF32 {
+    pub(crate) fn new(v: &View) -> ViewF32 {
         let f = |a: [f64; 3]| [a[0] as f32, a[1] as f32, a[2] as f32];
         ViewF32 {
             eye: [v.eye.x, v.eye.y, v.eye.z],
@@ -408,7 +408,7 @@ impl ViewF32 {
 /// least two (widened) radii in front of the eye plane; the others (near, behind, NaN) take
 /// [`tight_bound`] in f64.
 #[inline(always)]
-fn bound_group<L: Lanes>(
+pub(crate) fn bound_group<L: Lanes>(
     view: &View,
     vf: &ViewF32,
     deq: &Dequantizer,
@@ -761,7 +761,7 @@ fn splat_sphere<L: Lanes>(
 /// least `√(|oc|² − r'²) − r'` and the f32 ones less at most ≈ 10⁻⁶·|oc|; the result keeps a
 /// margin of 10⁻⁴·|oc|.
 #[inline(always)]
-fn near_distance(o: &[f32; 3], c: Vec3, r: f32) -> f32 {
+pub(crate) fn near_distance(o: &[f32; 3], c: Vec3, r: f32) -> f32 {
     let (x, y, z) = (c.x - o[0], c.y - o[1], c.z - o[2]);
     let d2 = x * x + y * y + z * z;
     let d = d2.sqrt();
@@ -838,7 +838,7 @@ fn keep_ties(ds: &mut [f32], is: &mut [u32], bits: u32, t: &[f32; 8], i: u32, is
 
 /// How equal distances are broken.
 #[derive(Clone, Copy)]
-enum Ties<'a> {
+pub(crate) enum Ties<'a> {
     /// By sample index (core's tie rule on the scene as given).
     Index,
     /// The samples (of an unbuilt scene, in frame order) as the LBVH build would order them:
@@ -850,7 +850,7 @@ enum Ties<'a> {
 /// the stable sort of the build).
 #[inline(never)]
 #[cold]
-fn sorted_before(samples: &[u64], a: u32, b: u32) -> bool {
+pub(crate) fn sorted_before(samples: &[u64], a: u32, b: u32) -> bool {
     let code = |i: u32| samples.get(i as usize).map_or(u64::MAX, |&s| code_of_sample(s));
     (code(a), a) < (code(b), b)
 }
