@@ -37,6 +37,19 @@ fn frame(model: volwarp_server::RadiusModel, dir: &str) -> Option<Frame> {
     Some(f)
 }
 
+/// [`DirectSplat`] behind the `Renderer` interface for the timing loop (it is not in the
+/// registry; the kind reported is never read here).
+struct Direct<'a>(&'a mut DirectSplat);
+
+impl Renderer for Direct<'_> {
+    fn kind(&self) -> volwarp_core::RendererKind {
+        volwarp_core::RendererKind::SplatTiles
+    }
+    fn render(&mut self, scene: &Scene, camera: &volwarp_core::Camera, out: &mut Image) {
+        self.0.render(scene, camera, out)
+    }
+}
+
 fn main() {
     let args: Vec<String> = std::env::args().collect();
     let threads: usize = args.get(1).and_then(|s| s.parse().ok()).unwrap_or(1);
@@ -93,7 +106,8 @@ fn main() {
                 Some(volwarp_cpu_tracer::create(kind, threads).expect("a CPU renderer"))
             }
         };
-        let r: &mut dyn Renderer = match (&mut tiles, &mut direct, &mut other) {
+        let mut direct_adapter = direct.as_mut().map(Direct);
+        let r: &mut dyn Renderer = match (&mut tiles, &mut direct_adapter, &mut other) {
             (Some(t), _, _) => t,
             (_, Some(d), _) => d,
             (_, _, Some(o)) => o.as_mut(),

@@ -1,33 +1,39 @@
-//! Exact sphere splatting in the samples' own order, without binning (renderer
-//! [`DirectSplat`], name `splat-direct`; the splatting route of the default `spheres`): the
+//! Exact sphere splatting in the samples' own order, without binning ([`DirectSplat`]): the
 //! same image as first-hit tracing — core's ray–sphere test for every covered pixel's own
 //! primary ray and core's tie rule — like [`crate::TileSplat`], but with no tiles, no bins and
-//! no second read of the spheres.
+//! no second read of the spheres. **Not the default and not in the renderer registry**: on the
+//! MRI benchmark frame it is measured 1.2–1.4× slower than the tiled splatter at 1024² and
+//! level with it at 512² (`docs/perf.md`, issue 18, sixth session); it stays for measurements
+//! (`examples/splat_timing.rs` names it `splat-direct`, the bench times it) and as the tested
+//! record of that route.
 //!
 //! The server compacts a frame's samples in its camera's scanline order, and the LBVH orders a
-//! built scene in Morton order: either way consecutive spheres land next to each other on the
-//! new image, so whole-image planes are touched a few rows at a time. The spheres are taken in
-//! the scene's order:
+//! built scene in Morton order: either way consecutive spheres land near each other on the new
+//! image, so a whole-image key plane is touched a band of rows at a time (at 1024² from the
+//! benchmark frame about 40 rows: the depth variation of one source row). The spheres are taken
+//! in the scene's order:
 //!
 //! 1. **Bound**, eight at a time in f32 lanes: the pixels whose *centres* lie between the
 //!    tangents from the eye (the tiled splatter's bound, [`crate::tile_splat`]). A sphere whose
 //!    rectangle holds no pixel centre costs only this.
 //! 2. **Pack**: every pixel of the rectangle, as 4×2 windows, goes into a stream of
-//!    (sphere, pixel) pairs: the window's eight unit ray directions (read from per-frame
-//!    direction planes, `RayBasis::dir`'s operations) are left-packed by the mask of pixels
+//!    (sphere, pixel) pairs: the window's pixel centres are left-packed by the mask of pixels
 //!    inside the rectangle (one `vpermps` with a 256-entry table), and the sphere's centre
 //!    relative to the eye and squared radius are written beside them. The common case, a
-//!    rectangle of at most 4×2 pixels (or 4×4, [`two windows`](Ctx::two) when most spheres are
-//!    three or four rows tall: 1024² from a 1024² frame), is one or two windows with no branch
-//!    on its size.
-//! 3. **Test**, eight pairs at a time, every lane a useful pixel: the packet tracer's ray–sphere
-//!    operations in lanes (the same `t` bit for bit), then per lane a 64-bit key
-//!    `(t bits << 32) | id` kept if smaller than the pixel's (core's tie rule: equal `t`, the
-//!    smaller index). An unbuilt scene's ties go to a cold path with the order the LBVH build
-//!    would give, as in [`crate::TileSplat`].
+//!    rectangle of at most 4×2 pixels (or 4×4 when more than a quarter of a subsample's small
+//!    rectangles are three or four rows tall, as at 1024² from a 1024² frame), is one or two
+//!    windows with no branch on its size.
+//! 3. **Test**, eight pairs at a time, every lane a useful pixel: the lanes' unit ray
+//!    directions (`RayBasis::dir`'s operations) and the packet tracer's ray–sphere operations
+//!    (the same `t` bit for bit), then per hit lane a 64-bit key `(t bits << 32) | id` kept if
+//!    smaller than the pixel's (core's tie rule: equal `t`, the smaller index). An unbuilt
+//!    scene's ties go to a cold path with the order the LBVH build would give, as in
+//!    [`crate::TileSplat`].
 //!
 //! Packing makes the lanes full: at 512² from the benchmark frame a sphere covers about two
-//! pixel centres, and a 4×2 block per sphere would test eight lanes for two.
+//! pixel centres, and a 4×2 block per sphere tests eight lanes for two. (Per-frame direction
+//! planes read by the windows, and 4×2 blocks tested in place against whole-image depth and id
+//! planes, were measured first and were slower: the planes' band of rows does not stay in L2.)
 //!
 //! **Threads, no merge.** The image is cut into one band of rows per thread, each holding about
 //! as many spheres (quantiles of the rectangles' centre rows of a subsample). Thread `k` takes
@@ -37,12 +43,12 @@
 //! Every (sphere, pixel) pair is tested once, by the pixel's owner, and the kept key is a
 //! minimum, so the image does not depend on the thread count or on the order (tested). In the
 //! server's scanline order the shares and the bands nearly coincide and few spheres are handed
-//! over; in Morton order about half are (the second pass then draws half), still with no
-//! whole-image merge.
+//! over (about 1 %); in Morton order about as many as the share holds (the second pass then
+//! draws them), still with no whole-image merge.
 //!
-//! Memory: 20 bytes per pixel (keys and direction planes, padded by eight pixels a row and four
-//! rows a band), a stream of a few hundred pairs per thread and 12 bytes per handed-over sphere.
-//! No occlusion culling: spheres large on screen are the tracer's (the cost model's) case.
+//! Memory: 8 bytes per pixel (the keys; rows are cleared as the spheres first reach them), a stream of a few hundred pairs per
+//! thread and 12 bytes per handed-over sphere. No occlusion culling: spheres large on screen
+//! are the tracer's (the cost model's) case.
 
 use crate::depth_buffer::EMPTY;
 use crate::lanes::{self, ray_dirs, Lanes};
@@ -51,20 +57,16 @@ use crate::threads::Threads;
 use crate::tile_splat::{bound_group, sorted_before, tight_bound, Rect, Ties, ViewF32, NO_RECT};
 use crate::{begin_frame_unbuilt_ok as begin_frame, shade, NO_HIT};
 use rayon::prelude::*;
-use volwarp_core::renderer::{Image, Renderer};
+use volwarp_core::renderer::Image;
+#[cfg(doc)]
+use volwarp_core::renderer::Renderer;
 use volwarp_core::sample::Dequantizer;
+#[cfg(doc)]
 use volwarp_core::RendererKind;
 use volwarp_core::{Camera, RayBasis, Scene, BACKGROUND};
 
 /// Spheres bounded by one call of the bound kernel.
 const CHUNK: usize = 32;
-
-/// Floats of padding after each row of a plane (an 8-lane load may start at any pixel).
-const PAD: usize = 8;
-
-/// Rows of padding below a band's planes (the second 4×2 window of a rectangle from its last
-/// row reads three rows further).
-const PAD_ROWS: usize = 4;
 
 /// Spheres of the subsample that places the bands and picks one or two windows.
 const BAND_SAMPLE: usize = 4096;
@@ -86,8 +88,8 @@ pub struct DirectSplat {
     last_two: bool,
 }
 
-/// One thread's rows of the image, its planes (row stride `width + PAD`, [`PAD_ROWS`] rows of
-/// padding below) and its stream of pairs.
+/// One thread's rows of the image, its key plane (row stride: the image width) and its stream
+/// of pairs.
 #[derive(Debug)]
 struct Band {
     /// First image row.
@@ -109,7 +111,7 @@ impl Default for Band {
 
 impl Band {
     fn plane(&self, stride: usize) -> usize {
-        (self.rows + PAD_ROWS) * stride + PAD
+        self.rows * stride
     }
 }
 
@@ -218,7 +220,7 @@ impl DirectSplat {
             h.resize_with(nb, Vec::new);
             h.iter_mut().for_each(Vec::clear);
         }
-        let ctx = Ctx { view: &view, vf: &vf, scene, stride: w + PAD, two, bands: &bands };
+        let ctx = Ctx { view: &view, vf: &vf, scene, stride: w, two, bands: &bands };
         let n = scene.samples.len();
         let share = |k: usize| (n * k / nb, n * (k + 1) / nb);
         let colors = &scene.colors[..];
@@ -361,8 +363,8 @@ impl<'a, L: Lanes> Kernel<'a, L> {
     }
 }
 
-/// Sizes `band`'s planes for the frame; its rows are cleared and their directions computed
-/// when first needed ([`ensure_rows`]).
+/// Sizes `band`'s key plane for the frame; its rows are cleared when first needed
+/// ([`ensure_rows`]).
 fn prepare(ctx: &Ctx, band: &mut Band) {
     let plane = band.plane(ctx.stride);
     band.keys.resize(plane, EMPTY);
@@ -373,20 +375,19 @@ fn prepare(ctx: &Ctx, band: &mut Band) {
 /// Rows made ready at a time by [`ensure_rows`].
 const READY_STEP: usize = 8;
 
-/// Makes `band`'s rows up to `y` (band rows, inclusive) ready: their keys cleared and their
-/// ray directions computed (exactly `RayBasis::dir`: pixel centres `x + 0.5`, exact in f32).
-/// Done row by row as the spheres first reach them, so in the server's scanline order a row's
-/// planes are still in cache when its spheres are drawn.
+/// Makes `band`'s rows up to `y` (band rows, inclusive) ready: their keys cleared. Done a few
+/// rows at a time as the spheres first reach them, so in the server's scanline order a row's
+/// keys are still in cache when its spheres are drawn.
 #[inline(always)]
-fn ensure_rows<L: Lanes>(ctx: &Ctx, band: &mut Band, y: usize) {
+fn ensure_rows(ctx: &Ctx, band: &mut Band, y: usize) {
     if y >= band.ready && band.ready < band.rows {
-        make_ready::<L>(ctx, band, (y + READY_STEP).min(band.rows));
+        make_ready(ctx, band, (y + READY_STEP).min(band.rows));
     }
 }
 
 /// [`ensure_rows`]'s work: rows `band.ready..end`.
 #[inline(never)]
-fn make_ready<L: Lanes>(ctx: &Ctx, band: &mut Band, end: usize) {
+fn make_ready(ctx: &Ctx, band: &mut Band, end: usize) {
     let stride = ctx.stride;
     if let Some(k) = band.keys.get_mut(band.ready * stride..end * stride) {
         k.fill(EMPTY);
@@ -424,7 +425,7 @@ fn first_pass_lanes<L: Lanes>(
             // `w = h = 0`) of one or two 4×2 windows inside this band.
             let (w, h) = (r.x1 as i32 - r.x0 as i32 + 1, ry1 as i32 - ry0 as i32 + 1);
             if ry0 >= by0 && ry1 <= by1 && w <= 4 && h <= hmax {
-                ensure_rows::<L>(ctx, band, ry0 - by0 + hmax as usize);
+                ensure_rows(ctx, band, ry0 - by0 + hmax as usize);
                 let sph = kern.sphere(id);
                 let (wb, x0) = (WBITS[w.clamp(0, 4) as usize], r.x0 as usize);
                 let at = (ry0 - by0) * stride + x0;
@@ -439,7 +440,7 @@ fn first_pass_lanes<L: Lanes>(
                 continue;
             }
             if ry1 >= by0 && ry0 <= by1 {
-                ensure_rows::<L>(ctx, band, ry1.min(by1) - by0);
+                ensure_rows(ctx, band, ry1.min(by1) - by0);
                 windows::<L>(&kern, band, r, id);
             }
             if ry0 < by0 || ry1 > by1 {
@@ -448,7 +449,7 @@ fn first_pass_lanes<L: Lanes>(
         }
         i += n;
     }
-    ensure_rows::<L>(ctx, band, band.rows - 1);
+    ensure_rows(ctx, band, band.rows - 1);
     flush::<L>(&kern, band, true);
 }
 
@@ -533,8 +534,8 @@ fn emit<L: Lanes>(k: &Kernel<L>, band: &mut Band, at: usize, px: usize, py: usiz
     let n = st.n;
     store(&mut st.f[0], n, (L::splat(px as f32) + k.lane4c).permute(perm).to_array());
     store(&mut st.f[1], n, (L::splat(py as f32) + k.row2c).permute(perm).to_array());
-    for a in 0..4 {
-        store(&mut st.f[2 + a], n, [sph[a]; 8]);
+    for (plane, &v) in st.f[2..].iter_mut().zip(sph) {
+        store(plane, n, [v; 8]);
     }
     let pix = L::permute_u(L::new_u(core::array::from_fn(|l| at as u32 + k.offsets[l])), perm);
     store(&mut st.pix, n, L::u_to_array(pix));
@@ -558,7 +559,8 @@ fn flush<L: Lanes>(k: &Kernel<L>, band: &mut Band, all: bool) {
     let zero = L::splat(0.0);
     let mut g = 0;
     while g < full {
-        let ld = |a: usize| -> [f32; 8] { st.f[a].get(g..).and_then(|r| r.first_chunk::<8>()).copied().unwrap_or([0.0; 8]) };
+        let ld =
+            |a: usize| -> [f32; 8] { st.f[a].get(g..).and_then(|r| r.first_chunk::<8>()).copied().unwrap_or([0.0; 8]) };
         // `RayBasis::dir` of the lanes' pixel centres.
         let [dx, dy, dz] = ray_dirs(k.basis, L::new(ld(0)), L::new(ld(1)));
         let (ox, oy, oz, r2) = (L::new(ld(2)), L::new(ld(3)), L::new(ld(4)), L::new(ld(5)));
@@ -619,14 +621,19 @@ fn sorted_tie(samples: &[u64], a: u64, b: u64) -> u64 {
     }
 }
 
-impl Renderer for DirectSplat {
-    fn kind(&self) -> RendererKind {
-        RendererKind::SplatTiles
-    }
-
-    fn render(&mut self, scene: &Scene, camera: &Camera, out: &mut Image) {
+impl DirectSplat {
+    /// Draws `scene` from `camera` into `out` (resized, background where nothing is hit), as a
+    /// [`Renderer`] would. It is not one of the registry's renderers (it is not faster than the
+    /// tiled splatter on the benchmark frame: `docs/perf.md`, issue 18, sixth session), so it
+    /// has no [`RendererKind`] and does not implement the trait.
+    pub fn render(&mut self, scene: &Scene, camera: &Camera, out: &mut Image) {
         if begin_frame(scene, camera, out) {
-            self.draw(scene, camera, &mut out.pixels, |colors, id| if id == NO_HIT { BACKGROUND } else { shade(colors, id) });
+            self.draw(
+                scene,
+                camera,
+                &mut out.pixels,
+                |colors, id| if id == NO_HIT { BACKGROUND } else { shade(colors, id) },
+            );
         }
     }
 }

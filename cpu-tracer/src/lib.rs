@@ -32,6 +32,7 @@
 #![allow(clippy::neg_cmp_op_on_partial_ord)]
 
 pub mod build;
+pub mod direct_splat;
 pub mod hole_fill;
 pub mod layer_splat;
 pub mod packet_tracer;
@@ -42,7 +43,6 @@ pub mod sphere_splat;
 pub mod stale_image;
 pub mod synthetic;
 pub mod threads;
-pub mod direct_splat;
 pub mod tile_splat;
 
 mod depth_buffer;
@@ -58,6 +58,7 @@ pub use build::sort as parallel_sort;
 
 pub use build::{build_scene, BuildTimes, Method, ParallelBuilder};
 
+pub use direct_splat::DirectSplat;
 pub use hole_fill::{FillOptions, HoleFill, SampleIds};
 pub use layer_splat::LayerSplat;
 pub use packet_tracer::PacketTracer;
@@ -67,7 +68,6 @@ pub use scalar_tracer::ScalarTracer;
 pub use sphere_splat::SphereSplat;
 pub use stale_image::StaleImage;
 pub use threads::Threads;
-pub use direct_splat::DirectSplat;
 pub use tile_splat::TileSplat;
 
 use volwarp_core::renderer::Renderer;

@@ -9,7 +9,7 @@
 mod frames;
 
 use volwarp_core::morton::code_of_sample;
-use volwarp_core::renderer::{Image, Renderer};
+use volwarp_core::renderer::Image;
 use volwarp_core::wire::Frame;
 use volwarp_core::{Camera, Scene, Vec3};
 use volwarp_cpu_tracer::route::unbuilt_scene;
