@@ -8,6 +8,7 @@
 //! |---|---|---|
 //! | [`route`] | the default: tiled splatting or packet tracing, chosen per frame by a measured cost model | `spheres` |
 //! | [`tile_splat`] | exact object-order sphere splatting in cache-sized screen tiles (no BVH) | `splat-tiles` |
+//! | [`direct_splat`] | the same exact splatting in the samples' own order, no binning (measured slower; not in the registry) | — |
 //! | [`packet_tracer`] | first-hit sphere tracing with 8-ray SIMD packets (`wide::f32x8`) | `spheres-cpu` |
 //! | [`scalar_tracer`] | core's scalar reference traversal per pixel | `spheres-scalar` |
 //! | [`point_splat`] | ZAL12 2.5D points: fixed N×N squares with a depth test | `points1`, `points2`, `points3` |
