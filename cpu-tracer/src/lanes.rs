@@ -13,6 +13,7 @@
 //! Masks are lanes with all bits set (true) or clear (false), as `wide`'s comparisons give.
 
 use core::ops::{Add, BitAnd, BitOr, Div, Mul, Sub};
+use volwarp_core::sample::Dequantizer;
 use volwarp_core::{RayBasis, Vec3};
 use wide::{f32x8, u32x8};
 
@@ -103,6 +104,18 @@ pub(crate) fn sphere_hits<L: Lanes>(o: &[f32; 3], d: &[L; 3], c: Vec3, r: f32, a
     Some((t, ok & (front | t1.simd_gt(zero))))
 }
 
+/// The centres less `eye` and the radii of up to eight packed samples (lanes past `s` are
+/// zero): `Dequantizer::center` and `radius` and one subtraction per axis, in scalar code.
+#[inline(always)]
+pub(crate) fn decode_scalar<L: Lanes>(deq: &Dequantizer, eye: [f32; 3], s: &[u64]) -> [L; 4] {
+    let (mut x, mut y, mut z, mut r) = ([0f32; 8], [0f32; 8], [0f32; 8], [0f32; 8]);
+    for (l, &s) in s.iter().take(8).enumerate() {
+        let c = deq.center(s);
+        (x[l], y[l], z[l], r[l]) = (c.x - eye[0], c.y - eye[1], c.z - eye[2], deq.radius(s));
+    }
+    [L::new(x), L::new(y), L::new(z), L::new(r)]
+}
+
 /// Eight `f32` lanes (also used as masks) and their companion eight `u32` lanes.
 pub(crate) trait Lanes:
     Copy
@@ -170,6 +183,11 @@ pub(crate) trait Lanes:
     fn permute(self, idx: Self::U) -> Self;
     /// Lane `l` of the result is lane `idx[l] & 7` of `a` (`vpermd`).
     fn permute_u(a: Self::U, idx: Self::U) -> Self::U;
+    /// [`decode_scalar`] of eight samples (the same values; AVX2 unpacks the eight in lanes).
+    #[inline(always)]
+    fn decode8(deq: &Dequantizer, eye: [f32; 3], s: &[u64; 8]) -> [Self; 4] {
+        decode_scalar(deq, eye, s)
+    }
 }
 
 /// The portable lanes: `wide`'s, whatever it was compiled for.
@@ -296,6 +314,7 @@ mod avx2 {
     use super::Lanes;
     use core::arch::x86_64::*;
     use core::ops::{Add, BitAnd, BitOr, Div, Mul, Sub};
+    use volwarp_core::sample::{Dequantizer, POS_BITS, RADIUS_BITS};
 
     /// Eight `f32` lanes in one AVX register, for the kernel compiled with AVX2.
     ///
@@ -478,11 +497,47 @@ mod avx2 {
         fn permute_u(a: __m256i, idx: __m256i) -> __m256i {
             unsafe { _mm256_permutevar8x32_epi32(a, idx) }
         }
+        /// The sample layout (`volwarp_core::sample`): x in bits 0–17, y in 18–35, z in
+        /// 36–53, the radius code in 54–63; split into the low and high 32 bits of the eight
+        /// samples, then the fields by 32-bit shifts, then `Dequantizer::center`'s and
+        /// `radius`'s f32 operations in the same order (`min + q·step`, `code·unit`).
+        #[inline(always)]
+        fn decode8(deq: &Dequantizer, eye: [f32; 3], s: &[u64; 8]) -> [Self; 4] {
+            const _: () = assert!(POS_BITS == 18 && RADIUS_BITS == 10);
+            // `s` is 64 readable bytes; the loads need no alignment.
+            unsafe {
+                let a = _mm256_loadu_si256(s.as_ptr().cast());
+                let b = _mm256_loadu_si256(s[4..].as_ptr().cast());
+                let idx = _mm256_setr_epi32(0, 2, 4, 6, 1, 3, 5, 7);
+                let (pa, pb) = (_mm256_permutevar8x32_epi32(a, idx), _mm256_permutevar8x32_epi32(b, idx));
+                let lo = _mm256_permute2x128_si256::<0x20>(pa, pb);
+                let hi = _mm256_permute2x128_si256::<0x31>(pa, pb);
+                let m = _mm256_set1_epi32(0x3ffff);
+                let x = _mm256_and_si256(lo, m);
+                let y = _mm256_or_si256(
+                    _mm256_srli_epi32::<18>(lo),
+                    _mm256_slli_epi32::<14>(_mm256_and_si256(hi, _mm256_set1_epi32(0xf))),
+                );
+                let z = _mm256_and_si256(_mm256_srli_epi32::<4>(hi), m);
+                let r = _mm256_srli_epi32::<22>(hi);
+                let f = |v: __m256i| Avx2(_mm256_cvtepi32_ps(v));
+                let axis = |q: __m256i, min: f32, step: f32, e: f32| {
+                    (Avx2::splat(min) + f(q) * Avx2::splat(step)) - Avx2::splat(e)
+                };
+                [
+                    axis(x, deq.min.x, deq.step.x, eye[0]),
+                    axis(y, deq.min.y, deq.step.y, eye[1]),
+                    axis(z, deq.min.z, deq.step.z, eye[2]),
+                    f(r) * Avx2::splat(deq.radius_unit),
+                ]
+            }
+        }
     }
 
     #[cfg(test)]
     mod tests {
-        use super::{Avx2, Lanes};
+        use super::{Avx2, Dequantizer, Lanes};
+        use crate::lanes::decode_scalar;
         use core::arch::x86_64::{__m256, __m256i};
         use wide::{f32x8, u32x8};
 
@@ -560,6 +615,33 @@ mod avx2 {
                     assert_eq!(Avx2::u_to_array(m.select_u(u, v)), wm.select_u(wu, wv).to_array());
                 }
                 assert_eq!(Avx2::u_to_array(u), wu.to_array());
+            }
+            // decode8: the lanes' unpacking against the scalar decode, every bit pattern class.
+            let deq = Dequantizer::new(
+                volwarp_core::sample::Bounds::new(
+                    volwarp_core::Vec3::new(-1.5, 0.25, 3.0),
+                    volwarp_core::Vec3::new(2.0, 7.0, 3.5),
+                ),
+                0.0123,
+            );
+            let mut x = 0x9e37_79b9_7f4a_7c15u64;
+            for round in 0..200 {
+                let s: [u64; 8] = core::array::from_fn(|l| {
+                    x ^= x << 13;
+                    x ^= x >> 7;
+                    x ^= x << 17;
+                    match (round + l) % 4 {
+                        0 => x,
+                        1 => u64::MAX,
+                        2 => 0,
+                        _ => x & 0x0000_000f_ffff_ffff,
+                    }
+                });
+                let eye = [0.5, -2.0, 10.0];
+                let (a, w) = (Avx2::decode8(&deq, eye, &s), decode_scalar::<f32x8>(&deq, eye, &s));
+                for (p, q) in a.iter().zip(&w) {
+                    assert_eq!(bits(*p), wbits(*q), "decode8 {s:x?}");
+                }
             }
             for k in 0..8u32 {
                 let idx = core::array::from_fn(|l| (l as u32 * 3 + k) ^ (k << 3));

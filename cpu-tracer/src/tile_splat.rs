@@ -417,12 +417,11 @@ pub(crate) fn bound_group<L: Lanes>(
 ) -> (Rect, bool) {
     let (mut u, mut any_large) = (NO_RECT, false);
     for (ss, rs) in samples.chunks(8).zip(rects.chunks_mut(8)) {
-        let (mut x, mut y, mut z, mut r) = ([0f32; 8], [0f32; 8], [0f32; 8], [0f32; 8]);
-        for (l, &s) in ss.iter().enumerate() {
-            let c = deq.center(s);
-            (x[l], y[l], z[l], r[l]) = (c.x - vf.eye[0], c.y - vf.eye[1], c.z - vf.eye[2], deq.radius(s));
-        }
-        let (rx, ry, rz, r) = (L::new(x), L::new(y), L::new(z), L::new(r));
+        // Eight at once in lanes where the CPU has them (`Lanes::decode8`: the same values).
+        let [rx, ry, rz, r] = match ss.first_chunk::<8>() {
+            Some(eight) => L::decode8(deq, vf.eye, eight),
+            None => lanes::decode_scalar(deq, vf.eye, ss),
+        };
         let cx = rx * L::splat(vf.u[0]) + ry * L::splat(vf.u[1]) + rz * L::splat(vf.u[2]);
         let cy = rx * L::splat(vf.v[0]) + ry * L::splat(vf.v[1]) + rz * L::splat(vf.v[2]);
         let cz = rx * L::splat(vf.w[0]) + ry * L::splat(vf.w[1]) + rz * L::splat(vf.w[2]);
