@@ -188,6 +188,18 @@ pub(crate) trait Lanes:
     fn decode8(deq: &Dequantizer, eye: [f32; 3], s: &[u64; 8]) -> [Self; 4] {
         decode_scalar(deq, eye, s)
     }
+    /// Per lane, `⌈lo⌉` at least 0 and `⌊hi⌋` at most `max`, as integers, for lanes with
+    /// `−1 ≤ lo < 2³¹` and `0 ≤ hi < 2³¹` (other lanes: unspecified values): the scalar
+    /// `ceil_clamped(lo)` (truncation, plus one where it fell below) and `(hi as u32).min(max)`.
+    #[inline(always)]
+    fn span_ints(lo: Self, hi: Self, max: u32) -> ([i32; 8], [i32; 8]) {
+        let (lo, hi) = (lo.to_array(), hi.to_array());
+        let c = lo.map(|a| {
+            let l = a as i32;
+            (if (l as f32) < a { l + 1 } else { l }).max(0)
+        });
+        (c, hi.map(|b| (b as u32).min(max) as i32))
+    }
 }
 
 /// The portable lanes: `wide`'s, whatever it was compiled for.
@@ -497,6 +509,22 @@ mod avx2 {
         fn permute_u(a: __m256i, idx: __m256i) -> __m256i {
             unsafe { _mm256_permutevar8x32_epi32(a, idx) }
         }
+        #[inline(always)]
+        fn span_ints(lo: Self, hi: Self, max: u32) -> ([i32; 8], [i32; 8]) {
+            // `vcvttps2dq` truncates as `as i32` does in range; the comparison and the
+            // integer max/min are the scalar ones per lane.
+            unsafe {
+                let t = _mm256_cvttps_epi32(lo.0);
+                let below = _mm256_castps_si256(_mm256_cmp_ps::<_CMP_LT_OQ>(_mm256_cvtepi32_ps(t), lo.0));
+                let c = _mm256_max_epi32(_mm256_sub_epi32(t, below), _mm256_setzero_si256());
+                let h = _mm256_min_epi32(_mm256_cvttps_epi32(hi.0), _mm256_set1_epi32(max as i32));
+                let (mut a, mut b) = ([0i32; 8], [0i32; 8]);
+                // `a`, `b` are 32 writable bytes each; the stores need no alignment.
+                _mm256_storeu_si256(a.as_mut_ptr().cast(), c);
+                _mm256_storeu_si256(b.as_mut_ptr().cast(), h);
+                (a, b)
+            }
+        }
         /// The sample layout (`volwarp_core::sample`): x in bits 0–17, y in 18–35, z in
         /// 36–53, the radius code in 54–63; split into the low and high 32 bits of the eight
         /// samples, then the fields by 32-bit shifts, then `Dequantizer::center`'s and
@@ -641,6 +669,26 @@ mod avx2 {
                 let (a, w) = (Avx2::decode8(&deq, eye, &s), decode_scalar::<f32x8>(&deq, eye, &s));
                 for (p, q) in a.iter().zip(&w) {
                     assert_eq!(bits(*p), wbits(*q), "decode8 {s:x?}");
+                }
+            }
+            // span_ints over the whole documented domain's edges and a sweep.
+            let los = [
+                -1.0f32, -0.999, -0.5, -0.0, 0.0, 1e-7, 0.5, 1.0, 1.0001, 2.5, 3.0, 1023.99, 8191.5, 8192.0,
+                16777215.0, 2e9,
+            ];
+            let his = [
+                0.0f32, 1e-7, 0.5, 0.999, 1.0, 2.0, 2.5, 7.99, 1023.0, 1023.99, 1024.0, 8191.9, 8192.0, 9000.5,
+                16777215.0, 2e9,
+            ];
+            let mut sweep: Vec<f32> = (0..2000).map(|i| i as f32 * 0.37 - 1.0).collect();
+            sweep.extend_from_slice(&los);
+            for c in sweep.chunks_exact(8) {
+                let lo: [f32; 8] = core::array::from_fn(|l| c[l]);
+                let hi: [f32; 8] = core::array::from_fn(|l| his[(l * 3 + c.len()) % his.len()].max(c[l].max(0.0)));
+                for max in [0u32, 1, 511, 1023, 8191] {
+                    let a = Avx2::span_ints(<Avx2 as Lanes>::new(lo), <Avx2 as Lanes>::new(hi), max);
+                    let w = <f32x8 as Lanes>::span_ints(f32x8::new(lo), f32x8::new(hi), max);
+                    assert_eq!(a, w, "span_ints {lo:?} {hi:?} {max}");
                 }
             }
             for k in 0..8u32 {

@@ -450,14 +450,15 @@ pub(crate) fn bound_group<L: Lanes>(
             & ay.simd_le(by)
             & by.simd_ge(zero)
             & ay.simd_lt(nh);
-        let (lx, hx) = (ax.fast_max(L::splat(-1.0)).to_array(), bx.fast_min(nw).to_array());
-        let (ly, hy) = (ay.fast_max(L::splat(-1.0)).to_array(), by.fast_min(nh).to_array());
+        // The integer spans in lanes (`Lanes::span_ints`: `ceil_clamped` and the truncating
+        // clamp, for the lanes of `ok`, whose values lie in its domain).
+        let (xs0, xs1) = L::span_ints(ax.fast_max(L::splat(-1.0)), bx.fast_min(nw), view.width - 1);
+        let (ys0, ys1) = L::span_ints(ay.fast_max(L::splat(-1.0)), by.fast_min(nh), view.height - 1);
         let (far, ok) = (far.to_bitmask(), ok.to_bitmask());
         for (l, (rect, &s)) in rs.iter_mut().zip(ss).enumerate() {
             let b = if ok & (1 << l) != 0 {
-                let (x0, x1) = (ceil_clamped(lx[l]), (hx[l] as u32).min(view.width - 1));
-                let (y0, y1) = (ceil_clamped(ly[l]), (hy[l] as u32).min(view.height - 1));
-                (x0 <= x1 && y0 <= y1).then_some((x0, x1, y0, y1))
+                let (x0, x1, y0, y1) = (xs0[l], xs1[l], ys0[l], ys1[l]);
+                (x0 <= x1 && y0 <= y1).then_some((x0 as u32, x1 as u32, y0 as u32, y1 as u32))
             } else if far & (1 << l) != 0 {
                 None
             } else {
@@ -511,13 +512,6 @@ fn centre_span(a: f64, b: f64, n: u32) -> Option<(u32, u32)> {
         return None;
     }
     Some((l as u32, h as u32))
-}
-
-/// `⌈a⌉`, at least 0, of `a ≥ −1` (truncation: no rounding instruction needed).
-#[inline(always)]
-fn ceil_clamped(a: f32) -> u32 {
-    let l = a as i32;
-    (if (l as f32) < a { l + 1 } else { l }).max(0) as u32
 }
 
 /// Whether `r` overlaps the tile at `(x0, y0)` of `w × h` pixels.
