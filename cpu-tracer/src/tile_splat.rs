@@ -5,7 +5,9 @@
 //!
 //! 1. **Bound** (parallel over runs of spheres): each sphere's screen rectangle — the pixels
 //!    whose *centres* lie between the tangents from the eye (`tight_bound`), eight spheres at
-//!    a time in f32 lanes with a widened radius, in f64 for spheres near the eye plane — and,
+//!    a time in f32 lanes with a widened radius (their packed samples unpacked and their integer
+//!    pixel spans taken in lanes too: `Lanes::decode8`, `Lanes::span_ints`), in f64 for spheres
+//!    near the eye plane — and,
 //!    per [`GROUP`] consecutive spheres, the union of their rectangles. The scene's order is
 //!    spatially coherent (Morton order when built, the server's image order when not), so a
 //!    group covers a small patch of the screen.
