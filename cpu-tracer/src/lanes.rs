@@ -548,15 +548,18 @@ mod avx2 {
                 );
                 let z = _mm256_and_si256(_mm256_srli_epi32::<4>(hi), m);
                 let r = _mm256_srli_epi32::<22>(hi);
-                let f = |v: __m256i| Avx2(_mm256_cvtepi32_ps(v));
-                let axis = |q: __m256i, min: f32, step: f32, e: f32| {
-                    (Avx2::splat(min) + f(q) * Avx2::splat(step)) - Avx2::splat(e)
-                };
+                // No closures: one would be compiled without AVX2, every intrinsic a call.
+                let (fx, fy, fz, fr) = (
+                    Avx2(_mm256_cvtepi32_ps(x)),
+                    Avx2(_mm256_cvtepi32_ps(y)),
+                    Avx2(_mm256_cvtepi32_ps(z)),
+                    Avx2(_mm256_cvtepi32_ps(r)),
+                );
                 [
-                    axis(x, deq.min.x, deq.step.x, eye[0]),
-                    axis(y, deq.min.y, deq.step.y, eye[1]),
-                    axis(z, deq.min.z, deq.step.z, eye[2]),
-                    f(r) * Avx2::splat(deq.radius_unit),
+                    (Avx2::splat(deq.min.x) + fx * Avx2::splat(deq.step.x)) - Avx2::splat(eye[0]),
+                    (Avx2::splat(deq.min.y) + fy * Avx2::splat(deq.step.y)) - Avx2::splat(eye[1]),
+                    (Avx2::splat(deq.min.z) + fz * Avx2::splat(deq.step.z)) - Avx2::splat(eye[2]),
+                    fr * Avx2::splat(deq.radius_unit),
                 ]
             }
         }
