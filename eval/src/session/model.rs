@@ -146,8 +146,9 @@ pub struct Calibration {
 /// `splat-fill` (with warp-sized radii) is splat's figure times 1.57, the ratio of the two
 /// measured in one `session-calibrate` run (tooth, 512², 2 threads; `docs/perf.md`);
 /// `splat-layers` (4 segments per pixel, hole filling, warp-grown footprints: `volwarp`) is
-/// splat-fill's figure times 2.74, the ratio of the two in one `session-calibrate --all` run
-/// (512², 2 threads; `docs/perf.md`, "Issue 19 and 14 (fifth session)").
+/// splat-fill's figure times 1.50, the median ratio of the two in three `session-calibrate
+/// --all` runs (512², 2 threads; `docs/perf.md`, "Issue 14 (sixth session)"; 2.74 before the
+/// SIMD set-up and band-at-a-time compositing).
 pub const DEFAULT_DRAW_MS_512: [(&str, f64); 8] = [
     ("stale", 0.9),
     ("points1", 0.7),
@@ -156,7 +157,7 @@ pub const DEFAULT_DRAW_MS_512: [(&str, f64); 8] = [
     ("spheres-cpu", 4.4),
     ("splat", 2.8),
     ("splat-fill", 4.4),
-    ("splat-layers", 12.1),
+    ("splat-layers", 6.6),
 ];
 
 impl Calibration {
