@@ -36,8 +36,9 @@
 //!
 //! Work: the footprints are set up in parallel over samples (four projections per sample, in
 //! `f32`), binned to bands of rows, rasterized in parallel over bands (a few edge tests per
-//! covered pixel) and the lists composited in parallel. Memory: `8 × LIST + 1` bytes per output
-//! pixel and 48 bytes per sample (its footprint) plus 4 per band it touches.
+//! covered pixel) and composited band by band. Memory: 1 byte per output pixel (its count),
+//! `8 × LIST` bytes per pixel of one band per thread, and per sample 64 bytes (its footprint)
+//! plus 4 for its band range and 4 per band it touches.
 
 use crate::hole_fill::{block_outside_silhouette, filled, stale_lookup, FILLED, UNFILLED};
 use crate::lanes::{self, Lanes};
@@ -206,16 +207,27 @@ impl LayerSplat {
     }
 }
 
-/// A camera's projection in `f32`.
-struct Proj {
-    eye: Vec3,
-    u: Vec3,
-    v: Vec3,
-    w: Vec3,
-    px_x: f32,
-    px_y: f32,
-    half_w: f32,
-    half_h: f32,
+/// A camera's projection in `f32`: a point's continuous image coordinates are
+/// `(c.u/c.w · px_x + half_w, half_h − c.v/c.w · px_y)` for its offset `c` from the eye in the
+/// camera's `(u, v, w)` basis.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct Proj {
+    /// The eye.
+    pub eye: Vec3,
+    /// The camera's right, up and forward axes.
+    pub u: Vec3,
+    /// See `u`.
+    pub v: Vec3,
+    /// See `u`.
+    pub w: Vec3,
+    /// Pixels per unit slope along x and y.
+    pub px_x: f32,
+    /// See `px_x`.
+    pub px_y: f32,
+    /// Half the viewport's width and height, pixels.
+    pub half_w: f32,
+    /// See `half_w`.
+    pub half_h: f32,
 }
 
 impl Proj {
@@ -278,31 +290,50 @@ fn insert(slots: &mut [u64], n: &mut u8, key: u64) {
 
 /// Per-frame constants of the footprint set-up: the source pixel's half sides and the frame's
 /// eye expressed in the new camera's basis, so a corner's image coordinates are a few
-/// multiply-adds and two divisions.
-struct Setup {
-    deq: Dequantizer,
+/// multiply-adds and two divisions. The one definition of these figures: the GPU layered
+/// splatter (`volwarp_gpu_tracer`) puts them in its uniform, so both draw the same footprints.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct Setup {
+    /// The frame's sample decoder.
+    pub deq: Dequantizer,
     /// The new camera's projection.
-    view: Proj,
-    /// The frame camera's eye and viewing axis.
-    src_eye: Vec3,
-    src_w: Vec3,
-    /// Half a source pixel along the frame camera's u and v per unit of its depth.
-    su: Vec3,
-    sv: Vec3,
-    /// `su`, `sv` and the frame's eye relative to the new one, in the new camera's basis.
-    bu: Vec3,
-    bv: Vec3,
-    e: Vec3,
-    /// How much the corners of a growing (opaque enough) sample scale, and from which alpha.
-    grow_ratio: f32,
-    min_alpha: u8,
-    /// The largest pixel index along x and y.
-    last_x: f32,
-    last_y: f32,
+    pub view: Proj,
+    /// The frame camera's eye.
+    pub src_eye: Vec3,
+    /// The frame camera's viewing axis.
+    pub src_w: Vec3,
+    /// Half a source pixel along the frame camera's u per unit of its depth.
+    pub su: Vec3,
+    /// The same along its v.
+    pub sv: Vec3,
+    /// `su` in the new camera's basis.
+    pub bu: Vec3,
+    /// `sv` in the new camera's basis.
+    pub bv: Vec3,
+    /// The frame's eye relative to the new one, in the new camera's basis.
+    pub e: Vec3,
+    /// How much the corners of a growing (at least `min_alpha` opaque) sample scale (≥ 1).
+    pub grow_ratio: f32,
+    /// The 8-bit alpha from which samples grow.
+    pub min_alpha: u8,
+    /// The largest pixel index along x.
+    pub last_x: f32,
+    /// The largest pixel index along y.
+    pub last_y: f32,
 }
 
 impl Setup {
-    fn new(camera: &Camera, frame_camera: &Camera, deq: &Dequantizer, own: f32, grown: f32, min_alpha: u8) -> Setup {
+    /// The constants for drawing a frame rendered for `frame_camera` (decoded by `deq`) for
+    /// `camera`, with footprints of half side `own` source pixels, `grown` for samples at least
+    /// `min_alpha` opaque.
+    pub fn new(
+        camera: &Camera,
+        frame_camera: &Camera,
+        deq: &Dequantizer,
+        own: f32,
+        grown: f32,
+        min_alpha: u8,
+    ) -> Setup {
         let view = Proj::new(&View::new(camera));
         let source = View::new(frame_camera);
         let src = Proj::new(&source);
@@ -410,14 +441,18 @@ impl Setup {
 /// is the id of `samples[0]`; `samples` holds at most eight.
 #[inline(always)]
 fn footprint_group<L: Lanes>(s: &Setup, samples: &[u64], colors: &[u32], first: usize, out: &mut [Quad]) {
-    let (mut cx, mut cy, mut cz, mut rr) = ([0.0f32; 8], [0.0f32; 8], [0.0f32; 8], [1.0f32; 8]);
-    for (i, &smp) in samples.iter().enumerate().take(8) {
-        let c = s.deq.center(smp);
-        (cx[i], cy[i], cz[i]) = (c.x, c.y, c.z);
-        rr[i] = s.scale(colors, first + i);
+    // The centres, decoded as the tile splatter's bound pass does (`Lanes::decode8`, the
+    // scalar `Dequantizer::center` values; less a zero eye, which changes no bit).
+    let [cx, cy, cz, _] = match samples.first_chunk::<8>() {
+        Some(eight) => L::decode8(&s.deq, [0.0; 3], eight),
+        None => lanes::decode_scalar(&s.deq, [0.0; 3], samples),
+    };
+    let mut rr = [1.0f32; 8];
+    for (i, r) in rr.iter_mut().enumerate().take(samples.len().min(8)) {
+        *r = s.scale(colors, first + i);
     }
     let sp = L::splat;
-    let (cx, cy, cz, r) = (L::new(cx), L::new(cy), L::new(cz), L::new(rr));
+    let r = L::new(rr);
     let (rx, ry, rz) = (cx - sp(s.src_eye.x), cy - sp(s.src_eye.y), cz - sp(s.src_eye.z));
     let z = rx * sp(s.src_w.x) + ry * sp(s.src_w.y) + rz * sp(s.src_w.z);
     let v = &s.view;

@@ -37,6 +37,7 @@ use std::time::{Duration, Instant};
 use volwarp_core::renderer::{Image, Renderer, BACKGROUND};
 use volwarp_core::warp_radius::warp_angle_deg;
 use volwarp_core::{Camera, RayBasis, RendererKind, Scene, Vec3};
+use volwarp_cpu_tracer::layer_splat::Setup;
 pub use volwarp_cpu_tracer::layer_splat::{LayerOptions, LIST, OPAQUE};
 
 /// Words at the start of the work buffer before the pixels' counts (`COUNTS` in the shader).
@@ -92,35 +93,6 @@ fn v4(v: Vec3) -> [f32; 4] {
     [v.x, v.y, v.z, 0.0]
 }
 
-/// A camera's projection in `f32`, computed as the CPU's `View::new` then `Proj::new` do.
-struct Proj {
-    eye: Vec3,
-    u: Vec3,
-    v: Vec3,
-    w: Vec3,
-    px_x: f32,
-    px_y: f32,
-    half_w: f32,
-    half_h: f32,
-}
-
-impl Proj {
-    fn new(camera: &Camera) -> Proj {
-        let (u, v, w) = camera.basis();
-        let tan_y = ((camera.fov_y_deg as f64).to_radians() * 0.5).tan();
-        Proj {
-            eye: camera.eye,
-            u,
-            v,
-            w,
-            px_x: (0.5 * camera.width as f64 / (tan_y * camera.aspect() as f64)) as f32,
-            px_y: (0.5 * camera.height as f64 / tan_y) as f32,
-            half_w: (0.5 * camera.width as f64) as f32,
-            half_h: (0.5 * camera.height as f64) as f32,
-        }
-    }
-}
-
 /// Counts per block of the scan (256 invocations × 16; `SCAN_BLOCK` in the shader).
 const SCAN_BLOCK: u32 = 4096;
 
@@ -152,17 +124,13 @@ fn check_scene(scene: &Scene) -> Result<u32, GpuError> {
 }
 
 /// The uniform of one draw of `scene` for `camera` (its frame camera `fc`) with footprints of
-/// half side `own`, `grown` for the opaque samples: `LayerSplat::draw`'s set-up, line for line.
+/// half side `own`, `grown` for the opaque samples: the CPU's footprint constants
+/// (`layer_splat::Setup`) and the stale lookup's projection.
 fn params(scene: &Scene, camera: &Camera, fc: &Camera, opts: &LayerOptions, grown: f32, cap: u32) -> LayerParams {
-    let own = opts.own;
-    let view = Proj::new(camera);
-    let src = Proj::new(fc);
-    let half = if own.is_finite() { own.clamp(0.0, 4.0) } else { 0.5 };
-    let grow_ratio = if half > 0.0 && grown.is_finite() { (grown.clamp(0.0, 4.0) / half).max(1.0) } else { 1.0 };
-    let (hx, hy) = (half / src.px_x, half / src.px_y);
-    let (su, sv) = (src.u * hx, src.v * hy);
-    let basis = |x: Vec3| Vec3::new(x.dot(view.u), x.dot(view.v), x.dot(view.w));
-    let (bu, bv, e) = (basis(su), basis(sv), basis(src.eye - view.eye));
+    // The footprint constants are the CPU's own (`layer_splat::Setup`), so both sides set up
+    // the same footprints.
+    let s = Setup::new(camera, fc, &scene.deq, opts.own, grown, opts.grow_min_alpha);
+    let view = &s.view;
     // The stale lookup's frame projection (`depth_buffer::Projector`) and focal plane.
     let (fu, fv, fwd) = fc.basis();
     let tan_y = libm::tanf(fc.fov_y_deg.to_radians() * 0.5);
@@ -177,13 +145,13 @@ fn params(scene: &Scene, camera: &Camera, fc: &Camera, opts: &LayerOptions, grow
         u: v4(view.u),
         v: v4(view.v),
         w: v4(view.w),
-        src_eye: v4(src.eye),
-        src_w: v4(src.w),
-        su: v4(su),
-        sv: v4(sv),
-        bu: v4(bu),
-        bv: v4(bv),
-        e: v4(e),
+        src_eye: v4(s.src_eye),
+        src_w: v4(s.src_w),
+        su: v4(s.su),
+        sv: v4(s.sv),
+        bu: v4(s.bu),
+        bv: v4(s.bv),
+        e: v4(s.e),
         proj: [view.px_x, view.px_y, view.half_w, view.half_h],
         deq_min: [d.min.x, d.min.y, d.min.z, 0.0],
         deq_step: [d.step.x, d.step.y, d.step.z, d.radius_unit],
@@ -193,12 +161,12 @@ fn params(scene: &Scene, camera: &Camera, fc: &Camera, opts: &LayerOptions, grow
         f_v: v4(fv),
         f_w: v4(fwd),
         f_proj: [tan_x, tan_y, fc.width as f32, fc.height as f32],
-        k: [grow_ratio, 0.0076, 1e-6, 1.0 / 255.0],
+        k: [s.grow_ratio, 0.0076, 1e-6, 1.0 / 255.0],
         k2: [OPAQUE, t_num, 0.0, 0.0],
         width: w,
         height: h,
         n: scene.samples.len() as u32,
-        min_alpha: opts.grow_min_alpha as u32,
+        min_alpha: s.min_alpha as u32,
         f_width: fc.width,
         f_height: fc.height,
         background: BACKGROUND,
