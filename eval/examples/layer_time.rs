@@ -21,6 +21,7 @@ use volwarp_core::wire::CameraRequest;
 use volwarp_core::{Heuristic, Image, RendererKind};
 use volwarp_cpu_tracer::{create, route::unbuilt_scene, LayerSplat};
 use volwarp_eval::camera_paths::orbit;
+use volwarp_eval::median;
 use volwarp_server::Marcher;
 
 fn arg<'a>(args: &'a [String], name: &str) -> Option<&'a str> {
@@ -43,11 +44,6 @@ fn ms(cpu: bool, f: impl FnOnce()) -> f64 {
         (true, Some(a), Some(b)) => (b - a) as f64 / 1e6,
         _ => t0.elapsed().as_secs_f64() * 1e3,
     }
-}
-
-fn median(v: &mut [f64]) -> f64 {
-    v.sort_by(f64::total_cmp);
-    v[v.len() / 2]
 }
 
 fn main() {
@@ -88,7 +84,7 @@ fn main() {
             ta.push(ms(cpu, || splat.render(&one, &cam, &mut a)));
             tb.push(ms(cpu, || volwarp.render(&lay, &cam, &mut b)));
         }
-        let (sa, sb) = (median(&mut ta), median(&mut tb));
+        let (sa, sb) = (median(&mut ta).unwrap_or(f64::NAN), median(&mut tb).unwrap_or(f64::NAN));
         ratios.push(sb / sa);
         println!(
             "| {} | {} | {} | {sa:.2} | {sb:.2} | {:.2}× |",
@@ -98,5 +94,5 @@ fn main() {
             sb / sa
         );
     }
-    println!("ratio median over datasets: {:.2}×", median(&mut ratios));
+    println!("ratio median over datasets: {:.2}×", median(&mut ratios).unwrap_or(f64::NAN));
 }
