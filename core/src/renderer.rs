@@ -76,6 +76,22 @@ pub trait Renderer {
     /// viewport and clears to [`BACKGROUND`].
     fn render(&mut self, scene: &Scene, camera: &Camera, out: &mut Image);
 
+    /// Draws the newest of `scenes` (newest first) for `camera` and, where this renderer keeps
+    /// frames ([`Renderer::keeps_frames`]), fills what it leaves uncovered from the older ones
+    /// (issue 19's multi-frame filling). By default it draws the newest alone; with no scene
+    /// `out` is left empty (0×0).
+    fn render_set(&mut self, scenes: &[&Scene], camera: &Camera, out: &mut Image) {
+        match scenes.first() {
+            Some(s) => self.render(s, camera, out),
+            None => out.reset_for_unusable(camera, 0),
+        }
+    }
+
+    /// Whether [`Renderer::render_set`] uses the older frames (by default it does not).
+    fn keeps_frames(&self) -> bool {
+        false
+    }
+
     /// Sizes spheres by the warp (core's [`crate::warp_radius`]: half the footprint at the
     /// frame's own camera, the frame's radius from a 10° turn on) when `on`. Returns whether
     /// this renderer can (by default it cannot and draws the frame's radii).

@@ -64,17 +64,21 @@ pub(crate) fn begin_frame_unbuilt_ok(scene: &Scene, camera: &Camera, out: &mut I
         return false;
     }
     out.reset_for(camera);
-    // The scene's rules but the node count (none yet).
-    let d = &scene.deq;
-    let ok = scene.colors.len() == scene.samples.len()
-        && scene.samples.len() < Scene::MAX_SAMPLES
-        && d.min.is_finite()
-        && d.step.is_finite()
-        && d.radius_unit.is_finite();
+    let ok = unbuilt_ok(scene);
     if !ok {
         warn_once(&WARNED_SCENE, "unusable unbuilt scene");
     }
     ok
+}
+
+/// Whether a scene keeps the scene's rules but the node count (an unbuilt scene has none).
+pub(crate) fn unbuilt_ok(scene: &Scene) -> bool {
+    let d = &scene.deq;
+    scene.colors.len() == scene.samples.len()
+        && scene.samples.len() < Scene::MAX_SAMPLES
+        && d.min.is_finite()
+        && d.step.is_finite()
+        && d.radius_unit.is_finite()
 }
 
 /// The color a renderer shows for a sample-id pixel.
