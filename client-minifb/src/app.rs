@@ -64,7 +64,12 @@ fn run_connected(opts: &Options, addr: &str) -> Result<(), ClientError> {
     log::info!(
         "renderer {} with {}",
         opts.renderer,
-        crate::window::levers(opts.predict, opts.guard, renderers.adaptive_radius())
+        crate::window::levers(
+            opts.predict,
+            opts.guard,
+            renderers.adaptive_radius(),
+            if renderers.keeps_frames() { opts.keep_frames } else { 1 }
+        )
     );
     let conn = connect_layers(addr, opts.token.as_deref(), timeout, opts.layers())?;
     let home = home_camera(&conn.bounds, opts.size.0, opts.size.1);
@@ -80,6 +85,7 @@ fn run_connected(opts: &Options, addr: &str) -> Result<(), ClientError> {
     };
     let net = Network::start(conn, cfg, recorder.as_ref().map(Recorder::sink))?;
     let mut display = Display::new(net, renderers, recorder.as_ref().map(Recorder::sink));
+    display.set_keep_frames(opts.keep_frames);
     let result = if opts.bench {
         crate::bench::run(opts, &mut display, home).map(|_| ())
     } else if opts.headless {

@@ -63,6 +63,12 @@ impl RateMeter {
 pub struct Display {
     net: Network,
     shown: Option<ReadyScene>,
+    /// Older frames kept for multi-frame filling, newest first (at most `keep − 1`).
+    older: VecDeque<ReadyScene>,
+    keep: usize,
+    /// The shown scene was drawn at least once (only drawn frames are kept as older ones, so
+    /// a replay, whose camera entries name the drawn frames, keeps the same).
+    drawn: bool,
     /// The renderers and the current one.
     pub renderers: Renderers,
     /// The last drawn image.
@@ -78,6 +84,9 @@ impl Display {
         Display {
             net,
             shown: None,
+            older: VecDeque::new(),
+            keep: 1,
+            drawn: false,
             renderers,
             image: Image::new(1, 1),
             recorder,
@@ -86,12 +95,42 @@ impl Display {
         }
     }
 
+    /// Keeps the `k` newest frames (at least 1): the current renderer fills what the newest
+    /// does not cover from the older ones where it can ([`Renderers::render_set`]).
+    pub fn set_keep_frames(&mut self, k: usize) {
+        self.keep = k.clamp(1, volwarp_cpu_tracer::hole_fill::MAX_FRAMES);
+        while self.older.len() >= self.keep {
+            if let Some(old) = self.older.pop_back() {
+                self.net.recycle(old.scene);
+            }
+        }
+    }
+
+    /// How many frames the current drawing uses at most (1 where the renderer keeps none).
+    pub fn frames_used(&self) -> usize {
+        if self.renderers.keeps_frames() {
+            self.keep
+        } else {
+            1
+        }
+    }
+
     /// Swaps in the newest ready scene, if any; `true` if one was swapped in.
     pub fn poll_scene(&mut self) -> bool {
         match self.net.take_scene() {
             Some(ready) => {
                 if let Some(old) = self.shown.replace(ready) {
-                    self.net.recycle(old.scene);
+                    if self.drawn {
+                        self.older.push_front(old);
+                    } else {
+                        self.net.recycle(old.scene);
+                    }
+                }
+                self.drawn = false;
+                while self.older.len() >= self.keep {
+                    if let Some(old) = self.older.pop_back() {
+                        self.net.recycle(old.scene);
+                    }
                 }
                 true
             }
@@ -153,7 +192,12 @@ impl Display {
         self.net.set_view(*view);
         let t0 = Instant::now();
         match &self.shown {
-            Some(s) => self.renderers.render(&s.scene, &view.camera, &mut self.image),
+            Some(s) => {
+                let scenes: Vec<&volwarp_core::Scene> =
+                    core::iter::once(&s.scene).chain(self.older.iter().map(|o| &o.scene)).collect();
+                self.renderers.render_set(&scenes, &view.camera, &mut self.image);
+                self.drawn = true;
+            }
             None => self.image.reset_for(&view.camera),
         }
         let render_ms = t0.elapsed().as_secs_f64() * 1e3;

@@ -8,6 +8,10 @@ use volwarp_core::{Heuristic, RendererKind};
 /// The default guard band (`--guard`), chosen on the session results (`docs/results.md`).
 pub const DEFAULT_GUARD: f32 = 0.0;
 
+/// How many of the newest frames the client keeps by default (`--keep-frames`), chosen on the
+/// session results (`docs/results.md`, "Older frames for layered frames").
+pub const DEFAULT_KEEP_FRAMES: usize = 4;
+
 /// The window controls, printed by `--help`.
 pub const CONTROLS: &str = "\
 Window controls:
@@ -23,7 +27,7 @@ Window controls:
   Esc / Q                    quit
 The title shows display FPS, server frames per second, the age of the shown frame (time since
 its camera was requested), its sample count, the renderer, the heuristic and the warp levers
-that are on (predict, guard, adapt).
+that are on (predict, guard, adapt, frames kept).
 
 Without --connect the client starts the real volwarp-server program (found beside this client,
 on PATH or in $VOLWARP_SERVER) on 127.0.0.1 (random port); it serves the bundled dataset, or
@@ -124,6 +128,11 @@ pub struct Options {
     /// `--adapt false` draws the frame's radii.
     #[arg(long, value_name = "BOOL", default_value_t = true, action = clap::ArgAction::Set)]
     pub adapt: bool,
+    /// Keep the K newest frames and fill what the newest does not cover from what the older
+    /// ones saw that it did not (renderers that keep frames: `splat-layers`; the others draw
+    /// the newest alone); 1..=8.
+    #[arg(long, value_name = "K", default_value_t = DEFAULT_KEEP_FRAMES, value_parser = parse_keep_frames)]
+    pub keep_frames: usize,
     /// Display frame rate limit (0: none). Default: 60 in the window, none headless.
     #[arg(long)]
     pub fps: Option<u32>,
@@ -218,6 +227,15 @@ impl Options {
     }
 }
 
+/// A frame count in `1..=`[`volwarp_cpu_tracer::hole_fill::MAX_FRAMES`].
+fn parse_keep_frames(s: &str) -> Result<usize, String> {
+    let max = volwarp_cpu_tracer::hole_fill::MAX_FRAMES;
+    match s.parse::<usize>() {
+        Ok(k) if (1..=max).contains(&k) => Ok(k),
+        _ => Err(format!("frames kept must be a count within 1..={max}")),
+    }
+}
+
 /// A guard fraction in `0..=0.5` (core's `guard::MAX_GUARD`).
 fn parse_guard(s: &str) -> Result<f32, String> {
     let g: f32 = s.parse().map_err(|e| format!("{e}"))?;
@@ -240,6 +258,15 @@ mod tests {
         assert!(parse_size("99999x10").is_err());
         assert_eq!(parse_heuristic("rel-threshold"), Ok(Heuristic::RelThreshold));
         assert!(parse_heuristic("nope").unwrap_err().contains("threshold"));
+    }
+
+    #[test]
+    fn frame_counts_are_bounded() {
+        assert_eq!(parse_keep_frames("4"), Ok(4));
+        assert_eq!(parse_keep_frames("1"), Ok(1));
+        for bad in ["0", "9", "-1", "x", ""] {
+            assert!(parse_keep_frames(bad).is_err(), "{bad}");
+        }
     }
 
     #[test]

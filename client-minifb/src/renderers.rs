@@ -143,6 +143,24 @@ impl Renderers {
         self.current.name()
     }
 
+    /// Whether the current renderer uses older frames ([`Renderer::keeps_frames`]).
+    pub fn keeps_frames(&self) -> bool {
+        self.slots[self.current.index()].as_ref().is_some_and(|r| r.keeps_frames())
+    }
+
+    /// Draws the newest of `scenes` (newest first) for `camera`, filling from the older ones
+    /// where the current renderer keeps frames; otherwise as [`Renderers::render`] the newest.
+    pub fn render_set(&mut self, scenes: &[&Scene], camera: &Camera, out: &mut Image) {
+        match scenes.first() {
+            Some(newest) if scenes.len() == 1 || !self.keeps_frames() => self.render(newest, camera, out),
+            Some(_) => match self.slots[self.current.index()].as_mut() {
+                Some(r) => r.render_set(scenes, camera, out),
+                None => out.reset_for(camera),
+            },
+            None => out.reset_for(camera),
+        }
+    }
+
     /// Draws `scene` for `camera` with the current renderer (building the LBVH of an unbuilt
     /// scene first if the renderer needs one).
     pub fn render(&mut self, scene: &Scene, camera: &Camera, out: &mut Image) {

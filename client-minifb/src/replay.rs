@@ -31,6 +31,10 @@ pub struct Replay {
     limits: Limits,
     frames: VecDeque<Frame>,
     scene: Option<Scene>,
+    /// The frames drawn before the shown one, newest first (at most `keep − 1`; only for
+    /// unbuilt scenes, what the renderers that keep frames draw).
+    older: VecDeque<Scene>,
+    keep: usize,
     builder: ParallelBuilder,
     /// Hand scenes over unbuilt (as the live client does for a renderer that needs no LBVH),
     /// so that replay draws the very same images.
@@ -49,6 +53,8 @@ impl Replay {
             limits: Limits::default(),
             frames: VecDeque::new(),
             scene: None,
+            older: VecDeque::new(),
+            keep: 1,
             builder: ParallelBuilder::new(build_threads),
             lazy: false,
             warned: false,
@@ -59,6 +65,12 @@ impl Replay {
     pub fn set_lazy_build(&mut self, lazy: bool) {
         self.lazy = lazy;
         self.scene = None;
+        self.older.clear();
+    }
+
+    /// Keeps the `k` newest frames up to the shown one, as the live client's `--keep-frames`.
+    pub fn set_keep_frames(&mut self, k: usize) {
+        self.keep = k.clamp(1, KEEP_FRAMES);
     }
 
     /// The next camera entry (time in µs and the request), storing the frames before it.
@@ -100,6 +112,13 @@ impl Replay {
         if self.scene.as_ref().is_some_and(|s| s.header.seq == fresh) {
             return self.scene.as_ref();
         }
+        // The live display keeps the frames it drew before (the camera entries name them).
+        if self.lazy && self.keep > 1 {
+            if let Some(prev) = self.scene.take() {
+                self.older.push_front(prev);
+                self.older.truncate(self.keep - 1);
+            }
+        }
         match self.scene.as_mut() {
             _ if self.lazy => self.scene = Some(volwarp_cpu_tracer::route::unbuilt_scene(frame)),
             Some(s) => self.builder.build_into(frame, s),
@@ -107,15 +126,24 @@ impl Replay {
         }
         self.scene.as_ref()
     }
+
+    /// The scene shown with a camera entry naming frame `seq` and the older frames kept with
+    /// it, newest first (empty before any frame).
+    pub fn scenes_for(&mut self, seq: u64) -> Vec<&Scene> {
+        if self.scene_for(seq).is_none() {
+            return Vec::new();
+        }
+        self.scene.iter().chain(self.older.iter()).collect()
+    }
 }
 
 /// Draws one camera entry.
 pub fn draw(replay: &mut Replay, renderers: &mut Renderers, req: &CameraRequest, image: &mut Image) -> FrameReport {
     let t0 = Instant::now();
-    let scene = replay.scene_for(req.seq);
-    let samples = scene.map_or(0, |s| s.samples.len());
-    match scene {
-        Some(s) => renderers.render(s, &req.camera, image),
+    let scenes = replay.scenes_for(req.seq);
+    let samples = scenes.first().map_or(0, |s| s.samples.len());
+    match scenes.first() {
+        Some(_) => renderers.render_set(&scenes, &req.camera, image),
         None => image.reset_for(&req.camera),
     }
     FrameReport {
@@ -135,6 +163,7 @@ pub fn run(opts: &Options, path: &Path) -> Result<(), ClientError> {
     let mut renderers = Renderers::new(opts.renderer, opts.tracer_threads()).map_err(ClientError::Renderer)?;
     renderers.set_adaptive_radius(opts.adapt);
     replay.set_lazy_build(!opts.renderer.info().caps.needs_lbvh);
+    replay.set_keep_frames(opts.keep_frames);
     if !opts.headless {
         return crate::window::run_replay(opts, &mut replay, &mut renderers);
     }

@@ -119,8 +119,9 @@ pub fn title(
 }
 
 /// The warp levers that are on, for the title (issue 19): camera prediction, the guard band,
-/// warp-sized radii (only where the current renderer can), or `no levers`.
-pub fn levers(predict: bool, guard: f32, adaptive_radius: bool) -> String {
+/// warp-sized radii (only where the current renderer can), the frames kept (only where the
+/// current renderer uses older frames), or `no levers`.
+pub fn levers(predict: bool, guard: f32, adaptive_radius: bool, frames: usize) -> String {
     let mut on = Vec::new();
     if predict {
         on.push("predict".to_string());
@@ -130,6 +131,9 @@ pub fn levers(predict: bool, guard: f32, adaptive_radius: bool) -> String {
     }
     if adaptive_radius {
         on.push("adapt".to_string());
+    }
+    if frames > 1 {
+        on.push(format!("{frames} frames"));
     }
     if on.is_empty() {
         "no levers".into()
@@ -238,7 +242,7 @@ pub fn run_live(opts: &Options, display: &mut Display, home: Camera) -> Result<(
                 display.renderers.name(),
                 heuristic,
             );
-            let l = levers(opts.predict, opts.guard, display.renderers.adaptive_radius());
+            let l = levers(opts.predict, opts.guard, display.renderers.adaptive_radius(), display.frames_used());
             screen.window.set_title(&format!("{t} | {l}"));
         }
     }
@@ -297,7 +301,8 @@ mod tests {
         for part in ["60 FPS", "1.5 FPS", "812 ms", "123456 samples", "splat", "gradient"] {
             assert!(t.contains(part), "{t}");
         }
-        assert_eq!(levers(true, 0.1, true), "predict + guard 0.1 + adapt");
-        assert_eq!(levers(false, 0.0, false), "no levers");
+        assert_eq!(levers(true, 0.1, true, 1), "predict + guard 0.1 + adapt");
+        assert_eq!(levers(true, 0.0, true, 4), "predict + adapt + 4 frames");
+        assert_eq!(levers(false, 0.0, false, 1), "no levers");
     }
 }

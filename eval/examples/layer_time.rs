@@ -3,8 +3,15 @@
 //! every bundled dataset:
 //!
 //! ```sh
-//! cargo run --release -p volwarp-eval --example layer_time -- ../shared/data [--size 512] [--runs 15] [--threads 1] [--only NAME]
+//! cargo run --release -p volwarp-eval --example layer_time -- ../shared/data [--size 512] [--runs 15] [--threads 1] [--only NAME] [--frames K]
 //! ```
+//!
+//! With `--frames K` (issue 19's multi-frame filling) it also times the layered default keeping
+//! `K` frames: the newest as above and `K − 1` older layered frames rendered 5°, 10°, … further
+//! back along the orbit, which fill what the newest leaves uncovered (`LayerSplat::render_set`),
+//! and the first draw after a frame arrives, once with one frame and once with `K` (the frames
+//! take turns as the newest, so every draw is an arrival: the one-frame figure includes the
+//! frame's own image, the `K`-frame one also what the newest did not see of each older frame).
 //!
 //! Per dataset the server renders the default camera's one-sample frame (threshold heuristic)
 //! and its layered frame (K = 4, the client's default); the client draws each 10° along the
@@ -53,6 +60,7 @@ fn main() {
     let runs: usize = arg(&args, "--runs").map_or(15, |s| s.parse().expect("a run count"));
     let threads: usize = arg(&args, "--threads").map_or(1, |s| s.parse().expect("a thread count"));
     let layers: u32 = arg(&args, "--layers").map_or(4, |s| s.parse().expect("a layer count"));
+    let frames: usize = arg(&args, "--frames").map_or(1, |s| s.parse().expect("a frame count"));
     let cpu = threads == 1;
     let mut datasets = volwarp_eval::report::shared_datasets(Path::new(dir)).expect("datasets");
     if let Some(only) = arg(&args, "--only") {
@@ -62,8 +70,10 @@ fn main() {
         "{size}², {threads} thread(s), {} ms, median of {runs}; volwarp = splat-layers K={layers}, fill, adaptive",
         if cpu { "on-CPU" } else { "wall" }
     );
-    println!("| dataset | samples K=1 | samples K={layers} | splat ms | volwarp ms | ratio |");
-    println!("|---|---|---|---|---|---|");
+    println!(
+        "| dataset | samples K=1 | samples K={layers} | splat ms | volwarp ms | ratio | volwarp, {frames} frames kept, ms | on arrival, 1 / {frames} frames, ms |"
+    );
+    println!("|---|---|---|---|---|---|---|---|");
     let mut ratios = Vec::new();
     for ds in &datasets {
         let m = Marcher::from_dataset(ds);
@@ -72,6 +82,17 @@ fn main() {
         let one = unbuilt_scene(&m.render_frame(&req).0);
         let lay = unbuilt_scene(&m.render_frame_layers(&req, layers).0);
         let cam = orbit(&c0, 10.0);
+        let older: Vec<_> = (1..frames)
+            .map(|i| {
+                let req = CameraRequest { camera: orbit(&c0, -5.0 * i as f32), ..req };
+                unbuilt_scene(&m.render_frame_layers(&req, layers).0)
+            })
+            .collect();
+        let set: Vec<_> = core::iter::once(&lay).chain(older.iter()).collect();
+        let mut kept = LayerSplat::new(threads);
+        kept.set_adaptive_radius(true);
+        let mut c = Image::new(0, 0);
+        kept.render_set(&set, &cam, &mut c);
         let mut splat = create(RendererKind::Splat, threads).expect("the CPU splatter");
         let mut volwarp = LayerSplat::new(threads);
         volwarp.set_adaptive_radius(true);
@@ -79,15 +100,28 @@ fn main() {
         // Warm-up: the layered renderer composites the frame's own image once per frame.
         splat.render(&one, &cam, &mut a);
         volwarp.render(&lay, &cam, &mut b);
-        let (mut ta, mut tb) = (Vec::new(), Vec::new());
+        let (mut ta, mut tb, mut tc) = (Vec::new(), Vec::new(), Vec::new());
         for _ in 0..runs {
             ta.push(ms(cpu, || splat.render(&one, &cam, &mut a)));
             tb.push(ms(cpu, || volwarp.render(&lay, &cam, &mut b)));
+            if frames > 1 {
+                tc.push(ms(cpu, || kept.render_set(&set, &cam, &mut c)));
+            }
         }
         let (sa, sb) = (median(&mut ta).unwrap_or(f64::NAN), median(&mut tb).unwrap_or(f64::NAN));
+        let sc = if frames > 1 { median(&mut tc).unwrap_or(f64::NAN) } else { sb };
+        // Arrivals: each draw has another newest frame (the set rotated by one).
+        let (mut t1, mut tk) = (Vec::new(), Vec::new());
+        for r in 0..runs {
+            let mut rot = set.clone();
+            rot.rotate_left(r % set.len());
+            t1.push(ms(cpu, || volwarp.render(rot[0], &cam, &mut b)));
+            tk.push(ms(cpu, || kept.render_set(&rot, &cam, &mut c)));
+        }
+        let (a1, ak) = (median(&mut t1).unwrap_or(f64::NAN), median(&mut tk).unwrap_or(f64::NAN));
         ratios.push(sb / sa);
         println!(
-            "| {} | {} | {} | {sa:.2} | {sb:.2} | {:.2}× |",
+            "| {} | {} | {} | {sa:.2} | {sb:.2} | {:.2}× | {sc:.2} | {a1:.2} / {ak:.2} |",
             ds.name,
             one.samples.len(),
             lay.samples.len(),

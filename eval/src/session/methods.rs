@@ -10,7 +10,8 @@
 //! - `+guard=G`: it asks for a view widened by `G` of its size on every side at the same pixel
 //!   density (core's `guard`), lever 2;
 //! - `+frames=K`: it keeps the `K` newest frames and fills what the newest does not cover from
-//!   the older ones (cpu-tracer's `hole_fill`, only the `*-fill` renderers), lever 3;
+//!   the older ones, lever 3 (the `*-fill` renderers: cpu-tracer's `hole_fill`; `splat-layers`:
+//!   what each older frame saw that the newest did not, `layer_splat`);
 //! - `+adapt`: it draws spheres sized by how far the view moved from the frame's camera (core's
 //!   `warp_radius`: half the footprint at the frame's camera, growing to the frame's own radius
 //!   by 10°; the splatters only; `splat-layers` grows its footprints instead), lever 4;
@@ -30,6 +31,7 @@ use volwarp_core::segments::MAX_LAYERS;
 use volwarp_core::wire::Frame;
 use volwarp_core::{Camera, Image, RendererKind, Scene};
 use volwarp_cpu_tracer::hole_fill::{FillOptions, HoleFill, SampleIds, MAX_FRAMES};
+use volwarp_cpu_tracer::layer_splat::LayerSplat;
 use volwarp_cpu_tracer::{PacketTracer, SphereSplat};
 
 /// A frame the client holds, with its scene built once for every method.
@@ -111,6 +113,31 @@ impl<R: SampleIds + Renderer> Method for FillMethod<R> {
     }
 }
 
+/// The layered splatter keeping several frames (`splat-layers+frames=K`): what each older frame
+/// saw that the newest did not fills what the newest leaves uncovered (`LayerSplat::render_set`).
+pub struct LayerMethod {
+    name: String,
+    request: RequestPolicy,
+    frames: usize,
+    r: LayerSplat,
+}
+
+impl Method for LayerMethod {
+    fn name(&self) -> &str {
+        &self.name
+    }
+    fn request(&self) -> RequestPolicy {
+        self.request
+    }
+    fn frames_kept(&self) -> usize {
+        self.frames
+    }
+    fn draw(&mut self, frames: &[&HeldFrame], camera: &Camera, out: &mut Image) {
+        let scenes: Vec<&Scene> = frames.iter().rev().take(self.frames).map(|f| &f.scene).collect();
+        self.r.render_set(&scenes, camera, out);
+    }
+}
+
 /// A parsed method spec (see the module docs).
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct MethodSpec {
@@ -118,7 +145,7 @@ pub struct MethodSpec {
     pub renderer: RendererKind,
     /// What the client asks for.
     pub request: RequestPolicy,
-    /// Frames kept (1 unless a `*-fill` renderer).
+    /// Frames kept (1 unless a `*-fill` renderer or `splat-layers`).
     pub frames: usize,
     /// Warp-sized radii (core's `warp_radius`; the splatters only).
     pub adapt: bool,
@@ -128,7 +155,7 @@ pub struct MethodSpec {
 
 /// The method the window client runs by default and the sessions' `volwarp` alias, chosen on
 /// the session results (`docs/results.md`, "Warps that beat the stale frame").
-pub const DEFAULT_METHOD: &str = "splat-layers+predict+adapt+layers=4";
+pub const DEFAULT_METHOD: &str = "splat-layers+predict+frames=4+adapt+layers=4";
 
 /// The methods of `all`: what a send-image system shows, the 2.5D points of ZAL12, the exact
 /// sphere renderers, and volwarp's default.
@@ -187,10 +214,11 @@ impl MethodSpec {
             }
         }
         let fills = matches!(renderer, RendererKind::SpheresFill | RendererKind::SplatFill);
-        if (m.frames > 1 || m.pull_push > 0) && !fills {
-            return Err(
-                format!("{spec}: frames=K and pp=L need a hole-filling renderer (splat-fill, spheres-fill)").into()
-            );
+        if (m.frames > 1 && !fills && renderer != RendererKind::SplatLayers) || (m.pull_push > 0 && !fills) {
+            return Err(format!(
+                "{spec}: frames=K and pp=L need a hole-filling renderer (splat-fill, spheres-fill, splat-layers)"
+            )
+            .into());
         }
         if m.adapt && !matches!(renderer, RendererKind::Splat | RendererKind::SplatFill | RendererKind::SplatLayers) {
             return Err(
@@ -243,6 +271,11 @@ impl MethodSpec {
         match (self.renderer, adapt) {
             (RendererKind::SplatFill, _) => fill_method(SphereSplat::new(t), RendererKind::SplatFill, fill_opts),
             (RendererKind::Splat, true) => fill_method(SphereSplat::new(t), RendererKind::Splat, none),
+            (RendererKind::SplatLayers, _) if frames > 1 => {
+                let mut r = LayerSplat::new(t);
+                r.set_adaptive_radius(adapt);
+                Box::new(LayerMethod { name, request, frames, r })
+            }
             (RendererKind::SpheresFill, _) => Box::new(FillMethod {
                 name,
                 request,
@@ -295,6 +328,10 @@ mod tests {
         assert_eq!(l.request, RequestPolicy { predict: true, guard: 0.0, layers: 4 });
         assert_eq!(l.name(), "splat-layers+predict+adapt+layers=4");
         assert_eq!(MethodSpec::parse(&l.name()).unwrap(), l);
+        let d = MethodSpec::parse("volwarp").unwrap();
+        assert_eq!((d.renderer, d.frames, d.adapt), (RendererKind::SplatLayers, 4, true));
+        assert_eq!(MethodSpec::parse(&d.name()).unwrap(), d);
+        assert_eq!(d.name(), DEFAULT_METHOD, "the default is written canonically");
     }
 
     #[test]
@@ -316,6 +353,9 @@ mod tests {
             "splat-layers+layers=0",
             "splat-layers+layers=17",
             "splat-layers+layers=x",
+            "splat-layers+pp=2",
+            "splat-layers+frames=9",
+            "points2+frames=2",
         ] {
             assert!(MethodSpec::parse(bad).is_err(), "{bad}");
         }

@@ -154,8 +154,8 @@ pub fn simulate_all(datasets: &[Dataset], opts: &SessionOptions) -> Result<Vec<R
 /// Measures the server's frame time per dataset and each method's draw time at `size` on this
 /// machine (medians of `runs`; the frame of the default camera drawn 10° away) and returns
 /// them as a [`Calibration`] (`list`: the methods, as `session --methods` takes them; a
-/// multi-frame method draws the one frame here; a method asking for layers draws a layered
-/// frame of the default camera). This reads the wall clock; the simulation only reads its result.
+/// multi-frame method draws the frame and older ones 5°, 10°, … back along the orbit; a method
+/// asking for layers draws layered frames of the default camera). This reads the wall clock; the simulation only reads its result.
 pub fn calibrate(
     datasets: &[Dataset],
     size: u32,
@@ -189,12 +189,28 @@ pub fn calibrate(
                 layered.push((k, methods::HeldFrame::new(marcher.render_frame_layers(&req, k).0)));
             }
             let held = layered.iter().find(|(n, _)| *n == k).map_or(&held, |(_, f)| f);
+            // A method keeping several frames draws them all: older ones rendered 5°, 10°, …
+            // back along the orbit (oldest first, as the simulator holds them).
+            let older: Vec<methods::HeldFrame> = (1..method.frames_kept())
+                .rev()
+                .map(|i| {
+                    let req = CameraRequest {
+                        seq: 1,
+                        camera: c0.orbit(-5.0 * i as f32, 0.0),
+                        heuristic: Heuristic::Threshold,
+                        radius_scale: 1.0,
+                    };
+                    let f = if k > 1 { marcher.render_frame_layers(&req, k).0 } else { marcher.render_frame(&req).0 };
+                    methods::HeldFrame::new(f)
+                })
+                .collect();
+            let set: Vec<&methods::HeldFrame> = older.iter().chain(core::iter::once(held)).collect();
             let mut img = Image::new(0, 0);
-            method.draw(&[held], &cam, &mut img);
+            method.draw(&set, &cam, &mut img);
             let mut t: Vec<f64> = (0..runs.max(1))
                 .map(|_| {
                     let s = Instant::now();
-                    method.draw(&[held], &cam, &mut img);
+                    method.draw(&set, &cam, &mut img);
                     s.elapsed().as_secs_f64() * 1e3
                 })
                 .collect();

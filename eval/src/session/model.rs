@@ -160,6 +160,11 @@ pub const DEFAULT_DRAW_MS_512: [(&str, f64); 8] = [
     ("splat-layers", 6.6),
 ];
 
+/// What each older frame a `splat-layers` method keeps adds to its draw time, as a fraction of
+/// the one-frame draw: the median over the five datasets of `layer_time --frames 4` (512², one
+/// thread; `docs/perf.md`, "Issue 19: older frames for layered frames").
+pub const OLDER_FRAME_COST: f64 = 0.06;
+
 impl Calibration {
     /// Reads a calibration file (a clear error for a malformed line).
     pub fn load(path: &Path) -> Result<Calibration, ErrorBox> {
@@ -213,7 +218,11 @@ impl Calibration {
         let spec = if method == "volwarp" { super::methods::DEFAULT_METHOD } else { method };
         let renderer = spec.split('+').next().unwrap_or(spec);
         if renderer != method {
-            return self.draw_ms(renderer, size);
+            // The layered splatter draws what the newest frame did not see of each older frame
+            // it keeps, on top of its own draw.
+            let frames = spec.split('+').find_map(|p| p.strip_prefix("frames=")?.parse::<usize>().ok()).unwrap_or(1);
+            let older = if renderer == "splat-layers" { frames.saturating_sub(1) as f64 } else { 0.0 };
+            return self.draw_ms(renderer, size) * (1.0 + OLDER_FRAME_COST * older);
         }
         let base = DEFAULT_DRAW_MS_512.iter().find(|(n, _)| *n == method).map_or(1.0, |x| x.1);
         base * (size as f64 / 512.0).powi(2)
@@ -234,6 +243,12 @@ mod tests {
         assert_eq!(back.server_ms("mri", 512), Some(231.5));
         assert_eq!(back.draw_ms("splat", 512), 2.75);
         assert!((back.draw_ms("splat", 1024) - 11.2).abs() < 1e-9, "default figure scaled by pixels");
+        // Older frames of a layered method add their share; other renderers' specs do not.
+        let one = back.draw_ms("splat-layers+predict+adapt+layers=4", 512);
+        let four = back.draw_ms("splat-layers+predict+frames=4+adapt+layers=4", 512);
+        assert!((four / one - (1.0 + 3.0 * OLDER_FRAME_COST)).abs() < 1e-9, "{four} / {one}");
+        assert_eq!(back.draw_ms("volwarp", 512), four, "the default keeps four frames");
+        assert_eq!(back.draw_ms("splat-fill+frames=3", 512), back.draw_ms("splat-fill", 512));
         assert!(Calibration::parse("kind,name,size,ms\nserver,mri,512,NaN\n").is_err());
         assert!(Calibration::parse("gpu,mri,512,1\n").is_err());
         assert!(Calibration::parse("server,mri,x,1\n").is_err());
