@@ -350,7 +350,7 @@ pub(crate) const UNFILLED: u64 = 0;
 /// The bit of a filled pixel.
 pub(crate) const FILLED: u64 = 1 << 32;
 /// An empty pixel the fill stages leave alone (outside the silhouette): the background.
-pub(crate) const BLOCKED: u64 = 1 << 33;
+const BLOCKED: u64 = 1 << 33;
 
 /// A filled pixel of color `c`.
 #[inline(always)]
