@@ -37,7 +37,9 @@
 //! [`RESIDUAL_TOLERANCE`] pixels behind the farthest segment of a pixel at least
 //! [`RESIDUAL_OPAQUE`] opaque. So an older sample never stands where the newest frame saw empty
 //! space or the same surface (on a steady orbit older frames change nothing), and a camera
-//! turning back gets the surfaces the newest frame could not see. Residuals are drawn only
+//! turning back gets the surfaces the newest frame could not see. Turned more than 90° from
+//! the newest frame's view, its footprints face away and draw nothing, so older frames are then
+//! drawn whole. Residuals are drawn only
 //! into pixels still empty, and footprints touching no tile with an empty pixel are skipped.
 //!
 //! **Warp-sized footprints** ([`Renderer::set_adaptive_radius`]): a surface seen from a new
@@ -643,12 +645,18 @@ impl Renderer for LayerSplat {
         // The tiles holding an unfilled pixel, once: a superset of those left after each older
         // frame, so nothing is missed.
         let mut tiles = core::mem::take(&mut self.tiles);
-        let tiles_w = if residuals.iter().any(|(_, o)| !o.samples.is_empty()) {
-            Holes::mark(&self.state, w, &mut tiles)
+        // Turned more than 90° from the newest frame's view, its footprints face away and draw
+        // nothing: what it saw is then no reason to leave an older sample out, so older frames
+        // are drawn whole.
+        let back_facing = (fc.target - fc.eye).dot(camera.target - camera.eye) < 0.0;
+        let sets: Vec<&Scene> = if back_facing {
+            older.iter().take(residuals.len()).copied().filter(|o| crate::frame_setup::unbuilt_ok(o)).collect()
         } else {
-            0
+            residuals.iter().map(|(_, r)| r).collect()
         };
-        for (_, o) in &residuals {
+        let tiles_w =
+            if sets.iter().any(|o| !o.samples.is_empty()) { Holes::mark(&self.state, w, &mut tiles) } else { 0 };
+        for &o in &sets {
             if o.samples.is_empty() || !tiles.contains(&1) {
                 continue;
             }

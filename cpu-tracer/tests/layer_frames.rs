@@ -1,6 +1,7 @@
 //! Older frames for layered frames (issue 19's multi-frame filling in `splat-layers`): an older
 //! frame fills only pixels the newest frame leaves uncovered, only with what the newest frame
-//! did not see (a copy of the newest frame adds nothing), and fills a disocclusion.
+//! did not see (the newest frame's samples again, from other cameras, add nothing), and fills a
+//! disocclusion and a 180° turn.
 
 use volwarp_core::renderer::{Image, Renderer};
 use volwarp_core::{Camera, Scene, Vec3, BACKGROUND};
@@ -77,6 +78,40 @@ fn an_older_frame_fills_a_disocclusion_and_never_overrides_the_newest() {
     }
     assert!(kept > 1000, "{kept} pixels covered by the newest frame");
     assert!(filled > 50, "{filled} pixels of the disocclusion filled from the older frame");
+}
+
+#[test]
+fn an_older_frame_fills_a_180_degree_turn() {
+    // An opaque slab before a wide plate. The newest frame, zoomed in from the front, saw the
+    // slab and the plate around it as far as its narrow view reached; the older one, from
+    // behind, saw the whole plate. Turned around, the newest frame's footprints face away and
+    // draw nothing, so the older frame is drawn whole: the plate, also where the newest frame
+    // saw it (a residual alone would leave a ring open there).
+    let front = Camera::look_at(Vec3::new(0.0, 0.0, 4.0), Vec3::ZERO, Vec3::Y, 12.0, 64, 64);
+    let mut newest = plane(30, 0.3, 0.1, [1.0, 0.5, 0.2, 1.0], |_, _| true);
+    newest.extend(plane(60, 1.0, -0.1, [0.2, 0.6, 1.0, 1.0], |x, y| {
+        x.abs().max(y.abs()) > 0.3 && x.abs().max(y.abs()) < 0.4
+    }));
+    let back = Camera::look_at(Vec3::new(0.0, 0.0, -4.0), Vec3::ZERO, Vec3::Y, 40.0, 64, 64);
+    let older = plane(60, 1.0, -0.1, [0.2, 0.6, 1.0, 1.0], |_, _| true);
+    let newest = unbuilt_scene(&frame_from_points(&newest, front));
+    let older = unbuilt_scene(&frame_from_points(&older, back));
+    let cam = back.orbit(5.0, 0.0);
+    let alone = draw(&mut unfilled(), &[&newest], &cam);
+    let both = draw(&mut unfilled(), &[&newest, &older], &cam);
+    let (mut kept, mut filled) = (0, 0);
+    for (&a, &b) in alone.pixels.iter().zip(&both.pixels) {
+        if a != BACKGROUND {
+            assert_eq!(b, a, "a pixel the newest frame covers keeps its color");
+            kept += 1;
+        } else if b != BACKGROUND {
+            assert!((b >> 16 & 0xff) > (b & 0xff), "filled with the older frame's blue: {b:08x}");
+            filled += 1;
+        }
+    }
+    assert_eq!(kept, 0, "seen from behind, the newest frame's footprints face away");
+    // The whole plate, ring included (2042 pixels; the residual alone leaves about 290 open).
+    assert!(filled > 1900, "{filled} pixels of the plate filled from the older frame");
 }
 
 #[test]
