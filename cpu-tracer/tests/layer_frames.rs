@@ -36,6 +36,24 @@ fn draw(r: &mut LayerSplat, scenes: &[&Scene], cam: &Camera) -> Image {
     img
 }
 
+/// Checks that every pixel the newest frame covers (`alone`) keeps its color with the older
+/// frames (`both`) and that every pixel they fill has the older frame's color (`older_color`);
+/// returns the counts of both.
+fn compare(alone: &Image, both: &Image, older_color: impl Fn(u32) -> bool) -> (usize, usize) {
+    assert_eq!((both.width, both.height), (alone.width, alone.height));
+    let (mut kept, mut filled) = (0, 0);
+    for (&a, &b) in alone.pixels.iter().zip(&both.pixels) {
+        if a != BACKGROUND {
+            assert_eq!(b, a, "a pixel the newest frame covers keeps its color");
+            kept += 1;
+        } else if b != BACKGROUND {
+            assert!(older_color(b), "filled with the older frame's color: {b:08x}");
+            filled += 1;
+        }
+    }
+    (kept, filled)
+}
+
 /// Without the stale fill, so what the older frames add is all that differs.
 fn unfilled() -> LayerSplat {
     LayerSplat::with_options(1, LayerOptions { fill: false, ..LayerOptions::DEFAULT })
@@ -64,18 +82,8 @@ fn an_older_frame_fills_a_disocclusion_and_never_overrides_the_newest() {
     let mut r2 = unfilled();
     r2.set_adaptive_radius(true);
     let both = draw(&mut r2, &[&newest, &older], &cam);
-    assert_eq!((both.width, both.height), (alone.width, alone.height));
-    let (mut kept, mut filled) = (0, 0);
-    for (&a, &b) in alone.pixels.iter().zip(&both.pixels) {
-        if a != BACKGROUND {
-            assert_eq!(b, a, "a pixel the newest frame covers keeps its color");
-            kept += 1;
-        } else if b != BACKGROUND {
-            // Filled from the older frame: its green wall.
-            assert!((b >> 8 & 0xff) > (b & 0xff), "filled with the older frame's color: {b:08x}");
-            filled += 1;
-        }
-    }
+    // Filled from the older frame: its green wall.
+    let (kept, filled) = compare(&alone, &both, |p| (p >> 8 & 0xff) > (p & 0xff));
     assert!(kept > 1000, "{kept} pixels covered by the newest frame");
     assert!(filled > 50, "{filled} pixels of the disocclusion filled from the older frame");
 }
@@ -99,16 +107,8 @@ fn an_older_frame_fills_a_180_degree_turn() {
     let cam = back.orbit(5.0, 0.0);
     let alone = draw(&mut unfilled(), &[&newest], &cam);
     let both = draw(&mut unfilled(), &[&newest, &older], &cam);
-    let (mut kept, mut filled) = (0, 0);
-    for (&a, &b) in alone.pixels.iter().zip(&both.pixels) {
-        if a != BACKGROUND {
-            assert_eq!(b, a, "a pixel the newest frame covers keeps its color");
-            kept += 1;
-        } else if b != BACKGROUND {
-            assert!((b >> 16 & 0xff) > (b & 0xff), "filled with the older frame's blue: {b:08x}");
-            filled += 1;
-        }
-    }
+    // Filled from the older frame: its blue plate.
+    let (kept, filled) = compare(&alone, &both, |p| (p >> 16 & 0xff) > (p & 0xff));
     assert_eq!(kept, 0, "seen from behind, the newest frame's footprints face away");
     // The whole plate, ring included (2042 pixels; the residual alone leaves about 290 open).
     assert!(filled > 1900, "{filled} pixels of the plate filled from the older frame");

@@ -31,7 +31,6 @@ use volwarp_core::segments::MAX_LAYERS;
 use volwarp_core::wire::Frame;
 use volwarp_core::{Camera, Image, RendererKind, Scene};
 use volwarp_cpu_tracer::hole_fill::{FillOptions, HoleFill, SampleIds, MAX_FRAMES};
-use volwarp_cpu_tracer::layer_splat::LayerSplat;
 use volwarp_cpu_tracer::{PacketTracer, SphereSplat};
 
 /// A frame the client holds, with its scene built once for every method.
@@ -66,10 +65,13 @@ pub trait Method {
     fn draw(&mut self, frames: &[&HeldFrame], camera: &Camera, out: &mut Image);
 }
 
-/// A method that is one renderer of the registry drawing the newest frame.
+/// A method that is one renderer of the registry drawing the frames it keeps
+/// (`Renderer::render_set`: the newest alone unless the renderer keeps frames, as
+/// `splat-layers` does).
 pub struct RendererMethod {
     name: String,
     request: RequestPolicy,
+    frames: usize,
     renderer: Box<dyn Renderer + Send>,
 }
 
@@ -80,9 +82,13 @@ impl Method for RendererMethod {
     fn request(&self) -> RequestPolicy {
         self.request
     }
+    fn frames_kept(&self) -> usize {
+        self.frames
+    }
     fn draw(&mut self, frames: &[&HeldFrame], camera: &Camera, out: &mut Image) {
-        match frames.last() {
-            Some(f) => self.renderer.render(&f.scene, camera, out),
+        let scenes: Vec<&Scene> = frames.iter().rev().take(self.frames).map(|f| &f.scene).collect();
+        match scenes.first() {
+            Some(_) => self.renderer.render_set(&scenes, camera, out),
             None => out.reset_for(camera),
         }
     }
@@ -110,31 +116,6 @@ impl<R: SampleIds + Renderer> Method for FillMethod<R> {
     fn draw(&mut self, frames: &[&HeldFrame], camera: &Camera, out: &mut Image) {
         let scenes: Vec<&Scene> = frames.iter().rev().take(self.frames).map(|f| &f.scene).collect();
         self.fill.render_set(&scenes, camera, out);
-    }
-}
-
-/// The layered splatter keeping several frames (`splat-layers+frames=K`): what each older frame
-/// saw that the newest did not fills what the newest leaves uncovered (`LayerSplat::render_set`).
-pub struct LayerMethod {
-    name: String,
-    request: RequestPolicy,
-    frames: usize,
-    r: LayerSplat,
-}
-
-impl Method for LayerMethod {
-    fn name(&self) -> &str {
-        &self.name
-    }
-    fn request(&self) -> RequestPolicy {
-        self.request
-    }
-    fn frames_kept(&self) -> usize {
-        self.frames
-    }
-    fn draw(&mut self, frames: &[&HeldFrame], camera: &Camera, out: &mut Image) {
-        let scenes: Vec<&Scene> = frames.iter().rev().take(self.frames).map(|f| &f.scene).collect();
-        self.r.render_set(&scenes, camera, out);
     }
 }
 
@@ -271,11 +252,6 @@ impl MethodSpec {
         match (self.renderer, adapt) {
             (RendererKind::SplatFill, _) => fill_method(SphereSplat::new(t), RendererKind::SplatFill, fill_opts),
             (RendererKind::Splat, true) => fill_method(SphereSplat::new(t), RendererKind::Splat, none),
-            (RendererKind::SplatLayers, _) if frames > 1 => {
-                let mut r = LayerSplat::new(t);
-                r.set_adaptive_radius(adapt);
-                Box::new(LayerMethod { name, request, frames, r })
-            }
             (RendererKind::SpheresFill, _) => Box::new(FillMethod {
                 name,
                 request,
@@ -285,7 +261,7 @@ impl MethodSpec {
             (kind, _) => {
                 let mut renderer = volwarp_cpu_tracer::create(kind, t).expect("parse admits only CPU renderers");
                 renderer.set_adaptive_radius(adapt);
-                Box::new(RendererMethod { name, request, renderer })
+                Box::new(RendererMethod { name, request, frames, renderer })
             }
         }
     }
