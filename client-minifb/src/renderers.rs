@@ -211,6 +211,30 @@ mod tests {
         assert!(r.select_key(RendererKind::ALL.len() + 1).is_err());
     }
 
+    #[test]
+    fn the_layered_renderer_uses_older_frames_and_the_others_draw_the_newest() {
+        // The newest frame zoomed in (a narrow view), an older one of the whole surface: what
+        // the older frame holds outside the newest frame's view fills the pixels around it.
+        let mut zoomed = depth_image_frame(48, 1.0, 7);
+        zoomed.header.camera.fov_y_deg /= 3.0;
+        let whole = depth_image_frame(48, 1.0, 9);
+        let (newest, older) =
+            (volwarp_cpu_tracer::route::unbuilt_scene(&zoomed), volwarp_cpu_tracer::route::unbuilt_scene(&whole));
+        let cam = whole.header.camera.orbit(5.0, 0.0);
+        let mut r = Renderers::new(RendererKind::SplatLayers, 1).unwrap();
+        assert!(r.keeps_frames());
+        let (mut one, mut two) = (Image::new(1, 1), Image::new(1, 1));
+        r.render(&newest, &cam, &mut one);
+        r.render_set(&[&newest, &older], &cam, &mut two);
+        let changed = one.pixels.iter().zip(&two.pixels).filter(|(a, b)| a != b).count();
+        assert!(changed > 100, "older frames fill {changed} pixels");
+        r.select(RendererKind::Splat).unwrap();
+        assert!(!r.keeps_frames());
+        r.render(&newest, &cam, &mut one);
+        r.render_set(&[&newest, &older], &cam, &mut two);
+        assert!(one == two, "a renderer that keeps no frames draws the newest alone");
+    }
+
     /// The GPU layered splatter opens by name where there is an adapter (lavapipe in CI) and
     /// draws the CPU's layered image; without one (or without the `gpu` feature) creating it
     /// is an error that says why, not a panic.
