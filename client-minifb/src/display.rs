@@ -99,6 +99,11 @@ impl Display {
     /// does not cover from the older ones where it can ([`Renderers::render_set`]).
     pub fn set_keep_frames(&mut self, k: usize) {
         self.keep = k.clamp(1, volwarp_cpu_tracer::hole_fill::MAX_FRAMES);
+        self.trim_older();
+    }
+
+    /// Hands the older frames beyond `keep − 1` back to the network.
+    fn trim_older(&mut self) {
         while self.older.len() >= self.keep {
             if let Some(old) = self.older.pop_back() {
                 self.net.recycle(old.scene);
@@ -127,11 +132,7 @@ impl Display {
                     }
                 }
                 self.drawn = false;
-                while self.older.len() >= self.keep {
-                    if let Some(old) = self.older.pop_back() {
-                        self.net.recycle(old.scene);
-                    }
-                }
+                self.trim_older();
                 true
             }
             None => false,

@@ -642,8 +642,6 @@ impl Renderer for LayerSplat {
         }
         let mut scratch = core::mem::replace(&mut self.scratch, Image::new(0, 0));
         let residuals = core::mem::take(&mut self.residuals);
-        // The tiles holding an unfilled pixel, once: a superset of those left after each older
-        // frame, so nothing is missed.
         let mut tiles = core::mem::take(&mut self.tiles);
         // Turned more than 90° from the newest frame's view, its footprints face away and draw
         // nothing: what it saw is then no reason to leave an older sample out, so older frames
@@ -654,12 +652,12 @@ impl Renderer for LayerSplat {
         } else {
             residuals.iter().map(|(_, r)| r).collect()
         };
+        // The tiles holding an unfilled pixel, once: a superset of those left after each older
+        // frame, so nothing is missed.
         let tiles_w =
             if sets.iter().any(|o| !o.samples.is_empty()) { Holes::mark(&self.state, w, &mut tiles) } else { 0 };
-        for &o in &sets {
-            if o.samples.is_empty() || !tiles.contains(&1) {
-                continue;
-            }
+        let holes = tiles_w > 0 && tiles.contains(&1);
+        for &o in sets.iter().filter(|o| holes && !o.samples.is_empty()) {
             // The older frame's pixels are read only where it has segments: no clearing.
             scratch.width = camera.width;
             scratch.height = camera.height;
@@ -680,16 +678,10 @@ impl Renderer for LayerSplat {
         self.residuals = residuals;
         self.scratch = scratch;
         self.tiles = tiles;
-        if !fill {
-            for (p, &s) in out.pixels.iter_mut().zip(&self.state) {
-                if s & FILLED != 0 {
-                    *p = s as u32;
-                }
-            }
-            return;
+        if fill {
+            block_outside_silhouette(&mut self.state, w, h);
+            stale_lookup(&self.frame.pixels, &fc, camera, &mut self.state, &self.threads);
         }
-        block_outside_silhouette(&mut self.state, w, h);
-        stale_lookup(&self.frame.pixels, &fc, camera, &mut self.state, &self.threads);
         for (p, &s) in out.pixels.iter_mut().zip(&self.state) {
             if s & FILLED != 0 {
                 *p = s as u32;

@@ -220,9 +220,11 @@ impl Calibration {
         if renderer != method {
             // The layered splatter draws what the newest frame did not see of each older frame
             // it keeps, on top of its own draw.
-            let frames = spec.split('+').find_map(|p| p.strip_prefix("frames=")?.parse::<usize>().ok()).unwrap_or(1);
-            let older = if renderer == "splat-layers" { frames.saturating_sub(1) as f64 } else { 0.0 };
-            return self.draw_ms(renderer, size) * (1.0 + OLDER_FRAME_COST * older);
+            let older = super::methods::MethodSpec::parse(spec)
+                .ok()
+                .filter(|m| m.renderer == volwarp_core::RendererKind::SplatLayers)
+                .map_or(0, |m| m.frames - 1);
+            return self.draw_ms(renderer, size) * (1.0 + OLDER_FRAME_COST * older as f64);
         }
         let base = DEFAULT_DRAW_MS_512.iter().find(|(n, _)| *n == method).map_or(1.0, |x| x.1);
         base * (size as f64 / 512.0).powi(2)
