@@ -218,7 +218,8 @@ impl<R: SampleIds> HoleFill<R> {
             self.depth.resolve(&scene.colors, &mut self.frame, &self.threads);
             self.frame_of = Some(id);
         }
-        stale_lookup(&self.frame, &fc, camera, &mut self.state, &self.threads);
+        let frame = &self.frame[..];
+        stale_lookup(|i| frame[i], &fc, camera, &mut self.state, &self.threads);
     }
 
     /// Stage 4: pull-push over the filled pixels into the unfilled ones.
@@ -305,14 +306,17 @@ impl<R: SampleIds> HoleFill<R> {
 }
 
 /// Stage 3 of the fill (shared with the layered splatter): every [`UNFILLED`] pixel of `state`
-/// (laid out for `camera`) takes the color of `frame` (an image for the frame camera `fc`)
-/// where the pixel's ray crosses `fc`'s focal plane; where `frame` shows background the pixel
-/// stays unfilled.
-pub(crate) fn stale_lookup(frame: &[u32], fc: &Camera, camera: &Camera, state: &mut [u64], threads: &Threads) {
+/// (laid out for `camera`) takes the color `frame` gives for the pixel (index `y · width + x`)
+/// of the frame camera `fc` where the pixel's ray crosses `fc`'s focal plane; where the frame
+/// shows background the pixel stays unfilled.
+pub(crate) fn stale_lookup(
+    frame: impl Fn(usize) -> u32 + Sync,
+    fc: &Camera,
+    camera: &Camera,
+    state: &mut [u64],
+    threads: &Threads,
+) {
     let (fw, fh) = (fc.width, fc.height);
-    if frame.len() != fw as usize * fh as usize {
-        return;
-    }
     let proj = Projector::new(fc);
     let (_, _, fwd) = fc.basis();
     // The focal plane: points q with q·fwd = target·fwd.
@@ -333,7 +337,7 @@ pub(crate) fn stale_lookup(frame: &[u32], fc: &Camera, camera: &Camera, state: &
             if x >= 0.0 && y >= 0.0 && x < fw as f32 && y < fh as f32 {
                 // Where the frame showed background too, the pixel stays a hole (for
                 // pull-push; the background otherwise, as before).
-                let c = frame[y as usize * fw as usize + x as usize];
+                let c = frame(y as usize * fw as usize + x as usize);
                 if c != BACKGROUND {
                     *p = filled(c);
                 }

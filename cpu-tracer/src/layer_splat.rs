@@ -26,14 +26,18 @@
 //! inside the covered pixels' row and column spans, take the frame's own composited image for
 //! their view direction (the stale frame, looked up as [`crate::hole_fill`]'s stage 3 does), so
 //! what the warp knows nothing about shows what a send-image system would, not the background.
-//! The frame's image is composited once per frame (the same footprints at the frame's camera).
+//! At its own camera every footprint is exactly its source pixel, so the frame's image at a
+//! pixel is that pixel's own segments composited: when a frame arrives its samples are grouped
+//! by source pixel once (`OwnPass`), and each hole composites the pixel it looks up on the
+//! spot; the whole image is composited only when the frame's own camera is drawn.
 //!
 //! **Older frames** ([`Renderer::render_set`], issue 19's multi-frame filling; the client keeps
 //! 4 frames by default): pixels no segment of the newest frame covers first take the older
 //! frames' segments, newest first, before the hole filling above. Only what the newest frame did
 //! not see comes back: when a newest frame arrives, its [`Sight`] (per pixel of its camera, the
 //! view depths of its nearest and farthest segment and its opacity) reduces each older frame
-//! once to its *residual*, the samples outside the newest frame's view or more than
+//! once to its *residual* (the previous newest whole, the others' residuals further), the
+//! samples outside the newest frame's view or more than
 //! [`RESIDUAL_TOLERANCE`] pixels behind the farthest segment of a pixel at least
 //! [`RESIDUAL_OPAQUE`] opaque. So an older sample never stands where the newest frame saw empty
 //! space or the same surface (on a steady orbit older frames change nothing), and a camera
@@ -191,7 +195,8 @@ pub struct LayerSplat {
     count: Vec<u8>,
     /// Grow the footprints with the warp.
     adaptive: bool,
-    /// The frame's own composited image (for the fill) and the scene it was made from.
+    /// The frame's own composited image (drawn at the frame's own camera; the hole lookups'
+    /// source for footprints other than the default's) and the scene it was made from.
     frame: Image,
     frame_of: Option<SceneId>,
     /// Per output pixel the fill state (`hole_fill`'s encoding).
@@ -203,6 +208,8 @@ pub struct LayerSplat {
     bands: Vec<u32>,
     /// An older frame's image (multi-frame filling).
     scratch: Image,
+    /// The newest frame's samples in its own camera (its own image and its `Sight` use them).
+    own: OwnPass,
     /// What the newest frame saw, and per older frame what it did not see.
     sight: Sight,
     residual_for: Option<SceneId>,
@@ -231,6 +238,7 @@ impl LayerSplat {
             bins: Vec::new(),
             bands: Vec::new(),
             scratch: Image::new(0, 0),
+            own: OwnPass::default(),
             sight: Sight::default(),
             residual_for: None,
             residuals: Vec::new(),
@@ -609,20 +617,21 @@ impl Renderer for LayerSplat {
         }
         let fc = scene.header.camera;
         let fill = self.opts.fill && fc.validate(MAX_VIEWPORT).is_ok();
-        // The frame's own image first (it uses the same per-pixel lists).
-        if fill && self.frame_of != Some(SceneId::of(scene)) {
-            let mut frame = core::mem::replace(&mut self.frame, Image::new(0, 0));
-            if begin_frame_unbuilt_ok(scene, &fc, &mut frame) {
-                self.draw(scene, &fc, self.opts.own, &mut frame, None);
-            }
-            self.frame = frame;
-            self.frame_of = Some(SceneId::of(scene));
-        }
         // At the frame's own camera the filled image is the frame's own (nothing is a hole
-        // there, and footprints do not grow): no second draw.
-        if fill && *camera == fc && self.frame.pixels.len() == out.pixels.len() {
-            out.pixels.copy_from_slice(&self.frame.pixels);
-            return;
+        // there, and footprints do not grow): composited once, then copied.
+        if fill && *camera == fc {
+            if self.frame_of != Some(SceneId::of(scene)) {
+                let mut frame = core::mem::replace(&mut self.frame, Image::new(0, 0));
+                if begin_frame_unbuilt_ok(scene, &fc, &mut frame) {
+                    self.own_image(scene, &mut frame);
+                }
+                self.frame = frame;
+                self.frame_of = Some(SceneId::of(scene));
+            }
+            if self.frame.pixels.len() == out.pixels.len() {
+                out.pixels.copy_from_slice(&self.frame.pixels);
+                return;
+            }
         }
         let grown = if self.adaptive { self.opts.own_at(warp_angle_deg(&fc, camera)) } else { self.opts.own };
         self.draw(scene, camera, grown, out, None);
@@ -680,7 +689,31 @@ impl Renderer for LayerSplat {
         self.tiles = tiles;
         if fill {
             block_outside_silhouette(&mut self.state, w, h);
-            stale_lookup(&self.frame.pixels, &fc, camera, &mut self.state, &self.threads);
+            // The frame's own image where a hole looks it up: each such pixel's own segments
+            // composited on the spot (a few thousand, against a million for the whole image).
+            if self.opts.own == 0.5 {
+                self.own.project(scene, &self.threads);
+                self.own.group();
+                let (own, colors) = (&self.own, &scene.colors[..]);
+                stale_lookup(|i| own.pixel(i, colors), &fc, camera, &mut self.state, &self.threads);
+            } else {
+                if self.frame_of != Some(SceneId::of(scene)) {
+                    let mut frame = core::mem::replace(&mut self.frame, Image::new(0, 0));
+                    if begin_frame_unbuilt_ok(scene, &fc, &mut frame) {
+                        self.own_image(scene, &mut frame);
+                    }
+                    self.frame = frame;
+                    self.frame_of = Some(SceneId::of(scene));
+                }
+                let frame = &self.frame.pixels[..];
+                stale_lookup(
+                    |i| frame.get(i).copied().unwrap_or(BACKGROUND),
+                    &fc,
+                    camera,
+                    &mut self.state,
+                    &self.threads,
+                );
+            }
         }
         for (p, &s) in out.pixels.iter_mut().zip(&self.state) {
             if s & FILLED != 0 {
@@ -693,18 +726,31 @@ impl Renderer for LayerSplat {
 impl LayerSplat {
     /// Brings [`LayerSplat::residuals`] up to date for `newest` and `older` (newest first):
     /// per older frame the samples the newest frame did not see.
+    ///
+    /// When the set has moved on by one frame (the previous newest is now the first older
+    /// frame), an older frame's residual is what is left of its last one: what the previous
+    /// newest saw of it is already drawn before it, from the previous newest's own samples, so
+    /// only the new newest's sight is applied to the (small) residuals, and only the previous
+    /// newest is reduced whole. Any other change of the set reduces every older frame whole.
     fn update_residuals(&mut self, newest: &Scene, older: &[&Scene]) {
         let id = SceneId::of(newest);
-        if self.residual_for != Some(id) {
-            self.residuals.clear();
-            self.sight.update(newest);
-            self.residual_for = Some(id);
-        }
         let older = &older[..older.len().min(crate::hole_fill::MAX_FRAMES - 1)];
+        let mut fresh = false;
+        if self.residual_for != Some(id) {
+            let shifted = self.residual_for.is_some() && older.first().map(|o| SceneId::of(o)) == self.residual_for;
+            if !shifted {
+                self.residuals.clear();
+            }
+            self.own.project(newest, &self.threads);
+            self.sight.update(newest, &self.own.at);
+            self.residual_for = Some(id);
+            fresh = true;
+        }
         let mut next = Vec::with_capacity(older.len());
         for &o in older {
             let oid = SceneId::of(o);
             let r = match self.residuals.iter().position(|(i, _)| *i == oid) {
+                Some(i) if fresh => self.sight.residual(&self.residuals.swap_remove(i).1, &self.threads),
                 Some(i) => self.residuals.swap_remove(i).1,
                 // An inconsistent scene adds nothing.
                 None if !crate::frame_setup::unbuilt_ok(o) => Scene::empty(&o.header),
@@ -736,8 +782,9 @@ pub struct Sight {
 
 impl Sight {
     /// Records what `scene` saw (nothing for an unusable camera: then every sample of an older
-    /// frame counts as unseen).
-    fn update(&mut self, scene: &Scene) {
+    /// frame counts as unseen), from its samples' pixels and depths in its own camera (`at`,
+    /// [`OwnPass::at`]).
+    fn update(&mut self, scene: &Scene, at: &[u64]) {
         let fc = scene.header.camera;
         self.proj = None;
         if fc.validate(MAX_VIEWPORT).is_err() {
@@ -751,14 +798,11 @@ impl Sight {
         self.hidden.resize(w * h, f32::NEG_INFINITY);
         self.trans.clear();
         self.trans.resize(w * h, 1.0);
-        let (mut idx, mut zs) = (vec![NO_PIXEL; QUAD_CHUNK], vec![0f32; QUAD_CHUNK]);
-        for (smp, col) in scene.samples.chunks(QUAD_CHUNK).zip(scene.colors.chunks(QUAD_CHUNK)) {
-            project(&proj, w, h, &scene.deq, smp, &mut idx[..smp.len()], &mut zs[..smp.len()]);
-            for ((&i, &z), &c) in idx.iter().zip(&zs).zip(col) {
-                if let Some(t) = self.trans.get_mut(i as usize) {
-                    *t *= 1.0 - (c >> 24) as f32 / 255.0;
-                    self.hidden[i as usize] = self.hidden[i as usize].max(z);
-                }
+        for (&a, &c) in at.iter().zip(&scene.colors) {
+            let (i, z) = ((a >> 32) as usize, f32::from_bits(a as u32));
+            if let Some(t) = self.trans.get_mut(i) {
+                *t *= 1.0 - (c >> 24) as f32 / 255.0;
+                self.hidden[i] = self.hidden[i].max(z);
             }
         }
         // z > zmax + tol·z / px  ⟺  z > zmax / (1 − tol / px).
@@ -782,7 +826,7 @@ impl Sight {
             let first = chunk * QUAD_CHUNK;
             let (mut idx, mut zs) = ([NO_PIXEL; QUAD_CHUNK], [0f32; QUAD_CHUNK]);
             let n = keep.len();
-            project(&proj, w, h, &o.deq, &o.samples[first..first + n], &mut idx[..n], &mut zs[..n]);
+            project(&proj, (w, h), &o.deq, &o.samples[first..first + n], &mut idx[..n], &mut zs[..n], &mut []);
             for ((k, &i), &z) in keep.iter_mut().zip(&idx).zip(&zs) {
                 // Outside the view (no pixel): unseen.
                 *k = self.hidden.get(i as usize).is_none_or(|&hz| z > hz) as u8;
@@ -809,39 +853,182 @@ impl Sight {
 /// The pixel index of a point outside the view.
 const NO_PIXEL: u32 = u32::MAX;
 
+/// A frame's samples in its own camera, once per frame: per sample its pixel and view depth
+/// (what [`Sight`] records) and its depth key, and the keys grouped by pixel (a counting sort).
+/// At its own camera every footprint of the default width is exactly its source pixel, so the
+/// frame's own composited image is each pixel's group sorted and composited: the image the
+/// footprints would draw there, without setting up, binning and rasterizing a million of them
+/// (measured: the first draw after a frame arrives, `docs/perf.md`). Memory: 20 bytes per
+/// sample and 4 per pixel, reused frame to frame.
+#[derive(Debug, Default)]
+struct OwnPass {
+    /// The scene projected.
+    of: Option<SceneId>,
+    /// Its camera's projection and viewport (`None`: unusable camera, nothing projected).
+    proj: Option<(Proj, usize, usize)>,
+    /// Per sample `pixel << 32 | view depth bits` (pixel [`NO_PIXEL`] outside the view).
+    at: Vec<u64>,
+    /// Per sample its depth key ([`key`]: squared distance from the eye, id).
+    keys: Vec<u64>,
+    /// The keys grouped by pixel (in sample order within a pixel) and, per pixel, where its
+    /// group starts (one more entry: the end of the last).
+    grouped: Vec<u64>,
+    start: Vec<u32>,
+}
+
+impl OwnPass {
+    /// Projects `scene`'s samples into its own camera (nothing if that was the last scene).
+    fn project(&mut self, scene: &Scene, threads: &Threads) {
+        let id = SceneId::of(scene);
+        if self.of == Some(id) {
+            return;
+        }
+        self.of = Some(id);
+        self.start.clear();
+        let fc = scene.header.camera;
+        let n = scene.samples.len();
+        if fc.validate(MAX_VIEWPORT).is_err() {
+            self.proj = None;
+            self.at.clear();
+            self.at.resize(n, (NO_PIXEL as u64) << 32);
+            return;
+        }
+        let (w, h) = (fc.width as usize, fc.height as usize);
+        let proj = Proj::new(&View::new(&fc));
+        self.proj = Some((proj, w, h));
+        self.at.resize(n, 0);
+        self.keys.resize(n, 0);
+        let (samples, deq) = (&scene.samples[..], &scene.deq);
+        threads.for_each_chunk_pair(&mut self.at[..n], &mut self.keys[..n], QUAD_CHUNK, |chunk, at, keys| {
+            let first = chunk * QUAD_CHUNK;
+            let m = at.len();
+            let (mut idx, mut zs, mut d2) = ([NO_PIXEL; QUAD_CHUNK], [0f32; QUAD_CHUNK], [0f32; QUAD_CHUNK]);
+            project(&proj, (w, h), deq, &samples[first..first + m], &mut idx[..m], &mut zs[..m], &mut d2[..m]);
+            for (k, (a, key_out)) in at.iter_mut().zip(keys.iter_mut()).enumerate() {
+                *a = (idx[k] as u64) << 32 | zs[k].to_bits() as u64;
+                *key_out = key(d2[k], (first + k) as u32);
+            }
+        });
+    }
+
+    /// Pixel `i`'s own segments composited over the background (after [`OwnPass::group`]; the
+    /// background for a pixel without segments or outside the view).
+    fn pixel(&self, i: usize, colors: &[u32]) -> u32 {
+        let (Some(&a), Some(&b)) = (self.start.get(i), self.start.get(i + 1)) else { return BACKGROUND };
+        let Some(keys) = self.grouped.get(a as usize..b as usize) else { return BACKGROUND };
+        let n = keys.len();
+        if n <= LIST {
+            let mut list = [0u64; LIST];
+            list[..n].copy_from_slice(keys);
+            sort_keys(&mut list[..n]);
+            composite_keys(&list[..n], colors)
+        } else {
+            // More segments than a list keeps: the nearest LIST, as the lists keep.
+            let mut long = keys.to_vec();
+            long.sort_unstable();
+            composite_keys(&long[..LIST], colors)
+        }
+    }
+
+    /// Groups the keys by pixel (after [`OwnPass::project`]); false for an unusable camera.
+    fn group(&mut self) -> bool {
+        let Some((_, w, h)) = self.proj else { return false };
+        if !self.start.is_empty() {
+            return true;
+        }
+        // Counts, then their running sums (each pixel's end), then every key placed backwards
+        // at its pixel's end: the ends become the starts and a pixel keeps its samples' order.
+        self.start.resize(w * h + 1, 0);
+        for &a in &self.at {
+            if let Some(c) = self.start.get_mut((a >> 32) as usize) {
+                *c += 1;
+            }
+        }
+        let mut sum = 0u32;
+        for c in &mut self.start[..w * h] {
+            sum += *c;
+            *c = sum;
+        }
+        self.start[w * h] = sum;
+        self.grouped.resize(sum as usize, 0);
+        for (&a, &k) in self.at.iter().zip(&self.keys).rev() {
+            let i = (a >> 32) as usize;
+            if i < w * h {
+                self.start[i] -= 1;
+                self.grouped[self.start[i] as usize] = k;
+            }
+        }
+        true
+    }
+}
+
+impl LayerSplat {
+    /// The frame's own composited image into `out` (sized to the frame's camera and cleared
+    /// to the background): with the default footprint width, each pixel's own segments sorted
+    /// and composited ([`OwnPass`]); with another width, the footprints drawn at the frame's
+    /// camera.
+    fn own_image(&mut self, scene: &Scene, out: &mut Image) {
+        let fc = scene.header.camera;
+        if self.opts.own != 0.5 {
+            self.draw(scene, &fc, self.opts.own, out, None);
+            return;
+        }
+        self.own.project(scene, &self.threads);
+        if !self.own.group() {
+            return;
+        }
+        let w = fc.width as usize;
+        let (own, colors) = (&self.own, &scene.colors[..]);
+        self.threads.for_each_chunk(&mut out.pixels, RASTER_BAND * w, |band, px| {
+            let first = band * RASTER_BAND * w;
+            for (j, p) in px.iter_mut().enumerate() {
+                *p = own.pixel(first + j, colors);
+            }
+        });
+    }
+}
+
 lanes::dispatch! {
     /// [`project_lanes`] on the best lanes this CPU has (the same values either way).
     fn project / project_avx2 => project_lanes(
         p: &Proj,
-        w: usize,
-        h: usize,
+        size: (usize, usize),
         deq: &Dequantizer,
         samples: &[u64],
         idx: &mut [u32],
         zs: &mut [f32],
+        d2: &mut [f32],
     )
 }
 
-/// Per packed sample its pixel index in a `w × h` view with projection `p` ([`NO_PIXEL`]
+/// Per packed sample its pixel index in a `w × h` view (`size`) with projection `p` ([`NO_PIXEL`]
 /// outside it) and its view depth: [`pixel`] eight samples at a time (bit for bit: the same
-/// decode and `f32` operations in the same order).
+/// decode and `f32` operations in the same order). Unless `d2` is empty, also its squared
+/// distance from the eye, as the footprint set-up computes it for the depth key.
 #[inline(always)]
 fn project_lanes<L: Lanes>(
     p: &Proj,
-    w: usize,
-    h: usize,
+    (w, h): (usize, usize),
     deq: &Dequantizer,
     samples: &[u64],
     idx: &mut [u32],
     zs: &mut [f32],
+    d2: &mut [f32],
 ) {
+    let with_d2 = !d2.is_empty();
     let eye = [p.eye.x, p.eye.y, p.eye.z];
     let (u, v, a) = (p.u, p.v, p.w);
-    for ((s, ix), zo) in samples.chunks(8).zip(idx.chunks_mut(8)).zip(zs.chunks_mut(8)) {
+    for (g, ((s, ix), zo)) in samples.chunks(8).zip(idx.chunks_mut(8)).zip(zs.chunks_mut(8)).enumerate() {
         let [x, y, z, _] = match <&[u64; 8]>::try_from(s) {
             Ok(s8) => L::decode8(deq, eye, s8),
             Err(_) => lanes::decode_scalar(deq, eye, s),
         };
+        if with_d2 {
+            let dd = (x * x + y * y + z * z).to_array();
+            for (o, &v) in d2[g * 8..].iter_mut().zip(&dd[..s.len()]) {
+                *o = v;
+            }
+        }
         let zc = x * L::splat(a.x) + y * L::splat(a.y) + z * L::splat(a.z);
         let uc = x * L::splat(u.x) + y * L::splat(u.y) + z * L::splat(u.z);
         let vc = x * L::splat(v.x) + y * L::splat(v.y) + z * L::splat(v.z);
@@ -1201,10 +1388,17 @@ mod tests {
                 }
             };
             let (mut idx, mut zs) = (vec![0; samples.len()], vec![0.0; samples.len()]);
-            project_lanes::<wide::f32x8>(&p, w, h, &deq, &samples, &mut idx, &mut zs);
+            let mut d2 = vec![0.0; samples.len()];
+            project_lanes::<wide::f32x8>(&p, (w, h), &deq, &samples, &mut idx, &mut zs, &mut d2);
             check(&idx, &zs, "portable lanes");
-            project(&p, w, h, &deq, &samples, &mut idx, &mut zs);
+            for (k, &smp) in samples.iter().enumerate() {
+                let n = deq.center(smp) - p.eye;
+                assert_eq!(d2[k].to_bits(), (n.x * n.x + n.y * n.y + n.z * n.z).to_bits(), "distance of {k}");
+            }
+            let mut d2_dispatched = vec![0.0; samples.len()];
+            project(&p, (w, h), &deq, &samples, &mut idx, &mut zs, &mut d2_dispatched);
             check(&idx, &zs, "dispatched lanes");
+            assert!(d2.iter().zip(&d2_dispatched).all(|(a, b)| a.to_bits() == b.to_bits()));
         }
         assert!(inside > frame.samples.len(), "too few samples in view: {inside}");
     }

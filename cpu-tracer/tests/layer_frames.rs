@@ -88,6 +88,38 @@ fn an_older_frame_fills_a_disocclusion_and_never_overrides_the_newest() {
     assert!(filled > 50, "{filled} pixels of the disocclusion filled from the older frame");
 }
 
+/// When a frame arrives, the set moves on by one: the older frames' residuals are then reduced
+/// further by the new frame's sight only (the previous newest is reduced whole). A new frame that
+/// also missed the wall must leave the disocclusion to the oldest frame, as a renderer that sees
+/// the set for the first time draws it.
+#[test]
+fn a_set_moved_on_by_one_frame_draws_like_a_fresh_set() {
+    let (newest, older, cam) = disocclusion();
+    // The next frame: the newest frame's samples from a camera 4° further on (it saw the same).
+    let mut next = newest.clone();
+    next.header.camera = newest.header.camera.orbit(-4.0, 0.0);
+    let next = Scene { samples: newest.samples.iter().rev().copied().collect(), ..next };
+    let next = Scene { colors: newest.colors.iter().rev().copied().collect(), ..next };
+    for fill in [false, true] {
+        let opts = LayerOptions { fill, ..LayerOptions::DEFAULT };
+        let mut r = LayerSplat::with_options(1, opts);
+        r.set_adaptive_radius(true);
+        let before = draw(&mut r, &[&newest, &older], &cam);
+        let moved = draw(&mut r, &[&next, &newest, &older], &cam);
+        let mut fresh = LayerSplat::with_options(1, opts);
+        fresh.set_adaptive_radius(true);
+        assert!(same(&moved, &draw(&mut fresh, &[&next, &newest, &older], &cam)), "fill {fill}");
+        if !fill {
+            let alone = draw(&mut fresh, &[&next], &cam);
+            let (_, filled) = compare(&alone, &moved, |p| (p >> 8 & 0xff) > (p & 0xff));
+            assert!(filled > 50, "{filled} pixels of the disocclusion filled from the oldest frame");
+            let alone = draw(&mut fresh, &[&newest], &cam);
+            let (_, filled_before) = compare(&alone, &before, |p| (p >> 8 & 0xff) > (p & 0xff));
+            assert!(filled_before > 50);
+        }
+    }
+}
+
 #[test]
 fn an_older_frame_fills_a_180_degree_turn() {
     // An opaque slab before a wide plate. The newest frame, zoomed in from the front, saw the

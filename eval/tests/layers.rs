@@ -180,3 +180,30 @@ fn one_and_several_threads_draw_the_same_layered_image() {
     (cam.width, cam.height) = (77, 45);
     assert!(draw(&mut one, &f, &cam) == draw(&mut two, &f, &cam));
 }
+
+/// The frame's own image (what the hole filling looks up and what the frame's own camera
+/// shows) is made by grouping each pixel's segments, not by drawing footprints: it must be
+/// what the footprints draw there, on every dataset, several K, odd viewports, 1 and 2 threads.
+#[test]
+fn the_frames_own_image_is_what_its_footprints_draw_there() {
+    use volwarp_cpu_tracer::layer_splat::LayerOptions;
+    for ds in datasets() {
+        let m = Marcher::from_dataset(&ds);
+        for (k, size, yaw) in [(4, (SIZE, SIZE), 0.0), (8, (131, 77), 33.0), (2, (64, 101), 200.0)] {
+            let mut req = request(&m, yaw);
+            (req.camera.width, req.camera.height) = size;
+            let (f, _) = m.render_frame_layers(&req, k);
+            assert!(!f.samples.is_empty());
+            let footprints = draw(
+                &mut LayerSplat::with_options(1, LayerOptions { fill: false, ..LayerOptions::DEFAULT }),
+                &f,
+                &req.camera,
+            );
+            for threads in [1, 2] {
+                let own = draw(&mut LayerSplat::new(threads), &f, &req.camera);
+                let differ = own.pixels.iter().zip(&footprints.pixels).filter(|(a, b)| a != b).count();
+                assert_eq!(differ, 0, "{} K={k} {size:?} {threads} threads: {differ} pixels differ", ds.name);
+            }
+        }
+    }
+}

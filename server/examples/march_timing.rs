@@ -1,0 +1,47 @@
+//! `cargo run --release -p volwarp-server --example march_timing -- [N] [SIZE] [DATASET]`:
+//! marches the MRI benchmark view (the `server` bench's camera) N times and prints the median
+//! wall and on-CPU (process CPU time, all threads) milliseconds; `RAYON_NUM_THREADS` picks the
+//! threads. A steadier figure than criterion's on a shared machine, and a loop to profile.
+
+use std::time::Instant;
+use volwarp_core::Heuristic;
+use volwarp_server::{Dataset, Marcher};
+
+/// Process CPU time (all threads) in ms.
+fn cpu_ms() -> f64 {
+    let mut ts = libc::timespec { tv_sec: 0, tv_nsec: 0 };
+    // SAFETY: a valid, writable timespec.
+    unsafe { libc::clock_gettime(libc::CLOCK_PROCESS_CPUTIME_ID, &mut ts) };
+    ts.tv_sec as f64 * 1e3 + ts.tv_nsec as f64 / 1e6
+}
+
+fn median(mut v: Vec<f64>) -> f64 {
+    v.sort_by(f64::total_cmp);
+    v[v.len() / 2]
+}
+
+fn main() {
+    let args: Vec<String> = std::env::args().collect();
+    let n: usize = args.get(1).and_then(|s| s.parse().ok()).unwrap_or(5);
+    let size: u32 = args.get(2).and_then(|s| s.parse().ok()).unwrap_or(1024);
+    let path = args.get(3).cloned().unwrap_or_else(|| {
+        concat!(env!("CARGO_MANIFEST_DIR"), "/../../shared/data/mri_colin27_181x217x181_uint8.raw").to_string()
+    });
+    let ds = Dataset::load(&path, None).expect("loading the volume");
+    let m = Marcher::from_dataset(&ds);
+    let camera = m.default_camera(size, size).orbit(20.0, 10.0).dolly(0.68);
+    let (mut wall, mut cpu) = (Vec::new(), Vec::new());
+    let mut samples = 0;
+    for _ in 0..n {
+        let (w0, c0) = (Instant::now(), cpu_ms());
+        let s = m.march(&camera, Heuristic::Threshold);
+        cpu.push(cpu_ms() - c0);
+        wall.push(w0.elapsed().as_secs_f64() * 1e3);
+        samples = s.t.iter().filter(|t| t.is_finite()).count();
+    }
+    println!(
+        "{path} {size}²: {samples} samples, wall {:.1} ms, cpu {:.1} ms (medians of {n})",
+        median(wall),
+        median(cpu)
+    );
+}
