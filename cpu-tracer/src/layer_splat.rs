@@ -620,14 +620,7 @@ impl Renderer for LayerSplat {
         // At the frame's own camera the filled image is the frame's own (nothing is a hole
         // there, and footprints do not grow): composited once, then copied.
         if fill && *camera == fc {
-            if self.frame_of != Some(SceneId::of(scene)) {
-                let mut frame = core::mem::replace(&mut self.frame, Image::new(0, 0));
-                if begin_frame_unbuilt_ok(scene, &fc, &mut frame) {
-                    self.own_image(scene, &mut frame);
-                }
-                self.frame = frame;
-                self.frame_of = Some(SceneId::of(scene));
-            }
+            self.cache_own_image(scene);
             if self.frame.pixels.len() == out.pixels.len() {
                 out.pixels.copy_from_slice(&self.frame.pixels);
                 return;
@@ -697,14 +690,7 @@ impl Renderer for LayerSplat {
                 let (own, colors) = (&self.own, &scene.colors[..]);
                 stale_lookup(|i| own.pixel(i, colors), &fc, camera, &mut self.state, &self.threads);
             } else {
-                if self.frame_of != Some(SceneId::of(scene)) {
-                    let mut frame = core::mem::replace(&mut self.frame, Image::new(0, 0));
-                    if begin_frame_unbuilt_ok(scene, &fc, &mut frame) {
-                        self.own_image(scene, &mut frame);
-                    }
-                    self.frame = frame;
-                    self.frame_of = Some(SceneId::of(scene));
-                }
+                self.cache_own_image(scene);
                 let frame = &self.frame.pixels[..];
                 stale_lookup(
                     |i| frame.get(i).copied().unwrap_or(BACKGROUND),
@@ -963,6 +949,19 @@ impl OwnPass {
 }
 
 impl LayerSplat {
+    /// Makes [`LayerSplat::frame`] the frame's own composited image, unless it already is.
+    fn cache_own_image(&mut self, scene: &Scene) {
+        if self.frame_of == Some(SceneId::of(scene)) {
+            return;
+        }
+        let mut frame = core::mem::replace(&mut self.frame, Image::new(0, 0));
+        if begin_frame_unbuilt_ok(scene, &scene.header.camera, &mut frame) {
+            self.own_image(scene, &mut frame);
+        }
+        self.frame = frame;
+        self.frame_of = Some(SceneId::of(scene));
+    }
+
     /// The frame's own composited image into `out` (sized to the frame's camera and cleared
     /// to the background): with the default footprint width, each pixel's own segments sorted
     /// and composited ([`OwnPass`]); with another width, the footprints drawn at the frame's
