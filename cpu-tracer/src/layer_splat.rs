@@ -728,7 +728,8 @@ impl LayerSplat {
                 self.residuals.clear();
             }
             self.own.project(newest, &self.threads);
-            self.sight.update(newest, &self.own.at);
+            self.own.group();
+            self.sight.update(newest, &self.own, &self.threads);
             self.residual_for = Some(id);
             fresh = true;
         }
@@ -756,46 +757,47 @@ fn unbuilt_copy(s: &Scene) -> Scene {
 /// What a frame saw, per pixel of its camera: the view depth beyond which a point is hidden
 /// from it (behind the farthest segment of a pixel at least [`RESIDUAL_OPAQUE`] opaque, by
 /// [`RESIDUAL_TOLERANCE`] pixels at that depth), infinite where the pixel is empty or seen
-/// through (8 bytes per pixel with the transmittance it is made from, reused frame to frame).
+/// through (4 bytes per pixel, reused frame to frame).
 #[derive(Debug, Default)]
 pub struct Sight {
     proj: Option<Proj>,
     w: usize,
     h: usize,
     hidden: Vec<f32>,
-    trans: Vec<f32>,
 }
 
 impl Sight {
     /// Records what `scene` saw (nothing for an unusable camera: then every sample of an older
-    /// frame counts as unseen), from its samples' pixels and depths in its own camera (`at`,
-    /// [`OwnPass::at`]).
-    fn update(&mut self, scene: &Scene, at: &[u64]) {
-        let fc = scene.header.camera;
+    /// frame counts as unseen), from its samples grouped by pixel of its own camera (`own`,
+    /// after [`OwnPass::group`]), in parallel over rows.
+    fn update(&mut self, scene: &Scene, own: &OwnPass, threads: &Threads) {
         self.proj = None;
-        if fc.validate(MAX_VIEWPORT).is_err() {
+        let Some((proj, w, h)) = own.proj else { return };
+        if own.start.len() != w * h + 1 {
             return;
         }
-        let (w, h) = (fc.width as usize, fc.height as usize);
         (self.w, self.h) = (w, h);
-        let proj = Proj::new(&View::new(&fc));
         self.proj = Some(proj);
-        self.hidden.clear();
-        self.hidden.resize(w * h, f32::NEG_INFINITY);
-        self.trans.clear();
-        self.trans.resize(w * h, 1.0);
-        for (&a, &c) in at.iter().zip(&scene.colors) {
-            let (i, z) = ((a >> 32) as usize, f32::from_bits(a as u32));
-            if let Some(t) = self.trans.get_mut(i) {
-                *t *= 1.0 - (c >> 24) as f32 / 255.0;
-                self.hidden[i] = self.hidden[i].max(z);
-            }
-        }
+        self.hidden.resize(w * h, 0.0);
         // z > zmax + tol·z / px  ⟺  z > zmax / (1 − tol / px).
         let k = 1.0 / (1.0 - RESIDUAL_TOLERANCE / proj.px_x).max(1e-3);
-        for (z, &t) in self.hidden.iter_mut().zip(&self.trans) {
-            *z = if 1.0 - t >= RESIDUAL_OPAQUE && z.is_finite() { *z * k } else { f32::INFINITY };
-        }
+        let (start, grouped, at, colors) = (&own.start[..], &own.grouped[..], &own.at[..], &scene.colors[..]);
+        threads.for_each_chunk(&mut self.hidden, RASTER_BAND * w, |band, hidden| {
+            let first = band * RASTER_BAND * w;
+            for (j, out) in hidden.iter_mut().enumerate() {
+                let (a, b) = (start[first + j] as usize, start[first + j + 1] as usize);
+                // The pixel's transmittance and farthest depth, its samples in their order.
+                let (mut trans, mut far) = (1.0f32, f32::NEG_INFINITY);
+                for &key in &grouped[a..b] {
+                    let id = key as u32 as usize;
+                    if let (Some(&c), Some(&p)) = (colors.get(id), at.get(id)) {
+                        trans *= 1.0 - (c >> 24) as f32 / 255.0;
+                        far = far.max(f32::from_bits(p as u32));
+                    }
+                }
+                *out = if 1.0 - trans >= RESIDUAL_OPAQUE && far.is_finite() { far * k } else { f32::INFINITY };
+            }
+        });
     }
 
     /// The samples of `o` this frame did not see: those outside its view, and those behind
