@@ -684,7 +684,7 @@ impl Renderer for LayerSplat {
             block_outside_silhouette(&mut self.state, w, h);
             // The frame's own image where a hole looks it up: each such pixel's own segments
             // composited on the spot (a few thousand, against a million for the whole image).
-            if self.opts.own == 0.5 {
+            if self.own_pixels() {
                 self.own.project(scene, &self.threads);
                 self.own.group();
                 let (own, colors) = (&self.own, &scene.colors[..]);
@@ -951,6 +951,13 @@ impl OwnPass {
 }
 
 impl LayerSplat {
+    /// Whether at the frame's own camera every footprint is exactly its source pixel (half
+    /// side 0.5, the default): then the frame's own image is its samples grouped by pixel
+    /// ([`OwnPass`]), with wider or narrower footprints it must be drawn.
+    fn own_pixels(&self) -> bool {
+        self.opts.own == 0.5
+    }
+
     /// Makes [`LayerSplat::frame`] the frame's own composited image, unless it already is.
     fn cache_own_image(&mut self, scene: &Scene) {
         if self.frame_of == Some(SceneId::of(scene)) {
@@ -970,7 +977,7 @@ impl LayerSplat {
     /// camera.
     fn own_image(&mut self, scene: &Scene, out: &mut Image) {
         let fc = scene.header.camera;
-        if self.opts.own != 0.5 {
+        if !self.own_pixels() {
             self.draw(scene, &fc, self.opts.own, out, None);
             return;
         }
