@@ -22,6 +22,20 @@
 //! `C += (1 − A)·c`, stopping once `A` ≥ [`OPAQUE`]. Zero-opacity segments add nothing (no
 //! division by opacity anywhere, so no NaN). Pixels nothing covers show the background.
 //!
+//! **Watertight slabs** ([`LayerOptions::watertight`]): the `j`-th nearest segment of a pixel
+//! belongs to slab `j`. Where the slab-`j` segments of the pixels around a corner of the source
+//! pixel grid lie within [`WATERTIGHT`] source pixels of each other in depth, that corner is
+//! shared: it sits on its ray at their mean depth, computed once per frame when it arrives
+//! ([`SlabCorners`]) and used by every pixel around it, so the footprints of one slab meet
+//! exactly instead of overlapping on one side and parting on the other (a semi-transparent
+//! slab counted twice or not at all, in bands along the surface's iso-depth lines: the contour
+//! lines `docs/results.md` traced). A segment takes its shared corners only where their
+//! footprint covers at least [`LayerOptions::water_ratio`] of the plane footprint's area on
+//! screen (a slab seen ever more edge-on thins to a sliver where the volume it stands for does
+//! not), and only if it does not grow (adaptive sizing below). At the frame's own camera a
+//! shared corner projects onto its pixel corner at any depth, so the frame is still reproduced
+//! there.
+//!
 //! **Hole filling** ([`LayerOptions::fill`], issue 19's lever 5): pixels no segment covers,
 //! inside the covered pixels' row and column spans, take the frame's own composited image for
 //! their view direction (the stale frame, looked up as [`crate::hole_fill`]'s stage 3 does), so
@@ -53,10 +67,11 @@
 //! [`LayerOptions::own`], so the frame is still reproduced there.
 //!
 //! Work: the footprints are set up in parallel over samples (four projections per sample, in
-//! `f32`), binned to bands of rows, rasterized in parallel over bands (a few edge tests per
+//! `f32`, eight more where a sample has shared corners), binned to bands of rows, rasterized in parallel over bands (a few edge tests per
 //! covered pixel) and composited band by band. Memory: 1 byte per output pixel (its count),
 //! `8 × LIST` bytes per pixel of one band per thread, and per sample 64 bytes (its footprint)
-//! plus 4 for its band range and 4 per band it touches.
+//! plus 4 for its band range and 4 per band it touches; for the newest frame, 20 bytes per
+//! sample and 4 per pixel (`OwnPass`) and 40 per sample for its shared corners.
 
 use crate::hole_fill::{block_outside_silhouette, filled, stale_lookup, FILLED, UNFILLED};
 use crate::lanes::{self, Lanes};
@@ -81,6 +96,9 @@ pub const OPAQUE: f32 = 0.999;
 /// the session ꟻLIP of the iron protein's dolly fell from 0.0187 to 0.0064 and the MRI's orbit
 /// from 0.0262 to 0.0200 (`docs/results.md`, "Layered frames as the default").
 pub const OWN_MARGIN: f32 = 0.0;
+
+/// The default depth tolerance of watertight slabs, source pixels ([`LayerOptions::watertight`]).
+pub const WATERTIGHT: f32 = 1.5;
 
 /// The widest footprint adaptive sizing grows to by default (half side, source pixels).
 pub const MAX_OWN: f32 = 2.0;
@@ -160,6 +178,16 @@ pub struct LayerOptions {
     pub grow_min_alpha: u8,
     /// The widest a grown footprint gets (half side, source pixels).
     pub max_own: f32,
+    /// Watertight slabs: neighbouring pixels' segments of the same slab share their
+    /// footprints' corners where their depths differ by at most this many source pixels (0:
+    /// every footprint is its own plane). Only with footprints of the source pixel's size.
+    /// Measured (`docs/results.md`, "Watertight slabs"): 1–3 all lower the sessions' ꟻLIP,
+    /// 1.5 the most.
+    pub watertight: f32,
+    /// A segment takes its slab's shared corners only where their footprint covers at least
+    /// this share of the plane footprint's area on screen: a slab seen ever more edge-on
+    /// thins to a sliver where the volume it stands for does not (measured, `docs/results.md`).
+    pub water_ratio: f32,
 }
 
 impl LayerOptions {
@@ -170,6 +198,8 @@ impl LayerOptions {
         grow_per_degree: 0.08,
         grow_min_alpha: 230,
         max_own: MAX_OWN,
+        watertight: WATERTIGHT,
+        water_ratio: 1.0,
     };
 
     /// The half side of the footprint for a warp of `deg` degrees (adaptive sizing on).
@@ -361,6 +391,9 @@ pub struct Setup {
     pub grow_ratio: f32,
     /// The 8-bit alpha from which samples grow.
     pub min_alpha: u8,
+    /// A sample takes its slab's shared corners where their footprint covers at least this
+    /// share of the plane footprint's area on screen.
+    pub water_ratio: f32,
     /// The largest pixel index along x.
     pub last_x: f32,
     /// The largest pixel index along y.
@@ -403,6 +436,7 @@ impl Setup {
             e,
             grow_ratio,
             min_alpha,
+            water_ratio: 1.0,
             last_x: camera.width as f32 - 1.0,
             last_y: camera.height as f32 - 1.0,
             view,
@@ -424,7 +458,7 @@ impl Setup {
     /// The footprint of sample `id` (packed `sample`), one at a time: the reference the lanes
     /// kernel [`footprint_group`] computes eight at a time, bit for bit.
     #[cfg(test)]
-    fn quad(&self, sample: u64, colors: &[u32], id: usize) -> Quad {
+    fn quad(&self, sample: u64, colors: &[u32], id: usize, shared: Option<[f32; 4]>) -> Quad {
         let view = &self.view;
         let c = self.deq.center(sample);
         let rel = c - self.src_eye;
@@ -447,17 +481,58 @@ impl Setup {
         // Opaque samples may grow (adaptive sizing): the corners scale with the half side.
         let r = self.scale(colors, id);
         let ba = Vec3::new(axis.dot(view.u), axis.dot(view.v), axis.dot(view.w));
-        let corner = |sx: f32, sy: f32| {
+        // Two candidates: the plane facing the new eye, and the slab's shared corners (only on
+        // a footprint that does not grow; each corner on its ray at the shared source depth
+        // where it is shared, on the plane where not).
+        let zc = shared.unwrap_or([f32::NAN; 4]);
+        let steps = [(-r, -r), (r, -r), (r, r), (-r, r)];
+        let plane_ok = |sx: f32, sy: f32| {
             let den = an + sx * un + sy * vn;
-            if !(den > 0.0 && den * den > edge_on) {
-                return None;
-            }
-            let p = self.e + (ba + self.bu * sx + self.bv * sy) * (num / den);
-            view.image(p)
+            (den > 0.0 && den * den > edge_on, num / den)
+        };
+        let at = |t: f32, sx: f32, sy: f32| view.image(self.e + (ba + self.bu * sx + self.bv * sy) * t);
+        let plane: Option<[(f32, f32); 4]> = steps
+            .iter()
+            .map(|&(sx, sy)| {
+                let (ok, t) = plane_ok(sx, sy);
+                if ok {
+                    at(t, sx, sy)
+                } else {
+                    None
+                }
+            })
+            .collect::<Option<Vec<_>>>()
+            .map(|v| [v[0], v[1], v[2], v[3]]);
+        let water: Option<[(f32, f32); 4]> = if r == 1.0 && zc.iter().any(|z| z.is_finite()) {
+            steps
+                .iter()
+                .zip(zc)
+                .map(|(&(sx, sy), z)| {
+                    let (ok, t) = plane_ok(sx, sy);
+                    if z.is_finite() {
+                        at(z, sx, sy)
+                    } else if ok {
+                        at(t, sx, sy)
+                    } else {
+                        None
+                    }
+                })
+                .collect::<Option<Vec<_>>>()
+                .map(|v| [v[0], v[1], v[2], v[3]])
+        } else {
+            None
+        };
+        let area = |q: &[(f32, f32); 4]| {
+            let a = (q[2].0 - q[0].0) * (q[3].1 - q[1].1) - (q[3].0 - q[1].0) * (q[2].1 - q[0].1);
+            a.max(-a)
+        };
+        let chosen = match (water, plane) {
+            (Some(w), Some(p)) if area(&w) >= area(&p) * self.water_ratio => Some(w),
+            (Some(w), None) => Some(w),
+            (_, p) => p,
         };
         // Its corners, in order around it, in the new camera's image.
-        let (Some(q0), Some(q1), Some(q2), Some(q3)) = (corner(-r, -r), corner(r, -r), corner(r, r), corner(-r, r))
-        else {
+        let Some([q0, q1, q2, q3]) = chosen else {
             return Quad::NONE;
         };
         let x0 = q0.0.min(q1.0).min(q2.0).min(q3.0);
@@ -485,7 +560,14 @@ impl Setup {
 /// so the same footprints bit for bit (the test `lanes_match_the_scalar_footprints`). `first`
 /// is the id of `samples[0]`; `samples` holds at most eight.
 #[inline(always)]
-fn footprint_group<L: Lanes>(s: &Setup, samples: &[u64], colors: &[u32], first: usize, out: &mut [Quad]) {
+fn footprint_group<L: Lanes>(
+    s: &Setup,
+    samples: &[u64],
+    colors: &[u32],
+    shared: &[[f32; 4]],
+    first: usize,
+    out: &mut [Quad],
+) {
     // The centres, decoded as the tile splatter's bound pass does (`Lanes::decode8`, the
     // scalar `Dequantizer::center` values; less a zero eye, which changes no bit).
     let [cx, cy, cz, _] = match samples.first_chunk::<8>() {
@@ -520,20 +602,60 @@ fn footprint_group<L: Lanes>(s: &Setup, samples: &[u64], colors: &[u32], first: 
     let mut xs = [zero; 4];
     let mut ys = [zero; 4];
     let neg = zero - r;
+    // The shared corner depths (NaN: not shared), used where the footprint does not grow.
+    let mut zc = [[f32::NAN; 8]; 4];
+    for (i, c) in shared.iter().enumerate().take(samples.len().min(8)) {
+        for k in 0..4 {
+            zc[k][i] = c[k];
+        }
+    }
+    let unit = r.simd_eq(sp(1.0));
+    // Two candidate footprints: the plane facing the new eye, and the slab's shared corners
+    // (each corner shared where it is, on the plane where not).
+    let (mut okp, mut okw, mut any_w) = (ok, ok & unit, zero.simd_gt(zero));
+    let (mut wxs, mut wys) = ([zero; 4], [zero; 4]);
     for (k, (sx, sy)) in [(neg, neg), (r, neg), (r, r), (neg, r)].into_iter().enumerate() {
         let den = an + sx * un + sy * vn;
-        ok = ok & den.simd_gt(zero) & (den * den).simd_gt(edge_on);
-        let t = num / den;
-        let px = sp(s.e.x) + (ba_u + sp(s.bu.x) * sx + sp(s.bv.x) * sy) * t;
-        let py = sp(s.e.y) + (ba_v + sp(s.bu.y) * sx + sp(s.bv.y) * sy) * t;
-        let pz = sp(s.e.z) + (ba_w + sp(s.bu.z) * sx + sp(s.bv.z) * sy) * t;
-        ok = ok & pz.simd_gt(sp(1e-6));
-        let inv = sp(1.0) / pz;
-        let x = px * inv * sp(v.px_x) + sp(v.half_w);
-        let y = sp(v.half_h) - py * inv * sp(v.px_y);
-        ok = ok & x.is_finite() & y.is_finite();
-        (xs[k], ys[k]) = (x, y);
+        let zk = L::new(zc[k]);
+        let shared = zk.is_finite();
+        any_w = any_w | shared;
+        let plane_ok = den.simd_gt(zero) & (den * den).simd_gt(edge_on);
+        let tp = num / den;
+        let (rx, ry, rz) = (
+            ba_u + sp(s.bu.x) * sx + sp(s.bv.x) * sy,
+            ba_v + sp(s.bu.y) * sx + sp(s.bv.y) * sy,
+            ba_w + sp(s.bu.z) * sx + sp(s.bv.z) * sy,
+        );
+        for (water, t) in [(false, tp), (true, shared.select(zk, tp))] {
+            let px = sp(s.e.x) + rx * t;
+            let py = sp(s.e.y) + ry * t;
+            let pz = sp(s.e.z) + rz * t;
+            let inv = sp(1.0) / pz;
+            let x = px * inv * sp(v.px_x) + sp(v.half_w);
+            let y = sp(v.half_h) - py * inv * sp(v.px_y);
+            let fine = pz.simd_gt(sp(1e-6)) & x.is_finite() & y.is_finite();
+            if water {
+                okw = okw & fine & (shared | plane_ok);
+                (wxs[k], wys[k]) = (x, y);
+            } else {
+                okp = okp & fine & plane_ok;
+                (xs[k], ys[k]) = (x, y);
+            }
+        }
     }
+    // The shared corners where the slab's footprint is at least `water_ratio` of the plane's
+    // area on screen (a slab seen ever more edge-on thins to a sliver where the volume it
+    // stands for does not), or where the plane has no footprint.
+    let aw = (wxs[2] - wxs[0]) * (wys[3] - wys[1]) - (wxs[3] - wxs[1]) * (wys[2] - wys[0]);
+    let ap = (xs[2] - xs[0]) * (ys[3] - ys[1]) - (xs[3] - xs[1]) * (ys[2] - ys[0]);
+    let (aw, ap) = (aw.max(zero - aw), ap.max(zero - ap));
+    let no_plane = okp.select(zero.simd_gt(zero), zero.simd_ge(zero));
+    let use_w = okw & any_w & (no_plane | aw.simd_ge(ap * sp(s.water_ratio)));
+    for k in 0..4 {
+        xs[k] = use_w.select(wxs[k], xs[k]);
+        ys[k] = use_w.select(wys[k], ys[k]);
+    }
+    ok = use_w | okp;
     let x0 = xs[0].min(xs[1]).min(xs[2]).min(xs[3]);
     let x1 = xs[0].max(xs[1]).max(xs[2]).max(xs[3]);
     let y0 = ys[0].min(ys[1]).min(ys[2]).min(ys[3]);
@@ -569,9 +691,17 @@ fn footprint_group<L: Lanes>(s: &Setup, samples: &[u64], colors: &[u32], first: 
 
 /// Every footprint of `samples` (ids from `first`) into `out`, eight at a time.
 #[inline(always)]
-fn footprint_lanes<L: Lanes>(s: &Setup, samples: &[u64], colors: &[u32], first: usize, out: &mut [Quad]) {
+fn footprint_lanes<L: Lanes>(
+    s: &Setup,
+    samples: &[u64],
+    colors: &[u32],
+    shared: &[[f32; 4]],
+    first: usize,
+    out: &mut [Quad],
+) {
     for (g, (smp, q)) in samples.chunks(8).zip(out.chunks_mut(8)).enumerate() {
-        footprint_group::<L>(s, smp, colors, first + 8 * g, q);
+        let sh = shared.get(8 * g..(8 * g + smp.len()).min(shared.len())).unwrap_or(&[]);
+        footprint_group::<L>(s, smp, colors, sh, first + 8 * g, q);
     }
 }
 
@@ -581,6 +711,7 @@ lanes::dispatch! {
         s: &Setup,
         samples: &[u64],
         colors: &[u32],
+        shared: &[[f32; 4]],
         first: usize,
         out: &mut [Quad],
     )
@@ -627,7 +758,18 @@ impl Renderer for LayerSplat {
             }
         }
         let grown = if self.adaptive { self.opts.own_at(warp_angle_deg(&fc, camera)) } else { self.opts.own };
-        self.draw(scene, camera, grown, out, None);
+        // Watertight slabs: the newest frame's corners shared between neighbouring pixels.
+        let shared = if self.opts.watertight > 0.0 && self.own_pixels() {
+            self.own.project(scene, &self.threads);
+            if self.own.group() {
+                self.own.share_corners(self.opts.watertight, &self.threads);
+            }
+            core::mem::take(&mut self.own.shared)
+        } else {
+            Vec::new()
+        };
+        self.draw(scene, camera, grown, &shared, out, None);
+        self.own.shared = shared;
         if !fill && older.is_empty() {
             return;
         }
@@ -669,7 +811,7 @@ impl Renderer for LayerSplat {
             // stop-and-go p95 rose from 0.0489 to 0.0545).
             let g = if self.adaptive { self.opts.own_at(warp_angle_deg(&oc, camera)) } else { self.opts.own };
             let state = core::mem::take(&mut self.state);
-            self.draw(o, camera, g, &mut scratch, Some(Holes { state: &state, tiles: &tiles, tiles_w }));
+            self.draw(o, camera, g, &[], &mut scratch, Some(Holes { state: &state, tiles: &tiles, tiles_w }));
             self.state = state;
             for ((s, &n), &p) in self.state.iter_mut().zip(&self.count).zip(&scratch.pixels) {
                 if *s == UNFILLED && n > 0 {
@@ -838,6 +980,36 @@ impl Sight {
     }
 }
 
+/// The slab-shared corner depths of layered frames, as [`LayerSplat`] finds them for its newest
+/// frame (see [`LayerOptions::watertight`]): what the GPU layered splatter uploads beside the
+/// samples, so both sides draw the same footprints. Keeps its buffers from frame to frame.
+#[derive(Debug, Default)]
+pub struct SlabCorners {
+    own: OwnPass,
+    threads: Threads,
+}
+
+impl SlabCorners {
+    /// A finder on `threads` threads (0: one per core).
+    pub fn new(threads: usize) -> Self {
+        SlabCorners { own: OwnPass::default(), threads: Threads::new(threads) }
+    }
+
+    /// Per sample of `scene` (by id) the source depths of its footprint's corners shared within
+    /// `tol` source pixels, NaN where not shared; empty for a `tol` ≤ 0 or an unusable camera.
+    pub fn corners(&mut self, scene: &Scene, tol: f32) -> &[[f32; 4]] {
+        if !(tol > 0.0) {
+            return &[];
+        }
+        self.own.project(scene, &self.threads);
+        if !self.own.group() {
+            return &[];
+        }
+        self.own.share_corners(tol, &self.threads);
+        &self.own.shared
+    }
+}
+
 /// The pixel index of a point outside the view.
 const NO_PIXEL: u32 = u32::MAX;
 
@@ -862,7 +1034,19 @@ struct OwnPass {
     /// group starts (one more entry: the end of the last).
     grouped: Vec<u64>,
     start: Vec<u32>,
+    /// Per sample (by id) the source depths of its footprint's four corners where they are
+    /// shared with the same slab of neighbouring pixels (NaN: not shared), and the tolerance
+    /// they were found with ([`OwnPass::share_corners`]; `None`: not found for this scene).
+    shared: Vec<[f32; 4]>,
+    shared_tol: Option<f32>,
+    /// Scratch: the groups sorted by depth key, and the corners in that order.
+    sorted: Vec<u64>,
+    corners: Vec<[f32; 4]>,
 }
+
+/// The footprint's corners in the order [`footprint_group`] visits them, as the steps `(sx,
+/// sy)` along the source camera's right and up from the pixel's centre.
+const CORNER_STEPS: [(i32, i32); 4] = [(-1, -1), (1, -1), (1, 1), (-1, 1)];
 
 impl OwnPass {
     /// Projects `scene`'s samples into its own camera (nothing if that was the last scene).
@@ -873,6 +1057,7 @@ impl OwnPass {
         }
         self.of = Some(id);
         self.start.clear();
+        self.shared_tol = None;
         let fc = scene.header.camera;
         let n = scene.samples.len();
         if fc.validate(MAX_VIEWPORT).is_err() {
@@ -915,6 +1100,96 @@ impl OwnPass {
             let mut long = keys.to_vec();
             long.sort_unstable();
             composite_keys(&long[..LIST], colors)
+        }
+    }
+
+    /// Finds [`OwnPass::shared`] (after [`OwnPass::group`]): the `j`-th nearest segment of a
+    /// pixel belongs to slab `j`, and a corner of its footprint is shared with the slab-`j`
+    /// segments of the (up to three) other pixels around that corner whose depth differs from
+    /// its own by at most `tol` source pixels at that depth (a depth step larger than that is an
+    /// edge, not a surface). A shared corner sits at the mean depth of the segments sharing it,
+    /// summed in the same order by every pixel around it, so neighbouring footprints of one
+    /// slab meet exactly: no overlap counts a semi-transparent slab twice and no gap lets the
+    /// slab behind show (the contour lines of `docs/results.md`). At the frame's own camera a
+    /// corner projects onto its pixel corner at any depth, so the frame's image is unchanged.
+    fn share_corners(&mut self, tol: f32, threads: &Threads) {
+        let Some((proj, w, h)) = self.proj else { return };
+        if self.start.len() != w * h + 1 || self.shared_tol == Some(tol) {
+            return;
+        }
+        self.shared_tol = Some(tol);
+        let n = self.at.len();
+        let total = self.grouped.len();
+        // The bands of rows and where their samples end in the grouped order.
+        let ends: Vec<usize> =
+            (0..h.div_ceil(RASTER_BAND)).map(|b| self.start[((b + 1) * RASTER_BAND).min(h) * w] as usize).collect();
+        // 1. Each pixel's segments sorted front to back.
+        self.sorted.clear();
+        self.sorted.extend_from_slice(&self.grouped);
+        let start = &self.start[..];
+        threads.for_each_part(&mut self.sorted, &ends, |b, part| {
+            let base = start[b * RASTER_BAND * w] as usize;
+            for i in b * RASTER_BAND * w..((b + 1) * RASTER_BAND).min(h) * w {
+                let g = &mut part[start[i] as usize - base..start[i + 1] as usize - base];
+                if g.len() <= LIST {
+                    sort_keys(g);
+                } else {
+                    g.sort_unstable();
+                }
+            }
+        });
+        // 2. Each segment's corners, in that order.
+        self.corners.resize(total, [f32::NAN; 4]);
+        let (sorted, at) = (&self.sorted[..], &self.at[..]);
+        let depth = |g: usize| at.get(sorted[g] as u32 as usize).map_or(f32::NAN, |&a| f32::from_bits(a as u32));
+        let per_px = tol.max(0.0) * 0.5 / proj.px_y;
+        threads.for_each_part(&mut self.corners, &ends, |b, part| {
+            let base = start[b * RASTER_BAND * w] as usize;
+            for i in b * RASTER_BAND * w..((b + 1) * RASTER_BAND).min(h) * w {
+                let (x, y) = ((i % w) as i64, (i / w) as i64);
+                let (a, e) = (start[i] as usize, start[i + 1] as usize);
+                for g in a..e {
+                    let (j, z) = (g - a, depth(g));
+                    let near = |zn: f32| (zn - z).abs() <= per_px * (zn + z);
+                    part[g - base] = CORNER_STEPS.map(|(sx, sy)| {
+                        // The grid corner, and the four pixels around it in a fixed order.
+                        let (cx, cy) = (x + (sx > 0) as i64, y + (sy < 0) as i64);
+                        let (mut sum, mut count) = (0.0f32, 0u32);
+                        for (px, py) in [(cx - 1, cy - 1), (cx, cy - 1), (cx - 1, cy), (cx, cy)] {
+                            if px < 0 || py < 0 || px >= w as i64 || py >= h as i64 {
+                                continue;
+                            }
+                            let q = py as usize * w + px as usize;
+                            let (qa, qe) = (start[q] as usize, start[q + 1] as usize);
+                            if qe - qa > j {
+                                let zn = depth(qa + j);
+                                if q == i || near(zn) {
+                                    sum += zn;
+                                    count += 1;
+                                }
+                            }
+                        }
+                        let zc = sum / count as f32;
+                        if count >= 2 && zc.is_finite() && zc > 0.0 {
+                            zc
+                        } else {
+                            f32::NAN
+                        }
+                    });
+                }
+            }
+        });
+        // 3. By sample id (a server's frame is already in that order: nothing to move).
+        self.shared.clear();
+        self.shared.resize(n, [f32::NAN; 4]);
+        if total == n && self.sorted.iter().enumerate().all(|(g, &k)| k as u32 as usize == g) {
+            self.shared.copy_from_slice(&self.corners);
+        } else {
+            for (&k, c) in self.sorted.iter().zip(&self.corners) {
+                if let Some(s) = self.shared.get_mut(k as u32 as usize) {
+                    *s = *c;
+                }
+            }
         }
     }
 
@@ -978,7 +1253,7 @@ impl LayerSplat {
     fn own_image(&mut self, scene: &Scene, out: &mut Image) {
         let fc = scene.header.camera;
         if !self.own_pixels() {
-            self.draw(scene, &fc, self.opts.own, out, None);
+            self.draw(scene, &fc, self.opts.own, &[], out, None);
             return;
         }
         self.own.project(scene, &self.threads);
@@ -1072,14 +1347,23 @@ impl LayerSplat {
     /// with footprints of half side [`LayerOptions::own`] source pixels, `grown` for samples at
     /// least [`LayerOptions::grow_min_alpha`] opaque; leaves `count` with each output pixel's
     /// number of segments.
-    fn draw(&mut self, scene: &Scene, camera: &Camera, grown: f32, out: &mut Image, only: Option<Holes>) {
+    fn draw(
+        &mut self,
+        scene: &Scene,
+        camera: &Camera,
+        grown: f32,
+        shared: &[[f32; 4]],
+        out: &mut Image,
+        only: Option<Holes>,
+    ) {
         let own = self.opts.own;
         let (w, h) = (camera.width as usize, camera.height as usize);
         let deq = &scene.deq;
         let cap = LIST;
         self.count.clear();
         self.count.resize(w * h, 0);
-        let setup = Setup::new(camera, &scene.header.camera, deq, own, grown, self.opts.grow_min_alpha);
+        let mut setup = Setup::new(camera, &scene.header.camera, deq, own, grown, self.opts.grow_min_alpha);
+        setup.water_ratio = self.opts.water_ratio;
         let colors = &scene.colors[..];
         // 1. Every sample's footprint in the new image (in parallel over samples, eight at a
         // time in SIMD lanes). Every footprint is written (NONE where there is none): no
@@ -1100,7 +1384,8 @@ impl LayerSplat {
             QUAD_CHUNK,
             |chunk, quads, bands| {
                 let first = chunk * QUAD_CHUNK;
-                footprints(&setup, &samples[first..first + quads.len()], colors, first, quads);
+                let sh = shared.get(first..(first + quads.len()).min(shared.len())).unwrap_or(&[]);
+                footprints(&setup, &samples[first..first + quads.len()], colors, sh, first, quads);
                 if let Some(holes) = only {
                     for q in quads.iter_mut().filter(|q| q.x[0] <= q.x[1] && !holes.near(q)) {
                         *q = Quad::NONE;
@@ -1347,22 +1632,51 @@ mod tests {
         {
             let mut camera = fc.orbit(deg, deg * 0.3);
             (camera.width, camera.height) = size;
-            let setup = Setup::new(&camera, &fc, &deq, 0.5, grown, 230);
-            let reference: Vec<Quad> =
-                samples.iter().enumerate().map(|(i, &smp)| setup.quad(smp, &colors, i)).collect();
-            drawn += reference.iter().filter(|q| q.x[0] <= q.x[1]).count();
-            let mut portable = vec![Quad::NONE; samples.len()];
-            footprint_lanes::<wide::f32x8>(&setup, &samples, &colors, 0, &mut portable);
-            assert!(reference.iter().zip(&portable).all(|(a, b)| same(a, b)), "portable lanes differ at {deg}°");
-            #[cfg(target_arch = "x86_64")]
-            if lanes::use_avx2() {
-                let mut avx = vec![Quad::NONE; samples.len()];
-                // SAFETY: the CPU has AVX2 (`use_avx2`).
-                unsafe { footprints_avx2(&setup, &samples, &colors, 0, &mut avx) };
-                assert!(reference.iter().zip(&avx).all(|(a, b)| same(a, b)), "AVX2 lanes differ at {deg}°");
+            let mut setup = Setup::new(&camera, &fc, &deq, 0.5, grown, 230);
+            // Without shared corners, and with some (each sample's own depth, a little off per
+            // corner, some corners and samples not shared), at two area ratios.
+            let none: Vec<[f32; 4]> = Vec::new();
+            let some: Vec<[f32; 4]> = samples
+                .iter()
+                .enumerate()
+                .map(|(i, &smp)| {
+                    let z = (deq.center(smp) - setup.src_eye).dot(setup.src_w);
+                    core::array::from_fn(|k| match (i + k) % 5 {
+                        0 => f32::NAN,
+                        j => z * (1.0 + 0.01 * j as f32 - 0.02),
+                    })
+                })
+                .map(|c| if rng.next_u64().is_multiple_of(4) { [f32::NAN; 4] } else { c })
+                .collect();
+            for (shared, ratio) in [(&none, 1.0), (&some, 1.0), (&some, 0.0), (&some, 1.5)] {
+                setup.water_ratio = ratio;
+                let reference: Vec<Quad> = samples
+                    .iter()
+                    .enumerate()
+                    .map(|(i, &smp)| setup.quad(smp, &colors, i, shared.get(i).copied()))
+                    .collect();
+                drawn += reference.iter().filter(|q| q.x[0] <= q.x[1]).count();
+                let mut portable = vec![Quad::NONE; samples.len()];
+                footprint_lanes::<wide::f32x8>(&setup, &samples, &colors, shared, 0, &mut portable);
+                assert!(reference.iter().zip(&portable).all(|(a, b)| same(a, b)), "portable lanes differ at {deg}°");
+                #[cfg(target_arch = "x86_64")]
+                if lanes::use_avx2() {
+                    let mut avx = vec![Quad::NONE; samples.len()];
+                    // SAFETY: the CPU has AVX2 (`use_avx2`).
+                    unsafe { footprints_avx2(&setup, &samples, &colors, shared, 0, &mut avx) };
+                    assert!(reference.iter().zip(&avx).all(|(a, b)| same(a, b)), "AVX2 lanes differ at {deg}°");
+                }
+                if shared.is_empty() {
+                    continue;
+                }
+                // The shared corners change footprints (else this compares nothing new).
+                let plain: Vec<Quad> =
+                    samples.iter().enumerate().map(|(i, &smp)| setup.quad(smp, &colors, i, None)).collect();
+                let changed = plain.iter().zip(&reference).filter(|(a, b)| !same(a, b)).count();
+                assert!(ratio > 1.0 || changed > samples.len() / 10, "{changed} footprints changed at {deg}°");
             }
         }
-        assert!(drawn > 3 * frame.samples.len() / 2, "too few footprints drawn: {drawn}");
+        assert!(drawn > 6 * frame.samples.len(), "too few footprints drawn: {drawn}");
     }
 
     #[test]
@@ -1439,6 +1753,83 @@ mod tests {
             sort_keys(&mut b);
             assert_eq!(b, distinct);
         }
+    }
+
+    /// A layer of two semi-transparent slabs on a tilted, gently curved surface, one segment
+    /// per slab on every pixel's ray of a 96² camera.
+    fn two_slab_frame() -> volwarp_core::wire::Frame {
+        use crate::synthetic::{frame_from_points, Point};
+        let camera = Camera::look_at(Vec3::new(0.0, 0.0, 3.0), Vec3::ZERO, Vec3::Y, 40.0, 96, 96);
+        let basis = camera.ray_basis();
+        let eye = camera.eye;
+        let mut pts = Vec::new();
+        for y in 0..96 {
+            for x in 0..96 {
+                let d = basis.dir(x, y);
+                // The surface z = 0.5·x + 0.1·y² (tilted about 27° to the view, curved).
+                let (mut t, mut hit) = (0.0, None);
+                for _ in 0..40 {
+                    let p = eye + d * t;
+                    let f = p.z - (0.5 * p.x + 0.1 * p.y * p.y);
+                    if f.abs() < 1e-6 {
+                        hit = Some(t);
+                        break;
+                    }
+                    t += f / (-d.z + 0.5 * d.x + 0.2 * p.y * d.y);
+                }
+                let Some(t) = hit else { continue };
+                for (k, dt) in [0.0f32, 0.02].into_iter().enumerate() {
+                    let a = 0.4;
+                    let c = if k == 0 { [0.35, 0.2, 0.1, a] } else { [0.1, 0.3, 0.35, a] };
+                    pts.push(Point { center: eye + d * (t + dt), radius: 0.01, color: c });
+                }
+            }
+        }
+        frame_from_points(&pts, camera)
+    }
+
+    /// Drawn 12° around the frame's camera, the slabs' footprints cover every pixel inside
+    /// the layer once per slab with shared corners; without, neighbouring footprints of one
+    /// slab overlap (a pixel takes it twice) and part (it misses it).
+    #[test]
+    fn shared_corners_make_each_slab_watertight() {
+        let frame = two_slab_frame();
+        let scene = crate::route::unbuilt_scene(&frame);
+        let cam = frame.header.camera.orbit(12.0, 4.0);
+        let mut out = Image::new(0, 0);
+        let mut counts = Vec::new();
+        for tol in [0.0, 3.0] {
+            let opts = LayerOptions { fill: false, watertight: tol, water_ratio: 0.0, ..LayerOptions::DEFAULT };
+            let mut r = LayerSplat::with_options(1, opts);
+            r.render(&scene, &cam, &mut out);
+            // Pixels inside the layer: between the first and last covered pixel of their row
+            // and of their column, two pixels in.
+            let (w, h) = (96usize, 96usize);
+            let c = |x: usize, y: usize| r.count[y * w + x];
+            let span = |v: Vec<u8>| {
+                let first = v.iter().position(|&n| n > 0).unwrap_or(v.len());
+                let last = v.iter().rposition(|&n| n > 0).unwrap_or(0);
+                (first + 2, last.saturating_sub(2))
+            };
+            let mut hist = [0usize; 4];
+            for y in 0..h {
+                let (x0, x1) = span((0..w).map(|x| c(x, y)).collect());
+                for x in x0..=x1.min(w - 1) {
+                    let (y0, y1) = span((0..h).map(|yy| c(x, yy)).collect());
+                    if (y0..=y1).contains(&y) {
+                        hist[(c(x, y) as usize).min(3)] += 1;
+                    }
+                }
+            }
+            counts.push(hist);
+        }
+        let (plain, tight) = (counts[0], counts[1]);
+        let inside: usize = tight.iter().sum();
+        assert!(inside > 3000, "the layer covers too little: {tight:?}");
+        // Watertight: each pixel inside takes both slabs, once each.
+        assert!(tight[2] * 1000 >= inside * 998, "shared corners: {tight:?} (count 0, 1, 2, 3+)");
+        // Plain footprints: overlaps and gaps.
+        assert!(plain[1] + plain[3] > inside / 50, "plain footprints: {plain:?}");
     }
 
     #[test]

@@ -80,6 +80,27 @@ impl Threads {
         }
     }
 
+    /// Calls `f(index, part)` for the consecutive parts of `data` that end at `ends` (ascending,
+    /// the last `data.len()`; a part may be empty), in parallel on the pool or serially on the
+    /// caller's thread: chunks of uneven length, such as the samples of bands of pixel rows.
+    pub fn for_each_part<T: Send, F>(&self, data: &mut [T], ends: &[usize], f: F)
+    where
+        F: Fn(usize, &mut [T]) + Sync + Send,
+    {
+        let mut parts = Vec::with_capacity(ends.len());
+        let (mut rest, mut at) = (data, 0usize);
+        for &end in ends {
+            let (part, tail) = rest.split_at_mut(end.clamp(at, at + rest.len()) - at);
+            at += part.len();
+            parts.push(part);
+            rest = tail;
+        }
+        match &self.pool {
+            Some(pool) => pool.install(|| parts.into_par_iter().enumerate().for_each(|(i, c)| f(i, c))),
+            None => parts.into_iter().enumerate().for_each(|(i, c)| f(i, c)),
+        }
+    }
+
     /// Runs `f` inside the pool (so rayon iterators in it use this pool), or on the caller's
     /// thread with a one-thread view.
     pub fn install<R: Send>(&self, f: impl FnOnce() -> R + Send) -> R {

@@ -1,7 +1,7 @@
 //! Issue 14's single-warp measurement of layered samples: for every dataset of a folder, the
 //! C0 frame (default framing, 512², heuristic `threshold`) is rendered with one sample per pixel
 //! and with K segments per pixel (`--layers 2,4,8`), warped along the orbit to 0–30° and scored
-//! (PSNR, ꟻLIP) against the marcher's truth:
+//! (PSNR, ꟻLIP, SSIM) against the marcher's truth:
 //!
 //! * `stale`, `points1`, `points2`, `points3`, `splat` on the one-sample frame (as today),
 //! * `splat-layers K=k` on each layered frame (`K=1`: the one-sample frame composited with its
@@ -15,6 +15,10 @@
 //! ```sh
 //! cargo run --release -p volwarp-eval --example layers -- ../shared/data --layers 2,4,8 --time
 //! ```
+//!
+//! Footprint options of the layered renderer: `--own`, `--no-fill`, `--grow`, `--grow-alpha`,
+//! `--max-own`, `--watertight T` (0: off), `--water-ratio R`; `--png DIR` writes each layered
+//! image, the truth and the ꟻLIP map.
 
 use std::path::Path;
 use std::time::Instant;
@@ -65,6 +69,13 @@ fn main() {
     if let Some(v) = arg(&args, "--max-own") {
         lopts.max_own = v.parse().expect("a half side");
     }
+    // `--watertight T`: neighbouring segments of a slab share corners within T source pixels.
+    if let Some(v) = arg(&args, "--watertight") {
+        lopts.watertight = v.parse().expect("a tolerance in source pixels");
+    }
+    if let Some(v) = arg(&args, "--water-ratio") {
+        lopts.water_ratio = v.parse().expect("an area ratio");
+    }
     let adapt = lopts.grow_per_degree > 0.0;
     let datasets = volwarp_eval::report::shared_datasets(Path::new(dir)).expect("datasets");
     let h = Heuristic::Threshold;
@@ -73,7 +84,7 @@ fn main() {
     let mut names: Vec<String> = base.iter().map(|k| k.name().to_string()).collect();
     names.push("splat-layers K=1".into());
     names.extend(layers.iter().map(|k| format!("splat-layers K={k}")));
-    println!("dataset,method,angle,psnr,flip");
+    println!("dataset,method,angle,psnr,flip,ssim");
     let mut sums = vec![[(0.0f64, 0.0f64); ANGLES.len()]; names.len()];
     let mut budget = Vec::new();
     let mut times = Vec::new();
@@ -119,14 +130,30 @@ fn main() {
             let mut scores = Vec::new();
             for r in plain.iter_mut() {
                 r.render(&scene_one, &cam, &mut img);
-                scores.push(Metrics::of(&truth, &img).map_or((0.0, 1.0), |m| (m.psnr, m.flip)));
+                scores.push(Metrics::of(&truth, &img).map_or((0.0, 1.0, 0.0), |m| (m.psnr, m.flip, m.ssim)));
             }
-            for s in &scenes {
+            for (s, (k, _)) in scenes.iter().zip(&frames) {
                 layered.render(s, &cam, &mut img);
-                scores.push(Metrics::of(&truth, &img).map_or((0.0, 1.0), |m| (m.psnr, m.flip)));
+                scores.push(Metrics::of(&truth, &img).map_or((0.0, 1.0, 0.0), |m| (m.psnr, m.flip, m.ssim)));
+                // `--png DIR`: the layered image and the truth, for looking at.
+                if let Some(dir) = arg(&args, "--png") {
+                    let _ = std::fs::create_dir_all(dir);
+                    let _ = img.save_png(&Path::new(dir).join(format!("{}_k{k}_{a}.png", ds.name)));
+                    let _ = truth.save_png(&Path::new(dir).join(format!("{}_truth_{a}.png", ds.name)));
+                    if let Some(map) =
+                        volwarp_eval::metrics::flip::flip_map(&truth, &img, volwarp_eval::metrics::flip::DEFAULT_PPD)
+                    {
+                        let mut fm = Image::new(img.width, img.height);
+                        for (p, &v) in fm.pixels.iter_mut().zip(&map) {
+                            let g = (v.clamp(0.0, 1.0) * 255.0) as u32;
+                            *p = 0xff00_0000 | g << 16 | g << 8 | g;
+                        }
+                        let _ = fm.save_png(&Path::new(dir).join(format!("{}_k{k}_{a}_flip.png", ds.name)));
+                    }
+                }
             }
-            for (i, (p, f)) in scores.iter().enumerate() {
-                println!("{},{},{a},{p:.2},{f:.4}", ds.name, names[i]);
+            for (i, (p, f, ss)) in scores.iter().enumerate() {
+                println!("{},{},{a},{p:.2},{f:.4},{ss:.4}", ds.name, names[i]);
                 sums[i][ai].0 += p / datasets.len() as f64;
                 sums[i][ai].1 += f / datasets.len() as f64;
             }

@@ -24,9 +24,13 @@
 //! order. The lists' total is not known before the `scan`: they are sized from the last
 //! frame (or `2n` entries), and a frame whose total exceeds that is drawn again with room.
 //!
-//! Memory on the GPU: 64 bytes per sample (footprints) + 12 (sample, color), 4 per list entry
-//! (a sample per pixel it covers), 24 per output pixel (pixel, count, list count and offset,
-//! readback) plus the frame's composite. The scan is reduce-then-scan over blocks of 4096
+//! Watertight slabs: the corners a segment shares with its slab's neighbours are found on the
+//! CPU with the CPU's own code (`SlabCorners`, once per uploaded scene) and uploaded beside the
+//! samples; `setup` chooses between them and the plane with the CPU's area rule.
+//!
+//! Memory on the GPU: 64 bytes per sample (footprints) + 12 (sample, color) + 16 (shared
+//! corners), 4 per list entry (a sample per pixel it covers), 24 per output pixel (pixel,
+//! count, list count and offset, readback) plus the frame's composite. The scan is reduce-then-scan over blocks of 4096
 //! counts (block sums, one workgroup over the sums, the prefixes written in place).
 
 use crate::buffers::{grid, read_mapped, GrowBuffer};
@@ -37,8 +41,8 @@ use std::time::{Duration, Instant};
 use volwarp_core::renderer::{Image, Renderer, BACKGROUND};
 use volwarp_core::warp_radius::warp_angle_deg;
 use volwarp_core::{Camera, RayBasis, RendererKind, Scene, Vec3};
-use volwarp_cpu_tracer::layer_splat::Setup;
 pub use volwarp_cpu_tracer::layer_splat::{LayerOptions, LIST, OPAQUE};
+use volwarp_cpu_tracer::layer_splat::{Setup, SlabCorners};
 
 /// Words at the start of the work buffer before the pixels' counts (`COUNTS` in the shader).
 const COUNTS: u32 = 16;
@@ -126,7 +130,15 @@ fn check_scene(scene: &Scene) -> Result<u32, GpuError> {
 /// The uniform of one draw of `scene` for `camera` (its frame camera `fc`) with footprints of
 /// half side `own`, `grown` for the opaque samples: the CPU's footprint constants
 /// (`layer_splat::Setup`) and the stale lookup's projection.
-fn params(scene: &Scene, camera: &Camera, fc: &Camera, opts: &LayerOptions, grown: f32, cap: u32) -> LayerParams {
+fn params(
+    scene: &Scene,
+    camera: &Camera,
+    fc: &Camera,
+    opts: &LayerOptions,
+    grown: f32,
+    cap: u32,
+    shared: bool,
+) -> LayerParams {
     // The footprint constants are the CPU's own (`layer_splat::Setup`), so both sides set up
     // the same footprints.
     let s = Setup::new(camera, fc, &scene.deq, opts.own, grown, opts.grow_min_alpha);
@@ -162,7 +174,7 @@ fn params(scene: &Scene, camera: &Camera, fc: &Camera, opts: &LayerOptions, grow
         f_w: v4(fwd),
         f_proj: [tan_x, tan_y, fc.width as f32, fc.height as f32],
         k: [s.grow_ratio, 0.0076, 1e-6, 1.0 / 255.0],
-        k2: [OPAQUE, t_num, 0.0, 0.0],
+        k2: [OPAQUE, t_num, opts.water_ratio, if shared { 1.0 } else { 0.0 }],
         width: w,
         height: h,
         n: scene.samples.len() as u32,
@@ -201,6 +213,11 @@ pub struct GpuLayerSplat {
     count: GrowBuffer,
     frame: GrowBuffer,
     dummy: GrowBuffer,
+    /// Per sample its slab-shared corner depths (16 bytes), found on the CPU.
+    shared: GrowBuffer,
+    corners: SlabCorners,
+    /// Whether the uploaded scene has shared corners.
+    has_shared: bool,
     staging: GrowBuffer,
     /// List entries (all pixels together) the list buffer is sized for.
     cap: u32,
@@ -275,6 +292,7 @@ impl GpuLayerSplat {
                 buffer(6, write),
                 buffer(7, write),
                 buffer(8, read),
+                buffer(9, read),
             ],
         });
         let layout = ctx.device.create_pipeline_layout(&wgpu::PipelineLayoutDescriptor {
@@ -327,6 +345,9 @@ impl GpuLayerSplat {
             count: GrowBuffer::new("layer counts", st),
             frame: GrowBuffer::new("layer frame", st_all),
             dummy: GrowBuffer::new("layer dummy", st),
+            shared: GrowBuffer::new("layer shared corners", st_dst),
+            corners: SlabCorners::new(0),
+            has_shared: false,
             staging: GrowBuffer::new("layer readback", wgpu::BufferUsages::MAP_READ | wgpu::BufferUsages::COPY_DST),
             cap: 0,
             bind_groups: None,
@@ -368,6 +389,7 @@ impl GpuLayerSplat {
         let len = scene.samples.len() as u64;
         let mut changed = self.samples.ensure(&self.ctx, len * 8)?;
         changed |= self.colors.ensure(&self.ctx, len * 4)?;
+        changed |= self.shared.ensure(&self.ctx, (len * 16).max(16))?;
         if changed {
             self.uploaded = None;
         }
@@ -375,6 +397,16 @@ impl GpuLayerSplat {
             if n > 0 {
                 self.ctx.queue.write_buffer(self.samples.get()?, 0, bytemuck::cast_slice(&scene.samples));
                 self.ctx.queue.write_buffer(self.colors.get()?, 0, bytemuck::cast_slice(&scene.colors));
+            }
+            // Watertight slabs: the corners the CPU shares (only with footprints of the source
+            // pixel's size, as the CPU).
+            self.has_shared = false;
+            if self.opts.own == 0.5 {
+                let corners = self.corners.corners(scene, self.opts.watertight);
+                if n > 0 && corners.len() == scene.samples.len() {
+                    self.ctx.queue.write_buffer(self.shared.get()?, 0, bytemuck::cast_slice(corners));
+                    self.has_shared = true;
+                }
             }
             self.uploaded = Some(key);
             self.uploads += 1;
@@ -409,11 +441,11 @@ impl GpuLayerSplat {
         let size = std::mem::size_of::<LayerParams>();
         let mut slots = [0u8; 2 * SLOT as usize];
         if draw_frame {
-            let p = params(scene, &fc, &fc, &self.opts, self.opts.own, self.cap);
+            let p = params(scene, &fc, &fc, &self.opts, self.opts.own, self.cap, false);
             slots[..size].copy_from_slice(bytemuck::bytes_of(&p));
         }
         if plan.draw_view {
-            let p = params(scene, camera, &fc, &self.opts, grown, self.cap);
+            let p = params(scene, camera, &fc, &self.opts, grown, self.cap, self.has_shared);
             slots[SLOT as usize..SLOT as usize + size].copy_from_slice(bytemuck::bytes_of(&p));
         }
         self.ctx.queue.write_buffer(&self.params, 0, &slots);
@@ -440,6 +472,7 @@ impl GpuLayerSplat {
                     (6, target),
                     (7, &self.count),
                     (8, stale),
+                    (9, &self.shared),
                 ] {
                     entries.push(wgpu::BindGroupEntry { binding: b, resource: buf.get()?.as_entire_binding() });
                 }

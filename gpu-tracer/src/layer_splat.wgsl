@@ -31,6 +31,9 @@
 @group(0) @binding(7) var<storage, read_write> count: array<u32>;
 // The frame's own composite (the fill's stale image; a dummy while the frame itself is drawn).
 @group(0) @binding(8) var<storage, read> frame: array<u32>;
+// Per sample its footprint's corners' shared source depths (NaN: not shared; the CPU's
+// `SlabCorners`), read where P.k2.w = 1.
+@group(0) @binding(9) var<storage, read> shared_z: array<vec4<f32>>;
 
 // A footprint: edge functions (a·px + b·py + c ≥ 0 inside) as a, b, c over the four edges,
 // the key (hi: dist² bits, lo: id), the pixel bounds x0 | x1 << 16, y0 | y1 << 16.
@@ -81,13 +84,33 @@ fn none_quad() -> Quad {
     return Quad(vec4<f32>(0.0), vec4<f32>(0.0), vec4<f32>(0.0), 0xffffffffu, 0xffffffffu, 1u, 1u);
 }
 
+// The corner `(sx, sy)` on its ray at source depth `t`.
+fn at(t: f32, ba: vec3<f32>, sx: f32, sy: f32) -> Img {
+    let p = P.e.xyz + (ba + P.bu.xyz * sx + P.bv.xyz * sy) * t;
+    return image(p);
+}
+
+// The corner on the plane facing the new eye.
 fn corner(an: f32, un: f32, vn: f32, edge_on: f32, num: f32, ba: vec3<f32>, sx: f32, sy: f32) -> Img {
     let den = an + sx * un + sy * vn;
     if !(den > 0.0 && den * den > edge_on) {
         return Img(vec2<f32>(0.0), false);
     }
-    let p = P.e.xyz + (ba + P.bu.xyz * sx + P.bv.xyz * sy) * (num / den);
-    return image(p);
+    return at(num / den, ba, sx, sy);
+}
+
+// The corner at its shared depth `z` where that is finite, else on the plane.
+fn shared_corner(z: f32, an: f32, un: f32, vn: f32, edge_on: f32, num: f32, ba: vec3<f32>, sx: f32, sy: f32) -> Img {
+    if finite(z) {
+        return at(z, ba, sx, sy);
+    }
+    return corner(an, un, vn, edge_on, num, ba, sx, sy);
+}
+
+// Twice the area of the quadrilateral q0 q1 q2 q3 (absolute).
+fn quad_area(q0: vec2<f32>, q1: vec2<f32>, q2: vec2<f32>, q3: vec2<f32>) -> f32 {
+    let a = (q2.x - q0.x) * (q3.y - q1.y) - (q3.x - q1.x) * (q2.y - q0.y);
+    return max(a, -a);
 }
 
 // The footprint of sample `id` (the CPU's step 1).
@@ -116,13 +139,35 @@ fn footprint(id: u32) -> Quad {
     let c1 = corner(an, un, vn, edge_on, num, ba, r, -r);
     let c2 = corner(an, un, vn, edge_on, num, ba, r, r);
     let c3 = corner(an, un, vn, edge_on, num, ba, -r, r);
-    if !(c0.ok && c1.ok && c2.ok && c3.ok) {
+    let plane_ok = c0.ok && c1.ok && c2.ok && c3.ok;
+    var q0 = c0.p;
+    var q1 = c1.p;
+    var q2 = c2.p;
+    var q3 = c3.p;
+    // The slab's shared corners (the CPU's choice: where their footprint covers at least
+    // P.k2.z of the plane's area, or the plane has none).
+    var water_ok = false;
+    if P.k2.w == 1.0 && r == 1.0 {
+        let z = shared_z[id];
+        if finite(z.x) || finite(z.y) || finite(z.z) || finite(z.w) {
+            let w0 = shared_corner(z.x, an, un, vn, edge_on, num, ba, -r, -r);
+            let w1 = shared_corner(z.y, an, un, vn, edge_on, num, ba, r, -r);
+            let w2 = shared_corner(z.z, an, un, vn, edge_on, num, ba, r, r);
+            let w3 = shared_corner(z.w, an, un, vn, edge_on, num, ba, -r, r);
+            if w0.ok && w1.ok && w2.ok && w3.ok {
+                if !plane_ok || quad_area(w0.p, w1.p, w2.p, w3.p) >= quad_area(q0, q1, q2, q3) * P.k2.z {
+                    water_ok = true;
+                    q0 = w0.p;
+                    q1 = w1.p;
+                    q2 = w2.p;
+                    q3 = w3.p;
+                }
+            }
+        }
+    }
+    if !(plane_ok || water_ok) {
         return none_quad();
     }
-    let q0 = c0.p;
-    let q1 = c1.p;
-    let q2 = c2.p;
-    let q3 = c3.p;
     let x0 = min(min(min(q0.x, q1.x), q2.x), q3.x);
     let x1 = max(max(max(q0.x, q1.x), q2.x), q3.x);
     let y0 = min(min(min(q0.y, q1.y), q2.y), q3.y);

@@ -174,7 +174,8 @@ struct LayerParams {
     f_proj: vec4<f32>,
     // Grow ratio, edge-on factor, eye-plane epsilon, 1/255.
     k: vec4<f32>,
-    // Opaque, the focal plane's numerator (plane − eye·fwd), unused, unused.
+    // Opaque, the focal plane's numerator (plane − eye·fwd), the shared corners' area ratio,
+    // 1 where the shared corners are read (else 0).
     k2: vec4<f32>,
     width: u32,
     height: u32,
