@@ -980,6 +980,149 @@ impl Sight {
     }
 }
 
+/// The shared corners of the segments of the pixel rows `rows` (of a `w × h` frame whose view
+/// depths, grouped by pixel front to back, are `zs`, pixel `i`'s from `start[i]`), into `part`
+/// (the rows' segments, the first at `base`), slab by slab as a stencil over dense rows: per
+/// slab `j` three rows of depths (NaN where a pixel has no `j`-th segment, and one NaN on each
+/// side), and per pixel the eight neighbours' slab-`j` depths that lie within
+/// `per_px · (z + z')` of its own joining each corner they touch: the corner is the mean of the
+/// four pixels around it that join (its own always does), summed in one fixed order (rows, then
+/// columns) by every pixel around it. Straight-line float code over rows, which the compiler
+/// vectorizes.
+#[inline(always)]
+fn band_corners_lanes<L: Lanes>(
+    start: &[u32],
+    zs: &[f32],
+    (w, h): (usize, usize),
+    per_px: f32,
+    rows: core::ops::Range<usize>,
+    part: &mut [[f32; 4]],
+    base: usize,
+) {
+    let wp = w + 2;
+    let count = |i: usize| (start[i + 1] - start[i]) as usize;
+    let (r0, r1) = (rows.start.saturating_sub(1), (rows.end + 1).min(h));
+    let k = (r0 * w..r1 * w).map(count).max().unwrap_or(0);
+    if k == 0 || rows.is_empty() {
+        return;
+    }
+    // Row `y`'s slab depths, `k` padded rows of `wp` (all NaN outside the frame).
+    let fill = |y: usize, slabs: &mut [f32]| {
+        slabs.fill(f32::NAN);
+        if y >= h {
+            return;
+        }
+        for x in 0..w {
+            let i = y * w + x;
+            let a = start[i] as usize;
+            for j in 0..count(i).min(k) {
+                slabs[j * wp + x + 1] = zs[a + j];
+            }
+        }
+    };
+    let (mut up, mut mid, mut down) = (vec![f32::NAN; k * wp], vec![f32::NAN; k * wp], vec![f32::NAN; k * wp]);
+    if rows.start > 0 {
+        fill(rows.start - 1, &mut up);
+    }
+    fill(rows.start, &mut mid);
+    // Per slab its four corner rows.
+    let mut out = vec![0f32; 4 * k * w];
+    for y in rows {
+        fill(y + 1, &mut down);
+        // Only the span of the row's pixels with segments, and as many slabs as they have.
+        let row = &start[y * w..=(y + 1) * w];
+        let Some(x0) = (0..w).find(|&x| row[x + 1] > row[x]) else {
+            core::mem::swap(&mut up, &mut mid);
+            core::mem::swap(&mut mid, &mut down);
+            continue;
+        };
+        let x1 = (0..w).rfind(|&x| row[x + 1] > row[x]).unwrap_or(x0) + 1;
+        let kr = (x0..x1).map(|x| (row[x + 1] - row[x]) as usize).max().unwrap_or(0).min(k);
+        for (j, o) in out.chunks_exact_mut(4 * w).take(kr).enumerate() {
+            let (u, m, d) = (&up[j * wp..(j + 1) * wp], &mid[j * wp..(j + 1) * wp], &down[j * wp..(j + 1) * wp]);
+            let (o0, rest) = o.split_at_mut(w);
+            let (o1, rest) = rest.split_at_mut(w);
+            let (o2, o3) = rest.split_at_mut(w);
+            let (u, m, d) = (&u[x0..x1 + 2], &m[x0..x1 + 2], &d[x0..x1 + 2]);
+            slab_row_corners(u, m, d, per_px, [&mut o0[x0..x1], &mut o1[x0..x1], &mut o2[x0..x1], &mut o3[x0..x1]]);
+        }
+        // Each pixel's segments, in order.
+        for x in x0..x1 {
+            let i = y * w + x;
+            let a = start[i] as usize - base;
+            for (j, c) in part[a..a + count(i).min(k)].iter_mut().enumerate() {
+                let o = &out[4 * j * w..];
+                *c = [o[x], o[w + x], o[2 * w + x], o[3 * w + x]];
+            }
+        }
+        core::mem::swap(&mut up, &mut mid);
+        core::mem::swap(&mut mid, &mut down);
+    }
+}
+
+lanes::dispatch! {
+    /// [`band_corners_lanes`] compiled for the best vector instructions this CPU has (the
+    /// stencil is plain float code the compiler vectorizes; the same values either way).
+    fn band_corners / band_corners_avx2 => band_corners_lanes(
+        start: &[u32],
+        zs: &[f32],
+        size: (usize, usize),
+        per_px: f32,
+        rows: core::ops::Range<usize>,
+        part: &mut [[f32; 4]],
+        base: usize,
+    )
+}
+
+/// One slab's corners along a row (see [`band_corners`]): `u`, `m`, `d` the rows above, at and
+/// below (padded, `w + 2` long), the four corners in the order [`footprint_group`] visits them
+/// (the steps `(sx, sy)` = (−1, −1), (1, −1), (1, 1), (−1, 1) along the source camera's right
+/// and up): each corner's four pixels are those of the 3 × 3 block around the pixel (row-major,
+/// 4 its own) that the step puts `(sx > 0)` columns and `(sy < 0)` rows into it.
+#[inline(always)]
+fn slab_row_corners(u: &[f32], m: &[f32], d: &[f32], per_px: f32, out: [&mut [f32]; 4]) {
+    let w = out[0].len();
+    let (u, m, d) = (&u[..w + 2], &m[..w + 2], &d[..w + 2]);
+    let [o0, o1, o2, o3] = out;
+    let (o1, o2, o3) = (&mut o1[..w], &mut o2[..w], &mut o3[..w]);
+    for x in 0..w {
+        let z = m[x + 1];
+        let (z0, j0) = join(u[x], z, per_px);
+        let (z1, j1) = join(u[x + 1], z, per_px);
+        let (z2, j2) = join(u[x + 2], z, per_px);
+        let (z3, j3) = join(m[x], z, per_px);
+        let (z5, j5) = join(m[x + 2], z, per_px);
+        let (z6, j6) = join(d[x], z, per_px);
+        let (z7, j7) = join(d[x + 1], z, per_px);
+        let (z8, j8) = join(d[x + 2], z, per_px);
+        // The corners' pixels: [3, 4, 6, 7], [4, 5, 7, 8], [1, 2, 4, 5], [0, 1, 3, 4].
+        o0[x] = corner(z3 + z + z6 + z7, j3 + 1.0 + j6 + j7);
+        o1[x] = corner(z + z5 + z7 + z8, 1.0 + j5 + j7 + j8);
+        o2[x] = corner(z1 + z2 + z + z5, j1 + j2 + 1.0 + j5);
+        o3[x] = corner(z0 + z1 + z3 + z, j0 + j1 + j3 + 1.0);
+    }
+}
+
+/// A neighbour's slab depth `v` where it joins a corner of the segment at depth `z` (else 0),
+/// and 1 where it does (else 0); NaN (no such segment) never joins.
+#[inline(always)]
+fn join(v: f32, z: f32, per_px: f32) -> (f32, f32) {
+    let j = (v - z).abs() <= per_px * (v + z);
+    (if j { v } else { 0.0 }, if j { 1.0 } else { 0.0 })
+}
+
+/// The shared corner from the sum and number of the depths that join it: their mean, NaN unless
+/// at least two join and the mean is a positive finite depth.
+#[inline(always)]
+fn corner(sum: f32, count: f32) -> f32 {
+    let zc = sum / count;
+    if count >= 2.0 && zc.is_finite() && zc > 0.0 {
+        zc
+    } else {
+        f32::NAN
+    }
+}
+
 /// The slab-shared corner depths of layered frames, as [`LayerSplat`] finds them for its newest
 /// frame (see [`LayerOptions::watertight`]): what the GPU layered splatter uploads beside the
 /// samples, so both sides draw the same footprints. Keeps its buffers from frame to frame.
@@ -1039,14 +1182,11 @@ struct OwnPass {
     /// they were found with ([`OwnPass::share_corners`]; `None`: not found for this scene).
     shared: Vec<[f32; 4]>,
     shared_tol: Option<f32>,
-    /// Scratch: the groups sorted by depth key, and the corners in that order.
+    /// Scratch: the groups sorted by depth key, their view depths and corners in that order.
     sorted: Vec<u64>,
+    zs: Vec<f32>,
     corners: Vec<[f32; 4]>,
 }
-
-/// The footprint's corners in the order [`footprint_group`] visits them, as the steps `(sx,
-/// sy)` along the source camera's right and up from the pixel's centre.
-const CORNER_STEPS: [(i32, i32); 4] = [(-1, -1), (1, -1), (1, 1), (-1, 1)];
 
 impl OwnPass {
     /// Projects `scene`'s samples into its own camera (nothing if that was the last scene).
@@ -1123,72 +1263,56 @@ impl OwnPass {
         // The bands of rows and where their samples end in the grouped order.
         let ends: Vec<usize> =
             (0..h.div_ceil(RASTER_BAND)).map(|b| self.start[((b + 1) * RASTER_BAND).min(h) * w] as usize).collect();
-        // 1. Each pixel's segments sorted front to back.
-        self.sorted.clear();
-        self.sorted.extend_from_slice(&self.grouped);
         let start = &self.start[..];
-        threads.for_each_part(&mut self.sorted, &ends, |b, part| {
-            let base = start[b * RASTER_BAND * w] as usize;
-            for i in b * RASTER_BAND * w..((b + 1) * RASTER_BAND).min(h) * w {
-                let g = &mut part[start[i] as usize - base..start[i + 1] as usize - base];
-                if g.len() <= LIST {
-                    sort_keys(g);
-                } else {
-                    g.sort_unstable();
+        // A server's frame comes pixel by pixel, each pixel's segments front to back: then the
+        // grouped order is the samples' own and the corners are written straight by id.
+        let in_order = total == n
+            && self.grouped.iter().enumerate().all(|(g, &k)| k as u32 as usize == g)
+            && (0..w * h).all(|i| self.grouped[start[i] as usize..start[i + 1] as usize].is_sorted());
+        // 1. Otherwise each pixel's segments sorted front to back.
+        if !in_order {
+            self.sorted.clear();
+            self.sorted.extend_from_slice(&self.grouped);
+            threads.for_each_part(&mut self.sorted, &ends, |b, part| {
+                let base = start[b * RASTER_BAND * w] as usize;
+                for i in b * RASTER_BAND * w..((b + 1) * RASTER_BAND).min(h) * w {
+                    let g = &mut part[start[i] as usize - base..start[i + 1] as usize - base];
+                    if g.len() <= LIST {
+                        sort_keys(g);
+                    } else {
+                        g.sort_unstable();
+                    }
                 }
+            });
+        }
+        // Their view depths in that order.
+        self.zs.resize(total, 0.0);
+        let (order, at) = (if in_order { &self.grouped[..] } else { &self.sorted[..] }, &self.at[..]);
+        threads.for_each_chunk(&mut self.zs, QUAD_CHUNK, |c, zs| {
+            for (z, &k) in zs.iter_mut().zip(&order[c * QUAD_CHUNK..]) {
+                *z = at.get(k as u32 as usize).map_or(f32::NAN, |&a| f32::from_bits(a as u32));
             }
         });
         // 2. Each segment's corners, in that order.
-        self.corners.resize(total, [f32::NAN; 4]);
-        let (sorted, at) = (&self.sorted[..], &self.at[..]);
-        let depth = |g: usize| at.get(sorted[g] as u32 as usize).map_or(f32::NAN, |&a| f32::from_bits(a as u32));
+        let corners = if in_order { &mut self.shared } else { &mut self.corners };
+        corners.clear();
+        corners.resize(total, [f32::NAN; 4]);
+        let zs = &self.zs[..];
         let per_px = tol.max(0.0) * 0.5 / proj.px_y;
-        threads.for_each_part(&mut self.corners, &ends, |b, part| {
+        threads.for_each_part(corners, &ends, |b, part| {
             let base = start[b * RASTER_BAND * w] as usize;
-            for i in b * RASTER_BAND * w..((b + 1) * RASTER_BAND).min(h) * w {
-                let (x, y) = ((i % w) as i64, (i / w) as i64);
-                let (a, e) = (start[i] as usize, start[i + 1] as usize);
-                for g in a..e {
-                    let (j, z) = (g - a, depth(g));
-                    let near = |zn: f32| (zn - z).abs() <= per_px * (zn + z);
-                    part[g - base] = CORNER_STEPS.map(|(sx, sy)| {
-                        // The grid corner, and the four pixels around it in a fixed order.
-                        let (cx, cy) = (x + (sx > 0) as i64, y + (sy < 0) as i64);
-                        let (mut sum, mut count) = (0.0f32, 0u32);
-                        for (px, py) in [(cx - 1, cy - 1), (cx, cy - 1), (cx - 1, cy), (cx, cy)] {
-                            if px < 0 || py < 0 || px >= w as i64 || py >= h as i64 {
-                                continue;
-                            }
-                            let q = py as usize * w + px as usize;
-                            let (qa, qe) = (start[q] as usize, start[q + 1] as usize);
-                            if qe - qa > j {
-                                let zn = depth(qa + j);
-                                if q == i || near(zn) {
-                                    sum += zn;
-                                    count += 1;
-                                }
-                            }
-                        }
-                        let zc = sum / count as f32;
-                        if count >= 2 && zc.is_finite() && zc > 0.0 {
-                            zc
-                        } else {
-                            f32::NAN
-                        }
-                    });
-                }
-            }
+            let rows = b * RASTER_BAND..((b + 1) * RASTER_BAND).min(h);
+            band_corners(start, zs, (w, h), per_px, rows, part, base);
         });
-        // 3. By sample id (a server's frame is already in that order: nothing to move).
+        if in_order {
+            return;
+        }
+        // 3. By sample id.
         self.shared.clear();
         self.shared.resize(n, [f32::NAN; 4]);
-        if total == n && self.sorted.iter().enumerate().all(|(g, &k)| k as u32 as usize == g) {
-            self.shared.copy_from_slice(&self.corners);
-        } else {
-            for (&k, c) in self.sorted.iter().zip(&self.corners) {
-                if let Some(s) = self.shared.get_mut(k as u32 as usize) {
-                    *s = *c;
-                }
+        for (&k, c) in self.sorted.iter().zip(&self.corners) {
+            if let Some(s) = self.shared.get_mut(k as u32 as usize) {
+                *s = *c;
             }
         }
     }
@@ -1823,6 +1947,18 @@ mod tests {
             }
             counts.push(hist);
         }
+        // The same frame with its samples in reverse order (each pixel's segments back to
+        // front): the corners are found by sorting and moved to the samples' ids, and the
+        // image is the same.
+        let mut reversed = frame.clone();
+        reversed.samples.reverse();
+        reversed.colors.reverse();
+        let opts = LayerOptions { fill: false, watertight: 3.0, water_ratio: 0.0, ..LayerOptions::DEFAULT };
+        let (mut a, mut b) = (Image::new(0, 0), Image::new(0, 0));
+        LayerSplat::with_options(1, opts).render(&scene, &cam, &mut a);
+        LayerSplat::with_options(1, opts).render(&crate::route::unbuilt_scene(&reversed), &cam, &mut b);
+        let same = a.pixels.iter().zip(&b.pixels).filter(|(p, q)| p == q).count();
+        assert!(same * 1000 >= a.pixels.len() * 999, "{same} of {} pixels equal in reverse order", a.pixels.len());
         let (plain, tight) = (counts[0], counts[1]);
         let inside: usize = tight.iter().sum();
         assert!(inside > 3000, "the layer covers too little: {tight:?}");
@@ -1830,6 +1966,97 @@ mod tests {
         assert!(tight[2] * 1000 >= inside * 998, "shared corners: {tight:?} (count 0, 1, 2, 3+)");
         // Plain footprints: overlaps and gaps.
         assert!(plain[1] + plain[3] > inside / 50, "plain footprints: {plain:?}");
+    }
+
+    /// The shared corners as the definition states them, one segment and corner at a time:
+    /// the four pixels around the corner in row-then-column order, each joining with its
+    /// `j`-th segment where that lies within the tolerance of the segment's own depth.
+    fn corners_reference(own: &OwnPass, tol: f32) -> Vec<[f32; 4]> {
+        let (proj, w, h) = own.proj.unwrap();
+        let per_px = tol * 0.5 / proj.px_y;
+        // Each pixel's depths front to back.
+        let depths = |i: usize| -> Vec<f32> {
+            let mut keys = own.grouped[own.start[i] as usize..own.start[i + 1] as usize].to_vec();
+            keys.sort_unstable();
+            keys.iter().map(|&k| f32::from_bits(own.at[k as u32 as usize] as u32)).collect()
+        };
+        let mut out = vec![[f32::NAN; 4]; own.at.len()];
+        for y in 0..h {
+            for x in 0..w {
+                let mut keys = own.grouped[own.start[y * w + x] as usize..own.start[y * w + x + 1] as usize].to_vec();
+                keys.sort_unstable();
+                for (j, &key) in keys.iter().enumerate() {
+                    let z = f32::from_bits(own.at[key as u32 as usize] as u32);
+                    for (k, (sx, sy)) in [(-1i64, -1i64), (1, -1), (1, 1), (-1, 1)].into_iter().enumerate() {
+                        let (cx, cy) = (x as i64 + (sx > 0) as i64, y as i64 + (sy < 0) as i64);
+                        let (mut sum, mut count) = (0.0f32, 0.0f32);
+                        for (px, py) in [(cx - 1, cy - 1), (cx, cy - 1), (cx - 1, cy), (cx, cy)] {
+                            if px < 0 || py < 0 || px >= w as i64 || py >= h as i64 {
+                                continue;
+                            }
+                            let d = depths(py as usize * w + px as usize);
+                            let own_pixel = (px, py) == (x as i64, y as i64);
+                            if let Some(&v) = d.get(j) {
+                                if own_pixel || (v - z).abs() <= per_px * (v + z) {
+                                    sum += v;
+                                    count += 1.0;
+                                }
+                            }
+                        }
+                        out[key as u32 as usize][k] = corner(sum, count);
+                    }
+                }
+            }
+        }
+        out
+    }
+
+    /// The row stencil (on both lane types) finds exactly the corners of the plain definition,
+    /// on a frame in the server's order and on the same frame shuffled.
+    #[test]
+    fn shared_corners_match_the_plain_definition() {
+        let frame = two_slab_frame();
+        let mut shuffled = frame.clone();
+        let mut rng = crate::synthetic::SplitMix64(5);
+        for i in (1..shuffled.samples.len()).rev() {
+            let j = (rng.next_u64() % (i as u64 + 1)) as usize;
+            shuffled.samples.swap(i, j);
+            shuffled.colors.swap(i, j);
+        }
+        let threads = Threads::new(1);
+        for f in [&frame, &shuffled] {
+            let scene = crate::route::unbuilt_scene(f);
+            for tol in [1.5, 6.0] {
+                let mut own = OwnPass::default();
+                own.project(&scene, &threads);
+                assert!(own.group());
+                own.share_corners(tol, &threads);
+                let reference = corners_reference(&own, tol);
+                let same = |a: &[[f32; 4]], b: &[[f32; 4]]| {
+                    a.len() == b.len()
+                        && a.iter().flatten().zip(b.iter().flatten()).all(|(p, q)| p.to_bits() == q.to_bits())
+                };
+                assert!(same(&own.shared, &reference), "tolerance {tol}");
+                let shared = own.shared.iter().flatten().filter(|z| z.is_finite()).count();
+                assert!(shared > own.shared.len(), "too few shared corners: {shared}");
+                // The portable instance of the stencil, row band by row band (a frame in the
+                // server's order: the corners are written by id).
+                if core::ptr::eq(f, &frame) {
+                    let (proj, w, h) = own.proj.unwrap();
+                    let mut portable = vec![[f32::NAN; 4]; own.at.len()];
+                    band_corners_lanes::<wide::f32x8>(
+                        &own.start,
+                        &own.zs,
+                        (w, h),
+                        tol * 0.5 / proj.px_y,
+                        0..h,
+                        &mut portable,
+                        0,
+                    );
+                    assert!(same(&portable, &reference), "portable, tolerance {tol}");
+                }
+            }
+        }
     }
 
     #[test]
