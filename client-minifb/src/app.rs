@@ -59,6 +59,7 @@ pub fn run(opts: &Options) -> Result<(), ClientError> {
 
 fn run_connected(opts: &Options, addr: &str) -> Result<(), ClientError> {
     let timeout = Duration::from_secs(opts.timeout_s.max(1));
+    crate::renderers::set_layer_options(opts.layer_options());
     let mut renderers = Renderers::new(opts.renderer, opts.tracer_threads()).map_err(ClientError::Renderer)?;
     renderers.set_adaptive_radius(opts.adapt);
     log::info!(
@@ -68,7 +69,8 @@ fn run_connected(opts: &Options, addr: &str) -> Result<(), ClientError> {
             opts.predict,
             opts.guard,
             renderers.adaptive_radius(),
-            if renderers.keeps_frames() { opts.keep_frames } else { 1 }
+            if renderers.keeps_frames() { opts.keep_frames } else { 1 },
+            renderers.watertight(),
         )
     );
     let conn = connect_layers(addr, opts.token.as_deref(), timeout, opts.layers())?;

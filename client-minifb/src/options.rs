@@ -133,6 +133,12 @@ pub struct Options {
     /// the newest alone); 1..=8.
     #[arg(long, value_name = "K", default_value_t = DEFAULT_KEEP_FRAMES, value_parser = parse_keep_frames)]
     pub keep_frames: usize,
+    /// Watertight slabs (`splat-layers`, `splat-layers-gpu`): neighbouring segments of one slab
+    /// share their footprints' corners where their depths lie within T source pixels, so a
+    /// semi-transparent layer shows no contour lines where it faces the view; 0 turns it off;
+    /// 0..=8.
+    #[arg(long, value_name = "T", default_value_t = volwarp_cpu_tracer::layer_splat::WATERTIGHT, value_parser = parse_watertight)]
+    pub watertight: f32,
     /// Display frame rate limit (0: none). Default: 60 in the window, none headless.
     #[arg(long)]
     pub fps: Option<u32>,
@@ -212,6 +218,11 @@ impl Options {
         Ok(())
     }
 
+    /// The layered renderers' options (`--watertight`).
+    pub fn layer_options(&self) -> volwarp_cpu_tracer::layer_splat::LayerOptions {
+        volwarp_cpu_tracer::layer_splat::LayerOptions { watertight: self.watertight, ..Default::default() }
+    }
+
     /// Extra arguments of the child server (`--volume FILE`).
     pub fn server_args(&self) -> Vec<String> {
         self.volume.iter().flat_map(|v| ["--volume".to_string(), v.clone()]).collect()
@@ -246,6 +257,15 @@ fn parse_guard(s: &str) -> Result<f32, String> {
     }
 }
 
+fn parse_watertight(s: &str) -> Result<f32, String> {
+    let t: f32 = s.parse().map_err(|e| format!("{e}"))?;
+    if (0.0..=8.0).contains(&t) {
+        Ok(t)
+    } else {
+        Err("watertight tolerance must be within 0..=8 source pixels".into())
+    }
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -262,6 +282,11 @@ mod tests {
 
     #[test]
     fn frame_counts_are_bounded() {
+        assert_eq!(parse_watertight("1.5"), Ok(1.5));
+        assert_eq!(parse_watertight("0"), Ok(0.0));
+        for bad in ["-1", "9", "NaN", "x"] {
+            assert!(parse_watertight(bad).is_err(), "{bad}");
+        }
         assert_eq!(parse_keep_frames("4"), Ok(4));
         assert_eq!(parse_keep_frames("1"), Ok(1));
         for bad in ["0", "9", "-1", "x", ""] {

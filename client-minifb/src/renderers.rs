@@ -5,6 +5,7 @@
 
 use volwarp_core::renderer::{Image, Renderer};
 use volwarp_core::{Camera, RendererKind, Scene};
+use volwarp_cpu_tracer::layer_splat::LayerOptions;
 
 /// All renderers of a client, created on first use.
 pub struct Renderers {
@@ -27,11 +28,29 @@ pub fn set_adapter(name: Option<String>) {
     let _ = ADAPTER.set(name);
 }
 
+/// The layered renderers' options the client's `--watertight` asked for (set once, before any
+/// layered renderer is created).
+static LAYERS: std::sync::OnceLock<LayerOptions> = std::sync::OnceLock::new();
+
+/// Makes the layered renderers (`splat-layers`, `splat-layers-gpu`) draw with `opts` (the
+/// defaults otherwise). Only the first call counts.
+pub fn set_layer_options(opts: LayerOptions) {
+    let _ = LAYERS.set(opts);
+}
+
+/// The layered renderers' options.
+pub fn layer_options() -> LayerOptions {
+    LAYERS.get().copied().unwrap_or_default()
+}
+
 /// Creates a renderer of the registry with `threads` CPU threads (0: all cores); the GPU tracer
 /// opens an adapter (an error names what to install when none opens).
 pub fn create(kind: RendererKind, threads: usize) -> Result<Box<dyn Renderer>, String> {
     if kind.info().caps.gpu {
         return create_gpu(kind);
+    }
+    if kind == RendererKind::SplatLayers {
+        return Ok(Box::new(volwarp_cpu_tracer::LayerSplat::with_options(threads, layer_options())));
     }
     match volwarp_cpu_tracer::create(kind, threads) {
         Some(r) => Ok(r),
@@ -48,13 +67,9 @@ fn create_gpu(kind: RendererKind) -> Result<Box<dyn Renderer>, String> {
     log::info!("{kind} ready on {} ({:.0} ms)", ctx.describe_driver(), t.elapsed().as_secs_f64() * 1e3);
     let r: Box<dyn Renderer> = match kind {
         RendererKind::SplatGpu => Box::new(volwarp_gpu_tracer::GpuSplat::with_context(ctx).map_err(|e| e.to_string())?),
-        RendererKind::SplatLayersGpu => Box::new(
-            volwarp_gpu_tracer::GpuLayerSplat::with_context(
-                ctx,
-                volwarp_gpu_tracer::layer_splat::LayerOptions::DEFAULT,
-            )
-            .map_err(|e| e.to_string())?,
-        ),
+        RendererKind::SplatLayersGpu => {
+            Box::new(volwarp_gpu_tracer::GpuLayerSplat::with_context(ctx, layer_options()).map_err(|e| e.to_string())?)
+        }
         _ => Box::new(volwarp_gpu_tracer::GpuTracer::with_context(ctx).map_err(|e| e.to_string())?),
     };
     Ok(r)
@@ -141,6 +156,15 @@ impl Renderers {
     /// The current renderer's name.
     pub fn name(&self) -> &'static str {
         self.current.name()
+    }
+
+    /// The watertight-slab tolerance the current renderer draws with (0: off, or not a
+    /// layered renderer).
+    pub fn watertight(&self) -> f32 {
+        match self.current {
+            RendererKind::SplatLayers | RendererKind::SplatLayersGpu => layer_options().watertight,
+            _ => 0.0,
+        }
     }
 
     /// Whether the current renderer uses older frames ([`Renderer::keeps_frames`]).

@@ -160,6 +160,7 @@ pub fn draw(replay: &mut Replay, renderers: &mut Renderers, req: &CameraRequest,
 /// Replays `path`: to PNG files with `--headless --out DIR`, else in a window.
 pub fn run(opts: &Options, path: &Path) -> Result<(), ClientError> {
     let mut replay = Replay::open(path, opts.build_threads)?;
+    crate::renderers::set_layer_options(opts.layer_options());
     let mut renderers = Renderers::new(opts.renderer, opts.tracer_threads()).map_err(ClientError::Renderer)?;
     renderers.set_adaptive_radius(opts.adapt);
     replay.set_lazy_build(!opts.renderer.info().caps.needs_lbvh);

@@ -120,8 +120,9 @@ pub fn title(
 
 /// The warp levers that are on, for the title (issue 19): camera prediction, the guard band,
 /// warp-sized radii (only where the current renderer can), the frames kept (only where the
-/// current renderer uses older frames), or `no levers`.
-pub fn levers(predict: bool, guard: f32, adaptive_radius: bool, frames: usize) -> String {
+/// current renderer uses older frames), watertight slabs (only with a layered renderer), or
+/// `no levers`.
+pub fn levers(predict: bool, guard: f32, adaptive_radius: bool, frames: usize, watertight: f32) -> String {
     let mut on = Vec::new();
     if predict {
         on.push("predict".to_string());
@@ -134,6 +135,9 @@ pub fn levers(predict: bool, guard: f32, adaptive_radius: bool, frames: usize) -
     }
     if frames > 1 {
         on.push(format!("{frames} frames"));
+    }
+    if watertight > 0.0 {
+        on.push(format!("watertight {watertight}"));
     }
     if on.is_empty() {
         "no levers".into()
@@ -242,7 +246,8 @@ pub fn run_live(opts: &Options, display: &mut Display, home: Camera) -> Result<(
                 display.renderers.name(),
                 heuristic,
             );
-            let l = levers(opts.predict, opts.guard, display.renderers.adaptive_radius(), display.frames_used());
+            let (frames_used, watertight) = (display.frames_used(), display.renderers.watertight());
+            let l = levers(opts.predict, opts.guard, display.renderers.adaptive_radius(), frames_used, watertight);
             screen.window.set_title(&format!("{t} | {l}"));
         }
     }
@@ -301,8 +306,8 @@ mod tests {
         for part in ["60 FPS", "1.5 FPS", "812 ms", "123456 samples", "splat", "gradient"] {
             assert!(t.contains(part), "{t}");
         }
-        assert_eq!(levers(true, 0.1, true, 1), "predict + guard 0.1 + adapt");
-        assert_eq!(levers(true, 0.0, true, 4), "predict + adapt + 4 frames");
-        assert_eq!(levers(false, 0.0, false, 1), "no levers");
+        assert_eq!(levers(true, 0.1, true, 1, 0.0), "predict + guard 0.1 + adapt");
+        assert_eq!(levers(true, 0.0, true, 4, 1.5), "predict + adapt + 4 frames + watertight 1.5");
+        assert_eq!(levers(false, 0.0, false, 1, 0.0), "no levers");
     }
 }
