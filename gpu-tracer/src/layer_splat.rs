@@ -50,6 +50,9 @@ const COUNTS: u32 = 16;
 /// Uniform slots (frame draw, new-camera draw) are this far apart.
 const SLOT: u64 = 1024;
 
+/// Storage buffers bound in one stage (bindings 1–9 of `layer_splat.wgsl`).
+const STORAGE_BINDINGS: u32 = 9;
+
 /// Bytes of one footprint on the GPU (`Quad` in `layer_splat.wgsl`).
 const QUAD_BYTES: u64 = 64;
 
@@ -264,6 +267,14 @@ impl GpuLayerSplat {
     /// A layered splatter on an already opened device, drawing with `opts` (those of the CPU's
     /// `LayerSplat::with_options`).
     pub fn with_context(ctx: GpuContext, opts: LayerOptions) -> Result<GpuLayerSplat, GpuError> {
+        // Nine storage buffers in one stage: one more than WebGPU's default limit, within what
+        // every native backend offers (the device is opened with the adapter's own limits).
+        if ctx.limits.max_storage_buffers_per_shader_stage < STORAGE_BINDINGS {
+            return Err(GpuError::Device(format!(
+                "the layered splatter needs {STORAGE_BINDINGS} storage buffers per shader stage, this adapter offers {}",
+                ctx.limits.max_storage_buffers_per_shader_stage
+            )));
+        }
         let scope = ctx.device.push_error_scope(wgpu::ErrorFilter::Validation);
         let consts = format!("const LIST: u32 = {LIST}u;\nconst SCAN_BLOCK: u32 = {SCAN_BLOCK}u;\n");
         let module = ctx.device.create_shader_module(wgpu::ShaderModuleDescriptor {
