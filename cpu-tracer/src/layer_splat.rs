@@ -980,7 +980,7 @@ impl Sight {
     }
 }
 
-/// The shared corners of the segments of the pixel rows `rows` (of a `w × h` frame whose view
+/// The shared corners of the segments (the `LIST` nearest of each pixel) of the pixel rows `rows` (of a `w × h` frame whose view
 /// depths, grouped by pixel front to back, are `zs`, pixel `i`'s from `start[i]`), into `part`
 /// (the rows' segments, the first at `base`), slab by slab as a stencil over dense rows: per
 /// slab `j` three rows of depths (NaN where a pixel has no `j`-th segment, and one NaN on each
@@ -1002,7 +1002,9 @@ fn band_corners_lanes<L: Lanes>(
     let wp = w + 2;
     let count = |i: usize| (start[i + 1] - start[i]) as usize;
     let (r0, r1) = (rows.start.saturating_sub(1), (rows.end + 1).min(h));
-    let k = (r0 * w..r1 * w).map(count).max().unwrap_or(0);
+    // At most `LIST` slabs (a pixel keeps no more segments than that; a frame that puts more
+    // samples on one pixel gets no shared corners for them, and no larger buffers).
+    let k = (r0 * w..r1 * w).map(count).max().unwrap_or(0).min(LIST);
     if k == 0 || rows.is_empty() {
         return;
     }
@@ -2057,6 +2059,37 @@ mod tests {
                 }
             }
         }
+    }
+
+    /// A frame that puts thousands of samples on one pixel: no panic, no buffer sized by them,
+    /// shared corners only for the nearest `LIST` of them, and an image without NaN colors.
+    #[test]
+    fn a_crowded_pixel_shares_only_its_nearest_slabs() {
+        let mut frame = two_slab_frame();
+        let (s0, c0) = (frame.samples[1000], frame.colors[1000]);
+        let at = 1001;
+        for _ in 0..5000 {
+            frame.samples.insert(at, s0);
+            frame.colors.insert(at, c0);
+        }
+        let scene = crate::route::unbuilt_scene(&frame);
+        let threads = Threads::new(1);
+        let mut own = OwnPass::default();
+        own.project(&scene, &threads);
+        assert!(own.group());
+        own.share_corners(3.0, &threads);
+        let (_, w, _) = own.proj.unwrap();
+        let crowded = (0..own.start.len() - 1).max_by_key(|&i| own.start[i + 1] - own.start[i]).unwrap();
+        let (a, e) = (own.start[crowded] as usize, own.start[crowded + 1] as usize);
+        assert!(e - a > 5000, "{} samples on the crowded pixel {crowded} of a {w}-wide frame", e - a);
+        let mut keys = own.grouped[a..e].to_vec();
+        keys.sort_unstable();
+        let far = keys[LIST..].iter().filter(|&&k| own.shared[k as u32 as usize].iter().any(|z| z.is_finite())).count();
+        assert_eq!(far, 0, "segments past the nearest {LIST} share corners");
+        let mut img = Image::new(0, 0);
+        let cam = frame.header.camera.orbit(10.0, 0.0);
+        LayerSplat::new(1).render(&scene, &cam, &mut img);
+        assert!(img.pixels.iter().any(|&p| p != BACKGROUND));
     }
 
     #[test]
