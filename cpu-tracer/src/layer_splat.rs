@@ -2013,8 +2013,9 @@ mod tests {
         out
     }
 
-    /// The row stencil (on both lane types) finds exactly the corners of the plain definition,
-    /// on a frame in the server's order and on the same frame shuffled.
+    /// The row stencil (on both lane types, on one thread and in parallel over bands of rows)
+    /// finds exactly the corners of the plain definition, on a frame in the server's order and
+    /// on the same frame shuffled.
     #[test]
     fn shared_corners_match_the_plain_definition() {
         let frame = two_slab_frame();
@@ -2025,8 +2026,8 @@ mod tests {
             shuffled.samples.swap(i, j);
             shuffled.colors.swap(i, j);
         }
-        let threads = Threads::new(1);
-        for f in [&frame, &shuffled] {
+        for (f, threads) in [(&frame, 1), (&shuffled, 1), (&frame, 2), (&shuffled, 3)] {
+            let threads = Threads::new(threads);
             let scene = crate::route::unbuilt_scene(f);
             for tol in [1.5, 6.0] {
                 let mut own = OwnPass::default();
