@@ -67,11 +67,12 @@
 //! [`LayerOptions::own`], so the frame is still reproduced there.
 //!
 //! Work: the footprints are set up in parallel over samples (four projections per sample, in
-//! `f32`, eight more where a sample has shared corners), binned to bands of rows, rasterized in parallel over bands (a few edge tests per
-//! covered pixel) and composited band by band. Memory: 1 byte per output pixel (its count),
+//! `f32`, four more where a sample has shared corners), binned to bands of rows, rasterized in
+//! parallel over bands (a few edge tests per covered pixel) and composited band by band. Memory: 1 byte per output pixel (its count),
 //! `8 × LIST` bytes per pixel of one band per thread, and per sample 64 bytes (its footprint)
 //! plus 4 for its band range and 4 per band it touches; for the newest frame, 20 bytes per
-//! sample and 4 per pixel (`OwnPass`) and 40 per sample for its shared corners.
+//! sample and 4 per pixel (`OwnPass`) and 20 per sample for its shared corners (44 for a frame
+//! not in the server's order, which is sorted first).
 
 use crate::hole_fill::{block_outside_silhouette, filled, stale_lookup, FILLED, UNFILLED};
 use crate::lanes::{self, Lanes};
