@@ -137,7 +137,12 @@ pub struct Options {
     /// share their footprints' corners where their depths lie within T source pixels, so a
     /// semi-transparent layer shows no contour lines where it faces the view; 0 turns it off;
     /// 0..=8.
-    #[arg(long, value_name = "T", default_value_t = volwarp_cpu_tracer::layer_splat::WATERTIGHT, value_parser = parse_watertight)]
+    #[arg(
+        long,
+        value_name = "T",
+        default_value_t = volwarp_cpu_tracer::layer_splat::WATERTIGHT,
+        value_parser = parse_watertight
+    )]
     pub watertight: f32,
     /// Display frame rate limit (0: none). Default: 60 in the window, none headless.
     #[arg(long)]

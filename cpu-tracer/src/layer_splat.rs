@@ -68,11 +68,12 @@
 //!
 //! Work: the footprints are set up in parallel over samples (four projections per sample, in
 //! `f32`, four more where a sample has shared corners), binned to bands of rows, rasterized in
-//! parallel over bands (a few edge tests per covered pixel) and composited band by band. Memory: 1 byte per output pixel (its count),
-//! `8 × LIST` bytes per pixel of one band per thread, and per sample 64 bytes (its footprint)
-//! plus 4 for its band range and 4 per band it touches; for the newest frame, 20 bytes per
-//! sample and 4 per pixel (`OwnPass`) and 20 per sample for its shared corners (44 for a frame
-//! not in the server's order, which is sorted first).
+//! parallel over bands (a few edge tests per covered pixel) and composited band by band.
+//! Memory: 1 byte per output pixel (its count), `8 × LIST` bytes per pixel of one band per
+//! thread, and per sample 64 bytes (its footprint) plus 4 for its band range and 4 per band it
+//! touches; for the newest frame, 20 bytes per sample and 4 per pixel (`OwnPass`) and 20 per
+//! sample for its shared corners (44 for a frame not in the server's order, which is sorted
+//! first).
 
 use crate::hole_fill::{block_outside_silhouette, filled, stale_lookup, FILLED, UNFILLED};
 use crate::lanes::{self, Lanes};
@@ -981,15 +982,15 @@ impl Sight {
     }
 }
 
-/// The shared corners of the segments (the `LIST` nearest of each pixel) of the pixel rows `rows` (of a `w × h` frame whose view
-/// depths, grouped by pixel front to back, are `zs`, pixel `i`'s from `start[i]`), into `part`
-/// (the rows' segments, the first at `base`), slab by slab as a stencil over dense rows: per
-/// slab `j` three rows of depths (NaN where a pixel has no `j`-th segment, and one NaN on each
-/// side), and per pixel the eight neighbours' slab-`j` depths that lie within
-/// `per_px · (z + z')` of its own joining each corner they touch: the corner is the mean of the
-/// four pixels around it that join (its own always does), summed in one fixed order (rows, then
-/// columns) by every pixel around it. Straight-line float code over rows, which the compiler
-/// vectorizes.
+/// The shared corners of the segments (the `LIST` nearest of each pixel) of the pixel rows
+/// `rows` (of a `w × h` frame whose view depths, grouped by pixel front to back, are `zs`, pixel
+/// `i`'s from `start[i]`), into `part` (the rows' segments, the first at `base`), slab by slab
+/// as a stencil over dense rows: per slab `j` three rows of depths (NaN where a pixel has no
+/// `j`-th segment, and one NaN on each side), and per pixel the eight neighbours' slab-`j`
+/// depths that lie within `per_px · (z + z')` of its own joining each corner they touch: the
+/// corner is the mean of the four pixels around it that join (its own always does), summed in
+/// one fixed order (rows, then columns) by every pixel around it. Straight-line float code over
+/// rows, which the compiler vectorizes.
 #[inline(always)]
 fn band_corners_lanes<L: Lanes>(
     start: &[u32],
