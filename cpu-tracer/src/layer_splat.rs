@@ -121,6 +121,10 @@ pub const RESIDUAL_TOLERANCE: f32 = 3.0;
 /// (measured: 0.5 and 0.9 give the same sessions).
 pub const RESIDUAL_OPAQUE: f32 = 0.9;
 
+/// Rows per task of the shared-corner stencil (each task reads a row more above and below, and
+/// keeps its own three rows of slab depths).
+const CORNER_BAND: usize = 32;
+
 /// Samples per footprint set-up task.
 const QUAD_CHUNK: usize = 4096;
 
@@ -994,7 +998,7 @@ impl Sight {
 #[inline(always)]
 fn band_corners_lanes<L: Lanes>(
     start: &[u32],
-    zs: &[f32],
+    zs: Depths,
     (w, h): (usize, usize),
     per_px: f32,
     rows: core::ops::Range<usize>,
@@ -1020,7 +1024,7 @@ fn band_corners_lanes<L: Lanes>(
             let i = y * w + x;
             let a = start[i] as usize;
             for j in 0..count(i).min(k) {
-                slabs[j * wp + x + 1] = zs[a + j];
+                slabs[j * wp + x + 1] = zs.get(a + j);
             }
         }
     };
@@ -1069,13 +1073,34 @@ lanes::dispatch! {
     /// stencil is plain float code the compiler vectorizes; the same values either way).
     fn band_corners / band_corners_avx2 => band_corners_lanes(
         start: &[u32],
-        zs: &[f32],
+        zs: Depths,
         size: (usize, usize),
         per_px: f32,
         rows: core::ops::Range<usize>,
         part: &mut [[f32; 4]],
         base: usize,
     )
+}
+
+/// Where the corner stencil reads the segments' view depths, in pixel order.
+#[derive(Clone, Copy, Debug)]
+enum Depths<'a> {
+    /// As they are (a frame not in the server's order, once sorted: `OwnPass::zs`).
+    Plain(&'a [f32]),
+    /// In the low bits of `OwnPass::at` (a frame in the server's order: pixel order is the
+    /// samples' own).
+    Packed(&'a [u64]),
+}
+
+impl Depths<'_> {
+    /// The depth at position `g`.
+    #[inline(always)]
+    fn get(&self, g: usize) -> f32 {
+        match self {
+            Depths::Plain(z) => z[g],
+            Depths::Packed(a) => f32::from_bits(a[g] as u32),
+        }
+    }
 }
 
 /// One slab's corners along a row (see [`band_corners`]): `u`, `m`, `d` the rows above, at and
@@ -1266,20 +1291,22 @@ impl OwnPass {
         let total = self.grouped.len();
         // The bands of rows and where their samples end in the grouped order.
         let ends: Vec<usize> =
-            (0..h.div_ceil(RASTER_BAND)).map(|b| self.start[((b + 1) * RASTER_BAND).min(h) * w] as usize).collect();
+            (0..h.div_ceil(CORNER_BAND)).map(|b| self.start[((b + 1) * CORNER_BAND).min(h) * w] as usize).collect();
         let start = &self.start[..];
         // A server's frame comes pixel by pixel, each pixel's segments front to back: then the
         // grouped order is the samples' own and the corners are written straight by id.
         let in_order = total == n
-            && self.grouped.iter().enumerate().all(|(g, &k)| k as u32 as usize == g)
-            && (0..w * h).all(|i| self.grouped[start[i] as usize..start[i + 1] as usize].is_sorted());
+            && self.at.windows(2).zip(self.keys.windows(2)).all(|(a, k)| {
+                let (p, q) = (a[0] >> 32, a[1] >> 32);
+                p < q || (p == q && k[0] < k[1])
+            });
         // 1. Otherwise each pixel's segments sorted front to back.
         if !in_order {
             self.sorted.clear();
             self.sorted.extend_from_slice(&self.grouped);
             threads.for_each_part(&mut self.sorted, &ends, |b, part| {
-                let base = start[b * RASTER_BAND * w] as usize;
-                for i in b * RASTER_BAND * w..((b + 1) * RASTER_BAND).min(h) * w {
+                let base = start[b * CORNER_BAND * w] as usize;
+                for i in b * CORNER_BAND * w..((b + 1) * CORNER_BAND).min(h) * w {
                     let g = &mut part[start[i] as usize - base..start[i + 1] as usize - base];
                     if g.len() <= LIST {
                         sort_keys(g);
@@ -1289,23 +1316,25 @@ impl OwnPass {
                 }
             });
         }
-        // Their view depths in that order.
-        self.zs.resize(total, 0.0);
-        let (order, at) = (if in_order { &self.grouped[..] } else { &self.sorted[..] }, &self.at[..]);
-        threads.for_each_chunk(&mut self.zs, QUAD_CHUNK, |c, zs| {
-            for (z, &k) in zs.iter_mut().zip(&order[c * QUAD_CHUNK..]) {
-                *z = at.get(k as u32 as usize).map_or(f32::NAN, |&a| f32::from_bits(a as u32));
-            }
-        });
+        // Their view depths in that order (in the server's order: where they are, in `at`).
+        if !in_order {
+            self.zs.resize(total, 0.0);
+            let (order, at) = (&self.sorted[..], &self.at[..]);
+            threads.for_each_chunk(&mut self.zs, QUAD_CHUNK, |c, zs| {
+                for (z, &k) in zs.iter_mut().zip(&order[c * QUAD_CHUNK..]) {
+                    *z = at.get(k as u32 as usize).map_or(f32::NAN, |&a| f32::from_bits(a as u32));
+                }
+            });
+        }
         // 2. Each segment's corners, in that order.
         let corners = if in_order { &mut self.shared } else { &mut self.corners };
         corners.clear();
         corners.resize(total, [f32::NAN; 4]);
-        let zs = &self.zs[..];
+        let zs = if in_order { Depths::Packed(&self.at) } else { Depths::Plain(&self.zs) };
         let per_px = tol.max(0.0) * 0.5 / proj.px_y;
         threads.for_each_part(corners, &ends, |b, part| {
-            let base = start[b * RASTER_BAND * w] as usize;
-            let rows = b * RASTER_BAND..((b + 1) * RASTER_BAND).min(h);
+            let base = start[b * CORNER_BAND * w] as usize;
+            let rows = b * CORNER_BAND..((b + 1) * CORNER_BAND).min(h);
             band_corners(start, zs, (w, h), per_px, rows, part, base);
         });
         if in_order {
@@ -2051,7 +2080,7 @@ mod tests {
                     let mut portable = vec![[f32::NAN; 4]; own.at.len()];
                     band_corners_lanes::<wide::f32x8>(
                         &own.start,
-                        &own.zs,
+                        Depths::Packed(&own.at),
                         (w, h),
                         tol * 0.5 / proj.px_y,
                         0..h,
