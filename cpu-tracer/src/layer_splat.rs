@@ -208,6 +208,19 @@ impl LayerOptions {
         water_ratio: 1.0,
     };
 
+    /// Whether at the frame's own camera every footprint is exactly its source pixel (half
+    /// side 0.5, the default): then the frame's own image is its samples grouped by pixel
+    /// (`OwnPass`), with wider or narrower footprints it must be drawn.
+    pub fn own_pixels(&self) -> bool {
+        self.own == 0.5
+    }
+
+    /// Whether the newest frame's slabs are watertight: a tolerance, and footprints of the
+    /// source pixel's size (what the shared corners are corners of).
+    pub fn shares_corners(&self) -> bool {
+        self.watertight > 0.0 && self.own_pixels()
+    }
+
     /// The half side of the footprint for a warp of `deg` degrees (adaptive sizing on).
     pub fn own_at(&self, deg: f32) -> f32 {
         let grow = if self.grow_per_degree.is_finite() { self.grow_per_degree.max(0.0) } else { 0.0 };
@@ -765,9 +778,8 @@ impl Renderer for LayerSplat {
         }
         let grown = if self.adaptive { self.opts.own_at(warp_angle_deg(&fc, camera)) } else { self.opts.own };
         // Watertight slabs: the newest frame's corners shared between neighbouring pixels.
-        let shared = if self.opts.watertight > 0.0 && self.own_pixels() {
-            self.own.project(scene, &self.threads);
-            if self.own.group() {
+        let shared = if self.opts.shares_corners() {
+            if self.own.prepare(scene, &self.threads) {
                 self.own.share_corners(self.opts.watertight, &self.threads);
             }
             core::mem::take(&mut self.own.shared)
@@ -832,9 +844,8 @@ impl Renderer for LayerSplat {
             block_outside_silhouette(&mut self.state, w, h);
             // The frame's own image where a hole looks it up: each such pixel's own segments
             // composited on the spot (a few thousand, against a million for the whole image).
-            if self.own_pixels() {
-                self.own.project(scene, &self.threads);
-                self.own.group();
+            if self.opts.own_pixels() {
+                self.own.prepare(scene, &self.threads);
                 let (own, colors) = (&self.own, &scene.colors[..]);
                 stale_lookup(|i| own.pixel(i, colors), &fc, camera, &mut self.state, &self.threads);
             } else {
@@ -875,8 +886,7 @@ impl LayerSplat {
             if !shifted {
                 self.residuals.clear();
             }
-            self.own.project(newest, &self.threads);
-            self.own.group();
+            self.own.prepare(newest, &self.threads);
             self.sight.update(newest, &self.own, &self.threads);
             self.residual_for = Some(id);
             fresh = true;
@@ -1173,8 +1183,7 @@ impl SlabCorners {
         if !(tol > 0.0) {
             return &[];
         }
-        self.own.project(scene, &self.threads);
-        if !self.own.group() {
+        if !self.own.prepare(scene, &self.threads) {
             return &[];
         }
         self.own.share_corners(tol, &self.threads);
@@ -1225,7 +1234,9 @@ impl OwnPass {
             return;
         }
         self.of = Some(id);
+        // What was found for the last scene goes with it.
         self.start.clear();
+        self.shared.clear();
         self.shared_tol = None;
         let fc = scene.header.camera;
         let n = scene.samples.len();
@@ -1251,6 +1262,13 @@ impl OwnPass {
                 *key_out = key(d2[k], (first + k) as u32);
             }
         });
+    }
+
+    /// [`OwnPass::project`] and [`OwnPass::group`] (each done once per scene); false for an
+    /// unusable camera.
+    fn prepare(&mut self, scene: &Scene, threads: &Threads) -> bool {
+        self.project(scene, threads);
+        self.group()
     }
 
     /// Pixel `i`'s own segments composited over the background (after [`OwnPass::group`]; the
@@ -1315,9 +1333,8 @@ impl OwnPass {
                     }
                 }
             });
-        }
-        // Their view depths in that order (in the server's order: where they are, in `at`).
-        if !in_order {
+            // Their view depths in that order (in the server's order they are read where they
+            // are, in `at`).
             self.zs.resize(total, 0.0);
             let (order, at) = (&self.sorted[..], &self.at[..]);
             threads.for_each_chunk(&mut self.zs, QUAD_CHUNK, |c, zs| {
@@ -1383,13 +1400,6 @@ impl OwnPass {
 }
 
 impl LayerSplat {
-    /// Whether at the frame's own camera every footprint is exactly its source pixel (half
-    /// side 0.5, the default): then the frame's own image is its samples grouped by pixel
-    /// ([`OwnPass`]), with wider or narrower footprints it must be drawn.
-    fn own_pixels(&self) -> bool {
-        self.opts.own == 0.5
-    }
-
     /// Makes [`LayerSplat::frame`] the frame's own composited image, unless it already is.
     fn cache_own_image(&mut self, scene: &Scene) {
         if self.frame_of == Some(SceneId::of(scene)) {
@@ -1409,12 +1419,11 @@ impl LayerSplat {
     /// camera.
     fn own_image(&mut self, scene: &Scene, out: &mut Image) {
         let fc = scene.header.camera;
-        if !self.own_pixels() {
+        if !self.opts.own_pixels() {
             self.draw(scene, &fc, self.opts.own, &[], out, None);
             return;
         }
-        self.own.project(scene, &self.threads);
-        if !self.own.group() {
+        if !self.own.prepare(scene, &self.threads) {
             return;
         }
         let w = fc.width as usize;

@@ -30,8 +30,9 @@
 //!
 //! Memory on the GPU: 64 bytes per sample (footprints) + 12 (sample, color) + 16 (shared
 //! corners), 4 per list entry (a sample per pixel it covers), 24 per output pixel (pixel,
-//! count, list count and offset, readback) plus the frame's composite. The scan is reduce-then-scan over blocks of 4096
-//! counts (block sums, one workgroup over the sums, the prefixes written in place).
+//! count, list count and offset, readback) plus the frame's composite. The scan is
+//! reduce-then-scan over blocks of 4096 counts (block sums, one workgroup over the sums, the
+//! prefixes written in place).
 
 use crate::buffers::{grid, read_mapped, GrowBuffer};
 use crate::tracer::{SceneKey, MAX_VIEWPORT};
@@ -409,10 +410,9 @@ impl GpuLayerSplat {
                 self.ctx.queue.write_buffer(self.samples.get()?, 0, bytemuck::cast_slice(&scene.samples));
                 self.ctx.queue.write_buffer(self.colors.get()?, 0, bytemuck::cast_slice(&scene.colors));
             }
-            // Watertight slabs: the corners the CPU shares (only with footprints of the source
-            // pixel's size, as the CPU).
+            // Watertight slabs: the corners the CPU shares, where it shares them.
             self.has_shared = false;
-            if self.opts.own == 0.5 {
+            if self.opts.shares_corners() {
                 let corners = self.corners.corners(scene, self.opts.watertight);
                 if n > 0 && corners.len() == scene.samples.len() {
                     self.ctx.queue.write_buffer(self.shared.get()?, 0, bytemuck::cast_slice(corners));
