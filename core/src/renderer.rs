@@ -38,6 +38,15 @@ impl Image {
         self.pixels.resize(camera.width as usize * camera.height as usize, BACKGROUND);
     }
 
+    /// Sizes the image to `camera`'s viewport *without* clearing it (pixels it keeps hold
+    /// whatever they held, new ones the background): for a renderer that writes every pixel,
+    /// which then need not clear ([`Image::reset_for`]) first.
+    pub fn size_for(&mut self, camera: &Camera) {
+        self.width = camera.width;
+        self.height = camera.height;
+        self.pixels.resize(camera.width as usize * camera.height as usize, BACKGROUND);
+    }
+
     /// What a renderer draws for a camera it cannot use: the background at the camera's
     /// viewport if that is within `1..=max_viewport` on both axes, otherwise an empty (0×0)
     /// image, so a bad camera never makes a renderer allocate.

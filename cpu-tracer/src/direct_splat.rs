@@ -417,7 +417,7 @@ fn first_pass_lanes<L: Lanes>(
     while i < hi {
         let n = CHUNK.min(hi - i);
         let rects = &mut rects[..n];
-        bound_group::<L>(ctx.view, ctx.vf, &ctx.scene.deq, &samples[i..i + n], rects);
+        bound_group::<L>(ctx.view, ctx.vf, &ctx.scene.deq, &samples[i..i + n], rects, &mut []);
         for (j, &r) in rects.iter().enumerate() {
             let id = (i + j) as u32;
             let (ry0, ry1) = (r.y0 as usize, r.y1 as usize);

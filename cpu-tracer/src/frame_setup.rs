@@ -71,6 +71,19 @@ pub(crate) fn begin_frame_unbuilt_ok(scene: &Scene, camera: &Camera, out: &mut I
     ok
 }
 
+/// [`begin_frame_unbuilt_ok`] for a renderer that writes every pixel of a usable frame: the
+/// same checks, but a usable frame's image is only sized ([`Image::size_for`]), not cleared.
+pub(crate) fn begin_frame_overwritten(scene: &Scene, camera: &Camera, out: &mut Image) -> bool {
+    let usable = camera.validate(MAX_VIEWPORT).is_ok()
+        && if scene.nodes.is_empty() && scene.samples.len() >= 2 { unbuilt_ok(scene) } else { scene.check().is_ok() };
+    if !usable {
+        // Clears, draws the background and warns once, as every renderer does.
+        return begin_frame_unbuilt_ok(scene, camera, out);
+    }
+    out.size_for(camera);
+    true
+}
+
 /// Whether a scene keeps the scene's rules but the node count (an unbuilt scene has none).
 pub(crate) fn unbuilt_ok(scene: &Scene) -> bool {
     let d = &scene.deq;

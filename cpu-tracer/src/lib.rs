@@ -50,7 +50,7 @@ mod depth_buffer;
 mod frame_setup;
 mod lanes;
 
-pub(crate) use frame_setup::{begin_frame, begin_frame_unbuilt_ok, shade, trace_ids_with};
+pub(crate) use frame_setup::{begin_frame, begin_frame_overwritten, begin_frame_unbuilt_ok, shade, trace_ids_with};
 
 /// The parallel LBVH build under its earlier path.
 pub use build as parallel_build;

@@ -14,11 +14,15 @@
 //! 2. **Bin**: each group goes to the [`TILE`]×[`TILE`] tiles its rectangle overlaps (a serial
 //!    counting sort over a few tens of thousands of groups). A sphere overlapping more than
 //!    [`MAX_TILES`] tiles (large on screen, or touching the eye plane: its rectangle is then the
-//!    whole viewport) goes to a list of large spheres instead, and a group overlapping more
-//!    than [`MAX_GROUP_TILES`] to a list of scattered groups; every tile reads both with a
-//!    rectangle test. Memory: one index per group per tile it overlaps (≤ [`MAX_GROUP_TILES`]),
-//!    one per large sphere or scattered group, 8 bytes of rectangle per sphere; nothing per
-//!    pixel besides the image, whatever the view.
+//!    whole viewport) goes to a list of large spheres instead, which every tile reads with a
+//!    rectangle test. A group overlapping more than [`MAX_GROUP_TILES`] tiles (in the server's
+//!    scanline order, the group that wraps from one row's end to the next row's start) is
+//!    binned by runs of consecutive spheres that lie close, each entry with the mask of the
+//!    group's spheres in its run, so no tile tests spheres that lie far from it. Memory: one
+//!    entry (index and mask) per group per tile it overlaps (≤ [`MAX_GROUP_TILES`], or
+//!    ≤ [`MAX_TILES`] per sphere of a split group), one per large sphere, 24 bytes per sphere
+//!    (its rectangle, and its centre and radius as the bound decoded them); nothing per pixel
+//!    besides the image, whatever the view.
 //! 3. **Splat** (parallel over bands of tiles): per tile, the unit ray directions of its pixels
 //!    (`RayBasis::dir`'s operations, eight at a time) and per pixel the distance and sample of
 //!    its nearest hit so far (an f32 depth plane and a u32 id plane), all in a local buffer of
@@ -44,7 +48,7 @@ use crate::depth_buffer::{key, key_prim, EMPTY};
 use crate::lanes::{self, ray_dirs, sphere_hits, Lanes};
 use crate::sphere_splat::View;
 use crate::threads::Threads;
-use crate::{begin_frame_unbuilt_ok as begin_frame, shade, NO_HIT};
+use crate::{begin_frame_overwritten, begin_frame_unbuilt_ok as begin_frame, shade, MAX_VIEWPORT, NO_HIT};
 use rayon::prelude::*;
 use std::sync::atomic::{AtomicU64, Ordering};
 use volwarp_core::morton::code_of_sample;
@@ -55,6 +59,7 @@ use volwarp_core::{Camera, Scene, Vec3, BACKGROUND};
 
 /// Tile side in pixels: a tile's keys (8 KB) and ray directions (≈ 16 KB) fit in L1.
 pub const TILE: usize = 32;
+const _: () = assert!(TILE.is_power_of_two());
 
 /// A sphere overlapping more tiles than this goes to the shared list of large spheres.
 pub const MAX_TILES: usize = 4;
@@ -64,9 +69,10 @@ pub const MAX_TILES: usize = 4;
 /// (the union of their spheres' but the large ones) overlaps it, and tests each sphere's own
 /// rectangle.
 pub const GROUP: usize = 32;
+const _: () = assert!(GROUP <= 32 && MAX_VIEWPORT < 0x7FFF);
 
-/// A group overlapping more tiles than this (its spheres far apart on screen) goes to a shared
-/// list that every tile reads, like the large spheres: memory stays one index per group.
+/// A group overlapping more tiles than this (its spheres far apart on screen) is binned by its
+/// spheres' own tiles instead of its rectangle's.
 pub const MAX_GROUP_TILES: usize = 16;
 
 /// Row stride of a tile's direction planes: eight floats of padding so that a row's 8-lane
@@ -84,7 +90,9 @@ pub(crate) struct Rect {
     pub(crate) y1: u16,
 }
 
-pub(crate) const NO_RECT: Rect = Rect { x0: 1, y0: 1, x1: 0, y1: 0 };
+/// The empty rectangle: `x0 > x1`, and `x0`, `y0` beyond every viewport ([`MAX_VIEWPORT`] <
+/// 2¹⁵), so that [`TileTest::hits`] refuses it without a test of its own.
+pub(crate) const NO_RECT: Rect = Rect { x0: 0x7FFF, y0: 0x7FFF, x1: 0, y1: 0 };
 
 impl Rect {
     pub(crate) fn is_empty(&self) -> bool {
@@ -108,6 +116,12 @@ impl Rect {
         Rect { x0: self.x0.min(o.x0), y0: self.y0.min(o.y0), x1: self.x1.max(o.x1), y1: self.y1.max(o.y1) }
     }
 
+    /// The four coordinates as one word: `x0` in the low 16 bits, then `y0`, `x1`, `y1`.
+    #[inline(always)]
+    fn bits(self) -> u64 {
+        self.x0 as u64 | (self.y0 as u64) << 16 | (self.x1 as u64) << 32 | (self.y1 as u64) << 48
+    }
+
     /// Inclusive tile ranges `(tx0, tx1, ty0, ty1)`.
     #[inline(always)]
     fn tiles(&self) -> (usize, usize, usize, usize) {
@@ -120,16 +134,23 @@ impl Rect {
 pub struct TileSplat {
     threads: Threads,
     rects: Vec<Rect>,
+    /// Per sphere, its centre less the eye and its radius, as the bound pass decoded them
+    /// (the kernel's ray–sphere test starts from exactly these values).
+    centres: Vec<[f32; 4]>,
     /// Whether a sphere whose near distance lies behind every pixel it could cover is skipped.
     cull: bool,
     /// (sphere–tile pairs drawn, of which skipped whole by the depth test) in the last frame.
     culled: (u64, u64),
     /// Per group of [`GROUP`] spheres, the union of its spheres' rectangles but the large ones.
     group_rects: Vec<Rect>,
-    /// Group indices, tile by tile.
-    lists: Vec<u32>,
+    /// Tile by tile, the groups binned to it: the group's index in the low 32 bits, in the
+    /// high 32 the mask of its spheres that may overlap the tile (all ones but for a group
+    /// binned by its spheres' tiles).
+    lists: Vec<u64>,
     /// Start of each tile's list in `lists` (`tiles + 2` entries).
     starts: Vec<u32>,
+    /// The binning's (tile, entry) pairs, in the groups' order (reused from frame to frame).
+    pairs: Vec<(u32, u64)>,
     /// Spheres overlapping more than [`MAX_TILES`] tiles.
     large: Vec<u32>,
     /// Their rectangles (their entries of `rects` are emptied, so a group skips them without
@@ -137,8 +158,6 @@ pub struct TileSplat {
     large_rects: Vec<Rect>,
     /// Per group, whether it holds a large sphere.
     group_large: Vec<bool>,
-    /// Groups overlapping more than [`MAX_GROUP_TILES`] tiles.
-    scattered: Vec<u32>,
 }
 
 /// The tile grid of a viewport.
@@ -164,15 +183,16 @@ impl TileSplat {
         TileSplat {
             threads: Threads::new(threads),
             rects: Vec::new(),
+            centres: Vec::new(),
             cull: true,
             culled: (0, 0),
             group_rects: Vec::new(),
             lists: Vec::new(),
             starts: Vec::new(),
+            pairs: Vec::new(),
             large: Vec::new(),
             large_rects: Vec::new(),
             group_large: Vec::new(),
-            scattered: Vec::new(),
         }
     }
 
@@ -207,9 +227,10 @@ impl TileSplat {
     }
 
     /// Entries of the tile lists of the last frame: group indices (at most
-    /// [`MAX_GROUP_TILES`] per group), large spheres and scattered groups (one each).
+    /// [`MAX_GROUP_TILES`] per group, at most [`MAX_TILES`] per sphere of a group binned by its
+    /// spheres' tiles) and large spheres (one each).
     pub fn binned_entries(&self) -> usize {
-        self.lists.len() + self.large.len() + self.scattered.len()
+        self.lists.len() + self.large.len()
     }
 
     /// The number of threads it draws with.
@@ -229,8 +250,9 @@ impl TileSplat {
         let (lists, starts, rects) = (&self.lists[..], &self.starts[..], &self.rects[..]);
         let (pairs, culled) = (AtomicU64::new(0), AtomicU64::new(0));
         let cull = self.cull;
-        let (large, scattered, group_rects) = (&self.large[..], &self.scattered[..], &self.group_rects[..]);
+        let (large, group_rects) = (&self.large[..], &self.group_rects[..]);
         let large_rects = &self.large_rects[..];
+        let centres = &self.centres[..];
         let band = |ty: usize, rows: &mut [u32]| {
             let mut buf = TileBuf::new();
             let mut counts = (0u64, 0u64);
@@ -239,8 +261,7 @@ impl TileSplat {
                 let list = &lists[starts[t] as usize..starts[t + 1] as usize];
                 let (x0, y0) = (tx * TILE, ty * TILE);
                 let (tw, th) = (TILE.min(w - x0), TILE.min(h - y0));
-                let any_large = large_rects.iter().any(|&r| overlaps(r, x0, y0, tw, th))
-                    || scattered.iter().any(|&g| overlaps(group_rects[g as usize], x0, y0, tw, th));
+                let any_large = large_rects.iter().any(|&r| overlaps(r, x0, y0, tw, th));
                 if list.is_empty() && !any_large {
                     let empty = out_of(colors, NO_HIT);
                     for row in rows.chunks_mut(w) {
@@ -249,7 +270,7 @@ impl TileSplat {
                     continue;
                 }
                 let tile = Tile { x0, y0, w: tw, h: th };
-                let lists = Lists { groups: list, large, large_rects, scattered, rects, group_rects, cull };
+                let lists = Lists { groups: list, large, large_rects, rects, centres, group_rects, cull };
                 let (p, c) = tile_dispatch(&view, &tile, samples, scene, &lists, &mut buf);
                 counts = (counts.0 + p, counts.1 + c);
                 for (y, row) in rows.chunks_mut(w).enumerate() {
@@ -277,50 +298,68 @@ impl TileSplat {
         let deq = &scene.deq;
         let groups = n.div_ceil(GROUP);
         self.rects.resize(n, NO_RECT);
+        self.centres.resize(n, [0.0; 4]);
         self.group_rects.resize(groups, NO_RECT);
         self.group_large.resize(groups, false);
         // 1. rectangles, in parallel over runs of whole groups
         let per_task = (groups.div_ceil(self.threads.count() * 8)).max(1);
         let vf = ViewF32::new(view);
-        let bound = |c: usize, rects: &mut [Rect], grects: &mut [Rect], glarge: &mut [bool]| {
-            let groups = rects.chunks_mut(GROUP).zip(grects.iter_mut().zip(glarge.iter_mut()));
-            for (g, (rects, (grect, glarge))) in groups.enumerate() {
-                let base = (c * per_task + g) * GROUP;
-                (*grect, *glarge) = bound_dispatch(view, &vf, deq, &samples[base..base + rects.len()], rects);
-            }
-        };
+        let bound =
+            |c: usize, rects: &mut [Rect], centres: &mut [[f32; 4]], grects: &mut [Rect], glarge: &mut [bool]| {
+                let groups = rects
+                    .chunks_mut(GROUP)
+                    .zip(centres.chunks_mut(GROUP))
+                    .zip(grects.iter_mut().zip(glarge.iter_mut()));
+                for (g, ((rects, centres), (grect, glarge))) in groups.enumerate() {
+                    let base = (c * per_task + g) * GROUP;
+                    let samples = &samples[base..base + rects.len()];
+                    (*grect, *glarge) = bound_dispatch(view, &vf, deq, samples, rects, centres);
+                }
+            };
         if self.threads.is_serial() {
-            bound(0, &mut self.rects, &mut self.group_rects, &mut self.group_large);
+            bound(0, &mut self.rects, &mut self.centres, &mut self.group_rects, &mut self.group_large);
         } else {
             self.threads.install(|| {
                 self.rects
                     .par_chunks_mut(per_task * GROUP)
+                    .zip(self.centres.par_chunks_mut(per_task * GROUP))
                     .zip(self.group_rects.par_chunks_mut(per_task))
                     .zip(self.group_large.par_chunks_mut(per_task))
                     .enumerate()
-                    .for_each(|(c, ((r, g), l))| bound(c, r, g, l))
+                    .for_each(|(c, (((r, cs), g), l))| bound(c, r, cs, g, l))
             });
         }
         // 2. groups to tiles (a counting sort, serial: a few tens of thousands of groups), and
-        // the large spheres to their own list
+        // the large spheres to their own list. A group overlapping more than
+        // [`MAX_GROUP_TILES`] tiles (in the server's scanline order, the group that wraps from
+        // one row's end to the next row's start) is binned by its spheres' own tiles, each
+        // entry with the mask of its spheres there.
         let nt = grid.tiles();
         self.starts.clear();
         self.starts.resize(nt + 2, 0);
         self.large.clear();
-        self.scattered.clear();
+        // One pass over the groups gathers (tile, entry) pairs and counts them per tile; a
+        // second over the pairs places them (a counting sort: each tile's list keeps the
+        // groups' order).
+        self.pairs.clear();
         for (g, r) in self.group_rects.iter().enumerate() {
             if r.is_empty() {
                 continue;
             }
             let (tx0, tx1, ty0, ty1) = r.tiles();
+            let at = self.pairs.len();
             if (tx1 - tx0 + 1) * (ty1 - ty0 + 1) > MAX_GROUP_TILES {
-                self.scattered.push(g as u32);
-                continue;
-            }
-            for ty in ty0..=ty1 {
-                for tx in tx0..=tx1 {
-                    self.starts[ty * grid.tx + tx + 1] += 1;
+                let first = g * GROUP;
+                split_group(&self.rects[first..(first + GROUP).min(n)], grid, g as u32, &mut self.pairs);
+            } else {
+                for ty in ty0..=ty1 {
+                    for tx in tx0..=tx1 {
+                        self.pairs.push(((ty * grid.tx + tx) as u32, g as u64 | (u32::MAX as u64) << 32));
+                    }
                 }
+            }
+            for &(t, _) in &self.pairs[at..] {
+                self.starts[t as usize + 1] += 1;
             }
         }
         for t in 0..nt {
@@ -329,21 +368,10 @@ impl TileSplat {
         self.starts[nt + 1] = self.starts[nt];
         self.lists.resize(self.starts[nt] as usize, 0);
         let mut fill = self.starts[..nt].to_vec();
-        for (g, r) in self.group_rects.iter().enumerate() {
-            if r.is_empty() {
-                continue;
-            }
-            let (tx0, tx1, ty0, ty1) = r.tiles();
-            if (tx1 - tx0 + 1) * (ty1 - ty0 + 1) > MAX_GROUP_TILES {
-                continue;
-            }
-            for ty in ty0..=ty1 {
-                for tx in tx0..=tx1 {
-                    let f = &mut fill[ty * grid.tx + tx];
-                    self.lists[*f as usize] = g as u32;
-                    *f += 1;
-                }
-            }
+        for &(t, e) in &self.pairs {
+            let f = &mut fill[t as usize];
+            self.lists[*f as usize] = e;
+            *f += 1;
         }
         self.large_rects.clear();
         for (g, _) in self.group_large.iter().enumerate().filter(|(_, &l)| l) {
@@ -354,6 +382,42 @@ impl TileSplat {
                     self.large_rects.push(r);
                     self.rects[i] = NO_RECT;
                 }
+            }
+        }
+    }
+}
+
+/// A group's spheres (but the large and the empty ones) as runs of consecutive spheres whose
+/// joint rectangle overlaps at most [`MAX_TILES`] tiles (a run holds at least one sphere, so
+/// a group gives at most [`MAX_TILES`] entries per sphere): each tile of each run with the
+/// entry (group `g`, the mask of the run's spheres) into `out`. The group that wraps from one
+/// scanline's end to the next one's start splits into two runs.
+fn split_group(rects: &[Rect], grid: Grid, g: u32, out: &mut Vec<(u32, u64)>) {
+    let mut j = 0;
+    while j < rects.len() {
+        let r = rects[j];
+        if r.is_empty() || r.is_large() {
+            j += 1;
+            continue;
+        }
+        let (mut run, mut mask) = (r, 1u32 << j);
+        j += 1;
+        while j < rects.len() {
+            let r = rects[j];
+            if !r.is_empty() && !r.is_large() {
+                let u = run.union(r);
+                let (tx0, tx1, ty0, ty1) = u.tiles();
+                if (tx1 - tx0 + 1) * (ty1 - ty0 + 1) > MAX_TILES {
+                    break;
+                }
+                (run, mask) = (u, mask | 1 << j);
+            }
+            j += 1;
+        }
+        let (tx0, tx1, ty0, ty1) = run.tiles();
+        for ty in ty0..=ty1 {
+            for tx in tx0..=tx1 {
+                out.push(((ty * grid.tx + tx) as u32, g as u64 | (mask as u64) << 32));
             }
         }
     }
@@ -416,14 +480,22 @@ pub(crate) fn bound_group<L: Lanes>(
     deq: &Dequantizer,
     samples: &[u64],
     rects: &mut [Rect],
+    centres: &mut [[f32; 4]],
 ) -> (Rect, bool) {
     let (mut u, mut any_large) = (NO_RECT, false);
-    for (ss, rs) in samples.chunks(8).zip(rects.chunks_mut(8)) {
+    let keep_centres = centres.len() == samples.len();
+    for (k, (ss, rs)) in samples.chunks(8).zip(rects.chunks_mut(8)).enumerate() {
         // Eight at once in lanes where the CPU has them (`Lanes::decode8`: the same values).
         let [rx, ry, rz, r] = match ss.first_chunk::<8>() {
             Some(eight) => L::decode8(deq, vf.eye, eight),
             None => lanes::decode_scalar(deq, vf.eye, ss),
         };
+        if keep_centres {
+            let (ax, ay, az, ar) = (rx.to_array(), ry.to_array(), rz.to_array(), r.to_array());
+            for (l, c) in centres[8 * k..].iter_mut().take(ss.len()).enumerate() {
+                *c = [ax[l], ay[l], az[l], ar[l]];
+            }
+        }
         let cx = rx * L::splat(vf.u[0]) + ry * L::splat(vf.u[1]) + rz * L::splat(vf.u[2]);
         let cy = rx * L::splat(vf.v[0]) + ry * L::splat(vf.v[1]) + rz * L::splat(vf.v[2]);
         let cz = rx * L::splat(vf.w[0]) + ry * L::splat(vf.w[1]) + rz * L::splat(vf.w[2]);
@@ -493,6 +565,7 @@ lanes::dispatch! {
         deq: &Dequantizer,
         samples: &[u64],
         rects: &mut [Rect],
+        centres: &mut [[f32; 4]],
     ) -> (Rect, bool)
 }
 
@@ -522,6 +595,50 @@ fn overlaps(r: Rect, x0: usize, y0: usize, w: usize, h: usize) -> bool {
     !r.is_empty() && (r.x0 as usize) < x0 + w && r.x1 as usize >= x0 && (r.y0 as usize) < y0 + h && r.y1 as usize >= y0
 }
 
+/// [`overlaps`] for one tile as four 16-bit comparisons in one 64-bit subtraction (SWAR):
+/// every coordinate is below 2¹⁵ ([`MAX_VIEWPORT`], [`NO_RECT`]), so with bit 15 of each
+/// field of the minuend set no field borrows from the next, and a field's bit 15 survives
+/// exactly where the minuend's field is at least the subtrahend's.
+#[derive(Clone, Copy)]
+struct TileTest {
+    /// The tile's last column and row in the low fields.
+    last: u64,
+    /// The tile's first column and row in the high fields.
+    first: u64,
+}
+
+/// Bit 15 of each 16-bit field.
+const FIELD_SIGNS: u64 = 0x8000_8000_8000_8000;
+/// The low two 16-bit fields.
+const LOW_FIELDS: u64 = 0xFFFF_FFFF;
+
+impl TileTest {
+    fn new(tile: &Tile) -> TileTest {
+        let (x1, y1) = ((tile.x0 + tile.w - 1) as u64, (tile.y0 + tile.h - 1) as u64);
+        TileTest { last: x1 | y1 << 16, first: (tile.x0 as u64) << 32 | (tile.y0 as u64) << 48 }
+    }
+
+    /// Whether `r` overlaps the tile: `x0 ≤ last x`, `y0 ≤ last y`, `x1 ≥ first x`,
+    /// `y1 ≥ first y` (false for an empty `r`, whose `x0` lies beyond every tile).
+    #[inline(always)]
+    fn hits(&self, r: Rect) -> bool {
+        let a = r.bits();
+        let minuend = self.last | (a & !LOW_FIELDS) | FIELD_SIGNS;
+        let subtrahend = (a & LOW_FIELDS) | self.first;
+        (minuend - subtrahend) & FIELD_SIGNS == FIELD_SIGNS
+    }
+
+    /// The spheres of `rects` (at most 32) that overlap the tile, as bits.
+    #[inline(always)]
+    fn hits_of(&self, rects: &[Rect]) -> u32 {
+        let mut m = 0u32;
+        for (j, &r) in rects.iter().enumerate().take(32) {
+            m |= (self.hits(r) as u32) << j;
+        }
+        m
+    }
+}
+
 /// A tile's place in the image.
 struct Tile {
     x0: usize,
@@ -531,15 +648,16 @@ struct Tile {
 }
 
 /// A tile's local buffers: its pixels' keys and unit ray directions (three planes of
-/// `TILE + 1` rows of [`STRIDE`] floats; padding is zero and never tested).
+/// `TILE + 1` rows of [`STRIDE`] floats; padding holds zeros or the directions of pixels past
+/// the tile, and is never tested).
 struct TileBuf {
     /// Per pixel (row stride [`TILE`], one row and eight pixels of padding), the distance of
     /// the nearest hit so far, `+∞` where none.
-    depth: Vec<f32>,
+    depth: Box<[f32; KEYS]>,
     /// Per pixel, the sample of that hit, [`NO_HIT`] where none: with `depth`, the pixel's
     /// key `(t, id)` ([`TileBuf::key`]).
-    ids: Vec<u32>,
-    dirs: Vec<f32>,
+    ids: Box<[u32; KEYS]>,
+    dirs: Box<[f32; 3 * PLANE]>,
 }
 
 /// Length of a tile's depth and id planes.
@@ -547,7 +665,13 @@ const KEYS: usize = (TILE + 1) * TILE + 8;
 
 impl TileBuf {
     fn new() -> TileBuf {
-        TileBuf { depth: vec![f32::INFINITY; KEYS], ids: vec![NO_HIT; KEYS], dirs: vec![0.0; 3 * PLANE] }
+        // Fixed lengths, so that the kernel's indices (below `TILE` by construction, masked to
+        // show it) need no bounds checks.
+        TileBuf {
+            depth: Box::new([f32::INFINITY; KEYS]),
+            ids: Box::new([NO_HIT; KEYS]),
+            dirs: Box::new([0.0; 3 * PLANE]),
+        }
     }
 }
 
@@ -626,44 +750,51 @@ fn splat_tile<L: Lanes>(
         let py = L::splat((tile.y0 + y) as f32 + 0.5);
         for x in (0..tile.w).step_by(8) {
             let d = ray_dirs(b, L::splat((tile.x0 + x) as f32) + lane_c, py);
-            let n = (tile.w - x).min(8);
+            // All eight lanes, also past a narrow tile's last column (into the row's padding):
+            // those pixels are never active, so their directions are never used.
             for (a, d) in d.iter().enumerate() {
-                let at = a * PLANE + y * STRIDE + x;
-                buf.dirs[at..at + n].copy_from_slice(&d.to_array()[..n]);
+                let at = a * PLANE + (y & (TILE - 1)) * STRIDE + (x & (TILE - 1));
+                if let Some(s) = buf.dirs.get_mut(at..at + 8) {
+                    s.copy_from_slice(&d.to_array());
+                }
             }
         }
     }
     buf.depth.fill(f32::INFINITY);
     buf.ids.fill(NO_HIT);
-    let o = [b.eye[0], b.eye[1], b.eye[2]];
-    let deq = &scene.deq;
+    // The centres are stored less the eye (exactly `sphere_hits`' `c − o`), so the rays start
+    // at the origin.
+    let o = [0.0; 3];
     let lane = L::new([0.0, 1.0, 2.0, 3.0, 4.0, 5.0, 6.0, 7.0]);
     let lane4 = L::new([0.0, 1.0, 2.0, 3.0, 0.0, 1.0, 2.0, 3.0]);
     let row2 = L::new([0.0, 0.0, 0.0, 0.0, 1.0, 1.0, 1.0, 1.0]);
     let (tx1, ty1) = (tile.x0 + tile.w - 1, tile.y0 + tile.h - 1);
     let ties = if scene.nodes.is_empty() { Ties::Sorted(samples) } else { Ties::Index };
-    let k = Kernel { ties, o, lane, lane4, row2, tx1, ty1, cull: lists.cull };
+    let k = Kernel { ties, centres: lists.centres, o, lane, lane4, row2, tx1, ty1, cull: lists.cull };
     let (mut pairs, mut culled) = (0u64, 0u64);
     let rects = lists.rects;
     let n = samples.len();
-    for &g in lists.groups.iter().chain(lists.scattered) {
-        let g = g as usize;
-        if !overlaps(lists.group_rects[g], tile.x0, tile.y0, tile.w, tile.h) {
+    let tt = TileTest::new(tile);
+    for &e in lists.groups {
+        let g = e as u32 as usize;
+        if !tt.hits(lists.group_rects[g]) {
             continue;
         }
         let first = g * GROUP;
         // Large spheres' rectangles are empty here (drawn from `large` below).
-        for (j, &r) in rects[first..(first + GROUP).min(n)].iter().enumerate() {
-            if overlaps(r, tile.x0, tile.y0, tile.w, tile.h) {
-                pairs += 1;
-                culled += splat_sphere(&k, tile, samples, deq, r, (first + j) as u32, buf) as u64;
-            }
+        let group = &rects[first..(first + GROUP).min(n)];
+        let mut hits = tt.hits_of(group) & (e >> 32) as u32;
+        while hits != 0 {
+            let j = hits.trailing_zeros() as usize;
+            hits &= hits - 1;
+            pairs += 1;
+            culled += splat_sphere(&k, tile, group[j], (first + j) as u32, buf) as u64;
         }
     }
     for (&i, &r) in lists.large.iter().zip(lists.large_rects) {
         if overlaps(r, tile.x0, tile.y0, tile.w, tile.h) {
             pairs += 1;
-            culled += splat_sphere(&k, tile, samples, deq, r, i, buf) as u64;
+            culled += splat_sphere(&k, tile, r, i, buf) as u64;
         }
     }
     (pairs, culled)
@@ -671,12 +802,13 @@ fn splat_tile<L: Lanes>(
 
 /// What a tile reads of the binning.
 struct Lists<'a> {
-    /// The groups binned to the tile.
-    groups: &'a [u32],
+    /// The groups binned to the tile (index and mask, as in `TileSplat::lists`).
+    groups: &'a [u64],
     large: &'a [u32],
     large_rects: &'a [Rect],
-    scattered: &'a [u32],
     rects: &'a [Rect],
+    /// Per sphere, its centre less the eye and its radius (`TileSplat::centres`).
+    centres: &'a [[f32; 4]],
     group_rects: &'a [Rect],
     /// Whether to skip spheres hidden in a block ([`TileSplat::with_culling`]).
     cull: bool,
@@ -685,6 +817,9 @@ struct Lists<'a> {
 /// The per-tile constants of [`splat_sphere`].
 struct Kernel<'a, L> {
     ties: Ties<'a>,
+    /// Per sphere, its centre less the eye and its radius.
+    centres: &'a [[f32; 4]],
+    /// The rays' origin: zero, as the centres are less the eye.
     o: [f32; 3],
     lane: L,
     lane4: L,
@@ -698,24 +833,18 @@ struct Kernel<'a, L> {
 /// caller's AVX2 target feature); `true` if culling skipped every block of it.
 #[allow(clippy::too_many_arguments)]
 #[inline(always)]
-fn splat_sphere<L: Lanes>(
-    k: &Kernel<'_, L>,
-    tile: &Tile,
-    samples: &[u64],
-    deq: &Dequantizer,
-    r: Rect,
-    i: u32,
-    buf: &mut TileBuf,
-) -> bool {
+fn splat_sphere<L: Lanes>(k: &Kernel<'_, L>, tile: &Tile, r: Rect, i: u32, buf: &mut TileBuf) -> bool {
     let TileBuf { depth, ids, dirs } = buf;
+    let (depth, ids, dirs): (&mut [f32; KEYS], &mut [u32; KEYS], &[f32; 3 * PLANE]) = (depth, ids, dirs);
     let mut all_culled = true;
     // The rectangle clipped to the tile, in tile coordinates.
-    let x0 = (r.x0 as usize).max(tile.x0) - tile.x0;
-    let x1 = (r.x1 as usize).min(k.tx1) - tile.x0;
-    let y0 = (r.y0 as usize).max(tile.y0) - tile.y0;
-    let y1 = (r.y1 as usize).min(k.ty1) - tile.y0;
-    let s = samples[i as usize];
-    let (c, rad) = (deq.center(s), deq.radius(s));
+    // (Masked with `TILE − 1`, which keeps them: it tells the compiler they lie in the tile.)
+    let x0 = ((r.x0 as usize).max(tile.x0) - tile.x0) & (TILE - 1);
+    let x1 = ((r.x1 as usize).min(k.tx1) - tile.x0) & (TILE - 1);
+    let y0 = ((r.y0 as usize).max(tile.y0) - tile.y0) & (TILE - 1);
+    let y1 = ((r.y1 as usize).min(k.ty1) - tile.y0) & (TILE - 1);
+    let [x, y, z, rad] = k.centres[i as usize];
+    let c = Vec3::new(x, y, z);
     if x1 - x0 < 4 {
         // 4×2 blocks: lane l is pixel (x0 + l % 4, y + l / 4).
         let wmask = k.lane4.simd_lt(L::splat((x1 - x0 + 1) as f32));
@@ -771,7 +900,7 @@ pub(crate) fn near_distance(o: &[f32; 3], c: Vec3, r: f32) -> f32 {
 /// The depths of a 4×2 block (`is_quad`) or of 8 pixels of a row at `at` (`+∞` if out of the
 /// plane, which never culls).
 #[inline(always)]
-fn depth_at<L: Lanes>(depth: &[f32], at: usize, is_quad: bool) -> L {
+fn depth_at<L: Lanes>(depth: &[f32; KEYS], at: usize, is_quad: bool) -> L {
     match depth.get(at..) {
         Some(s) if s.len() >= TILE + 8 => L::new(if is_quad { quad::<f32, TILE>(s) } else { eight(s) }),
         _ => L::splat(f32::INFINITY),
@@ -786,7 +915,16 @@ fn depth_at<L: Lanes>(depth: &[f32], at: usize, is_quad: bool) -> L {
 /// [`keep_ties`] (the tie rule, rare).
 #[allow(clippy::too_many_arguments)]
 #[inline(always)]
-fn keep<L: Lanes>(depth: &mut [f32], ids: &mut [u32], m: L, t: L, i: u32, base: usize, is_quad: bool, ties: Ties) {
+fn keep<L: Lanes>(
+    depth: &mut [f32; KEYS],
+    ids: &mut [u32; KEYS],
+    m: L,
+    t: L,
+    i: u32,
+    base: usize,
+    is_quad: bool,
+    ties: Ties,
+) {
     let (Some(ds), Some(is)) = (depth.get_mut(base..base + TILE + 8), ids.get_mut(base..base + TILE + 8)) else {
         return;
     };
@@ -869,7 +1007,9 @@ impl Renderer for TileSplat {
     }
 
     fn render(&mut self, scene: &Scene, camera: &Camera, out: &mut Image) {
-        if begin_frame(scene, camera, out) {
+        // Every tile writes all its pixels (a tile without spheres the background), so the
+        // image is not cleared first.
+        if begin_frame_overwritten(scene, camera, out) {
             self.draw(
                 scene,
                 camera,

@@ -14,7 +14,7 @@ use volwarp_core::wire::Frame;
 use volwarp_core::{Camera, Scene, Vec3};
 use volwarp_cpu_tracer::route::{estimate, unbuilt_scene};
 use volwarp_cpu_tracer::synthetic::{clustered_cloud, depth_image_frame, one_point_cloud, random_cloud};
-use volwarp_cpu_tracer::tile_splat::MAX_TILES;
+use volwarp_cpu_tracer::tile_splat::{GROUP, MAX_GROUP_TILES, MAX_TILES};
 use volwarp_cpu_tracer::{build_scene, AutoSpheres, Route, ScalarTracer, TileSplat, NO_HIT};
 
 /// Asserts the tiled splatter (1 and 2 threads) gives the scalar tracer's ids exactly on the
@@ -184,4 +184,14 @@ fn lists_stay_bounded_whatever_the_view() {
     assert!(t.splat_ids(&scene, &inside, &mut ids));
     assert!(t.binned_entries() <= MAX_TILES * scene.samples.len(), "{}", t.binned_entries());
     assert!(ids.iter().all(|&i| i != NO_HIT));
+    // Small spheres in random order: every group of consecutive spheres spans the screen, so
+    // each is binned by its spheres' own tiles (more entries than whole groups could give),
+    // still at most MAX_TILES per sphere, and the image is the reference's.
+    let f = random_cloud(20_000, 0.004, 52, 512);
+    let unbuilt = unbuilt_scene(&f);
+    let n = unbuilt.samples.len();
+    assert!(t.splat_ids(&unbuilt, &f.header.camera, &mut ids));
+    let entries = t.binned_entries();
+    assert!(entries <= MAX_TILES * n && entries > n.div_ceil(GROUP) * MAX_GROUP_TILES, "{entries} for {n}");
+    assert_splat_exact(&f, &build_scene(&f), &f.header.camera, "random order, split groups");
 }
