@@ -5,7 +5,6 @@
 use crate::{MAX_VIEWPORT, NO_HIT};
 use std::sync::atomic::{AtomicBool, Ordering};
 use volwarp_core::renderer::Image;
-use volwarp_core::sample::over_background;
 use volwarp_core::{Camera, Scene, BACKGROUND};
 
 static WARNED_CAMERA: AtomicBool = AtomicBool::new(false);
@@ -94,11 +93,93 @@ pub(crate) fn unbuilt_ok(scene: &Scene) -> bool {
         && d.radius_unit.is_finite()
 }
 
-/// The color a renderer shows for a sample-id pixel.
+/// The color a renderer shows for a sample-id pixel: the sample's premultiplied color over
+/// [`BACKGROUND`] (core's `over_background`, by [`over_background_fast`]).
 #[inline(always)]
 pub(crate) fn shade(colors: &[u32], prim: u32) -> u32 {
     match colors.get(prim as usize) {
-        Some(&c) => over_background(c, BACKGROUND),
+        Some(&c) => over_background_fast(c),
         None => BACKGROUND,
+    }
+}
+
+/// Per alpha `a`, what core's `over_background(c, BACKGROUND)` adds to `c`'s channels: byte
+/// `ch` is `((255 − a)·BACKGROUND[ch] + 127) / 255` for red, green and blue, and 255 for alpha
+/// (which saturates the result's alpha to 255).
+static BACKGROUND_TERMS: [u32; 256] = {
+    let mut t = [0u32; 256];
+    let mut a = 0;
+    while a < 256 {
+        let k = 255 - a as u32;
+        let mut v = 0xFF00_0000u32;
+        let mut ch = 0;
+        while ch < 3 {
+            let d = (BACKGROUND >> (8 * ch)) & 0xFF;
+            v |= ((k * d + 127) / 255) << (8 * ch);
+            ch += 1;
+        }
+        t[a] = v;
+        a += 1;
+    }
+    t
+};
+
+/// `over_background(c, BACKGROUND)` exactly (tested for every alpha and channel value): the
+/// per-alpha background term from a table, added to the four bytes with saturation in one
+/// 32-bit word (the per-channel multiply and division by 255 depend only on the alpha).
+#[inline(always)]
+pub(crate) fn over_background_fast(c: u32) -> u32 {
+    saturating_add_bytes(c, BACKGROUND_TERMS[(c >> 24) as usize])
+}
+
+/// The four bytes of `a` and `b` added, each saturating at 255 (SWAR: the low seven bits of
+/// each byte are added without carries between bytes; bit 7 and its carry out are recovered
+/// with exclusive-or and majority).
+#[inline(always)]
+fn saturating_add_bytes(a: u32, b: u32) -> u32 {
+    const LOW: u32 = 0x7F7F_7F7F;
+    const TOP: u32 = 0x8080_8080;
+    let low = (a & LOW) + (b & LOW);
+    let top = (a ^ b) & TOP;
+    let sum = low ^ top;
+    let carry = ((a & b) | (top & low)) & TOP;
+    sum | (carry >> 7) * 0xFF
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use volwarp_core::sample::over_background;
+    
+    #[test]
+    fn the_fast_background_is_core_s_for_every_alpha_and_channel() {
+        for a in 0..=255u32 {
+            for v in 0..=255u32 {
+                // Every channel value against every alpha, in each channel position, with the
+                // other channels at the extremes.
+                for c in [v | v << 8 | v << 16, v | 255 << 8, v << 8 | 255 << 16, v << 16 | 255, v ^ 0xFF_FF00] {
+                    let c = c | a << 24;
+                    assert_eq!(over_background_fast(c), over_background(c, BACKGROUND), "{c:#010x}");
+                }
+            }
+        }
+        let mut x = 0x1234_5678u32;
+        for _ in 0..1_000_000 {
+            x ^= x << 13;
+            x ^= x >> 17;
+            x ^= x << 5;
+            assert_eq!(over_background_fast(x), over_background(x, BACKGROUND), "{x:#010x}");
+        }
+    }
+
+    #[test]
+    fn bytes_add_with_saturation() {
+        for a in 0..=255u32 {
+            for b in 0..=255u32 {
+                let want = (a + b).min(255);
+                let got = saturating_add_bytes(a << 8 | b | a << 24, b << 8 | a | b << 24);
+                assert_eq!(got, want << 8 | want | want << 24, "{a} + {b}");
+            }
+        }
     }
 }

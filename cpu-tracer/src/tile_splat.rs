@@ -107,6 +107,22 @@ impl Rect {
         (tx1 - tx0 + 1) * (ty1 - ty0 + 1) > MAX_TILES
     }
 
+    /// [`Rect::is_large`] for a non-empty rectangle, and some value (no overflow) for an empty
+    /// one.
+    #[inline(always)]
+    fn is_large_wrapping(&self) -> bool {
+        let t = |a: u16| (a as usize / TILE) as isize;
+        let (tx, ty) = (t(self.x1) - t(self.x0) + 1, t(self.y1) - t(self.y0) + 1);
+        tx.wrapping_mul(ty) > MAX_TILES as isize
+    }
+
+    /// The smallest rectangle holding both, where an empty one is [`NO_RECT`] (whose corners
+    /// make it the identity of the componentwise minimum and maximum), with no branch.
+    #[inline(always)]
+    fn union_of_non_empty(self, o: Rect) -> Rect {
+        Rect { x0: self.x0.min(o.x0), y0: self.y0.min(o.y0), x1: self.x1.max(o.x1), y1: self.y1.max(o.y1) }
+    }
+
     /// The smallest rectangle holding both (`self` may be empty).
     #[inline(always)]
     fn union(self, o: Rect) -> Rect {
@@ -529,29 +545,34 @@ pub(crate) fn bound_group<L: Lanes>(
         let (xs0, xs1) = L::span_ints(ax.fast_max(L::splat(-1.0)), bx.fast_min(nw), view.width - 1);
         let (ys0, ys1) = L::span_ints(ay.fast_max(L::splat(-1.0)), by.fast_min(nh), view.height - 1);
         let (far, ok) = (far.to_bitmask(), ok.to_bitmask());
-        for (l, (rect, &s)) in rs.iter_mut().zip(ss).enumerate() {
-            let b = if ok & (1 << l) != 0 {
-                let (x0, x1, y0, y1) = (xs0[l], xs1[l], ys0[l], ys1[l]);
-                (x0 <= x1 && y0 <= y1).then_some((x0 as u32, x1 as u32, y0 as u32, y1 as u32))
-            } else if far & (1 << l) != 0 {
-                None
-            } else {
-                tight_bound(view, deq.center(s), deq.radius(s))
-            };
-            // Built in a local and stored once: reading `*rect` back after four 16-bit stores
-            // stalled on store forwarding (a fifth of the bound pass).
-            let r = match b {
+        // Branch-free per lane: the lanes of `ok` with a non-empty span get their rectangle,
+        // the others the empty one (built in locals and stored once: reading `*rect` back
+        // after four 16-bit stores stalled on store forwarding).
+        let mut out = [NO_RECT; 8];
+        for (l, r) in out.iter_mut().enumerate() {
+            let (x0, x1, y0, y1) = (xs0[l], xs1[l], ys0[l], ys1[l]);
+            let fast = ok >> l & 1 != 0 && x0 <= x1 && y0 <= y1;
+            let rect = Rect { x0: x0 as u16, y0: y0 as u16, x1: x1 as u16, y1: y1 as u16 };
+            *r = if fast { rect } else { NO_RECT };
+        }
+        // Near the eye plane, behind it, or NaN (rare): the f64 bound.
+        let mut slow = !ok & !far & ((1u32 << ss.len()) - 1);
+        while slow != 0 {
+            let l = slow.trailing_zeros() as usize;
+            slow &= slow - 1;
+            out[l] = match tight_bound(view, deq.center(ss[l]), deq.radius(ss[l])) {
                 Some((x0, x1, y0, y1)) => Rect { x0: x0 as u16, y0: y0 as u16, x1: x1 as u16, y1: y1 as u16 },
                 None => NO_RECT,
             };
+        }
+        for (rect, &r) in rs.iter_mut().zip(&out) {
             *rect = r;
-            if !r.is_empty() {
-                if r.is_large() {
-                    any_large = true;
-                } else {
-                    u = u.union(r);
-                }
-            }
+            // Large: non-empty and over `MAX_TILES` tiles; the union takes the others, the
+            // empty rectangle being its identity (`NO_RECT`'s corners lie beyond every
+            // viewport, in the right order).
+            let large = !r.is_empty() & r.is_large_wrapping();
+            any_large |= large;
+            u = u.union_of_non_empty(if large { NO_RECT } else { r });
         }
     }
     (u, any_large)
@@ -775,6 +796,7 @@ fn splat_tile<L: Lanes>(
     let rects = lists.rects;
     let n = samples.len();
     let tt = TileTest::new(tile);
+    let mut touch = 0u32;
     for &e in lists.groups {
         let g = e as u32 as usize;
         if !tt.hits(lists.group_rects[g]) {
@@ -784,6 +806,12 @@ fn splat_tile<L: Lanes>(
         // Large spheres' rectangles are empty here (drawn from `large` below).
         let group = &rects[first..(first + GROUP).min(n)];
         let mut hits = tt.hits_of(group) & (e >> 32) as u32;
+        // Read the group's colors now (its 32 colors lie in two or three cache lines), so
+        // they are in cache when the tile's pixels are shaded: nothing waits for these loads.
+        if hits != 0 {
+            let colors = &scene.colors[first.min(n - 1)..(first + GROUP).min(n)];
+            touch ^= colors[0] ^ colors[colors.len() / 2] ^ colors[colors.len() - 1];
+        }
         while hits != 0 {
             let j = hits.trailing_zeros() as usize;
             hits &= hits - 1;
@@ -797,6 +825,7 @@ fn splat_tile<L: Lanes>(
             culled += splat_sphere(&k, tile, r, i, buf) as u64;
         }
     }
+    std::hint::black_box(touch);
     (pairs, culled)
 }
 
