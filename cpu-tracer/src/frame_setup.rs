@@ -143,14 +143,14 @@ fn saturating_add_bytes(a: u32, b: u32) -> u32 {
     let top = (a ^ b) & TOP;
     let sum = low ^ top;
     let carry = ((a & b) | (top & low)) & TOP;
-    sum | (carry >> 7) * 0xFF
+    sum | ((carry >> 7) * 0xFF)
 }
 
 #[cfg(test)]
 mod tests {
     use super::*;
     use volwarp_core::sample::over_background;
-    
+
     #[test]
     fn the_fast_background_is_core_s_for_every_alpha_and_channel() {
         for a in 0..=255u32 {

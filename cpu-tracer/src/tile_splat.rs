@@ -165,8 +165,9 @@ pub struct TileSplat {
     lists: Vec<u64>,
     /// Start of each tile's list in `lists` (`tiles + 2` entries).
     starts: Vec<u32>,
-    /// The binning's (tile, entry) pairs, in the groups' order (reused from frame to frame).
-    pairs: Vec<(u32, u64)>,
+    /// The binning's (tile, entry) pairs, per task of the bound pass in the groups' order
+    /// (reused from frame to frame).
+    task_pairs: Vec<Vec<(u32, u64)>>,
     /// Spheres overlapping more than [`MAX_TILES`] tiles.
     large: Vec<u32>,
     /// Their rectangles (their entries of `rects` are emptied, so a group skips them without
@@ -205,7 +206,7 @@ impl TileSplat {
             group_rects: Vec::new(),
             lists: Vec::new(),
             starts: Vec::new(),
-            pairs: Vec::new(),
+            task_pairs: Vec::new(),
             large: Vec::new(),
             large_rects: Vec::new(),
             group_large: Vec::new(),
@@ -320,20 +321,28 @@ impl TileSplat {
         // 1. rectangles, in parallel over runs of whole groups
         let per_task = (groups.div_ceil(self.threads.count() * 8)).max(1);
         let vf = ViewF32::new(view);
-        let bound =
-            |c: usize, rects: &mut [Rect], centres: &mut [[f32; 4]], grects: &mut [Rect], glarge: &mut [bool]| {
-                let groups = rects
-                    .chunks_mut(GROUP)
-                    .zip(centres.chunks_mut(GROUP))
-                    .zip(grects.iter_mut().zip(glarge.iter_mut()));
-                for (g, ((rects, centres), (grect, glarge))) in groups.enumerate() {
-                    let base = (c * per_task + g) * GROUP;
-                    let samples = &samples[base..base + rects.len()];
-                    (*grect, *glarge) = bound_dispatch(view, &vf, deq, samples, rects, centres);
-                }
-            };
+        // Each task also lists its groups' (tile, entry) pairs, in the groups' order.
+        let tasks = groups.div_ceil(per_task);
+        self.task_pairs.resize_with(tasks.max(1), Vec::new);
+        let bound = |c: usize,
+                     rects: &mut [Rect],
+                     centres: &mut [[f32; 4]],
+                     grects: &mut [Rect],
+                     glarge: &mut [bool],
+                     pairs: &mut Vec<(u32, u64)>| {
+            pairs.clear();
+            let groups =
+                rects.chunks_mut(GROUP).zip(centres.chunks_mut(GROUP)).zip(grects.iter_mut().zip(glarge.iter_mut()));
+            for (g, ((rects, centres), (grect, glarge))) in groups.enumerate() {
+                let base = (c * per_task + g) * GROUP;
+                let samples = &samples[base..base + rects.len()];
+                (*grect, *glarge) = bound_dispatch(view, &vf, deq, samples, rects, centres);
+                group_pairs((c * per_task + g) as u32, *grect, rects, grid, pairs);
+            }
+        };
         if self.threads.is_serial() {
-            bound(0, &mut self.rects, &mut self.centres, &mut self.group_rects, &mut self.group_large);
+            let pairs = &mut self.task_pairs[0];
+            bound(0, &mut self.rects, &mut self.centres, &mut self.group_rects, &mut self.group_large, pairs);
         } else {
             self.threads.install(|| {
                 self.rects
@@ -341,42 +350,21 @@ impl TileSplat {
                     .zip(self.centres.par_chunks_mut(per_task * GROUP))
                     .zip(self.group_rects.par_chunks_mut(per_task))
                     .zip(self.group_large.par_chunks_mut(per_task))
+                    .zip(self.task_pairs.par_iter_mut())
                     .enumerate()
-                    .for_each(|(c, (((r, cs), g), l))| bound(c, r, cs, g, l))
+                    .for_each(|(c, ((((r, cs), g), l), p))| bound(c, r, cs, g, l, p))
             });
         }
-        // 2. groups to tiles (a counting sort, serial: a few tens of thousands of groups), and
-        // the large spheres to their own list. A group overlapping more than
-        // [`MAX_GROUP_TILES`] tiles (in the server's scanline order, the group that wraps from
-        // one row's end to the next row's start) is binned by its spheres' own tiles, each
-        // entry with the mask of its spheres there.
+        // 2. the pairs to per-tile lists (a counting sort, serial: a few tens of thousands of
+        // pairs; each tile's list keeps the groups' order), and the large spheres to their own
+        // list.
         let nt = grid.tiles();
         self.starts.clear();
         self.starts.resize(nt + 2, 0);
         self.large.clear();
-        // One pass over the groups gathers (tile, entry) pairs and counts them per tile; a
-        // second over the pairs places them (a counting sort: each tile's list keeps the
-        // groups' order).
-        self.pairs.clear();
-        for (g, r) in self.group_rects.iter().enumerate() {
-            if r.is_empty() {
-                continue;
-            }
-            let (tx0, tx1, ty0, ty1) = r.tiles();
-            let at = self.pairs.len();
-            if (tx1 - tx0 + 1) * (ty1 - ty0 + 1) > MAX_GROUP_TILES {
-                let first = g * GROUP;
-                split_group(&self.rects[first..(first + GROUP).min(n)], grid, g as u32, &mut self.pairs);
-            } else {
-                for ty in ty0..=ty1 {
-                    for tx in tx0..=tx1 {
-                        self.pairs.push(((ty * grid.tx + tx) as u32, g as u64 | (u32::MAX as u64) << 32));
-                    }
-                }
-            }
-            for &(t, _) in &self.pairs[at..] {
-                self.starts[t as usize + 1] += 1;
-            }
+        let task_pairs = &self.task_pairs[..tasks.min(self.task_pairs.len())];
+        for &(t, _) in task_pairs.iter().flatten() {
+            self.starts[t as usize + 1] += 1;
         }
         for t in 0..nt {
             self.starts[t + 1] += self.starts[t];
@@ -384,7 +372,7 @@ impl TileSplat {
         self.starts[nt + 1] = self.starts[nt];
         self.lists.resize(self.starts[nt] as usize, 0);
         let mut fill = self.starts[..nt].to_vec();
-        for &(t, e) in &self.pairs {
+        for &(t, e) in task_pairs.iter().flatten() {
             let f = &mut fill[t as usize];
             self.lists[*f as usize] = e;
             *f += 1;
@@ -398,6 +386,27 @@ impl TileSplat {
                     self.large_rects.push(r);
                     self.rects[i] = NO_RECT;
                 }
+            }
+        }
+    }
+}
+
+/// The (tile, entry) pairs of group `g` (rectangle `grect`, its spheres' `rects`) into `out`:
+/// each tile its rectangle overlaps with the whole group, or, for a group overlapping more
+/// than [`MAX_GROUP_TILES`] tiles (in the server's scanline order, the group that wraps from
+/// one row's end to the next row's start), [`split_group`]'s runs.
+#[inline(always)]
+fn group_pairs(g: u32, grect: Rect, rects: &[Rect], grid: Grid, out: &mut Vec<(u32, u64)>) {
+    if grect.is_empty() {
+        return;
+    }
+    let (tx0, tx1, ty0, ty1) = grect.tiles();
+    if (tx1 - tx0 + 1) * (ty1 - ty0 + 1) > MAX_GROUP_TILES {
+        split_group(rects, grid, g, out);
+    } else {
+        for ty in ty0..=ty1 {
+            for tx in tx0..=tx1 {
+                out.push(((ty * grid.tx + tx) as u32, g as u64 | (u32::MAX as u64) << 32));
             }
         }
     }
