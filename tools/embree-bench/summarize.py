@@ -46,6 +46,21 @@ for model in ("footprint", "voxel"):
             rays = int(res) ** 2
             print(f"| {model} | {res}² | {th} | {o:.1f} ({1e3 / o:.1f}, {rays / o / 1e3:.2f}) | {oi:.1f} | {mode} | {e:.1f} ({1e3 / e:.1f}, {rays / e / 1e3:.2f}) | {e / o:.2f} | {x['our_hits']} / {x['hits']} | {x['same_prim']} |")
 
+print("\n## The default renderer (`spheres`, client path: unbuilt scene, shaded) vs Embree\n")
+print("| model | res | threads | spheres render ms (FPS, Mrays/s) | splat-tiles ids ms (built scene) | Embree best mode | Embree ms (FPS) | Embree / spheres render | Embree / splat ids |")
+print("|---|---|---|---|---:|---|---|---:|---:|")
+for model in ("footprint", "voxel"):
+    for res in ("1024", "512"):
+        for th in ("1", "2"):
+            o = m.get(("ours-spheres", model, res, th, "render"))
+            oi = m.get(("ours-spheres", model, res, th, "ids"))
+            emb = [(v, k[0]) for k, v in m.items() if k[0].startswith("embree-") and k[0] != "embree-build" and k[1:4] == (model, res, th)]
+            if o is None or not emb:
+                continue
+            e, mode = min(emb)
+            rays = int(res) ** 2
+            print(f"| {model} | {res}² | {th} | {o:.1f} ({1e3 / o:.1f}, {rays / o / 1e3:.2f}) | {oi:.1f} | {mode} | {e:.1f} ({1e3 / e:.1f}) | {e / o:.2f} | {e / oi:.2f} |")
+
 print("\n## BVH build (ms)\n")
 print("| model | threads | ours (ParallelBuilder, whole scene build) | Embree rtcCommitScene (SPHERE_POINT, default quality) | Embree / ours |")
 print("|---|---|---:|---:|---:|")

@@ -12,7 +12,10 @@
 //!   - `ids_M_RES.u32`: our tracer's first-hit sample index per pixel (row-major, `u32::MAX`
 //!     for none), for a per-pixel comparison.
 //! * `volwarp-embree-bench time OUT_DIR [RUNS] [MODELS]` times `PacketTracer::render` (the
-//!   figure trace_timing reports) and `PacketTracer::trace_ids` on 1 and 2 threads at 1024²
+//!   figure trace_timing reports) and `PacketTracer::trace_ids`, the default renderer
+//!   (`AutoSpheres::render` on the unbuilt scene, as a client draws a frame) and
+//!   `TileSplat::splat_ids` on the built scene (checked equal to the tracer's ids) on 1 and 2
+//!   threads at 1024²
 //!   and 512² (wall clock, median of `RUNS` ≥ 7 after one warm-up render), and the LBVH build
 //!   (`ParallelBuilder`, 1 and 2 threads), for the models (default both, comma separated).
 //!
@@ -32,7 +35,8 @@ use std::time::Instant;
 use volwarp_core::renderer::{Image, Renderer};
 use volwarp_core::wire::{self, CameraRequest, Frame, Limits, Message};
 use volwarp_core::{Camera, Heuristic, Scene};
-use volwarp_cpu_tracer::{PacketTracer, ParallelBuilder};
+use volwarp_cpu_tracer::route::unbuilt_scene;
+use volwarp_cpu_tracer::{AutoSpheres, PacketTracer, ParallelBuilder, TileSplat};
 use volwarp_server::{Dataset, MarchOptions, Marcher, RadiusModel};
 
 /// The MRI beside the checkout (the same file as `cpu-tracer/benches/support/frames.rs`).
@@ -159,6 +163,7 @@ fn time_ours(dir: &Path, runs: usize, models: &[RadiusModel]) {
             );
         }
         let scene = Scene::build(&frame);
+        let unbuilt = unbuilt_scene(&frame);
         for res in RES {
             let cam = traced_camera(&frame, res);
             let rays = (res * res) as f64;
@@ -177,6 +182,26 @@ fn time_ours(dir: &Path, runs: usize, models: &[RadiusModel]) {
                         "RESULT tracer=ours-packet model={model} res={res} threads={threads} what={what} n={n} median_ms={m:.3} min_ms={lo:.3} max_ms={hi:.3} fps={:.1} mrays={:.2} hits={hits}",
                         1e3 / m,
                         rays / m / 1e3
+                    );
+                }
+                // The default renderer (`spheres`: the cost model's route, the tiled splatter
+                // on these views) as a client draws a frame: on the unbuilt scene (the frame's
+                // samples in arrival order, no LBVH), with shading; and the tiled splatter's
+                // first-hit ids on the built scene, which must equal the packet tracer's.
+                let mut auto = AutoSpheres::new(threads);
+                let r = time(runs, || auto.render(&unbuilt, &cam, &mut img));
+                let mut tiles = TileSplat::new(threads);
+                let mut splat_ids = Vec::new();
+                let t = time(runs, || {
+                    tiles.splat_ids(&scene, &cam, &mut splat_ids);
+                });
+                assert!(splat_ids == ids, "the splatter's ids equal the packet tracer's");
+                for (what, (m, lo, hi)) in [("render", r), ("ids", t)] {
+                    println!(
+                        "RESULT tracer=ours-spheres model={model} res={res} threads={threads} what={what} n={n} median_ms={m:.3} min_ms={lo:.3} max_ms={hi:.3} fps={:.1} mrays={:.2} hits={hits} route={:?}",
+                        1e3 / m,
+                        rays / m / 1e3,
+                        auto.last_route()
                     );
                 }
             }
