@@ -85,6 +85,7 @@ use volwarp_core::renderer::{Image, Renderer};
 use volwarp_core::sample::{over_background, pack_color_f32, Dequantizer};
 use volwarp_core::warp_radius::warp_angle_deg;
 use volwarp_core::{Camera, RendererKind, Scene, Vec3, BACKGROUND};
+use wide::f32x4;
 
 /// Most segments kept per output pixel (the nearest ones).
 pub const LIST: usize = 16;
@@ -134,24 +135,59 @@ const QUAD_CHUNK: usize = 4096;
 #[derive(Clone, Copy, Debug)]
 #[repr(C, align(64))]
 struct Quad {
-    /// Per edge `(A, B, C)`: a pixel centre `(px, py)` is inside where `A·px + B·py + C ≥ 0`
-    /// for all four.
-    edges: [[f32; 3]; 4],
+    /// The four edges' coefficients `A`, `B`, `C` (`edges[k][e]`: coefficient `k` of edge
+    /// `e`, so each coefficient of the four edges is one 4-lane vector): a pixel centre
+    /// `(px, py)` is inside where `A·px + B·py + C ≥ 0` for all four.
+    edges: [[f32; 4]; 3],
     key: u64,
     x: [u16; 2],
     y: [u16; 2],
 }
 
 impl Quad {
-    const NONE: Quad = Quad { edges: [[0.0; 3]; 4], key: u64::MAX, x: [1, 0], y: [1, 0] };
+    const NONE: Quad = Quad { edges: [[0.0; 4]; 3], key: u64::MAX, x: [1, 0], y: [1, 0] };
 
-    /// Whether pixel centre `(px, py)` is inside (no branch per edge).
-    #[inline(always)]
+    /// Whether pixel centre `(px, py)` is inside (no branch per edge): the reference of
+    /// [`Quad::row`]'s test.
+    #[cfg(test)]
     fn covers(&self, px: f32, py: f32) -> bool {
         let e = &self.edges;
-        let f = |k: usize| e[k][0] * px + e[k][1] * py + e[k][2];
+        let f = |k: usize| e[0][k] * px + e[1][k] * py + e[2][k];
         (f(0) >= 0.0) & (f(1) >= 0.0) & (f(2) >= 0.0) & (f(3) >= 0.0)
     }
+
+    /// The four edges at pixel row `py`, for [`QuadRow::covers`].
+    #[inline(always)]
+    fn row(&self, py: f32) -> QuadRow {
+        let [a, b, c] = self.edges.map(f32x4::from);
+        QuadRow { a, bpy: b * f32x4::splat(py), c }
+    }
+}
+
+/// A footprint's four edge functions along one pixel row, as 4-lane vectors (one lane per
+/// edge): the same operations as [`Quad::covers`] in the same order (`(A·px + B·py) + C`, no
+/// fused multiply-add), so the same result, with one vector multiply, two adds and one
+/// comparison per pixel.
+#[derive(Clone, Copy)]
+struct QuadRow {
+    a: f32x4,
+    bpy: f32x4,
+    c: f32x4,
+}
+
+impl QuadRow {
+    /// Whether pixel centre `px` of the row is inside.
+    #[inline(always)]
+    fn covers(&self, px: f32) -> bool {
+        let f = (self.a * f32x4::splat(px) + self.bpy) + self.c;
+        f.simd_ge(f32x4::ZERO).to_bitmask() == 0xF
+    }
+}
+
+/// Four edges' `[A, B, C]` as [`Quad::edges`] keeps them (coefficient-major).
+#[cfg(test)]
+fn coefficient_major(e: [[f32; 3]; 4]) -> [[f32; 4]; 3] {
+    core::array::from_fn(|k| core::array::from_fn(|i| e[i][k]))
 }
 
 /// The edge functions of the quadrilateral with corners `q` (in order around it), signed by
@@ -567,7 +603,7 @@ impl Setup {
         // Squared distance: the same order, no square root. (Bounds are within the viewport,
         // at most `MAX_VIEWPORT` < 2¹⁶.)
         Quad {
-            edges: edges_of([q0, q1, q2, q3]),
+            edges: coefficient_major(edges_of([q0, q1, q2, q3])),
             key: key(dist2, id as u32),
             x: [xa as u16, xb as u16],
             y: [ya as u16, yb as u16],
@@ -699,7 +735,7 @@ fn footprint_group<L: Lanes>(
             Quad::NONE
         } else {
             Quad {
-                edges: core::array::from_fn(|e| core::array::from_fn(|k| edges[e][k][i])),
+                edges: core::array::from_fn(|k| core::array::from_fn(|e| edges[e][k][i])),
                 key: key(d2[i], (first + i) as u32),
                 x: [xa[i] as u16, xb[i] as u16],
                 y: [ya[i] as u16, yb[i] as u16],
@@ -1592,10 +1628,10 @@ impl LayerSplat {
                     let q = &quads[id as usize];
                     let (ya, yb) = ((q.y[0] as usize).max(y_lo), (q.y[1] as usize).min(y_lo + RASTER_BAND - 1));
                     for y in ya..=yb {
-                        let py = y as f32 + 0.5;
+                        let row = q.row(y as f32 + 0.5);
                         for x in q.x[0] as usize..=q.x[1] as usize {
                             let px = x as f32 + 0.5;
-                            if q.covers(px, py) && only.is_none_or(|h| h.state[y * w + x] == UNFILLED) {
+                            if row.covers(px) && only.is_none_or(|h| h.state[y * w + x] == UNFILLED) {
                                 let i = (y - y_lo) * w + x;
                                 insert(&mut keys[i * cap..(i + 1) * cap], &mut count[i], q.key);
                             }
