@@ -195,3 +195,33 @@ fn lists_stay_bounded_whatever_the_view() {
     assert!(entries <= MAX_TILES * n && entries > n.div_ceil(GROUP) * MAX_GROUP_TILES, "{entries} for {n}");
     assert_splat_exact(&f, &build_scene(&f), &f.header.camera, "random order, split groups");
 }
+
+#[test]
+fn every_pixel_is_written_without_clearing_the_image_first() {
+    // The tiled splatter sizes the image but does not clear it: every tile must write all its
+    // pixels, the ones no sphere covers included (background), whatever the image held.
+    let f = random_cloud(3000, 0.01, 61, 200);
+    let c = f.header.camera;
+    for (scene, what) in [(build_scene(&f), "built"), (unbuilt_scene(&f), "unbuilt")] {
+        for cam in [c.orbit(15.0, 5.0).with_viewport(131, 97), c.dolly(0.5).with_viewport(64, 64)] {
+            let fresh = render(&mut TileSplat::new(1), &scene, &cam);
+            for threads in [1, 2] {
+                let mut img = Image::new(cam.width, cam.height);
+                img.pixels.fill(0x1234_5678);
+                TileSplat::new(threads).render(&scene, &cam, &mut img);
+                assert!(img == fresh, "{what}, {threads} thread(s): stale pixels left");
+                // A smaller image before: resized, then every pixel written.
+                let mut small = Image::new(7, 3);
+                small.pixels.fill(0x1234_5678);
+                TileSplat::new(threads).render(&scene, &cam, &mut small);
+                assert!(small == fresh, "{what}, {threads} thread(s): resized");
+            }
+        }
+    }
+    // An unusable camera still clears to the background, as every renderer does.
+    let mut img = Image::new(5, 5);
+    img.pixels.fill(0x1234_5678);
+    let bad = Camera { fov_y_deg: f32::NAN, ..c.with_viewport(5, 5) };
+    TileSplat::new(1).render(&build_scene(&f), &bad, &mut img);
+    assert!(img.pixels.iter().all(|&p| p == volwarp_core::BACKGROUND));
+}
