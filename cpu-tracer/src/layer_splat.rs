@@ -1808,6 +1808,42 @@ mod tests {
         assert_eq!(slots.to_vec(), (0..6u64).map(|k| k * 3).collect::<Vec<_>>());
     }
 
+    #[test]
+    fn the_row_test_is_the_pixel_test() {
+        // Quadrilaterals around random points, pixel centres on and near their edges (exact
+        // zeros of an edge function included), and non-finite coefficients.
+        let mut x = 0x9E37_79B9u32;
+        let mut rnd = move || {
+            x ^= x << 13;
+            x ^= x >> 17;
+            x ^= x << 5;
+            (x >> 8) as f32 / (1 << 24) as f32
+        };
+        let mut tested = [0usize; 2];
+        for i in 0..20_000 {
+            let (cx, cy) = (rnd() * 64.0, rnd() * 64.0);
+            let q: [(f32, f32); 4] = core::array::from_fn(|k| {
+                let a = (k as f32 + rnd() * 0.8) * core::f32::consts::FRAC_PI_2;
+                let r = 0.5 + rnd() * 3.0;
+                (cx + r * a.cos(), cy + r * a.sin())
+            });
+            let mut quad = Quad { edges: coefficient_major(edges_of(q)), ..Quad::NONE };
+            if i % 97 == 0 {
+                quad.edges[(i / 97) % 3][i % 4] = [f32::NAN, f32::INFINITY, -f32::INFINITY][i % 3];
+            }
+            for _ in 0..16 {
+                let (px, py) = ((cx + rnd() * 8.0 - 4.0).floor() + 0.5, (cy + rnd() * 8.0 - 4.0).floor() + 0.5);
+                let want = quad.covers(px, py);
+                assert_eq!(quad.row(py).covers(px), want, "{quad:?} at ({px}, {py})");
+                tested[want as usize] += 1;
+            }
+            // A corner itself: every edge through it is zero there.
+            let (px, py) = q[0];
+            assert_eq!(quad.row(py).covers(px), quad.covers(px, py));
+        }
+        assert!(tested[0] > 10_000 && tested[1] > 10_000, "{tested:?}");
+    }
+
     /// The footprints of a synthetic surface (plus random samples, some behind the eye, some
     /// degenerate) for `frame_camera`, set up for `camera` by the scalar reference and by the
     /// lanes kernel on both lane types: the same quads bit for bit.
