@@ -75,14 +75,15 @@
 //! sample for its shared corners (44 for a frame not in the server's order, which is sorted
 //! first).
 
-use crate::hole_fill::{block_outside_silhouette, filled, stale_lookup, FILLED, UNFILLED};
+use crate::frame_setup::over_background_fast;
+use crate::hole_fill::{block_outside_silhouette_on, filled, stale_lookup, FILLED, UNFILLED};
 use crate::lanes::{self, Lanes};
 use crate::route::SceneId;
 use crate::sphere_splat::View;
 use crate::threads::Threads;
 use crate::{begin_frame_unbuilt_ok, MAX_VIEWPORT};
 use volwarp_core::renderer::{Image, Renderer};
-use volwarp_core::sample::{over_background, pack_color_f32, Dequantizer};
+use volwarp_core::sample::{pack_color_f32, Dequantizer};
 use volwarp_core::warp_radius::warp_angle_deg;
 use volwarp_core::{Camera, RendererKind, Scene, Vec3, BACKGROUND};
 use wide::f32x4;
@@ -128,6 +129,10 @@ const CORNER_BAND: usize = 32;
 
 /// Samples per footprint set-up task.
 const QUAD_CHUNK: usize = 4096;
+
+/// Rows per task of the per-pixel passes over the fill state (in parallel: at 1024² each pass
+/// reads and writes 8 MB of state).
+const PIXEL_PASS_ROWS: usize = 64;
 
 /// A sample's footprint in the new image: the edge functions of its quadrilateral, depth key
 /// and pixel bounds (`x[0] > x[1]`: none). 64 bytes, one cache line: the footprints of a 1024²
@@ -286,9 +291,11 @@ pub struct LayerSplat {
     frame_of: Option<SceneId>,
     /// Per output pixel the fill state (`hole_fill`'s encoding).
     state: Vec<u64>,
-    /// Per sample its footprint, and per band of rows the footprints that touch it.
+    /// Per sample its footprint.
     quads: Vec<Quad>,
-    bins: Vec<Vec<u32>>,
+    /// Per binning task (one per thread), per band of rows, the footprints of the task's run
+    /// that touch it.
+    bins: Vec<Vec<Vec<u32>>>,
     /// Per sample the first and last band of rows its footprint touches (`b0 | b1 << 16`).
     bands: Vec<u32>,
     /// An older frame's image (multi-frame filling).
@@ -828,8 +835,16 @@ impl Renderer for LayerSplat {
             return;
         }
         let (w, h) = (camera.width as usize, camera.height as usize);
-        self.state.clear();
-        self.state.extend(self.count.iter().zip(&out.pixels).map(|(&n, &p)| if n == 0 { UNFILLED } else { filled(p) }));
+        // The per-pixel passes below run in parallel over runs of rows (each pixel on its own).
+        let rows = PIXEL_PASS_ROWS * w;
+        self.state.resize(w * h, UNFILLED);
+        let (count, pixels) = (&self.count[..], &out.pixels[..]);
+        self.threads.for_each_chunk(&mut self.state[..w * h], rows, |i, state| {
+            let at = i * rows;
+            for ((s, &n), &p) in state.iter_mut().zip(&count[at..]).zip(&pixels[at..]) {
+                *s = if n == 0 { UNFILLED } else { filled(p) };
+            }
+        });
         // Older frames, newest first, only where nothing is yet (issue 19's lever 3): what
         // each saw that the newest frame did not (see [`Sight`]), so an older sample never
         // stands where the newest frame saw empty space or the same surface.
@@ -867,17 +882,21 @@ impl Renderer for LayerSplat {
             let state = core::mem::take(&mut self.state);
             self.draw(o, camera, g, &[], &mut scratch, Some(Holes { state: &state, tiles: &tiles, tiles_w }));
             self.state = state;
-            for ((s, &n), &p) in self.state.iter_mut().zip(&self.count).zip(&scratch.pixels) {
-                if *s == UNFILLED && n > 0 {
-                    *s = filled(p);
+            let (count, pixels) = (&self.count[..], &scratch.pixels[..]);
+            self.threads.for_each_chunk(&mut self.state[..w * h], rows, |i, state| {
+                let at = i * rows;
+                for ((s, &n), &p) in state.iter_mut().zip(&count[at..]).zip(&pixels[at..]) {
+                    if *s == UNFILLED && n > 0 {
+                        *s = filled(p);
+                    }
                 }
-            }
+            });
         }
         self.residuals = residuals;
         self.scratch = scratch;
         self.tiles = tiles;
         if fill {
-            block_outside_silhouette(&mut self.state, w, h);
+            block_outside_silhouette_on(&mut self.state, w, h, &self.threads);
             // The frame's own image where a hole looks it up: each such pixel's own segments
             // composited on the spot (a few thousand, against a million for the whole image).
             if self.opts.own_pixels() {
@@ -896,11 +915,14 @@ impl Renderer for LayerSplat {
                 );
             }
         }
-        for (p, &s) in out.pixels.iter_mut().zip(&self.state) {
-            if s & FILLED != 0 {
-                *p = s as u32;
+        let state = &self.state[..];
+        self.threads.for_each_chunk(&mut out.pixels, rows, |i, pixels| {
+            for (p, &s) in pixels.iter_mut().zip(&state[i * rows..]) {
+                if s & FILLED != 0 {
+                    *p = s as u32;
+                }
             }
-        }
+        });
     }
 }
 
@@ -1604,27 +1626,42 @@ impl LayerSplat {
                 }
             },
         );
-        // 2. Each footprint to the row bands it touches.
+        // 2. Each footprint to the row bands it touches: one task per thread, each over its
+        // run of footprints into its own lists, so band `b`'s footprints are the tasks' lists
+        // `b` one after the other (in the footprints' order).
         let bands = h.div_ceil(RASTER_BAND);
-        self.bins.resize_with(bands, Vec::new);
-        self.bins.iter_mut().for_each(Vec::clear);
-        for (id, &b) in self.bands[..n].iter().enumerate() {
-            for b in (b & 0xffff) as usize..=(b >> 16) as usize {
-                self.bins[b].push(id as u32);
+        let tasks = self.threads.count().max(1);
+        self.bins.resize_with(tasks, Vec::new);
+        let per_task = n.div_ceil(tasks).max(1);
+        let footprint_bands = &self.bands[..n];
+        self.threads.for_each_chunk(&mut self.bins, 1, |t, task| {
+            let bins = &mut task[0];
+            bins.resize_with(bands, Vec::new);
+            bins.iter_mut().for_each(Vec::clear);
+            let first = (t * per_task).min(n);
+            for (id, &b) in footprint_bands[first..(first + per_task).min(n)].iter().enumerate() {
+                for bin in &mut bins[(b & 0xffff) as usize..=(b >> 16) as usize] {
+                    bin.push((first + id) as u32);
+                }
             }
-        }
+        });
         // 3. Per band of rows: its pixels take their footprints' keys, then the band is
         // composited while its lists are still in the cache (in parallel over bands: the lists
         // keep the nearest keys whatever the order, so the image does not depend on it). The
         // lists live in a band-sized buffer per thread, not one for the whole image.
         let (quads, bins) = (&self.quads[..], &self.bins[..]);
         let band = |b: usize, px: &mut [u32], count: &mut [u8]| {
+            // A band no footprint touches keeps its pixels (their counts are 0): an older
+            // frame's few samples touch few bands.
+            if bins.iter().all(|task| task[b].is_empty()) {
+                return;
+            }
             LISTS.with_borrow_mut(|keys| {
                 if keys.len() < RASTER_BAND * w * cap {
                     keys.resize(RASTER_BAND * w * cap, u64::MAX);
                 }
                 let y_lo = b * RASTER_BAND;
-                for &id in &bins[b] {
+                for &id in bins.iter().flat_map(|task| &task[b]) {
                     let q = &quads[id as usize];
                     let (ya, yb) = ((q.y[0] as usize).max(y_lo), (q.y[1] as usize).min(y_lo + RASTER_BAND - 1));
                     for y in ya..=yb {
@@ -1789,7 +1826,7 @@ fn composite_keys(keys: &[u64], colors: &[u32]) -> u32 {
             break;
         }
     }
-    over_background(pack_color_f32(acc), BACKGROUND)
+    over_background_fast(pack_color_f32(acc))
 }
 
 #[cfg(test)]
