@@ -30,36 +30,31 @@ for k in sorted(m):
     mr = f"{int(res) ** 2 / ms / 1e3:.2f}" if res != "-" else ""
     print(f"| {t} | {model} | {res} | {th} | {what} | {ms:.2f} | {fps:.1f} | {mr} | {rounds[k]} | {extra[k].get('hits', '')} |")
 
+def against_embree(tracer):
+    """Per (model, res, threads) with both: our render and ids ms, Embree's fastest mode and ms."""
+    for model in ("footprint", "voxel"):
+        for res in ("1024", "512"):
+            for th in ("1", "2"):
+                o = m.get((tracer, model, res, th, "render"))
+                oi = m.get((tracer, model, res, th, "ids"))
+                emb = [(v, k[0]) for k, v in m.items() if k[0].startswith("embree-") and k[0] != "embree-build" and k[1:4] == (model, res, th)]
+                if o is not None and emb:
+                    e, mode = min(emb)
+                    yield model, res, th, o, oi, e, mode, int(res) ** 2
+
+
 print("\n## Ours vs Embree (fastest Embree mode per row)\n")
 print("| model | res | threads | ours render ms (FPS, Mrays/s) | ours ids ms | Embree best mode | Embree ms (FPS, Mrays/s) | Embree / ours render | hit px ours / Embree | same prim |")
 print("|---|---|---|---|---:|---|---|---:|---|---:|")
-for model in ("footprint", "voxel"):
-    for res in ("1024", "512"):
-        for th in ("1", "2"):
-            o = m.get(("ours-packet", model, res, th, "render"))
-            oi = m.get(("ours-packet", model, res, th, "ids"))
-            emb = [(v, k[0]) for k, v in m.items() if k[0].startswith("embree-") and k[0] != "embree-build" and k[1:4] == (model, res, th)]
-            if o is None or not emb:
-                continue
-            e, mode = min(emb)
-            x = extra[(mode, model, res, th, "trace")]
-            rays = int(res) ** 2
-            print(f"| {model} | {res}² | {th} | {o:.1f} ({1e3 / o:.1f}, {rays / o / 1e3:.2f}) | {oi:.1f} | {mode} | {e:.1f} ({1e3 / e:.1f}, {rays / e / 1e3:.2f}) | {e / o:.2f} | {x['our_hits']} / {x['hits']} | {x['same_prim']} |")
+for model, res, th, o, oi, e, mode, rays in against_embree("ours-packet"):
+    x = extra[(mode, model, res, th, "trace")]
+    print(f"| {model} | {res}² | {th} | {o:.1f} ({1e3 / o:.1f}, {rays / o / 1e3:.2f}) | {oi:.1f} | {mode} | {e:.1f} ({1e3 / e:.1f}, {rays / e / 1e3:.2f}) | {e / o:.2f} | {x['our_hits']} / {x['hits']} | {x['same_prim']} |")
 
 print("\n## The default renderer (`spheres`, client path: unbuilt scene, shaded) vs Embree\n")
 print("| model | res | threads | spheres render ms (FPS, Mrays/s) | splat-tiles ids ms (built scene) | Embree best mode | Embree ms (FPS) | Embree / spheres render | Embree / splat ids |")
 print("|---|---|---|---|---:|---|---|---:|---:|")
-for model in ("footprint", "voxel"):
-    for res in ("1024", "512"):
-        for th in ("1", "2"):
-            o = m.get(("ours-spheres", model, res, th, "render"))
-            oi = m.get(("ours-spheres", model, res, th, "ids"))
-            emb = [(v, k[0]) for k, v in m.items() if k[0].startswith("embree-") and k[0] != "embree-build" and k[1:4] == (model, res, th)]
-            if o is None or not emb:
-                continue
-            e, mode = min(emb)
-            rays = int(res) ** 2
-            print(f"| {model} | {res}² | {th} | {o:.1f} ({1e3 / o:.1f}, {rays / o / 1e3:.2f}) | {oi:.1f} | {mode} | {e:.1f} ({1e3 / e:.1f}) | {e / o:.2f} | {e / oi:.2f} |")
+for model, res, th, o, oi, e, mode, rays in against_embree("ours-spheres"):
+    print(f"| {model} | {res}² | {th} | {o:.1f} ({1e3 / o:.1f}, {rays / o / 1e3:.2f}) | {oi:.1f} | {mode} | {e:.1f} ({1e3 / e:.1f}) | {e / o:.2f} | {e / oi:.2f} |")
 
 print("\n## BVH build (ms)\n")
 print("| model | threads | ours (ParallelBuilder, whole scene build) | Embree rtcCommitScene (SPHERE_POINT, default quality) | Embree / ours |")
