@@ -162,7 +162,8 @@ pub struct Options {
     pub timeout_s: u64,
     /// Layered samples (issue 14): ask the server for up to K depth segments per pixel, 1–16
     /// (renderers `splat-layers` and `splat-layers-gpu` composite them front to back). Default:
-    /// 4 with `--renderer splat-layers` or `splat-layers-gpu`, else 1 (one sample per pixel).
+    /// 4 with `--renderer splat-layers`, `splat-layers-gpu` or `spheres-layers`, else 1 (one
+    /// sample per pixel).
     #[arg(long, value_name = "K", value_parser = clap::value_parser!(u8).range(1..=16))]
     pub layers: Option<u8>,
 }
@@ -170,7 +171,7 @@ pub struct Options {
 impl Options {
     /// The segments per pixel to ask the server for (see `--layers`).
     pub fn layers(&self) -> u8 {
-        self.layers.unwrap_or(if matches!(self.renderer, RendererKind::SplatLayers | RendererKind::SplatLayersGpu) {
+        self.layers.unwrap_or(if self.renderer.draws_layers() {
             volwarp_core::segments::DEFAULT_LAYERS as u8
         } else {
             1

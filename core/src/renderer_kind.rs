@@ -55,6 +55,10 @@ pub enum RendererKind {
     /// The layered splatter as wgpu compute shaders: the same footprints, lists, compositing
     /// and fill as `splat-layers`, the same image (`splat-layers-gpu`, key 15: no window key).
     SplatLayersGpu,
+    /// Layered samples drawn by multi-hit LBVH traversal: every segment sphere a pixel's ray
+    /// hits where the ray passes through the segment's own source pixel, composited front to
+    /// back (the reference tracer of `splat-layers`; `spheres-layers`, key 16: no window key).
+    SpheresLayers,
 }
 
 /// One row of the registry.
@@ -166,11 +170,17 @@ pub const REGISTRY: [RendererInfo; RendererKind::COUNT] = [
         about: "wgpu layered samples composited front to back (no LBVH)",
         caps: caps(false, false, true),
     },
+    RendererInfo {
+        kind: RendererKind::SpheresLayers,
+        name: "spheres-layers",
+        about: "layered samples by multi-hit sphere tracing (LBVH), composited front to back",
+        caps: caps(false, true, false),
+    },
 ];
 
 impl RendererKind {
     /// How many renderers the registry has.
-    pub const COUNT: usize = 15;
+    pub const COUNT: usize = 16;
 
     /// Every renderer, in key order.
     pub const ALL: [RendererKind; RendererKind::COUNT] = [
@@ -189,6 +199,7 @@ impl RendererKind {
         RendererKind::SplatGpu,
         RendererKind::SplatLayers,
         RendererKind::SplatLayersGpu,
+        RendererKind::SpheresLayers,
     ];
 
     /// The renderer a client starts with: the layered splatter (issue 14; the client then asks
@@ -196,6 +207,12 @@ impl RendererKind {
     /// and warp-grown footprints, the most accurate method of the session results
     /// (`docs/results.md`, "Layered frames as the default").
     pub const DEFAULT: RendererKind = RendererKind::SplatLayers;
+
+    /// Whether it composites a layered frame's segments (the client then asks for
+    /// `segments::DEFAULT_LAYERS` per pixel); the others draw first hits.
+    pub const fn draws_layers(self) -> bool {
+        matches!(self, RendererKind::SplatLayers | RendererKind::SplatLayersGpu | RendererKind::SpheresLayers)
+    }
 
     /// Its row of [`REGISTRY`].
     pub const fn info(self) -> &'static RendererInfo {
@@ -220,6 +237,7 @@ impl RendererKind {
             RendererKind::SplatGpu => 12,
             RendererKind::SplatLayers => 13,
             RendererKind::SplatLayersGpu => 14,
+            RendererKind::SpheresLayers => 15,
         }
     }
 

@@ -92,6 +92,65 @@ impl Lbvh<'_> {
     }
 }
 
+impl Lbvh<'_> {
+    /// Every hit of `ray` (unit direction) nearer than a bound the caller keeps: `visit(t,
+    /// prim)` is called for each sphere the ray hits (in no particular order) and returns the
+    /// distance beyond which the caller wants no more hits (`f32::INFINITY` for all); subtrees
+    /// whose box the ray enters only beyond it are skipped (the box test keeps a hit at exactly
+    /// that distance). The multi-hit traversal of layered frames (`spheres-layers`).
+    pub fn hits(&self, ray: &Ray, mut visit: impl FnMut(f32, u32) -> f32) {
+        let n = self.samples.len();
+        let mut bound = f32::INFINITY;
+        let mut leaf = |k: u32, bound: &mut f32| {
+            let s = self.samples[k as usize];
+            if let Some(t) = intersect(ray.origin, ray.dir, self.deq.center(s), self.deq.radius(s)) {
+                if t <= *bound {
+                    *bound = visit(t, k);
+                }
+            }
+        };
+        if n == 1 {
+            leaf(0, &mut bound);
+        }
+        if n < 2 {
+            return;
+        }
+        let inv = Vec3::ONE / ray.dir;
+        let root = &self.nodes[0];
+        if intersect_box(ray.origin, inv, root.min, root.max, f32::INFINITY).is_none() {
+            return;
+        }
+        let mut stack = [0u32; STACK_SIZE];
+        let mut sp = 1;
+        while sp > 0 {
+            sp -= 1;
+            let node = self.nodes[stack[sp] as usize];
+            let mut near: [(u32, f32); 2] = [(0, 0.0); 2];
+            let mut m = 0;
+            for child in [node.left, node.right] {
+                if child & LEAF_BIT != 0 {
+                    leaf(child & !LEAF_BIT, &mut bound);
+                } else {
+                    let (lo, hi) = child_box(self.nodes, self.samples, &self.deq, child);
+                    if let Some(t) = intersect_box(ray.origin, inv, lo, hi, bound) {
+                        near[m] = (child, t);
+                        m += 1;
+                    }
+                }
+            }
+            if m == 2 && near[1].1 < near[0].1 {
+                near.swap(0, 1);
+            }
+            for &(child, _) in near[..m].iter().rev() {
+                if sp < STACK_SIZE {
+                    stack[sp] = child;
+                    sp += 1;
+                }
+            }
+        }
+    }
+}
+
 /// The first hit by testing every sphere: the oracle for [`Lbvh::trace`].
 pub fn brute_force(samples: &[u64], deq: &Dequantizer, ray: &Ray) -> Option<Hit> {
     let mut best = None;

@@ -58,6 +58,35 @@ fn check_scene(scene: &Scene, rays: &[(Vec3, Vec3)]) {
         let a = lbvh.trace(&ray);
         let b = brute_force(&scene.samples, &scene.deq, &ray);
         assert_eq!(a, b, "ray {o} {d}");
+        // Every hit (the multi-hit traversal of layered frames), and the four nearest with a
+        // pruning bound, against testing every sphere.
+        let mut all: Vec<(u32, u32)> = (0..scene.samples.len() as u32)
+            .filter_map(|k| {
+                let s = scene.samples[k as usize];
+                volwarp_core::sphere::intersect(ray.origin, ray.dir, scene.deq.center(s), scene.deq.radius(s))
+                    .map(|t| (t.to_bits(), k))
+            })
+            .collect();
+        all.sort_unstable();
+        let mut got = Vec::new();
+        lbvh.hits(&ray, |t, k| {
+            got.push((t.to_bits(), k));
+            f32::INFINITY
+        });
+        got.sort_unstable();
+        assert_eq!(got, all, "every hit, ray {o} {d}");
+        let mut near: Vec<(u32, u32)> = Vec::new();
+        lbvh.hits(&ray, |t, k| {
+            near.push((t.to_bits(), k));
+            near.sort_unstable();
+            near.truncate(4);
+            if near.len() == 4 {
+                f32::from_bits(near[3].0)
+            } else {
+                f32::INFINITY
+            }
+        });
+        assert_eq!(near, all[..all.len().min(4)], "four nearest, ray {o} {d}");
     }
 }
 

@@ -400,13 +400,13 @@ impl Proj {
 /// The depth key: the centre's distance from the eye (ordered bits of a non-negative float)
 /// and the sample id.
 #[inline(always)]
-fn key(dist: f32, id: u32) -> u64 {
+pub(crate) fn key(dist: f32, id: u32) -> u64 {
     ((dist.max(0.0).to_bits() as u64) << 32) | id as u64
 }
 
 /// Inserts `key` into a list of `cap` slots holding `n`, keeping the `cap` smallest.
 #[inline(always)]
-fn insert(slots: &mut [u64], n: &mut u8, key: u64) {
+pub(crate) fn insert(slots: &mut [u64], n: &mut u8, key: u64) {
     let len = *n as usize;
     if len < slots.len() {
         slots[len] = key;
@@ -1810,7 +1810,7 @@ unsafe fn sort_keys_avx2(keys: &mut [u64]) {
 
 /// The pixel of a sorted list of keys: their samples' colors composited front to back over the
 /// background.
-fn composite_keys(keys: &[u64], colors: &[u32]) -> u32 {
+pub(crate) fn composite_keys(keys: &[u64], colors: &[u32]) -> u32 {
     if keys.is_empty() {
         return BACKGROUND;
     }

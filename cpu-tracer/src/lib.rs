@@ -14,6 +14,7 @@
 //! | [`point_splat`] | ZAL12 2.5D points: fixed N×N squares with a depth test | `points1`, `points2`, `points3` |
 //! | [`sphere_splat`] | exact object-order sphere splatting (no BVH) | `splat` |
 //! | [`layer_splat`] | layered samples (issue 14): segments owned per output ray, composited front to back | `splat-layers` |
+//! | [`layer_trace`] | the same layered compositing by multi-hit LBVH traversal (the reference tracer) | `spheres-layers` |
 //! | [`stale_image`] | the frame as it was rendered, not warped | `stale` |
 //! | [`build`] (also `parallel_build`) | rayon LBVH build, byte-identical to `Scene::build` | — |
 //! | [`build::sort`] (also `parallel_sort`) | the parallel stable radix sort it uses | — |
@@ -36,6 +37,7 @@ pub mod build;
 pub mod direct_splat;
 pub mod hole_fill;
 pub mod layer_splat;
+pub mod layer_trace;
 pub mod packet_tracer;
 pub mod point_splat;
 pub mod route;
@@ -62,6 +64,7 @@ pub use build::{build_scene, BuildTimes, Method, ParallelBuilder};
 pub use direct_splat::DirectSplat;
 pub use hole_fill::{FillOptions, HoleFill, SampleIds};
 pub use layer_splat::LayerSplat;
+pub use layer_trace::LayerTrace;
 pub use packet_tracer::PacketTracer;
 pub use point_splat::PointSplat;
 pub use route::{AutoSpheres, CostModel, LazyBuild, Route};
@@ -101,6 +104,7 @@ pub fn create(kind: RendererKind, threads: usize) -> Option<Box<dyn Renderer + S
             Box::new(HoleFill::new(SphereSplat::new(threads), kind, FillOptions::DEFAULT, threads))
         }
         RendererKind::SplatLayers => Box::new(LayerSplat::new(threads)),
+        RendererKind::SpheresLayers => Box::new(LayerTrace::new(threads)),
         RendererKind::SpheresGpu | RendererKind::SplatGpu | RendererKind::SplatLayersGpu => return None,
     })
 }

@@ -76,6 +76,40 @@ fn at_the_frames_own_camera_the_composite_is_the_servers_render() {
 }
 
 #[test]
+fn the_layered_tracer_composites_the_servers_render_too() {
+    // `spheres-layers`: multi-hit traversal of the built scene's LBVH, the same compositing.
+    let mut r = create(RendererKind::SpheresLayers, 2).unwrap();
+    let mut any_hits = false;
+    for ds in datasets() {
+        let m = Marcher::from_dataset(&ds);
+        let req = request(&m, 12.0);
+        let truth = m.render_image(&req.camera);
+        let (f, _) = m.render_frame_layers(&req, 4);
+        let scene = build_scene(&f);
+        let mut img = Image::new(0, 0);
+        r.render(&scene, &req.camera, &mut img);
+        let q = Metrics::of(&truth, &img).unwrap();
+        assert!(q.psnr >= 40.0, "{}: {:.1} dB", ds.name, q.psnr);
+        assert!(q.flip <= 0.005, "{}: ꟻLIP {:.4}", ds.name, q.flip);
+        any_hits |= img.pixels.iter().any(|&p| p != BACKGROUND);
+        // 10° away it beats the stale frame, as the splatter does.
+        let cam = orbit(&req.camera, 10.0);
+        let truth = m.render_image(&cam);
+        r.render(&scene, &cam, &mut img);
+        let warped = Metrics::of(&truth, &img).unwrap();
+        let stale = Metrics::of(&truth, &draw(create(RendererKind::Stale, 1).unwrap().as_mut(), &f, &cam)).unwrap();
+        assert!(warped.psnr > stale.psnr, "{}: {:.1} dB traced, {:.1} dB stale", ds.name, warped.psnr, stale.psnr);
+        // The one-sample frame (K = 1) drawn the same way is its own image at its camera.
+        let one = m.render_frame(&req).0;
+        r.render(&build_scene(&one), &req.camera, &mut img);
+        let own = draw(create(RendererKind::Stale, 1).unwrap().as_mut(), &one, &req.camera);
+        let q1 = Metrics::of(&own, &img).unwrap();
+        assert!(q1.psnr >= 40.0, "{} K=1: {:.1} dB", ds.name, q1.psnr);
+    }
+    assert!(any_hits);
+}
+
+#[test]
 fn the_composite_does_not_depend_on_the_order_of_the_samples() {
     let ds = Dataset::load(data("data/ct_head_quarter.nhdr"), None).unwrap();
     let m = Marcher::from_dataset(&ds);
