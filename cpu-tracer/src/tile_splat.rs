@@ -322,8 +322,11 @@ impl TileSplat {
         let per_task = (groups.div_ceil(self.threads.count() * 8)).max(1);
         let vf = ViewF32::new(view);
         // Each task also lists its groups' (tile, entry) pairs, in the groups' order.
-        let tasks = groups.div_ceil(per_task);
-        self.task_pairs.resize_with(tasks.max(1), Vec::new);
+        // (One list when serial: the one task then takes every group. Cleared here too, as a
+        // scene without groups runs no task.)
+        let tasks = if self.threads.is_serial() { 1 } else { groups.div_ceil(per_task).max(1) };
+        self.task_pairs.resize_with(tasks, Vec::new);
+        self.task_pairs.iter_mut().for_each(Vec::clear);
         let bound = |c: usize,
                      rects: &mut [Rect],
                      centres: &mut [[f32; 4]],
@@ -362,7 +365,7 @@ impl TileSplat {
         self.starts.clear();
         self.starts.resize(nt + 2, 0);
         self.large.clear();
-        let task_pairs = &self.task_pairs[..tasks.min(self.task_pairs.len())];
+        let task_pairs = &self.task_pairs[..];
         for &(t, _) in task_pairs.iter().flatten() {
             self.starts[t as usize + 1] += 1;
         }

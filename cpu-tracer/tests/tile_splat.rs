@@ -218,6 +218,17 @@ fn every_pixel_is_written_without_clearing_the_image_first() {
             }
         }
     }
+    // A scene without samples after one with many: nothing of the last frame's binning is
+    // left (it draws the background, with any thread count).
+    for threads in [1, 2] {
+        let mut t = TileSplat::new(threads);
+        let mut img = Image::new(0, 0);
+        t.render(&build_scene(&f), &c, &mut img);
+        let empty = unbuilt_scene(&random_cloud(0, 0.01, 62, 200));
+        assert!(empty.samples.is_empty());
+        t.render(&empty, &c, &mut img);
+        assert!(img.pixels.iter().all(|&p| p == volwarp_core::BACKGROUND), "{threads} thread(s)");
+    }
     // An unusable camera still clears to the background, as every renderer does.
     let mut img = Image::new(5, 5);
     img.pixels.fill(0x1234_5678);
