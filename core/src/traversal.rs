@@ -44,50 +44,16 @@ fn test_leaf(samples: &[u64], deq: &Dequantizer, ray: &Ray, k: u32, best: &mut O
 }
 
 impl Lbvh<'_> {
-    /// The first hit of `ray` (unit direction), if any.
+    /// The first hit of `ray` (unit direction), if any: [`Lbvh::hits`] keeping the nearest by
+    /// the tie rule, the subtrees beyond it skipped.
     pub fn trace(&self, ray: &Ray) -> Option<Hit> {
-        let n = self.samples.len();
         let mut best = None;
-        if n == 0 {
-            return None;
-        }
-        if n == 1 {
-            test_leaf(self.samples, &self.deq, ray, 0, &mut best);
-            return best;
-        }
-        let inv = Vec3::ONE / ray.dir;
-        let t_max = |b: &Option<Hit>| b.map_or(f32::INFINITY, |h| h.t);
-        let root = &self.nodes[0];
-        intersect_box(ray.origin, inv, root.min, root.max, f32::INFINITY)?;
-        let mut stack = [0u32; STACK_SIZE];
-        let mut sp = 1;
-        while sp > 0 {
-            sp -= 1;
-            let node = self.nodes[stack[sp] as usize];
-            let mut near: [(u32, f32); 2] = [(0, 0.0); 2];
-            let mut m = 0;
-            for child in [node.left, node.right] {
-                if child & LEAF_BIT != 0 {
-                    test_leaf(self.samples, &self.deq, ray, child & !LEAF_BIT, &mut best);
-                } else {
-                    let (lo, hi) = child_box(self.nodes, self.samples, &self.deq, child);
-                    if let Some(t) = intersect_box(ray.origin, inv, lo, hi, t_max(&best)) {
-                        near[m] = (child, t);
-                        m += 1;
-                    }
-                }
+        self.hits(ray, |t, prim| {
+            if closer(t, prim, &best) {
+                best = Some(Hit { t, prim });
             }
-            if m == 2 && near[1].1 < near[0].1 {
-                near.swap(0, 1);
-            }
-            // Push far first so the near child is popped first.
-            for &(child, _) in near[..m].iter().rev() {
-                if sp < STACK_SIZE {
-                    stack[sp] = child;
-                    sp += 1;
-                }
-            }
-        }
+            best.map_or(f32::INFINITY, |h| h.t)
+        });
         best
     }
 }
@@ -141,6 +107,7 @@ impl Lbvh<'_> {
             if m == 2 && near[1].1 < near[0].1 {
                 near.swap(0, 1);
             }
+            // Push far first so the near child is popped first.
             for &(child, _) in near[..m].iter().rev() {
                 if sp < STACK_SIZE {
                     stack[sp] = child;
