@@ -32,10 +32,8 @@ impl Image {
 
     /// Resizes to the camera's viewport (if needed) and fills with [`BACKGROUND`].
     pub fn reset_for(&mut self, camera: &Camera) {
-        self.width = camera.width;
-        self.height = camera.height;
         self.pixels.clear();
-        self.pixels.resize(camera.width as usize * camera.height as usize, BACKGROUND);
+        self.size_for(camera);
     }
 
     /// Sizes the image to `camera`'s viewport *without* clearing it (pixels it keeps hold

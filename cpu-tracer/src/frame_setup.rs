@@ -38,49 +38,44 @@ pub(crate) fn trace_ids_with(
 /// (after drawing the background, or an empty image for an unusable viewport) if the camera
 /// does not validate or the scene is inconsistent.
 pub(crate) fn begin_frame(scene: &Scene, camera: &Camera, out: &mut Image) -> bool {
-    if let Err(e) = camera.validate(MAX_VIEWPORT) {
-        warn_once(&WARNED_CAMERA, &format!("unusable camera: {e}"));
-        out.reset_for_unusable(camera, MAX_VIEWPORT);
-        return false;
-    }
-    out.reset_for(camera);
-    if let Err(e) = scene.check() {
-        warn_once(&WARNED_SCENE, &format!("unusable scene: {e}"));
-        return false;
-    }
-    true
+    start_frame(scene, camera, out, false, false)
 }
 
 /// [`begin_frame`] for a renderer that also draws unbuilt scenes (no nodes: samples and
 /// colors of a frame in arrival order, [`crate::route::unbuilt_scene`]).
 pub(crate) fn begin_frame_unbuilt_ok(scene: &Scene, camera: &Camera, out: &mut Image) -> bool {
-    if !scene.nodes.is_empty() || scene.samples.len() < 2 {
-        return begin_frame(scene, camera, out);
-    }
-    if let Err(e) = camera.validate(MAX_VIEWPORT) {
-        warn_once(&WARNED_CAMERA, &format!("unusable camera: {e}"));
-        out.reset_for_unusable(camera, MAX_VIEWPORT);
-        return false;
-    }
-    out.reset_for(camera);
-    let ok = unbuilt_ok(scene);
-    if !ok {
-        warn_once(&WARNED_SCENE, "unusable unbuilt scene");
-    }
-    ok
+    start_frame(scene, camera, out, true, false)
 }
 
 /// [`begin_frame_unbuilt_ok`] for a renderer that writes every pixel of a usable frame: the
 /// same checks, but a usable frame's image is only sized ([`Image::size_for`]), not cleared.
 pub(crate) fn begin_frame_overwritten(scene: &Scene, camera: &Camera, out: &mut Image) -> bool {
-    let usable = camera.validate(MAX_VIEWPORT).is_ok()
-        && if scene.nodes.is_empty() && scene.samples.len() >= 2 { unbuilt_ok(scene) } else { scene.check().is_ok() };
-    if !usable {
-        // Clears, draws the background and warns once, as every renderer does.
-        return begin_frame_unbuilt_ok(scene, camera, out);
+    start_frame(scene, camera, out, true, true)
+}
+
+/// The three above: the camera checked (an unusable one: [`Image::reset_for_unusable`]), the
+/// scene checked by core's rules or, if `unbuilt` and it has no nodes and two samples or more,
+/// by [`unbuilt_ok`]; the image cleared, or only sized where `overwritten` and both are
+/// usable. Each kind of failure warns once.
+fn start_frame(scene: &Scene, camera: &Camera, out: &mut Image, unbuilt: bool, overwritten: bool) -> bool {
+    if let Err(e) = camera.validate(MAX_VIEWPORT) {
+        warn_once(&WARNED_CAMERA, &format!("unusable camera: {e}"));
+        out.reset_for_unusable(camera, MAX_VIEWPORT);
+        return false;
     }
-    out.size_for(camera);
-    true
+    let problem = if unbuilt && scene.nodes.is_empty() && scene.samples.len() >= 2 {
+        (!unbuilt_ok(scene)).then(|| "unusable unbuilt scene".to_string())
+    } else {
+        scene.check().err().map(|e| format!("unusable scene: {e}"))
+    };
+    match problem {
+        None if overwritten => out.size_for(camera),
+        _ => out.reset_for(camera),
+    }
+    if let Some(p) = &problem {
+        warn_once(&WARNED_SCENE, p);
+    }
+    problem.is_none()
 }
 
 /// Whether a scene keeps the scene's rules but the node count (an unbuilt scene has none).

@@ -99,36 +99,21 @@ impl Rect {
         self.x0 > self.x1
     }
 
-    /// Whether it overlaps more than [`MAX_TILES`] tiles (then it is drawn from the list of
-    /// large spheres, not from its group).
+    /// Whether a non-empty rectangle overlaps more than [`MAX_TILES`] tiles (then it is drawn
+    /// from the list of large spheres, not from its group); some value, without overflow, for
+    /// an empty one.
     #[inline(always)]
     fn is_large(&self) -> bool {
-        let (tx0, tx1, ty0, ty1) = self.tiles();
-        (tx1 - tx0 + 1) * (ty1 - ty0 + 1) > MAX_TILES
-    }
-
-    /// [`Rect::is_large`] for a non-empty rectangle, and some value (no overflow) for an empty
-    /// one.
-    #[inline(always)]
-    fn is_large_wrapping(&self) -> bool {
         let t = |a: u16| (a as usize / TILE) as isize;
         let (tx, ty) = (t(self.x1) - t(self.x0) + 1, t(self.y1) - t(self.y0) + 1);
         tx.wrapping_mul(ty) > MAX_TILES as isize
     }
 
-    /// The smallest rectangle holding both, where an empty one is [`NO_RECT`] (whose corners
-    /// make it the identity of the componentwise minimum and maximum), with no branch.
-    #[inline(always)]
-    fn union_of_non_empty(self, o: Rect) -> Rect {
-        Rect { x0: self.x0.min(o.x0), y0: self.y0.min(o.y0), x1: self.x1.max(o.x1), y1: self.y1.max(o.y1) }
-    }
-
-    /// The smallest rectangle holding both (`self` may be empty).
+    /// The smallest rectangle holding both, with no branch: the empty rectangle (always
+    /// [`NO_RECT`], whose corners lie beyond every viewport in the right order) is the identity
+    /// of the componentwise minimum and maximum.
     #[inline(always)]
     fn union(self, o: Rect) -> Rect {
-        if self.is_empty() {
-            return o;
-        }
         Rect { x0: self.x0.min(o.x0), y0: self.y0.min(o.y0), x1: self.x1.max(o.x1), y1: self.y1.max(o.y1) }
     }
 
@@ -277,8 +262,9 @@ impl TileSplat {
                 let t = ty * grid.tx + tx;
                 let list = &lists[starts[t] as usize..starts[t + 1] as usize];
                 let (x0, y0) = (tx * TILE, ty * TILE);
-                let (tw, th) = (TILE.min(w - x0), TILE.min(h - y0));
-                let any_large = large_rects.iter().any(|&r| overlaps(r, x0, y0, tw, th));
+                let tile = Tile { x0, y0, w: TILE.min(w - x0), h: TILE.min(h - y0) };
+                let (tw, tt) = (tile.w, TileTest::new(&tile));
+                let any_large = large_rects.iter().any(|&r| tt.hits(r));
                 if list.is_empty() && !any_large {
                     let empty = out_of(colors, NO_HIT);
                     for row in rows.chunks_mut(w) {
@@ -286,7 +272,6 @@ impl TileSplat {
                     }
                     continue;
                 }
-                let tile = Tile { x0, y0, w: tw, h: th };
                 let lists = Lists { groups: list, large, large_rects, rects, centres, group_rects, cull };
                 let (p, c) = tile_dispatch(&view, &tile, samples, scene, &lists, &mut buf);
                 counts = (counts.0 + p, counts.1 + c);
@@ -582,9 +567,9 @@ pub(crate) fn bound_group<L: Lanes>(
             // Large: non-empty and over `MAX_TILES` tiles; the union takes the others, the
             // empty rectangle being its identity (`NO_RECT`'s corners lie beyond every
             // viewport, in the right order).
-            let large = !r.is_empty() & r.is_large_wrapping();
+            let large = !r.is_empty() & r.is_large();
             any_large |= large;
-            u = u.union_of_non_empty(if large { NO_RECT } else { r });
+            u = u.union(if large { NO_RECT } else { r });
         }
     }
     (u, any_large)
@@ -622,16 +607,10 @@ fn centre_span(a: f64, b: f64, n: u32) -> Option<(u32, u32)> {
     Some((l as u32, h as u32))
 }
 
-/// Whether `r` overlaps the tile at `(x0, y0)` of `w × h` pixels.
-#[inline(always)]
-fn overlaps(r: Rect, x0: usize, y0: usize, w: usize, h: usize) -> bool {
-    !r.is_empty() && (r.x0 as usize) < x0 + w && r.x1 as usize >= x0 && (r.y0 as usize) < y0 + h && r.y1 as usize >= y0
-}
-
-/// [`overlaps`] for one tile as four 16-bit comparisons in one 64-bit subtraction (SWAR):
-/// every coordinate is below 2¹⁵ ([`MAX_VIEWPORT`], [`NO_RECT`]), so with bit 15 of each
-/// field of the minuend set no field borrows from the next, and a field's bit 15 survives
-/// exactly where the minuend's field is at least the subtrahend's.
+/// Whether a rectangle overlaps one tile, as four 16-bit comparisons in one 64-bit
+/// subtraction (SWAR): every coordinate is below 2¹⁵ ([`MAX_VIEWPORT`], [`NO_RECT`]), so with
+/// bit 15 of each field of the minuend set no field borrows from the next, and a field's bit
+/// 15 survives exactly where the minuend's field is at least the subtrahend's.
 #[derive(Clone, Copy)]
 struct TileTest {
     /// The tile's last column and row in the low fields.
@@ -832,7 +811,7 @@ fn splat_tile<L: Lanes>(
         }
     }
     for (&i, &r) in lists.large.iter().zip(lists.large_rects) {
-        if overlaps(r, tile.x0, tile.y0, tile.w, tile.h) {
+        if tt.hits(r) {
             pairs += 1;
             culled += splat_sphere(&k, tile, r, i, buf) as u64;
         }
