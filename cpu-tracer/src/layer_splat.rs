@@ -368,7 +368,7 @@ pub struct Proj {
 }
 
 impl Proj {
-    fn new(view: &View) -> Proj {
+    pub(crate) fn new(view: &View) -> Proj {
         let f = |a: [f64; 3]| Vec3::new(a[0] as f32, a[1] as f32, a[2] as f32);
         Proj {
             eye: view.eye,
@@ -395,6 +395,22 @@ impl Proj {
         let (x, y) = (c.x * inv * self.px_x + self.half_w, self.half_h - c.y * inv * self.px_y);
         (x.is_finite() && y.is_finite()).then_some((x, y))
     }
+}
+
+/// The pixels a draw covered (`count` > 0) into the fill `state` with their color from
+/// `pixels`, where still [`UNFILLED`]; with `fresh` the state is set anew (every other pixel
+/// [`UNFILLED`]). In parallel over runs of `rows` pixels (each pixel on its own).
+fn take_drawn(threads: &Threads, state: &mut [u64], count: &[u8], pixels: &[u32], rows: usize, fresh: bool) {
+    threads.for_each_chunk(state, rows, |i, state| {
+        let at = i * rows;
+        for ((s, &n), &p) in state.iter_mut().zip(&count[at..]).zip(&pixels[at..]) {
+            if n > 0 && (fresh || *s == UNFILLED) {
+                *s = filled(p);
+            } else if fresh {
+                *s = UNFILLED;
+            }
+        }
+    });
 }
 
 /// The depth key: the centre's distance from the eye (ordered bits of a non-negative float)
@@ -838,13 +854,7 @@ impl Renderer for LayerSplat {
         // The per-pixel passes below run in parallel over runs of rows (each pixel on its own).
         let rows = PIXEL_PASS_ROWS * w;
         self.state.resize(w * h, UNFILLED);
-        let (count, pixels) = (&self.count[..], &out.pixels[..]);
-        self.threads.for_each_chunk(&mut self.state[..w * h], rows, |i, state| {
-            let at = i * rows;
-            for ((s, &n), &p) in state.iter_mut().zip(&count[at..]).zip(&pixels[at..]) {
-                *s = if n == 0 { UNFILLED } else { filled(p) };
-            }
-        });
+        take_drawn(&self.threads, &mut self.state[..w * h], &self.count, &out.pixels, rows, true);
         // Older frames, newest first, only where nothing is yet (issue 19's lever 3): what
         // each saw that the newest frame did not (see [`Sight`]), so an older sample never
         // stands where the newest frame saw empty space or the same surface.
@@ -882,15 +892,7 @@ impl Renderer for LayerSplat {
             let state = core::mem::take(&mut self.state);
             self.draw(o, camera, g, &[], &mut scratch, Some(Holes { state: &state, tiles: &tiles, tiles_w }));
             self.state = state;
-            let (count, pixels) = (&self.count[..], &scratch.pixels[..]);
-            self.threads.for_each_chunk(&mut self.state[..w * h], rows, |i, state| {
-                let at = i * rows;
-                for ((s, &n), &p) in state.iter_mut().zip(&count[at..]).zip(&pixels[at..]) {
-                    if *s == UNFILLED && n > 0 {
-                        *s = filled(p);
-                    }
-                }
-            });
+            take_drawn(&self.threads, &mut self.state[..w * h], &self.count, &scratch.pixels, rows, false);
         }
         self.residuals = residuals;
         self.scratch = scratch;
@@ -1553,9 +1555,9 @@ fn project_lanes<L: Lanes>(
 }
 
 /// The pixel (of a `w × h` view with projection `p`) and view depth of point `c`, if in the
-/// view: the scalar reference of [`project_lanes`].
-#[cfg(test)]
-fn pixel(p: &Proj, w: usize, h: usize, c: Vec3) -> Option<(usize, f32)> {
+/// view: the scalar reference of [`project_lanes`], and the layered tracer's projection
+/// (`layer_trace`), so both renderers give a sample the same source pixel.
+pub(crate) fn pixel(p: &Proj, w: usize, h: usize, c: Vec3) -> Option<(usize, f32)> {
     let r = c - p.eye;
     let z = r.dot(p.w);
     if !(z > 1e-6) {

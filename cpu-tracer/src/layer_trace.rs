@@ -17,7 +17,7 @@
 //! It is the reference, not the fast path: one scalar traversal per pixel (`spheres-scalar`'s
 //! cost, more for the hits it keeps), in parallel over rows. `splat-layers` is the default.
 
-use crate::layer_splat::{composite_keys, insert, key, LIST};
+use crate::layer_splat::{composite_keys, insert, key, pixel, Proj, LIST};
 use crate::sphere_splat::View;
 use crate::threads::Threads;
 use crate::{begin_frame, MAX_VIEWPORT};
@@ -47,21 +47,6 @@ impl LayerTrace {
     }
 }
 
-/// The pixel (row-major index) of the frame camera `view` that point `p` projects into, if any.
-#[inline]
-fn pixel_of(view: &View, p: Vec3) -> Option<u32> {
-    let rel = [(p.x - view.eye.x) as f64, (p.y - view.eye.y) as f64, (p.z - view.eye.z) as f64];
-    let dot = |a: [f64; 3]| a[0] * rel[0] + a[1] * rel[1] + a[2] * rel[2];
-    let z = dot(view.w);
-    if !(z > 0.0) {
-        return None;
-    }
-    let x = (view.half_w + dot(view.u) / z * view.px_x).floor();
-    let y = (view.half_h - dot(view.v) / z * view.px_y).floor();
-    let inside = x >= 0.0 && y >= 0.0 && x < view.width as f64 && y < view.height as f64;
-    inside.then(|| y as u32 * view.width + x as u32)
-}
-
 impl Renderer for LayerTrace {
     fn kind(&self) -> RendererKind {
         RendererKind::SpheresLayers
@@ -73,10 +58,15 @@ impl Renderer for LayerTrace {
         }
         let (samples, deq, colors) = (&scene.samples[..], &scene.deq, &scene.colors[..]);
         let fc = scene.header.camera;
-        let frame = fc.validate(MAX_VIEWPORT).is_ok().then(|| View::new(&fc));
+        // The frame's projection, as `splat-layers` assigns samples their source pixels.
+        let frame = fc
+            .validate(MAX_VIEWPORT)
+            .is_ok()
+            .then(|| (Proj::new(&View::new(&fc)), fc.width as usize, fc.height as usize));
+        let pixel_of = |(p, w, h): &(Proj, usize, usize), c: Vec3| pixel(p, *w, *h, c).map(|(i, _)| i as u32);
         self.owner.clear();
         self.owner
-            .extend(samples.iter().map(|&s| frame.as_ref().and_then(|v| pixel_of(v, deq.center(s))).unwrap_or(ANY)));
+            .extend(samples.iter().map(|&s| frame.as_ref().and_then(|f| pixel_of(f, deq.center(s))).unwrap_or(ANY)));
         let (owner, frame) = (&self.owner[..], frame.as_ref());
         let lbvh = scene.lbvh();
         let basis = camera.ray_basis();
@@ -90,10 +80,10 @@ impl Renderer for LayerTrace {
                 lbvh.hits(&ray, |t, k| {
                     let own = owner.get(k as usize).copied().unwrap_or(ANY);
                     let owned = own == ANY
-                        || frame.is_some_and(|v| {
+                        || frame.is_some_and(|f| {
                             let c = deq.center(samples[k as usize]);
                             let nearest = ray.origin + ray.dir * (c - ray.origin).dot(ray.dir);
-                            pixel_of(v, nearest) == Some(own)
+                            pixel_of(f, nearest) == Some(own)
                         });
                     if owned {
                         insert(&mut keys, &mut n, key(t, k));
