@@ -20,7 +20,9 @@
 //! `(distance from the eye, sample id)` keys); the list is sorted (ties by id, so the result
 //! does not depend on the order of the samples) and composited front to back,
 //! `C += (1 − A)·c`, stopping once `A` ≥ [`OPAQUE`]. Zero-opacity segments add nothing (no
-//! division by opacity anywhere, so no NaN). Pixels nothing covers show the background.
+//! division by opacity anywhere, so no NaN). Pixels nothing covers show the background. The lists,
+//! their sort and their compositing live in `key_list.rs` (AVX2 paths beside the scalar
+//! reference: the compositing runs eight pixels at once, one per lane).
 //!
 //! **Watertight slabs** ([`LayerOptions::watertight`]): the `j`-th nearest segment of a pixel
 //! belongs to slab `j`. Where the slab-`j` segments of the pixels around a corner of the source
@@ -75,15 +77,16 @@
 //! sample for its shared corners (44 for a frame not in the server's order, which is sorted
 //! first).
 
-use crate::frame_setup::over_background_fast;
 use crate::hole_fill::{block_outside_silhouette_on, filled, stale_lookup, FILLED, UNFILLED};
+use crate::key_list::{composite_keys, insert, key};
+use crate::key_list::{composite_run, sort_keys};
 use crate::lanes::{self, Lanes};
 use crate::route::SceneId;
 use crate::sphere_splat::View;
 use crate::threads::Threads;
 use crate::{begin_frame_unbuilt_ok, MAX_VIEWPORT};
 use volwarp_core::renderer::{Image, Renderer};
-use volwarp_core::sample::{pack_color_f32, Dequantizer};
+use volwarp_core::sample::Dequantizer;
 use volwarp_core::warp_radius::warp_angle_deg;
 use volwarp_core::{Camera, RendererKind, Scene, Vec3, BACKGROUND};
 use wide::f32x4;
@@ -411,34 +414,6 @@ fn take_drawn(threads: &Threads, state: &mut [u64], count: &[u8], pixels: &[u32]
             }
         }
     });
-}
-
-/// The depth key: the centre's distance from the eye (ordered bits of a non-negative float)
-/// and the sample id.
-#[inline(always)]
-pub(crate) fn key(dist: f32, id: u32) -> u64 {
-    ((dist.max(0.0).to_bits() as u64) << 32) | id as u64
-}
-
-/// Inserts `key` into a list of `cap` slots holding `n`, keeping the `cap` smallest.
-#[inline(always)]
-pub(crate) fn insert(slots: &mut [u64], n: &mut u8, key: u64) {
-    let len = *n as usize;
-    if len < slots.len() {
-        slots[len] = key;
-        *n += 1;
-        return;
-    }
-    let (mut worst, mut at) = (0u64, 0usize);
-    for (i, &k) in slots.iter().enumerate() {
-        if k >= worst {
-            worst = k;
-            at = i;
-        }
-    }
-    if key < worst {
-        slots[at] = key;
-    }
 }
 
 /// Per-frame constants of the footprint set-up: the source pixel's half sides and the frame's
@@ -1663,28 +1638,31 @@ impl LayerSplat {
                     keys.resize(RASTER_BAND * w * cap, u64::MAX);
                 }
                 let y_lo = b * RASTER_BAND;
-                for &id in bins.iter().flat_map(|task| &task[b]) {
-                    let q = &quads[id as usize];
-                    let (ya, yb) = ((q.y[0] as usize).max(y_lo), (q.y[1] as usize).min(y_lo + RASTER_BAND - 1));
-                    for y in ya..=yb {
-                        let row = q.row(y as f32 + 0.5);
-                        for x in q.x[0] as usize..=q.x[1] as usize {
-                            let px = x as f32 + 0.5;
-                            if row.covers(px) && only.is_none_or(|h| h.state[y * w + x] == UNFILLED) {
-                                let i = (y - y_lo) * w + x;
-                                insert(&mut keys[i * cap..(i + 1) * cap], &mut count[i], q.key);
+                for list in bins.iter().map(|task| &task[b]) {
+                    for (k, &id) in list.iter().enumerate() {
+                        // The footprints are read in their order but scattered over ~60 MB:
+                        // the one PREFETCH ahead is asked for now.
+                        if let Some(&ahead) = list.get(k + PREFETCH) {
+                            prefetch(&quads[ahead as usize]);
+                        }
+                        let q = &quads[id as usize];
+                        let (ya, yb) = ((q.y[0] as usize).max(y_lo), (q.y[1] as usize).min(y_lo + RASTER_BAND - 1));
+                        for y in ya..=yb {
+                            let row = q.row(y as f32 + 0.5);
+                            for x in q.x[0] as usize..=q.x[1] as usize {
+                                let px = x as f32 + 0.5;
+                                if row.covers(px) && only.is_none_or(|h| h.state[y * w + x] == UNFILLED) {
+                                    let i = (y - y_lo) * w + x;
+                                    insert(&mut keys[i * cap..(i + 1) * cap], &mut count[i], q.key);
+                                }
                             }
                         }
                     }
                 }
-                for (i, (p, &n)) in px.iter_mut().zip(count.iter()).enumerate() {
-                    let n = n as usize;
-                    if n > 0 {
-                        let list = &mut keys[i * cap..i * cap + n];
-                        sort_keys(list);
-                        *p = composite_keys(list, colors);
-                    }
+                for (i, &n) in count.iter().enumerate().filter(|(_, &n)| n > 1) {
+                    sort_keys(&mut keys[i * cap..i * cap + n as usize]);
                 }
+                composite_run(keys, count, colors, px);
             })
         };
         let count = &mut self.count[..];
@@ -1729,124 +1707,27 @@ impl Holes<'_> {
     }
 }
 
+/// How many footprints ahead the rasterizer asks for a footprint's cache line.
+const PREFETCH: usize = 24;
+
+/// Asks the CPU to bring `q`'s cache line closer (a hint: no effect on any result).
+#[inline(always)]
+fn prefetch(q: &Quad) {
+    #[cfg(target_arch = "x86_64")]
+    // SAFETY: a prefetch reads nothing architecturally and cannot fault; SSE is baseline.
+    unsafe {
+        core::arch::x86_64::_mm_prefetch::<{ core::arch::x86_64::_MM_HINT_T0 }>(q as *const Quad as *const i8)
+    };
+}
+
 thread_local! {
     /// The per-pixel key lists of the band a thread is drawing (`RASTER_BAND` rows × `LIST`).
     static LISTS: core::cell::RefCell<Vec<u64>> = const { core::cell::RefCell::new(Vec::new()) };
 }
 
-/// Sorts a short list (at most [`LIST`]) of distinct keys: with AVX2 where the CPU has it,
-/// else [`sort_keys_scalar`]. (The keys are distinct: each holds its sample's id.)
-#[inline(always)]
-fn sort_keys(keys: &mut [u64]) {
-    #[cfg(target_arch = "x86_64")]
-    if lanes::use_avx2() {
-        // SAFETY: the CPU has AVX2 (`use_avx2` checks).
-        unsafe { sort_keys_avx2(keys) };
-        return;
-    }
-    sort_keys_scalar(keys);
-}
-
-/// Sorts a short list of distinct keys by rank: each key goes to the place given by how many
-/// keys are smaller (n² comparisons without a branch to mispredict; an insertion sort's
-/// data-dependent branches cost more on these handfuls of keys, `docs/perf.md`).
-#[inline(always)]
-fn sort_keys_scalar(keys: &mut [u64]) {
-    let n = keys.len().min(LIST);
-    let mut tmp = [0u64; LIST];
-    tmp[..n].copy_from_slice(&keys[..n]);
-    for &k in &tmp[..n] {
-        let rank = tmp[..n].iter().map(|&x| (x < k) as usize).sum::<usize>();
-        keys[rank] = k;
-    }
-}
-
-/// [`sort_keys_scalar`] with the ranks of all keys counted at once: for each key, one 64-bit
-/// comparison against all sixteen slots (four AVX2 registers) adds one to the rank of every
-/// larger key. Keys are below 2⁶³ (the distance's bits are those of a non-negative `f32`), so
-/// the signed comparison orders them; the unused slots hold `i64::MAX` and are not read back.
-///
-/// # Safety
-/// The CPU must support AVX2.
-#[cfg(target_arch = "x86_64")]
-#[target_feature(enable = "avx2")]
-unsafe fn sort_keys_avx2(keys: &mut [u64]) {
-    use core::arch::x86_64::*;
-    let n = keys.len().min(LIST);
-    let mut tmp = [i64::MAX; LIST];
-    for (t, &k) in tmp.iter_mut().zip(&keys[..n]) {
-        *t = k as i64;
-    }
-    let p = tmp.as_ptr() as *const __m256i;
-    // SAFETY: `tmp` holds LIST = 16 i64, i.e. four unaligned 256-bit loads.
-    let v = unsafe {
-        [
-            _mm256_loadu_si256(p),
-            _mm256_loadu_si256(p.add(1)),
-            _mm256_loadu_si256(p.add(2)),
-            _mm256_loadu_si256(p.add(3)),
-        ]
-    };
-    let mut rank = [_mm256_setzero_si256(); 4];
-    for &k in &tmp[..n] {
-        let kk = _mm256_set1_epi64x(k);
-        for (r, &x) in rank.iter_mut().zip(&v) {
-            // The comparison is −1 where the slot's key is larger.
-            *r = _mm256_sub_epi64(*r, _mm256_cmpgt_epi64(x, kk));
-        }
-    }
-    let mut ranks = [0u64; LIST];
-    let q = ranks.as_mut_ptr() as *mut __m256i;
-    // SAFETY: `ranks` holds LIST = 16 u64, i.e. four unaligned 256-bit stores.
-    unsafe {
-        for (i, &r) in rank.iter().enumerate() {
-            _mm256_storeu_si256(q.add(i), r);
-        }
-    }
-    for (&k, &r) in tmp[..n].iter().zip(&ranks) {
-        if let Some(slot) = keys.get_mut(r as usize) {
-            *slot = k as u64;
-        }
-    }
-}
-
-/// The pixel of a sorted list of keys: their samples' colors composited front to back over the
-/// background.
-pub(crate) fn composite_keys(keys: &[u64], colors: &[u32]) -> u32 {
-    if keys.is_empty() {
-        return BACKGROUND;
-    }
-    let mut acc = [0.0f32; 4];
-    for &k in keys {
-        let Some(&c) = colors.get(k as u32 as usize) else { continue };
-        let c = c.to_le_bytes();
-        let wgt = (1.0 - acc[3]) * (1.0 / 255.0);
-        for i in 0..4 {
-            acc[i] += wgt * c[i] as f32;
-        }
-        if acc[3] >= OPAQUE {
-            break;
-        }
-    }
-    over_background_fast(pack_color_f32(acc))
-}
-
 #[cfg(test)]
 mod tests {
     use super::*;
-
-    #[test]
-    fn the_short_list_keeps_the_nearest() {
-        let mut slots = [0u64; 6];
-        let mut n = 0u8;
-        for k in (0..40u64).rev() {
-            insert(&mut slots, &mut n, k * 3);
-        }
-        slots.sort_unstable();
-        assert_eq!(n, 6);
-        assert_eq!(slots.to_vec(), (0..6u64).map(|k| k * 3).collect::<Vec<_>>());
-    }
-
     #[test]
     fn the_row_test_is_the_pixel_test() {
         // Quadrilaterals around random points, pixel centres on and near their edges (exact
@@ -2000,36 +1881,6 @@ mod tests {
             assert!(d2.iter().zip(&d2_dispatched).all(|(a, b)| a.to_bits() == b.to_bits()));
         }
         assert!(inside > frame.samples.len(), "too few samples in view: {inside}");
-    }
-
-    /// Short lists of distinct keys (0 to LIST long, in every order the generator gives, with
-    /// keys near 2⁶³ and equal distances) sort as `sort_unstable` sorts them, on both paths.
-    #[test]
-    fn short_lists_sort_like_the_standard_sort() {
-        use crate::synthetic::SplitMix64;
-        let mut rng = SplitMix64(11);
-        for round in 0..2000 {
-            let n = round % (LIST + 1);
-            let list: Vec<u64> = (0..n)
-                .map(|i| match round % 3 {
-                    0 => rng.next_u64() >> 1,
-                    1 => key(f32::INFINITY, (rng.next_u64() % 1000) as u32 * 20 + i as u32),
-                    _ => key(1.5, i as u32 * 7 + 1) ^ (rng.next_u64() & 0xffff_0000_0000_0000 >> 1),
-                })
-                .collect();
-            let mut distinct = list.clone();
-            distinct.sort_unstable();
-            distinct.dedup();
-            if distinct.len() != list.len() {
-                continue;
-            }
-            let mut a = list.clone();
-            sort_keys_scalar(&mut a);
-            assert_eq!(a, distinct);
-            let mut b = list.clone();
-            sort_keys(&mut b);
-            assert_eq!(b, distinct);
-        }
     }
 
     /// A layer of two semi-transparent slabs on a tilted, gently curved surface, one segment
@@ -2242,12 +2093,5 @@ mod tests {
         let cam = frame.header.camera.orbit(10.0, 0.0);
         LayerSplat::new(1).render(&scene, &cam, &mut img);
         assert!(img.pixels.iter().any(|&p| p != BACKGROUND));
-    }
-
-    #[test]
-    fn compositing_zero_opacity_gives_the_background_and_no_nan() {
-        let colors = [0u32, 0, 0];
-        assert_eq!(composite_keys(&[key(1.0, 0), key(2.0, 1), key(3.0, 2)], &colors), BACKGROUND);
-        assert_eq!(composite_keys(&[], &colors), BACKGROUND);
     }
 }

@@ -17,7 +17,8 @@
 //! It is the reference, not the fast path: one scalar traversal per pixel (`spheres-scalar`'s
 //! cost, more for the hits it keeps), in parallel over rows. `splat-layers` is the default.
 
-use crate::layer_splat::{composite_keys, insert, key, pixel, Proj, LIST};
+use crate::key_list::{composite_keys, insert, key};
+use crate::layer_splat::{pixel, Proj, LIST};
 use crate::sphere_splat::View;
 use crate::threads::Threads;
 use crate::{begin_frame, MAX_VIEWPORT};

@@ -21,6 +21,7 @@
 //! | [`hole_fill`] | sphere renderers whose empty pixels are filled (older frames, the stale frame by direction, pull-push) | `spheres-fill`, `splat-fill` |
 //! | [`synthetic`] | synthetic frames and clouds for tests and benchmarks | — |
 //! | [`threads`] | a renderer's own thread count | — |
+//! | `key_list` | the layered renderers' per-pixel lists of nearest keys: insert, sort, composite (AVX2 paths beside the scalar reference) | — |
 //! | `frame_setup` | what every renderer does first: validate camera and scene, size and clear the output | — |
 //!
 //! All sphere renderers give the **same** image: they mirror core's ray generation
@@ -50,6 +51,7 @@ pub mod tile_splat;
 
 mod depth_buffer;
 mod frame_setup;
+mod key_list;
 mod lanes;
 
 pub(crate) use frame_setup::{begin_frame, begin_frame_overwritten, begin_frame_unbuilt_ok, shade, trace_ids_with};
