@@ -1,6 +1,6 @@
 //! # volwarp-cpu-tracer
 //!
-//! Every CPU way of drawing a volwarp [`Scene`] for a camera, behind the one
+//! Every CPU way of drawing a volwarp [`Scene`](volwarp_core::Scene) for a camera, behind the one
 //! [`Renderer`] interface of `volwarp-core`, and the parallel LBVH build a CPU-only client
 //! uses to turn a received frame into a scene.
 //!
