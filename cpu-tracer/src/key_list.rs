@@ -61,6 +61,27 @@ fn replace_farthest(slots: &mut [u64], key: u64) {
     }
 }
 
+/// A list of [`LIST`] keys in four AVX2 registers.
+///
+/// # Safety
+/// The CPU must support AVX2.
+#[cfg(target_arch = "x86_64")]
+#[target_feature(enable = "avx2")]
+#[inline]
+unsafe fn load_list(keys: &[u64; LIST]) -> [core::arch::x86_64::__m256i; 4] {
+    use core::arch::x86_64::*;
+    let p = keys.as_ptr() as *const __m256i;
+    // SAFETY: `keys` holds LIST = 16 u64, i.e. four unaligned 256-bit loads.
+    unsafe {
+        [
+            _mm256_loadu_si256(p),
+            _mm256_loadu_si256(p.add(1)),
+            _mm256_loadu_si256(p.add(2)),
+            _mm256_loadu_si256(p.add(3)),
+        ]
+    }
+}
+
 /// [`replace_farthest`] for a list of [`LIST`] keys in four AVX2 registers: whether any key is
 /// farther than `key` is one comparison per register; only then is the farthest found, by a
 /// tree of maxima, and its slot by an equality mask. The keys are distinct (each holds its
@@ -74,16 +95,8 @@ fn replace_farthest(slots: &mut [u64], key: u64) {
 #[target_feature(enable = "avx2")]
 unsafe fn replace_farthest_avx2(slots: &mut [u64; LIST], key: u64) {
     use core::arch::x86_64::*;
-    let p = slots.as_ptr() as *const __m256i;
-    // SAFETY: `slots` holds LIST = 16 u64, i.e. four unaligned 256-bit loads.
-    let v = unsafe {
-        [
-            _mm256_loadu_si256(p),
-            _mm256_loadu_si256(p.add(1)),
-            _mm256_loadu_si256(p.add(2)),
-            _mm256_loadu_si256(p.add(3)),
-        ]
-    };
+    // SAFETY: the CPU supports AVX2 (this function's contract).
+    let v = unsafe { load_list(slots) };
     let k = _mm256_set1_epi64x(key as i64);
     let farther = _mm256_or_si256(
         _mm256_or_si256(_mm256_cmpgt_epi64(v[0], k), _mm256_cmpgt_epi64(v[1], k)),
@@ -142,23 +155,13 @@ fn sort_keys_scalar(keys: &mut [u64]) {
 unsafe fn sort_keys_avx2(keys: &mut [u64]) {
     use core::arch::x86_64::*;
     let n = keys.len().min(LIST);
-    let mut tmp = [i64::MAX; LIST];
-    for (t, &k) in tmp.iter_mut().zip(&keys[..n]) {
-        *t = k as i64;
-    }
-    let p = tmp.as_ptr() as *const __m256i;
-    // SAFETY: `tmp` holds LIST = 16 i64, i.e. four unaligned 256-bit loads.
-    let v = unsafe {
-        [
-            _mm256_loadu_si256(p),
-            _mm256_loadu_si256(p.add(1)),
-            _mm256_loadu_si256(p.add(2)),
-            _mm256_loadu_si256(p.add(3)),
-        ]
-    };
+    let mut tmp = [i64::MAX as u64; LIST];
+    tmp[..n].copy_from_slice(&keys[..n]);
+    // SAFETY: the CPU supports AVX2 (this function's contract).
+    let v = unsafe { load_list(&tmp) };
     let mut rank = [_mm256_setzero_si256(); 4];
     for &k in &tmp[..n] {
-        let kk = _mm256_set1_epi64x(k);
+        let kk = _mm256_set1_epi64x(k as i64);
         for (r, &x) in rank.iter_mut().zip(&v) {
             // The comparison is −1 where the slot's key is larger.
             *r = _mm256_sub_epi64(*r, _mm256_cmpgt_epi64(x, kk));
@@ -174,7 +177,7 @@ unsafe fn sort_keys_avx2(keys: &mut [u64]) {
     }
     for (&k, &r) in tmp[..n].iter().zip(&ranks) {
         if let Some(slot) = keys.get_mut(r as usize) {
-            *slot = k as u64;
+            *slot = k;
         }
     }
 }
