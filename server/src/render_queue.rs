@@ -1,13 +1,16 @@
 //! Sharing one marcher pool between clients.
 //!
-//! Every client's frame runs on the same rayon pool: a request becomes one job in the pool's
-//! first-in-first-out injector queue, behind the jobs already waiting, and its row bands are
-//! shared out to whichever threads are free; a client asks for its next frame only after it
-//! got the last one, so it queues behind every other waiting client and none can starve
-//! another (each waits at most for the frames queued before it). A small frame is not held
-//! up behind a large one: both run at once. (A first-come-first-served lock around whole
-//! frames was tried first: a 48² frame then waited for a 512² one and missed a 1.5 s idle
-//! timeout on the loaded test machine.)
+//! Every client's frame runs on the same rayon pool, its row bands shared out to every thread.
+//! **Large frames take turns, first come first served** (a ticket [`Gate`]): one large frame
+//! marches at a time, in the order the requests came, so each waits at most for the frames
+//! asked for before it, and as a client asks for its next frame only after it got the last one,
+//! every busy client gets the same share. (Entering the pool all at once, as the first version
+//! did, let a worker waiting inside one frame's parallel split take up another frame's job, so
+//! the frame it was in ended only after that one: with four clients asking for equal MRI frames
+//! at 512², the fastest got 2.1× the frames of the slowest, `docs/perf.md`.) **Small frames**
+//! (at most [`SMALL_FRAME`] pixels) skip the line and run beside a large one: a 48² frame never
+//! waits for a 512² one (a lock around every frame was tried first and made a small frame miss
+//! a 1.5 s idle timeout on a loaded test machine).
 //!
 //! A request identical to one being rendered or just rendered (same camera, viewport,
 //! heuristic and radius scale; any sequence number) is answered with a copy of that render
@@ -62,11 +65,58 @@ pub struct RenderCounts {
     pub shared: u64,
 }
 
+/// Frames of at most this many pixels do not take a turn at the [`Gate`] (128², a thumbnail or
+/// a test's frame; the client's views are 512² and up).
+pub const SMALL_FRAME: u64 = 128 * 128;
+
+/// First come, first served by ticket: [`Gate::enter`] waits until every earlier ticket has
+/// left (its [`Turn`] dropped, also when the render panics).
+#[derive(Default)]
+pub struct Gate {
+    /// (next ticket to hand out, ticket being served).
+    tickets: Mutex<(u64, u64)>,
+    turn: Condvar,
+}
+
+/// A ticket's turn at the [`Gate`]: the next ticket is served once it is dropped.
+pub struct Turn<'a>(&'a Gate);
+
+impl Gate {
+    /// A ticket: the place in line, in the order of the calls.
+    pub fn ticket(&self) -> u64 {
+        let mut t = self.lock();
+        t.0 += 1;
+        t.0 - 1
+    }
+
+    /// Waits until `ticket` is served.
+    pub fn enter(&self, ticket: u64) -> Turn<'_> {
+        let mut t = self.lock();
+        while t.1 != ticket {
+            t = self.turn.wait(t).unwrap_or_else(|e| e.into_inner());
+        }
+        Turn(self)
+    }
+
+    fn lock(&self) -> MutexGuard<'_, (u64, u64)> {
+        self.tickets.lock().unwrap_or_else(|e| e.into_inner())
+    }
+}
+
+impl Drop for Turn<'_> {
+    fn drop(&mut self) {
+        self.0.lock().1 += 1;
+        self.0.turn.notify_all();
+    }
+}
+
 /// The shared render queue in front of one marcher and its thread pool.
 pub struct RenderQueue {
     marcher: Arc<Marcher>,
     pool: rayon::ThreadPool,
     state: Mutex<State>,
+    /// Large frames' turns.
+    gate: Gate,
     /// Signalled when a render ends.
     done: Condvar,
     rendered: AtomicU64,
@@ -91,6 +141,7 @@ impl RenderQueue {
             marcher,
             pool,
             state: Mutex::new(State::default()),
+            gate: Gate::default(),
             done: Condvar::new(),
             rendered: AtomicU64::new(0),
             shared: AtomicU64::new(0),
@@ -144,7 +195,10 @@ impl RenderQueue {
         s.in_flight.push(key);
         drop(s);
         let flight = Flight(self, key);
+        let pixels = req.camera.width as u64 * req.camera.height as u64;
+        let turn = (pixels > SMALL_FRAME).then(|| self.gate.enter(self.gate.ticket()));
         let stats = self.pool.install(|| self.marcher.render_frame_layers_into(req, layers, frame));
+        drop(turn);
         self.rendered.fetch_add(1, Ordering::Relaxed);
         // Keep a copy for identical requests (published before the flight ends), reusing the
         // previous copy's memory when no client holds it any more.
@@ -174,5 +228,49 @@ impl RenderQueue {
 
     fn lock(&self) -> MutexGuard<'_, State> {
         self.state.lock().unwrap_or_else(|e| e.into_inner())
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// Tickets are served in the order they were handed out, whatever order their holders
+    /// arrive at the gate in.
+    #[test]
+    fn the_gate_serves_tickets_in_order() {
+        let gate = Arc::new(Gate::default());
+        let order = Arc::new(Mutex::new(Vec::new()));
+        let tickets: Vec<u64> = (0..6).map(|_| gate.ticket()).collect();
+        let threads: Vec<_> = tickets
+            .iter()
+            .rev()
+            .map(|&t| {
+                let (gate, order) = (gate.clone(), order.clone());
+                std::thread::spawn(move || {
+                    let _turn = gate.enter(t);
+                    order.lock().unwrap().push(t);
+                })
+            })
+            .collect();
+        for t in threads {
+            t.join().unwrap();
+        }
+        assert_eq!(*order.lock().unwrap(), tickets);
+    }
+
+    /// A holder that panics still hands the turn on.
+    #[test]
+    fn a_panicking_turn_hands_on() {
+        let gate = Arc::new(Gate::default());
+        let (a, b) = (gate.ticket(), gate.ticket());
+        let g = gate.clone();
+        let r = std::thread::spawn(move || {
+            let _turn = g.enter(a);
+            panic!("render failed");
+        })
+        .join();
+        assert!(r.is_err());
+        drop(gate.enter(b));
     }
 }
