@@ -9,8 +9,10 @@ if [ "$(id -u)" != 0 ] && command -v sudo >/dev/null; then SUDO=sudo; fi
 
 # System packages: lavapipe (software Vulkan) for the GPU tests, Xvfb for the window test.
 need=()
-# gcc-aarch64-linux-gnu: minifb's build script compiles C for the ARM check of the client.
-for p in mesa-vulkan-drivers libvulkan1 xvfb xauth x11-apps gcc-aarch64-linux-gnu; do
+# gcc-aarch64-linux-gnu: minifb's and zstd-sys's build scripts compile C for the ARM check of the
+# client; libc6-dev-arm64-cross: the C library headers that C needs (only a "Recommends" of the
+# compiler, which --no-install-recommends leaves out).
+for p in mesa-vulkan-drivers libvulkan1 xvfb xauth x11-apps gcc-aarch64-linux-gnu libc6-dev-arm64-cross; do
   dpkg -s "$p" >/dev/null 2>&1 || need+=("$p")
 done
 if [ ${#need[@]} -gt 0 ]; then
