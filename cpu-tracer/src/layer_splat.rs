@@ -1303,7 +1303,7 @@ impl OwnPass {
     /// unusable camera.
     fn prepare(&mut self, scene: &Scene, threads: &Threads) -> bool {
         self.project(scene, threads);
-        self.group()
+        self.group(threads)
     }
 
     /// Pixel `i`'s own segments composited over the background (after [`OwnPass::group`]; the
@@ -1403,14 +1403,44 @@ impl OwnPass {
     }
 
     /// Groups the keys by pixel (after [`OwnPass::project`]); false for an unusable camera.
-    fn group(&mut self) -> bool {
+    fn group(&mut self, threads: &Threads) -> bool {
         let Some((_, w, h)) = self.proj else { return false };
         if !self.start.is_empty() {
             return true;
         }
-        // Counts, then their running sums (each pixel's end), then every key placed backwards
-        // at its pixel's end: the ends become the starts and a pixel keeps its samples' order.
         self.start.resize(w * h + 1, 0);
+        // A server's frame comes in pixel order (samples outside the view, `NO_PIXEL`, can
+        // only come last then): the groups are the keys in their order, and a pixel's start is
+        // the number of samples on earlier pixels, found per band of pixels in parallel.
+        let pixel = |a: u64| (a >> 32) as usize;
+        if self.at.windows(2).all(|p| pixel(p[0]) <= pixel(p[1])) {
+            let at = &self.at[..];
+            let valid = at.partition_point(|&a| pixel(a) < w * h);
+            threads.for_each_chunk(&mut self.start[..w * h], PIXEL_PASS_ROWS * w, |band, start| {
+                let p0 = band * PIXEL_PASS_ROWS * w;
+                let mut j = at[..valid].partition_point(|&a| pixel(a) < p0);
+                for (i, s) in start.iter_mut().enumerate() {
+                    while j < valid && pixel(at[j]) < p0 + i {
+                        j += 1;
+                    }
+                    *s = j as u32;
+                }
+            });
+            self.start[w * h] = valid as u32;
+            self.grouped.clear();
+            self.grouped.extend_from_slice(&self.keys[..valid]);
+            return true;
+        }
+        self.group_any_order();
+        true
+    }
+
+    /// [`OwnPass::group`] for samples in any order: counts, then their running sums (each
+    /// pixel's end), then every key placed backwards at its pixel's end, so the ends become the
+    /// starts and a pixel keeps its samples' order. (After `start` was sized.)
+    fn group_any_order(&mut self) {
+        let Some((_, w, h)) = self.proj else { return };
+        self.start.iter_mut().for_each(|s| *s = 0);
         for &a in &self.at {
             if let Some(c) = self.start.get_mut((a >> 32) as usize) {
                 *c += 1;
@@ -1430,7 +1460,6 @@ impl OwnPass {
                 self.grouped[self.start[i] as usize] = k;
             }
         }
-        true
     }
 }
 
@@ -1883,6 +1912,45 @@ mod tests {
         assert!(inside > frame.samples.len(), "too few samples in view: {inside}");
     }
 
+    /// A frame in pixel order is grouped by the parallel path exactly as the counting sort
+    /// groups it, with samples outside the view (last, as the projection sorts them) or not.
+    #[test]
+    fn pixel_order_groups_like_the_counting_sort() {
+        use crate::synthetic::{frame_from_points, Point};
+        let frame = two_slab_frame();
+        // A small frame in pixel order whose last two samples lie behind the eye.
+        let camera = Camera::look_at(Vec3::new(0.0, 0.0, 3.0), Vec3::ZERO, Vec3::Y, 40.0, 8, 8);
+        let basis = camera.ray_basis();
+        let mut pts: Vec<Point> = (0..64)
+            .map(|i| Point {
+                center: camera.eye + basis.dir(i % 8, i / 8) * 2.0,
+                radius: 0.01,
+                color: [0.2, 0.2, 0.2, 0.5],
+            })
+            .collect();
+        pts.extend((0..2).map(|k| Point {
+            center: camera.eye + Vec3::new(0.0, 0.0, 1.0 + k as f32),
+            radius: 0.01,
+            color: [0.1; 4],
+        }));
+        let away = frame_from_points(&pts, camera);
+        for (f, n) in [(&frame, 1), (&frame, 3), (&away, 2)] {
+            let threads = Threads::new(n);
+            let scene = crate::route::unbuilt_scene(f);
+            let mut own = OwnPass::default();
+            own.project(&scene, &threads);
+            assert!(own.at.windows(2).all(|p| p[0] >> 32 <= p[1] >> 32), "the frame is in pixel order");
+            assert!(own.group(&threads));
+            let (start, grouped) = (own.start.clone(), own.grouped.clone());
+            own.group_any_order();
+            assert_eq!(own.start, start);
+            assert_eq!(own.grouped, grouped);
+            // The frame behind the eye keeps its 64 samples in view, not the two behind.
+            let in_view = if n == 2 { 64 } else { f.samples.len() };
+            assert_eq!(grouped.len(), in_view);
+        }
+    }
+
     /// A layer of two semi-transparent slabs on a tilted, gently curved surface, one segment
     /// per slab on every pixel's ray of a 96² camera.
     fn two_slab_frame() -> volwarp_core::wire::Frame {
@@ -2034,7 +2102,7 @@ mod tests {
             for tol in [1.5, 6.0] {
                 let mut own = OwnPass::default();
                 own.project(&scene, &threads);
-                assert!(own.group());
+                assert!(own.group(&threads));
                 own.share_corners(tol, &threads);
                 let reference = corners_reference(&own, tol);
                 let same = |a: &[[f32; 4]], b: &[[f32; 4]]| {
@@ -2079,7 +2147,7 @@ mod tests {
         let threads = Threads::new(1);
         let mut own = OwnPass::default();
         own.project(&scene, &threads);
-        assert!(own.group());
+        assert!(own.group(&threads));
         own.share_corners(3.0, &threads);
         let (_, w, _) = own.proj.unwrap();
         let crowded = (0..own.start.len() - 1).max_by_key(|&i| own.start[i + 1] - own.start[i]).unwrap();
