@@ -1380,11 +1380,12 @@ impl OwnPass {
         }
         // 2. Each segment's corners, in that order.
         let corners = if in_order { &mut self.shared } else { &mut self.corners };
-        corners.clear();
+        // Not shared (NaN) unless found: set per band, in parallel, not in one serial pass.
         corners.resize(total, [f32::NAN; 4]);
         let zs = if in_order { Depths::Packed(&self.at) } else { Depths::Plain(&self.zs) };
         let per_px = tol.max(0.0) * 0.5 / proj.px_y;
         threads.for_each_part(corners, &ends, |b, part| {
+            part.fill([f32::NAN; 4]);
             let base = start[b * CORNER_BAND * w] as usize;
             let rows = b * CORNER_BAND..((b + 1) * CORNER_BAND).min(h);
             band_corners(start, zs, (w, h), per_px, rows, part, base);
