@@ -78,8 +78,7 @@
 //! first).
 
 use crate::hole_fill::{block_outside_silhouette_on, filled, stale_lookup, FILLED, UNFILLED};
-use crate::key_list::{composite_keys, insert, key};
-use crate::key_list::{composite_run, sort_keys};
+use crate::key_list::{composite_keys, composite_run, insert, key, sort_keys};
 use crate::lanes::{self, Lanes};
 use crate::route::SceneId;
 use crate::sphere_splat::View;
@@ -1409,12 +1408,12 @@ impl OwnPass {
         if !self.start.is_empty() {
             return true;
         }
-        self.start.resize(w * h + 1, 0);
         // A server's frame comes in pixel order (samples outside the view, `NO_PIXEL`, can
         // only come last then): the groups are the keys in their order, and a pixel's start is
         // the number of samples on earlier pixels, found per band of pixels in parallel.
         let pixel = |a: u64| (a >> 32) as usize;
         if self.at.windows(2).all(|p| pixel(p[0]) <= pixel(p[1])) {
+            self.start.resize(w * h + 1, 0);
             let at = &self.at[..];
             let valid = at.partition_point(|&a| pixel(a) < w * h);
             threads.for_each_chunk(&mut self.start[..w * h], PIXEL_PASS_ROWS * w, |band, start| {
@@ -1438,10 +1437,11 @@ impl OwnPass {
 
     /// [`OwnPass::group`] for samples in any order: counts, then their running sums (each
     /// pixel's end), then every key placed backwards at its pixel's end, so the ends become the
-    /// starts and a pixel keeps its samples' order. (After `start` was sized.)
+    /// starts and a pixel keeps its samples' order.
     fn group_any_order(&mut self) {
         let Some((_, w, h)) = self.proj else { return };
-        self.start.iter_mut().for_each(|s| *s = 0);
+        self.start.clear();
+        self.start.resize(w * h + 1, 0);
         for &a in &self.at {
             if let Some(c) = self.start.get_mut((a >> 32) as usize) {
                 *c += 1;

@@ -26,7 +26,7 @@
 //! 3. **Splat** (parallel over bands of tiles): per tile, the unit ray directions of its pixels
 //!    (`RayBasis::dir`'s operations, eight at a time) and per pixel the distance and sample of
 //!    its nearest hit so far (an f32 depth plane and a u32 id plane), all in a local buffer of
-//!    about 24 KB that stays in L1; each sphere of its groups whose rectangle overlaps the tile
+//!    about 90 KB that stays in L2 ([`TILE`]); each sphere of its groups whose rectangle overlaps the tile
 //!    tests its pixels in the tile eight at a time with the packet tracer's SIMD ray–sphere
 //!    kernel (`lanes::sphere_hits`, AVX2 dispatch): as 4×2 blocks when the rectangle is at most
 //!    four pixels wide, as rows of 8 otherwise. The depth test runs in the same lanes (a nearer
