@@ -64,6 +64,8 @@ pub mod stats;
 pub mod traversal;
 pub mod warp_radius;
 pub mod wire;
+#[cfg(feature = "zstd-c")]
+pub mod zero_runs;
 
 #[cfg(feature = "alloc")]
 mod compact_fast;

@@ -231,18 +231,21 @@ proptest! {
 }
 
 /// C zstd (feature `zstd-c`, what std clients use) and ruzstd (no_std) decompress every body
+/// (from the library's match finder, ruzstd's encoder or the server's zero-run parse)
 /// to the same bytes and refuse frames that do not fill exactly the stated length; changed bytes
 /// give a typed error or a body of exactly that length (no checksum: zstd cannot tell every
 /// change, and the two libraries then need not agree on the bytes: measured, a few in 300).
 #[test]
 fn c_zstd_and_ruzstd_decompress_the_same_bodies() {
-    use volwarp_core::compact_frame::{compress, decompress, decompress_c, decompress_ruzstd, Coder};
+    use volwarp_core::compact_frame::{compress, compress_c, decompress, decompress_c, decompress_ruzstd, Coder};
     let (frame, model) = random_frame(7, 200, 150, 0.01);
     let planes = build_planes(&frame, &EncodeOptions { radius: Some(model), ..EncodeOptions::default() }).unwrap();
     let params = planes.params;
     let c_coded = zstd::bulk::compress(&planes.body, 1).unwrap();
     let r_coded = compress(&planes.body, Coder::Zstd);
-    for coded in [&c_coded, &r_coded] {
+    // The server's: the zero-run parse with C zstd's entropy stage.
+    let runs_coded = compress_c(&planes.body, 1);
+    for coded in [&c_coded, &r_coded, &runs_coded] {
         assert_eq!(decompress_c(coded, &params).unwrap(), planes.body);
         assert_eq!(decompress_ruzstd(coded, &params).unwrap(), planes.body);
         assert_eq!(decompress(coded, &params).unwrap(), planes.body);

@@ -69,7 +69,7 @@ fn main() {
     let lim = Limits::default();
     let ms_per = |ms: f64| n as f64 / ms / 1e3;
     println!(
-        "MRI 1024²: {n} samples, body {} B, zstd-{ZSTD_LEVEL} {} B ({:.3} B/sample with headers), lz4_flex {} B, raw12 {} B",
+        "MRI 1024²: {n} samples, body {} B, zero-run parse + zstd entropy level {ZSTD_LEVEL} {} B ({:.3} B/sample with headers), lz4_flex {} B, raw12 {} B",
         planes.body.len(),
         coded.len(),
         bytes.len() as f64 / n as f64,
@@ -80,7 +80,18 @@ fn main() {
     let row = |name: &str, ms: f64| println!("  {name:<52} {ms:8.2} ms  {:7.1} M samples/s", ms_per(ms));
     row("planes (build_planes, fast)", median_ms(runs, || compact_frame::build_planes(&frame, &opts)));
     row("planes (build_planes_reference)", median_ms(runs, || compact_frame::build_planes_reference(&frame, &opts)));
-    row("C zstd level 1 compress", median_ms(runs, || zstd::bulk::compress(&planes.body, ZSTD_LEVEL)));
+    row("zero-run parse (zero_run_sequences)", median_ms(runs, || volwarp_core::zero_runs::zero_run_sequences(&planes.body)));
+    row("C zstd, zero-run parse, compress (the server's)", median_ms(runs, || compact_frame::compress_c(&planes.body, ZSTD_LEVEL)));
+    let lib1 = zstd::bulk::compress(&planes.body, 1).expect("zstd");
+    row(
+        &format!(
+            "C zstd level 1 compress ({} B, {:.3} B/sample)",
+            lib1.len(),
+            (HEADER_LEN + compact_frame::COMPACT_FIXED_LEN + lib1.len()) as f64 / n as f64
+        ),
+        median_ms(runs, || zstd::bulk::compress(&planes.body, 1)),
+    );
+    row("C zstd level 1 decompress", median_ms(runs, || compact_frame::decompress_c(&lib1, &params)));
     row("lz4_flex compress", median_ms(runs, || lz4_flex::compress(&planes.body)));
     // Other zstd levels: size, compression and (C) decompression time.
     for level in [-4, -1, 3] {

@@ -4,9 +4,11 @@
 //!
 //! The server knows each frame's radius model exactly ([`crate::radius::FrameRadius`]), so
 //! radius codes cost nothing in the compact form unless a depth rounds to the next code. The
-//! body is entropy coded with the C zstd library (level [`ZSTD_LEVEL`]): about 10× faster
-//! than ruzstd's pure-Rust encoder (core's default) at a better ratio; clients decode either
-//! with ruzstd (`docs/perf.md`, issue 16).
+//! body is entropy coded with the C zstd library (entropy level [`ZSTD_LEVEL`]) with the
+//! body's zero runs as its only matches (`volwarp_core::zero_runs`): about 10× faster than
+//! ruzstd's pure-Rust encoder (core's default) at a better ratio, and 2.7× faster than the
+//! library's own level 1; clients decode either with ruzstd or C zstd (`docs/perf.md`,
+//! issue 16).
 
 use crate::marcher::Marcher;
 use volwarp_core::compact_frame::{self, Coder, EncodeOptions, Encoding, RadiusPrediction};
@@ -25,7 +27,8 @@ pub fn encode_options(marcher: &Marcher, req: &CameraRequest) -> EncodeOptions {
     }
 }
 
-/// The compact message (header included) of `frame` with C zstd at `level`, or `None` if
+/// The compact message (header included) of `frame` with C zstd at `level` over the zero-run
+/// parse ([`compact_frame::compress_c`]), or `None` if
 /// the frame does not fit the compact form.
 pub fn encode_compact(frame: &Frame, opts: &EncodeOptions, level: i32) -> Option<Vec<u8>> {
     if !frame.segments.is_empty() {
@@ -37,7 +40,7 @@ pub fn encode_compact(frame: &Frame, opts: &EncodeOptions, level: i32) -> Option
     }
     let planes = compact_frame::build_planes(frame, opts).ok()?;
     let coded = match planes.params.coder {
-        Coder::Zstd => zstd::bulk::compress(&planes.body, level).ok()?,
+        Coder::Zstd => compact_frame::compress_c(&planes.body, level),
         Coder::Stored => planes.body,
     };
     let header = FrameHeader { count: frame.samples.len() as u32, ..frame.header };
