@@ -7,21 +7,27 @@
 //!
 //! What makes them fast, and why the result cannot differ:
 //!
-//! * **Neighbours from the mask.** Which MED neighbours exist is read from the coverage mask
-//!   (left: the previously visited pixel is `idx − 1` in the same row; up and upper-left: mask
-//!   bits `idx − w` and `idx − w − 1`), and their values from two row buffers, so no per-column
-//!   tags or saved cells are kept. The rule is the one of `docs/wire-format.md`; "left only" and
-//!   "no neighbour" both predict the previously visited pixel's values, and a full MED is
-//!   `clamp(a + b − c, min(a, b), max(a, b))` (the LOCO-I identity), computed without branches,
-//!   for the four color channels at once in the 16-bit lanes of a `u64`.
-//! * **Two passes.** The sequential part (prediction, which depends on the previous pixel) only
-//!   produces depth codes and colors; the geometry (ray direction with its square root, the
-//!   position along the ray, quantization, the radius model) runs afterwards as an independent
-//!   map over the samples, written branch-free so the compiler vectorizes it. Every float
-//!   operation is the reference's, in the reference's order (no fused multiply-add, `1/sqrt`
-//!   not an approximate reciprocal, divisions kept as divisions), so every bit is the same.
-//! * **Encoder.** One branch-free map projects every sample to its pixel and measures its depth
-//!   and `dir · forward` (kept for the radius model, so the square root is taken once). Anything
+//! * **Rows, not pixels.** The MED context is kept a row at a time. The encoder scatters a
+//!   row's samples into row buffers (depth codes, RGBA8 words, coverage), predicts every pixel
+//!   of the row at once with branch-free maps (colors byte by byte, which the compiler
+//!   vectorizes) and gathers the residuals back in sample order. The decoder, whose prediction
+//!   depends on the pixel just decoded, keeps the row above in one 64-bit cell per column
+//!   (color, depth code, coverage) and carries the left neighbour in registers. The rule is the
+//!   one of `docs/wire-format.md`; "left only" and "no neighbour" both predict the previously
+//!   visited pixel, which is the previous sample; the MED is computed in its select form or as
+//!   `max(min(a, b), min(max(a, b), a + b − c))` in 32-bit lanes, both exact.
+//! * **Passes.** The geometry (ray direction with its square root, the position along the
+//!   ray, quantization, the radius model) runs as independent maps over the samples. Every
+//!   float operation is the reference's, in the reference's order (no fused multiply-add,
+//!   `1/sqrt` not an approximate reciprocal, divisions kept as divisions), so every bit is the
+//!   same.
+//! * **AVX2 where the CPU has it** (x86-64 with std, detected at run time): the same passes
+//!   compiled for AVX2, and the hot ones written with intrinsics (`compact_fast/avx2.rs`):
+//!   projection, depth and radius codes, the residual gather and the decoder's sequential loop.
+//!   Elsewhere (no_std, other CPUs) the portable code runs; tests compare both with the
+//!   references.
+//! * **Encoder.** One map projects every sample to its pixel and measures its depth and
+//!   `dir · forward` (kept for the radius model, so the square root is taken once). Anything
 //!   unusual (a sample off its pixel, out of pixel order, a non-finite depth) hands the frame to
 //!   the reference encoder, which returns its exact error.
 
@@ -34,6 +40,9 @@ use crate::sample::{Dequantizer, Quantizer, POS_BITS, POS_MAX, RADIUS_MAX};
 use crate::wire::{Frame, FrameHeader, WireError};
 use alloc::vec;
 use alloc::vec::Vec;
+
+#[cfg(all(feature = "std", target_arch = "x86_64"))]
+mod avx2;
 
 /// The geometry of one frame as plain floats: the ray basis, the view direction and the
 /// quantizer.
@@ -96,163 +105,42 @@ fn dot(a: [f32; 3], b: [f32; 3]) -> f32 {
     a[0] * b[0] + a[1] * b[1] + a[2] * b[2]
 }
 
-/// MED of one channel with all three neighbours present.
-#[inline(always)]
-fn med3(a: i32, b: i32, c: i32) -> i32 {
-    (a + b - c).clamp(a.min(b), a.max(b))
-}
-
-// Colors are predicted four channels at once, one per 16-bit lane of a `u64` ("spread" form:
-// channel k in bits 16k..16k+8). Lanes never carry into each other: every intermediate value
-// stays below 2^15.
-const LANE_LOW: u64 = 0x00ff_00ff_00ff_00ff;
-const LANE_HIGH: u64 = 0x8000_8000_8000_8000;
-const LANE_BIAS: u64 = 0x0100_0100_0100_0100;
-
-/// RGBA8 to spread form.
-#[inline(always)]
-fn spread(c: u32) -> u64 {
-    let x = c as u64;
-    let x = (x | x << 16) & 0x0000_ffff_0000_ffff;
-    (x | x << 8) & LANE_LOW
-}
-
-/// Spread form (lanes < 256) back to RGBA8.
-#[inline(always)]
-fn unspread(x: u64) -> u32 {
-    let x = (x | x >> 8) & 0x0000_ffff_0000_ffff;
-    (x | x >> 16) as u32
-}
-
-/// All-ones in the lanes where `a ≥ b`.
-#[inline(always)]
-fn lanes_ge(a: u64, b: u64) -> u64 {
-    ((((a | LANE_HIGH) - b) & LANE_HIGH) >> 15) * 0xffff
-}
-
-/// Per-lane minimum and maximum.
-#[inline(always)]
-fn lanes_min_max(a: u64, b: u64) -> (u64, u64) {
-    let ge = lanes_ge(a, b);
-    let x = (a ^ b) & ge;
-    (a ^ x, b ^ x)
-}
-
-/// Per-lane MED with all three neighbours present: `clamp(a + b − c, min, max)`.
-#[inline(always)]
-fn med3_lanes(a: u64, b: u64, c: u64) -> u64 {
-    let (lo, hi) = lanes_min_max(a, b);
-    let x = a + b + LANE_BIAS - c;
-    let (y, _) = lanes_min_max(x, hi + LANE_BIAS);
-    let (_, z) = lanes_min_max(y, lo + LANE_BIAS);
-    z - LANE_BIAS
-}
-
-/// Per-lane `(a + b) >> 1`.
-#[inline(always)]
-fn avg_lanes(a: u64, b: u64) -> u64 {
-    ((a + b) >> 1) & LANE_LOW
-}
-
-/// Bit `j` of the coverage mask.
-#[inline(always)]
-fn bit(mask: &[u8], j: u64) -> bool {
-    (mask[(j >> 3) as usize] >> (j & 7)) & 1 != 0
-}
-
-/// The MED context of the covered pixels, visited in pixel order: the previous and the current
-/// row's depth codes and colors (valid where the mask has a bit), and the previously visited
-/// pixel.
-struct Rows {
-    w: u64,
-    prev_d: Vec<u16>,
-    cur_d: Vec<u16>,
-    prev_c: Vec<u64>,
-    cur_c: Vec<u64>,
-    last_d: u16,
-    last_c: u64,
-    last_idx: u64,
-    y: u64,
-    row_start: u64,
-}
-
-impl Rows {
-    fn new(w: u32) -> Rows {
-        Rows {
-            w: w as u64,
-            prev_d: vec![0; w as usize],
-            cur_d: vec![0; w as usize],
-            prev_c: vec![0; w as usize],
-            cur_c: vec![0; w as usize],
-            last_d: 0,
-            last_c: 0,
-            last_idx: u64::MAX,
-            y: 0,
-            row_start: 0,
-        }
-    }
-
-    /// Moves to the row of pixel `idx` (≥ every pixel visited before) and returns its column.
-    #[inline(always)]
-    fn seek(&mut self, idx: u64) -> u64 {
-        let mut x = idx - self.row_start;
-        if x >= self.w {
-            let dy = x / self.w;
-            self.y += dy;
-            self.row_start += dy * self.w;
-            x -= dy * self.w;
-            // The old current row becomes the previous one; when rows were skipped, the
-            // previous row is empty and its values are never read.
-            core::mem::swap(&mut self.prev_d, &mut self.cur_d);
-            core::mem::swap(&mut self.prev_c, &mut self.cur_c);
-        }
-        x
-    }
-
-    /// The predicted depth code and color (spread form) of pixel `idx` at column `x` of the
-    /// current row.
-    #[inline(always)]
-    fn predict(&self, mask: &[u8], idx: u64, x: u64) -> (u16, u64) {
-        let xs = x as usize;
-        let has_left = x > 0 && self.last_idx.wrapping_add(1) == idx;
-        let has_up = self.y > 0 && bit(mask, idx - self.w);
-        if has_up {
-            let (bd, bc) = (self.prev_d[xs], self.prev_c[xs]);
-            if has_left {
-                let (ad, ac) = (self.last_d, self.last_c);
-                if bit(mask, idx - self.w - 1) {
-                    let (cd, cc) = (self.prev_d[xs - 1], self.prev_c[xs - 1]);
-                    (med3(ad as i32, bd as i32, cd as i32) as u16, med3_lanes(ac, bc, cc))
-                } else {
-                    (((ad as u32 + bd as u32) >> 1) as u16, avg_lanes(ac, bc))
-                }
-            } else {
-                (bd, bc)
-            }
-        } else if !has_left && x > 0 && self.y > 0 && bit(mask, idx - self.w - 1) {
-            (self.prev_d[xs - 1], self.prev_c[xs - 1])
-        } else {
-            // Left only, or no neighbour at all: the previously visited pixel.
-            (self.last_d, self.last_c)
-        }
-    }
-
-    /// Records pixel `idx` (column `x`)'s true depth code and color (spread form).
-    #[inline(always)]
-    fn record(&mut self, idx: u64, x: u64, d: u16, c: u64) {
-        self.cur_d[x as usize] = d;
-        self.cur_c[x as usize] = c;
-        self.last_d = d;
-        self.last_c = c;
-        self.last_idx = idx;
-    }
-}
-
 // ---------------------------------------------------------------- decoding
 
 /// Rebuilds the frame from the header, the parameters and the decompressed body: the fast
 /// path of `compact_frame::decode_body_reference` (the same frame and the same errors).
 pub(crate) fn decode_body(header: &FrameHeader, params: &CompactParams, body: &[u8]) -> Result<Frame, WireError> {
+    #[cfg(all(feature = "std", target_arch = "x86_64"))]
+    if std::is_x86_feature_detected!("avx2") {
+        // SAFETY: the CPU has AVX2.
+        return unsafe { decode_body_avx2(header, params, body) };
+    }
+    decode_body_lanes::<false>(header, params, body)
+}
+
+/// [`decode_body`] with the portable code only.
+pub(crate) fn decode_body_portable(
+    header: &FrameHeader,
+    params: &CompactParams,
+    body: &[u8],
+) -> Result<Frame, WireError> {
+    decode_body_lanes::<false>(header, params, body)
+}
+
+/// [`decode_body_lanes`] compiled for AVX2 (the lane maps then run 8 floats wide).
+#[cfg(all(feature = "std", target_arch = "x86_64"))]
+#[target_feature(enable = "avx2")]
+fn decode_body_avx2(header: &FrameHeader, params: &CompactParams, body: &[u8]) -> Result<Frame, WireError> {
+    decode_body_lanes::<true>(header, params, body)
+}
+
+/// The body of [`decode_body`], inlined into each instruction-set variant.
+#[inline(always)]
+fn decode_body_lanes<const AVX2: bool>(
+    header: &FrameHeader,
+    params: &CompactParams,
+    body: &[u8],
+) -> Result<Frame, WireError> {
     // Pixel coordinates travel between the passes in 24 bits each (viewports that wide exist
     // only under custom limits; the reference decodes them).
     if header.camera.width >= 1 << 24 || header.camera.height >= 1 << 24 {
@@ -260,7 +148,7 @@ pub(crate) fn decode_body(header: &FrameHeader, params: &CompactParams, body: &[
     }
     let mut samples = Vec::new();
     let mut colors = Vec::new();
-    let (rlo, rhi) = decode_predicted(header, body, &mut samples, &mut colors)?;
+    let (rlo, rhi) = decode_predicted::<AVX2>(header, body, &mut samples, &mut colors)?;
     place(header, params, rlo, rhi, &mut samples);
     Ok(Frame { header: *header, samples, colors, segments: Vec::new() })
 }
@@ -268,8 +156,8 @@ pub(crate) fn decode_body(header: &FrameHeader, params: &CompactParams, body: &[
 /// The sequential part of decoding: checks the mask and the radius residuals, undoes the
 /// prediction into `colors` (final) and `samples` (each `depth code | x << 16 | y << 40`, for
 /// [`place`]), and returns the radius residual planes.
-#[inline(never)]
-fn decode_predicted<'a>(
+#[inline(always)]
+fn decode_predicted<'a, const AVX2: bool>(
     header: &FrameHeader,
     body: &'a [u8],
     samples: &mut Vec<u64>,
@@ -331,26 +219,103 @@ fn decode_predicted<'a>(
             bits &= bits - 1;
         }
     }
-    let mut rows = Rows::new(w);
-    let samples = &mut samples[..n];
-    for i in 0..n {
-        let idx = samples[i];
-        let x = rows.seek(idx);
-        let (pd, pc) = rows.predict(mask, idx, x);
-        let code = pd.wrapping_add(dlo[i] as u16 | (dhi[i] as u16) << 8);
-        let res = spread(u32::from_le_bytes([cr[i], cg[i], cb[i], ca[i]]));
-        let c = (pc + res) & LANE_LOW;
-        colors.push(unspread(c));
-        samples[i] = code as u64 | x << 16 | rows.y << 40;
-        rows.record(idx, x, code, c);
+    #[cfg(all(feature = "std", target_arch = "x86_64"))]
+    if AVX2 {
+        // SAFETY: only `decode_body_avx2` sets `AVX2`, on a CPU with AVX2.
+        unsafe { avx2::undo_prediction(w, &mut samples[..n], [dlo, dhi], [cr, cg, cb, ca], colors) };
+        return Ok((rlo, rhi));
     }
+    undo_prediction_by_row(w, &mut samples[..n], [dlo, dhi], [cr, cg, cb, ca], colors);
     Ok((rlo, rhi))
+}
+
+/// The sequential part of [`decode_predicted`], a row at a time: `samples` holds the covered
+/// pixels' indices in order and gets `code | x << 16 | y << 40`; `colors` gets the colors.
+///
+/// The row above is kept in buffers one column longer than the row (cell `x + 1` holds column
+/// `x`, cell 0 is never covered), so the upper-left neighbour needs no test for column 0. The
+/// left neighbour, when it exists, and "the previously visited pixel" are both the previous
+/// sample, whose values are carried in registers; the upper neighbours' values are read from
+/// the buffers. Each channel's MED is `max(min(a, b), min(max(a, b), a + (b − c)))` (exact: the
+/// channels are 8 bits and depth codes 16, computed in `i32`).
+#[inline(always)]
+fn undo_prediction_by_row(w: u32, samples: &mut [u64], d_res: [&[u8]; 2], c_res: [&[u8]; 4], colors: &mut Vec<u32>) {
+    let n = samples.len();
+    let [dlo, dhi] = d_res;
+    let [cr, cg, cb, ca] = c_res;
+    let (dlo, dhi, cr, cg, cb, ca) = (&dlo[..n], &dhi[..n], &cr[..n], &cg[..n], &cb[..n], &ca[..n]);
+    let (w64, wu) = (w as u64, w as usize);
+    let mut prev_d = vec![0u16; wu + 1];
+    let mut cur_d = vec![0u16; wu + 1];
+    let mut prev_c = vec![0u32; wu + 1];
+    let mut cur_c = vec![0u32; wu + 1];
+    let mut prev_m = vec![0u8; wu + 1];
+    let mut cur_m = vec![0u8; wu + 1];
+    // The previously visited pixel's depth code and channels.
+    let mut last_d = 0i32;
+    let mut last_c = [0i32; 4];
+    let mut last_y = u64::MAX;
+    let mut i0 = 0;
+    while i0 < n {
+        let y = samples[i0] / w64;
+        let row_start = y * w64;
+        let row_end = row_start + w64;
+        let mut i1 = i0 + 1;
+        while i1 < n && samples[i1] < row_end {
+            i1 += 1;
+        }
+        core::mem::swap(&mut prev_d, &mut cur_d);
+        core::mem::swap(&mut prev_c, &mut cur_c);
+        core::mem::swap(&mut prev_m, &mut cur_m);
+        if last_y.wrapping_add(1) != y {
+            prev_m.fill(0);
+        }
+        cur_m.fill(0);
+        // The previous sample's column in this row (none yet: a value no column follows).
+        let mut left = u64::MAX - 1;
+        for i in i0..i1 {
+            let x = samples[i] - row_start;
+            let xs = x as usize;
+            // Cells: x + 1 is this column, x the one to the left (0: outside the row).
+            let (hb, hc) = (prev_m[xs + 1] != 0, prev_m[xs] != 0);
+            let ha = left.wrapping_add(1) == x;
+            let (bd, cd) = (prev_d[xs + 1] as i32, prev_d[xs] as i32);
+            let (bc, cc) = (prev_c[xs + 1].to_le_bytes(), prev_c[xs].to_le_bytes());
+            let res_c = [cr[i], cg[i], cb[i], ca[i]];
+            let dres = dlo[i] as u16 | (dhi[i] as u16) << 8;
+            let (pd, pc) = if hb & ha & hc {
+                let med = |a: i32, b: i32, c: i32| a.min(b).max(a.max(b).min(a + b - c));
+                (med(last_d, bd, cd), core::array::from_fn(|k| med(last_c[k], bc[k] as i32, cc[k] as i32)))
+            } else if hb & ha {
+                ((last_d + bd) >> 1, core::array::from_fn(|k| (last_c[k] + bc[k] as i32) >> 1))
+            } else if hb {
+                (bd, bc.map(|v| v as i32))
+            } else if !ha & hc {
+                (cd, cc.map(|v| v as i32))
+            } else {
+                (last_d, last_c)
+            };
+            let code = (pd as u16).wrapping_add(dres);
+            let c: [u8; 4] = core::array::from_fn(|k| (pc[k] as u8).wrapping_add(res_c[k]));
+            let packed = u32::from_le_bytes(c);
+            colors.push(packed);
+            samples[i] = code as u64 | x << 16 | y << 40;
+            cur_d[xs + 1] = code;
+            cur_c[xs + 1] = packed;
+            cur_m[xs + 1] = 1;
+            last_d = code as i32;
+            last_c = c.map(|v| v as i32);
+            left = x;
+        }
+        last_y = y;
+        i0 = i1;
+    }
 }
 
 /// The geometric part of decoding, a map over the samples: each `code | x << 16 | y << 40`
 /// becomes the packed sample on pixel `(x, y)`'s ray at the code's depth, with the model's
 /// radius code plus the residual.
-#[inline(never)]
+#[inline(always)]
 fn place(header: &FrameHeader, params: &CompactParams, rlo: &[u8], rhi: &[u8], samples: &mut [u64]) {
     let geo = Geo::new(header);
     let mut s = samples.chunks_exact_mut(LANES);
@@ -463,7 +428,7 @@ impl Proj {
         &self,
         geo: &Geo,
         s: &[u64],
-        pix: &mut [u64],
+        pix: &mut [u32],
         depth: &mut [f32],
         dfwd: &mut [f32],
     ) -> bool {
@@ -500,7 +465,8 @@ impl Proj {
             let r = [rel[0][l], rel[1][l], rel[2][l]];
             let t = dot(r, d);
             ok &= inside[l] & t.is_finite();
-            pix[l] = yi[l] as u64 * self.columns + xi[l] as u64;
+            // Below 2^32: `build_planes` checks `w · h` first.
+            pix[l] = (yi[l] as u64 * self.columns + xi[l] as u64) as u32;
             depth[l] = t;
             dfwd[l] = dot(d, geo.forward);
         }
@@ -546,8 +512,30 @@ fn code_lanes<const L: usize>(
 
 /// Splits a frame into the compact form's mask and residual planes: the fast path of
 /// `compact_frame::build_planes_reference` (the same planes, or the reference's error).
-#[inline(never)]
 pub(crate) fn build_planes(frame: &Frame, opts: &EncodeOptions) -> Result<Planes, EncodeError> {
+    #[cfg(all(feature = "std", target_arch = "x86_64"))]
+    if std::is_x86_feature_detected!("avx2") {
+        // SAFETY: the CPU has AVX2.
+        return unsafe { build_planes_avx2(frame, opts) };
+    }
+    build_planes_lanes::<false>(frame, opts)
+}
+
+/// [`build_planes`] with the portable code only.
+pub(crate) fn build_planes_portable(frame: &Frame, opts: &EncodeOptions) -> Result<Planes, EncodeError> {
+    build_planes_lanes::<false>(frame, opts)
+}
+
+/// [`build_planes_lanes`] compiled for AVX2 (the lane maps then run 8 floats wide).
+#[cfg(all(feature = "std", target_arch = "x86_64"))]
+#[target_feature(enable = "avx2")]
+fn build_planes_avx2(frame: &Frame, opts: &EncodeOptions) -> Result<Planes, EncodeError> {
+    build_planes_lanes::<true>(frame, opts)
+}
+
+/// The body of [`build_planes`], inlined into each instruction-set variant.
+#[inline(always)]
+fn build_planes_lanes<const AVX2: bool>(frame: &Frame, opts: &EncodeOptions) -> Result<Planes, EncodeError> {
     let h = &frame.header;
     let cam = &h.camera;
     let n = frame.samples.len();
@@ -559,33 +547,47 @@ pub(crate) fn build_planes(frame: &Frame, opts: &EncodeOptions) -> Result<Planes
     {
         return Err(EncodeError::BadFrame);
     }
+    if cam.width as u64 * cam.height as u64 > 1 << 32 {
+        // Pixel indices travel in 32 bits here (such viewports exist only under custom
+        // limits; the reference encodes them).
+        return build_planes_reference(frame, opts);
+    }
     let w = cam.width;
     let geo = Geo::new(h);
     let deq = Dequantizer::new(h.bounds, h.radius_unit);
     let proj = Proj::new(cam, &deq);
     // Pass 1, a branch-free map: each sample's pixel, depth along that pixel's ray and
     // `dir · forward` (the reference's `Projector::pixel` and `RayBasis::dir`, op for op).
-    let mut pix = vec![0u64; n];
+    let mut pix = vec![0u32; n];
     let mut depth = vec![0f32; n];
     let mut dfwd = vec![0f32; n];
-    let mut ok = true;
-    let mut s = frame.samples.chunks_exact(LANES);
-    let mut px = pix.chunks_exact_mut(LANES);
-    let mut t = depth.chunks_exact_mut(LANES);
-    let mut f = dfwd.chunks_exact_mut(LANES);
-    for (((s, px), t), f) in (&mut s).zip(&mut px).zip(&mut t).zip(&mut f) {
-        ok &= proj.project_lanes::<LANES>(&geo, s, px, t, f);
+    let mut range = None;
+    #[cfg(all(feature = "std", target_arch = "x86_64"))]
+    if AVX2 {
+        // SAFETY: only `build_planes_avx2` sets `AVX2`, on a CPU with AVX2.
+        range = unsafe { avx2::project(&proj, &geo, &frame.samples, &mut pix, &mut depth, &mut dfwd) };
     }
-    let (s, px, t, f) = (s.remainder(), px.into_remainder(), t.into_remainder(), f.into_remainder());
-    for k in 0..s.len() {
-        ok &= proj.project_lanes::<1>(&geo, &s[k..], &mut px[k..], &mut t[k..], &mut f[k..]);
+    if !AVX2 {
+        let mut ok = true;
+        let mut s = frame.samples.chunks_exact(LANES);
+        let mut px = pix.chunks_exact_mut(LANES);
+        let mut t = depth.chunks_exact_mut(LANES);
+        let mut f = dfwd.chunks_exact_mut(LANES);
+        for (((s, px), t), f) in (&mut s).zip(&mut px).zip(&mut t).zip(&mut f) {
+            ok &= proj.project_lanes::<LANES>(&geo, s, px, t, f);
+        }
+        let (s, px, t, f) = (s.remainder(), px.into_remainder(), t.into_remainder(), f.into_remainder());
+        for k in 0..s.len() {
+            ok &= proj.project_lanes::<1>(&geo, &s[k..], &mut px[k..], &mut t[k..], &mut f[k..]);
+        }
+        // Strictly increasing pixels (one sample per pixel, in pixel order).
+        ok &= pix.windows(2).all(|p| p[0] < p[1]);
+        range =
+            ok.then(|| depth.iter().fold((f32::INFINITY, f32::NEG_INFINITY), |(lo, hi), &t| (lo.min(t), hi.max(t))));
     }
-    // Strictly increasing pixels (one sample per pixel, in pixel order).
-    ok &= pix.windows(2).all(|p| p[0] < p[1]);
-    if !ok {
+    let Some(range) = range else {
         return build_planes_reference(frame, opts);
-    }
-    let range = depth.iter().fold((f32::INFINITY, f32::NEG_INFINITY), |(lo, hi), &t| (lo.min(t), hi.max(t)));
+    };
     let (params, mlen, raw_len) = frame_params(frame, opts, range)?;
     // Pass 2, a map: depth codes and radius residuals (neither depends on a neighbour).
     let mut codes = vec![0u16; n];
@@ -598,7 +600,12 @@ pub(crate) fn build_planes(frame: &Frame, opts: &EncodeOptions) -> Result<Planes
     let (cr, rest) = rest.split_at_mut(n);
     let (cg, rest) = rest.split_at_mut(n);
     let (cb, ca) = rest.split_at_mut(n);
-    {
+    #[cfg(all(feature = "std", target_arch = "x86_64"))]
+    if AVX2 {
+        // SAFETY: only `build_planes_avx2` sets `AVX2`, on a CPU with AVX2.
+        unsafe { avx2::code(&geo, &params, &frame.samples, &depth, &dfwd, &mut codes, rlo, rhi) };
+    }
+    if !AVX2 {
         let mut it = frame
             .samples
             .chunks_exact(LANES)
@@ -615,27 +622,203 @@ pub(crate) fn build_planes(frame: &Frame, opts: &EncodeOptions) -> Result<Planes
             code_lanes::<1>(&geo, &params, &frame.samples[i..], &depth[i..], &dfwd[i..], &mut codes[i..], lo, hi);
         }
     }
-    for &idx in &pix {
-        mask[(idx >> 3) as usize] |= 1 << (idx & 7);
-    }
-    // Pass 3, sequential: the MED residuals of depth codes and colors.
-    let mut rows = Rows::new(w);
-    for i in 0..n {
-        let idx = pix[i];
-        let x = rows.seek(idx);
-        let (pd, pc) = rows.predict(mask, idx, x);
-        let dres = codes[i].wrapping_sub(pd);
-        dlo[i] = dres as u8;
-        dhi[i] = (dres >> 8) as u8;
-        let c = spread(frame.colors[i]);
-        let r = unspread((c + LANE_BIAS - pc) & LANE_LOW).to_le_bytes();
-        cr[i] = r[0];
-        cg[i] = r[1];
-        cb[i] = r[2];
-        ca[i] = r[3];
-        rows.record(idx, x, codes[i], c);
-    }
+    // Pass 3, row by row: the MED residuals of depth codes and colors.
+    residuals_by_row::<AVX2>(w, &pix, &codes, &frame.colors, mask, [dlo, dhi], [cr, cg, cb, ca]);
     Ok(Planes { params, body })
+}
+
+/// One image row of the encoder's MED context: depth codes, colors (RGBA8) and coverage
+/// (`0x0101_0101` where the pixel has a sample, one 1 per channel byte; other cells hold stale
+/// values that are never used).
+struct RowPlanes {
+    d: Vec<u16>,
+    c: Vec<u32>,
+    m: Vec<u32>,
+}
+
+impl RowPlanes {
+    fn new(w: usize) -> RowPlanes {
+        // One depth cell more than the row: the AVX2 gather of a 16-bit cell reads two.
+        RowPlanes { d: vec![0; w + 1], c: vec![0; w], m: vec![0; w] }
+    }
+}
+
+/// Coverage of a pixel in [`RowPlanes::m`].
+const COVERED4: u32 = 0x0101_0101;
+
+/// LOCO-I's MED of one value with all three neighbours present, in the select form that is
+/// exact in wrapping arithmetic (`a + b − c` lies between `a` and `b` when it is chosen).
+macro_rules! med_select {
+    ($a:expr, $b:expr, $c:expr) => {{
+        let (a, b, c) = ($a, $b, $c);
+        let (mn, mx) = (a.min(b), a.max(b));
+        if c >= mx {
+            mn
+        } else if c <= mn {
+            mx
+        } else {
+            a.wrapping_add(b).wrapping_sub(c)
+        }
+    }};
+}
+
+/// One prediction plane of [`predict_row`]: `out[j]` from the left (`a`, `cur[j − s]`), upper
+/// (`b`, `prev[j]`) and upper-left (`c`, `prev[j − s]`) cells, whose coverage is in `cm` /
+/// `pm` at the same indices, for `j ≥ s` (`s` cells per pixel).
+macro_rules! predict_plane {
+    ($out:expr, $cur:expr, $prev:expr, $cm:expr, $pm:expr, $s:expr) => {{
+        let (s, len) = ($s, $out.len());
+        let (a, b, c) = (&$cur[..len - s], &$prev[s..], &$prev[..len - s]);
+        let (ha, hb, hc) = (&$cm[..len - s], &$pm[s..], &$pm[..len - s]);
+        let it = $out[s..].iter_mut().zip(a).zip(b).zip(c).zip(ha).zip(hb).zip(hc);
+        for ((((((o, &a), &b), &c), &ha), &hb), &hc) in it {
+            let med = med_select!(a, b, c);
+            let avg = (a >> 1) + (b >> 1) + (a & b & 1);
+            let both = if hc != 0 { med } else { avg };
+            let up = if ha != 0 { both } else { b };
+            *o = if hb != 0 { up } else { c };
+        }
+    }};
+}
+
+/// The prediction of every pixel of a row whose true values are known (`cur`, the encoder's
+/// case) from that row and the one above (`prev`, coverage 0 where that row is empty or does
+/// not exist): `out` gets the predicted depth code and color, and `out.m[x]` is non-zero where
+/// the rule predicts the previously visited pixel (left only, or no neighbour), which the
+/// caller takes from the previous sample. Branch-free maps over the row (colors byte by byte),
+/// which the compiler vectorizes.
+#[inline(always)]
+fn predict_row(prev: &RowPlanes, cur: &RowPlanes, out: &mut RowPlanes) {
+    let w = out.m.len();
+    if w == 0 {
+        return;
+    }
+    // Column 0: no left or upper-left neighbour.
+    out.m[0] = if prev.m[0] == 0 { COVERED4 } else { 0 };
+    out.d[0] = prev.d[0];
+    out.c[0] = prev.c[0];
+    let it = out.m[1..].iter_mut().zip(&cur.m[..w - 1]).zip(&prev.m[1..]).zip(&prev.m[..w - 1]);
+    for (((o, &ha), &hb), &hc) in it {
+        *o = if (hb == 0) & ((ha != 0) | (hc == 0)) { COVERED4 } else { 0 };
+    }
+    predict_plane!(out.d, cur.d, prev.d, cur.m, prev.m, 1);
+    let (cm, pm): (&[u8], &[u8]) = (bytemuck::cast_slice(&cur.m), bytemuck::cast_slice(&prev.m));
+    let (cc, pc): (&[u8], &[u8]) = (bytemuck::cast_slice(&cur.c), bytemuck::cast_slice(&prev.c));
+    let oc: &mut [u8] = bytemuck::cast_slice_mut(out.c.as_mut_slice());
+    predict_plane!(oc, cc, pc, cm, pm, 4);
+    // Column 0's color was set above (bytes 0..4 are not written by the plane).
+}
+
+/// Per-byte `a − b` (mod 256) of two RGBA8 words.
+#[inline(always)]
+fn sub_bytes(a: u32, b: u32) -> u32 {
+    const H: u32 = 0x8080_8080;
+    ((a | H).wrapping_sub(b & !H)) ^ ((a ^ !b) & H)
+}
+
+/// Pass 3 of [`build_planes`]: the MED residuals of depth codes and colors, a row at a time.
+/// The samples of a row are scattered into row buffers, every pixel's prediction is computed
+/// as maps over the row ([`predict_row`]), and the residuals are gathered back in sample order.
+/// "The previously visited pixel" of the rule is the previous sample.
+#[inline(always)]
+fn residuals_by_row<const AVX2: bool>(
+    w: u32,
+    pix: &[u32],
+    codes: &[u16],
+    colors: &[u32],
+    mask: &mut [u8],
+    d_out: [&mut [u8]; 2],
+    c_out: [&mut [u8]; 4],
+) {
+    let n = pix.len();
+    let (codes, colors) = (&codes[..n], &colors[..n]);
+    let [dlo, dhi] = d_out;
+    let [cr, cg, cb, ca] = c_out;
+    let (dlo, dhi, cr, cg, cb, ca) =
+        (&mut dlo[..n], &mut dhi[..n], &mut cr[..n], &mut cg[..n], &mut cb[..n], &mut ca[..n]);
+    let (w64, wu) = (w as u64, w as usize);
+    let mut prev = RowPlanes::new(wu);
+    let mut cur = RowPlanes::new(wu);
+    let mut pred = RowPlanes::new(wu);
+    let mut last_y = u64::MAX;
+    let mut i0 = 0;
+    while i0 < n {
+        let y = pix[i0] as u64 / w64;
+        let row_start = y * w64;
+        let row_end = row_start + w64;
+        let mut i1 = i0 + 1;
+        while i1 < n && (pix[i1] as u64) < row_end {
+            i1 += 1;
+        }
+        core::mem::swap(&mut prev, &mut cur);
+        if last_y.wrapping_add(1) != y {
+            // The row above has no samples (or this is the first row).
+            prev.m.fill(0);
+        }
+        cur.m.fill(0);
+        for i in i0..i1 {
+            let x = (pix[i] as u64 - row_start) as usize;
+            cur.d[x] = codes[i];
+            cur.c[x] = colors[i];
+            cur.m[x] = COVERED4;
+        }
+        // The row's coverage bits: whole bytes from the row's flags where rows start on a
+        // byte, else bit by bit.
+        if wu % 8 == 0 {
+            let bytes = &mut mask[(row_start / 8) as usize..][..wu / 8];
+            for (b, f) in bytes.iter_mut().zip(cur.m.chunks_exact(8)) {
+                *b = f.iter().enumerate().fold(0, |acc, (k, &m)| acc | ((m & 1) as u8) << k);
+            }
+        } else {
+            for &p in &pix[i0..i1] {
+                mask[(p >> 3) as usize] |= 1 << (p & 7);
+            }
+        }
+        predict_row(&prev, &cur, &mut pred);
+        // The samples the AVX2 gather leaves (all of them without it).
+        #[cfg(all(feature = "std", target_arch = "x86_64"))]
+        let first = if AVX2 && i0 >= 1 {
+            // SAFETY: only `build_planes_avx2` sets `AVX2`, on a CPU with AVX2.
+            unsafe {
+                avx2::gather_row(
+                    pix,
+                    row_start as u32,
+                    i0..i1,
+                    codes,
+                    colors,
+                    (&pred.d, &pred.c, &pred.m),
+                    [&mut *dlo, &mut *dhi],
+                    [&mut *cr, &mut *cg, &mut *cb, &mut *ca],
+                )
+            }
+        } else {
+            i0
+        };
+        #[cfg(not(all(feature = "std", target_arch = "x86_64")))]
+        let first = i0;
+        for i in first..i1 {
+            let x = (pix[i] as u64 - row_start) as usize;
+            let (pd, pc) = if pred.m[x] != 0 {
+                // The previous sample (none before the first: zeros).
+                match i.checked_sub(1) {
+                    Some(j) => (codes[j], colors[j]),
+                    None => (0, 0),
+                }
+            } else {
+                (pred.d[x], pred.c[x])
+            };
+            let dres = codes[i].wrapping_sub(pd);
+            dlo[i] = dres as u8;
+            dhi[i] = (dres >> 8) as u8;
+            let r = sub_bytes(colors[i], pc).to_le_bytes();
+            cr[i] = r[0];
+            cg[i] = r[1];
+            cb[i] = r[2];
+            ca[i] = r[3];
+        }
+        last_y = y;
+        i0 = i1;
+    }
 }
 
 #[cfg(test)]

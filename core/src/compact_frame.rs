@@ -580,6 +580,14 @@ mod codec {
         crate::compact_fast::build_planes(frame, opts)
     }
 
+    /// [`build_planes`] without the CPU-specific kernels: the portable code that runs where
+    /// AVX2 is missing (and without std), callable everywhere so tests compare it with the
+    /// reference too.
+    #[doc(hidden)]
+    pub fn build_planes_portable(frame: &Frame, opts: &EncodeOptions) -> Result<Planes, EncodeError> {
+        crate::compact_fast::build_planes_portable(frame, opts)
+    }
+
     /// The parameters of a frame's planes from the depth range `(t_lo, t_hi)` of its samples
     /// (ignored for an empty frame), with the mask's and the whole body's length in bytes. One
     /// definition for the reference and the fast encoder (`compact_fast`), so both write the same
@@ -898,6 +906,12 @@ mod codec {
     /// [`decode_body_reference`].
     pub fn decode_body(header: &FrameHeader, params: &CompactParams, body: &[u8]) -> Result<Frame, WireError> {
         crate::compact_fast::decode_body(header, params, body)
+    }
+
+    /// [`decode_body`] without the CPU-specific kernels (see [`build_planes_portable`]).
+    #[doc(hidden)]
+    pub fn decode_body_portable(header: &FrameHeader, params: &CompactParams, body: &[u8]) -> Result<Frame, WireError> {
+        crate::compact_fast::decode_body_portable(header, params, body)
     }
 
     /// The simple scalar form of [`decode_body`], one sample at a time (the oracle the fast

@@ -101,7 +101,8 @@ pub fn compress(body: &[u8], level: i32) -> Option<Vec<u8>> {
         if cctx.is_null() {
             return None;
         }
-        let mut ok = zstd_sys::ZSTD_isError(zstd_sys::ZSTD_CCtx_setParameter(cctx, P::ZSTD_c_compressionLevel, level)) == 0;
+        let mut ok =
+            zstd_sys::ZSTD_isError(zstd_sys::ZSTD_CCtx_setParameter(cctx, P::ZSTD_c_compressionLevel, level)) == 0;
         ok &= zstd_sys::ZSTD_isError(zstd_sys::ZSTD_CCtx_setParameter(cctx, P::ZSTD_c_minMatch, 3)) == 0;
         // ZSTD_c_validateSequences (an experimental parameter, not named by the bindings).
         ok &= zstd_sys::ZSTD_isError(zstd_sys::ZSTD_CCtx_setParameter(cctx, P::ZSTD_c_experimentalParam12, 1)) == 0;

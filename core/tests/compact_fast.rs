@@ -6,8 +6,8 @@
 use proptest::prelude::*;
 use volwarp_core::camera::Camera;
 use volwarp_core::compact_frame::{
-    build_planes, build_planes_reference, decode_body, decode_body_reference, CompactParams, EncodeError,
-    EncodeOptions, RadiusPrediction,
+    build_planes, build_planes_portable, build_planes_reference, decode_body, decode_body_portable,
+    decode_body_reference, CompactParams, EncodeError, EncodeOptions, RadiusPrediction,
 };
 use volwarp_core::heuristics::Heuristic;
 use volwarp_core::sample::{self, Bounds, Quantizer};
@@ -102,11 +102,14 @@ fn check_frame(frame: &Frame, opts: &EncodeOptions) -> bool {
     let fast = build_planes(frame, opts);
     let slow = build_planes_reference(frame, opts);
     assert_eq!(fast, slow, "encoders differ");
+    // The portable code too (on an AVX2 machine the fast path above is the AVX2 one).
+    assert_eq!(build_planes_portable(frame, opts), slow, "portable encoder differs");
     if let Ok(p) = fast {
         let h = FrameHeader { count: frame.samples.len() as u32, ..frame.header };
         let a = decode_body(&h, &p.params, &p.body).expect("the fast decoder refused a body");
         let b = decode_body_reference(&h, &p.params, &p.body).expect("the reference refused a body");
         assert!(a == b, "decoders differ");
+        assert!(decode_body_portable(&h, &p.params, &p.body).as_ref() == Ok(&b), "portable decoder differs");
         assert_eq!(a.colors, frame.colors);
         return true;
     }
@@ -159,6 +162,13 @@ fn fast_encoder_gives_the_reference_error_for_frames_off_the_rules() {
         assert_eq!(fast, build_planes_reference(f, &opts), "{name}");
     }
     assert!(matches!(build_planes(&swapped, &opts), Err(EncodeError::NotPixelAligned { .. })));
+    // Out of order at every position within and across the AVX2 encoder's chunks of eight.
+    for k in 0..17 {
+        let mut f = frame.clone();
+        f.samples.swap(k, k + 1);
+        assert_eq!(build_planes(&f, &opts), build_planes_reference(&f, &opts), "swap at {k}");
+        assert!(build_planes(&f, &opts).is_err() && build_planes_portable(&f, &opts).is_err(), "swap at {k}");
+    }
     assert_eq!(build_planes(&short, &opts), Err(EncodeError::BadFrame));
 }
 
@@ -216,6 +226,7 @@ fn fast_decoder_equals_the_reference_on_random_bodies() {
         let a = decode_body(&header, &params, &body);
         let b = decode_body_reference(&header, &params, &body);
         assert!(a == b, "case {case} ({w}x{h}): {:?} against {:?}", a.as_ref().err(), b.as_ref().err());
+        assert!(decode_body_portable(&header, &params, &body) == b, "case {case}: portable decoder differs");
     }
 }
 

@@ -80,8 +80,14 @@ fn main() {
     let row = |name: &str, ms: f64| println!("  {name:<52} {ms:8.2} ms  {:7.1} M samples/s", ms_per(ms));
     row("planes (build_planes, fast)", median_ms(runs, || compact_frame::build_planes(&frame, &opts)));
     row("planes (build_planes_reference)", median_ms(runs, || compact_frame::build_planes_reference(&frame, &opts)));
-    row("zero-run parse (zero_run_sequences)", median_ms(runs, || volwarp_core::zero_runs::zero_run_sequences(&planes.body)));
-    row("C zstd, zero-run parse, compress (the server's)", median_ms(runs, || compact_frame::compress_c(&planes.body, ZSTD_LEVEL)));
+    row(
+        "zero-run parse (zero_run_sequences)",
+        median_ms(runs, || volwarp_core::zero_runs::zero_run_sequences(&planes.body)),
+    );
+    row(
+        "C zstd, zero-run parse, compress (the server's)",
+        median_ms(runs, || compact_frame::compress_c(&planes.body, ZSTD_LEVEL)),
+    );
     let lib1 = zstd::bulk::compress(&planes.body, 1).expect("zstd");
     row(
         &format!(
