@@ -149,7 +149,7 @@ fn decode_body_lanes<const AVX2: bool>(
     let mut samples = Vec::new();
     let mut colors = Vec::new();
     let (rlo, rhi) = decode_predicted::<AVX2>(header, body, &mut samples, &mut colors)?;
-    place(header, params, rlo, rhi, &mut samples);
+    place::<AVX2>(header, params, rlo, rhi, &mut samples);
     Ok(Frame { header: *header, samples, colors, segments: Vec::new() })
 }
 
@@ -316,8 +316,14 @@ fn undo_prediction_by_row(w: u32, samples: &mut [u64], d_res: [&[u8]; 2], c_res:
 /// becomes the packed sample on pixel `(x, y)`'s ray at the code's depth, with the model's
 /// radius code plus the residual.
 #[inline(always)]
-fn place(header: &FrameHeader, params: &CompactParams, rlo: &[u8], rhi: &[u8], samples: &mut [u64]) {
+fn place<const AVX2: bool>(header: &FrameHeader, params: &CompactParams, rlo: &[u8], rhi: &[u8], samples: &mut [u64]) {
     let geo = Geo::new(header);
+    #[cfg(all(feature = "std", target_arch = "x86_64"))]
+    if AVX2 {
+        // SAFETY: only `decode_body_avx2` sets `AVX2`, on a CPU with AVX2.
+        unsafe { avx2::place(&geo, params, rlo, rhi, samples) };
+        return;
+    }
     let mut s = samples.chunks_exact_mut(LANES);
     let mut lo = rlo.chunks_exact(LANES);
     let mut hi = rhi.chunks_exact(LANES);

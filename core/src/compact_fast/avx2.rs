@@ -15,7 +15,8 @@ use core::arch::x86_64::*;
 /// SSE register (AVX2 machines have SSE4.1's 32-bit `min`/`max`), the depth code beside them in
 /// a general register: the chain from one sample to the next is a few instructions long. Pixels
 /// with all three neighbours (99.7 % of the MRI bench frame's) take the MED path; the others
-/// take the generic one.
+/// take the generic one. Each sample becomes `x | (code & 0xff) << 24 | (y | (code >> 8) << 24)
+/// << 32` for [`place`] (not the portable code's layout).
 #[target_feature(enable = "avx2")]
 pub(super) fn undo_prediction(
     w: u32,
@@ -100,7 +101,9 @@ pub(super) fn undo_prediction(
             let c = _mm_and_si128(_mm_add_epi32(pc, res), low_byte);
             let packed = _mm_cvtsi128_si32(_mm_shuffle_epi8(c, gather_low)) as u32;
             *col = packed;
-            *s = code as u64 | x << 16 | y << 40;
+            // The layout [`place`] reads: x and the code's low byte in the low half, y and
+            // its high byte in the high half.
+            *s = (x | (code as u64 & 0xff) << 24) | (y | (code as u64 >> 8) << 24) << 32;
             cur[xs + 1] = packed as u64 | (code as u64) << 32 | COVERED;
             last_d = code as i32;
             last_c = c;
@@ -389,4 +392,97 @@ pub(super) fn gather_row(
         i += 8;
     }
     i
+}
+
+/// The high 32 bits of eight `u64` lanes (`a` then `b`), in order.
+#[inline]
+#[target_feature(enable = "avx2")]
+fn high_dwords(a: __m256i, b: __m256i) -> __m256i {
+    let sh = _mm256_shuffle_ps::<0xDD>(_mm256_castsi256_ps(a), _mm256_castsi256_ps(b));
+    _mm256_castpd_si256(_mm256_permute4x64_pd::<0xD8>(_mm256_castps_pd(sh)))
+}
+
+/// `place` of the parent module (`place_lanes`) eight samples at a time, on the layout
+/// [`undo_prediction`] writes: each sample becomes the packed sample on pixel `(x, y)`'s ray
+/// at the code's depth, with the model's radius code plus the residual. `rlo` and `rhi` are as
+/// long as `samples`.
+#[target_feature(enable = "avx2")]
+pub(super) fn place(geo: &Geo, params: &CompactParams, rlo: &[u8], rhi: &[u8], samples: &mut [u64]) {
+    let n = samples.len();
+    let (rlo, rhi) = (&rlo[..n], &rhi[..n]);
+    let (corner, du, dv, eye, fwd) =
+        (splat3(geo.corner), splat3(geo.du), splat3(geo.dv), splat3(geo.eye), splat3(geo.forward));
+    let (qmin, qscale) = (splat3(geo.qmin), splat3(geo.qscale));
+    let (dmin, dstep) = (_mm256_set1_ps(params.depth_min), _mm256_set1_ps(params.depth_step));
+    let (rc, rk) = (_mm256_set1_ps(params.radius.constant), _mm256_set1_ps(params.radius.per_depth));
+    let unit = _mm256_set1_ps(geo.radius_unit);
+    let (zero, half, one) = (_mm256_setzero_ps(), _mm256_set1_ps(0.5), _mm256_set1_ps(1.0));
+    let (pos_max, radius_max) = (_mm256_set1_ps(POS_MAX as f32), _mm256_set1_ps(RADIUS_MAX as f32));
+    let (low24, rmask) = (_mm256_set1_epi32(0xff_ffff), _mm256_set1_epi32(RADIUS_MAX as i32));
+    let chunks = n / 8;
+    for c in 0..chunks {
+        let k = 8 * c;
+        // SAFETY (of the loads and stores): `k + 8 ≤ n` and every slice is `n` long.
+        let (a, b, lo8, hi8) = unsafe {
+            (
+                _mm256_loadu_si256(samples.as_ptr().add(k).cast()),
+                _mm256_loadu_si256(samples.as_ptr().add(k + 4).cast()),
+                _mm256_cvtepu8_epi32(_mm_loadl_epi64(rlo.as_ptr().add(k).cast())),
+                _mm256_cvtepu8_epi32(_mm_loadl_epi64(rhi.as_ptr().add(k).cast())),
+            )
+        };
+        let (l, h) = (low_dwords(a, b), high_dwords(a, b));
+        let code = _mm256_or_si256(_mm256_srli_epi32::<24>(l), _mm256_slli_epi32::<8>(_mm256_srli_epi32::<24>(h)));
+        let px = _mm256_add_ps(_mm256_cvtepi32_ps(_mm256_and_si256(l, low24)), half);
+        let py = _mm256_add_ps(_mm256_cvtepi32_ps(_mm256_and_si256(h, low24)), half);
+        let dd: [__m256; 3] = core::array::from_fn(|i| {
+            _mm256_add_ps(_mm256_add_ps(corner[i], _mm256_mul_ps(du[i], px)), _mm256_mul_ps(dv[i], py))
+        });
+        let inv = _mm256_div_ps(one, _mm256_sqrt_ps(dot(dd, dd)));
+        let d = [_mm256_mul_ps(dd[0], inv), _mm256_mul_ps(dd[1], inv), _mm256_mul_ps(dd[2], inv)];
+        let t = _mm256_add_ps(dmin, _mm256_mul_ps(_mm256_cvtepi32_ps(code), dstep));
+        let q: [__m256i; 3] = core::array::from_fn(|i| {
+            let p = _mm256_add_ps(eye[i], _mm256_mul_ps(d[i], t));
+            let f = _mm256_add_ps(_mm256_mul_ps(_mm256_sub_ps(p, qmin[i]), qscale[i]), half);
+            // `max` with 0 second: NaN goes to 0 as in the reference.
+            _mm256_cvttps_epi32(_mm256_min_ps(_mm256_max_ps(f, zero), pos_max))
+        });
+        let r = _mm256_add_ps(rc, _mm256_mul_ps(rk, _mm256_mul_ps(t, dot(d, fwd))));
+        let x = _mm256_add_ps(_mm256_div_ps(r, unit), half);
+        let rf = _mm256_and_ps(_mm256_cmp_ps::<_CMP_GT_OQ>(r, zero), _mm256_min_ps(_mm256_max_ps(x, one), radius_max));
+        let res = _mm256_or_si256(lo8, _mm256_slli_epi32::<8>(hi8));
+        let rcode = _mm256_and_si256(_mm256_add_epi32(_mm256_cvttps_epi32(rf), res), rmask);
+        let pack = |half: fn(__m256i) -> __m128i| {
+            let w = |v: __m256i| _mm256_cvtepu32_epi64(half(v));
+            _mm256_or_si256(
+                _mm256_or_si256(w(q[0]), _mm256_slli_epi64::<18>(w(q[1]))),
+                _mm256_or_si256(_mm256_slli_epi64::<36>(w(q[2])), _mm256_slli_epi64::<54>(w(rcode))),
+            )
+        };
+        let (first, second) = (pack(low_half), pack(high_half));
+        // SAFETY: as for the loads.
+        unsafe {
+            _mm256_storeu_si256(samples.as_mut_ptr().add(k).cast(), first);
+            _mm256_storeu_si256(samples.as_mut_ptr().add(k + 4).cast(), second);
+        }
+    }
+    for i in 8 * chunks..n {
+        // Back to the portable layout for the portable code.
+        let v = samples[i];
+        let code = (v >> 24) & 0xff | (v >> 56) << 8;
+        samples[i] = code | (v & 0xff_ffff) << 16 | ((v >> 32) & 0xff_ffff) << 40;
+        super::place_lanes::<1>(geo, params, &rlo[i..], &rhi[i..], &mut samples[i..]);
+    }
+}
+
+#[inline]
+#[target_feature(enable = "avx2")]
+fn low_half(v: __m256i) -> __m128i {
+    _mm256_castsi256_si128(v)
+}
+
+#[inline]
+#[target_feature(enable = "avx2")]
+fn high_half(v: __m256i) -> __m128i {
+    _mm256_extracti128_si256::<1>(v)
 }
