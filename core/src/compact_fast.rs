@@ -208,6 +208,12 @@ fn decode_predicted<'a, const AVX2: bool>(
     samples.reserve_exact(n);
     colors.clear();
     colors.reserve_exact(n);
+    #[cfg(all(feature = "std", target_arch = "x86_64"))]
+    if AVX2 {
+        // SAFETY: only `decode_body_avx2` sets `AVX2`, on a CPU with AVX2.
+        unsafe { avx2::undo_prediction(w, mask, n, samples, [dlo, dhi], [cr, cg, cb, ca], colors) };
+        return Ok((rlo, rhi));
+    }
     // The covered pixels' indices first, so the loop below runs over `0..n` with every plane
     // `n` long and no bounds to check.
     for (wi, chunk) in mask.chunks(8).enumerate() {
@@ -218,12 +224,6 @@ fn decode_predicted<'a, const AVX2: bool>(
             samples.push(wi as u64 * 64 + bits.trailing_zeros() as u64);
             bits &= bits - 1;
         }
-    }
-    #[cfg(all(feature = "std", target_arch = "x86_64"))]
-    if AVX2 {
-        // SAFETY: only `decode_body_avx2` sets `AVX2`, on a CPU with AVX2.
-        unsafe { avx2::undo_prediction(w, &mut samples[..n], [dlo, dhi], [cr, cg, cb, ca], colors) };
-        return Ok((rlo, rhi));
     }
     undo_prediction_by_row(w, &mut samples[..n], [dlo, dhi], [cr, cg, cb, ca], colors);
     Ok((rlo, rhi))

@@ -220,7 +220,8 @@ pub(crate) fn depth_of(params: &CompactParams, code: u32) -> f32 {
 
 /// The most bytes one `wire::read_message` may allocate under `limits` when the message is a
 /// CompactFrame: the payload, the decompressed body (mask and 8 bytes per sample), the
-/// frame's 12 bytes per sample, two rows of predictor state (20 bytes per column), and
+/// frame's 12 bytes per sample, two rows of predictor state (at most 64 bytes per column: the
+/// AVX2 decoder's 32-byte cells, one column more than the row), and
 /// ruzstd's buffers (a window of at most max(body, [`MIN_ZSTD_WINDOW`]), one [`DECODE_STEP`],
 /// one 128 KiB block and its tables; with the feature `zstd-c` the C library instead holds a
 /// fixed ~160 KiB context, outside Rust's allocator). The fuzz targets check every decode
@@ -232,7 +233,7 @@ pub fn decode_alloc_bound(limits: &Limits) -> u64 {
     limits.max_payload as u64
         + body
         + 12 * samples
-        + 24 * vp
+        + 64 * (vp + 1)
         + body.max(MIN_ZSTD_WINDOW)
         + DECODE_STEP as u64
         + (256 << 10)
@@ -789,7 +790,7 @@ mod codec {
     /// Decodes a CompactFrame payload (the bytes after the 12-byte message header) into an
     /// ordinary frame. Allocates at most the payload's decompressed length (`⌈w·h/8⌉ + 8·count`,
     /// both bounded by the validated header and `limits`), the 12 bytes per sample of the result,
-    /// and two rows of predictor state (`20 · width` bytes).
+    /// and two rows of predictor state (at most `64 · (width + 1)` bytes).
     pub fn decode_payload(payload: &[u8], limits: &Limits) -> Result<Frame, WireError> {
         let len = payload.len() as u32;
         let bad_len = WireError::BadLength { ty: MsgType::CompactFrame, len };

@@ -15,25 +15,42 @@ use core::arch::x86_64::*;
 /// SSE register (AVX2 machines have SSE4.1's 32-bit `min`/`max`), the depth code beside them in
 /// a general register: the chain from one sample to the next is a few instructions long. Pixels
 /// with all three neighbours (99.7 % of the MRI bench frame's) take the MED path; the others
-/// take the generic one. Each sample becomes `x | (code & 0xff) << 24 | (y | (code >> 8) << 24)
-/// << 32` for [`place`] (not the portable code's layout).
+/// take the generic one. Each sample becomes `x | y << 24 | code << 48` for [`place`] (not the
+/// portable code's layout).
 #[target_feature(enable = "avx2")]
 pub(super) fn undo_prediction(
     w: u32,
-    samples: &mut [u64],
+    mask: &[u8],
+    n: usize,
+    samples: &mut Vec<u64>,
     d_res: [&[u8]; 2],
     c_res: [&[u8]; 4],
     colors: &mut Vec<u32>,
 ) {
-    let n = samples.len();
     let [dlo, dhi] = d_res;
     let [cr, cg, cb, ca] = c_res;
-    // Two streams instead of seven for the sequential loop: each sample's depth residual in
-    // the top 16 bits of its pixel index (below 2^48), its color residuals as one u32 in
-    // `colors`, which the loop then overwrites with the decoded color.
-    for ((s, &lo), &hi) in samples.iter_mut().zip(&dlo[..n]).zip(&dhi[..n]) {
-        *s |= (lo as u64 | (hi as u64) << 8) << 48;
+    let (dlo, dhi) = (&dlo[..n], &dhi[..n]);
+    // Two streams instead of seven for the sequential loop: each sample's pixel index (below
+    // 2^48) with its depth residual in the top 16 bits, and its color residuals as one u32 in
+    // `colors`, which the loop then overwrites with the decoded color. Written into the
+    // vectors' spare capacity (the caller reserved `n`; the mask has exactly `n` bits).
+    let spare = &mut samples.spare_capacity_mut()[..n];
+    let mut k = 0;
+    let (words, tail) = mask.as_chunks::<8>();
+    let mut last = [0u8; 8];
+    last[..tail.len()].copy_from_slice(tail);
+    for (wi, word) in words.iter().chain(core::iter::once(&last)).enumerate() {
+        let mut bits = u64::from_le_bytes(*word);
+        while bits != 0 {
+            let dres = dlo[k] as u64 | (dhi[k] as u64) << 8;
+            spare[k].write((wi as u64 * 64 + bits.trailing_zeros() as u64) | dres << 48);
+            k += 1;
+            bits &= bits - 1;
+        }
     }
+    assert_eq!(k, n, "the caller checked the mask's count");
+    // SAFETY: the first `n` elements were written just above.
+    unsafe { samples.set_len(n) };
     colors.extend(
         cr[..n]
             .iter()
@@ -42,20 +59,22 @@ pub(super) fn undo_prediction(
             .zip(&ca[..n])
             .map(|(((&r, &g), &b), &a)| u32::from_le_bytes([r, g, b, a])),
     );
+    let samples = &mut samples[..n];
     let colors = &mut colors[..n];
     let (w64, wu) = (w as u64, w as usize);
-    // One cell per column (cell `x + 1` is column `x`, cell 0 is never covered): color in
-    // bits 0–31, depth code in 32–47, covered in bit 48.
-    let mut prev = vec![0u64; wu + 1];
-    let mut cur = vec![0u64; wu + 1];
-    const COVERED: u64 = 1 << 48;
-    let widen = |c: u64| _mm_cvtepu8_epi32(_mm_cvtsi32_si128(c as u32 as i32));
-    // Bytes 0, 4, 8, 12: the four lanes' low bytes back into one u32.
+    // One cell per column (cell `x + 1` is column `x`; cell 0, left of column 0, is never
+    // written): the pixel's four channels and depth code in 32-bit lanes 0–4, and in lane 5
+    // the tag `r + 1` of the row `r` that wrote it. A cell of the row above row `y` holds a
+    // sample iff its tag is `y`: stale cells (from older rows, or the sentinel the buffers
+    // start with) never match, so no buffer is cleared between rows.
+    const NEVER: [u32; 8] = [0, 0, 0, 0, 0, u32::MAX, 0, 0];
+    let mut prev = vec![NEVER; wu + 1];
+    let mut cur = vec![NEVER; wu + 1];
+    let lanes = _mm256_setr_epi32(0xff, 0xff, 0xff, 0xff, 0xffff, 0, 0, 0);
+    // Bytes 0, 4, 8, 12: the four channel lanes' low bytes back into one u32.
     let gather_low = _mm_setr_epi8(0, 4, 8, 12, -1, -1, -1, -1, -1, -1, -1, -1, -1, -1, -1, -1);
-    let low_byte = _mm_set1_epi32(0xff);
-    let mut last_d = 0i32;
-    let mut last_c = _mm_setzero_si128();
-    let mut last_y = u64::MAX;
+    // The previously visited pixel's values.
+    let mut last = _mm256_setzero_si256();
     let idx_mask = (1u64 << 48) - 1;
     let mut i0 = 0;
     while i0 < n {
@@ -67,49 +86,54 @@ pub(super) fn undo_prediction(
             i1 += 1;
         }
         core::mem::swap(&mut prev, &mut cur);
-        if last_y.wrapping_add(1) != y {
-            prev.fill(0);
-        }
-        cur.fill(0);
+        // Rows are below 2^24 (the caller's check), so tags never wrap.
+        let (above, tag) = (y as u32, y as u32 + 1);
+        let tagv = _mm256_setr_epi32(0, 0, 0, 0, 0, tag as i32, 0, 0);
+        let y24 = y << 24;
         let mut left = u64::MAX - 1;
         for (s, col) in samples[i0..i1].iter_mut().zip(&mut colors[i0..i1]) {
             let v = *s;
             let x = (v & idx_mask) - row_start;
             let xs = x as usize;
-            let (b, c) = (prev[xs + 1], prev[xs]);
-            let (hb, hc) = (b & COVERED != 0, c & COVERED != 0);
+            // SAFETY: every index of this row lies in `row_start..row_end`, so `x < w` and
+            // both cells exist (`prev` has `w + 1`).
+            let (bcell, ccell) = unsafe { (prev.get_unchecked(xs + 1), prev.get_unchecked(xs)) };
+            let (hb, hc) = (bcell[5] == above, ccell[5] == above);
             let ha = left.wrapping_add(1) == x;
-            let (bd, cd) = ((b >> 32) as u16 as i32, (c >> 32) as u16 as i32);
-            let (bc, cc) = (widen(b), widen(c));
-            let res = widen(*col as u64);
-            let (pd, pc) = if hb & ha & hc {
-                let t = _mm_add_epi32(last_c, _mm_sub_epi32(bc, cc));
-                let mn = _mm_min_epi32(last_c, bc);
-                let mx = _mm_max_epi32(last_c, bc);
-                let med = _mm_max_epi32(mn, _mm_min_epi32(mx, t));
-                (last_d.min(bd).max(last_d.max(bd).min(last_d + bd - cd)), med)
+            // SAFETY: both cells are 32 bytes.
+            let (b, c) =
+                unsafe { (_mm256_loadu_si256(bcell.as_ptr().cast()), _mm256_loadu_si256(ccell.as_ptr().cast())) };
+            let res = _mm256_inserti128_si256::<1>(
+                _mm256_castsi128_si256(_mm_cvtepu8_epi32(_mm_cvtsi32_si128(*col as i32))),
+                _mm_cvtsi32_si128((v >> 48) as i32),
+            );
+            let p = if hb & ha & hc {
+                // LOCO-I's MED as a function of the left value a, with b and c known: for
+                // b ≥ c it is min(max(a, b), a + b − c), for b < c max(min(a, b), a + b − c)
+                // (exact in 32-bit lanes), so the chain from a is two operations and a blend.
+                let t = _mm256_add_epi32(last, _mm256_sub_epi32(b, c));
+                let up = _mm256_min_epi32(_mm256_max_epi32(last, b), t);
+                let down = _mm256_max_epi32(_mm256_min_epi32(last, b), t);
+                _mm256_blendv_epi8(up, down, _mm256_cmpgt_epi32(c, b))
             } else if hb & ha {
-                ((last_d + bd) >> 1, _mm_srli_epi32::<1>(_mm_add_epi32(last_c, bc)))
+                _mm256_srli_epi32::<1>(_mm256_add_epi32(last, b))
             } else if hb {
-                (bd, bc)
+                b
             } else if !ha & hc {
-                (cd, cc)
+                c
             } else {
-                (last_d, last_c)
+                last
             };
-            let code = (pd as u16).wrapping_add((v >> 48) as u16);
-            let c = _mm_and_si128(_mm_add_epi32(pc, res), low_byte);
-            let packed = _mm_cvtsi128_si32(_mm_shuffle_epi8(c, gather_low)) as u32;
-            *col = packed;
-            // The layout [`place`] reads: x and the code's low byte in the low half, y and
-            // its high byte in the high half.
-            *s = (x | (code as u64 & 0xff) << 24) | (y | (code as u64 >> 8) << 24) << 32;
-            cur[xs + 1] = packed as u64 | (code as u64) << 32 | COVERED;
-            last_d = code as i32;
-            last_c = c;
+            let d = _mm256_and_si256(_mm256_add_epi32(p, res), lanes);
+            let code = _mm256_extract_epi32::<4>(d) as u32 as u64;
+            *col = _mm_cvtsi128_si32(_mm_shuffle_epi8(_mm256_castsi256_si128(d), gather_low)) as u32;
+            // The layout [`place`] reads: x, y and the code in bits 0, 24 and 48.
+            *s = (x + y24) | code << 48;
+            // SAFETY: the cell exists (see above) and is 32 bytes.
+            unsafe { _mm256_storeu_si256(cur.get_unchecked_mut(xs + 1).as_mut_ptr().cast(), _mm256_or_si256(d, tagv)) };
+            last = d;
             left = x;
         }
-        last_y = y;
         i0 = i1;
     }
 }
@@ -419,6 +443,7 @@ pub(super) fn place(geo: &Geo, params: &CompactParams, rlo: &[u8], rhi: &[u8], s
     let (zero, half, one) = (_mm256_setzero_ps(), _mm256_set1_ps(0.5), _mm256_set1_ps(1.0));
     let (pos_max, radius_max) = (_mm256_set1_ps(POS_MAX as f32), _mm256_set1_ps(RADIUS_MAX as f32));
     let (low24, rmask) = (_mm256_set1_epi32(0xff_ffff), _mm256_set1_epi32(RADIUS_MAX as i32));
+    let low16 = _mm256_set1_epi32(0xffff);
     let chunks = n / 8;
     for c in 0..chunks {
         let k = 8 * c;
@@ -431,10 +456,12 @@ pub(super) fn place(geo: &Geo, params: &CompactParams, rlo: &[u8], rhi: &[u8], s
                 _mm256_cvtepu8_epi32(_mm_loadl_epi64(rhi.as_ptr().add(k).cast())),
             )
         };
+        // x in bits 0–23, y in 24–47, the depth code in 48–63.
         let (l, h) = (low_dwords(a, b), high_dwords(a, b));
-        let code = _mm256_or_si256(_mm256_srli_epi32::<24>(l), _mm256_slli_epi32::<8>(_mm256_srli_epi32::<24>(h)));
+        let code = _mm256_srli_epi32::<16>(h);
+        let y = _mm256_or_si256(_mm256_srli_epi32::<24>(l), _mm256_slli_epi32::<8>(_mm256_and_si256(h, low16)));
         let px = _mm256_add_ps(_mm256_cvtepi32_ps(_mm256_and_si256(l, low24)), half);
-        let py = _mm256_add_ps(_mm256_cvtepi32_ps(_mm256_and_si256(h, low24)), half);
+        let py = _mm256_add_ps(_mm256_cvtepi32_ps(y), half);
         let dd: [__m256; 3] = core::array::from_fn(|i| {
             _mm256_add_ps(_mm256_add_ps(corner[i], _mm256_mul_ps(du[i], px)), _mm256_mul_ps(dv[i], py))
         });
@@ -469,8 +496,7 @@ pub(super) fn place(geo: &Geo, params: &CompactParams, rlo: &[u8], rhi: &[u8], s
     for i in 8 * chunks..n {
         // Back to the portable layout for the portable code.
         let v = samples[i];
-        let code = (v >> 24) & 0xff | (v >> 56) << 8;
-        samples[i] = code | (v & 0xff_ffff) << 16 | ((v >> 32) & 0xff_ffff) << 40;
+        samples[i] = v >> 48 | (v & 0xff_ffff) << 16 | ((v >> 24) & 0xff_ffff) << 40;
         super::place_lanes::<1>(geo, params, &rlo[i..], &rhi[i..], &mut samples[i..]);
     }
 }
