@@ -19,15 +19,17 @@ use core::arch::x86_64::*;
 /// portable code's layout).
 #[target_feature(enable = "avx2")]
 pub(super) fn undo_prediction(
+    geo: &Geo,
+    params: &CompactParams,
     w: u32,
     mask: &[u8],
     n: usize,
     samples: &mut Vec<u64>,
-    d_res: [&[u8]; 2],
+    r_res: [&[u8]; 4],
     c_res: [&[u8]; 4],
     colors: &mut Vec<u32>,
 ) {
-    let [dlo, dhi] = d_res;
+    let [dlo, dhi, rlo, rhi] = r_res;
     let [cr, cg, cb, ca] = c_res;
     let (dlo, dhi) = (&dlo[..n], &dhi[..n]);
     // Two streams instead of seven for the sequential loop: each sample's pixel index (below
@@ -134,6 +136,8 @@ pub(super) fn undo_prediction(
             last = d;
             left = x;
         }
+        // The row's geometry while its samples are in cache.
+        place(geo, params, &rlo[i0..i1], &rhi[i0..i1], &mut samples[i0..i1]);
         i0 = i1;
     }
 }
