@@ -148,11 +148,8 @@ fn decode_body_lanes<const AVX2: bool>(
     }
     let mut samples = Vec::new();
     let mut colors = Vec::new();
-    let (rlo, rhi) = decode_predicted::<AVX2>(header, params, body, &mut samples, &mut colors)?;
-    if !AVX2 {
-        // (The AVX2 decoder places each row as it goes.)
-        place::<AVX2>(header, params, rlo, rhi, &mut samples);
-    }
+    let (rlo, rhi) = decode_predicted::<AVX2>(header, body, &mut samples, &mut colors)?;
+    place::<AVX2>(header, params, rlo, rhi, &mut samples);
     Ok(Frame { header: *header, samples, colors, segments: Vec::new() })
 }
 
@@ -162,7 +159,6 @@ fn decode_body_lanes<const AVX2: bool>(
 #[inline(always)]
 fn decode_predicted<'a, const AVX2: bool>(
     header: &FrameHeader,
-    #[allow(unused_variables)] params: &CompactParams,
     body: &'a [u8],
     samples: &mut Vec<u64>,
     colors: &mut Vec<u32>,
@@ -215,8 +211,7 @@ fn decode_predicted<'a, const AVX2: bool>(
     #[cfg(all(feature = "std", target_arch = "x86_64"))]
     if AVX2 {
         // SAFETY: only `decode_body_avx2` sets `AVX2`, on a CPU with AVX2.
-        let geo = Geo::new(header);
-        unsafe { avx2::undo_prediction(&geo, params, w, mask, n, samples, [dlo, dhi, rlo, rhi], [cr, cg, cb, ca], colors) };
+        unsafe { avx2::undo_prediction(w, mask, n, samples, [dlo, dhi], [cr, cg, cb, ca], colors) };
         return Ok((rlo, rhi));
     }
     // The covered pixels' indices first, so the loop below runs over `0..n` with every plane

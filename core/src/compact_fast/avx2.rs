@@ -19,17 +19,15 @@ use core::arch::x86_64::*;
 /// portable code's layout).
 #[target_feature(enable = "avx2")]
 pub(super) fn undo_prediction(
-    geo: &Geo,
-    params: &CompactParams,
     w: u32,
     mask: &[u8],
     n: usize,
     samples: &mut Vec<u64>,
-    r_res: [&[u8]; 4],
+    d_res: [&[u8]; 2],
     c_res: [&[u8]; 4],
     colors: &mut Vec<u32>,
 ) {
-    let [dlo, dhi, rlo, rhi] = r_res;
+    let [dlo, dhi] = d_res;
     let [cr, cg, cb, ca] = c_res;
     let (dlo, dhi) = (&dlo[..n], &dhi[..n]);
     // Two streams instead of seven for the sequential loop: each sample's pixel index (below
@@ -136,8 +134,6 @@ pub(super) fn undo_prediction(
             last = d;
             left = x;
         }
-        // The row's geometry while its samples are in cache.
-        place(geo, params, &rlo[i0..i1], &rhi[i0..i1], &mut samples[i0..i1]);
         i0 = i1;
     }
 }
@@ -483,14 +479,15 @@ pub(super) fn place(geo: &Geo, params: &CompactParams, rlo: &[u8], rhi: &[u8], s
         let rf = _mm256_and_ps(_mm256_cmp_ps::<_CMP_GT_OQ>(r, zero), _mm256_min_ps(_mm256_max_ps(x, one), radius_max));
         let res = _mm256_or_si256(lo8, _mm256_slli_epi32::<8>(hi8));
         let rcode = _mm256_and_si256(_mm256_add_epi32(_mm256_cvttps_epi32(rf), res), rmask);
-        let pack = |half: fn(__m256i) -> __m128i| {
-            let w = |v: __m256i| _mm256_cvtepu32_epi64(half(v));
-            _mm256_or_si256(
-                _mm256_or_si256(w(q[0]), _mm256_slli_epi64::<18>(w(q[1]))),
-                _mm256_or_si256(_mm256_slli_epi64::<36>(w(q[2])), _mm256_slli_epi64::<54>(w(rcode))),
-            )
-        };
-        let (first, second) = (pack(low_half), pack(high_half));
+        // The packed samples' low and high 32 bits (qx | qy << 18 | qz << 36 | rcode << 54),
+        // then interleaved into 64-bit lanes.
+        let lo = _mm256_or_si256(q[0], _mm256_slli_epi32::<18>(q[1]));
+        let hi = _mm256_or_si256(
+            _mm256_or_si256(_mm256_srli_epi32::<14>(q[1]), _mm256_slli_epi32::<4>(q[2])),
+            _mm256_slli_epi32::<22>(rcode),
+        );
+        let (ul, uh) = (_mm256_unpacklo_epi32(lo, hi), _mm256_unpackhi_epi32(lo, hi));
+        let (first, second) = (_mm256_permute2x128_si256::<0x20>(ul, uh), _mm256_permute2x128_si256::<0x31>(ul, uh));
         // SAFETY: as for the loads.
         unsafe {
             _mm256_storeu_si256(samples.as_mut_ptr().add(k).cast(), first);
@@ -503,16 +500,4 @@ pub(super) fn place(geo: &Geo, params: &CompactParams, rlo: &[u8], rhi: &[u8], s
         samples[i] = v >> 48 | (v & 0xff_ffff) << 16 | ((v >> 24) & 0xff_ffff) << 40;
         super::place_lanes::<1>(geo, params, &rlo[i..], &rhi[i..], &mut samples[i..]);
     }
-}
-
-#[inline]
-#[target_feature(enable = "avx2")]
-fn low_half(v: __m256i) -> __m128i {
-    _mm256_castsi256_si128(v)
-}
-
-#[inline]
-#[target_feature(enable = "avx2")]
-fn high_half(v: __m256i) -> __m128i {
-    _mm256_extracti128_si256::<1>(v)
 }
