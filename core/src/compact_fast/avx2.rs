@@ -34,22 +34,54 @@ pub(super) fn undo_prediction(
     // 2^48) with its depth residual in the top 16 bits, and its color residuals as one u32 in
     // `colors`, which the loop then overwrites with the decoded color. Written into the
     // vectors' spare capacity (the caller reserved `n`; the mask has exactly `n` bits).
-    let spare = &mut samples.spare_capacity_mut()[..n];
+    let out = samples.spare_capacity_mut().as_mut_ptr();
+    let capacity = samples.capacity();
+    assert!(capacity >= n, "the caller reserved n");
     let mut k = 0;
-    let (words, tail) = mask.as_chunks::<8>();
-    let mut last = [0u8; 8];
-    last[..tail.len()].copy_from_slice(tail);
-    for (wi, word) in words.iter().chain(core::iter::once(&last)).enumerate() {
-        let mut bits = u64::from_le_bytes(*word);
-        while bits != 0 {
-            let dres = dlo[k] as u64 | (dhi[k] as u64) << 8;
-            spare[k].write((wi as u64 * 64 + bits.trailing_zeros() as u64) | dres << 48);
-            k += 1;
-            bits &= bits - 1;
+    for (bi, &bits) in mask.iter().enumerate() {
+        if bits == 0 {
+            continue;
         }
+        let count = bits.count_ones() as usize;
+        if k + 8 <= n {
+            // Eight at once (those past this byte's `count` are overwritten by the next
+            // byte's): the byte's bit positions from the table, the depth residuals of samples
+            // `k..k + 8`.
+            let base = _mm256_set1_epi64x(bi as i64 * 8);
+            // SAFETY: the table entry is 8 bytes; `k + 8 ≤ n`: the loads of `dlo`/`dhi` (n
+            // long) and the stores into `samples` (capacity ≥ n) stay inside.
+            unsafe {
+                let pos = _mm_loadl_epi64(BIT_POSITIONS[bits as usize].as_ptr().cast());
+                let dw = _mm_unpacklo_epi8(
+                    _mm_loadl_epi64(dlo.as_ptr().add(k).cast()),
+                    _mm_loadl_epi64(dhi.as_ptr().add(k).cast()),
+                );
+                let d0 = _mm256_slli_epi64::<48>(_mm256_cvtepu16_epi64(dw));
+                let d1 = _mm256_slli_epi64::<48>(_mm256_cvtepu16_epi64(_mm_srli_si128::<8>(dw)));
+                let p0 = _mm256_add_epi64(_mm256_cvtepu8_epi64(pos), base);
+                let p1 = _mm256_add_epi64(_mm256_cvtepu8_epi64(_mm_srli_si128::<4>(pos)), base);
+                _mm256_storeu_si256(out.add(k).cast(), _mm256_or_si256(p0, d0));
+                _mm256_storeu_si256(out.add(k + 4).cast(), _mm256_or_si256(p1, d1));
+            }
+        } else {
+            let mut b = bits;
+            for j in k..k + count {
+                assert!(j < n, "the caller checked the mask's count");
+                let dres = dlo[j] as u64 | (dhi[j] as u64) << 8;
+                // SAFETY: `j < n ≤ capacity`.
+                unsafe {
+                    out.add(j)
+                        .write(core::mem::MaybeUninit::new((bi as u64 * 8 + b.trailing_zeros() as u64) | dres << 48))
+                };
+                b &= b - 1;
+            }
+        }
+        k += count;
     }
     assert_eq!(k, n, "the caller checked the mask's count");
-    // SAFETY: the first `n` elements were written just above.
+    // SAFETY: every index below `n` was written above: each set bit wrote its own slot
+    // (a vector step's slots past its byte's count are written again by the following
+    // bytes, in order, before `n` is reached).
     unsafe { samples.set_len(n) };
     colors.extend(
         cr[..n]
@@ -137,6 +169,24 @@ pub(super) fn undo_prediction(
         i0 = i1;
     }
 }
+
+/// The positions of the set bits of each byte, lowest first (unused entries 0).
+static BIT_POSITIONS: [[u8; 8]; 256] = {
+    let mut t = [[0u8; 8]; 256];
+    let mut b = 0;
+    while b < 256 {
+        let (mut j, mut bit) = (0, 0);
+        while bit < 8 {
+            if b >> bit & 1 == 1 {
+                t[b][j] = bit as u8;
+                j += 1;
+            }
+            bit += 1;
+        }
+        b += 1;
+    }
+    t
+};
 
 /// The low 32 bits of eight `u64` lanes (`a` then `b`), in order.
 #[inline]
