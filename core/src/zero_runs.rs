@@ -23,8 +23,7 @@
 use alloc::vec::Vec;
 
 /// Zero runs shorter than this stay literals. A run this long always contains an aligned
-/// 8-byte zero word (16 ≥ 8 + 7), which is how [`zero_run_sequences`] finds them; on the
-/// MRI 1024² body 12–16 gave the smallest frames (1.421–1.430 B/sample), and fewer, longer
+/// 8-byte zero word (16 ≥ 8 + 7); on the MRI 1024² body 12–16 gave the smallest frames (1.421–1.430 B/sample), and fewer, longer
 /// sequences decode faster, so 16.
 pub const MIN_RUN: usize = 16;
 
@@ -41,43 +40,92 @@ pub struct ZeroRun {
 /// `start..end` is the literal zero at `start` (ending the sequence's literals) and a match of
 /// `end − start − 1` bytes at offset 1. Bytes not in a run are literals.
 pub fn zero_run_sequences(body: &[u8]) -> Vec<ZeroRun> {
-    let words = body.len() / 8;
-    let word = |k: usize| u64::from_le_bytes(body[8 * k..8 * k + 8].try_into().expect("8 bytes"));
+    // 64 bytes at a time as a mask of their zero bytes (bit i: byte i is 0). `run` counts the
+    // zeros just before the current chunk; runs inside a chunk are found on its mask, most
+    // chunks with a few operations and no branch taken.
     let mut out = Vec::new();
     // End of the last run emitted (the next sequence's literals start here).
     let mut lit_start = 0usize;
-    let mut k = 0usize;
-    while k < words {
-        if word(k) != 0 {
-            k += 1;
+    let mut emit = |start: usize, end: usize, out: &mut Vec<ZeroRun>| {
+        out.push(ZeroRun { lit: (start + 1 - lit_start) as u32, len: (end - start - 1) as u32 });
+        lit_start = end;
+    };
+    let mut run = 0usize;
+    let (chunks, tail) = body.as_chunks::<64>();
+    for (ci, chunk) in chunks.iter().enumerate() {
+        let base = 64 * ci;
+        let z = zero_mask(chunk);
+        if z == u64::MAX {
+            run += 64;
             continue;
         }
-        // A zero word: extend backwards into the previous (non-zero, or already emitted) word
-        // and forwards over zero words, then into the first non-zero word or the tail.
-        let mut start = 8 * k;
-        if k > 0 && 8 * k > lit_start {
-            let back = (word(k - 1).leading_zeros() / 8) as usize;
-            start -= back.min(8 * k - lit_start);
+        // The run reaching into this chunk ends at its first non-zero byte.
+        let low = z.trailing_ones() as usize;
+        if run + low >= MIN_RUN {
+            emit(base - run, base + low, &mut out);
         }
-        let mut j = k + 1;
-        while j < words && word(j) == 0 {
-            j += 1;
+        // Runs inside the chunk: bit i of `long` is set where 16 zeros start at byte i.
+        let mut rest = z & (u64::MAX << low); // from the first non-zero byte on
+        let top = z.leading_ones() as usize;
+        // The run at the top of the chunk carries into the next one.
+        rest &= if top == 0 { u64::MAX } else { !(u64::MAX << (64 - top)) };
+        let mut long = rest;
+        let mut span = 1;
+        while span < MIN_RUN {
+            long &= long >> span;
+            span *= 2;
         }
-        let mut end = 8 * j;
-        if j < words {
-            end += (word(j).trailing_zeros() / 8) as usize;
+        while long != 0 {
+            let start = long.trailing_zeros() as usize;
+            let len = (rest >> start).trailing_ones() as usize;
+            emit(base + start, base + start + len, &mut out);
+            let cleared = if start + len >= 64 { 0 } else { u64::MAX << (start + len) };
+            long &= cleared;
+            rest &= cleared;
+        }
+        run = top;
+    }
+    // The tail (fewer than 64 bytes), byte by byte.
+    let base = 64 * chunks.len();
+    let mut i = 0;
+    while i < tail.len() {
+        if tail[i] != 0 {
+            if run >= MIN_RUN {
+                emit(base + i - run, base + i, &mut out);
+            }
+            run = 0;
         } else {
-            end += body[end..].iter().take_while(|&&b| b == 0).count();
+            run += 1;
         }
-        if end - start >= MIN_RUN {
-            out.push(ZeroRun { lit: (start + 1 - lit_start) as u32, len: (end - start - 1) as u32 });
-            lit_start = end;
-        }
-        // The next word to look at is the one holding `end` (its zero bytes, if any, are the
-        // run's; a run cannot start there without a zero word of its own).
-        k = j.max(k + 1);
+        i += 1;
+    }
+    if run >= MIN_RUN {
+        emit(base + tail.len() - run, base + tail.len(), &mut out);
     }
     out
+}
+
+/// Bit `i` set where byte `i` of the chunk is 0.
+#[inline(always)]
+fn zero_mask(chunk: &[u8; 64]) -> u64 {
+    #[cfg(target_arch = "x86_64")]
+    {
+        use core::arch::x86_64::*;
+        let mut m = 0u64;
+        for q in 0..4 {
+            // SAFETY: SSE2 is part of x86-64; the load reads 16 of the chunk's 64 bytes.
+            let bits = unsafe {
+                let v = _mm_loadu_si128(chunk.as_ptr().add(16 * q).cast());
+                _mm_movemask_epi8(_mm_cmpeq_epi8(v, _mm_setzero_si128())) as u32 as u64
+            };
+            m |= bits << (16 * q);
+        }
+        m
+    }
+    #[cfg(not(target_arch = "x86_64"))]
+    {
+        chunk.iter().enumerate().fold(0u64, |m, (i, &b)| m | ((b == 0) as u64) << i)
+    }
 }
 
 /// One zstd frame of `body` at entropy `level` with the sequences of [`zero_run_sequences`],
