@@ -14,17 +14,17 @@
 //! everything else is left as literals; `ZSTD_compressSequences` then Huffman-codes the
 //! literals and FSE-codes the few sequences. The result is an ordinary zstd frame (RFC 8878):
 //! the decoders (C zstd, ruzstd) and the wire format do not change. On the MRI 1024² bench
-//! frame it is 2.7× faster to encode, 2.2× faster to decode and 9 % smaller than zstd level 1
-//! (`docs/perf.md`, "Issue 16: our own parse").
+//! frame it is about 2× faster to encode, 2.2× faster to decode and 9 % smaller than zstd
+//! level 1 (`docs/perf.md`, "Issue 16: encode ≤ 8 ms, decode ≤ 5 ms").
 //!
 //! The zstd crates expose `ZSTD_compressSequences` only as the raw binding (`zstd-sys`, feature
-//! `experimental`), hence the one `unsafe` block below.
+//! `experimental`), hence the `unsafe` block in [`compress`]. The parse reads 64 bytes at a
+//! time as a mask of their zero bytes (SSE2 on x86-64, a byte loop elsewhere).
 
 use alloc::vec::Vec;
 
-/// Zero runs shorter than this stay literals. A run this long always contains an aligned
-/// 8-byte zero word (16 ≥ 8 + 7); on the MRI 1024² body 12–16 gave the smallest frames (1.421–1.430 B/sample), and fewer, longer
-/// sequences decode faster, so 16.
+/// Zero runs shorter than this stay literals. On the MRI 1024² body 12–16 gave the smallest
+/// frames (1.421–1.430 B/sample), and fewer, longer sequences decode faster, so 16.
 pub const MIN_RUN: usize = 16;
 
 /// One zstd sequence: `lit` literals, then `len` bytes copied from `1` byte back.
