@@ -715,13 +715,13 @@ mod codec {
     }
 
     /// Entropy codes a body as one zstd frame with the C zstd library at entropy `level`, with
-    /// the body's runs of zeros as its only matches (`crate::zero_runs`: what `volwarp-server`
+    /// the body's runs of identical bytes as its only matches (`crate::byte_runs`: what `volwarp-server`
     /// sends; faster both ways and smaller than the library's own match finder on residual
     /// planes, and about 10× ruzstd's encoder's speed).
     #[cfg(feature = "zstd-c")]
     pub fn compress_c(body: &[u8], level: i32) -> Vec<u8> {
         // Only allocation failure can make the library fail on a buffer of its own bound.
-        crate::zero_runs::compress(body, level)
+        crate::byte_runs::compress(body, level)
             .or_else(|| zstd::bulk::compress(body, level).ok())
             .unwrap_or_else(|| compress(body, Coder::Zstd))
     }

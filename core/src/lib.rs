@@ -39,6 +39,8 @@ extern crate alloc;
 #[cfg(feature = "std")]
 extern crate std;
 
+#[cfg(feature = "zstd-c")]
+pub mod byte_runs;
 pub mod camera;
 pub mod compact_frame;
 pub mod compaction;
@@ -64,8 +66,6 @@ pub mod stats;
 pub mod traversal;
 pub mod warp_radius;
 pub mod wire;
-#[cfg(feature = "zstd-c")]
-pub mod zero_runs;
 
 #[cfg(feature = "alloc")]
 mod compact_fast;

@@ -242,7 +242,7 @@ proptest! {
 }
 
 /// C zstd (feature `zstd-c`, what std clients use) and ruzstd (no_std) decompress every body
-/// (from the library's match finder, ruzstd's encoder or the server's zero-run parse)
+/// (from the library's match finder, ruzstd's encoder or the server's byte-run parse)
 /// to the same bytes and refuse frames that do not fill exactly the stated length; changed bytes
 /// give a typed error or a body of exactly that length (no checksum: zstd cannot tell every
 /// change, and the two libraries then need not agree on the bytes: measured, a few in 300).
@@ -254,7 +254,7 @@ fn c_zstd_and_ruzstd_decompress_the_same_bodies() {
     let params = planes.params;
     let c_coded = zstd::bulk::compress(&planes.body, 1).unwrap();
     let r_coded = compress(&planes.body, Coder::Zstd);
-    // The server's: the zero-run parse with C zstd's entropy stage.
+    // The server's: the byte-run parse with C zstd's entropy stage.
     let runs_coded = compress_c(&planes.body, 1);
     for coded in [&c_coded, &r_coded, &runs_coded] {
         assert_eq!(decompress_c(coded, &params).unwrap(), planes.body);

@@ -7,7 +7,8 @@
 //! ```
 //!
 //! Prints the median of `RUNS` for the fast paths and the scalar references they replace
-//! (planes, reconstruction), the entropy coders (C zstd level 1 as the server sends; C zstd and
+//! (planes, reconstruction) and the portable code, the entropy coders (the server's byte-run
+//! parse with C zstd's entropy stage, the library's own level 1 for comparison; C zstd and
 //! ruzstd decompression; lz4_flex for comparison), the whole encode and decode, and the 12-byte
 //! form's decode; then bytes per sample. The frame is the `compact` bench's
 //! (`cargo bench -p volwarp-server --bench compact`, which measures wall time).
@@ -69,7 +70,7 @@ fn main() {
     let lim = Limits::default();
     let ms_per = |ms: f64| n as f64 / ms / 1e3;
     println!(
-        "MRI 1024²: {n} samples, body {} B, zero-run parse + zstd entropy level {ZSTD_LEVEL} {} B ({:.3} B/sample with headers), lz4_flex {} B, raw12 {} B",
+        "MRI 1024²: {n} samples, body {} B, byte-run parse + zstd entropy level {ZSTD_LEVEL} {} B ({:.3} B/sample with headers), lz4_flex {} B, raw12 {} B",
         planes.body.len(),
         coded.len(),
         bytes.len() as f64 / n as f64,
@@ -79,13 +80,11 @@ fn main() {
     println!("on-CPU ms (one thread), median of {runs}:");
     let row = |name: &str, ms: f64| println!("  {name:<52} {ms:8.2} ms  {:7.1} M samples/s", ms_per(ms));
     row("planes (build_planes, fast)", median_ms(runs, || compact_frame::build_planes(&frame, &opts)));
+    row("planes (build_planes_portable)", median_ms(runs, || compact_frame::build_planes_portable(&frame, &opts)));
     row("planes (build_planes_reference)", median_ms(runs, || compact_frame::build_planes_reference(&frame, &opts)));
+    row("byte-run parse (run_sequences)", median_ms(runs, || volwarp_core::byte_runs::run_sequences(&planes.body)));
     row(
-        "zero-run parse (zero_run_sequences)",
-        median_ms(runs, || volwarp_core::zero_runs::zero_run_sequences(&planes.body)),
-    );
-    row(
-        "C zstd, zero-run parse, compress (the server's)",
+        "C zstd, byte-run parse, compress (the server's)",
         median_ms(runs, || compact_frame::compress_c(&planes.body, ZSTD_LEVEL)),
     );
     let lib1 = zstd::bulk::compress(&planes.body, 1).expect("zstd");
@@ -116,6 +115,10 @@ fn main() {
     row(
         "reconstruct (decode_body, fast)",
         median_ms(runs, || compact_frame::decode_body(&frame.header, &params, &planes.body)),
+    );
+    row(
+        "reconstruct (decode_body_portable)",
+        median_ms(runs, || compact_frame::decode_body_portable(&frame.header, &params, &planes.body)),
     );
     row(
         "reconstruct (decode_body_reference)",

@@ -5,7 +5,7 @@
 //! The server knows each frame's radius model exactly ([`crate::radius::FrameRadius`]), so
 //! radius codes cost nothing in the compact form unless a depth rounds to the next code. The
 //! body is entropy coded with the C zstd library (entropy level [`ZSTD_LEVEL`]) with the
-//! body's zero runs as its only matches (`volwarp_core::zero_runs`): about 10× faster than
+//! body's runs of identical bytes as its only matches (`volwarp_core::byte_runs`): about 10× faster than
 //! ruzstd's pure-Rust encoder (core's default) at a better ratio, and 2.7× faster than the
 //! library's own level 1; clients decode either with ruzstd or C zstd (`docs/perf.md`,
 //! issue 16).
@@ -27,7 +27,7 @@ pub fn encode_options(marcher: &Marcher, req: &CameraRequest) -> EncodeOptions {
     }
 }
 
-/// The compact message (header included) of `frame` with C zstd at `level` over the zero-run
+/// The compact message (header included) of `frame` with C zstd at `level` over the byte-run
 /// parse ([`compact_frame::compress_c`]), or `None` if
 /// the frame does not fit the compact form.
 pub fn encode_compact(frame: &Frame, opts: &EncodeOptions, level: i32) -> Option<Vec<u8>> {

@@ -2,83 +2,90 @@
 //! entropy stage.
 //!
 //! A compact body is a coverage mask and residual planes (`docs/wire-format.md`). Its
-//! redundancy is of two kinds: long runs of zeros (radius residuals are zero almost
-//! everywhere, color and depth residuals in flat regions) and skewed small values (most
-//! residuals are 0, ±1 or ±2). zstd's own match finder at level 1 finds a great many short
-//! matches in such data and then spends most of its time coding them (`ZSTD_compressBlock_fast`
-//! and `ZSTD_encodeSequences` led the profile; negative levels were no faster), while the
-//! skewed residuals are exactly what its Huffman literal coder is for.
+//! redundancy is of two kinds: long runs of one byte value (radius residuals are zero almost
+//! everywhere, color and depth residuals in flat regions, the mask 0x00 or 0xff over empty and
+//! covered stretches) and skewed small values (most residuals are 0, ±1 or ±2). zstd's own
+//! match finder at level 1 finds a great many short matches in such data and then spends most
+//! of its time coding them (`ZSTD_compressBlock_fast` and `ZSTD_encodeSequences` led the
+//! profile; negative levels were no faster), while the skewed residuals are exactly what its
+//! Huffman literal coder is for.
 //!
-//! So the encoder parses the body itself: every run of at least [`MIN_RUN`] zero bytes becomes
-//! one zstd sequence (a literal zero, then a match at offset 1 for the rest of the run), and
-//! everything else is left as literals; `ZSTD_compressSequences` then Huffman-codes the
-//! literals and FSE-codes the few sequences. The result is an ordinary zstd frame (RFC 8878):
-//! the decoders (C zstd, ruzstd) and the wire format do not change. On the MRI 1024² bench
-//! frame it is about 2× faster to encode, 2.2× faster to decode and 9 % smaller than zstd
-//! level 1 (`docs/perf.md`, "Issue 16: encode ≤ 8 ms, decode ≤ 5 ms").
+//! So the encoder parses the body itself: every run of at least [`MIN_RUN`] identical bytes
+//! becomes one zstd sequence (the run's first byte as a literal, then a match at offset 1 for
+//! the rest), and everything else is left as literals; `ZSTD_compressSequences` then
+//! Huffman-codes the literals and FSE-codes the few sequences. The result is an ordinary zstd
+//! frame (RFC 8878): the decoders (C zstd, ruzstd) and the wire format do not change. On the
+//! MRI 1024² bench frame it is about 2.5× faster to encode, 2.3× faster to decode and 10 %
+//! smaller than zstd level 1 (`docs/perf.md`, "Twelfth session: issue 16").
 //!
 //! The zstd crates expose `ZSTD_compressSequences` only as the raw binding (`zstd-sys`, feature
 //! `experimental`), hence the `unsafe` block in [`compress`]. The parse reads 64 bytes at a
-//! time as a mask of their zero bytes (SSE2 on x86-64, a byte loop elsewhere).
+//! time as a mask of the bytes equal to the one before (SSE2 on x86-64, a byte loop
+//! elsewhere).
 
 use alloc::vec::Vec;
 
-/// Zero runs shorter than this stay literals. On the MRI 1024² body 12–16 gave the smallest
-/// frames (1.421–1.430 B/sample), and fewer, longer sequences decode faster, so 16.
+/// Runs of identical bytes shorter than this stay literals. On the MRI 1024² body 12–16 gave
+/// the smallest frames, and fewer, longer sequences decode faster, so 16.
 pub const MIN_RUN: usize = 16;
 
 /// One zstd sequence: `lit` literals, then `len` bytes copied from `1` byte back.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
-pub struct ZeroRun {
-    /// Literal bytes before the run's first (literal) zero, that zero included.
+pub struct Run {
+    /// Literal bytes before the run's first byte, that byte included.
     pub lit: u32,
     /// The rest of the run, copied from offset 1.
     pub len: u32,
 }
 
-/// The body's runs of at least [`MIN_RUN`] zeros as sequences, in order: a run at
-/// `start..end` is the literal zero at `start` (ending the sequence's literals) and a match of
+/// The body's runs of at least [`MIN_RUN`] identical bytes as sequences, in order: a run at
+/// `start..end` is the literal byte at `start` (ending the sequence's literals) and a match of
 /// `end − start − 1` bytes at offset 1. Bytes not in a run are literals.
-pub fn zero_run_sequences(body: &[u8]) -> Vec<ZeroRun> {
-    // 64 bytes at a time as a mask of their zero bytes (bit i: byte i is 0). `run` counts the
-    // zeros just before the current chunk; runs inside a chunk are found on its mask, most
-    // chunks with a few operations and no branch taken.
+pub fn run_sequences(body: &[u8]) -> Vec<Run> {
+    // A run of identical bytes `start..end` is a run of "repeat" bits `start + 1..end` (bit i:
+    // byte i equals byte i − 1), found 64 bytes at a time on their repeat mask. `run` counts
+    // the repeat bits just before the current chunk; runs inside a chunk are found on its
+    // mask, most chunks with a few operations and no branch taken.
+    const REPEATS: usize = MIN_RUN - 1;
     let mut out = Vec::new();
     // End of the last run emitted (the next sequence's literals start here).
     let mut lit_start = 0usize;
-    let mut emit = |start: usize, end: usize, out: &mut Vec<ZeroRun>| {
-        out.push(ZeroRun { lit: (start + 1 - lit_start) as u32, len: (end - start - 1) as u32 });
+    let mut emit = |start: usize, end: usize, out: &mut Vec<Run>| {
+        out.push(Run { lit: (start + 1 - lit_start) as u32, len: (end - start - 1) as u32 });
         lit_start = end;
     };
     let mut run = 0usize;
     let (chunks, tail) = body.as_chunks::<64>();
-    for (ci, chunk) in chunks.iter().enumerate() {
+    for ci in 0..chunks.len() {
         let base = 64 * ci;
-        let z = zero_mask(chunk);
+        let z = repeat_mask(body, base);
         if z == u64::MAX {
             run += 64;
             continue;
         }
-        // The run reaching into this chunk ends at its first non-zero byte.
+        // The run reaching into this chunk ends at its first byte that differs.
         let low = z.trailing_ones() as usize;
-        if run + low >= MIN_RUN {
-            emit(base - run, base + low, &mut out);
+        if run + low >= REPEATS {
+            emit(base - run - 1, base + low, &mut out);
         }
-        // Runs inside the chunk: bit i of `long` is set where 16 zeros start at byte i.
-        let mut rest = z & (u64::MAX << low); // from the first non-zero byte on
+        // Runs inside the chunk: bit i of `long` is set where `REPEATS` repeat bits start.
+        let mut rest = z & (u64::MAX << low); // from the first differing byte on
         let top = z.leading_ones() as usize;
         // The run at the top of the chunk carries into the next one.
         rest &= if top == 0 { u64::MAX } else { !(u64::MAX << (64 - top)) };
         let mut long = rest;
-        let mut span = 1;
-        while span < MIN_RUN {
-            long &= long >> span;
-            span *= 2;
+        let mut have = 1;
+        while have * 2 <= REPEATS {
+            long &= long >> have;
+            have *= 2;
+        }
+        if have < REPEATS {
+            long &= long >> (REPEATS - have);
         }
         while long != 0 {
             let start = long.trailing_zeros() as usize;
             let len = (rest >> start).trailing_ones() as usize;
-            emit(base + start, base + start + len, &mut out);
+            emit(base + start - 1, base + start + len, &mut out);
             let cleared = if start + len >= 64 { 0 } else { u64::MAX << (start + len) };
             long &= cleared;
             rest &= cleared;
@@ -89,9 +96,10 @@ pub fn zero_run_sequences(body: &[u8]) -> Vec<ZeroRun> {
     let base = 64 * chunks.len();
     let mut i = 0;
     while i < tail.len() {
-        if tail[i] != 0 {
-            if run >= MIN_RUN {
-                emit(base + i - run, base + i, &mut out);
+        let j = base + i;
+        if j == 0 || body[j] != body[j - 1] {
+            if run >= REPEATS {
+                emit(j - run - 1, j, &mut out);
             }
             run = 0;
         } else {
@@ -99,39 +107,38 @@ pub fn zero_run_sequences(body: &[u8]) -> Vec<ZeroRun> {
         }
         i += 1;
     }
-    if run >= MIN_RUN {
-        emit(base + tail.len() - run, base + tail.len(), &mut out);
+    if run >= REPEATS {
+        emit(base + tail.len() - run - 1, base + tail.len(), &mut out);
     }
     out
 }
 
-/// Bit `i` set where byte `i` of the chunk is 0.
+/// Bit `i` set where byte `base + i` equals the byte before it (never for byte 0).
 #[inline(always)]
-fn zero_mask(chunk: &[u8; 64]) -> u64 {
+fn repeat_mask(body: &[u8], base: usize) -> u64 {
     #[cfg(target_arch = "x86_64")]
-    {
+    if base > 0 {
         use core::arch::x86_64::*;
         let mut m = 0u64;
         for q in 0..4 {
-            // SAFETY: SSE2 is part of x86-64; the load reads 16 of the chunk's 64 bytes.
+            // SAFETY: bytes base - 1 .. base + 64 lie in `body` (base ≥ 64, a whole chunk follows).
             let bits = unsafe {
-                let v = _mm_loadu_si128(chunk.as_ptr().add(16 * q).cast());
-                _mm_movemask_epi8(_mm_cmpeq_epi8(v, _mm_setzero_si128())) as u32 as u64
+                let p = body.as_ptr().add(base + 16 * q);
+                let v = _mm_loadu_si128(p.cast());
+                let u = _mm_loadu_si128(p.sub(1).cast());
+                _mm_movemask_epi8(_mm_cmpeq_epi8(v, u)) as u32 as u64
             };
             m |= bits << (16 * q);
         }
-        m
+        return m;
     }
-    #[cfg(not(target_arch = "x86_64"))]
-    {
-        chunk.iter().enumerate().fold(0u64, |m, (i, &b)| m | ((b == 0) as u64) << i)
-    }
+    (0..64).fold(0u64, |m, i| m | ((base + i > 0 && body[base + i] == body[base + i - 1]) as u64) << i)
 }
 
-/// One zstd frame of `body` at entropy `level` with the sequences of [`zero_run_sequences`],
+/// One zstd frame of `body` at entropy `level` with the sequences of [`run_sequences`],
 /// or `None` if the library refuses (only allocation failure should make it).
 pub fn compress(body: &[u8], level: i32) -> Option<Vec<u8>> {
-    let seqs: Vec<zstd_sys::ZSTD_Sequence> = zero_run_sequences(body)
+    let seqs: Vec<zstd_sys::ZSTD_Sequence> = run_sequences(body)
         .into_iter()
         .map(|r| zstd_sys::ZSTD_Sequence { offset: 1, litLength: r.lit, matchLength: r.len, rep: 0 })
         .collect();
@@ -180,21 +187,17 @@ pub fn compress(body: &[u8], level: i32) -> Option<Vec<u8>> {
 mod tests {
     use super::*;
 
-    /// The runs of at least MIN_RUN zeros, found byte by byte.
-    fn reference(body: &[u8]) -> Vec<ZeroRun> {
+    /// The runs of at least MIN_RUN identical bytes, found byte by byte.
+    fn reference(body: &[u8]) -> Vec<Run> {
         let mut out = Vec::new();
         let (mut i, mut lit_start) = (0, 0);
         while i < body.len() {
-            if body[i] != 0 {
-                i += 1;
-                continue;
-            }
             let mut j = i;
-            while j < body.len() && body[j] == 0 {
+            while j < body.len() && body[j] == body[i] {
                 j += 1;
             }
             if j - i >= MIN_RUN {
-                out.push(ZeroRun { lit: (i + 1 - lit_start) as u32, len: (j - i - 1) as u32 });
+                out.push(Run { lit: (i + 1 - lit_start) as u32, len: (j - i - 1) as u32 });
                 lit_start = j;
             }
             i = j;
@@ -214,11 +217,16 @@ mod tests {
         for case in 0..400 {
             let len = (rnd() % 700) as usize;
             let mut body = alloc::vec![0u8; len];
-            // Runs of every length at every alignment, between random bytes.
+            // Runs of every length at every alignment (of zeros, 0xff or another value, some
+            // back to back), between random bytes.
             let mut i = 0;
             while i < len {
                 let run = (rnd() % 40) as usize;
+                let value = [0u8, 0xff, rnd() as u8][(rnd() % 3) as usize];
                 let lit = (rnd() % 12) as usize;
+                for b in body.iter_mut().skip(i).take(run) {
+                    *b = value;
+                }
                 i += run;
                 for b in body.iter_mut().skip(i).take(lit) {
                     *b = (rnd() % 4) as u8;
@@ -228,7 +236,7 @@ mod tests {
             if case % 7 == 0 {
                 body.iter_mut().for_each(|b| *b = 0);
             }
-            assert_eq!(zero_run_sequences(&body), reference(&body), "case {case}: {body:?}");
+            assert_eq!(run_sequences(&body), reference(&body), "case {case}: {body:?}");
         }
     }
 
