@@ -3,8 +3,8 @@
 //!
 //! Times are in milliseconds of simulated time. The server renders one frame at a time for the
 //! camera its [`ServerPolicy`] picks from the requests it has received, in `server_ms`; it then
-//! writes the frame to the link (blocking, as a TCP write does), which carries the frame's real
-//! encoded bytes ([`volwarp_core::compact_frame::encoded_size`]) at `mbps`, and the frame arrives
+//! writes the frame to the link (blocking, as a TCP write does), which carries the bytes the
+//! server sends for it (`volwarp_server::encoding::encode_frame`) at `mbps`, and the frame arrives
 //! `latency_ms` later. The client shows a new image every display tick; each method takes its
 //! draw time from the calibration (or a fixed figure).
 

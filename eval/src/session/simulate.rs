@@ -10,8 +10,8 @@
 //! 2. **Server**: when idle, it takes the newest request that arrived and that it has not
 //!    served yet (waiting for one if there is none), lets its [`ServerPolicy`] pick the camera,
 //!    renders the frame (the real marcher, so the frame's real sample count and bytes) in
-//!    `server_ms`, writes it to the link (blocking; the frame's encoded bytes in the session's
-//!    encoding, `compact_frame::encoded_size`, at `mbps`) and
+//!    `server_ms`, writes it to the link (blocking; the frame's bytes in the session's encoding
+//!    as the server encodes it, `volwarp_server::encoding::encode_frame`, at `mbps`) and
 //!    only then takes the next request. The frame arrives `latency_ms` after the write ends.
 //! 3. **Client**: each method draws for the camera of a tick with the newest frame arrived by
 //!    then. A draw of `d` ms takes `ceil(d / tick)` ticks (at least one); a draw that fits in one
@@ -27,12 +27,13 @@ use super::paths::{CameraPath, MAX_VIEWPORT};
 use crate::{ErrorBox, Metrics};
 use rayon::prelude::*;
 use std::collections::HashMap;
-use volwarp_core::compact_frame::{encoded_size, EncodeOptions, Encoding};
+use volwarp_core::compact_frame::Encoding;
 use volwarp_core::guard::GuardBand;
 use volwarp_core::prediction::{Horizon, Predictor};
 use volwarp_core::renderer::Renderer;
 use volwarp_core::wire::CameraRequest;
 use volwarp_core::{Camera, Heuristic, Image, RendererKind};
+use volwarp_server::encoding::encode_frame;
 use volwarp_server::Marcher;
 
 /// What a session runs with besides the dataset, the path and the methods.
@@ -238,11 +239,15 @@ pub fn serve(
     let end_ms = (cams.len() - 1) as f64 * tick_ms;
     let net = cfg.net;
     let layers = stream_layers(cfg, request);
+    // Each frame with the bytes the server sends for it: its own encoder and radius model
+    // (`volwarp_server::encoding::encode_frame`).
     let render = |camera: Camera, seq: usize| {
         let req = CameraRequest { seq: seq as u64, camera, heuristic: cfg.heuristic, radius_scale: 1.0 };
-        marcher.render_frame_layers(&req, layers).0
+        let frame = marcher.render_frame_layers(&req, layers).0;
+        let bytes = encode_frame(marcher, &req, &frame, cfg.encoding).0.len() as u64;
+        (frame, bytes)
     };
-    let first = render(cams[0], 0);
+    let (first, first_bytes) = render(cams[0], 0);
     let mut out = vec![(
         FrameEvent {
             seq: 0,
@@ -251,7 +256,7 @@ pub fn serve(
             guard_offset: (0, 0),
             request_ms: 0.0,
             start_ms: 0.0,
-            bytes: encoded_size(&first, cfg.encoding, &EncodeOptions::default()) as u64,
+            bytes: first_bytes,
             arrive_ms: 0.0,
         },
         first,
@@ -310,8 +315,7 @@ pub fn serve(
         let camera = policy.camera(&requests[..=j], s);
         served = j + 1;
         let seq = out.len();
-        let frame = render(camera, seq);
-        let bytes = encoded_size(&frame, cfg.encoding, &EncodeOptions::default()) as u64;
+        let (frame, bytes) = render(camera, seq);
         let write_end = s + net.server_ms + net.transfer_ms(bytes);
         let arrive_ms = write_end + net.latency_ms;
         if arrive_ms <= end_ms {
