@@ -154,8 +154,8 @@ fn decode_body_lanes<const AVX2: bool>(
 }
 
 /// The sequential part of decoding: checks the mask and the radius residuals, undoes the
-/// prediction into `colors` (final) and `samples` (each `depth code | x << 16 | y << 40`, for
-/// [`place`]), and returns the radius residual planes.
+/// prediction into `colors` (final) and `samples` (each `depth code | x << 16 | y << 40` for
+/// [`place`]; the AVX2 decoder's own layout with `AVX2`), and returns the radius residual planes.
 #[inline(always)]
 fn decode_predicted<'a, const AVX2: bool>(
     header: &FrameHeader,
@@ -312,9 +312,9 @@ fn undo_prediction_by_row(w: u32, samples: &mut [u64], d_res: [&[u8]; 2], c_res:
     }
 }
 
-/// The geometric part of decoding, a map over the samples: each `code | x << 16 | y << 40`
-/// becomes the packed sample on pixel `(x, y)`'s ray at the code's depth, with the model's
-/// radius code plus the residual.
+/// The geometric part of decoding, a map over the samples: each `code | x << 16 | y << 40` (with
+/// `AVX2`, `avx2::undo_prediction`'s layout) becomes the packed sample on pixel `(x, y)`'s ray
+/// at the code's depth, with the model's radius code plus the residual.
 #[inline(always)]
 fn place<const AVX2: bool>(header: &FrameHeader, params: &CompactParams, rlo: &[u8], rhi: &[u8], samples: &mut [u64]) {
     let geo = Geo::new(header);

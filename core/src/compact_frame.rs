@@ -19,7 +19,7 @@
 //! The mask and the residual planes go through one zstd frame (decoded by `ruzstd`, pure Rust,
 //! no_std + alloc). The decoded sample sits on its pixel's ray ([`crate::RayBasis::dir`]) at the
 //! dequantized depth and is quantized again to the usual packed `u64`, so a decoded compact
-//! frame is an ordinary [`Frame`] (same sample order: pixel order) and every renderer works
+//! frame is an ordinary [`Frame`](crate::wire::Frame) (same sample order: pixel order) and every renderer works
 //! unchanged. Colors and radius codes round-trip exactly; positions move by at most
 //! [`position_bound`] from the 12-byte form's.
 //!

@@ -11,12 +11,17 @@ use alloc::vec;
 use alloc::vec::Vec;
 use core::arch::x86_64::*;
 
-/// [`super::undo_prediction_by_row`] with the four channels of a pixel in the 32-bit lanes of one
-/// SSE register (AVX2 machines have SSE4.1's 32-bit `min`/`max`), the depth code beside them in
-/// a general register: the chain from one sample to the next is a few instructions long. Pixels
-/// with all three neighbours (99.7 % of the MRI bench frame's) take the MED path; the others
-/// take the generic one. Each sample becomes `x | y << 24 | code << 48` for [`place`] (not the
-/// portable code's layout).
+/// The sequential part of decoding (`decode_predicted` after its checks, the work of
+/// [`super::undo_prediction_by_row`]): the `n` covered pixels of `mask` (exactly `n` bits,
+/// checked) with their depth and color residuals become, in `samples`, `x | y << 24 | code << 48`
+/// each (the layout [`place`] reads, not the portable code's) and, in `colors`, the colors.
+///
+/// A pixel's four channels and depth code travel in 32-bit lanes 0–4 of one AVX2 register; the
+/// row above is kept as one 32-byte cell per column with a row tag in lane 5 (a cell counts for
+/// row `y` iff its tag is `y`, so nothing is cleared between rows). Pixels with all three
+/// neighbours (99.7 % of the MRI bench frame's) take the MED path, written as a function of the
+/// left value `a` (the chain from one sample to the next: two operations and a blend); the
+/// others take the generic one.
 #[target_feature(enable = "avx2")]
 pub(super) fn undo_prediction(
     w: u32,
