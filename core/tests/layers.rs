@@ -197,3 +197,76 @@ fn a_corrupt_layered_compact_frame_is_a_typed_error() {
     }
     assert_eq!(decode(&swapped, &lim).unwrap_err(), WireError::Layers(LayerError::Inconsistent));
 }
+
+/// A layered frame over `w × w` pixels (more samples than one block of `validate`'s).
+fn layered_big(k: u8, w: u32) -> Frame {
+    let camera = Camera::look_at(Vec3::new(0.5, 0.5, 3.0), Vec3::splat(0.5), Vec3::Y, 30.0, w, w);
+    let bounds = Bounds::new(Vec3::new(-1.0, -1.0, -1.0), Vec3::new(2.0, 2.0, 2.0));
+    let q = Quantizer::new(bounds, 0.001);
+    let basis = camera.ray_basis();
+    let (mut samples, mut colors, mut segments) = (Vec::new(), Vec::new(), Vec::new());
+    for y in 0..w {
+        for x in 0..w {
+            let n = ((x * 7 + y * 3) % (k as u32 + 1)) as u8;
+            let d = basis.dir(x, y);
+            for j in 0..n {
+                let t = 2.0 + 0.3 * j as f32 + 0.01 * (x % 16) as f32;
+                samples.push(q.pack(camera.eye + d * t, 0.004));
+                let a = 40 + 50 * j + (x % 16) as u8;
+                colors.push(pack_color(a / 2, a / 3, a, a));
+                segments.push(j);
+            }
+        }
+    }
+    let header = FrameHeader {
+        seq: 1,
+        camera,
+        heuristic: Heuristic::Threshold,
+        bounds,
+        radius_unit: 0.001,
+        render_us: 5,
+        count: samples.len() as u32,
+    };
+    Frame { header, samples, colors, segments }
+}
+
+/// The blocked `validate` gives the one-sample-at-a-time reference's result (the same first
+/// error, or `Ok`) on valid frames and on every kind of damage at every position, across its
+/// blocks of 256.
+#[test]
+fn blocked_validation_equals_the_reference() {
+    use volwarp_core::segments::validate_reference;
+    let f = layered_big(4, 40);
+    assert!(f.samples.len() > 2000, "{}", f.samples.len());
+    let check = |g: &Frame, layers: u8| {
+        let a = validate(&g.header, &g.samples, &g.colors, &g.segments, layers);
+        let b = validate_reference(&g.header, &g.samples, &g.colors, &g.segments, layers);
+        assert_eq!(a, b);
+        a
+    };
+    assert_eq!(check(&f, 4), Ok(()));
+    let n = f.samples.len();
+    let mut state = 0x2545_f491_4f6c_dd1du64;
+    let mut rnd = move |m: usize| {
+        state ^= state << 13;
+        state ^= state >> 7;
+        state ^= state << 17;
+        (state % m as u64) as usize
+    };
+    let mut errors = 0;
+    for case in 0..600 {
+        let mut g = f.clone();
+        let i = if case < 40 { (case * 64) % n } else { rnd(n) };
+        match case % 6 {
+            0 => g.samples.swap(i, (i + 1) % n),
+            1 => g.segments[i] = g.segments[i].wrapping_add(1 + rnd(3) as u8),
+            2 => g.colors[i] = pack_color(200, 0, 0, 10),
+            3 => g.samples[i] ^= 1 << rnd(54),
+            4 => g.samples[i] = g.samples[(i + n - 1) % n],
+            _ => g.segments[i] = 0,
+        }
+        errors += check(&g, 4).is_err() as u32;
+        let _ = check(&g, 2);
+    }
+    assert!(errors > 300, "the damage is found: {errors} of 600");
+}
