@@ -507,7 +507,33 @@ mod layered_compact {
         let mut cursor = vec![0usize; layers as usize];
         let mut i = 0;
         let (first_mask, _) = &parts[0];
+        let nl = parts.len();
         for (byte_i, &byte) in first_mask.iter().enumerate() {
+            // Eight pixels with every layer (the common case inside an object): each layer's
+            // next eight samples, interleaved pixel by pixel, with no bit tests.
+            if byte == 0xff && parts.iter().all(|(m, _)| m[byte_i] == 0xff) && i + 8 * nl <= n {
+                let mut ok = true;
+                for (l, (_, f)) in parts.iter().enumerate() {
+                    let k = cursor[l];
+                    let (Some(src), Some(col)) = (f.samples.get(k..k + 8), f.colors.get(k..k + 8)) else {
+                        ok = false;
+                        break;
+                    };
+                    for p in 0..8 {
+                        samples[i + p * nl + l] = src[p];
+                        colors[i + p * nl + l] = col[p];
+                        segments[i + p * nl + l] = l as u8;
+                    }
+                }
+                if !ok {
+                    return Err(inconsistent);
+                }
+                for c in cursor.iter_mut() {
+                    *c += 8;
+                }
+                i += 8 * nl;
+                continue;
+            }
             let mut bits = byte;
             while bits != 0 {
                 let bit = bits.trailing_zeros() as usize;
