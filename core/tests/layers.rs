@@ -10,34 +10,9 @@ use volwarp_core::{Bounds, Camera, Heuristic, Vec3};
 /// A 16×16 frame of up to `k` segments per pixel (pixel-dependent counts, some empty pixels),
 /// each on its pixel's ray, 0.3 apart, with valid premultiplied colors.
 fn layered(k: u8) -> Frame {
-    let camera = Camera::look_at(Vec3::new(0.5, 0.5, 3.0), Vec3::splat(0.5), Vec3::Y, 30.0, 16, 16);
-    let bounds = Bounds::new(Vec3::new(-1.0, -1.0, -1.0), Vec3::new(2.0, 2.0, 2.0));
-    let q = Quantizer::new(bounds, 0.001);
-    let basis = camera.ray_basis();
-    let (mut samples, mut colors, mut segments) = (Vec::new(), Vec::new(), Vec::new());
-    for y in 0..16u32 {
-        for x in 0..16u32 {
-            let n = ((x * 7 + y * 3) % (k as u32 + 1)) as u8;
-            let d = basis.dir(x, y);
-            for j in 0..n {
-                let t = 2.0 + 0.3 * j as f32 + 0.01 * x as f32;
-                samples.push(q.pack(camera.eye + d * t, 0.004));
-                let a = 40 + 50 * j + x as u8;
-                colors.push(pack_color(a / 2, a / 3, a, a));
-                segments.push(j);
-            }
-        }
-    }
-    let header = FrameHeader {
-        seq: 9,
-        camera,
-        heuristic: Heuristic::Threshold,
-        bounds,
-        radius_unit: 0.001,
-        render_us: 5,
-        count: samples.len() as u32,
-    };
-    Frame { header, samples, colors, segments }
+    let mut f = layered_big(k, 16);
+    f.header.seq = 9;
+    f
 }
 
 fn decode(bytes: &[u8], limits: &Limits) -> Result<Frame, WireError> {
@@ -198,7 +173,8 @@ fn a_corrupt_layered_compact_frame_is_a_typed_error() {
     assert_eq!(decode(&swapped, &lim).unwrap_err(), WireError::Layers(LayerError::Inconsistent));
 }
 
-/// A layered frame over `w × w` pixels (more samples than one block of `validate`'s).
+/// `layered` over `w × w` pixels (the pattern repeating every 16 columns; larger frames have
+/// more samples than one block of `validate`'s).
 fn layered_big(k: u8, w: u32) -> Frame {
     let camera = Camera::look_at(Vec3::new(0.5, 0.5, 3.0), Vec3::splat(0.5), Vec3::Y, 30.0, w, w);
     let bounds = Bounds::new(Vec3::new(-1.0, -1.0, -1.0), Vec3::new(2.0, 2.0, 2.0));
