@@ -15,7 +15,7 @@ use crate::camera_paths::orbit;
 use crate::csv::{num, Table};
 use crate::{ErrorBox, Metrics};
 use std::path::Path;
-use volwarp_core::compact_frame::{encoded_size, EncodeOptions, Encoding};
+use volwarp_core::compact_frame::Encoding;
 use volwarp_core::renderer::Renderer;
 use volwarp_core::wire::CameraRequest;
 use volwarp_core::{Heuristic, Image, RendererKind};
@@ -93,7 +93,8 @@ pub fn study(ds: &Dataset, heuristic: Heuristic, size: u32, variants: &[Variant]
         let m = base.with_transfer_function(&ds.tf, opts);
         let frame = m.render_frame(&req).0;
         let n = frame.samples.len();
-        let bytes = encoded_size(&frame, Encoding::Compact, &EncodeOptions::default());
+        // The bytes the server sends (its encoder, the frame's radius model).
+        let bytes = volwarp_server::encoding::encode_frame(&m, &req, &frame, Encoding::Compact).0.len();
         let bps = bytes as f64 / n.max(1) as f64;
         let scene = volwarp_cpu_tracer::build_scene(&frame);
         if vi == 0 {
