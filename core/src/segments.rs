@@ -399,18 +399,35 @@ mod layered_compact {
     use alloc::vec;
     use alloc::vec::Vec;
 
-    /// Layer `l` of a layered frame: its samples with segment index `l`, in pixel order.
-    pub fn layer_frame(frame: &Frame, l: u8) -> Frame {
-        let mut samples = Vec::new();
-        let mut colors = Vec::new();
+    /// Every layer of a layered frame, split in one pass: layer `l` holds the samples with
+    /// segment index `l`, in pixel order (a frame whose planes differ in length gives
+    /// `BadFrame`).
+    pub fn layer_frames(frame: &Frame) -> Result<Vec<Frame>, EncodeError> {
+        if frame.segments.len() != frame.samples.len() || frame.samples.len() != frame.colors.len() {
+            return Err(EncodeError::BadFrame);
+        }
+        let layers = frame.layers() as usize;
+        let mut counts = vec![0usize; layers];
+        for &seg in &frame.segments {
+            if let Some(c) = counts.get_mut(seg as usize) {
+                *c += 1;
+            }
+        }
+        let mut parts: Vec<(Vec<u64>, Vec<u32>)> =
+            counts.iter().map(|&c| (Vec::with_capacity(c), Vec::with_capacity(c))).collect();
         for ((&s, &c), &seg) in frame.samples.iter().zip(&frame.colors).zip(&frame.segments) {
-            if seg == l {
+            if let Some((samples, colors)) = parts.get_mut(seg as usize) {
                 samples.push(s);
                 colors.push(c);
             }
         }
-        let header = crate::wire::FrameHeader { count: samples.len() as u32, ..frame.header };
-        Frame::new(header, samples, colors)
+        Ok(parts
+            .into_iter()
+            .map(|(samples, colors)| {
+                let header = crate::wire::FrameHeader { count: samples.len() as u32, ..frame.header };
+                Frame::new(header, samples, colors)
+            })
+            .collect())
     }
 
     /// Encodes a layered frame (non-empty `segments`) as one LayeredCompactFrame message
@@ -424,18 +441,25 @@ mod layered_compact {
     /// included), e.g. with another zstd implementation.
     pub fn encode_layered_with(
         frame: &Frame,
-        mut encode: impl FnMut(&Frame) -> Result<Vec<u8>, EncodeError>,
+        encode: impl FnMut(&Frame) -> Result<Vec<u8>, EncodeError>,
     ) -> Result<Vec<u8>, EncodeError> {
-        if frame.segments.len() != frame.samples.len() || frame.samples.len() != frame.colors.len() {
+        let msgs = layer_frames(frame)?.iter().map(encode).collect::<Result<Vec<_>, _>>()?;
+        assemble_layered(frame, &msgs)
+    }
+
+    /// The LayeredCompactFrame message of `frame` from its layers' CompactFrame messages
+    /// (header included; layer 0 first, as [`layer_frames`] splits them), however they were
+    /// made (e.g. in parallel).
+    pub fn assemble_layered(frame: &Frame, msgs: &[Vec<u8>]) -> Result<Vec<u8>, EncodeError> {
+        let layers = frame.layers();
+        if msgs.len() != layers as usize {
             return Err(EncodeError::BadFrame);
         }
-        let layers = frame.layers();
         let mut fixed =
             encode_frame_fixed(&crate::wire::FrameHeader { count: frame.samples.len() as u32, ..frame.header });
         fixed[57] = layers;
         let mut payload = Vec::from(fixed);
-        for l in 0..layers {
-            let msg = encode(&layer_frame(frame, l))?;
+        for msg in msgs {
             if msg.len() < HEADER_LEN {
                 return Err(EncodeError::BadFrame);
             }

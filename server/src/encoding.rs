@@ -11,6 +11,7 @@
 //! issue 16).
 
 use crate::marcher::Marcher;
+use rayon::prelude::*;
 use volwarp_core::compact_frame::{self, Coder, EncodeOptions, Encoding, RadiusPrediction};
 use volwarp_core::wire::{self, CameraRequest, Frame, FrameHeader, Message};
 
@@ -32,11 +33,12 @@ pub fn encode_options(marcher: &Marcher, req: &CameraRequest) -> EncodeOptions {
 /// the frame does not fit the compact form.
 pub fn encode_compact(frame: &Frame, opts: &EncodeOptions, level: i32) -> Option<Vec<u8>> {
     if !frame.segments.is_empty() {
-        // A layered frame (issue 14): one compact part per layer, in a LayeredCompactFrame.
-        return volwarp_core::segments::encode_layered_with(frame, |layer| {
-            encode_compact(layer, opts, level).ok_or(compact_frame::EncodeError::BadFrame)
-        })
-        .ok();
+        // A layered frame (issue 14): one compact part per layer, in a LayeredCompactFrame;
+        // the parts are encoded in parallel (the same bytes as one after another).
+        let layers = volwarp_core::segments::layer_frames(frame).ok()?;
+        let msgs: Vec<Vec<u8>> =
+            layers.par_iter().map(|layer| encode_compact(layer, opts, level)).collect::<Option<_>>()?;
+        return volwarp_core::segments::assemble_layered(frame, &msgs).ok();
     }
     let planes = compact_frame::build_planes(frame, opts).ok()?;
     let coded = match planes.params.coder {

@@ -59,3 +59,25 @@ fn fast_codec_equals_the_reference_on_the_mri() {
     };
     check(&Marcher::from_dataset(&ds), "mri");
 }
+
+/// A layered frame's parts are encoded in parallel: the same message, byte for byte, as
+/// encoding them one after another (`segments::encode_layered_with`), and it decodes to the
+/// frame's segments and colors.
+#[test]
+fn layered_frames_encode_in_parallel_as_in_sequence() {
+    let m = Marcher::from_dataset(&Dataset::default_bundled());
+    let camera = m.default_camera(256, 192).orbit(30.0, 10.0);
+    let req = CameraRequest { seq: 3, camera, heuristic: Heuristic::Threshold, radius_scale: 1.0 };
+    let (frame, _) = m.render_frame_layers(&req, 4);
+    assert!(frame.layers() >= 2, "a layered frame");
+    let opts = encode_options(&m, &req);
+    let parallel = encode_compact(&frame, &opts, ZSTD_LEVEL).expect("encodes");
+    let sequential = volwarp_core::segments::encode_layered_with(&frame, |layer| {
+        encode_compact(layer, &opts, ZSTD_LEVEL).ok_or(volwarp_core::compact_frame::EncodeError::BadFrame)
+    })
+    .expect("encodes");
+    assert_eq!(parallel, sequential);
+    let back = volwarp_core::segments::decode_layered_payload(&parallel[HEADER_LEN..], &Limits::default()).unwrap();
+    assert_eq!(back.segments, frame.segments);
+    assert_eq!(back.colors, frame.colors);
+}
