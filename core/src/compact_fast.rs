@@ -11,11 +11,12 @@
 //!   row's samples into row buffers (depth codes, RGBA8 words, coverage), predicts every pixel
 //!   of the row at once with branch-free maps (colors byte by byte, which the compiler
 //!   vectorizes) and gathers the residuals back in sample order. The decoder, whose prediction
-//!   depends on the pixel just decoded, keeps the row above in one 64-bit cell per column
-//!   (color, depth code, coverage) and carries the left neighbour in registers. The rule is the
-//!   one of `docs/wire-format.md`; "left only" and "no neighbour" both predict the previously
-//!   visited pixel, which is the previous sample; the MED is computed in its select form or as
-//!   `max(min(a, b), min(max(a, b), a + b − c))` in 32-bit lanes, both exact.
+//!   depends on the pixel just decoded, keeps the row above in buffers (one column longer than
+//!   the row, so column 0 needs no test; the AVX2 decoder in tagged 32-byte cells) and carries
+//!   the left neighbour in registers. The rule is the one of `docs/wire-format.md`; "left only"
+//!   and "no neighbour" both predict the previously visited pixel, which is the previous sample;
+//!   the MED is computed in its select form or as `max(min(a, b), min(max(a, b), a + b − c))` in
+//!   32-bit lanes, both exact.
 //! * **Passes.** The geometry (ray direction with its square root, the position along the
 //!   ray, quantization, the radius model) runs as independent maps over the samples. Every
 //!   float operation is the reference's, in the reference's order (no fused multiply-add,
@@ -103,6 +104,20 @@ fn trunc_small(v: f32) -> u32 {
 #[inline(always)]
 fn dot(a: [f32; 3], b: [f32; 3]) -> f32 {
     a[0] * b[0] + a[1] * b[1] + a[2] * b[2]
+}
+
+/// The row of the samples from `i0` on (`key(i)`: sample `i`'s pixel index, increasing with
+/// `i`; `n` samples, rows `w` pixels wide): its number, its first pixel index, and the end of
+/// its samples.
+#[inline(always)]
+fn next_row(i0: usize, n: usize, w: u64, key: impl Fn(usize) -> u64) -> (u64, u64, usize) {
+    let y = key(i0) / w;
+    let row_start = y * w;
+    let mut i1 = i0 + 1;
+    while i1 < n && key(i1) < row_start + w {
+        i1 += 1;
+    }
+    (y, row_start, i1)
 }
 
 // ---------------------------------------------------------------- decoding
@@ -257,13 +272,7 @@ fn undo_prediction_by_row(w: u32, samples: &mut [u64], d_res: [&[u8]; 2], c_res:
     let mut last_y = u64::MAX;
     let mut i0 = 0;
     while i0 < n {
-        let y = samples[i0] / w64;
-        let row_start = y * w64;
-        let row_end = row_start + w64;
-        let mut i1 = i0 + 1;
-        while i1 < n && samples[i1] < row_end {
-            i1 += 1;
-        }
+        let (y, row_start, i1) = next_row(i0, n, w64, |i| samples[i]);
         core::mem::swap(&mut prev_d, &mut cur_d);
         core::mem::swap(&mut prev_c, &mut cur_c);
         core::mem::swap(&mut prev_m, &mut cur_m);
@@ -749,13 +758,7 @@ fn residuals_by_row<const AVX2: bool>(
     let mut last_y = u64::MAX;
     let mut i0 = 0;
     while i0 < n {
-        let y = pix[i0] as u64 / w64;
-        let row_start = y * w64;
-        let row_end = row_start + w64;
-        let mut i1 = i0 + 1;
-        while i1 < n && (pix[i1] as u64) < row_end {
-            i1 += 1;
-        }
+        let (y, row_start, i1) = next_row(i0, n, w64, |i| pix[i] as u64);
         core::mem::swap(&mut prev, &mut cur);
         if last_y.wrapping_add(1) != y {
             // The row above has no samples (or this is the first row).

@@ -19,8 +19,8 @@
 //! The mask and the residual planes go through one zstd frame (decoded by `ruzstd`, pure Rust,
 //! no_std + alloc). The decoded sample sits on its pixel's ray ([`crate::RayBasis::dir`]) at the
 //! dequantized depth and is quantized again to the usual packed `u64`, so a decoded compact
-//! frame is an ordinary [`Frame`](crate::wire::Frame) (same sample order: pixel order) and every renderer works
-//! unchanged. Colors and radius codes round-trip exactly; positions move by at most
+//! frame is an ordinary [`Frame`](crate::wire::Frame) (same sample order: pixel order) and every
+//! renderer works unchanged. Colors and radius codes round-trip exactly; positions move by at most
 //! [`position_bound`] from the 12-byte form's.
 //!
 //! **Bounded decoding.** Every size the decoder allocates follows from the header after it was
@@ -715,9 +715,9 @@ mod codec {
     }
 
     /// Entropy codes a body as one zstd frame with the C zstd library at entropy `level`, with
-    /// the body's runs of identical bytes as its only matches (`crate::byte_runs`: what `volwarp-server`
-    /// sends; faster both ways and smaller than the library's own match finder on residual
-    /// planes, and about 10× ruzstd's encoder's speed).
+    /// the body's runs of identical bytes as its only matches (`crate::byte_runs`: what
+    /// `volwarp-server` sends; faster both ways than the library's own match finder on residual
+    /// planes and smaller on most frames, and about 10× ruzstd's encoder's speed).
     #[cfg(feature = "zstd-c")]
     pub fn compress_c(body: &[u8], level: i32) -> Vec<u8> {
         // Only allocation failure can make the library fail on a buffer of its own bound.
@@ -771,8 +771,10 @@ mod codec {
         (crate::wire::encode_to_vec(&crate::wire::Message::Frame(frame.clone())), Encoding::Raw12)
     }
 
-    /// The bytes `frame` takes on the wire in `encoding` (message header included): what a link
-    /// model or session simulator should charge for it.
+    /// The bytes `frame` takes on the wire in `encoding` (message header included) with core's
+    /// own encoder ([`encode_frame`]: ruzstd, `opts`). The bytes the server sends for its frames
+    /// (C zstd, the frame's radius model), which link models and the session simulator charge,
+    /// are `volwarp_server::encoding::encode_frame`'s.
     pub fn encoded_size(frame: &Frame, encoding: Encoding, opts: &EncodeOptions) -> usize {
         match encoding {
             Encoding::Raw12 => {

@@ -271,8 +271,6 @@ fn validate_blocks(
     let (mut behind, mut on_ray) = ([false; B], [false; B]);
     // The sample before the block: its offset from the eye and distance.
     let mut before = [0f32; 4];
-    // Whether any sample was seen (a later segment needs one before it).
-    let mut seen = false;
     for start in (0..samples.len()).step_by(B) {
         let end = (start + B).min(samples.len());
         let m = end - start;
@@ -298,43 +296,54 @@ fn validate_blocks(
         // Whether the whole block passes, as one reduction; only a failing block is walked in
         // order for its first error.
         let segs = &segments[start..end];
+        let before_seg =
+            |k: usize| if k == 0 { segments.get(start.wrapping_sub(1)).copied() } else { Some(segs[k - 1]) };
         let mut pass = true;
         for k in 0..m {
-            let [r, g, b, a] = colors[start + k].to_le_bytes();
-            let seg = segs[k];
-            let before_seg = if k == 0 { segments.get(start.wrapping_sub(1)).copied() } else { Some(segs[k - 1]) };
-            let follows = before_seg.is_some_and(|p| p.wrapping_add(1) == seg) & behind[k] & on_ray[k];
-            pass &= (r <= a) & (g <= a) & (b <= a) & (seg < layers.max(1)) & ((seg == 0) | follows);
+            pass &= check_sample(start + k, colors[start + k], segs[k], before_seg(k), layers, behind[k], on_ray[k])
+                .is_ok();
         }
-        if pass {
-            seen |= m > 0;
-            before = [rx[m - 1], ry[m - 1], rz[m - 1], dist[m - 1]];
-            continue;
-        }
-        for k in 0..m {
-            let i = start + k;
-            let seg = segments[i];
-            let [r, g, b, a] = colors[i].to_le_bytes();
-            if r > a || g > a || b > a {
-                return Err(LayerError::Opacity { index: i });
-            }
-            if seg >= layers.max(1) {
-                return Err(LayerError::BadIndex { index: i });
-            }
-            if seg == 0 {
-                seen = true;
-                continue;
-            }
-            if !seen || i == 0 || segments[i - 1] != seg - 1 {
-                return Err(LayerError::BadIndex { index: i });
-            }
-            // Strictly behind, and on the same ray from the eye: the previous point's
-            // direction reaches this one's within a tenth of the distance.
-            if !behind[k] || !on_ray[k] {
-                return Err(LayerError::Unsorted { index: i });
+        if !pass {
+            for k in 0..m {
+                check_sample(start + k, colors[start + k], segs[k], before_seg(k), layers, behind[k], on_ray[k])?;
             }
         }
         before = [rx[m - 1], ry[m - 1], rz[m - 1], dist[m - 1]];
+    }
+    Ok(())
+}
+
+/// The checks of sample `i` (its color, its segment index, the segment index of the sample
+/// before it if any, and whether it lies behind that sample on the same ray), in the order
+/// [`validate`] reports them. A later segment must directly follow its predecessor, which
+/// itself passed, so the sample before is the one it is compared with.
+#[inline(always)]
+fn check_sample(
+    i: usize,
+    color: u32,
+    seg: u8,
+    before: Option<u8>,
+    layers: u8,
+    behind: bool,
+    on_ray: bool,
+) -> Result<(), LayerError> {
+    let [r, g, b, a] = color.to_le_bytes();
+    if r > a || g > a || b > a {
+        return Err(LayerError::Opacity { index: i });
+    }
+    if seg >= layers.max(1) {
+        return Err(LayerError::BadIndex { index: i });
+    }
+    if seg == 0 {
+        return Ok(());
+    }
+    if before != Some(seg - 1) {
+        return Err(LayerError::BadIndex { index: i });
+    }
+    // Strictly behind, and on the same ray from the eye: the previous point's direction
+    // reaches this one's within a tenth of the distance.
+    if !behind || !on_ray {
+        return Err(LayerError::Unsorted { index: i });
     }
     Ok(())
 }
@@ -536,24 +545,17 @@ mod layered_compact {
             // Eight pixels with every layer (the common case inside an object): each layer's
             // next eight samples, interleaved pixel by pixel, with no bit tests.
             if byte == 0xff && parts.iter().all(|(m, _)| m[byte_i] == 0xff) && i + 8 * nl <= n {
-                let mut ok = true;
                 for (l, (_, f)) in parts.iter().enumerate() {
                     let k = cursor[l];
                     let (Some(src), Some(col)) = (f.samples.get(k..k + 8), f.colors.get(k..k + 8)) else {
-                        ok = false;
-                        break;
+                        return Err(inconsistent);
                     };
                     for p in 0..8 {
                         samples[i + p * nl + l] = src[p];
                         colors[i + p * nl + l] = col[p];
                         segments[i + p * nl + l] = l as u8;
                     }
-                }
-                if !ok {
-                    return Err(inconsistent);
-                }
-                for c in cursor.iter_mut() {
-                    *c += 8;
+                    cursor[l] += 8;
                 }
                 i += 8 * nl;
                 continue;

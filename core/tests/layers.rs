@@ -176,14 +176,20 @@ fn a_corrupt_layered_compact_frame_is_a_typed_error() {
 /// `layered` over `w × w` pixels (the pattern repeating every 16 columns; larger frames have
 /// more samples than one block of `validate`'s).
 fn layered_big(k: u8, w: u32) -> Frame {
-    let camera = Camera::look_at(Vec3::new(0.5, 0.5, 3.0), Vec3::splat(0.5), Vec3::Y, 30.0, w, w);
+    layered_frame(w, w, |x, y| ((x * 7 + y * 3) % (k as u32 + 1)) as u8)
+}
+
+/// A `w × h` layered frame with `count(x, y)` segments at pixel `(x, y)` (at most 4), each on
+/// its pixel's ray, 0.3 apart, with valid premultiplied colors.
+fn layered_frame(w: u32, h: u32, count: impl Fn(u32, u32) -> u8) -> Frame {
+    let camera = Camera::look_at(Vec3::new(0.5, 0.5, 3.0), Vec3::splat(0.5), Vec3::Y, 30.0, w, h);
     let bounds = Bounds::new(Vec3::new(-1.0, -1.0, -1.0), Vec3::new(2.0, 2.0, 2.0));
     let q = Quantizer::new(bounds, 0.001);
     let basis = camera.ray_basis();
     let (mut samples, mut colors, mut segments) = (Vec::new(), Vec::new(), Vec::new());
-    for y in 0..w {
+    for y in 0..h {
         for x in 0..w {
-            let n = ((x * 7 + y * 3) % (k as u32 + 1)) as u8;
+            let n = count(x, y);
             let d = basis.dir(x, y);
             for j in 0..n {
                 let t = 2.0 + 0.3 * j as f32 + 0.01 * (x % 16) as f32;
@@ -251,40 +257,13 @@ fn blocked_validation_equals_the_reference() {
 /// layers: the merge's fast path) and sometimes fewer, round trips like the 12-byte form.
 #[test]
 fn layered_compact_frames_with_full_coverage_round_trip() {
-    let camera = Camera::look_at(Vec3::new(0.5, 0.5, 3.0), Vec3::splat(0.5), Vec3::Y, 30.0, 48, 40);
-    let bounds = Bounds::new(Vec3::new(-1.0, -1.0, -1.0), Vec3::new(2.0, 2.0, 2.0));
-    let q = Quantizer::new(bounds, 0.001);
-    let basis = camera.ray_basis();
-    let (mut samples, mut colors, mut segments) = (Vec::new(), Vec::new(), Vec::new());
-    for y in 0..40u32 {
-        for x in 0..48u32 {
-            // Three layers almost everywhere; a few pixels with one or two, a few empty.
-            let n = match (x * 13 + y * 7) % 29 {
-                0 => 0,
-                1 => 1,
-                2 => 2,
-                _ => 3,
-            };
-            let d = basis.dir(x, y);
-            for j in 0..n {
-                let t = 2.0 + 0.3 * j as f32 + 0.01 * (x % 8) as f32;
-                samples.push(q.pack(camera.eye + d * t, 0.004));
-                let a = 60 + 60 * j + (y % 8) as u8;
-                colors.push(pack_color(a / 2, a / 4, a / 3, a));
-                segments.push(j);
-            }
-        }
-    }
-    let header = FrameHeader {
-        seq: 2,
-        camera,
-        heuristic: Heuristic::Threshold,
-        bounds,
-        radius_unit: 0.001,
-        render_us: 5,
-        count: samples.len() as u32,
-    };
-    let f = Frame { header, samples, colors, segments };
+    // Three layers almost everywhere; a few pixels with one or two, a few empty.
+    let f = layered_frame(48, 40, |x, y| match (x * 13 + y * 7) % 29 {
+        0 => 0,
+        1 => 1,
+        2 => 2,
+        _ => 3,
+    });
     let (compact, got) = compact_frame::encode_frame(&f, Encoding::Compact, &EncodeOptions::default());
     assert_eq!(got, Encoding::Compact);
     let back = decode(&compact, &Limits::default()).unwrap();

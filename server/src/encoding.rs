@@ -5,10 +5,10 @@
 //! The server knows each frame's radius model exactly ([`crate::radius::FrameRadius`]), so
 //! radius codes cost nothing in the compact form unless a depth rounds to the next code. The
 //! body is entropy coded with the C zstd library (entropy level [`ZSTD_LEVEL`]) with the
-//! body's runs of identical bytes as its only matches (`volwarp_core::byte_runs`): about 10× faster than
-//! ruzstd's pure-Rust encoder (core's default) at a better ratio, and 2.7× faster than the
-//! library's own level 1; clients decode either with ruzstd or C zstd (`docs/perf.md`,
-//! issue 16).
+//! body's runs of identical bytes as its only matches (`volwarp_core::byte_runs`): about 10×
+//! faster than ruzstd's pure-Rust encoder (core's default) at a better ratio, and 2.4× faster
+//! than the library's own level 1; clients decode either with ruzstd or C zstd
+//! (`docs/perf.md`, issue 16).
 
 use crate::marcher::Marcher;
 use rayon::prelude::*;
@@ -29,8 +29,7 @@ pub fn encode_options(marcher: &Marcher, req: &CameraRequest) -> EncodeOptions {
 }
 
 /// The compact message (header included) of `frame` with C zstd at `level` over the byte-run
-/// parse ([`compact_frame::compress_c`]), or `None` if
-/// the frame does not fit the compact form.
+/// parse ([`compact_frame::compress_c`]), or `None` if the frame does not fit the compact form.
 pub fn encode_compact(frame: &Frame, opts: &EncodeOptions, level: i32) -> Option<Vec<u8>> {
     if !frame.segments.is_empty() {
         // A layered frame (issue 14): one compact part per layer, in a LayeredCompactFrame;

@@ -115,13 +115,7 @@ pub(super) fn undo_prediction(
     let idx_mask = (1u64 << 48) - 1;
     let mut i0 = 0;
     while i0 < n {
-        let y = (samples[i0] & idx_mask) / w64;
-        let row_start = y * w64;
-        let row_end = row_start + w64;
-        let mut i1 = i0 + 1;
-        while i1 < n && (samples[i1] & idx_mask) < row_end {
-            i1 += 1;
-        }
+        let (y, row_start, i1) = super::next_row(i0, n, w64, |i| samples[i] & idx_mask);
         core::mem::swap(&mut prev, &mut cur);
         // Rows are below 2^24 (the caller's check), so tags never wrap.
         let (above, tag) = (y as u32, y as u32 + 1);
@@ -132,7 +126,7 @@ pub(super) fn undo_prediction(
             let v = *s;
             let x = (v & idx_mask) - row_start;
             let xs = x as usize;
-            // SAFETY: every index of this row lies in `row_start..row_end`, so `x < w` and
+            // SAFETY: every index of this row lies in `row_start..row_start + w`, so `x < w` and
             // both cells exist (`prev` has `w + 1`).
             let (bcell, ccell) = unsafe { (prev.get_unchecked(xs + 1), prev.get_unchecked(xs)) };
             let (hb, hc) = (bcell[5] == above, ccell[5] == above);
