@@ -1,4 +1,4 @@
-//! The eight-lane vector types the packet marcher ([`crate::packet_march`]) is generic over:
+//! The vector types (eight or sixteen lanes) the packet marcher ([`crate::packet_march`]) is generic over:
 //! `f32` lanes (also used as masks), `i32` lanes, and gathers from `f32` slices.
 //!
 //! The same approach as the CPU tracer's lanes (`cpu-tracer/src/lanes.rs`), with the
@@ -17,7 +17,7 @@ use core::ops::{Add, BitAnd, BitOr, Div, Mul, Sub};
 use wide::{f32x8, i32x8};
 
 /// Defines `$name`, which runs the kernel `$kernel::<L>` on the best lanes this CPU has: the
-/// instance `$avx2`, compiled with `#[target_feature(enable = "avx2")]` on [`Avx2`] lanes,
+/// instance `$avx2`, compiled with `#[target_feature(enable = "avx2")]` on sixteen [`Avx2`] lanes ([`X2`]),
 /// where `is_x86_feature_detected!("avx2")` says the CPU has AVX2, and the portable
 /// `wide::f32x8` instance elsewhere. Both compute the same values.
 macro_rules! dispatch {
@@ -32,7 +32,7 @@ macro_rules! dispatch {
             $kernel::<wide::f32x8>($($arg),*)
         }
 
-        /// The kernel on [`crate::lanes::Avx2`] lanes, compiled with AVX2.
+        /// The kernel on sixteen [`crate::lanes::Avx2`] lanes ([`crate::lanes::X2`]), compiled with AVX2.
         ///
         /// # Safety
         /// The CPU must support AVX2.
@@ -41,13 +41,16 @@ macro_rules! dispatch {
         #[allow(clippy::too_many_arguments)]
         unsafe fn $avx2($($arg: $ty),*) {
             // `Avx2`'s invariant holds: the caller guarantees AVX2.
-            $kernel::<$crate::lanes::Avx2>($($arg),*)
+            $kernel::<$crate::lanes::X2<$crate::lanes::Avx2>>($($arg),*)
         }
     };
 }
 pub(crate) use dispatch;
 
-/// Eight `f32` lanes (also masks) and their companion eight `i32` lanes.
+/// The most lanes a [`Lanes`] type has.
+pub(crate) const MAX_LANES: usize = 16;
+
+/// `N` `f32` lanes (also masks) and their companion `N` `i32` lanes (`N` = 8 or 16).
 pub(crate) trait Lanes:
     Copy
     + Add<Output = Self>
@@ -57,13 +60,15 @@ pub(crate) trait Lanes:
     + BitAnd<Output = Self>
     + BitOr<Output = Self>
 {
-    /// Eight `i32` lanes.
+    /// `i32` lanes, as many.
     type I: Copy + Add<Output = Self::I>;
+    /// The number of lanes (at most [`MAX_LANES`]).
+    const N: usize;
 
     /// All lanes `x`.
     fn splat(x: f32) -> Self;
-    /// The lanes of `a`, lane 0 first.
-    fn new(a: [f32; 8]) -> Self;
+    /// The lanes of `a[..N]`, lane 0 first.
+    fn new(a: &[f32; MAX_LANES]) -> Self;
     /// `f32::min` per lane where `rhs` is not NaN (a NaN `self` gives `rhs`); `rhs` where it is
     /// (`minps`: one instruction, the kernel's bounds are never NaN).
     fn min(self, rhs: Self) -> Self;
@@ -83,8 +88,8 @@ pub(crate) trait Lanes:
     fn to_bitmask(self) -> u32;
     /// Whether any lane of the mask is set.
     fn any(self) -> bool;
-    /// The lanes, lane 0 first.
-    fn to_array(self) -> [f32; 8];
+    /// The lanes, lane 0 first (the rest of the array zero).
+    fn to_array(self) -> [f32; MAX_LANES];
     /// Truncation toward zero of lanes in `0 ..= 2³¹ − 128` (`x as i32` there).
     fn trunc_int(self) -> Self::I;
     /// The `i32` lanes as `f32` (exact below 2²⁴).
@@ -104,14 +109,15 @@ pub(crate) trait Lanes:
 /// The portable lanes: `wide`'s, whatever it was compiled for.
 impl Lanes for f32x8 {
     type I = i32x8;
+    const N: usize = 8;
 
     #[inline(always)]
     fn splat(x: f32) -> Self {
         f32x8::splat(x)
     }
     #[inline(always)]
-    fn new(a: [f32; 8]) -> Self {
-        f32x8::new(a)
+    fn new(a: &[f32; MAX_LANES]) -> Self {
+        f32x8::new(core::array::from_fn(|l| a[l]))
     }
     #[inline(always)]
     fn min(self, rhs: Self) -> Self {
@@ -150,8 +156,9 @@ impl Lanes for f32x8 {
         f32x8::any(self)
     }
     #[inline(always)]
-    fn to_array(self) -> [f32; 8] {
-        f32x8::to_array(self)
+    fn to_array(self) -> [f32; MAX_LANES] {
+        let a = f32x8::to_array(self);
+        core::array::from_fn(|l| if l < 8 { a[l] } else { 0.0 })
     }
     #[inline(always)]
     fn trunc_int(self) -> i32x8 {
@@ -186,12 +193,138 @@ impl Lanes for f32x8 {
     }
 }
 
+/// Sixteen lanes as two halves of eight (`X2<Avx2>`: two AVX registers per value). Every
+/// operation is its halves' operation, so the values are those of the eight-lane type lane for
+/// lane; the two halves are independent chains of work, which a core overlaps (the packet
+/// marcher's step is bound by the latency of its gathers and blends, not by their throughput).
+#[derive(Clone, Copy)]
+pub(crate) struct X2<L>(L, L);
+
+/// The `i32` lanes of [`X2`].
+#[derive(Clone, Copy)]
+pub(crate) struct X2I<I>(I, I);
+
+impl<I: Add<Output = I>> Add for X2I<I> {
+    type Output = X2I<I>;
+    #[inline(always)]
+    fn add(self, rhs: X2I<I>) -> X2I<I> {
+        X2I(self.0 + rhs.0, self.1 + rhs.1)
+    }
+}
+
+macro_rules! x2_binop {
+    ($tr:ident, $f:ident) => {
+        impl<L: $tr<Output = L>> $tr for X2<L> {
+            type Output = X2<L>;
+            #[inline(always)]
+            fn $f(self, rhs: X2<L>) -> X2<L> {
+                X2(self.0.$f(rhs.0), self.1.$f(rhs.1))
+            }
+        }
+    };
+}
+x2_binop!(Add, add);
+x2_binop!(Sub, sub);
+x2_binop!(Mul, mul);
+x2_binop!(Div, div);
+x2_binop!(BitAnd, bitand);
+x2_binop!(BitOr, bitor);
+
+impl<L: Lanes> Lanes for X2<L> {
+    type I = X2I<L::I>;
+    const N: usize = 2 * L::N;
+
+    #[inline(always)]
+    fn splat(x: f32) -> Self {
+        X2(L::splat(x), L::splat(x))
+    }
+    #[inline(always)]
+    fn new(a: &[f32; MAX_LANES]) -> Self {
+        let hi: [f32; MAX_LANES] = core::array::from_fn(|l| if l < L::N { a[L::N + l] } else { 0.0 });
+        X2(L::new(a), L::new(&hi))
+    }
+    #[inline(always)]
+    fn min(self, rhs: Self) -> Self {
+        X2(self.0.min(rhs.0), self.1.min(rhs.1))
+    }
+    #[inline(always)]
+    fn max(self, rhs: Self) -> Self {
+        X2(self.0.max(rhs.0), self.1.max(rhs.1))
+    }
+    #[inline(always)]
+    fn simd_lt(self, rhs: Self) -> Self {
+        X2(self.0.simd_lt(rhs.0), self.1.simd_lt(rhs.1))
+    }
+    #[inline(always)]
+    fn simd_gt(self, rhs: Self) -> Self {
+        X2(self.0.simd_gt(rhs.0), self.1.simd_gt(rhs.1))
+    }
+    #[inline(always)]
+    fn simd_ge(self, rhs: Self) -> Self {
+        X2(self.0.simd_ge(rhs.0), self.1.simd_ge(rhs.1))
+    }
+    #[inline(always)]
+    fn and_not(self, rhs: Self) -> Self {
+        X2(self.0.and_not(rhs.0), self.1.and_not(rhs.1))
+    }
+    #[inline(always)]
+    fn select(self, if_true: Self, if_false: Self) -> Self {
+        X2(self.0.select(if_true.0, if_false.0), self.1.select(if_true.1, if_false.1))
+    }
+    #[inline(always)]
+    fn to_bitmask(self) -> u32 {
+        self.0.to_bitmask() | self.1.to_bitmask() << L::N
+    }
+    #[inline(always)]
+    fn any(self) -> bool {
+        (self.0 | self.1).any()
+    }
+    #[inline(always)]
+    fn to_array(self) -> [f32; MAX_LANES] {
+        let (lo, hi) = (self.0.to_array(), self.1.to_array());
+        core::array::from_fn(|l| {
+            if l < L::N {
+                lo[l]
+            } else if l < 2 * L::N {
+                hi[l - L::N]
+            } else {
+                0.0
+            }
+        })
+    }
+    #[inline(always)]
+    fn trunc_int(self) -> Self::I {
+        X2I(self.0.trunc_int(), self.1.trunc_int())
+    }
+    #[inline(always)]
+    fn int_to_float(i: Self::I) -> Self {
+        X2(L::int_to_float(i.0), L::int_to_float(i.1))
+    }
+    #[inline(always)]
+    fn splat_i(x: i32) -> Self::I {
+        X2I(L::splat_i(x), L::splat_i(x))
+    }
+    #[inline(always)]
+    fn mul_i(a: Self::I, b: Self::I) -> Self::I {
+        X2I(L::mul_i(a.0, b.0), L::mul_i(a.1, b.1))
+    }
+    #[inline(always)]
+    fn gather(data: &[f32], idx: Self::I) -> Self {
+        X2(L::gather(data, idx.0), L::gather(data, idx.1))
+    }
+    #[inline(always)]
+    fn gather_pairs(data: &[f32], idx: Self::I) -> (Self, Self) {
+        let ((a0, b0), (a1, b1)) = (L::gather_pairs(data, idx.0), L::gather_pairs(data, idx.1));
+        (X2(a0, a1), X2(b0, b1))
+    }
+}
+
 #[cfg(target_arch = "x86_64")]
 pub(crate) use avx2::Avx2;
 
 #[cfg(target_arch = "x86_64")]
 mod avx2 {
-    use super::Lanes;
+    use super::{Lanes, MAX_LANES};
     use core::arch::x86_64::*;
     use core::ops::{Add, BitAnd, BitOr, Div, Mul, Sub};
 
@@ -250,14 +383,15 @@ mod avx2 {
     // gathers, whose pointers are noted there.
     impl Lanes for Avx2 {
         type I = Avx2I;
+        const N: usize = 8;
 
         #[inline(always)]
         fn splat(x: f32) -> Self {
             Avx2(unsafe { _mm256_set1_ps(x) })
         }
         #[inline(always)]
-        fn new(a: [f32; 8]) -> Self {
-            // `a` is eight readable `f32`; the load needs no alignment.
+        fn new(a: &[f32; MAX_LANES]) -> Self {
+            // `a` holds at least eight readable `f32`; the load needs no alignment.
             Avx2(unsafe { _mm256_loadu_ps(a.as_ptr()) })
         }
         #[inline(always)]
@@ -300,9 +434,9 @@ mod avx2 {
             unsafe { _mm256_testz_ps(self.0, self.0) == 0 }
         }
         #[inline(always)]
-        fn to_array(self) -> [f32; 8] {
-            let mut a = [0f32; 8];
-            // `a` is 32 writable bytes; the store needs no alignment.
+        fn to_array(self) -> [f32; MAX_LANES] {
+            let mut a = [0f32; MAX_LANES];
+            // `a` holds at least 32 writable bytes; the store needs no alignment.
             unsafe { _mm256_storeu_ps(a.as_mut_ptr(), self.0) };
             a
         }
@@ -363,60 +497,69 @@ mod avx2 {
 
     #[cfg(test)]
     mod tests {
-        use super::{Avx2, Avx2I, Lanes};
-        use wide::{f32x8, i32x8};
+        use super::super::{MAX_LANES, X2};
+        use super::{Avx2, Lanes};
+        use wide::f32x8;
 
-        /// Every `Lanes` method of `Avx2` against the portable lanes, inlined into an AVX2
-        /// function as the kernel is.
-        #[target_feature(enable = "avx2")]
-        fn check() {
+        /// Every `Lanes` method of `A` against `W`'s (the same width), inlined into the caller.
+        #[inline(always)]
+        fn check_against<A: Lanes, W: Lanes>() {
+            assert_eq!(A::N, W::N);
+            let n = A::N;
             let vals = [0.0, -0.0, 1.0, -1.0, 0.5, 3.7, 1e-40, 1e7, f32::INFINITY, -f32::INFINITY, f32::NAN, 1023.5];
             let pairs: Vec<(f32, f32)> = vals.iter().flat_map(|&a| vals.iter().map(move |&b| (a, b))).collect();
             let data: Vec<f32> = (0..100).map(|i| i as f32 * 0.25).collect();
-            let bits = |x: [f32; 8]| x.map(f32::to_bits);
-            for c in pairs.chunks_exact(8) {
-                let a: [f32; 8] = core::array::from_fn(|l| c[l].0);
-                let b: [f32; 8] = core::array::from_fn(|l| c[l].1);
-                let (x, y) = (<Avx2 as Lanes>::new(a), <Avx2 as Lanes>::new(b));
-                let (p, q) = (<f32x8 as Lanes>::new(a), <f32x8 as Lanes>::new(b));
-                let eq = |what: &str, r: Avx2, s: f32x8| {
-                    let (r, s) = (r.to_array(), Lanes::to_array(s));
-                    let ok = (0..8).all(|l| r[l].to_bits() == s[l].to_bits() || (r[l].is_nan() && s[l].is_nan()));
+            let bits = |x: [f32; MAX_LANES]| x.map(f32::to_bits);
+            for c in pairs.chunks_exact(n) {
+                let a: [f32; MAX_LANES] = core::array::from_fn(|l| if l < n { c[l].0 } else { 0.0 });
+                let b: [f32; MAX_LANES] = core::array::from_fn(|l| if l < n { c[l].1 } else { 0.0 });
+                let (x, y) = (A::new(&a), A::new(&b));
+                let (p, q) = (W::new(&a), W::new(&b));
+                let eq = |what: &str, r: A, s: W| {
+                    let (r, s) = (r.to_array(), s.to_array());
+                    let ok = (0..n).all(|l| r[l].to_bits() == s[l].to_bits() || (r[l].is_nan() && s[l].is_nan()));
                     assert!(ok, "{what}: {a:?} {b:?}: {r:?} {s:?}");
                 };
+                eq("new", x, p);
                 eq("add", x + y, p + q);
                 eq("sub", x - y, p - q);
                 eq("mul", x * y, p * q);
                 eq("div", x / y, p / q);
-                eq("min", x.min(y), Lanes::min(p, q));
-                eq("max", x.max(y), Lanes::max(p, q));
-                let (lt, wlt) = (x.simd_lt(y), Lanes::simd_lt(p, q));
-                let (ge, wge) = (x.simd_ge(y), Lanes::simd_ge(p, q));
-                assert_eq!(bits(lt.to_array()), bits(Lanes::to_array(wlt)));
-                assert_eq!(bits(ge.to_array()), bits(Lanes::to_array(wge)));
-                assert_eq!(bits(x.simd_gt(y).to_array()), bits(Lanes::to_array(Lanes::simd_gt(p, q))));
-                assert_eq!(bits(lt.and_not(ge).to_array()), bits(Lanes::to_array(Lanes::and_not(wlt, wge))));
-                eq("select", lt.select(x, y), Lanes::select(wlt, p, q));
-                assert_eq!(lt.to_bitmask(), Lanes::to_bitmask(wlt));
-                assert_eq!(lt.any(), Lanes::any(wlt));
+                eq("min", x.min(y), p.min(q));
+                eq("max", x.max(y), p.max(q));
+                let (lt, wlt) = (x.simd_lt(y), p.simd_lt(q));
+                let (ge, wge) = (x.simd_ge(y), p.simd_ge(q));
+                assert_eq!(bits(lt.to_array()), bits(wlt.to_array()));
+                assert_eq!(bits(ge.to_array()), bits(wge.to_array()));
+                assert_eq!(bits(x.simd_gt(y).to_array()), bits(p.simd_gt(q).to_array()));
+                assert_eq!(bits((lt | ge).to_array()), bits((wlt | wge).to_array()));
+                assert_eq!(bits((lt & ge).to_array()), bits((wlt & wge).to_array()));
+                assert_eq!(bits(lt.and_not(ge).to_array()), bits(wlt.and_not(wge).to_array()));
+                eq("select", lt.select(x, y), wlt.select(p, q));
+                assert_eq!(lt.to_bitmask(), wlt.to_bitmask());
+                assert_eq!(lt.any(), wlt.any());
                 // Truncation and gathers on the documented range (clamped like the kernel does).
-                let (g, wg) = (
-                    x.max(Avx2::splat(0.0)).min(Avx2::splat(120.0)),
-                    Lanes::min(Lanes::max(p, f32x8::splat(0.0)), f32x8::splat(120.0)),
-                );
-                let (ti, wti): (Avx2I, i32x8) = (g.trunc_int(), Lanes::trunc_int(wg));
-                eq("trunc", Avx2::int_to_float(ti), <f32x8 as Lanes>::int_to_float(wti));
-                let k = Avx2::mul_i(ti, Avx2::splat_i(3)) + Avx2::splat_i(-20);
-                let wk = <f32x8 as Lanes>::mul_i(wti, <f32x8 as Lanes>::splat_i(3)) + <f32x8 as Lanes>::splat_i(-20);
-                eq("gather", Avx2::gather(&data, k), <f32x8 as Lanes>::gather(&data, wk));
-                eq("gather empty", Avx2::gather(&[], k), <f32x8 as Lanes>::gather(&[], wk));
-                let ((p0, p1), (w0, w1)) = (Avx2::gather_pairs(&data, k), <f32x8 as Lanes>::gather_pairs(&data, wk));
+                let (g, wg) = (x.max(A::splat(0.0)).min(A::splat(120.0)), p.max(W::splat(0.0)).min(W::splat(120.0)));
+                let (ti, wti) = (g.trunc_int(), wg.trunc_int());
+                eq("trunc", A::int_to_float(ti), W::int_to_float(wti));
+                let k = A::mul_i(ti, A::splat_i(3)) + A::splat_i(-20);
+                let wk = W::mul_i(wti, W::splat_i(3)) + W::splat_i(-20);
+                eq("gather", A::gather(&data, k), W::gather(&data, wk));
+                eq("gather empty", A::gather(&[], k), W::gather(&[], wk));
+                let ((p0, p1), (w0, w1)) = (A::gather_pairs(&data, k), W::gather_pairs(&data, wk));
                 eq("pairs 0", p0, w0);
                 eq("pairs 1", p1, w1);
-                let ((p0, _), (w0, _)) =
-                    (Avx2::gather_pairs(&data[..1], k), <f32x8 as Lanes>::gather_pairs(&data[..1], wk));
+                let ((p0, _), (w0, _)) = (A::gather_pairs(&data[..1], k), W::gather_pairs(&data[..1], wk));
                 eq("pairs short", p0, w0);
             }
+        }
+
+        /// `Avx2` and the kernel's sixteen-lane `X2<Avx2>` against the portable lanes, inlined
+        /// into an AVX2 function as the kernel is.
+        #[target_feature(enable = "avx2")]
+        fn check() {
+            check_against::<Avx2, f32x8>();
+            check_against::<X2<Avx2>, X2<f32x8>>();
         }
 
         #[test]

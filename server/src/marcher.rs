@@ -149,7 +149,7 @@ pub struct Marcher {
     lut: Vec<[f32; 4]>,
     /// The same table as four planes (r, g, b, a) for the packet marcher's gathers.
     lut_planes: Arc<[Vec<f32>; 4]>,
-    /// The occupancy's brick distances as `f32`, for the packet marcher's gathers.
+    /// [`Occupancy::look_table`], for the packet marcher's gathers.
     dist: Arc<Vec<f32>>,
     opts: MarchOptions,
     dt: f32,
@@ -205,7 +205,7 @@ impl Marcher {
         let occupancy = grid.occupancy(tf, sp);
         log::debug!("empty-space grid: {:.1} % of bricks visible", occupancy.fraction_occupied() * 100.0);
         let lut_planes = Arc::new([0, 1, 2, 3].map(|c| lut.iter().map(|e| e[c]).collect::<Vec<f32>>()));
-        let dist = Arc::new(occupancy.distances().iter().map(|&d| d as f32).collect());
+        let dist = Arc::new(occupancy.look_table());
         Marcher { volume, grid, occupancy, lut, lut_planes, dist, opts, dt, inv_spacing: 1.0 / sp }
     }
 
@@ -312,8 +312,8 @@ impl Marcher {
             let gp = og + dg * t;
             if skip && t >= t_check {
                 let br = occ.brick_of(gp);
-                let r = occ.distance(br);
-                let t_out = occ.leap_exit_t(br, r.max(1), o, inv_d);
+                let (r, reach) = occ.look(br);
+                let t_out = occ.leap_exit_t(br, reach, o, inv_d);
                 if r > 0 {
                     // Resume at the first lattice sample at or after t_out (ceil, done by hand:
                     // the libm call showed in profiles); NaN or no progress steps by one.

@@ -1,5 +1,8 @@
-//! The packet marcher: eight rays of a 4×2 block of pixels marched together in SIMD lanes
-//! ([`crate::lanes`]: AVX2 where the CPU has it, `wide` elsewhere, chosen at run time).
+//! The packet marcher: the rays of a block of pixels marched together in SIMD lanes
+//! ([`crate::lanes`], chosen at run time): where the CPU has AVX2, sixteen rays of a 4×4 block
+//! as two AVX registers per value ([`crate::lanes::X2`]: two independent chains of dependent
+//! gathers and blends that the core overlaps, 1.26× faster than one register of eight rays on
+//! the MRI benchmark view); elsewhere eight rays of a 4×2 block in `wide`'s lanes.
 //!
 //! Per step, every active lane computes its sample position, clamps it to the voxel lattice,
 //! gathers the eight neighbours and blends them trilinearly, gathers the transfer function's
@@ -23,10 +26,11 @@ use volwarp_core::sample::{over_background, pack_color_f32, Quantizer};
 use volwarp_core::segments::Segmenter;
 use volwarp_core::{DepthPicker, FirstPassAccumulator, Heuristic, RayBasis, Vec3, BACKGROUND};
 
-/// Pixels per packet along x and y.
+/// Pixels per packet along x (the packet is `PW × (lanes / PW)` pixels).
 const PW: usize = 4;
-/// Pixels per packet along y.
-const PH: usize = 2;
+/// The most lanes a [`Lanes`] type has (arrays of lane values are this long; a type with fewer
+/// lanes uses their start).
+const MAXL: usize = crate::lanes::MAX_LANES;
 
 /// What a pass does with the samples a lane composites.
 trait Feed {
@@ -34,34 +38,34 @@ trait Feed {
     const ACTIVE: bool;
     /// Feeds lane `l`'s sample for every bit `l` of `bits`: its `t`, own opacity and
     /// accumulated opacity after compositing it.
-    fn feed(&mut self, bits: u32, t: &[f32; 8], src_a: &[f32; 8], dst_a: &[f32; 8]);
+    fn feed(&mut self, bits: u32, t: &[f32; MAXL], src_a: &[f32; MAXL], dst_a: &[f32; MAXL]);
     /// Whether the pass wants the accumulated color too ([`Feed::feed_rgba`] instead of
     /// [`Feed::feed`]).
     const RGBA: bool = false;
     /// Feeds lane `l`'s sample for every bit `l` of `bits`: its `t` and the accumulated
     /// premultiplied color after compositing it (only called where [`Feed::RGBA`]).
     #[inline(always)]
-    fn feed_rgba(&mut self, _bits: u32, _t: &[f32; 8], _dst: [&[f32; 8]; 4]) {}
+    fn feed_rgba(&mut self, _bits: u32, _t: &[f32; MAXL], _dst: [&[f32; MAXL]; 4]) {}
 }
 
-/// Calls `f(lane)` for every set bit of `bits` (lanes 0..8), lowest first.
+/// Calls `f(lane)` for every set bit of `bits` (lanes 0..16), lowest first.
 #[inline(always)]
 fn for_lanes(mut bits: u32, mut f: impl FnMut(usize)) {
     while bits != 0 {
-        let l = bits.trailing_zeros() as usize & 7;
+        let l = bits.trailing_zeros() as usize % MAXL;
         bits &= bits - 1;
         f(l);
     }
 }
 
 /// Layered samples (issue 14): each lane's ray cut into segments.
-impl Feed for [Segmenter; 8] {
+impl Feed for [Segmenter; MAXL] {
     const ACTIVE: bool = true;
     const RGBA: bool = true;
     #[inline(always)]
-    fn feed(&mut self, _: u32, _: &[f32; 8], _: &[f32; 8], _: &[f32; 8]) {}
+    fn feed(&mut self, _: u32, _: &[f32; MAXL], _: &[f32; MAXL], _: &[f32; MAXL]) {}
     #[inline(always)]
-    fn feed_rgba(&mut self, bits: u32, t: &[f32; 8], dst: [&[f32; 8]; 4]) {
+    fn feed_rgba(&mut self, bits: u32, t: &[f32; MAXL], dst: [&[f32; MAXL]; 4]) {
         for_lanes(bits, |l| {
             self[l].feed(t[l], [dst[0][l], dst[1][l], dst[2][l], dst[3][l]]);
         });
@@ -74,23 +78,23 @@ struct NoFeed;
 impl Feed for NoFeed {
     const ACTIVE: bool = false;
     #[inline(always)]
-    fn feed(&mut self, _: u32, _: &[f32; 8], _: &[f32; 8], _: &[f32; 8]) {}
+    fn feed(&mut self, _: u32, _: &[f32; MAXL], _: &[f32; MAXL], _: &[f32; MAXL]) {}
 }
 
-impl Feed for [FirstPassAccumulator; 8] {
+impl Feed for [FirstPassAccumulator; MAXL] {
     const ACTIVE: bool = true;
     #[inline(always)]
-    fn feed(&mut self, bits: u32, _: &[f32; 8], src_a: &[f32; 8], dst_a: &[f32; 8]) {
+    fn feed(&mut self, bits: u32, _: &[f32; MAXL], src_a: &[f32; MAXL], dst_a: &[f32; MAXL]) {
         for_lanes(bits, |l| {
             self[l].feed(src_a[l], dst_a[l]);
         });
     }
 }
 
-impl Feed for [DepthPicker; 8] {
+impl Feed for [DepthPicker; MAXL] {
     const ACTIVE: bool = true;
     #[inline(always)]
-    fn feed(&mut self, bits: u32, t: &[f32; 8], src_a: &[f32; 8], dst_a: &[f32; 8]) {
+    fn feed(&mut self, bits: u32, t: &[f32; MAXL], src_a: &[f32; MAXL], dst_a: &[f32; MAXL]) {
         for_lanes(bits, |l| {
             self[l].feed(t[l], src_a[l], dst_a[l]);
         });
@@ -99,14 +103,14 @@ impl Feed for [DepthPicker; 8] {
 
 /// Depth pickers with the rays' spread collectors ([`crate::radius::RadiusModel::Uncertainty`]).
 struct PickSpread {
-    pickers: [DepthPicker; 8],
-    spread: [RaySpread; 8],
+    pickers: [DepthPicker; MAXL],
+    spread: [RaySpread; MAXL],
 }
 
 impl Feed for PickSpread {
     const ACTIVE: bool = true;
     #[inline(always)]
-    fn feed(&mut self, bits: u32, t: &[f32; 8], src_a: &[f32; 8], dst_a: &[f32; 8]) {
+    fn feed(&mut self, bits: u32, t: &[f32; MAXL], src_a: &[f32; MAXL], dst_a: &[f32; MAXL]) {
         for_lanes(bits, |l| {
             self.pickers[l].feed(t[l], src_a[l], dst_a[l]);
             self.spread[l].feed(t[l], dst_a[l]);
@@ -114,18 +118,18 @@ impl Feed for PickSpread {
     }
 }
 
-/// The eight rays of a packet, set up exactly as the scalar marcher sets up one ray.
+/// The rays of a packet (lanes past the packet's width unused), set up exactly as the scalar marcher sets up one ray.
 struct Rays {
     /// Unit directions (lanes outside the image get the packet's first direction).
-    d: [Vec3; 8],
+    d: [Vec3; MAXL],
     /// `1 / d`.
-    inv_d: [Vec3; 8],
+    inv_d: [Vec3; MAXL],
     /// Box entry.
-    t_enter: [f32; 8],
+    t_enter: [f32; MAXL],
     /// Box exit (`None`: the lane misses the box or lies outside the image).
-    t_exit: [Option<f32>; 8],
+    t_exit: [Option<f32>; MAXL],
     /// Sample count.
-    n: [f32; 8],
+    n: [f32; MAXL],
 }
 
 /// One axis of the packet's rays, for the empty-space leaps.
@@ -146,13 +150,13 @@ impl<L: Lanes> Axis<L> {
     #[inline(always)]
     fn new(rays: &Rays, a: usize, spacing: Vec3, o: Vec3) -> Axis<L> {
         let all = f32::from_bits(!0);
-        let inv: [f32; 8] = core::array::from_fn(|l| rays.inv_d[l][a]);
+        let inv: [f32; MAXL] = core::array::from_fn(|l| rays.inv_d[l][a]);
         let pos = inv.map(|v| if v.is_finite() && v > 0.0 { all } else { 0.0 });
         let neg = inv.map(|v| if v.is_finite() && v <= 0.0 { all } else { 0.0 });
         Axis {
-            positive: L::new(pos),
-            negative: L::new(neg),
-            inv_d: L::new(inv),
+            positive: L::new(&pos),
+            negative: L::new(&neg),
+            inv_d: L::new(&inv),
             spacing: L::splat(spacing[a]),
             o: L::splat(o[a]),
         }
@@ -165,16 +169,23 @@ pub(crate) struct Kernel<'a> {
     /// The volume's values with their padding ([`crate::volume::Volume`]'s `padded_data`).
     pub(crate) data: &'a [f32],
     pub(crate) lut: &'a [Vec<f32>; 4],
-    /// [`crate::empty_space::Occupancy::distances`] as `f32`.
+    /// [`crate::empty_space::Occupancy::look_table`].
     pub(crate) dist: &'a [f32],
 }
 
 impl Kernel<'_> {
-    fn rays(&self, basis: &RayBasis, o: Vec3, x0: u32, y0: u32, w: u32, h: u32) -> Rays {
-        let mut r =
-            Rays { d: [Vec3::ZERO; 8], inv_d: [Vec3::ZERO; 8], t_enter: [0.0; 8], t_exit: [None; 8], n: [0.0; 8] };
+    /// The rays of the `lanes`-pixel packet at `(x0, y0)`.
+    #[allow(clippy::too_many_arguments)]
+    fn rays(&self, lanes: usize, basis: &RayBasis, o: Vec3, x0: u32, y0: u32, w: u32, h: u32) -> Rays {
+        let mut r = Rays {
+            d: [Vec3::ZERO; MAXL],
+            inv_d: [Vec3::ZERO; MAXL],
+            t_enter: [0.0; MAXL],
+            t_exit: [None; MAXL],
+            n: [0.0; MAXL],
+        };
         let first = basis.dir(x0, y0);
-        for l in 0..8 {
+        for l in 0..lanes {
             let (x, y) = (x0 + (l % PW) as u32, y0 + (l / PW) as u32);
             if x >= w || y >= h {
                 r.d[l] = first;
@@ -196,7 +207,7 @@ impl Kernel<'_> {
 
     /// Marches the packet's rays, feeding `feed`; returns each lane's premultiplied color.
     #[inline(always)]
-    fn march<L: Lanes, F: Feed>(&self, o: Vec3, rays: &Rays, feed: &mut F) -> [[f32; 4]; 8] {
+    fn march<L: Lanes, F: Feed>(&self, o: Vec3, rays: &Rays, feed: &mut F) -> [[f32; 4]; MAXL] {
         let m = self.m;
         let vol = m.volume();
         let [nx, ny, nz] = vol.dims();
@@ -205,13 +216,13 @@ impl Kernel<'_> {
         let occ = m.occupancy();
         let inv_spacing = m.inv_spacing();
         let og = o * inv_spacing - 0.5;
-        let dg: [Vec3; 8] = core::array::from_fn(|l| rays.d[l] * inv_spacing);
-        let dgx = L::new(core::array::from_fn(|l| dg[l].x));
-        let dgy = L::new(core::array::from_fn(|l| dg[l].y));
-        let dgz = L::new(core::array::from_fn(|l| dg[l].z));
+        let dg: [Vec3; MAXL] = core::array::from_fn(|l| rays.d[l] * inv_spacing);
+        let dgx = L::new(&core::array::from_fn::<f32, MAXL, _>(|l| dg[l].x));
+        let dgy = L::new(&core::array::from_fn::<f32, MAXL, _>(|l| dg[l].y));
+        let dgz = L::new(&core::array::from_fn::<f32, MAXL, _>(|l| dg[l].z));
         let (ogx, ogy, ogz) = (L::splat(og.x), L::splat(og.y), L::splat(og.z));
-        let te = L::new(rays.t_enter);
-        let n = L::new(rays.n);
+        let te = L::new(&rays.t_enter);
+        let n = L::new(&rays.n);
         let (dtl, half, one, zero) = (L::splat(dt), L::splat(0.5), L::splat(1.0), L::splat(0.0));
         let (mx, my, mz) = (L::splat((nx - 1) as f32), L::splat((ny - 1) as f32), L::splat((nz - 1) as f32));
         let (snx, snxy) = (L::splat_i(nx as i32), L::splat_i((nx * ny) as i32));
@@ -254,8 +265,10 @@ impl Kernel<'_> {
                     let by = (py * eighth).max(zero).min(nby_m1).trunc_int();
                     let bz = (pz * eighth).max(zero).min(nbz_m1).trunc_int();
                     let bi = bx + L::mul_i(snbx, by + L::mul_i(snby, bz));
+                    // The look's result: an invisible brick's distance, or minus a visible one's
+                    // reach (`Occupancy::look_table`).
                     let dist = L::gather(self.dist, bi);
-                    let reach = dist.max(one) - one;
+                    let reach = dist.max(zero - dist) - one;
                     let (bxf, byf, bzf) = (L::int_to_float(bx), L::int_to_float(by), L::int_to_float(bz));
                     let mut t_out = L::splat(f32::INFINITY);
                     for (bf, nb, ax) in [(bxf, nbx, &axes[0]), (byf, nby, &axes[1]), (bzf, nbz, &axes[2])] {
@@ -353,11 +366,11 @@ impl Kernel<'_> {
         let o = basis.origin();
         let (w, h) = (basis.eye[3] as u32, basis.corner[3] as u32);
         let rows = (color.len() / (w as usize).max(1)) as u32;
-        for py in (y0..y0 + rows).step_by(PH) {
+        for py in (y0..y0 + rows).step_by(L::N / PW) {
             for px in (0..w).step_by(PW) {
-                let rays = self.rays(basis, o, px, py, w, h);
-                let mut depth = [None; 8];
-                let mut unc = [Uncertainty::default(); 8];
+                let rays = self.rays(L::N, basis, o, px, py, w, h);
+                let mut depth = [None; MAXL];
+                let mut unc = [Uncertainty::default(); MAXL];
                 let spread = pack.is_some_and(|(_, r)| r.uses_spread());
                 let c = match heuristic {
                     None => self.march::<L, _>(o, &rays, &mut NoFeed),
@@ -365,18 +378,18 @@ impl Kernel<'_> {
                         // No closure here: one would be compiled without the caller's AVX2
                         // target feature, and the lanes' methods would not inline into it.
                         let first = if hr.needs_first_pass() {
-                            let mut acc = [FirstPassAccumulator::new(); 8];
+                            let mut acc = [FirstPassAccumulator::new(); MAXL];
                             self.march::<L, _>(o, &rays, &mut acc);
                             Some(acc.map(|a| a.finish()))
                         } else {
                             None
                         };
-                        let pickers: [DepthPicker; 8] =
+                        let pickers: [DepthPicker; MAXL] =
                             core::array::from_fn(|l| DepthPicker::new(hr, first.map(|f| f[l])));
                         if spread {
-                            let mut ps = PickSpread { pickers, spread: [RaySpread::new(); 8] };
+                            let mut ps = PickSpread { pickers, spread: [RaySpread::new(); MAXL] };
                             let c = self.march::<L, _>(o, &rays, &mut ps);
-                            for l in 0..8 {
+                            for l in 0..L::N {
                                 depth[l] = rays.t_exit[l].and_then(|te| ps.pickers[l].finish(te));
                                 unc[l] = ps.spread[l].finish();
                             }
@@ -384,14 +397,14 @@ impl Kernel<'_> {
                         } else {
                             let mut pickers = pickers;
                             let c = self.march::<L, _>(o, &rays, &mut pickers);
-                            for l in 0..8 {
+                            for l in 0..L::N {
                                 depth[l] = rays.t_exit[l].and_then(|te| pickers[l].finish(te));
                             }
                             c
                         }
                     }
                 };
-                for l in 0..8 {
+                for l in 0..L::N {
                     let (x, y) = (px + (l % PW) as u32, py + (l / PW) as u32);
                     if x >= w || y >= y0 + rows {
                         continue;
@@ -446,12 +459,12 @@ impl Kernel<'_> {
         let k = out.layers;
         let rows = (out.count.len() / (w as usize).max(1)) as u32;
         let step = self.m.step();
-        for py in (y0..y0 + rows).step_by(PH) {
+        for py in (y0..y0 + rows).step_by(L::N / PW) {
             for px in (0..w).step_by(PW) {
-                let rays = self.rays(basis, o, px, py, w, h);
-                let mut segs = [Segmenter::new(k as u32, step); 8];
+                let rays = self.rays(L::N, basis, o, px, py, w, h);
+                let mut segs = [Segmenter::new(k as u32, step); MAXL];
                 self.march::<L, _>(o, &rays, &mut segs);
-                for (l, seg) in segs.iter_mut().enumerate() {
+                for (l, seg) in segs.iter_mut().enumerate().take(L::N) {
                     let (x, y) = (px + (l % PW) as u32, py + (l / PW) as u32);
                     if x >= w || y >= y0 + rows || rays.t_exit[l].is_none() {
                         continue;
