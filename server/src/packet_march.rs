@@ -1,6 +1,6 @@
 //! The packet marcher: the rays of a block of pixels marched together in SIMD lanes
 //! ([`crate::lanes`], chosen at run time): where the CPU has AVX2, sixteen rays of a 4×4 block
-//! as two AVX registers per value ([`crate::lanes::X2`]: two independent chains of dependent
+//! as two AVX registers per value (`lanes::X2`: two independent chains of dependent
 //! gathers and blends that the core overlaps, 1.26× faster than one register of eight rays on
 //! the MRI benchmark view); elsewhere eight rays of a 4×2 block in `wide`'s lanes.
 //!
