@@ -194,6 +194,24 @@ impl DepthPicker {
         }
     }
 
+    /// For [`Heuristic::Threshold`] and [`Heuristic::RelThreshold`], the target of their
+    /// criterion: [`DepthPicker::feed`] picks the first sample with `dst_a > target`. A marcher
+    /// that feeds many rays at once in SIMD lanes can apply that one comparison lane-wise and
+    /// hand the outcome back with [`DepthPicker::with_outcome`]; `None` for the others.
+    pub fn threshold_target(&self) -> Option<f32> {
+        matches!(self.heuristic, Heuristic::Threshold | Heuristic::RelThreshold).then_some(self.target)
+    }
+
+    /// This picker (of a heuristic with a [`DepthPicker::threshold_target`]) as if it had been
+    /// fed a ray's samples whose first with `dst_a > target` lay at `chosen` and whose last left
+    /// the accumulated opacity at `final_dst` (0 if none was fed): what
+    /// [`DepthPicker::finish`] needs of a threshold-like heuristic.
+    pub fn with_outcome(mut self, chosen: Option<f32>, final_dst: f32) -> Self {
+        self.chosen = chosen;
+        self.final_dst = final_dst;
+        self
+    }
+
     /// Feeds one classified sample: its ray parameter `t`, its own opacity `src_a` and the
     /// accumulated opacity `dst_a` after compositing it.
     #[inline]
@@ -345,5 +363,32 @@ mod tests {
         }
         assert_eq!(Heuristic::from_code(8), None);
         assert_eq!(Heuristic::from_name("nope"), None);
+    }
+
+    #[test]
+    fn threshold_outcome_equals_feeding() {
+        // Profiles of source opacities; the outcome a lane-wise feeder finds (first dst_a above
+        // the target, the final dst_a) must give the fed picker's depth.
+        let profiles: [&[f32]; 5] = [&[], &[0.0, 0.0], &[0.1, 0.5, 0.9, 0.2], &[0.05; 12], &[0.0, 1.0]];
+        for h in [Heuristic::Threshold, Heuristic::RelThreshold] {
+            for src in profiles {
+                let first = FirstPass { entrance_alpha: 0.3, exit_alpha: 0.4, final_alpha: 0.9 };
+                let mut fed = DepthPicker::new(h, Some(first));
+                let target = fed.threshold_target().expect("a threshold-like heuristic");
+                let (mut dst, mut chosen) = (0.0f32, None);
+                for (i, &a) in src.iter().enumerate() {
+                    if a > 0.0 {
+                        dst += (1.0 - dst) * a;
+                        fed.feed(i as f32, a, dst);
+                        if chosen.is_none() && dst > target {
+                            chosen = Some(i as f32);
+                        }
+                    }
+                }
+                let lanes = DepthPicker::new(h, Some(first)).with_outcome(chosen, dst);
+                assert_eq!(lanes.finish(99.0), fed.finish(99.0), "{h:?} {src:?}");
+            }
+        }
+        assert_eq!(DepthPicker::new(Heuristic::Peak, None).threshold_target(), None);
     }
 }

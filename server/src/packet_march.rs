@@ -46,6 +46,18 @@ trait Feed {
     /// premultiplied color after compositing it (only called where [`Feed::RGBA`]).
     #[inline(always)]
     fn feed_rgba(&mut self, _bits: u32, _t: &[f32; MAXL], _dst: [&[f32; MAXL]; 4]) {}
+    /// Whether the pass is a threshold-like depth picker applied in lanes: the kernel keeps
+    /// each lane's first `t` with accumulated opacity above [`Feed::targets`] itself (no calls
+    /// of [`Feed::feed`]) and hands the result to [`Feed::set_chosen`].
+    const LANE_THRESHOLD: bool = false;
+    /// Each lane's target (only read where [`Feed::LANE_THRESHOLD`]).
+    #[inline(always)]
+    fn targets(&self) -> [f32; MAXL] {
+        [f32::INFINITY; MAXL]
+    }
+    /// Lane `l`'s chosen `t` for every bit `l` of `bits` (the lanes that found one).
+    #[inline(always)]
+    fn set_chosen(&mut self, _bits: u32, _chosen: &[f32; MAXL]) {}
 }
 
 /// Calls `f(lane)` for every set bit of `bits` (lanes 0..16), lowest first.
@@ -99,6 +111,37 @@ impl Feed for [DepthPicker; MAXL] {
             self[l].feed(t[l], src_a[l], dst_a[l]);
         });
     }
+}
+
+/// Threshold-like depth pickers ([`DepthPicker::threshold_target`]) applied in lanes: the same
+/// comparison, `dst_a > target`, on the first sample that passes it.
+struct LaneThreshold {
+    targets: [f32; MAXL],
+    chosen: [Option<f32>; MAXL],
+}
+
+impl Feed for LaneThreshold {
+    const ACTIVE: bool = false;
+    const LANE_THRESHOLD: bool = true;
+    #[inline(always)]
+    fn feed(&mut self, _: u32, _: &[f32; MAXL], _: &[f32; MAXL], _: &[f32; MAXL]) {}
+    #[inline(always)]
+    fn targets(&self) -> [f32; MAXL] {
+        self.targets
+    }
+    #[inline(always)]
+    fn set_chosen(&mut self, bits: u32, chosen: &[f32; MAXL]) {
+        for_lanes(bits, |l| self.chosen[l] = Some(chosen[l]));
+    }
+}
+
+/// Every picker's [`DepthPicker::threshold_target`], if all have one.
+fn threshold_targets(pickers: &[DepthPicker; MAXL]) -> Option<[f32; MAXL]> {
+    let mut t = [f32::INFINITY; MAXL];
+    for (t, p) in t.iter_mut().zip(pickers) {
+        *t = p.threshold_target()?;
+    }
+    Some(t)
 }
 
 /// Depth pickers with the rays' spread collectors ([`crate::radius::RadiusModel::Uncertainty`]).
@@ -243,6 +286,10 @@ impl Kernel<'_> {
 
         let mut k = zero;
         let mut alive = zero.simd_lt(n);
+        // `Feed::LANE_THRESHOLD`: each lane's target, whether it is still unmet, and the `t`
+        // where it was met.
+        let target = if F::LANE_THRESHOLD { L::new(&feed.targets()) } else { zero };
+        let (mut unmet, mut chosen) = (one.simd_gt(zero), zero);
         let mut t_check = L::splat(f32::NEG_INFINITY);
         let (mut r, mut g, mut b, mut a) = (zero, zero, zero, zero);
         loop {
@@ -339,10 +386,17 @@ impl Kernel<'_> {
                     feed.feed_rgba(vis.to_bitmask(), &t.to_array(), dst);
                 } else if F::ACTIVE {
                     feed.feed(vis.to_bitmask(), &t.to_array(), &ca.to_array(), &a.to_array());
+                } else if F::LANE_THRESHOLD {
+                    let met = vis & unmet & a.simd_gt(target);
+                    chosen = met.select(t, chosen);
+                    unmet = unmet.and_not(met);
                 }
                 alive = alive.and_not(vis & a.simd_ge(ert));
             }
             k = running.select(k + one, k);
+        }
+        if F::LANE_THRESHOLD {
+            feed.set_chosen(one.simd_gt(zero).and_not(unmet).to_bitmask(), &chosen.to_array());
         }
         let (r, g, b, a) = (r.to_array(), g.to_array(), b.to_array(), a.to_array());
         core::array::from_fn(|l| [r[l], g[l], b[l], a[l]])
@@ -392,6 +446,14 @@ impl Kernel<'_> {
                             for l in 0..L::N {
                                 depth[l] = rays.t_exit[l].and_then(|te| ps.pickers[l].finish(te));
                                 unc[l] = ps.spread[l].finish();
+                            }
+                            c
+                        } else if let Some(targets) = threshold_targets(&pickers) {
+                            let mut lt = LaneThreshold { targets, chosen: [None; MAXL] };
+                            let c = self.march::<L, _>(o, &rays, &mut lt);
+                            for l in 0..L::N {
+                                let picker = pickers[l].with_outcome(lt.chosen[l], c[l][3]);
+                                depth[l] = rays.t_exit[l].and_then(|te| picker.finish(te));
                             }
                             c
                         } else {
