@@ -1,11 +1,12 @@
 //! `cargo run --release -p volwarp-server --example march_timing -- [N] [SIZE] [DATASET]`:
 //! marches the MRI benchmark view (the `server` bench's camera) N times and prints the median
 //! wall and on-CPU (process CPU time, all threads) milliseconds; `RAYON_NUM_THREADS` picks the
-//! threads. A steadier figure than criterion's on a shared machine, and a loop to profile.
+//! threads, `VOLWARP_LANES` (`portable`, `avx2`, `avx512`) the widest lanes the packet marcher
+//! may use. A steadier figure than criterion's on a shared machine, and a loop to profile.
 
 use std::time::Instant;
 use volwarp_core::Heuristic;
-use volwarp_server::{Dataset, Marcher};
+use volwarp_server::{Dataset, LaneKind, Marcher};
 
 /// Process CPU time (all threads) in ms.
 fn cpu_ms() -> f64 {
@@ -27,6 +28,14 @@ fn main() {
     let path = args.get(3).cloned().unwrap_or_else(|| {
         concat!(env!("CARGO_MANIFEST_DIR"), "/../../shared/data/mri_colin27_181x217x181_uint8.raw").to_string()
     });
+    if let Ok(l) = std::env::var("VOLWARP_LANES") {
+        let kind = match l.as_str() {
+            "portable" => LaneKind::Portable,
+            "avx2" => LaneKind::Avx2,
+            _ => LaneKind::Avx512,
+        };
+        volwarp_server::limit_lanes(kind);
+    }
     let ds = Dataset::load(&path, None).expect("loading the volume");
     let m = Marcher::from_dataset(&ds);
     let camera = m.default_camera(size, size).orbit(20.0, 10.0).dolly(0.68);
@@ -40,7 +49,8 @@ fn main() {
         samples = s.t.iter().filter(|t| t.is_finite()).count();
     }
     println!(
-        "{path} {size}²: {samples} samples, wall {:.1} ms, cpu {:.1} ms (medians of {n})",
+        "{path} {size}², {:?} lanes: {samples} samples, wall {:.1} ms, cpu {:.1} ms (medians of {n})",
+        volwarp_server::lane_kind(),
         median(wall),
         median(cpu)
     );

@@ -16,20 +16,64 @@
 use core::ops::{Add, BitAnd, BitOr, Div, Mul, Sub};
 use wide::{f32x8, i32x8};
 
-/// Defines `$name`, which runs the kernel `$kernel::<L>` on the best lanes this CPU has: the
-/// instance `$avx2`, compiled with `#[target_feature(enable = "avx2")]` on sixteen [`Avx2`] lanes ([`X2`]),
-/// where `is_x86_feature_detected!("avx2")` says the CPU has AVX2, and the portable
-/// `wide::f32x8` instance elsewhere. Both compute the same values.
+/// Which lanes the packet marcher may use: the widest this CPU has (the default), or no
+/// wider than a given kind (tests run every kind this CPU has against the scalar marcher;
+/// benchmarks compare them).
+#[derive(Clone, Copy, Debug, PartialEq, Eq, PartialOrd, Ord)]
+pub enum LaneKind {
+    /// `wide`'s eight lanes, compiled for the build's baseline (SSE2 on x86-64, NEON on
+    /// aarch64): eight rays of a 4×2 pixel block.
+    Portable = 0,
+    /// Sixteen rays of a 4×4 block as two AVX2 registers per value.
+    Avx2 = 1,
+    /// Thirty-two rays of an 8×4 block as two AVX-512 registers per value (AVX-512 F and DQ).
+    Avx512 = 2,
+}
+
+static LANE_LIMIT: core::sync::atomic::AtomicU8 = core::sync::atomic::AtomicU8::new(LaneKind::Avx512 as u8);
+
+/// Limits the packet marcher to lanes no wider than `kind` (process-wide; every kind computes
+/// the same values).
+pub fn limit_lanes(kind: LaneKind) {
+    LANE_LIMIT.store(kind as u8, core::sync::atomic::Ordering::Relaxed);
+}
+
+/// The lanes the packet marcher uses now: the widest this CPU has within [`limit_lanes`].
+pub fn lane_kind() -> LaneKind {
+    let limit = LANE_LIMIT.load(core::sync::atomic::Ordering::Relaxed);
+    #[cfg(target_arch = "x86_64")]
+    {
+        if limit >= LaneKind::Avx512 as u8
+            && std::is_x86_feature_detected!("avx512f")
+            && std::is_x86_feature_detected!("avx512dq")
+        {
+            return LaneKind::Avx512;
+        }
+        if limit >= LaneKind::Avx2 as u8 && std::is_x86_feature_detected!("avx2") {
+            return LaneKind::Avx2;
+        }
+    }
+    let _ = limit;
+    LaneKind::Portable
+}
+
+/// Defines `$name`, which runs the kernel `$kernel::<L>` on the lanes [`lane_kind`] picks: the
+/// instance `$avx512`, compiled with AVX-512 F and DQ on [`X2`]`<`[`Avx512`]`>`; the instance
+/// `$avx2`, compiled with AVX2 on `X2<Avx2>`; or the portable `wide::f32x8` instance. All
+/// compute the same values.
 macro_rules! dispatch {
-    ($(#[$doc:meta])* fn $name:ident / $avx2:ident => $kernel:ident($($arg:ident: $ty:ty),* $(,)?)) => {
+    ($(#[$doc:meta])* fn $name:ident / $avx2:ident / $avx512:ident => $kernel:ident($($arg:ident: $ty:ty),* $(,)?)) => {
         $(#[$doc])*
         pub(crate) fn $name($($arg: $ty),*) {
-            #[cfg(target_arch = "x86_64")]
-            if std::is_x86_feature_detected!("avx2") {
-                // SAFETY: the CPU supports AVX2 (checked just above).
-                return unsafe { $avx2($($arg),*) };
+            match $crate::lanes::lane_kind() {
+                // SAFETY: `lane_kind` returns `Avx512` only where the CPU has AVX-512 F and DQ.
+                #[cfg(target_arch = "x86_64")]
+                $crate::lanes::LaneKind::Avx512 => unsafe { $avx512($($arg),*) },
+                // SAFETY: `lane_kind` returns `Avx2` only where the CPU has AVX2.
+                #[cfg(target_arch = "x86_64")]
+                $crate::lanes::LaneKind::Avx2 => unsafe { $avx2($($arg),*) },
+                _ => $kernel::<wide::f32x8>($($arg),*),
             }
-            $kernel::<wide::f32x8>($($arg),*)
         }
 
         /// The kernel on sixteen [`crate::lanes::Avx2`] lanes ([`crate::lanes::X2`]), compiled with AVX2.
@@ -43,12 +87,25 @@ macro_rules! dispatch {
             // `Avx2`'s invariant holds: the caller guarantees AVX2.
             $kernel::<$crate::lanes::X2<$crate::lanes::Avx2>>($($arg),*)
         }
+
+        /// The kernel on thirty-two [`crate::lanes::Avx512`] lanes ([`crate::lanes::X2`]),
+        /// compiled with AVX-512 F and DQ.
+        ///
+        /// # Safety
+        /// The CPU must support AVX-512 F and DQ.
+        #[cfg(target_arch = "x86_64")]
+        #[target_feature(enable = "avx512f,avx512dq")]
+        #[allow(clippy::too_many_arguments)]
+        unsafe fn $avx512($($arg: $ty),*) {
+            // `Avx512`'s invariant holds: the caller guarantees AVX-512 F and DQ.
+            $kernel::<$crate::lanes::X2<$crate::lanes::Avx512>>($($arg),*)
+        }
     };
 }
 pub(crate) use dispatch;
 
 /// The most lanes a [`Lanes`] type has.
-pub(crate) const MAX_LANES: usize = 16;
+pub(crate) const MAX_LANES: usize = 32;
 
 /// `N` `f32` lanes (also masks) and their companion `N` `i32` lanes (`N` = 8 or 16).
 pub(crate) trait Lanes:
@@ -198,10 +255,12 @@ impl Lanes for f32x8 {
 /// lane; the two halves are independent chains of work, which a core overlaps (the packet
 /// marcher's step is bound by the latency of its gathers and blends, not by their throughput).
 #[derive(Clone, Copy)]
+#[cfg_attr(not(target_arch = "x86_64"), allow(dead_code))]
 pub(crate) struct X2<L>(L, L);
 
 /// The `i32` lanes of [`X2`].
 #[derive(Clone, Copy)]
+#[cfg_attr(not(target_arch = "x86_64"), allow(dead_code))]
 pub(crate) struct X2I<I>(I, I);
 
 impl<I: Add<Output = I>> Add for X2I<I> {
@@ -494,80 +553,276 @@ mod avx2 {
             }
         }
     }
+}
 
-    #[cfg(test)]
-    mod tests {
-        use super::super::{MAX_LANES, X2};
-        use super::{Avx2, Lanes};
-        use wide::f32x8;
+#[cfg(target_arch = "x86_64")]
+pub(crate) use avx512::Avx512;
 
-        /// Every `Lanes` method of `A` against `W`'s (the same width), inlined into the caller.
+#[cfg(target_arch = "x86_64")]
+mod avx512 {
+    use super::{Lanes, MAX_LANES};
+    use core::arch::x86_64::*;
+    use core::ops::{Add, BitAnd, BitOr, Div, Mul, Sub};
+
+    /// Sixteen `f32` lanes in one AVX-512 register, for the kernel compiled with AVX-512 F and
+    /// DQ. Masks are lanes with all bits set, as for the other lane types (a compare's mask
+    /// register is spread into a vector, and a select reads the lanes' sign bits back).
+    ///
+    /// **Invariant**: values of this type and calls of its methods exist only on CPUs with
+    /// AVX-512 F and DQ (the kernel instance that uses it is called only after
+    /// `is_x86_feature_detected!` said so). Every `unsafe` block below relies on this.
+    #[derive(Clone, Copy)]
+    pub(crate) struct Avx512(__m512);
+
+    /// Sixteen `i32` lanes in one AVX-512 register (the same invariant as [`Avx512`]).
+    #[derive(Clone, Copy)]
+    pub(crate) struct Avx512I(__m512i);
+
+    macro_rules! binop {
+        ($tr:ident, $f:ident, $intr:ident) => {
+            impl $tr for Avx512 {
+                type Output = Avx512;
+                #[inline(always)]
+                fn $f(self, rhs: Avx512) -> Avx512 {
+                    // SAFETY: AVX-512 F and DQ are available (the type's invariant).
+                    Avx512(unsafe { $intr(self.0, rhs.0) })
+                }
+            }
+        };
+    }
+    binop!(Add, add, _mm512_add_ps);
+    binop!(Sub, sub, _mm512_sub_ps);
+    binop!(Mul, mul, _mm512_mul_ps);
+    binop!(Div, div, _mm512_div_ps);
+    binop!(BitAnd, bitand, _mm512_and_ps);
+    binop!(BitOr, bitor, _mm512_or_ps);
+
+    impl Add for Avx512I {
+        type Output = Avx512I;
         #[inline(always)]
-        fn check_against<A: Lanes, W: Lanes>() {
-            assert_eq!(A::N, W::N);
-            let n = A::N;
-            let vals = [0.0, -0.0, 1.0, -1.0, 0.5, 3.7, 1e-40, 1e7, f32::INFINITY, -f32::INFINITY, f32::NAN, 1023.5];
-            let pairs: Vec<(f32, f32)> = vals.iter().flat_map(|&a| vals.iter().map(move |&b| (a, b))).collect();
-            let data: Vec<f32> = (0..100).map(|i| i as f32 * 0.25).collect();
-            let bits = |x: [f32; MAX_LANES]| x.map(f32::to_bits);
-            for c in pairs.chunks_exact(n) {
-                let a: [f32; MAX_LANES] = core::array::from_fn(|l| if l < n { c[l].0 } else { 0.0 });
-                let b: [f32; MAX_LANES] = core::array::from_fn(|l| if l < n { c[l].1 } else { 0.0 });
-                let (x, y) = (A::new(&a), A::new(&b));
-                let (p, q) = (W::new(&a), W::new(&b));
-                let eq = |what: &str, r: A, s: W| {
-                    let (r, s) = (r.to_array(), s.to_array());
-                    let ok = (0..n).all(|l| r[l].to_bits() == s[l].to_bits() || (r[l].is_nan() && s[l].is_nan()));
-                    assert!(ok, "{what}: {a:?} {b:?}: {r:?} {s:?}");
-                };
-                eq("new", x, p);
-                eq("add", x + y, p + q);
-                eq("sub", x - y, p - q);
-                eq("mul", x * y, p * q);
-                eq("div", x / y, p / q);
-                eq("min", x.min(y), p.min(q));
-                eq("max", x.max(y), p.max(q));
-                let (lt, wlt) = (x.simd_lt(y), p.simd_lt(q));
-                let (ge, wge) = (x.simd_ge(y), p.simd_ge(q));
-                assert_eq!(bits(lt.to_array()), bits(wlt.to_array()));
-                assert_eq!(bits(ge.to_array()), bits(wge.to_array()));
-                assert_eq!(bits(x.simd_gt(y).to_array()), bits(p.simd_gt(q).to_array()));
-                assert_eq!(bits((lt | ge).to_array()), bits((wlt | wge).to_array()));
-                assert_eq!(bits((lt & ge).to_array()), bits((wlt & wge).to_array()));
-                assert_eq!(bits(lt.and_not(ge).to_array()), bits(wlt.and_not(wge).to_array()));
-                eq("select", lt.select(x, y), wlt.select(p, q));
-                assert_eq!(lt.to_bitmask(), wlt.to_bitmask());
-                assert_eq!(lt.any(), wlt.any());
-                // Truncation and gathers on the documented range (clamped like the kernel does).
-                let (g, wg) = (x.max(A::splat(0.0)).min(A::splat(120.0)), p.max(W::splat(0.0)).min(W::splat(120.0)));
-                let (ti, wti) = (g.trunc_int(), wg.trunc_int());
-                eq("trunc", A::int_to_float(ti), W::int_to_float(wti));
-                let k = A::mul_i(ti, A::splat_i(3)) + A::splat_i(-20);
-                let wk = W::mul_i(wti, W::splat_i(3)) + W::splat_i(-20);
-                eq("gather", A::gather(&data, k), W::gather(&data, wk));
-                eq("gather empty", A::gather(&[], k), W::gather(&[], wk));
-                let ((p0, p1), (w0, w1)) = (A::gather_pairs(&data, k), W::gather_pairs(&data, wk));
-                eq("pairs 0", p0, w0);
-                eq("pairs 1", p1, w1);
-                let ((p0, _), (w0, _)) = (A::gather_pairs(&data[..1], k), W::gather_pairs(&data[..1], wk));
-                eq("pairs short", p0, w0);
+        fn add(self, rhs: Avx512I) -> Avx512I {
+            // SAFETY: AVX-512 F is available (the type's invariant).
+            Avx512I(unsafe { _mm512_add_epi32(self.0, rhs.0) })
+        }
+    }
+
+    impl Avx512 {
+        /// Ordered, non-signalling comparison `P` as a mask vector: false where either is NaN.
+        #[inline(always)]
+        fn cmp<const P: i32>(self, rhs: Avx512) -> Avx512 {
+            // SAFETY: AVX-512 F and DQ are available (the type's invariant).
+            unsafe { Avx512(_mm512_castsi512_ps(_mm512_movm_epi32(_mm512_cmp_ps_mask::<P>(self.0, rhs.0)))) }
+        }
+        /// The lanes' sign bits (a mask vector's lanes) as a mask register.
+        #[inline(always)]
+        fn mask(self) -> __mmask16 {
+            // SAFETY: AVX-512 DQ is available (the type's invariant).
+            unsafe { _mm512_movepi32_mask(_mm512_castps_si512(self.0)) }
+        }
+    }
+
+    // SAFETY (every `unsafe` block of this impl): AVX-512 F and DQ are available (the type's
+    // invariant); the intrinsics have no other precondition, except the loads, stores and
+    // gathers, whose pointers are noted there.
+    impl Lanes for Avx512 {
+        type I = Avx512I;
+        const N: usize = 16;
+
+        #[inline(always)]
+        fn splat(x: f32) -> Self {
+            Avx512(unsafe { _mm512_set1_ps(x) })
+        }
+        #[inline(always)]
+        fn new(a: &[f32; MAX_LANES]) -> Self {
+            // `a` holds at least sixteen readable `f32`; the load needs no alignment.
+            Avx512(unsafe { _mm512_loadu_ps(a.as_ptr()) })
+        }
+        #[inline(always)]
+        fn min(self, rhs: Self) -> Self {
+            // `vminps(self, rhs)`: `self < rhs ? self : rhs`, as `Avx2`'s.
+            Avx512(unsafe { _mm512_min_ps(self.0, rhs.0) })
+        }
+        #[inline(always)]
+        fn max(self, rhs: Self) -> Self {
+            Avx512(unsafe { _mm512_max_ps(self.0, rhs.0) })
+        }
+        #[inline(always)]
+        fn simd_lt(self, rhs: Self) -> Self {
+            self.cmp::<_CMP_LT_OQ>(rhs)
+        }
+        #[inline(always)]
+        fn simd_gt(self, rhs: Self) -> Self {
+            self.cmp::<_CMP_GT_OQ>(rhs)
+        }
+        #[inline(always)]
+        fn simd_ge(self, rhs: Self) -> Self {
+            self.cmp::<_CMP_GE_OQ>(rhs)
+        }
+        #[inline(always)]
+        fn and_not(self, rhs: Self) -> Self {
+            Avx512(unsafe { _mm512_andnot_ps(rhs.0, self.0) })
+        }
+        #[inline(always)]
+        fn select(self, if_true: Self, if_false: Self) -> Self {
+            // Lanes whose sign bit is set take `if_true`, as `vblendvps`.
+            Avx512(unsafe { _mm512_mask_blend_ps(self.mask(), if_false.0, if_true.0) })
+        }
+        #[inline(always)]
+        fn to_bitmask(self) -> u32 {
+            self.mask() as u32
+        }
+        #[inline(always)]
+        fn any(self) -> bool {
+            self.mask() != 0
+        }
+        #[inline(always)]
+        fn to_array(self) -> [f32; MAX_LANES] {
+            let mut a = [0f32; MAX_LANES];
+            // `a` holds at least 64 writable bytes; the store needs no alignment.
+            unsafe { _mm512_storeu_ps(a.as_mut_ptr(), self.0) };
+            a
+        }
+        #[inline(always)]
+        fn trunc_int(self) -> Avx512I {
+            Avx512I(unsafe { _mm512_cvttps_epi32(self.0) })
+        }
+        #[inline(always)]
+        fn int_to_float(i: Avx512I) -> Self {
+            Avx512(unsafe { _mm512_cvtepi32_ps(i.0) })
+        }
+        #[inline(always)]
+        fn splat_i(x: i32) -> Avx512I {
+            Avx512I(unsafe { _mm512_set1_epi32(x) })
+        }
+        #[inline(always)]
+        fn mul_i(a: Avx512I, b: Avx512I) -> Avx512I {
+            Avx512I(unsafe { _mm512_mullo_epi32(a.0, b.0) })
+        }
+        #[inline(always)]
+        fn gather(data: &[f32], idx: Avx512I) -> Self {
+            if data.is_empty() {
+                return Avx512::splat(0.0);
+            }
+            // Clamp every index to 0 ..= len − 1 (see `Avx2::gather`).
+            let last = (data.len() - 1).min(i32::MAX as usize) as i32;
+            unsafe {
+                let i = _mm512_min_epi32(_mm512_max_epi32(idx.0, _mm512_setzero_si512()), _mm512_set1_epi32(last));
+                // SAFETY: every index is in 0 ..= len − 1 (just above), scale 4 is `f32`'s size.
+                Avx512(_mm512_i32gather_ps::<4>(i, data.as_ptr()))
             }
         }
-
-        /// `Avx2` and the kernel's sixteen-lane `X2<Avx2>` against the portable lanes, inlined
-        /// into an AVX2 function as the kernel is.
-        #[target_feature(enable = "avx2")]
-        fn check() {
-            check_against::<Avx2, f32x8>();
-            check_against::<X2<Avx2>, X2<f32x8>>();
-        }
-
-        #[test]
-        fn avx2_lanes_equal_portable_lanes() {
-            if std::is_x86_feature_detected!("avx2") {
-                // SAFETY: the CPU supports AVX2 (checked just above).
-                unsafe { check() }
+        #[inline(always)]
+        fn gather_pairs(data: &[f32], idx: Avx512I) -> (Self, Self) {
+            if data.len() < 2 {
+                return (Avx512::splat(0.0), Avx512::splat(0.0));
             }
+            let last = (data.len() - 2).min(i32::MAX as usize) as i32;
+            unsafe {
+                let i = _mm512_min_epi32(_mm512_max_epi32(idx.0, _mm512_setzero_si512()), _mm512_set1_epi32(last));
+                // SAFETY: every index is in 0 ..= len − 2 (just above), so each 8-byte element
+                // (two `f32`, read as one `f64` at byte offset 4·index) lies inside `data`.
+                let p = data.as_ptr().cast::<f64>();
+                let lo = _mm512_castpd_ps(_mm512_i32gather_pd::<4>(_mm512_castsi512_si256(i), p));
+                let hi = _mm512_castpd_ps(_mm512_i32gather_pd::<4>(_mm512_extracti64x4_epi64::<1>(i), p));
+                // lo = a0 b0 … a7 b7, hi = a8 b8 … a15 b15: the even and the odd elements.
+                let even = _mm512_setr_epi32(0, 2, 4, 6, 8, 10, 12, 14, 16, 18, 20, 22, 24, 26, 28, 30);
+                let odd = _mm512_setr_epi32(1, 3, 5, 7, 9, 11, 13, 15, 17, 19, 21, 23, 25, 27, 29, 31);
+                (Avx512(_mm512_permutex2var_ps(lo, even, hi)), Avx512(_mm512_permutex2var_ps(lo, odd, hi)))
+            }
+        }
+    }
+}
+
+#[cfg(test)]
+#[cfg(target_arch = "x86_64")]
+mod tests {
+    use super::{Avx2, Avx512, Lanes, MAX_LANES, X2};
+    use wide::f32x8;
+
+    /// Every `Lanes` method of `A` against `W`'s (the same width), inlined into the caller.
+    #[inline(always)]
+    fn check_against<A: Lanes, W: Lanes>() {
+        assert_eq!(A::N, W::N);
+        let n = A::N;
+        let vals = [0.0, -0.0, 1.0, -1.0, 0.5, 3.7, 1e-40, 1e7, f32::INFINITY, -f32::INFINITY, f32::NAN, 1023.5];
+        let pairs: Vec<(f32, f32)> = vals.iter().flat_map(|&a| vals.iter().map(move |&b| (a, b))).collect();
+        let data: Vec<f32> = (0..100).map(|i| i as f32 * 0.25).collect();
+        let bits = |x: [f32; MAX_LANES]| x.map(f32::to_bits);
+        for c in pairs.chunks_exact(n) {
+            let a: [f32; MAX_LANES] = core::array::from_fn(|l| if l < n { c[l].0 } else { 0.0 });
+            let b: [f32; MAX_LANES] = core::array::from_fn(|l| if l < n { c[l].1 } else { 0.0 });
+            let (x, y) = (A::new(&a), A::new(&b));
+            let (p, q) = (W::new(&a), W::new(&b));
+            let eq = |what: &str, r: A, s: W| {
+                let (r, s) = (r.to_array(), s.to_array());
+                let ok = (0..n).all(|l| r[l].to_bits() == s[l].to_bits() || (r[l].is_nan() && s[l].is_nan()));
+                assert!(ok, "{what}: {a:?} {b:?}: {r:?} {s:?}");
+            };
+            eq("new", x, p);
+            eq("add", x + y, p + q);
+            eq("sub", x - y, p - q);
+            eq("mul", x * y, p * q);
+            eq("div", x / y, p / q);
+            eq("min", x.min(y), p.min(q));
+            eq("max", x.max(y), p.max(q));
+            let (lt, wlt) = (x.simd_lt(y), p.simd_lt(q));
+            let (ge, wge) = (x.simd_ge(y), p.simd_ge(q));
+            assert_eq!(bits(lt.to_array()), bits(wlt.to_array()));
+            assert_eq!(bits(ge.to_array()), bits(wge.to_array()));
+            assert_eq!(bits(x.simd_gt(y).to_array()), bits(p.simd_gt(q).to_array()));
+            assert_eq!(bits((lt | ge).to_array()), bits((wlt | wge).to_array()));
+            assert_eq!(bits((lt & ge).to_array()), bits((wlt & wge).to_array()));
+            assert_eq!(bits(lt.and_not(ge).to_array()), bits(wlt.and_not(wge).to_array()));
+            eq("select", lt.select(x, y), wlt.select(p, q));
+            assert_eq!(lt.to_bitmask(), wlt.to_bitmask());
+            assert_eq!(lt.any(), wlt.any());
+            // Truncation and gathers on the documented range (clamped like the kernel does).
+            let (g, wg) = (x.max(A::splat(0.0)).min(A::splat(120.0)), p.max(W::splat(0.0)).min(W::splat(120.0)));
+            let (ti, wti) = (g.trunc_int(), wg.trunc_int());
+            eq("trunc", A::int_to_float(ti), W::int_to_float(wti));
+            let k = A::mul_i(ti, A::splat_i(3)) + A::splat_i(-20);
+            let wk = W::mul_i(wti, W::splat_i(3)) + W::splat_i(-20);
+            eq("gather", A::gather(&data, k), W::gather(&data, wk));
+            eq("gather empty", A::gather(&[], k), W::gather(&[], wk));
+            let ((p0, p1), (w0, w1)) = (A::gather_pairs(&data, k), W::gather_pairs(&data, wk));
+            eq("pairs 0", p0, w0);
+            eq("pairs 1", p1, w1);
+            let ((p0, _), (w0, _)) = (A::gather_pairs(&data[..1], k), W::gather_pairs(&data[..1], wk));
+            eq("pairs short", p0, w0);
+        }
+    }
+
+    /// `Avx2` and the kernel's sixteen-lane `X2<Avx2>` against the portable lanes, inlined
+    /// into an AVX2 function as the kernel is.
+    #[target_feature(enable = "avx2")]
+    fn check() {
+        check_against::<Avx2, f32x8>();
+        check_against::<X2<Avx2>, X2<f32x8>>();
+    }
+
+    #[test]
+    fn avx2_lanes_equal_portable_lanes() {
+        if std::is_x86_feature_detected!("avx2") {
+            // SAFETY: the CPU supports AVX2 (checked just above).
+            unsafe { check() }
+        }
+    }
+
+    /// `Avx512` and the kernel's thirty-two-lane `X2<Avx512>` against the portable lanes,
+    /// inlined into a function compiled with AVX-512 F and DQ as the kernel is.
+    #[target_feature(enable = "avx512f,avx512dq")]
+    fn check512() {
+        check_against::<Avx512, X2<f32x8>>();
+        check_against::<X2<Avx512>, X2<X2<f32x8>>>();
+    }
+
+    #[test]
+    fn avx512_lanes_equal_portable_lanes() {
+        if std::is_x86_feature_detected!("avx512f") && std::is_x86_feature_detected!("avx512dq") {
+            // SAFETY: the CPU supports AVX-512 F and DQ (checked just above).
+            unsafe { check512() }
+        } else {
+            eprintln!("this CPU lacks AVX-512 F/DQ: the AVX-512 lanes are not tested here");
         }
     }
 }

@@ -15,7 +15,7 @@
 //! | [`encoding`] | the wire encoding of a frame: 12-byte or compact, negotiated per client |
 //! | [`empty_space`] | the min/max brick grid for empty-space skipping |
 //! | [`marcher`] | the CPU ray marcher: frames for clients and ground-truth images |
-//! | [`packet_march`] | the marcher's fast kernel: eight rays at once in SIMD lanes |
+//! | [`packet_march`] | the marcher's fast kernel: 8, 16 or 32 rays at once in SIMD lanes ([`LaneKind`]) |
 //! | [`radius`] | the sphere radius models: pixel footprint or half a voxel diagonal |
 //! | [`compaction`] | the parallel compaction of a frame's samples |
 //! | [`render_queue`] | one marcher pool shared by all clients; identical requests rendered once |
@@ -46,6 +46,7 @@ pub mod transfer_function;
 pub mod volume;
 
 pub use dataset::Dataset;
+pub use lanes::{lane_kind, limit_lanes, LaneKind};
 pub use marcher::{default_camera, FrameStats, LayerBuffer, MarchKernel, MarchOptions, Marcher, PixelBuffer};
 pub use radius::RadiusModel;
 pub use server::{Server, ServerConfig, ServerHandle};

@@ -1,8 +1,11 @@
-//! The packet marcher: the rays of a block of pixels marched together in SIMD lanes
-//! ([`crate::lanes`], chosen at run time): where the CPU has AVX2, sixteen rays of a 4×4 block
-//! as two AVX registers per value (`lanes::X2`: two independent chains of dependent
-//! gathers and blends that the core overlaps, 1.26× faster than one register of eight rays on
-//! the MRI benchmark view); elsewhere eight rays of a 4×2 block in `wide`'s lanes.
+//! The packet marcher: the rays of a block of pixels marched together in SIMD lanes, the widest
+//! the CPU has ([`crate::LaneKind`], chosen at run time): thirty-two rays of an 8×4 block as
+//! two AVX-512 registers per value, sixteen rays of a 4×4 block as two AVX2 registers per
+//! value, or eight rays of a 4×2 block in `wide`'s portable lanes. Two registers per value make
+//! two independent chains of dependent gathers and blends that the core overlaps: the step is
+//! bound by their latency more than by their throughput (on the MRI benchmark view, one
+//! thread: eight AVX2 lanes 424 ms, sixteen 336 ms; sixteen AVX-512 lanes 268 ms, thirty-two
+//! 243 ms).
 //!
 //! Per step, every active lane computes its sample position, clamps it to the voxel lattice,
 //! gathers the eight neighbours and blends them trilinearly, gathers the transfer function's
@@ -26,8 +29,14 @@ use volwarp_core::sample::{over_background, pack_color_f32, Quantizer};
 use volwarp_core::segments::Segmenter;
 use volwarp_core::{DepthPicker, FirstPassAccumulator, Heuristic, RayBasis, Vec3, BACKGROUND};
 
-/// Pixels per packet along x (the packet is `PW × (lanes / PW)` pixels).
-const PW: usize = 4;
+/// Pixels per packet along x for `lanes` lanes (the packet is `pw × (lanes / pw)` pixels).
+const fn pw(lanes: usize) -> usize {
+    if lanes >= 32 {
+        8
+    } else {
+        4
+    }
+}
 /// The most lanes a [`Lanes`] type has (arrays of lane values are this long; a type with fewer
 /// lanes uses their start).
 const MAXL: usize = crate::lanes::MAX_LANES;
@@ -229,7 +238,7 @@ impl Kernel<'_> {
         };
         let first = basis.dir(x0, y0);
         for l in 0..lanes {
-            let (x, y) = (x0 + (l % PW) as u32, y0 + (l / PW) as u32);
+            let (x, y) = (x0 + (l % pw(lanes)) as u32, y0 + (l / pw(lanes)) as u32);
             if x >= w || y >= h {
                 r.d[l] = first;
                 r.inv_d[l] = 1.0 / first;
@@ -420,8 +429,8 @@ impl Kernel<'_> {
         let o = basis.origin();
         let (w, h) = (basis.eye[3] as u32, basis.corner[3] as u32);
         let rows = (color.len() / (w as usize).max(1)) as u32;
-        for py in (y0..y0 + rows).step_by(L::N / PW) {
-            for px in (0..w).step_by(PW) {
+        for py in (y0..y0 + rows).step_by(L::N / pw(L::N)) {
+            for px in (0..w).step_by(pw(L::N)) {
                 let rays = self.rays(L::N, basis, o, px, py, w, h);
                 let mut depth = [None; MAXL];
                 let mut unc = [Uncertainty::default(); MAXL];
@@ -467,7 +476,7 @@ impl Kernel<'_> {
                     }
                 };
                 for l in 0..L::N {
-                    let (x, y) = (px + (l % PW) as u32, py + (l / PW) as u32);
+                    let (x, y) = (px + (l % pw(L::N)) as u32, py + (l / pw(L::N)) as u32);
                     if x >= w || y >= y0 + rows {
                         continue;
                     }
@@ -521,13 +530,13 @@ impl Kernel<'_> {
         let k = out.layers;
         let rows = (out.count.len() / (w as usize).max(1)) as u32;
         let step = self.m.step();
-        for py in (y0..y0 + rows).step_by(L::N / PW) {
-            for px in (0..w).step_by(PW) {
+        for py in (y0..y0 + rows).step_by(L::N / pw(L::N)) {
+            for px in (0..w).step_by(pw(L::N)) {
                 let rays = self.rays(L::N, basis, o, px, py, w, h);
                 let mut segs = [Segmenter::new(k as u32, step); MAXL];
                 self.march::<L, _>(o, &rays, &mut segs);
                 for (l, seg) in segs.iter_mut().enumerate().take(L::N) {
-                    let (x, y) = (px + (l % PW) as u32, py + (l / PW) as u32);
+                    let (x, y) = (px + (l % pw(L::N)) as u32, py + (l / pw(L::N)) as u32);
                     if x >= w || y >= y0 + rows || rays.t_exit[l].is_none() {
                         continue;
                     }
@@ -569,7 +578,7 @@ fn band_layers_kernel<L: Lanes>(
 dispatch! {
     /// Marches the rows of one band into layered samples with the best lanes this CPU has (see
     /// [`Kernel::band_layers`]).
-    fn march_band_layers / march_band_layers_avx2 => band_layers_kernel(
+    fn march_band_layers / march_band_layers_avx2 / march_band_layers_avx512 => band_layers_kernel(
         k: &Kernel<'_>,
         basis: &RayBasis,
         pack: Option<(&Quantizer, FrameRadius)>,
@@ -596,7 +605,7 @@ fn band_kernel<L: Lanes>(
 dispatch! {
     /// Marches the rows of one band with the best lanes this CPU has (see [`Kernel::band`]).
     #[allow(clippy::too_many_arguments)]
-    fn march_band / march_band_avx2 => band_kernel(
+    fn march_band / march_band_avx2 / march_band_avx512 => band_kernel(
         k: &Kernel<'_>,
         basis: &RayBasis,
         heuristic: Option<Heuristic>,

@@ -10,7 +10,28 @@ use std::path::Path;
 use volwarp_core::wire::CameraRequest;
 use volwarp_core::{Camera, Heuristic, Vec3};
 use volwarp_server::transfer_function::TransferFunction;
-use volwarp_server::{Dataset, MarchKernel, MarchOptions, Marcher, PixelBuffer, Volume};
+use volwarp_server::{
+    lane_kind, limit_lanes, Dataset, LaneKind, MarchKernel, MarchOptions, Marcher, PixelBuffer, Volume,
+};
+
+/// Tests that limit the lanes hold this while they do (the limit is process-wide; tests that
+/// do not hold it may run on any kind, which computes the same values).
+static LANES: std::sync::Mutex<()> = std::sync::Mutex::new(());
+
+/// Runs `f` with each lane kind this CPU has (widest first), then lifts the limit; prints the
+/// kinds it could not run.
+fn for_each_lane_kind(mut f: impl FnMut(LaneKind)) {
+    let _guard = LANES.lock().unwrap_or_else(|e| e.into_inner());
+    for kind in [LaneKind::Avx512, LaneKind::Avx2, LaneKind::Portable] {
+        limit_lanes(kind);
+        if lane_kind() != kind {
+            eprintln!("this CPU lacks {kind:?} lanes: not tested here");
+            continue;
+        }
+        f(kind);
+    }
+    limit_lanes(LaneKind::Avx512);
+}
 
 fn data(name: &str) -> std::path::PathBuf {
     Path::new(env!("CARGO_MANIFEST_DIR")).join("..").join(name)
@@ -105,17 +126,32 @@ fn cameras(m: &Marcher) -> Vec<(&'static str, Camera)> {
 
 #[test]
 fn packet_marcher_equals_scalar_on_every_dataset_heuristic_and_view() {
-    for ds in datasets() {
-        let (fast, slow) = pair(&ds, MarchOptions::default());
-        for (view, cam) in cameras(&fast) {
-            for h in Heuristic::ALL {
-                let what = format!("{} {view} {h}", ds.name);
-                assert_same(&what, &fast.march(&cam, h), &slow.march(&cam, h));
+    let datasets = datasets();
+    let pairs: Vec<(Marcher, Marcher)> = datasets.iter().map(|ds| pair(ds, MarchOptions::default())).collect();
+    let truth: Vec<Vec<_>> = pairs
+        .iter()
+        .map(|(fast, slow)| {
+            cameras(fast)
+                .into_iter()
+                .map(|(_, cam)| {
+                    let depths: Vec<PixelBuffer> = Heuristic::ALL.iter().map(|&h| slow.march(&cam, h)).collect();
+                    (depths, slow.render_image(&cam))
+                })
+                .collect()
+        })
+        .collect();
+    for_each_lane_kind(|kind| {
+        for ((ds, (fast, _)), truth) in datasets.iter().zip(&pairs).zip(&truth) {
+            for ((view, cam), (depths, image)) in cameras(fast).into_iter().zip(truth) {
+                for (&h, slow) in Heuristic::ALL.iter().zip(depths) {
+                    let what = format!("{kind:?} {} {view} {h}", ds.name);
+                    assert_same(&what, &fast.march(&cam, h), slow);
+                }
+                let a = fast.render_image(&cam);
+                assert!(a.pixels == image.pixels, "{kind:?} {} {view}: ground-truth images differ", ds.name);
             }
-            let (a, b) = (fast.render_image(&cam), slow.render_image(&cam));
-            assert!(a.pixels == b.pixels, "{} {view}: ground-truth images differ", ds.name);
         }
-    }
+    });
 }
 
 #[test]
@@ -153,19 +189,21 @@ fn skipping_changes_no_packet_image() {
 fn packet_frames_equal_scalar_frames() {
     let ds = Dataset::load(data("data/neghip_64x64x64_uint8.raw"), None).unwrap();
     let (fast, slow) = pair(&ds, MarchOptions::default());
-    for h in Heuristic::ALL {
-        let req = CameraRequest {
-            seq: 3,
-            camera: fast.default_camera(57, 43).orbit(25.0, 15.0),
-            heuristic: h,
-            radius_scale: 1.5,
-        };
-        let (a, _) = fast.render_frame(&req);
-        let (b, _) = slow.render_frame(&req);
-        assert!(!a.samples.is_empty(), "{h}");
-        assert_eq!(a.samples, b.samples, "{h}");
-        assert_eq!(a.colors, b.colors, "{h}");
-    }
+    for_each_lane_kind(|kind| {
+        for h in Heuristic::ALL {
+            let req = CameraRequest {
+                seq: 3,
+                camera: fast.default_camera(57, 43).orbit(25.0, 15.0),
+                heuristic: h,
+                radius_scale: 1.5,
+            };
+            let (a, _) = fast.render_frame(&req);
+            let (b, _) = slow.render_frame(&req);
+            assert!(!a.samples.is_empty(), "{h}");
+            assert_eq!(a.samples, b.samples, "{kind:?} {h}");
+            assert_eq!(a.colors, b.colors, "{kind:?} {h}");
+        }
+    });
 }
 
 #[test]
@@ -177,12 +215,14 @@ fn packet_marcher_handles_tiny_and_flat_volumes() {
         let vol = Volume::from_values("flat", dims, Vec3::new(1.0, 0.5, 2.0), values).unwrap();
         let ds = Dataset::new(vol, tf.clone());
         let (fast, slow) = pair(&ds, MarchOptions::default());
-        for (view, cam) in cameras(&fast) {
-            assert_same(
-                &format!("{dims:?} {view}"),
-                &fast.march(&cam, Heuristic::Midpoint),
-                &slow.march(&cam, Heuristic::Midpoint),
-            );
-        }
+        for_each_lane_kind(|kind| {
+            for (view, cam) in cameras(&fast) {
+                assert_same(
+                    &format!("{kind:?} {dims:?} {view}"),
+                    &fast.march(&cam, Heuristic::Midpoint),
+                    &slow.march(&cam, Heuristic::Midpoint),
+                );
+            }
+        });
     }
 }
