@@ -161,6 +161,11 @@ pub(crate) trait Lanes:
     /// Per lane `(data[idx], data[idx + 1])`, each index clamped to `0 ..= data.len() − 2`
     /// first (a slice shorter than 2 gives zeros).
     fn gather_pairs(data: &[f32], idx: Self::I) -> (Self, Self);
+    /// Per lane `data[idx]`, each index clamped to `0 ..= data.len() − 1` first (an empty
+    /// slice gives zeros).
+    fn gather_words(data: &[u32], idx: Self::I) -> Self::I;
+    /// The four bytes of each lane's word, lowest first, as `f32` (exact).
+    fn unpack_bytes(w: Self::I) -> [Self; 4];
 }
 
 /// The portable lanes: `wide`'s, whatever it was compiled for.
@@ -247,6 +252,17 @@ impl Lanes for f32x8 {
         let last = data.len() - 2;
         let i = idx.to_array().map(|i| (i.max(0) as usize).min(last));
         (f32x8::new(core::array::from_fn(|l| data[i[l]])), f32x8::new(core::array::from_fn(|l| data[i[l] + 1])))
+    }
+    #[inline(always)]
+    fn gather_words(data: &[u32], idx: i32x8) -> i32x8 {
+        let last = data.len().saturating_sub(1);
+        let i = idx.to_array();
+        i32x8::new(core::array::from_fn(|l| data.get((i[l].max(0) as usize).min(last)).copied().unwrap_or(0) as i32))
+    }
+    #[inline(always)]
+    fn unpack_bytes(w: i32x8) -> [Self; 4] {
+        let m = i32x8::splat(255);
+        [w & m, (w >> 8) & m, (w >> 16) & m, (w >> 24) & m].map(|b| b.round_float())
     }
 }
 
@@ -375,6 +391,15 @@ impl<L: Lanes> Lanes for X2<L> {
     fn gather_pairs(data: &[f32], idx: Self::I) -> (Self, Self) {
         let ((a0, b0), (a1, b1)) = (L::gather_pairs(data, idx.0), L::gather_pairs(data, idx.1));
         (X2(a0, a1), X2(b0, b1))
+    }
+    #[inline(always)]
+    fn gather_words(data: &[u32], idx: Self::I) -> Self::I {
+        X2I(L::gather_words(data, idx.0), L::gather_words(data, idx.1))
+    }
+    #[inline(always)]
+    fn unpack_bytes(w: Self::I) -> [Self; 4] {
+        let (a, b) = (L::unpack_bytes(w.0), L::unpack_bytes(w.1));
+        [X2(a[0], b[0]), X2(a[1], b[1]), X2(a[2], b[2]), X2(a[3], b[3])]
     }
 }
 
@@ -550,6 +575,31 @@ mod avx2 {
                 let b = _mm256_shuffle_ps::<0b11_01_11_01>(lo, hi); // b0 b1 b4 b5 | b2 b3 b6 b7
                 let order = |v: __m256| _mm256_castpd_ps(_mm256_permute4x64_pd::<0b11_01_10_00>(_mm256_castps_pd(v)));
                 (Avx2(order(a)), Avx2(order(b)))
+            }
+        }
+        #[inline(always)]
+        fn gather_words(data: &[u32], idx: Avx2I) -> Avx2I {
+            if data.is_empty() {
+                return Avx2::splat_i(0);
+            }
+            let last = (data.len() - 1).min(i32::MAX as usize) as i32;
+            unsafe {
+                let i = _mm256_min_epi32(_mm256_max_epi32(idx.0, _mm256_setzero_si256()), _mm256_set1_epi32(last));
+                // SAFETY: every index is in 0 ..= len − 1 (just above), scale 4 is `u32`'s size.
+                Avx2I(_mm256_i32gather_epi32::<4>(data.as_ptr().cast(), i))
+            }
+        }
+        #[inline(always)]
+        fn unpack_bytes(w: Avx2I) -> [Self; 4] {
+            unsafe {
+                let m = _mm256_set1_epi32(255);
+                [
+                    _mm256_and_si256(w.0, m),
+                    _mm256_and_si256(_mm256_srli_epi32::<8>(w.0), m),
+                    _mm256_and_si256(_mm256_srli_epi32::<16>(w.0), m),
+                    _mm256_srli_epi32::<24>(w.0),
+                ]
+                .map(|b| Avx2(_mm256_cvtepi32_ps(b)))
             }
         }
     }
@@ -728,6 +778,31 @@ mod avx512 {
                 let even = _mm512_setr_epi32(0, 2, 4, 6, 8, 10, 12, 14, 16, 18, 20, 22, 24, 26, 28, 30);
                 let odd = _mm512_setr_epi32(1, 3, 5, 7, 9, 11, 13, 15, 17, 19, 21, 23, 25, 27, 29, 31);
                 (Avx512(_mm512_permutex2var_ps(lo, even, hi)), Avx512(_mm512_permutex2var_ps(lo, odd, hi)))
+            }
+        }
+        #[inline(always)]
+        fn gather_words(data: &[u32], idx: Avx512I) -> Avx512I {
+            if data.is_empty() {
+                return Avx512::splat_i(0);
+            }
+            let last = (data.len() - 1).min(i32::MAX as usize) as i32;
+            unsafe {
+                let i = _mm512_min_epi32(_mm512_max_epi32(idx.0, _mm512_setzero_si512()), _mm512_set1_epi32(last));
+                // SAFETY: every index is in 0 ..= len − 1 (just above), scale 4 is `u32`'s size.
+                Avx512I(_mm512_i32gather_epi32::<4>(i, data.as_ptr().cast()))
+            }
+        }
+        #[inline(always)]
+        fn unpack_bytes(w: Avx512I) -> [Self; 4] {
+            unsafe {
+                let m = _mm512_set1_epi32(255);
+                [
+                    _mm512_and_si512(w.0, m),
+                    _mm512_and_si512(_mm512_srli_epi32::<8>(w.0), m),
+                    _mm512_and_si512(_mm512_srli_epi32::<16>(w.0), m),
+                    _mm512_srli_epi32::<24>(w.0),
+                ]
+                .map(|b| Avx512(_mm512_cvtepi32_ps(b)))
             }
         }
     }

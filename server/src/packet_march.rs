@@ -220,6 +220,8 @@ pub(crate) struct Kernel<'a> {
     pub(crate) m: &'a Marcher,
     /// The volume's values with their padding ([`crate::volume::Volume`]'s `padded_data`).
     pub(crate) data: &'a [f32],
+    /// A byte-coded volume's codes, read instead of `data` (the same values).
+    pub(crate) stencil: Option<&'a crate::volume::ByteStencil>,
     pub(crate) lut: &'a [Vec<f32>; 4],
     /// [`crate::empty_space::Occupancy::look_table`].
     pub(crate) dist: &'a [f32],
@@ -364,12 +366,21 @@ impl Kernel<'_> {
             // (the volume's padding keeps the reads inside): there the fraction is exactly 0, so
             // `c + (far - c) * 0` is `c`, as the scalar marcher's clamped read gives.
             let base = xi + L::mul_i(snx, yi + L::mul_i(sny, zi));
-            let d = self.data;
-            let (c000, c100) = L::gather_pairs(d, base);
-            let (c010, c110) = L::gather_pairs(d, base + snx);
             let b2 = base + snxy;
-            let (c001, c101) = L::gather_pairs(d, b2);
-            let (c011, c111) = L::gather_pairs(d, b2 + snx);
+            let (c000, c100, c010, c110, c001, c101, c011, c111) = if let Some(st) = self.stencil {
+                // Two gathers of the x–y squares of byte codes, normalized as `Volume` did.
+                let s = L::splat(st.scale);
+                let [a, b, c, d] = L::unpack_bytes(L::gather_words(&st.words, base));
+                let [e, f, g, h] = L::unpack_bytes(L::gather_words(&st.words, b2));
+                (a * s, b * s, c * s, d * s, e * s, f * s, g * s, h * s)
+            } else {
+                let d = self.data;
+                let (c000, c100) = L::gather_pairs(d, base);
+                let (c010, c110) = L::gather_pairs(d, base + snx);
+                let (c001, c101) = L::gather_pairs(d, b2);
+                let (c011, c111) = L::gather_pairs(d, b2 + snx);
+                (c000, c100, c010, c110, c001, c101, c011, c111)
+            };
             let c00 = c000 + (c100 - c000) * fx;
             let c10 = c010 + (c110 - c010) * fx;
             let c01 = c001 + (c101 - c001) * fx;

@@ -6,7 +6,11 @@
 //! voxel of the box faces.
 //!
 //! Values are stored normalized to `0..=1` over the data range of the file
-//! ([`Volume::value_range`]), so a transfer function is a lookup over `0..=1`.
+//! ([`Volume::value_range`]), so a transfer function is a lookup over `0..=1`. Integer values
+//! at most 255 apart (8-bit volumes, 16-bit ones of small range) are *byte-coded*: code
+//! `value − min`, normalized value `code as f32 · scale` in `f32` arithmetic (`scale` the
+//! largest `f32` with `range · scale ≤ 1`), which the packet marcher reproduces bit for bit from
+//! the codes it gathers (`ByteStencil`); other values are normalized in `f64`.
 //!
 //! Loaders ([`load_volume`]): headerless raw files named `name_XxYxZ_type.raw`
 //! ([`parse_raw_name`]; dims, type and spacing may also come from [`LoadOptions`]) and NRRD
@@ -64,6 +68,39 @@ pub struct Volume {
     /// The values, then [`Volume::padding`] zeros (so that reads of a trilinear neighbourhood
     /// need no clamping of its far corners; see `padded_data`).
     data: Vec<f32>,
+    /// For byte-coded volumes, the packet marcher's stencil (see [`ByteStencil`]).
+    stencil: Option<ByteStencil>,
+}
+
+/// The voxels of a volume whose values are at most 256 integers apart (every 8-bit volume, and
+/// 16-bit ones of small range), as byte codes `value − min` with the normalized value
+/// `code as f32 * scale` (exactly what [`Volume::data`] holds for them), arranged for the packet
+/// marcher's gathers: word `i` holds the codes of voxels `i`, `i + 1`, `i + nx` and
+/// `i + nx + 1` in its bytes 0 to 3 (the x–y square of a trilinear stencil), so two 32-bit
+/// gathers (this slice and the next) read all eight corners, where `f32` values take four
+/// 64-bit gathers of pairs. Reads past the volume's rows or end give codes whose weight is 0.
+#[derive(Clone, Debug)]
+pub(crate) struct ByteStencil {
+    /// One word per voxel, then [`Volume::padding`] more.
+    pub(crate) words: Vec<u32>,
+    /// The normalized value of code 1.
+    pub(crate) scale: f32,
+}
+
+/// Most voxels a [`ByteStencil`] is built for (it takes 4 bytes per voxel, as the values do).
+const MAX_STENCIL_VOXELS: u64 = 1 << 26;
+
+/// The largest `f32` scale with `range · scale ≤ 1` in `f32` arithmetic (so codes normalize
+/// into `0 ..= 1` without clamping), 0 for an empty range.
+fn code_scale(range: f32) -> f32 {
+    if range <= 0.0 {
+        return 0.0;
+    }
+    let mut s = (1.0 / range as f64) as f32;
+    while range * s > 1.0 {
+        s = f32::from_bits(s.to_bits() - 1);
+    }
+    s
 }
 
 /// Checks dims and spacing and returns the number of voxels (at most `max_voxels`).
@@ -88,7 +125,8 @@ pub(crate) fn check_geometry(dims: [u32; 3], spacing: Vec3, max_voxels: u64) -> 
 
 impl Volume {
     /// A volume from values in x-fastest order (`dims` product long). Non-finite values become
-    /// the data minimum; the values are normalized over their range.
+    /// the data minimum; the values are normalized over their range (byte-coded where they are
+    /// integers at most 255 apart, see the module docs).
     pub fn from_values(name: &str, dims: [u32; 3], spacing: Vec3, mut values: Vec<f32>) -> Result<Volume, VolumeError> {
         let n = check_geometry(dims, spacing, u64::MAX)?;
         if values.len() as u64 != n {
@@ -105,12 +143,34 @@ impl Volume {
         if lo > hi {
             (lo, hi) = (0.0, 0.0);
         }
-        let scale = if hi > lo { 1.0 / (hi as f64 - lo as f64) } else { 0.0 };
-        for v in values.iter_mut() {
-            *v = if v.is_finite() { ((*v as f64 - lo as f64) * scale).clamp(0.0, 1.0) as f32 } else { 0.0 };
+        // Integer values at most 255 apart: byte codes, normalized in f32 arithmetic so that
+        // the packet marcher can normalize the codes it gathers to the same bits.
+        let byte_coded = hi - lo <= 255.0
+            && n <= MAX_STENCIL_VOXELS
+            && values.iter().all(|v| v.is_finite() && v.fract() == 0.0 && v.abs() < 16_777_216.0);
+        let mut codes = Vec::new();
+        if byte_coded {
+            let scale = code_scale(hi - lo);
+            codes = values.iter().map(|&v| (v - lo) as u8).collect();
+            for (v, &c) in values.iter_mut().zip(&codes) {
+                *v = c as f32 * scale;
+            }
+        } else {
+            let scale = if hi > lo { 1.0 / (hi as f64 - lo as f64) } else { 0.0 };
+            for v in values.iter_mut() {
+                *v = if v.is_finite() { ((*v as f64 - lo as f64) * scale).clamp(0.0, 1.0) as f32 } else { 0.0 };
+            }
         }
         values.resize(values.len() + Volume::padding(dims), 0.0);
-        Ok(Volume { name: name.to_string(), dims, spacing, value_range: (lo, hi), data: values })
+        let stencil = byte_coded.then(|| {
+            let nx = dims[0] as usize;
+            let code = |i: usize| codes.get(i).copied().unwrap_or(0) as u32;
+            let words = (0..values.len())
+                .map(|i| code(i) | code(i + 1) << 8 | code(i + nx) << 16 | code(i + nx + 1) << 24)
+                .collect();
+            ByteStencil { words, scale: code_scale(hi - lo) }
+        });
+        Ok(Volume { name: name.to_string(), dims, spacing, value_range: (lo, hi), data: values, stencil })
     }
 
     /// A volume from a function of the world position of each voxel centre.
@@ -189,6 +249,11 @@ impl Volume {
     pub(crate) fn padded_data(&self) -> &[f32] {
         &self.data
     }
+
+    /// The byte codes of a byte-coded volume, arranged for the packet marcher.
+    pub(crate) fn byte_stencil(&self) -> Option<&ByteStencil> {
+        self.stencil.as_ref()
+    }
 }
 
 /// Loads a raw (`.raw` or any other extension) or NRRD (`.nrrd`, `.nhdr`) volume.
@@ -214,6 +279,43 @@ pub fn load_volume(path: impl AsRef<Path>, opts: &LoadOptions) -> Result<Volume,
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn byte_coded_volumes_normalize_their_codes_exactly() {
+        // 16-bit values of small range (an unseen-volume case), 8-bit values, a flat volume.
+        for values in [
+            vec![1000.0, 1200.0, 1100.0, 1001.0, 1254.0, 1000.0],
+            (0..24).map(|i| (i * 37 % 256) as f32).chain([0.0, 255.0]).collect(),
+            vec![7.0; 6],
+        ] {
+            let range =
+                values.iter().copied().fold(0.0, f32::max) - values.iter().copied().fold(f32::INFINITY, f32::min);
+            let dims = [values.len() as u32 / 2, 2, 1];
+            let v = Volume::from_values("b", dims, Vec3::ONE, values.clone()).unwrap();
+            let st = v.byte_stencil().expect("byte-coded");
+            assert!(range * st.scale <= 1.0);
+            let lo = values.iter().copied().fold(f32::INFINITY, f32::min);
+            let nx = dims[0] as usize;
+            for (i, (&x, &n)) in values.iter().zip(v.data()).enumerate() {
+                let code = (x - lo) as u32;
+                assert_eq!(n.to_bits(), (code as f32 * st.scale).to_bits());
+                assert!((0.0..=1.0).contains(&n));
+                assert_eq!(st.words[i] & 255, code);
+                if i + nx + 1 < values.len() {
+                    let c = |j: usize| (values[j] - lo) as u32;
+                    assert_eq!(st.words[i], c(i) | c(i + 1) << 8 | c(i + nx) << 16 | c(i + nx + 1) << 24);
+                }
+            }
+            if range > 0.0 {
+                assert_eq!(v.data().iter().copied().fold(0.0, f32::max), range * st.scale);
+            }
+        }
+        // Wide ranges and fractions keep the f64 normalization and no codes.
+        for values in [vec![0.0, 256.0], vec![0.0, 0.5], vec![0.0, f32::NAN]] {
+            let v = Volume::from_values("f", [2, 1, 1], Vec3::ONE, values).unwrap();
+            assert!(v.byte_stencil().is_none());
+        }
+    }
 
     #[test]
     fn marschner_lobb_is_in_range() {
