@@ -15,7 +15,7 @@ use crate::volume::Volume;
 use volwarp_core::Vec3;
 
 /// Brick edge in voxels.
-pub const BRICK: u32 = 8;
+pub const BRICK: u32 = 4;
 
 /// Min/max of the normalized values per brick.
 #[derive(Clone, Debug)]

@@ -148,7 +148,7 @@ pub struct Marcher {
     /// Opacity-corrected, premultiplied table.
     lut: Vec<[f32; 4]>,
     /// The same table as four planes (r, g, b, a) for the packet marcher's gathers.
-    lut_planes: Arc<[Vec<f32>; 4]>,
+    lut_planes: Arc<Vec<f32>>,
     /// [`Occupancy::look_table`], for the packet marcher's gathers.
     dist: Arc<Vec<f32>>,
     opts: MarchOptions,
@@ -204,7 +204,7 @@ impl Marcher {
         debug_assert_eq!(lut.len(), LUT_SIZE);
         let occupancy = grid.occupancy(tf, sp);
         log::debug!("empty-space grid: {:.1} % of bricks visible", occupancy.fraction_occupied() * 100.0);
-        let lut_planes = Arc::new([0, 1, 2, 3].map(|c| lut.iter().map(|e| e[c]).collect::<Vec<f32>>()));
+        let lut_planes = Arc::new(lut.iter().flat_map(|&[r, g, b, a]| [a, r, g, b]).collect::<Vec<f32>>());
         let dist = Arc::new(occupancy.look_table());
         Marcher { volume, grid, occupancy, lut, lut_planes, dist, opts, dt, inv_spacing: 1.0 / sp }
     }

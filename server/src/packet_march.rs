@@ -222,7 +222,8 @@ pub(crate) struct Kernel<'a> {
     pub(crate) data: &'a [f32],
     /// A byte-coded volume's codes, read instead of `data` (the same values).
     pub(crate) stencil: Option<&'a crate::volume::ByteStencil>,
-    pub(crate) lut: &'a [Vec<f32>; 4],
+    /// The opacity-corrected, premultiplied transfer function as (a, r, g, b) entries.
+    pub(crate) lut: &'a [f32],
     /// [`crate::empty_space::Occupancy::look_table`].
     pub(crate) dist: &'a [f32],
 }
@@ -282,7 +283,7 @@ impl Kernel<'_> {
         let (snx, snxy) = (L::splat_i(nx as i32), L::splat_i((nx * ny) as i32));
         let sny = L::splat_i(ny as i32);
         let (lut_max, lut_scale) =
-            (L::splat((self.lut[3].len().max(1) - 1) as f32), L::splat((self.lut[3].len().max(1) - 1) as f32));
+            (L::splat((self.lut.len() / 4).max(1) as f32 - 1.0), L::splat((self.lut.len() / 4).max(1) as f32 - 1.0));
         let ert = L::splat(opts.early_termination);
         // No closure calls a lane method here (see `band`).
         let nb = occ.bricks();
@@ -390,12 +391,13 @@ impl Kernel<'_> {
             let v = c0 + (c1 - c0) * fz;
             // TransferFunction::index, in lanes.
             let idx = (v * lut_scale + half).max(zero).min(lut_max).trunc_int();
-            let ca = L::gather(&self.lut[3], idx);
+            // The table's entries are (a, r, g, b): opacity and red in one 64-bit gather.
+            let q = idx + idx;
+            let q = q + q;
+            let (ca, cr) = L::gather_pairs(self.lut, q);
             let vis = active & ca.simd_gt(zero);
             if vis.any() {
-                let cr = L::gather(&self.lut[0], idx);
-                let cg = L::gather(&self.lut[1], idx);
-                let cb = L::gather(&self.lut[2], idx);
+                let (cg, cb) = L::gather_pairs(self.lut, q + L::splat_i(2));
                 let w = one - a;
                 r = vis.select(r + w * cr, r);
                 g = vis.select(g + w * cg, g);
