@@ -242,7 +242,7 @@ impl Marcher {
 
     /// A ray's samples: their count `n`, the box entry and exit (`None` if the ray misses the
     /// box); sample `k` lies at `t_enter + (k + ½)·Δt`.
-    #[inline]
+    #[inline(always)]
     pub(crate) fn ray_setup(&self, o: Vec3, d: Vec3) -> (u32, f32, Option<f32>) {
         let Some((t_enter, t_exit)) = clip(o, 1.0 / d, self.volume.extent()) else {
             return (0, 0.0, None);

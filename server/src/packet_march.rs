@@ -231,6 +231,7 @@ pub(crate) struct Kernel<'a> {
 impl Kernel<'_> {
     /// The rays of the `lanes`-pixel packet at `(x0, y0)`.
     #[allow(clippy::too_many_arguments)]
+    #[inline(always)]
     fn rays(&self, lanes: usize, basis: &RayBasis, o: Vec3, x0: u32, y0: u32, w: u32, h: u32) -> Rays {
         let mut r = Rays {
             d: [Vec3::ZERO; MAXL],
