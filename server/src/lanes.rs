@@ -107,7 +107,25 @@ pub(crate) use dispatch;
 /// The most lanes a [`Lanes`] type has.
 pub(crate) const MAX_LANES: usize = 32;
 
-/// `N` `f32` lanes (also masks) and their companion `N` `i32` lanes (`N` = 8 or 16).
+/// A mask of [`Lanes`]: a lane vector with all bits set or clear per lane (AVX2, `wide`) or a
+/// mask register (AVX-512).
+pub(crate) trait Mask: Copy + BitAnd<Output = Self> + BitOr<Output = Self> {
+    /// The number of lanes.
+    const LANES: usize;
+    /// Bit `l` is lane `l`.
+    fn to_bitmask(self) -> u32;
+    /// Whether any lane is set.
+    fn any(self) -> bool;
+    /// `self` and not `rhs`.
+    fn and_not(self, rhs: Self) -> Self;
+    /// Per lane, `if_true` where the mask is set, else `if_false`.
+    #[inline(always)]
+    fn select<L: Lanes<M = Self>>(self, if_true: L, if_false: L) -> L {
+        L::blend(self, if_true, if_false)
+    }
+}
+
+/// `N` `f32` lanes and their companion `N` `i32` lanes and mask (`N` = 8, 16 or 32).
 pub(crate) trait Lanes:
     Copy
     + Add<Output = Self>
@@ -119,6 +137,8 @@ pub(crate) trait Lanes:
 {
     /// `i32` lanes, as many.
     type I: Copy + Add<Output = Self::I>;
+    /// A mask of as many lanes.
+    type M: Mask;
     /// The number of lanes (at most [`MAX_LANES`]).
     const N: usize;
 
@@ -132,19 +152,15 @@ pub(crate) trait Lanes:
     /// `f32::max` per lane where `rhs` is not NaN (a NaN `self` gives `rhs`); `rhs` where it is.
     fn max(self, rhs: Self) -> Self;
     /// Mask of `self < rhs` (false if either is NaN).
-    fn simd_lt(self, rhs: Self) -> Self;
+    fn simd_lt(self, rhs: Self) -> Self::M;
     /// Mask of `self > rhs` (false if either is NaN).
-    fn simd_gt(self, rhs: Self) -> Self;
+    fn simd_gt(self, rhs: Self) -> Self::M;
     /// Mask of `self >= rhs` (false if either is NaN).
-    fn simd_ge(self, rhs: Self) -> Self;
-    /// `self & !rhs` (for masks: `self` and not `rhs`).
-    fn and_not(self, rhs: Self) -> Self;
-    /// Per lane, `if_true` where the mask `self` is set, else `if_false`.
-    fn select(self, if_true: Self, if_false: Self) -> Self;
-    /// Bit `l` is lane `l`'s sign bit (for a mask: whether it is set).
-    fn to_bitmask(self) -> u32;
-    /// Whether any lane of the mask is set.
-    fn any(self) -> bool;
+    fn simd_ge(self, rhs: Self) -> Self::M;
+    /// Per lane, `if_true` where `m` is set, else `if_false`.
+    fn blend(m: Self::M, if_true: Self, if_false: Self) -> Self;
+    /// The mask whose lane `l` is bit `l` of `bits`.
+    fn mask_from_bits(bits: u32) -> Self::M;
     /// The lanes, lane 0 first (the rest of the array zero).
     fn to_array(self) -> [f32; MAX_LANES];
     /// Truncation toward zero of lanes in `0 ..= 2³¹ − 128` (`x as i32` there).
@@ -169,8 +185,25 @@ pub(crate) trait Lanes:
 }
 
 /// The portable lanes: `wide`'s, whatever it was compiled for.
+impl Mask for f32x8 {
+    const LANES: usize = 8;
+    #[inline(always)]
+    fn to_bitmask(self) -> u32 {
+        f32x8::to_bitmask(self)
+    }
+    #[inline(always)]
+    fn any(self) -> bool {
+        f32x8::any(self)
+    }
+    #[inline(always)]
+    fn and_not(self, rhs: Self) -> Self {
+        self & !rhs
+    }
+}
+
 impl Lanes for f32x8 {
     type I = i32x8;
+    type M = f32x8;
     const N: usize = 8;
 
     #[inline(always)]
@@ -202,20 +235,12 @@ impl Lanes for f32x8 {
         f32x8::simd_ge(self, rhs)
     }
     #[inline(always)]
-    fn and_not(self, rhs: Self) -> Self {
-        self & !rhs
+    fn blend(m: f32x8, if_true: Self, if_false: Self) -> Self {
+        f32x8::select(m, if_true, if_false)
     }
     #[inline(always)]
-    fn select(self, if_true: Self, if_false: Self) -> Self {
-        f32x8::select(self, if_true, if_false)
-    }
-    #[inline(always)]
-    fn to_bitmask(self) -> u32 {
-        f32x8::to_bitmask(self)
-    }
-    #[inline(always)]
-    fn any(self) -> bool {
-        f32x8::any(self)
+    fn mask_from_bits(bits: u32) -> f32x8 {
+        f32x8::new(core::array::from_fn(|l| if bits >> l & 1 == 1 { f32::from_bits(!0) } else { 0.0 }))
     }
     #[inline(always)]
     fn to_array(self) -> [f32; MAX_LANES] {
@@ -305,8 +330,25 @@ x2_binop!(Div, div);
 x2_binop!(BitAnd, bitand);
 x2_binop!(BitOr, bitor);
 
+impl<M: Mask> Mask for X2<M> {
+    const LANES: usize = 2 * M::LANES;
+    #[inline(always)]
+    fn to_bitmask(self) -> u32 {
+        self.0.to_bitmask() | self.1.to_bitmask() << M::LANES
+    }
+    #[inline(always)]
+    fn any(self) -> bool {
+        (self.0 | self.1).any()
+    }
+    #[inline(always)]
+    fn and_not(self, rhs: Self) -> Self {
+        X2(self.0.and_not(rhs.0), self.1.and_not(rhs.1))
+    }
+}
+
 impl<L: Lanes> Lanes for X2<L> {
     type I = X2I<L::I>;
+    type M = X2<L::M>;
     const N: usize = 2 * L::N;
 
     #[inline(always)]
@@ -327,32 +369,24 @@ impl<L: Lanes> Lanes for X2<L> {
         X2(self.0.max(rhs.0), self.1.max(rhs.1))
     }
     #[inline(always)]
-    fn simd_lt(self, rhs: Self) -> Self {
+    fn simd_lt(self, rhs: Self) -> Self::M {
         X2(self.0.simd_lt(rhs.0), self.1.simd_lt(rhs.1))
     }
     #[inline(always)]
-    fn simd_gt(self, rhs: Self) -> Self {
+    fn simd_gt(self, rhs: Self) -> Self::M {
         X2(self.0.simd_gt(rhs.0), self.1.simd_gt(rhs.1))
     }
     #[inline(always)]
-    fn simd_ge(self, rhs: Self) -> Self {
+    fn simd_ge(self, rhs: Self) -> Self::M {
         X2(self.0.simd_ge(rhs.0), self.1.simd_ge(rhs.1))
     }
     #[inline(always)]
-    fn and_not(self, rhs: Self) -> Self {
-        X2(self.0.and_not(rhs.0), self.1.and_not(rhs.1))
+    fn blend(m: Self::M, if_true: Self, if_false: Self) -> Self {
+        X2(L::blend(m.0, if_true.0, if_false.0), L::blend(m.1, if_true.1, if_false.1))
     }
     #[inline(always)]
-    fn select(self, if_true: Self, if_false: Self) -> Self {
-        X2(self.0.select(if_true.0, if_false.0), self.1.select(if_true.1, if_false.1))
-    }
-    #[inline(always)]
-    fn to_bitmask(self) -> u32 {
-        self.0.to_bitmask() | self.1.to_bitmask() << L::N
-    }
-    #[inline(always)]
-    fn any(self) -> bool {
-        (self.0 | self.1).any()
+    fn mask_from_bits(bits: u32) -> Self::M {
+        X2(L::mask_from_bits(bits), L::mask_from_bits(bits >> L::N))
     }
     #[inline(always)]
     fn to_array(self) -> [f32; MAX_LANES] {
@@ -408,7 +442,7 @@ pub(crate) use avx2::Avx2;
 
 #[cfg(target_arch = "x86_64")]
 mod avx2 {
-    use super::{Lanes, MAX_LANES};
+    use super::{Lanes, Mask, MAX_LANES};
     use core::arch::x86_64::*;
     use core::ops::{Add, BitAnd, BitOr, Div, Mul, Sub};
 
@@ -465,8 +499,28 @@ mod avx2 {
     // SAFETY (every `unsafe` block of this impl): AVX and AVX2 are available (the type's
     // invariant); the intrinsics have no other precondition, except the loads, stores and
     // gathers, whose pointers are noted there.
+    impl Mask for Avx2 {
+        const LANES: usize = 8;
+        #[inline(always)]
+        fn to_bitmask(self) -> u32 {
+            // SAFETY: AVX is available (the type's invariant).
+            (unsafe { _mm256_movemask_ps(self.0) }) as u32
+        }
+        #[inline(always)]
+        fn any(self) -> bool {
+            // `vtestps`: ZF is set when no sign bit is. SAFETY: AVX is available.
+            unsafe { _mm256_testz_ps(self.0, self.0) == 0 }
+        }
+        #[inline(always)]
+        fn and_not(self, rhs: Self) -> Self {
+            // SAFETY: AVX is available (the type's invariant).
+            Avx2(unsafe { _mm256_andnot_ps(rhs.0, self.0) })
+        }
+    }
+
     impl Lanes for Avx2 {
         type I = Avx2I;
+        type M = Avx2;
         const N: usize = 8;
 
         #[inline(always)]
@@ -500,22 +554,15 @@ mod avx2 {
             self.cmp::<_CMP_GE_OQ>(rhs)
         }
         #[inline(always)]
-        fn and_not(self, rhs: Self) -> Self {
-            Avx2(unsafe { _mm256_andnot_ps(rhs.0, self.0) })
-        }
-        #[inline(always)]
-        fn select(self, if_true: Self, if_false: Self) -> Self {
+        fn blend(m: Self, if_true: Self, if_false: Self) -> Self {
             // `vblendvps` reads the sign bit, i.e. the whole lane of a mask.
-            Avx2(unsafe { _mm256_blendv_ps(if_false.0, if_true.0, self.0) })
+            Avx2(unsafe { _mm256_blendv_ps(if_false.0, if_true.0, m.0) })
         }
         #[inline(always)]
-        fn to_bitmask(self) -> u32 {
-            (unsafe { _mm256_movemask_ps(self.0) }) as u32
-        }
-        #[inline(always)]
-        fn any(self) -> bool {
-            // `vtestps`: ZF is set when no sign bit is.
-            unsafe { _mm256_testz_ps(self.0, self.0) == 0 }
+        fn mask_from_bits(bits: u32) -> Self {
+            let a: [f32; MAX_LANES] =
+                core::array::from_fn(|l| if l < 8 && bits >> l & 1 == 1 { f32::from_bits(!0) } else { 0.0 });
+            Avx2::new(&a)
         }
         #[inline(always)]
         fn to_array(self) -> [f32; MAX_LANES] {
@@ -610,13 +657,12 @@ pub(crate) use avx512::Avx512;
 
 #[cfg(target_arch = "x86_64")]
 mod avx512 {
-    use super::{Lanes, MAX_LANES};
+    use super::{Lanes, Mask, MAX_LANES};
     use core::arch::x86_64::*;
     use core::ops::{Add, BitAnd, BitOr, Div, Mul, Sub};
 
     /// Sixteen `f32` lanes in one AVX-512 register, for the kernel compiled with AVX-512 F and
-    /// DQ. Masks are lanes with all bits set, as for the other lane types (a compare's mask
-    /// register is spread into a vector, and a select reads the lanes' sign bits back).
+    /// DQ; its masks are mask registers ([`K16`]).
     ///
     /// **Invariant**: values of this type and calls of its methods exist only on CPUs with
     /// AVX-512 F and DQ (the kernel instance that uses it is called only after
@@ -627,6 +673,42 @@ mod avx512 {
     /// Sixteen `i32` lanes in one AVX-512 register (the same invariant as [`Avx512`]).
     #[derive(Clone, Copy)]
     pub(crate) struct Avx512I(__m512i);
+
+    /// A mask of sixteen lanes: an AVX-512 mask register (`k`), bit `l` lane `l`.
+    #[derive(Clone, Copy)]
+    pub(crate) struct K16(__mmask16);
+
+    impl BitAnd for K16 {
+        type Output = K16;
+        #[inline(always)]
+        fn bitand(self, rhs: K16) -> K16 {
+            K16(self.0 & rhs.0)
+        }
+    }
+
+    impl BitOr for K16 {
+        type Output = K16;
+        #[inline(always)]
+        fn bitor(self, rhs: K16) -> K16 {
+            K16(self.0 | rhs.0)
+        }
+    }
+
+    impl Mask for K16 {
+        const LANES: usize = 16;
+        #[inline(always)]
+        fn to_bitmask(self) -> u32 {
+            self.0 as u32
+        }
+        #[inline(always)]
+        fn any(self) -> bool {
+            self.0 != 0
+        }
+        #[inline(always)]
+        fn and_not(self, rhs: K16) -> K16 {
+            K16(self.0 & !rhs.0)
+        }
+    }
 
     macro_rules! binop {
         ($tr:ident, $f:ident, $intr:ident) => {
@@ -657,17 +739,11 @@ mod avx512 {
     }
 
     impl Avx512 {
-        /// Ordered, non-signalling comparison `P` as a mask vector: false where either is NaN.
+        /// Ordered, non-signalling comparison `P`: false where either is NaN.
         #[inline(always)]
-        fn cmp<const P: i32>(self, rhs: Avx512) -> Avx512 {
-            // SAFETY: AVX-512 F and DQ are available (the type's invariant).
-            unsafe { Avx512(_mm512_castsi512_ps(_mm512_movm_epi32(_mm512_cmp_ps_mask::<P>(self.0, rhs.0)))) }
-        }
-        /// The lanes' sign bits (a mask vector's lanes) as a mask register.
-        #[inline(always)]
-        fn mask(self) -> __mmask16 {
-            // SAFETY: AVX-512 DQ is available (the type's invariant).
-            unsafe { _mm512_movepi32_mask(_mm512_castps_si512(self.0)) }
+        fn cmp<const P: i32>(self, rhs: Avx512) -> K16 {
+            // SAFETY: AVX-512 F is available (the type's invariant).
+            K16(unsafe { _mm512_cmp_ps_mask::<P>(self.0, rhs.0) })
         }
     }
 
@@ -676,6 +752,7 @@ mod avx512 {
     // gathers, whose pointers are noted there.
     impl Lanes for Avx512 {
         type I = Avx512I;
+        type M = K16;
         const N: usize = 16;
 
         #[inline(always)]
@@ -697,33 +774,24 @@ mod avx512 {
             Avx512(unsafe { _mm512_max_ps(self.0, rhs.0) })
         }
         #[inline(always)]
-        fn simd_lt(self, rhs: Self) -> Self {
+        fn simd_lt(self, rhs: Self) -> K16 {
             self.cmp::<_CMP_LT_OQ>(rhs)
         }
         #[inline(always)]
-        fn simd_gt(self, rhs: Self) -> Self {
+        fn simd_gt(self, rhs: Self) -> K16 {
             self.cmp::<_CMP_GT_OQ>(rhs)
         }
         #[inline(always)]
-        fn simd_ge(self, rhs: Self) -> Self {
+        fn simd_ge(self, rhs: Self) -> K16 {
             self.cmp::<_CMP_GE_OQ>(rhs)
         }
         #[inline(always)]
-        fn and_not(self, rhs: Self) -> Self {
-            Avx512(unsafe { _mm512_andnot_ps(rhs.0, self.0) })
+        fn blend(m: K16, if_true: Self, if_false: Self) -> Self {
+            Avx512(unsafe { _mm512_mask_blend_ps(m.0, if_false.0, if_true.0) })
         }
         #[inline(always)]
-        fn select(self, if_true: Self, if_false: Self) -> Self {
-            // Lanes whose sign bit is set take `if_true`, as `vblendvps`.
-            Avx512(unsafe { _mm512_mask_blend_ps(self.mask(), if_false.0, if_true.0) })
-        }
-        #[inline(always)]
-        fn to_bitmask(self) -> u32 {
-            self.mask() as u32
-        }
-        #[inline(always)]
-        fn any(self) -> bool {
-            self.mask() != 0
+        fn mask_from_bits(bits: u32) -> K16 {
+            K16(bits as u16)
         }
         #[inline(always)]
         fn to_array(self) -> [f32; MAX_LANES] {
@@ -811,7 +879,7 @@ mod avx512 {
 #[cfg(test)]
 #[cfg(target_arch = "x86_64")]
 mod tests {
-    use super::{Avx2, Avx512, Lanes, MAX_LANES, X2};
+    use super::{Avx2, Avx512, Lanes, Mask, MAX_LANES, X2};
     use wide::f32x8;
 
     /// Every `Lanes` method of `A` against `W`'s (the same width), inlined into the caller.
@@ -822,7 +890,6 @@ mod tests {
         let vals = [0.0, -0.0, 1.0, -1.0, 0.5, 3.7, 1e-40, 1e7, f32::INFINITY, -f32::INFINITY, f32::NAN, 1023.5];
         let pairs: Vec<(f32, f32)> = vals.iter().flat_map(|&a| vals.iter().map(move |&b| (a, b))).collect();
         let data: Vec<f32> = (0..100).map(|i| i as f32 * 0.25).collect();
-        let bits = |x: [f32; MAX_LANES]| x.map(f32::to_bits);
         for c in pairs.chunks_exact(n) {
             let a: [f32; MAX_LANES] = core::array::from_fn(|l| if l < n { c[l].0 } else { 0.0 });
             let b: [f32; MAX_LANES] = core::array::from_fn(|l| if l < n { c[l].1 } else { 0.0 });
@@ -842,15 +909,23 @@ mod tests {
             eq("max", x.max(y), p.max(q));
             let (lt, wlt) = (x.simd_lt(y), p.simd_lt(q));
             let (ge, wge) = (x.simd_ge(y), p.simd_ge(q));
-            assert_eq!(bits(lt.to_array()), bits(wlt.to_array()));
-            assert_eq!(bits(ge.to_array()), bits(wge.to_array()));
-            assert_eq!(bits(x.simd_gt(y).to_array()), bits(p.simd_gt(q).to_array()));
-            assert_eq!(bits((lt | ge).to_array()), bits((wlt | wge).to_array()));
-            assert_eq!(bits((lt & ge).to_array()), bits((wlt & wge).to_array()));
-            assert_eq!(bits(lt.and_not(ge).to_array()), bits(wlt.and_not(wge).to_array()));
+            let lane_bits = ((1u64 << n) - 1) as u32;
+            let expect = |f: &dyn Fn(f32, f32) -> bool| (0..n).fold(0u32, |m, l| m | u32::from(f(a[l], b[l])) << l);
+            assert_eq!(lt.to_bitmask(), expect(&|u, v| u < v));
+            assert_eq!(wlt.to_bitmask(), expect(&|u, v| u < v));
+            assert_eq!(ge.to_bitmask(), wge.to_bitmask());
+            assert_eq!(x.simd_gt(y).to_bitmask(), p.simd_gt(q).to_bitmask());
+            assert_eq!((lt | ge).to_bitmask(), (wlt | wge).to_bitmask());
+            assert_eq!((lt & ge).to_bitmask(), (wlt & wge).to_bitmask());
+            assert_eq!(lt.and_not(ge).to_bitmask(), wlt.and_not(wge).to_bitmask());
             eq("select", lt.select(x, y), wlt.select(p, q));
-            assert_eq!(lt.to_bitmask(), wlt.to_bitmask());
             assert_eq!(lt.any(), wlt.any());
+            for m in [0u32, 1, 0b1010_0110_0101, 1 << (n - 1), lane_bits, 0x5a5a_5a5a] {
+                let m = m & lane_bits;
+                assert_eq!(A::mask_from_bits(m).to_bitmask(), m);
+                assert_eq!(W::mask_from_bits(m).to_bitmask(), m);
+                assert_eq!(A::mask_from_bits(m).any(), m != 0);
+            }
             // Truncation and gathers on the documented range (clamped like the kernel does).
             let (g, wg) = (x.max(A::splat(0.0)).min(A::splat(120.0)), p.max(W::splat(0.0)).min(W::splat(120.0)));
             let (ti, wti) = (g.trunc_int(), wg.trunc_int());

@@ -22,7 +22,7 @@
 //! scalar marcher's bit for bit; the tests in `server/tests/packet_march.rs` check this on every
 //! bundled dataset and heuristic.
 
-use crate::lanes::{dispatch, Lanes};
+use crate::lanes::{dispatch, Lanes, Mask};
 use crate::marcher::Marcher;
 use crate::radius::{FrameRadius, RaySpread, Uncertainty};
 use volwarp_core::sample::{over_background, pack_color_f32, Quantizer};
@@ -185,11 +185,11 @@ struct Rays {
 }
 
 /// One axis of the packet's rays, for the empty-space leaps.
-struct Axis<L> {
+struct Axis<L: Lanes> {
     /// Lanes whose `1 / d` along the axis is finite and positive.
-    positive: L,
+    positive: L::M,
     /// Lanes whose `1 / d` along the axis is finite and not positive.
-    negative: L,
+    negative: L::M,
     /// `1 / d` along the axis.
     inv_d: L,
     /// The voxel spacing along the axis.
@@ -201,13 +201,11 @@ struct Axis<L> {
 impl<L: Lanes> Axis<L> {
     #[inline(always)]
     fn new(rays: &Rays, a: usize, spacing: Vec3, o: Vec3) -> Axis<L> {
-        let all = f32::from_bits(!0);
         let inv: [f32; MAXL] = core::array::from_fn(|l| rays.inv_d[l][a]);
-        let pos = inv.map(|v| if v.is_finite() && v > 0.0 { all } else { 0.0 });
-        let neg = inv.map(|v| if v.is_finite() && v <= 0.0 { all } else { 0.0 });
+        let bits = |f: fn(f32) -> bool| inv.iter().enumerate().fold(0u32, |b, (l, &v)| b | u32::from(f(v)) << l);
         Axis {
-            positive: L::new(&pos),
-            negative: L::new(&neg),
+            positive: L::mask_from_bits(bits(|v| v.is_finite() && v > 0.0)),
+            negative: L::mask_from_bits(bits(|v| v.is_finite() && v <= 0.0)),
             inv_d: L::new(&inv),
             spacing: L::splat(spacing[a]),
             o: L::splat(o[a]),
