@@ -182,6 +182,11 @@ pub(crate) trait Lanes:
     fn gather_words(data: &[u32], idx: Self::I) -> Self::I;
     /// The four bytes of each lane's word, lowest first, as `f32` (exact).
     fn unpack_bytes(w: Self::I) -> [Self; 4];
+    /// Per lane the low and the high 32 bits of `data[idx]`, each index clamped to
+    /// `0 ..= data.len() − 1` first (an empty slice gives zeros).
+    fn gather_quads(data: &[u64], idx: Self::I) -> (Self::I, Self::I);
+    /// The two 16-bit halves of each lane's word, low first, as `f32` (exact).
+    fn unpack_shorts(w: Self::I) -> [Self; 2];
 }
 
 /// The portable lanes: `wide`'s, whatever it was compiled for.
@@ -288,6 +293,18 @@ impl Lanes for f32x8 {
     fn unpack_bytes(w: i32x8) -> [Self; 4] {
         let m = i32x8::splat(255);
         [w & m, (w >> 8) & m, (w >> 16) & m, (w >> 24) & m].map(|b| b.round_float())
+    }
+    #[inline(always)]
+    fn gather_quads(data: &[u64], idx: i32x8) -> (i32x8, i32x8) {
+        let last = data.len().saturating_sub(1);
+        let i = idx.to_array();
+        let q: [u64; 8] = core::array::from_fn(|l| data.get((i[l].max(0) as usize).min(last)).copied().unwrap_or(0));
+        (i32x8::new(q.map(|q| q as u32 as i32)), i32x8::new(q.map(|q| (q >> 32) as u32 as i32)))
+    }
+    #[inline(always)]
+    fn unpack_shorts(w: i32x8) -> [Self; 2] {
+        let m = i32x8::splat(0xffff);
+        [w & m, (w >> 16) & m].map(|b| b.round_float())
     }
 }
 
@@ -434,6 +451,16 @@ impl<L: Lanes> Lanes for X2<L> {
     fn unpack_bytes(w: Self::I) -> [Self; 4] {
         let (a, b) = (L::unpack_bytes(w.0), L::unpack_bytes(w.1));
         [X2(a[0], b[0]), X2(a[1], b[1]), X2(a[2], b[2]), X2(a[3], b[3])]
+    }
+    #[inline(always)]
+    fn gather_quads(data: &[u64], idx: Self::I) -> (Self::I, Self::I) {
+        let ((a0, b0), (a1, b1)) = (L::gather_quads(data, idx.0), L::gather_quads(data, idx.1));
+        (X2I(a0, a1), X2I(b0, b1))
+    }
+    #[inline(always)]
+    fn unpack_shorts(w: Self::I) -> [Self; 2] {
+        let (a, b) = (L::unpack_shorts(w.0), L::unpack_shorts(w.1));
+        [X2(a[0], b[0]), X2(a[1], b[1])]
     }
 }
 
@@ -647,6 +674,33 @@ mod avx2 {
                     _mm256_srli_epi32::<24>(w.0),
                 ]
                 .map(|b| Avx2(_mm256_cvtepi32_ps(b)))
+            }
+        }
+        #[inline(always)]
+        fn gather_quads(data: &[u64], idx: Avx2I) -> (Avx2I, Avx2I) {
+            if data.is_empty() {
+                return (Avx2::splat_i(0), Avx2::splat_i(0));
+            }
+            let last = (data.len() - 1).min(i32::MAX as usize) as i32;
+            unsafe {
+                let i = _mm256_min_epi32(_mm256_max_epi32(idx.0, _mm256_setzero_si256()), _mm256_set1_epi32(last));
+                // SAFETY: every index is in 0 ..= len − 1 (just above), scale 8 is `u64`'s size.
+                let p = data.as_ptr().cast::<i64>();
+                let lo = _mm256_castsi256_ps(_mm256_i32gather_epi64::<8>(p, _mm256_castsi256_si128(i)));
+                let hi = _mm256_castsi256_ps(_mm256_i32gather_epi64::<8>(p, _mm256_extracti128_si256::<1>(i)));
+                // The low and high dwords of the eight elements, in lane order (as `gather_pairs`).
+                let a = _mm256_shuffle_ps::<0b10_00_10_00>(lo, hi);
+                let b = _mm256_shuffle_ps::<0b11_01_11_01>(lo, hi);
+                let order =
+                    |v: __m256| _mm256_castpd_si256(_mm256_permute4x64_pd::<0b11_01_10_00>(_mm256_castps_pd(v)));
+                (Avx2I(order(a)), Avx2I(order(b)))
+            }
+        }
+        #[inline(always)]
+        fn unpack_shorts(w: Avx2I) -> [Self; 2] {
+            unsafe {
+                let lo = _mm256_and_si256(w.0, _mm256_set1_epi32(0xffff));
+                [lo, _mm256_srli_epi32::<16>(w.0)].map(|b| Avx2(_mm256_cvtepi32_ps(b)))
             }
         }
     }
@@ -873,6 +927,30 @@ mod avx512 {
                 .map(|b| Avx512(_mm512_cvtepi32_ps(b)))
             }
         }
+        #[inline(always)]
+        fn gather_quads(data: &[u64], idx: Avx512I) -> (Avx512I, Avx512I) {
+            if data.is_empty() {
+                return (Avx512::splat_i(0), Avx512::splat_i(0));
+            }
+            let last = (data.len() - 1).min(i32::MAX as usize) as i32;
+            unsafe {
+                let i = _mm512_min_epi32(_mm512_max_epi32(idx.0, _mm512_setzero_si512()), _mm512_set1_epi32(last));
+                // SAFETY: every index is in 0 ..= len − 1 (just above), scale 8 is `u64`'s size.
+                let p = data.as_ptr().cast::<i64>();
+                let lo = _mm512_i32gather_epi64::<8>(_mm512_castsi512_si256(i), p);
+                let hi = _mm512_i32gather_epi64::<8>(_mm512_extracti64x4_epi64::<1>(i), p);
+                let even = _mm512_setr_epi32(0, 2, 4, 6, 8, 10, 12, 14, 16, 18, 20, 22, 24, 26, 28, 30);
+                let odd = _mm512_setr_epi32(1, 3, 5, 7, 9, 11, 13, 15, 17, 19, 21, 23, 25, 27, 29, 31);
+                (Avx512I(_mm512_permutex2var_epi32(lo, even, hi)), Avx512I(_mm512_permutex2var_epi32(lo, odd, hi)))
+            }
+        }
+        #[inline(always)]
+        fn unpack_shorts(w: Avx512I) -> [Self; 2] {
+            unsafe {
+                let lo = _mm512_and_si512(w.0, _mm512_set1_epi32(0xffff));
+                [lo, _mm512_srli_epi32::<16>(w.0)].map(|b| Avx512(_mm512_cvtepi32_ps(b)))
+            }
+        }
     }
 }
 
@@ -939,6 +1017,22 @@ mod tests {
             eq("pairs 1", p1, w1);
             let ((p0, _), (w0, _)) = (A::gather_pairs(&data[..1], k), W::gather_pairs(&data[..1], wk));
             eq("pairs short", p0, w0);
+            let words: Vec<u32> = (0..100u32).map(|i| i.wrapping_mul(2_654_435_761)).collect();
+            for data in [&words[..], &[]] {
+                let (bw, ww) = (A::unpack_bytes(A::gather_words(data, k)), W::unpack_bytes(W::gather_words(data, wk)));
+                for j in 0..4 {
+                    eq("words", bw[j], ww[j]);
+                }
+            }
+            let quads: Vec<u64> = (0..100u64).map(|i| i.wrapping_mul(0x9e37_79b9_7f4a_7c15)).collect();
+            for data in [&quads[..], &[]] {
+                let ((a0, a1), (w0, w1)) = (A::gather_quads(data, k), W::gather_quads(data, wk));
+                for (x, y) in [(a0, w0), (a1, w1)] {
+                    let (s, t) = (A::unpack_shorts(x), W::unpack_shorts(y));
+                    eq("quads lo", s[0], t[0]);
+                    eq("quads hi", s[1], t[1]);
+                }
+            }
         }
     }
 

@@ -256,7 +256,7 @@ impl Marcher {
         crate::packet_march::Kernel {
             m: self,
             data: self.volume.padded_data(),
-            stencil: self.volume.byte_stencil(),
+            stencil: self.volume.code_stencil(),
             lut: &self.lut_planes,
             dist: &self.dist,
         }

@@ -25,6 +25,7 @@
 use crate::lanes::{dispatch, Lanes, Mask};
 use crate::marcher::Marcher;
 use crate::radius::{FrameRadius, RaySpread, Uncertainty};
+use crate::volume::Squares;
 use volwarp_core::sample::{over_background, pack_color_f32, Quantizer};
 use volwarp_core::segments::Segmenter;
 use volwarp_core::{DepthPicker, FirstPassAccumulator, Heuristic, RayBasis, Vec3, BACKGROUND};
@@ -218,8 +219,8 @@ pub(crate) struct Kernel<'a> {
     pub(crate) m: &'a Marcher,
     /// The volume's values with their padding ([`crate::volume::Volume`]'s `padded_data`).
     pub(crate) data: &'a [f32],
-    /// A byte-coded volume's codes, read instead of `data` (the same values).
-    pub(crate) stencil: Option<&'a crate::volume::ByteStencil>,
+    /// An integer-coded volume's codes, read instead of `data` (the same values).
+    pub(crate) stencil: Option<&'a crate::volume::CodeStencil>,
     /// The opacity-corrected, premultiplied transfer function as (a, r, g, b) entries.
     pub(crate) lut: &'a [f32],
     /// [`crate::empty_space::Occupancy::look_table`].
@@ -368,10 +369,21 @@ impl Kernel<'_> {
             let base = xi + L::mul_i(snx, yi + L::mul_i(sny, zi));
             let b2 = base + snxy;
             let (c000, c100, c010, c110, c001, c101, c011, c111) = if let Some(st) = self.stencil {
-                // Two gathers of the x–y squares of byte codes, normalized as `Volume` did.
+                // Two gathers of the x–y squares of codes, normalized as `Volume` did.
                 let s = L::splat(st.scale);
-                let [a, b, c, d] = L::unpack_bytes(L::gather_words(&st.words, base));
-                let [e, f, g, h] = L::unpack_bytes(L::gather_words(&st.words, b2));
+                let [a, b, c, d, e, f, g, h] = match &st.squares {
+                    Squares::Bytes(words) => {
+                        let [a, b, c, d] = L::unpack_bytes(L::gather_words(words, base));
+                        let [e, f, g, h] = L::unpack_bytes(L::gather_words(words, b2));
+                        [a, b, c, d, e, f, g, h]
+                    }
+                    Squares::Shorts(words) => {
+                        let ((w0, w1), (w2, w3)) = (L::gather_quads(words, base), L::gather_quads(words, b2));
+                        let ([a, b], [c, d]) = (L::unpack_shorts(w0), L::unpack_shorts(w1));
+                        let ([e, f], [g, h]) = (L::unpack_shorts(w2), L::unpack_shorts(w3));
+                        [a, b, c, d, e, f, g, h]
+                    }
+                };
                 (a * s, b * s, c * s, d * s, e * s, f * s, g * s, h * s)
             } else {
                 let d = self.data;

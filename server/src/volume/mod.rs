@@ -7,10 +7,11 @@
 //!
 //! Values are stored normalized to `0..=1` over the data range of the file
 //! ([`Volume::value_range`]), so a transfer function is a lookup over `0..=1`. Integer values
-//! at most 255 apart (8-bit volumes, 16-bit ones of small range) are *byte-coded*: code
-//! `value − min`, normalized value `code as f32 · scale` in `f32` arithmetic (`scale` the
-//! largest `f32` with `range · scale ≤ 1`), which the packet marcher reproduces bit for bit from
-//! the codes it gathers (`ByteStencil`); other values are normalized in `f64`.
+//! at most 65,535 apart (every 8- and 16-bit volume) are *integer-coded*: code `value − min`,
+//! normalized value `code as f32 · scale` in `f32` arithmetic (`scale` the largest `f32` with
+//! `range · scale ≤ 1`), which the packet marcher reproduces bit for bit from the codes it
+//! gathers (`CodeStencil`: bytes where the range is at most 255, else 16-bit codes); other values
+//! (`f32` data, wider integers) are normalized in `f64`.
 //!
 //! Loaders ([`load_volume`]): headerless raw files named `name_XxYxZ_type.raw`
 //! ([`parse_raw_name`]; dims, type and spacing may also come from [`LoadOptions`]) and NRRD
@@ -68,26 +69,37 @@ pub struct Volume {
     /// The values, then [`Volume::padding`] zeros (so that reads of a trilinear neighbourhood
     /// need no clamping of its far corners; see `padded_data`).
     data: Vec<f32>,
-    /// For byte-coded volumes, the packet marcher's stencil (see [`ByteStencil`]).
-    stencil: Option<ByteStencil>,
+    /// For integer-coded volumes, the packet marcher's stencil (see [`CodeStencil`]).
+    stencil: Option<CodeStencil>,
 }
 
-/// The voxels of a volume whose values are at most 256 integers apart (every 8-bit volume, and
-/// 16-bit ones of small range), as byte codes `value − min` with the normalized value
-/// `code as f32 * scale` (exactly what [`Volume::data`] holds for them), arranged for the packet
-/// marcher's gathers: word `i` holds the codes of voxels `i`, `i + 1`, `i + nx` and
-/// `i + nx + 1` in its bytes 0 to 3 (the x–y square of a trilinear stencil), so two 32-bit
-/// gathers (this slice and the next) read all eight corners, where `f32` values take four
-/// 64-bit gathers of pairs. Reads past the volume's rows or end give codes whose weight is 0.
+/// The voxels of a volume of integer values at most 65,535 apart (every 8- and 16-bit volume),
+/// as codes `value − min` with the normalized value `code as f32 * scale` (exactly what
+/// [`Volume::data`] holds for them), arranged for the packet marcher's gathers: element `i`
+/// holds the codes of voxels `i`, `i + 1`, `i + nx` and `i + nx + 1` (the x–y square of a
+/// trilinear stencil), so two gathers (this slice and the next) read all eight corners, where
+/// `f32` values take four gathers of pairs. Reads past the volume's rows or end give codes whose
+/// weight is 0.
 #[derive(Clone, Debug)]
-pub(crate) struct ByteStencil {
-    /// One word per voxel, then [`Volume::padding`] more.
-    pub(crate) words: Vec<u32>,
+pub(crate) struct CodeStencil {
+    /// The squares, one per voxel, then [`Volume::padding`] more.
+    pub(crate) squares: Squares,
     /// The normalized value of code 1.
     pub(crate) scale: f32,
 }
 
-/// Most voxels a [`ByteStencil`] is built for (it takes 4 bytes per voxel, as the values do).
+/// The x–y squares of codes of a [`CodeStencil`].
+#[derive(Clone, Debug)]
+pub(crate) enum Squares {
+    /// Values at most 255 apart: byte codes, voxel `i`, `i + 1`, `i + nx`, `i + nx + 1` in bytes
+    /// 0 to 3 of a word.
+    Bytes(Vec<u32>),
+    /// Values at most 65,535 apart: 16-bit codes, in 16-bit fields 0 to 3 of a 64-bit word.
+    Shorts(Vec<u64>),
+}
+
+/// Most voxels a [`CodeStencil`] is built for (4 bytes per voxel for byte codes, as the values
+/// take; 8 for 16-bit codes).
 const MAX_STENCIL_VOXELS: u64 = 1 << 26;
 
 /// The largest `f32` scale with `range · scale ≤ 1` in `f32` arithmetic (so codes normalize
@@ -126,7 +138,7 @@ pub(crate) fn check_geometry(dims: [u32; 3], spacing: Vec3, max_voxels: u64) -> 
 impl Volume {
     /// A volume from values in x-fastest order (`dims` product long). Non-finite values become
     /// the data minimum; the values are normalized over their range (byte-coded where they are
-    /// integers at most 255 apart, see the module docs).
+    /// integers at most 65,535 apart, see the module docs).
     pub fn from_values(name: &str, dims: [u32; 3], spacing: Vec3, mut values: Vec<f32>) -> Result<Volume, VolumeError> {
         let n = check_geometry(dims, spacing, u64::MAX)?;
         if values.len() as u64 != n {
@@ -143,15 +155,15 @@ impl Volume {
         if lo > hi {
             (lo, hi) = (0.0, 0.0);
         }
-        // Integer values at most 255 apart: byte codes, normalized in f32 arithmetic so that
-        // the packet marcher can normalize the codes it gathers to the same bits.
-        let byte_coded = hi - lo <= 255.0
-            && n <= MAX_STENCIL_VOXELS
+        // Integer values at most 65,535 apart: codes, normalized in f32 arithmetic so that the
+        // packet marcher can normalize the codes it gathers to the same bits.
+        let coded = hi - lo <= 65_535.0
+            && n <= MAX_STENCIL_VOXELS >> u32::from(hi - lo > 255.0)
             && values.iter().all(|v| v.is_finite() && v.fract() == 0.0 && v.abs() < 16_777_216.0);
-        let mut codes = Vec::new();
-        if byte_coded {
+        let mut codes: Vec<u16> = Vec::new();
+        if coded {
             let scale = code_scale(hi - lo);
-            codes = values.iter().map(|&v| (v - lo) as u8).collect();
+            codes = values.iter().map(|&v| (v - lo) as u16).collect();
             for (v, &c) in values.iter_mut().zip(&codes) {
                 *v = c as f32 * scale;
             }
@@ -162,13 +174,18 @@ impl Volume {
             }
         }
         values.resize(values.len() + Volume::padding(dims), 0.0);
-        let stencil = byte_coded.then(|| {
+        let stencil = coded.then(|| {
             let nx = dims[0] as usize;
-            let code = |i: usize| codes.get(i).copied().unwrap_or(0) as u32;
-            let words = (0..values.len())
-                .map(|i| code(i) | code(i + 1) << 8 | code(i + nx) << 16 | code(i + nx + 1) << 24)
-                .collect();
-            ByteStencil { words, scale: code_scale(hi - lo) }
+            let code = |i: usize| codes.get(i).copied().unwrap_or(0) as u64;
+            let square = |i: usize| [code(i), code(i + 1), code(i + nx), code(i + nx + 1)];
+            let squares = if hi - lo <= 255.0 {
+                let word = |c: [u64; 4]| (c[0] | c[1] << 8 | c[2] << 16 | c[3] << 24) as u32;
+                Squares::Bytes((0..values.len()).map(|i| word(square(i))).collect())
+            } else {
+                let word = |c: [u64; 4]| c[0] | c[1] << 16 | c[2] << 32 | c[3] << 48;
+                Squares::Shorts((0..values.len()).map(|i| word(square(i))).collect())
+            };
+            CodeStencil { squares, scale: code_scale(hi - lo) }
         });
         Ok(Volume { name: name.to_string(), dims, spacing, value_range: (lo, hi), data: values, stencil })
     }
@@ -250,8 +267,8 @@ impl Volume {
         &self.data
     }
 
-    /// The byte codes of a byte-coded volume, arranged for the packet marcher.
-    pub(crate) fn byte_stencil(&self) -> Option<&ByteStencil> {
+    /// The codes of an integer-coded volume, arranged for the packet marcher.
+    pub(crate) fn code_stencil(&self) -> Option<&CodeStencil> {
         self.stencil.as_ref()
     }
 }
@@ -281,7 +298,7 @@ mod tests {
     use super::*;
 
     #[test]
-    fn byte_coded_volumes_normalize_their_codes_exactly() {
+    fn integer_coded_volumes_normalize_their_codes_exactly() {
         // 16-bit values of small range (an unseen-volume case), 8-bit values, a flat volume.
         for values in [
             vec![1000.0, 1200.0, 1100.0, 1001.0, 1254.0, 1000.0],
@@ -292,7 +309,8 @@ mod tests {
                 values.iter().copied().fold(0.0, f32::max) - values.iter().copied().fold(f32::INFINITY, f32::min);
             let dims = [values.len() as u32 / 2, 2, 1];
             let v = Volume::from_values("b", dims, Vec3::ONE, values.clone()).unwrap();
-            let st = v.byte_stencil().expect("byte-coded");
+            let st = v.code_stencil().expect("integer-coded");
+            let Squares::Bytes(words) = &st.squares else { panic!("byte codes expected") };
             assert!(range * st.scale <= 1.0);
             let lo = values.iter().copied().fold(f32::INFINITY, f32::min);
             let nx = dims[0] as usize;
@@ -300,20 +318,35 @@ mod tests {
                 let code = (x - lo) as u32;
                 assert_eq!(n.to_bits(), (code as f32 * st.scale).to_bits());
                 assert!((0.0..=1.0).contains(&n));
-                assert_eq!(st.words[i] & 255, code);
+                assert_eq!(words[i] & 255, code);
                 if i + nx + 1 < values.len() {
                     let c = |j: usize| (values[j] - lo) as u32;
-                    assert_eq!(st.words[i], c(i) | c(i + 1) << 8 | c(i + nx) << 16 | c(i + nx + 1) << 24);
+                    assert_eq!(words[i], c(i) | c(i + 1) << 8 | c(i + nx) << 16 | c(i + nx + 1) << 24);
                 }
             }
             if range > 0.0 {
                 assert_eq!(v.data().iter().copied().fold(0.0, f32::max), range * st.scale);
             }
         }
-        // Wide ranges and fractions keep the f64 normalization and no codes.
-        for values in [vec![0.0, 256.0], vec![0.0, 0.5], vec![0.0, f32::NAN]] {
+        // 16-bit ranges: 16-bit codes.
+        let values: Vec<f32> =
+            (0..30).map(|i| (i * 4099 % 65_536) as f32 - 32_768.0).chain([-32_768.0, 32_767.0]).collect();
+        let v = Volume::from_values("s", [8, 4, 1], Vec3::ONE, values.clone()).unwrap();
+        let st = v.code_stencil().expect("integer-coded");
+        let Squares::Shorts(words) = &st.squares else { panic!("16-bit codes expected") };
+        assert!(65_535.0 * st.scale <= 1.0);
+        for (i, (&x, &n)) in values.iter().zip(v.data()).enumerate() {
+            let c = |j: usize| (values[j] + 32_768.0) as u64;
+            assert_eq!(n.to_bits(), (c(i) as f32 * st.scale).to_bits());
+            if i + 9 < values.len() {
+                assert_eq!(words[i], c(i) | c(i + 1) << 16 | c(i + 8) << 32 | c(i + 9) << 48, "{x}");
+            }
+        }
+        assert_eq!(v.data().iter().copied().fold(0.0, f32::max), 65_535.0 * st.scale);
+        // Wider ranges and fractions keep the f64 normalization and no codes.
+        for values in [vec![0.0, 65_536.0], vec![0.0, 0.5], vec![0.0, f32::NAN]] {
             let v = Volume::from_values("f", [2, 1, 1], Vec3::ONE, values).unwrap();
-            assert!(v.byte_stencil().is_none());
+            assert!(v.code_stencil().is_none());
         }
     }
 
