@@ -93,6 +93,7 @@ fn main() {
     // `cargo bench` passes `--bench`; a filter argument picks volumes by name.
     let filter: Vec<String> = std::env::args().skip(1).filter(|a| !a.starts_with("--")).collect();
     let threads = env_usize("VTK_BENCH_THREADS", 2);
+    volwarp_server::limit_lanes_from_env();
     let runs = env_usize("VTK_BENCH_RUNS", 5).max(1);
     let Ok(dir) = std::fs::read_dir(DATA) else {
         eprintln!("vs_vtk skipped: {DATA} not found");
@@ -113,7 +114,11 @@ fn main() {
         }
     }
     let load = std::fs::read_to_string("/proc/loadavg").unwrap_or_default();
-    eprintln!("vs_vtk: {threads} threads, median of {runs} runs; load {}", load.trim());
+    eprintln!(
+        "vs_vtk: {threads} threads, {:?} lanes, median of {runs} runs; load {}",
+        volwarp_server::lane_kind(),
+        load.trim()
+    );
     let pool = rayon::ThreadPoolBuilder::new().num_threads(threads).build().expect("thread pool");
     let mut ours = Vec::new();
     let mut json = Vec::new();

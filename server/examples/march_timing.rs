@@ -6,7 +6,7 @@
 
 use std::time::Instant;
 use volwarp_core::Heuristic;
-use volwarp_server::{Dataset, LaneKind, Marcher};
+use volwarp_server::{Dataset, Marcher};
 
 /// Process CPU time (all threads) in ms.
 fn cpu_ms() -> f64 {
@@ -28,14 +28,7 @@ fn main() {
     let path = args.get(3).cloned().unwrap_or_else(|| {
         concat!(env!("CARGO_MANIFEST_DIR"), "/../../shared/data/mri_colin27_181x217x181_uint8.raw").to_string()
     });
-    if let Ok(l) = std::env::var("VOLWARP_LANES") {
-        let kind = match l.as_str() {
-            "portable" => LaneKind::Portable,
-            "avx2" => LaneKind::Avx2,
-            _ => LaneKind::Avx512,
-        };
-        volwarp_server::limit_lanes(kind);
-    }
+    volwarp_server::limit_lanes_from_env();
     let ds = Dataset::load(&path, None).expect("loading the volume");
     let m = Marcher::from_dataset(&ds);
     let camera = m.default_camera(size, size).orbit(20.0, 10.0).dolly(0.68);

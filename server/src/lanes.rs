@@ -38,6 +38,30 @@ pub fn limit_lanes(kind: LaneKind) {
     LANE_LIMIT.store(kind as u8, core::sync::atomic::Ordering::Relaxed);
 }
 
+impl core::str::FromStr for LaneKind {
+    type Err = String;
+    /// `portable`, `avx2` or `avx512`.
+    fn from_str(s: &str) -> Result<LaneKind, String> {
+        match s.to_ascii_lowercase().as_str() {
+            "portable" => Ok(LaneKind::Portable),
+            "avx2" => Ok(LaneKind::Avx2),
+            "avx512" => Ok(LaneKind::Avx512),
+            _ => Err(format!("unknown lane kind {s:?} (portable, avx2 or avx512)")),
+        }
+    }
+}
+
+/// Applies `VOLWARP_LANES` (`portable`, `avx2` or `avx512`), if set, with [`limit_lanes`]; an
+/// unknown value is logged and ignored. The server, its benches and `march_timing` call this.
+pub fn limit_lanes_from_env() {
+    if let Ok(v) = std::env::var("VOLWARP_LANES") {
+        match v.parse() {
+            Ok(kind) => limit_lanes(kind),
+            Err(e) => log::warn!("VOLWARP_LANES: {e}"),
+        }
+    }
+}
+
 /// The lanes the packet marcher uses now: the widest this CPU has within [`limit_lanes`].
 pub fn lane_kind() -> LaneKind {
     let limit = LANE_LIMIT.load(core::sync::atomic::Ordering::Relaxed);

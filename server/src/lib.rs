@@ -46,7 +46,7 @@ pub mod transfer_function;
 pub mod volume;
 
 pub use dataset::Dataset;
-pub use lanes::{lane_kind, limit_lanes, LaneKind};
+pub use lanes::{lane_kind, limit_lanes, limit_lanes_from_env, LaneKind};
 pub use marcher::{default_camera, FrameStats, LayerBuffer, MarchKernel, MarchOptions, Marcher, PixelBuffer};
 pub use radius::RadiusModel;
 pub use server::{Server, ServerConfig, ServerHandle};

@@ -312,6 +312,8 @@ fn parse_encoding(s: &str) -> Result<Encoding, String> {
 
 fn main() -> ExitCode {
     env_logger::Builder::from_env(env_logger::Env::default().default_filter_or("info")).init();
+    volwarp_server::limit_lanes_from_env();
+    log::info!("packet marcher: {:?} lanes", volwarp_server::lane_kind());
     match run(Cli::parse()) {
         Ok(()) => ExitCode::SUCCESS,
         Err(e) => {
