@@ -1,4 +1,4 @@
-//! The vector types (eight or sixteen lanes) the packet marcher ([`crate::packet_march`]) is generic over:
+//! The vector types (8, 16 or 32 lanes) the packet marcher ([`crate::packet_march`]) is generic over:
 //! `f32` lanes (also used as masks), `i32` lanes, and gathers from `f32` slices.
 //!
 //! The same approach as the CPU tracer's lanes (`cpu-tracer/src/lanes.rs`), with the
@@ -24,7 +24,7 @@ pub enum LaneKind {
     /// `wide`'s eight lanes, compiled for the build's baseline (SSE2 on x86-64, NEON on
     /// aarch64): eight rays of a 4×2 pixel block.
     Portable = 0,
-    /// Sixteen rays of a 4×4 block as two AVX2 registers per value.
+    /// Thirty-two rays of an 8×4 block as four AVX2 registers per value.
     Avx2 = 1,
     /// Thirty-two rays of an 8×4 block as two AVX-512 registers per value (AVX-512 F and DQ).
     Avx512 = 2,
@@ -100,7 +100,8 @@ macro_rules! dispatch {
             }
         }
 
-        /// The kernel on sixteen [`crate::lanes::Avx2`] lanes ([`crate::lanes::X2`]), compiled with AVX2.
+        /// The kernel on thirty-two [`crate::lanes::Avx2`] lanes (`X2<X2<Avx2>>`), compiled with
+        /// AVX2.
         ///
         /// # Safety
         /// The CPU must support AVX2.
@@ -109,7 +110,7 @@ macro_rules! dispatch {
         #[allow(clippy::too_many_arguments)]
         unsafe fn $avx2($($arg: $ty),*) {
             // `Avx2`'s invariant holds: the caller guarantees AVX2.
-            $kernel::<$crate::lanes::X2<$crate::lanes::Avx2>>($($arg),*)
+            $kernel::<$crate::lanes::X2<$crate::lanes::X2<$crate::lanes::Avx2>>>($($arg),*)
         }
 
         /// The kernel on thirty-two [`crate::lanes::Avx512`] lanes ([`crate::lanes::X2`]),
@@ -332,10 +333,11 @@ impl Lanes for f32x8 {
     }
 }
 
-/// Sixteen lanes as two halves of eight (`X2<Avx2>`: two AVX registers per value). Every
-/// operation is its halves' operation, so the values are those of the eight-lane type lane for
-/// lane; the two halves are independent chains of work, which a core overlaps (the packet
-/// marcher's step is bound by the latency of its gathers and blends, not by their throughput).
+/// Twice the lanes of `L` as two halves (`X2<Avx2>`: sixteen lanes in two AVX registers per
+/// value; `X2<X2<Avx2>>` thirty-two in four). Every operation is its halves' operation, so the
+/// values are those of `L` lane for lane; the halves are independent chains of work, which a
+/// core overlaps (the packet marcher's step is bound by the latency of its gathers and blends,
+/// not by their throughput).
 #[derive(Clone, Copy)]
 #[cfg_attr(not(target_arch = "x86_64"), allow(dead_code))]
 pub(crate) struct X2<L>(L, L);
@@ -1060,12 +1062,13 @@ mod tests {
         }
     }
 
-    /// `Avx2` and the kernel's sixteen-lane `X2<Avx2>` against the portable lanes, inlined
+    /// `Avx2`, `X2<Avx2>` and the kernel's thirty-two-lane `X2<X2<Avx2>>` against the portable lanes, inlined
     /// into an AVX2 function as the kernel is.
     #[target_feature(enable = "avx2")]
     fn check() {
         check_against::<Avx2, f32x8>();
         check_against::<X2<Avx2>, X2<f32x8>>();
+        check_against::<X2<X2<Avx2>>, X2<X2<f32x8>>>();
     }
 
     #[test]
