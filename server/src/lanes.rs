@@ -21,8 +21,8 @@ use wide::{f32x8, i32x8};
 /// benchmarks compare them).
 #[derive(Clone, Copy, Debug, PartialEq, Eq, PartialOrd, Ord)]
 pub enum LaneKind {
-    /// `wide`'s eight lanes, compiled for the build's baseline (SSE2 on x86-64, NEON on
-    /// aarch64): eight rays of a 4×2 pixel block.
+    /// `wide`'s lanes, compiled for the build's baseline (SSE2 on x86-64, NEON on aarch64):
+    /// sixteen rays of a 4×4 pixel block as two `f32x8` per value.
     Portable = 0,
     /// Thirty-two rays of an 8×4 block as four AVX2 registers per value.
     Avx2 = 1,
@@ -83,8 +83,8 @@ pub fn lane_kind() -> LaneKind {
 
 /// Defines `$name`, which runs the kernel `$kernel::<L>` on the lanes [`lane_kind`] picks: the
 /// instance `$avx512`, compiled with AVX-512 F and DQ on [`X2`]`<`[`Avx512`]`>`; the instance
-/// `$avx2`, compiled with AVX2 on `X2<Avx2>`; or the portable `wide::f32x8` instance. All
-/// compute the same values.
+/// `$avx2`, compiled with AVX2 on `X2<X2<Avx2>>`; or the portable `X2<wide::f32x8>` instance.
+/// All compute the same values.
 macro_rules! dispatch {
     ($(#[$doc:meta])* fn $name:ident / $avx2:ident / $avx512:ident => $kernel:ident($($arg:ident: $ty:ty),* $(,)?)) => {
         $(#[$doc])*
@@ -96,7 +96,7 @@ macro_rules! dispatch {
                 // SAFETY: `lane_kind` returns `Avx2` only where the CPU has AVX2.
                 #[cfg(target_arch = "x86_64")]
                 $crate::lanes::LaneKind::Avx2 => unsafe { $avx2($($arg),*) },
-                _ => $kernel::<wide::f32x8>($($arg),*),
+                _ => $kernel::<$crate::lanes::X2<wide::f32x8>>($($arg),*),
             }
         }
 
@@ -339,12 +339,10 @@ impl Lanes for f32x8 {
 /// core overlaps (the packet marcher's step is bound by the latency of its gathers and blends,
 /// not by their throughput).
 #[derive(Clone, Copy)]
-#[cfg_attr(not(target_arch = "x86_64"), allow(dead_code))]
 pub(crate) struct X2<L>(L, L);
 
 /// The `i32` lanes of [`X2`].
 #[derive(Clone, Copy)]
-#[cfg_attr(not(target_arch = "x86_64"), allow(dead_code))]
 pub(crate) struct X2I<I>(I, I);
 
 impl<I: Add<Output = I>> Add for X2I<I> {

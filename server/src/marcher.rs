@@ -35,7 +35,7 @@ const BAND_ROWS: usize = 4;
 /// Which implementation marches the rays; both give the same colors and depths bit for bit.
 #[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
 pub enum MarchKernel {
-    /// Eight rays of a 4×2 pixel block at once in SIMD lanes ([`crate::packet_march`]); the
+    /// A block of 16 or 32 pixels' rays at once in SIMD lanes ([`crate::packet_march`]); the
     /// default.
     #[default]
     Packet,

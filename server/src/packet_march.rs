@@ -1,11 +1,12 @@
 //! The packet marcher: the rays of a block of pixels marched together in SIMD lanes, the widest
 //! the CPU has ([`crate::LaneKind`], chosen at run time): thirty-two rays of an 8×4 block as
-//! two AVX-512 registers per value or as four AVX2 registers, or eight rays of a 4×2 block in
-//! `wide`'s portable lanes. Several registers per value make independent chains of dependent
+//! two AVX-512 registers per value or as four AVX2 registers, or sixteen rays of a 4×4 block
+//! in `wide`'s portable lanes (two `f32x8` per value). Several registers per value make independent chains of dependent
 //! gathers and blends that the core overlaps: the step is bound by their latency more than by
 //! their throughput (on the MRI benchmark view, one thread: 8 AVX2 lanes 424 ms, 16 in two
 //! registers 336 ms; 16 AVX-512 lanes 268 ms, 32 in two registers 243 ms; at the session's end,
-//! 32 AVX2 lanes in four registers 211 ms against 258 in two).
+//! 32 AVX2 lanes in four registers 211 ms against 258 in two; the portable lanes (SSE2 here)
+//! 407–439 ms with 16 rays in two `f32x8` against 463–480 with 8 in one).
 //!
 //! Per step, every active lane computes its sample position, clamps it to the voxel lattice,
 //! gathers the eight neighbours and blends them trilinearly, gathers the transfer function's
