@@ -1,4 +1,4 @@
-//! The vector types (8, 16 or 32 lanes) the packet marcher ([`crate::packet_march`]) is generic over:
+//! The vector types (8 to 64 lanes) the packet marcher ([`crate::packet_march`]) is generic over:
 //! `f32` lanes (also used as masks), `i32` lanes, and gathers from `f32` slices.
 //!
 //! The same approach as the CPU tracer's lanes (`cpu-tracer/src/lanes.rs`), with the
@@ -26,7 +26,7 @@ pub enum LaneKind {
     Portable = 0,
     /// Thirty-two rays of an 8×4 block as four AVX2 registers per value.
     Avx2 = 1,
-    /// Thirty-two rays of an 8×4 block as two AVX-512 registers per value (AVX-512 F and DQ).
+    /// Sixty-four rays of an 8×8 block as four AVX-512 registers per value (AVX-512 F and DQ).
     Avx512 = 2,
 }
 
@@ -82,9 +82,10 @@ pub fn lane_kind() -> LaneKind {
 }
 
 /// Defines `$name`, which runs the kernel `$kernel::<L>` on the lanes [`lane_kind`] picks: the
-/// instance `$avx512`, compiled with AVX-512 F and DQ on [`X2`]`<`[`Avx512`]`>`; the instance
-/// `$avx2`, compiled with AVX2 on `X2<X2<Avx2>>`; or the portable `X2<wide::f32x8>` instance.
-/// All compute the same values.
+/// instance `$avx512`, compiled with AVX-512 F and DQ on `X2<X2<Avx512>>` (64 lanes); the
+/// instance `$avx2`, compiled with AVX2 on `X2<X2<Avx2>>` (32); or the portable
+/// `X2<wide::f32x8>` instance (16). Each instance's packet arrays are sized for its lanes (the
+/// kernel's const `M`). All compute the same values.
 macro_rules! dispatch {
     ($(#[$doc:meta])* fn $name:ident / $avx2:ident / $avx512:ident => $kernel:ident($($arg:ident: $ty:ty),* $(,)?)) => {
         $(#[$doc])*
@@ -96,7 +97,7 @@ macro_rules! dispatch {
                 // SAFETY: `lane_kind` returns `Avx2` only where the CPU has AVX2.
                 #[cfg(target_arch = "x86_64")]
                 $crate::lanes::LaneKind::Avx2 => unsafe { $avx2($($arg),*) },
-                _ => $kernel::<$crate::lanes::X2<wide::f32x8>>($($arg),*),
+                _ => $kernel::<$crate::lanes::X2<wide::f32x8>, 16>($($arg),*),
             }
         }
 
@@ -110,11 +111,11 @@ macro_rules! dispatch {
         #[allow(clippy::too_many_arguments)]
         unsafe fn $avx2($($arg: $ty),*) {
             // `Avx2`'s invariant holds: the caller guarantees AVX2.
-            $kernel::<$crate::lanes::X2<$crate::lanes::X2<$crate::lanes::Avx2>>>($($arg),*)
+            $kernel::<$crate::lanes::X2<$crate::lanes::X2<$crate::lanes::Avx2>>, 32>($($arg),*)
         }
 
-        /// The kernel on thirty-two [`crate::lanes::Avx512`] lanes ([`crate::lanes::X2`]),
-        /// compiled with AVX-512 F and DQ.
+        /// The kernel on sixty-four [`crate::lanes::Avx512`] lanes (`X2<X2<Avx512>>`), compiled
+        /// with AVX-512 F and DQ.
         ///
         /// # Safety
         /// The CPU must support AVX-512 F and DQ.
@@ -123,14 +124,15 @@ macro_rules! dispatch {
         #[allow(clippy::too_many_arguments)]
         unsafe fn $avx512($($arg: $ty),*) {
             // `Avx512`'s invariant holds: the caller guarantees AVX-512 F and DQ.
-            $kernel::<$crate::lanes::X2<$crate::lanes::Avx512>>($($arg),*)
+            $kernel::<$crate::lanes::X2<$crate::lanes::X2<$crate::lanes::Avx512>>, 64>($($arg),*)
         }
     };
 }
 pub(crate) use dispatch;
 
 /// The most lanes a [`Lanes`] type has.
-pub(crate) const MAX_LANES: usize = 32;
+#[cfg_attr(not(target_arch = "x86_64"), allow(dead_code))]
+pub(crate) const MAX_LANES: usize = 64;
 
 /// A mask of [`Lanes`]: a lane vector with all bits set or clear per lane (AVX2, `wide`) or a
 /// mask register (AVX-512).
@@ -138,7 +140,7 @@ pub(crate) trait Mask: Copy + BitAnd<Output = Self> + BitOr<Output = Self> {
     /// The number of lanes.
     const LANES: usize;
     /// Bit `l` is lane `l`.
-    fn to_bitmask(self) -> u32;
+    fn to_bitmask(self) -> u64;
     /// Whether any lane is set.
     fn any(self) -> bool;
     /// `self` and not `rhs`.
@@ -169,8 +171,8 @@ pub(crate) trait Lanes:
 
     /// All lanes `x`.
     fn splat(x: f32) -> Self;
-    /// The lanes of `a[..N]`, lane 0 first.
-    fn new(a: &[f32; MAX_LANES]) -> Self;
+    /// The lanes of `a[..N]`, lane 0 first (`a` holds at least `N` values).
+    fn new(a: &[f32]) -> Self;
     /// `f32::min` per lane where `rhs` is not NaN (a NaN `self` gives `rhs`); `rhs` where it is
     /// (`minps`: one instruction, the kernel's bounds are never NaN).
     fn min(self, rhs: Self) -> Self;
@@ -185,9 +187,16 @@ pub(crate) trait Lanes:
     /// Per lane, `if_true` where `m` is set, else `if_false`.
     fn blend(m: Self::M, if_true: Self, if_false: Self) -> Self;
     /// The mask whose lane `l` is bit `l` of `bits`.
-    fn mask_from_bits(bits: u32) -> Self::M;
-    /// The lanes, lane 0 first (the rest of the array zero).
-    fn to_array(self) -> [f32; MAX_LANES];
+    fn mask_from_bits(bits: u64) -> Self::M;
+    /// Stores the lanes into `out[..N]`, lane 0 first (`out` holds at least `N` values).
+    fn store(self, out: &mut [f32]);
+    /// The lanes as the start of an `M`-long array (`M ≥ N`; the rest zero).
+    #[inline(always)]
+    fn to_array<const M: usize>(self) -> [f32; M] {
+        let mut a = [0.0; M];
+        self.store(&mut a);
+        a
+    }
     /// Truncation toward zero of lanes in `0 ..= 2³¹ − 128` (`x as i32` there).
     fn trunc_int(self) -> Self::I;
     /// The `i32` lanes as `f32` (exact below 2²⁴).
@@ -218,8 +227,8 @@ pub(crate) trait Lanes:
 impl Mask for f32x8 {
     const LANES: usize = 8;
     #[inline(always)]
-    fn to_bitmask(self) -> u32 {
-        f32x8::to_bitmask(self)
+    fn to_bitmask(self) -> u64 {
+        f32x8::to_bitmask(self) as u64
     }
     #[inline(always)]
     fn any(self) -> bool {
@@ -241,8 +250,9 @@ impl Lanes for f32x8 {
         f32x8::splat(x)
     }
     #[inline(always)]
-    fn new(a: &[f32; MAX_LANES]) -> Self {
-        f32x8::new(core::array::from_fn(|l| a[l]))
+    fn new(a: &[f32]) -> Self {
+        let a: &[f32; 8] = a[..8].try_into().expect("eight lanes");
+        f32x8::new(*a)
     }
     #[inline(always)]
     fn min(self, rhs: Self) -> Self {
@@ -269,13 +279,12 @@ impl Lanes for f32x8 {
         f32x8::select(m, if_true, if_false)
     }
     #[inline(always)]
-    fn mask_from_bits(bits: u32) -> f32x8 {
+    fn mask_from_bits(bits: u64) -> f32x8 {
         f32x8::new(core::array::from_fn(|l| if bits >> l & 1 == 1 { f32::from_bits(!0) } else { 0.0 }))
     }
     #[inline(always)]
-    fn to_array(self) -> [f32; MAX_LANES] {
-        let a = f32x8::to_array(self);
-        core::array::from_fn(|l| if l < 8 { a[l] } else { 0.0 })
+    fn store(self, out: &mut [f32]) {
+        out[..8].copy_from_slice(&f32x8::to_array(self));
     }
     #[inline(always)]
     fn trunc_int(self) -> i32x8 {
@@ -374,7 +383,7 @@ x2_binop!(BitOr, bitor);
 impl<M: Mask> Mask for X2<M> {
     const LANES: usize = 2 * M::LANES;
     #[inline(always)]
-    fn to_bitmask(self) -> u32 {
+    fn to_bitmask(self) -> u64 {
         self.0.to_bitmask() | self.1.to_bitmask() << M::LANES
     }
     #[inline(always)]
@@ -397,9 +406,8 @@ impl<L: Lanes> Lanes for X2<L> {
         X2(L::splat(x), L::splat(x))
     }
     #[inline(always)]
-    fn new(a: &[f32; MAX_LANES]) -> Self {
-        let hi: [f32; MAX_LANES] = core::array::from_fn(|l| if l < L::N { a[L::N + l] } else { 0.0 });
-        X2(L::new(a), L::new(&hi))
+    fn new(a: &[f32]) -> Self {
+        X2(L::new(a), L::new(&a[L::N..]))
     }
     #[inline(always)]
     fn min(self, rhs: Self) -> Self {
@@ -426,21 +434,13 @@ impl<L: Lanes> Lanes for X2<L> {
         X2(L::blend(m.0, if_true.0, if_false.0), L::blend(m.1, if_true.1, if_false.1))
     }
     #[inline(always)]
-    fn mask_from_bits(bits: u32) -> Self::M {
+    fn mask_from_bits(bits: u64) -> Self::M {
         X2(L::mask_from_bits(bits), L::mask_from_bits(bits >> L::N))
     }
     #[inline(always)]
-    fn to_array(self) -> [f32; MAX_LANES] {
-        let (lo, hi) = (self.0.to_array(), self.1.to_array());
-        core::array::from_fn(|l| {
-            if l < L::N {
-                lo[l]
-            } else if l < 2 * L::N {
-                hi[l - L::N]
-            } else {
-                0.0
-            }
-        })
+    fn store(self, out: &mut [f32]) {
+        self.0.store(out);
+        self.1.store(&mut out[L::N..]);
     }
     #[inline(always)]
     fn trunc_int(self) -> Self::I {
@@ -553,9 +553,9 @@ mod avx2 {
     impl Mask for Avx2 {
         const LANES: usize = 8;
         #[inline(always)]
-        fn to_bitmask(self) -> u32 {
+        fn to_bitmask(self) -> u64 {
             // SAFETY: AVX is available (the type's invariant).
-            (unsafe { _mm256_movemask_ps(self.0) }) as u32
+            (unsafe { _mm256_movemask_ps(self.0) }) as u32 as u64
         }
         #[inline(always)]
         fn any(self) -> bool {
@@ -579,8 +579,9 @@ mod avx2 {
             Avx2(unsafe { _mm256_set1_ps(x) })
         }
         #[inline(always)]
-        fn new(a: &[f32; MAX_LANES]) -> Self {
-            // `a` holds at least eight readable `f32`; the load needs no alignment.
+        fn new(a: &[f32]) -> Self {
+            let a = &a[..8];
+            // `a` is eight readable `f32`; the load needs no alignment.
             Avx2(unsafe { _mm256_loadu_ps(a.as_ptr()) })
         }
         #[inline(always)]
@@ -610,17 +611,16 @@ mod avx2 {
             Avx2(unsafe { _mm256_blendv_ps(if_false.0, if_true.0, m.0) })
         }
         #[inline(always)]
-        fn mask_from_bits(bits: u32) -> Self {
+        fn mask_from_bits(bits: u64) -> Self {
             let a: [f32; MAX_LANES] =
                 core::array::from_fn(|l| if l < 8 && bits >> l & 1 == 1 { f32::from_bits(!0) } else { 0.0 });
             Avx2::new(&a)
         }
         #[inline(always)]
-        fn to_array(self) -> [f32; MAX_LANES] {
-            let mut a = [0f32; MAX_LANES];
-            // `a` holds at least 32 writable bytes; the store needs no alignment.
-            unsafe { _mm256_storeu_ps(a.as_mut_ptr(), self.0) };
-            a
+        fn store(self, out: &mut [f32]) {
+            let out = &mut out[..8];
+            // `out` is 32 writable bytes; the store needs no alignment.
+            unsafe { _mm256_storeu_ps(out.as_mut_ptr(), self.0) };
         }
         #[inline(always)]
         fn trunc_int(self) -> Avx2I {
@@ -735,7 +735,7 @@ pub(crate) use avx512::Avx512;
 
 #[cfg(target_arch = "x86_64")]
 mod avx512 {
-    use super::{Lanes, Mask, MAX_LANES};
+    use super::{Lanes, Mask};
     use core::arch::x86_64::*;
     use core::ops::{Add, BitAnd, BitOr, Div, Mul, Sub};
 
@@ -775,8 +775,8 @@ mod avx512 {
     impl Mask for K16 {
         const LANES: usize = 16;
         #[inline(always)]
-        fn to_bitmask(self) -> u32 {
-            self.0 as u32
+        fn to_bitmask(self) -> u64 {
+            self.0 as u64
         }
         #[inline(always)]
         fn any(self) -> bool {
@@ -838,8 +838,9 @@ mod avx512 {
             Avx512(unsafe { _mm512_set1_ps(x) })
         }
         #[inline(always)]
-        fn new(a: &[f32; MAX_LANES]) -> Self {
-            // `a` holds at least sixteen readable `f32`; the load needs no alignment.
+        fn new(a: &[f32]) -> Self {
+            let a = &a[..16];
+            // `a` is sixteen readable `f32`; the load needs no alignment.
             Avx512(unsafe { _mm512_loadu_ps(a.as_ptr()) })
         }
         #[inline(always)]
@@ -868,15 +869,14 @@ mod avx512 {
             Avx512(unsafe { _mm512_mask_blend_ps(m.0, if_false.0, if_true.0) })
         }
         #[inline(always)]
-        fn mask_from_bits(bits: u32) -> K16 {
+        fn mask_from_bits(bits: u64) -> K16 {
             K16(bits as u16)
         }
         #[inline(always)]
-        fn to_array(self) -> [f32; MAX_LANES] {
-            let mut a = [0f32; MAX_LANES];
-            // `a` holds at least 64 writable bytes; the store needs no alignment.
-            unsafe { _mm512_storeu_ps(a.as_mut_ptr(), self.0) };
-            a
+        fn store(self, out: &mut [f32]) {
+            let out = &mut out[..16];
+            // `out` is 64 writable bytes; the store needs no alignment.
+            unsafe { _mm512_storeu_ps(out.as_mut_ptr(), self.0) };
         }
         #[inline(always)]
         fn trunc_int(self) -> Avx512I {
@@ -998,7 +998,7 @@ mod tests {
             let (x, y) = (A::new(&a), A::new(&b));
             let (p, q) = (W::new(&a), W::new(&b));
             let eq = |what: &str, r: A, s: W| {
-                let (r, s) = (r.to_array(), s.to_array());
+                let (r, s) = (r.to_array::<MAX_LANES>(), s.to_array::<MAX_LANES>());
                 let ok = (0..n).all(|l| r[l].to_bits() == s[l].to_bits() || (r[l].is_nan() && s[l].is_nan()));
                 assert!(ok, "{what}: {a:?} {b:?}: {r:?} {s:?}");
             };
@@ -1011,8 +1011,8 @@ mod tests {
             eq("max", x.max(y), p.max(q));
             let (lt, wlt) = (x.simd_lt(y), p.simd_lt(q));
             let (ge, wge) = (x.simd_ge(y), p.simd_ge(q));
-            let lane_bits = ((1u64 << n) - 1) as u32;
-            let expect = |f: &dyn Fn(f32, f32) -> bool| (0..n).fold(0u32, |m, l| m | u32::from(f(a[l], b[l])) << l);
+            let lane_bits = if n == 64 { u64::MAX } else { (1u64 << n) - 1 };
+            let expect = |f: &dyn Fn(f32, f32) -> bool| (0..n).fold(0u64, |m, l| m | u64::from(f(a[l], b[l])) << l);
             assert_eq!(lt.to_bitmask(), expect(&|u, v| u < v));
             assert_eq!(wlt.to_bitmask(), expect(&|u, v| u < v));
             assert_eq!(ge.to_bitmask(), wge.to_bitmask());
@@ -1022,7 +1022,7 @@ mod tests {
             assert_eq!(lt.and_not(ge).to_bitmask(), wlt.and_not(wge).to_bitmask());
             eq("select", lt.select(x, y), wlt.select(p, q));
             assert_eq!(lt.any(), wlt.any());
-            for m in [0u32, 1, 0b1010_0110_0101, 1 << (n - 1), lane_bits, 0x5a5a_5a5a] {
+            for m in [0u64, 1, 0b1010_0110_0101, 1 << (n - 1), lane_bits, 0x5a5a_5a5a_5a5a_5a5a] {
                 let m = m & lane_bits;
                 assert_eq!(A::mask_from_bits(m).to_bitmask(), m);
                 assert_eq!(W::mask_from_bits(m).to_bitmask(), m);
@@ -1083,6 +1083,7 @@ mod tests {
     fn check512() {
         check_against::<Avx512, X2<f32x8>>();
         check_against::<X2<Avx512>, X2<X2<f32x8>>>();
+        check_against::<X2<X2<Avx512>>, X2<X2<X2<f32x8>>>>();
     }
 
     #[test]

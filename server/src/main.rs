@@ -93,7 +93,7 @@ struct DataArgs {
     /// Sphere radius as a multiple of the model's (for `dump`; clients send their own).
     #[arg(long, global = true, default_value_t = 1.0)]
     radius_scale: f32,
-    /// Marching kernel: `packet` (16 or 32 rays at once in SIMD lanes) or `scalar` (one ray at a
+    /// Marching kernel: `packet` (16 to 64 rays at once in SIMD lanes) or `scalar` (one ray at a
     /// time, the reference); both give the same image.
     #[arg(long, global = true, default_value = "packet", value_parser = ["packet", "scalar"])]
     kernel: String,

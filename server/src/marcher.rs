@@ -30,12 +30,12 @@ use volwarp_core::wire::{CameraRequest, Frame, FrameHeader};
 use volwarp_core::{Camera, DepthPicker, FirstPassAccumulator, Heuristic, Image, Vec3, BACKGROUND};
 
 /// Rows per parallel task (a multiple of the packet marcher's packet height).
-const BAND_ROWS: usize = 4;
+const BAND_ROWS: usize = 8;
 
 /// Which implementation marches the rays; both give the same colors and depths bit for bit.
 #[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
 pub enum MarchKernel {
-    /// A block of 16 or 32 pixels' rays at once in SIMD lanes ([`crate::packet_march`]); the
+    /// A block of 16 to 64 pixels' rays at once in SIMD lanes ([`crate::packet_march`]); the
     /// default.
     #[default]
     Packet,

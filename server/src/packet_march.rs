@@ -1,12 +1,15 @@
 //! The packet marcher: the rays of a block of pixels marched together in SIMD lanes, the widest
-//! the CPU has ([`crate::LaneKind`], chosen at run time): thirty-two rays of an 8×4 block as
-//! two AVX-512 registers per value or as four AVX2 registers, or sixteen rays of a 4×4 block
+//! the CPU has ([`crate::LaneKind`], chosen at run time): sixty-four rays of an 8×8 block as
+//! four AVX-512 registers per value, thirty-two of an 8×4 block as four AVX2 registers, or
+//! sixteen rays of a 4×4 block
 //! in `wide`'s portable lanes (two `f32x8` per value). Several registers per value make independent chains of dependent
 //! gathers and blends that the core overlaps: the step is bound by their latency more than by
 //! their throughput (on the MRI benchmark view, one thread: 8 AVX2 lanes 424 ms, 16 in two
 //! registers 336 ms; 16 AVX-512 lanes 268 ms, 32 in two registers 243 ms; at the session's end,
 //! 32 AVX2 lanes in four registers 211 ms against 258 in two; the portable lanes (SSE2 here)
-//! 407–439 ms with 16 rays in two `f32x8` against 463–480 with 8 in one).
+//! 407–439 ms with 16 rays in two `f32x8` against 463–480 with 8 in one; 64 AVX-512 lanes in
+//! four registers 145.8–148.3 ms against 177.7–180.2 with 32 in two). The packet's arrays
+//! (rays, pickers, results) are sized for the instance's lanes by the const parameter `M`.
 //!
 //! Per step, every active lane computes its sample position, clamps it to the voxel lattice,
 //! gathers the eight neighbours and blends them trilinearly, gathers the transfer function's
@@ -39,56 +42,53 @@ const fn pw(lanes: usize) -> usize {
         4
     }
 }
-/// The most lanes a [`Lanes`] type has (arrays of lane values are this long; a type with fewer
-/// lanes uses their start).
-const MAXL: usize = crate::lanes::MAX_LANES;
 
 /// What a pass does with the samples a lane composites.
-trait Feed {
+trait Feed<const M: usize> {
     /// Whether [`Feed::feed`] does anything (the lanes are stored to arrays only if so).
     const ACTIVE: bool;
     /// Feeds lane `l`'s sample for every bit `l` of `bits`: its `t`, own opacity and
     /// accumulated opacity after compositing it.
-    fn feed(&mut self, bits: u32, t: &[f32; MAXL], src_a: &[f32; MAXL], dst_a: &[f32; MAXL]);
+    fn feed(&mut self, bits: u64, t: &[f32; M], src_a: &[f32; M], dst_a: &[f32; M]);
     /// Whether the pass wants the accumulated color too ([`Feed::feed_rgba`] instead of
     /// [`Feed::feed`]).
     const RGBA: bool = false;
     /// Feeds lane `l`'s sample for every bit `l` of `bits`: its `t` and the accumulated
     /// premultiplied color after compositing it (only called where [`Feed::RGBA`]).
     #[inline(always)]
-    fn feed_rgba(&mut self, _bits: u32, _t: &[f32; MAXL], _dst: [&[f32; MAXL]; 4]) {}
+    fn feed_rgba(&mut self, _bits: u64, _t: &[f32; M], _dst: [&[f32; M]; 4]) {}
     /// Whether the pass is a threshold-like depth picker applied in lanes: the kernel keeps
     /// each lane's first `t` with accumulated opacity above [`Feed::targets`] itself (no calls
     /// of [`Feed::feed`]) and hands the result to [`Feed::set_chosen`].
     const LANE_THRESHOLD: bool = false;
     /// Each lane's target (only read where [`Feed::LANE_THRESHOLD`]).
     #[inline(always)]
-    fn targets(&self) -> [f32; MAXL] {
-        [f32::INFINITY; MAXL]
+    fn targets(&self) -> [f32; M] {
+        [f32::INFINITY; M]
     }
     /// Lane `l`'s chosen `t` for every bit `l` of `bits` (the lanes that found one).
     #[inline(always)]
-    fn set_chosen(&mut self, _bits: u32, _chosen: &[f32; MAXL]) {}
+    fn set_chosen(&mut self, _bits: u64, _chosen: &[f32; M]) {}
 }
 
 /// Calls `f(lane)` for every set bit of `bits` (lanes 0..16), lowest first.
 #[inline(always)]
-fn for_lanes(mut bits: u32, mut f: impl FnMut(usize)) {
+fn for_lanes(mut bits: u64, mut f: impl FnMut(usize)) {
     while bits != 0 {
-        let l = bits.trailing_zeros() as usize % MAXL;
+        let l = bits.trailing_zeros() as usize;
         bits &= bits - 1;
         f(l);
     }
 }
 
 /// Layered samples (issue 14): each lane's ray cut into segments.
-impl Feed for [Segmenter; MAXL] {
+impl<const M: usize> Feed<M> for [Segmenter; M] {
     const ACTIVE: bool = true;
     const RGBA: bool = true;
     #[inline(always)]
-    fn feed(&mut self, _: u32, _: &[f32; MAXL], _: &[f32; MAXL], _: &[f32; MAXL]) {}
+    fn feed(&mut self, _: u64, _: &[f32; M], _: &[f32; M], _: &[f32; M]) {}
     #[inline(always)]
-    fn feed_rgba(&mut self, bits: u32, t: &[f32; MAXL], dst: [&[f32; MAXL]; 4]) {
+    fn feed_rgba(&mut self, bits: u64, t: &[f32; M], dst: [&[f32; M]; 4]) {
         for_lanes(bits, |l| {
             self[l].feed(t[l], [dst[0][l], dst[1][l], dst[2][l], dst[3][l]]);
         });
@@ -98,26 +98,26 @@ impl Feed for [Segmenter; MAXL] {
 /// Colors only.
 struct NoFeed;
 
-impl Feed for NoFeed {
+impl<const M: usize> Feed<M> for NoFeed {
     const ACTIVE: bool = false;
     #[inline(always)]
-    fn feed(&mut self, _: u32, _: &[f32; MAXL], _: &[f32; MAXL], _: &[f32; MAXL]) {}
+    fn feed(&mut self, _: u64, _: &[f32; M], _: &[f32; M], _: &[f32; M]) {}
 }
 
-impl Feed for [FirstPassAccumulator; MAXL] {
+impl<const M: usize> Feed<M> for [FirstPassAccumulator; M] {
     const ACTIVE: bool = true;
     #[inline(always)]
-    fn feed(&mut self, bits: u32, _: &[f32; MAXL], src_a: &[f32; MAXL], dst_a: &[f32; MAXL]) {
+    fn feed(&mut self, bits: u64, _: &[f32; M], src_a: &[f32; M], dst_a: &[f32; M]) {
         for_lanes(bits, |l| {
             self[l].feed(src_a[l], dst_a[l]);
         });
     }
 }
 
-impl Feed for [DepthPicker; MAXL] {
+impl<const M: usize> Feed<M> for [DepthPicker; M] {
     const ACTIVE: bool = true;
     #[inline(always)]
-    fn feed(&mut self, bits: u32, t: &[f32; MAXL], src_a: &[f32; MAXL], dst_a: &[f32; MAXL]) {
+    fn feed(&mut self, bits: u64, t: &[f32; M], src_a: &[f32; M], dst_a: &[f32; M]) {
         for_lanes(bits, |l| {
             self[l].feed(t[l], src_a[l], dst_a[l]);
         });
@@ -126,29 +126,29 @@ impl Feed for [DepthPicker; MAXL] {
 
 /// Threshold-like depth pickers ([`DepthPicker::threshold_target`]) applied in lanes: the same
 /// comparison, `dst_a > target`, on the first sample that passes it.
-struct LaneThreshold {
-    targets: [f32; MAXL],
-    chosen: [Option<f32>; MAXL],
+struct LaneThreshold<const M: usize> {
+    targets: [f32; M],
+    chosen: [Option<f32>; M],
 }
 
-impl Feed for LaneThreshold {
+impl<const M: usize> Feed<M> for LaneThreshold<M> {
     const ACTIVE: bool = false;
     const LANE_THRESHOLD: bool = true;
     #[inline(always)]
-    fn feed(&mut self, _: u32, _: &[f32; MAXL], _: &[f32; MAXL], _: &[f32; MAXL]) {}
+    fn feed(&mut self, _: u64, _: &[f32; M], _: &[f32; M], _: &[f32; M]) {}
     #[inline(always)]
-    fn targets(&self) -> [f32; MAXL] {
+    fn targets(&self) -> [f32; M] {
         self.targets
     }
     #[inline(always)]
-    fn set_chosen(&mut self, bits: u32, chosen: &[f32; MAXL]) {
+    fn set_chosen(&mut self, bits: u64, chosen: &[f32; M]) {
         for_lanes(bits, |l| self.chosen[l] = Some(chosen[l]));
     }
 }
 
 /// Every picker's [`DepthPicker::threshold_target`], if all have one.
-fn threshold_targets(pickers: &[DepthPicker; MAXL]) -> Option<[f32; MAXL]> {
-    let mut t = [f32::INFINITY; MAXL];
+fn threshold_targets<const M: usize>(pickers: &[DepthPicker; M]) -> Option<[f32; M]> {
+    let mut t = [f32::INFINITY; M];
     for (t, p) in t.iter_mut().zip(pickers) {
         *t = p.threshold_target()?;
     }
@@ -156,15 +156,15 @@ fn threshold_targets(pickers: &[DepthPicker; MAXL]) -> Option<[f32; MAXL]> {
 }
 
 /// Depth pickers with the rays' spread collectors ([`crate::radius::RadiusModel::Uncertainty`]).
-struct PickSpread {
-    pickers: [DepthPicker; MAXL],
-    spread: [RaySpread; MAXL],
+struct PickSpread<const M: usize> {
+    pickers: [DepthPicker; M],
+    spread: [RaySpread; M],
 }
 
-impl Feed for PickSpread {
+impl<const M: usize> Feed<M> for PickSpread<M> {
     const ACTIVE: bool = true;
     #[inline(always)]
-    fn feed(&mut self, bits: u32, t: &[f32; MAXL], src_a: &[f32; MAXL], dst_a: &[f32; MAXL]) {
+    fn feed(&mut self, bits: u64, t: &[f32; M], src_a: &[f32; M], dst_a: &[f32; M]) {
         for_lanes(bits, |l| {
             self.pickers[l].feed(t[l], src_a[l], dst_a[l]);
             self.spread[l].feed(t[l], dst_a[l]);
@@ -173,17 +173,17 @@ impl Feed for PickSpread {
 }
 
 /// The rays of a packet (lanes past the packet's width unused), set up exactly as the scalar marcher sets up one ray.
-struct Rays {
+struct Rays<const M: usize> {
     /// Unit directions (lanes outside the image get the packet's first direction).
-    d: [Vec3; MAXL],
+    d: [Vec3; M],
     /// `1 / d`.
-    inv_d: [Vec3; MAXL],
+    inv_d: [Vec3; M],
     /// Box entry.
-    t_enter: [f32; MAXL],
+    t_enter: [f32; M],
     /// Box exit (`None`: the lane misses the box or lies outside the image).
-    t_exit: [Option<f32>; MAXL],
+    t_exit: [Option<f32>; M],
     /// Sample count.
-    n: [f32; MAXL],
+    n: [f32; M],
 }
 
 /// One axis of the packet's rays, for the empty-space leaps.
@@ -202,9 +202,9 @@ struct Axis<L: Lanes> {
 
 impl<L: Lanes> Axis<L> {
     #[inline(always)]
-    fn new(rays: &Rays, a: usize, spacing: Vec3, o: Vec3) -> Axis<L> {
-        let inv: [f32; MAXL] = core::array::from_fn(|l| rays.inv_d[l][a]);
-        let bits = |f: fn(f32) -> bool| inv.iter().enumerate().fold(0u32, |b, (l, &v)| b | u32::from(f(v)) << l);
+    fn new<const M: usize>(rays: &Rays<M>, a: usize, spacing: Vec3, o: Vec3) -> Axis<L> {
+        let inv: [f32; M] = core::array::from_fn(|l| rays.inv_d[l][a]);
+        let bits = |f: fn(f32) -> bool| inv.iter().enumerate().fold(0u64, |b, (l, &v)| b | u64::from(f(v)) << l);
         Axis {
             positive: L::mask_from_bits(bits(|v| v.is_finite() && v > 0.0)),
             negative: L::mask_from_bits(bits(|v| v.is_finite() && v <= 0.0)),
@@ -232,14 +232,18 @@ impl Kernel<'_> {
     /// The rays of the `lanes`-pixel packet at `(x0, y0)`.
     #[allow(clippy::too_many_arguments)]
     #[inline(always)]
-    fn rays(&self, lanes: usize, basis: &RayBasis, o: Vec3, x0: u32, y0: u32, w: u32, h: u32) -> Rays {
-        let mut r = Rays {
-            d: [Vec3::ZERO; MAXL],
-            inv_d: [Vec3::ZERO; MAXL],
-            t_enter: [0.0; MAXL],
-            t_exit: [None; MAXL],
-            n: [0.0; MAXL],
-        };
+    fn rays<const M: usize>(
+        &self,
+        lanes: usize,
+        basis: &RayBasis,
+        o: Vec3,
+        x0: u32,
+        y0: u32,
+        w: u32,
+        h: u32,
+    ) -> Rays<M> {
+        let mut r =
+            Rays { d: [Vec3::ZERO; M], inv_d: [Vec3::ZERO; M], t_enter: [0.0; M], t_exit: [None; M], n: [0.0; M] };
         let first = basis.dir(x0, y0);
         for l in 0..lanes {
             let (x, y) = (x0 + (l % pw(lanes)) as u32, y0 + (l / pw(lanes)) as u32);
@@ -263,7 +267,7 @@ impl Kernel<'_> {
 
     /// Marches the packet's rays, feeding `feed`; returns each lane's premultiplied color.
     #[inline(always)]
-    fn march<L: Lanes, F: Feed>(&self, o: Vec3, rays: &Rays, feed: &mut F) -> [[f32; 4]; MAXL] {
+    fn march<L: Lanes, F: Feed<M>, const M: usize>(&self, o: Vec3, rays: &Rays<M>, feed: &mut F) -> [[f32; 4]; M] {
         let m = self.m;
         let vol = m.volume();
         let [nx, ny, nz] = vol.dims();
@@ -272,10 +276,10 @@ impl Kernel<'_> {
         let occ = m.occupancy();
         let inv_spacing = m.inv_spacing();
         let og = o * inv_spacing - 0.5;
-        let dg: [Vec3; MAXL] = core::array::from_fn(|l| rays.d[l] * inv_spacing);
-        let dgx = L::new(&core::array::from_fn::<f32, MAXL, _>(|l| dg[l].x));
-        let dgy = L::new(&core::array::from_fn::<f32, MAXL, _>(|l| dg[l].y));
-        let dgz = L::new(&core::array::from_fn::<f32, MAXL, _>(|l| dg[l].z));
+        let dg: [Vec3; M] = core::array::from_fn(|l| rays.d[l] * inv_spacing);
+        let dgx = L::new(&core::array::from_fn::<f32, M, _>(|l| dg[l].x));
+        let dgy = L::new(&core::array::from_fn::<f32, M, _>(|l| dg[l].y));
+        let dgz = L::new(&core::array::from_fn::<f32, M, _>(|l| dg[l].z));
         let (ogx, ogy, ogz) = (L::splat(og.x), L::splat(og.y), L::splat(og.z));
         let te = L::new(&rays.t_enter);
         let n = L::new(&rays.n);
@@ -432,7 +436,7 @@ impl Kernel<'_> {
         if F::LANE_THRESHOLD {
             feed.set_chosen(one.simd_gt(zero).and_not(unmet).to_bitmask(), &chosen.to_array());
         }
-        let (r, g, b, a) = (r.to_array(), g.to_array(), b.to_array(), a.to_array());
+        let (r, g, b, a) = (r.to_array::<M>(), g.to_array::<M>(), b.to_array::<M>(), a.to_array::<M>());
         core::array::from_fn(|l| [r[l], g[l], b[l], a[l]])
     }
 
@@ -441,7 +445,7 @@ impl Kernel<'_> {
     /// empty). `heuristic` `None` renders colors over the background (the ground-truth image).
     #[allow(clippy::too_many_arguments)]
     #[inline(always)]
-    fn band<L: Lanes>(
+    fn band<L: Lanes, const M: usize>(
         &self,
         basis: &RayBasis,
         heuristic: Option<Heuristic>,
@@ -457,34 +461,34 @@ impl Kernel<'_> {
         for py in (y0..y0 + rows).step_by(L::N / pw(L::N)) {
             for px in (0..w).step_by(pw(L::N)) {
                 let rays = self.rays(L::N, basis, o, px, py, w, h);
-                let mut depth = [None; MAXL];
-                let mut unc = [Uncertainty::default(); MAXL];
+                let mut depth = [None; M];
+                let mut unc = [Uncertainty::default(); M];
                 let spread = pack.is_some_and(|(_, r)| r.uses_spread());
                 let c = match heuristic {
-                    None => self.march::<L, _>(o, &rays, &mut NoFeed),
+                    None => self.march::<L, _, M>(o, &rays, &mut NoFeed),
                     Some(hr) => {
                         // No closure here: one would be compiled without the caller's AVX2
                         // target feature, and the lanes' methods would not inline into it.
                         let first = if hr.needs_first_pass() {
-                            let mut acc = [FirstPassAccumulator::new(); MAXL];
-                            self.march::<L, _>(o, &rays, &mut acc);
+                            let mut acc = [FirstPassAccumulator::new(); M];
+                            self.march::<L, _, M>(o, &rays, &mut acc);
                             Some(acc.map(|a| a.finish()))
                         } else {
                             None
                         };
-                        let pickers: [DepthPicker; MAXL] =
+                        let pickers: [DepthPicker; M] =
                             core::array::from_fn(|l| DepthPicker::new(hr, first.map(|f| f[l])));
                         if spread {
-                            let mut ps = PickSpread { pickers, spread: [RaySpread::new(); MAXL] };
-                            let c = self.march::<L, _>(o, &rays, &mut ps);
+                            let mut ps = PickSpread { pickers, spread: [RaySpread::new(); M] };
+                            let c = self.march::<L, _, M>(o, &rays, &mut ps);
                             for l in 0..L::N {
                                 depth[l] = rays.t_exit[l].and_then(|te| ps.pickers[l].finish(te));
                                 unc[l] = ps.spread[l].finish();
                             }
                             c
                         } else if let Some(targets) = threshold_targets(&pickers) {
-                            let mut lt = LaneThreshold { targets, chosen: [None; MAXL] };
-                            let c = self.march::<L, _>(o, &rays, &mut lt);
+                            let mut lt = LaneThreshold { targets, chosen: [None; M] };
+                            let c = self.march::<L, _, M>(o, &rays, &mut lt);
                             for l in 0..L::N {
                                 let picker = pickers[l].with_outcome(lt.chosen[l], c[l][3]);
                                 depth[l] = rays.t_exit[l].and_then(|te| picker.finish(te));
@@ -492,7 +496,7 @@ impl Kernel<'_> {
                             c
                         } else {
                             let mut pickers = pickers;
-                            let c = self.march::<L, _>(o, &rays, &mut pickers);
+                            let c = self.march::<L, _, M>(o, &rays, &mut pickers);
                             for l in 0..L::N {
                                 depth[l] = rays.t_exit[l].and_then(|te| pickers[l].finish(te));
                             }
@@ -543,7 +547,7 @@ impl Kernel<'_> {
     /// [`Kernel::band`] for layered samples: rows `y0 ..` of the image (as many as `out.count`
     /// holds), each ray cut by a [`Segmenter`] into at most `out.layers` segments.
     #[inline(always)]
-    fn band_layers<L: Lanes>(
+    fn band_layers<L: Lanes, const M: usize>(
         &self,
         basis: &RayBasis,
         pack: Option<(&Quantizer, FrameRadius)>,
@@ -558,8 +562,8 @@ impl Kernel<'_> {
         for py in (y0..y0 + rows).step_by(L::N / pw(L::N)) {
             for px in (0..w).step_by(pw(L::N)) {
                 let rays = self.rays(L::N, basis, o, px, py, w, h);
-                let mut segs = [Segmenter::new(k as u32, step); MAXL];
-                self.march::<L, _>(o, &rays, &mut segs);
+                let mut segs = [Segmenter::new(k as u32, step); M];
+                self.march::<L, _, M>(o, &rays, &mut segs);
                 for (l, seg) in segs.iter_mut().enumerate().take(L::N) {
                     let (x, y) = (px + (l % pw(L::N)) as u32, py + (l / pw(L::N)) as u32);
                     if x >= w || y >= y0 + rows || rays.t_exit[l].is_none() {
@@ -590,14 +594,14 @@ impl Kernel<'_> {
 }
 
 #[inline(always)]
-fn band_layers_kernel<L: Lanes>(
+fn band_layers_kernel<L: Lanes, const M: usize>(
     k: &Kernel<'_>,
     basis: &RayBasis,
     pack: Option<(&Quantizer, FrameRadius)>,
     y0: u32,
     out: &mut LayerOut<'_>,
 ) {
-    k.band_layers::<L>(basis, pack, y0, out)
+    k.band_layers::<L, M>(basis, pack, y0, out)
 }
 
 dispatch! {
@@ -614,7 +618,7 @@ dispatch! {
 
 #[inline(always)]
 #[allow(clippy::too_many_arguments)]
-fn band_kernel<L: Lanes>(
+fn band_kernel<L: Lanes, const M: usize>(
     k: &Kernel<'_>,
     basis: &RayBasis,
     heuristic: Option<Heuristic>,
@@ -624,7 +628,7 @@ fn band_kernel<L: Lanes>(
     color: &mut [u32],
     packed: &mut [u64],
 ) {
-    k.band::<L>(basis, heuristic, pack, y0, t, color, packed)
+    k.band::<L, M>(basis, heuristic, pack, y0, t, color, packed)
 }
 
 dispatch! {
