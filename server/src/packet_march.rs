@@ -12,14 +12,16 @@
 //! (rays, pickers, results) are sized for the instance's lanes by the const parameter `M`.
 //!
 //! Per step, every active lane computes its sample position, clamps it to the voxel lattice,
-//! gathers the eight neighbours and blends them trilinearly, gathers the transfer function's
-//! opacity (and, where any lane is visible, its color) and composites front to back, all in
-//! lanes. Each lane keeps its own sample index, so rays of different lengths, early ray
-//! termination and empty-space leaps (done per lane when a lane enters a new brick, with the
-//! scalar marcher's own [`crate::empty_space::Occupancy`] code) work as in the scalar marcher.
-//! The depth heuristics stay the one scalar definition of [`volwarp_core::heuristics`]: the
-//! samples a lane composites are fed to that lane's [`DepthPicker`] (or
-//! [`FirstPassAccumulator`]) in order.
+//! gathers the eight neighbours (as integer codes where the volume has them,
+//! `crate::volume::CodeStencil`) and blends them trilinearly, gathers the transfer function's
+//! opacity and red (and, where any lane is visible, its green and blue) and composites front to
+//! back, all in lanes. Each lane keeps its own sample index, so rays of different lengths, early
+//! ray termination and empty-space leaps (done per lane when a lane reaches the face its last
+//! look found, with the scalar marcher's rule, [`crate::empty_space::Occupancy::look`]) work as
+//! in the scalar marcher. The depth heuristics stay the one scalar definition of
+//! [`volwarp_core::heuristics`]: the samples a lane composites are fed to that lane's
+//! [`DepthPicker`] (or [`FirstPassAccumulator`]) in order, or, for the threshold-like ones,
+//! core's comparison is applied in lanes (`DepthPicker::threshold_target`).
 //!
 //! Every operation is the scalar marcher's ([`crate::marcher::Marcher::march_ray`]) in the same
 //! order with the same IEEE rounding (no fused multiply-add), so the colors and depths are the
@@ -324,10 +326,10 @@ impl Kernel<'_> {
                 let mut check = alive & running & t.simd_ge(t_check);
                 while check.any() {
                     let (px, py, pz) = (ogx + dgx * t, ogy + dgy * t, ogz + dgz * t);
-                    let eighth = L::splat(1.0 / crate::empty_space::BRICK as f32);
-                    let bx = (px * eighth).max(zero).min(nbx_m1).trunc_int();
-                    let by = (py * eighth).max(zero).min(nby_m1).trunc_int();
-                    let bz = (pz * eighth).max(zero).min(nbz_m1).trunc_int();
+                    let per_brick = L::splat(1.0 / crate::empty_space::BRICK as f32);
+                    let bx = (px * per_brick).max(zero).min(nbx_m1).trunc_int();
+                    let by = (py * per_brick).max(zero).min(nby_m1).trunc_int();
+                    let bz = (pz * per_brick).max(zero).min(nbz_m1).trunc_int();
                     let bi = bx + L::mul_i(snbx, by + L::mul_i(snby, bz));
                     // The look's result: an invisible brick's distance, or minus a visible one's
                     // reach (`Occupancy::look_table`).

@@ -137,7 +137,7 @@ pub(crate) fn check_geometry(dims: [u32; 3], spacing: Vec3, max_voxels: u64) -> 
 
 impl Volume {
     /// A volume from values in x-fastest order (`dims` product long). Non-finite values become
-    /// the data minimum; the values are normalized over their range (byte-coded where they are
+    /// the data minimum; the values are normalized over their range (integer-coded where they are
     /// integers at most 65,535 apart, see the module docs).
     pub fn from_values(name: &str, dims: [u32; 3], spacing: Vec3, mut values: Vec<f32>) -> Result<Volume, VolumeError> {
         let n = check_geometry(dims, spacing, u64::MAX)?;
