@@ -244,6 +244,19 @@ fn validate_avx2(
     validate_blocks(header, samples, colors, segments, layers)
 }
 
+/// The checks [`validate`] and [`validate_reference`] start with: one color and one segment
+/// index per sample, and at most [`MAX_LAYERS`] layers.
+#[inline(always)]
+fn check_shape(samples: &[u64], colors: &[u32], segments: &[u8], layers: u8) -> Result<(), LayerError> {
+    if segments.len() != samples.len() || colors.len() != samples.len() {
+        return Err(LayerError::Inconsistent);
+    }
+    if layers as usize > MAX_LAYERS {
+        return Err(LayerError::TooManyLayers { layers, limit: MAX_LAYERS as u8 });
+    }
+    Ok(())
+}
+
 /// The body of [`validate`].
 #[inline(always)]
 fn validate_blocks(
@@ -253,12 +266,7 @@ fn validate_blocks(
     segments: &[u8],
     layers: u8,
 ) -> Result<(), LayerError> {
-    if segments.len() != samples.len() || colors.len() != samples.len() {
-        return Err(LayerError::Inconsistent);
-    }
-    if layers as usize > MAX_LAYERS {
-        return Err(LayerError::TooManyLayers { layers, limit: MAX_LAYERS as u8 });
-    }
+    check_shape(samples, colors, segments, layers)?;
     let deq = header.dequantizer();
     let eye = header.camera.eye;
     // A block at a time: first the geometry of every sample and of it against the sample before
@@ -357,12 +365,7 @@ pub fn validate_reference(
     segments: &[u8],
     layers: u8,
 ) -> Result<(), LayerError> {
-    if segments.len() != samples.len() || colors.len() != samples.len() {
-        return Err(LayerError::Inconsistent);
-    }
-    if layers as usize > MAX_LAYERS {
-        return Err(LayerError::TooManyLayers { layers, limit: MAX_LAYERS as u8 });
-    }
+    check_shape(samples, colors, segments, layers)?;
     let deq = header.dequantizer();
     let eye = header.camera.eye;
     let mut prev: Option<(glam::Vec3, f32)> = None;

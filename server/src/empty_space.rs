@@ -160,16 +160,20 @@ impl Occupancy {
     /// every brick closer than that is invisible.
     #[inline(always)]
     pub fn distance(&self, b: [u32; 3]) -> u8 {
-        let i = b[0] as usize + self.bricks[0] as usize * (b[1] as usize + self.bricks[1] as usize * b[2] as usize);
-        self.dist.get(i).copied().unwrap_or(0)
+        self.dist.get(self.index(b)).copied().unwrap_or(0)
+    }
+
+    /// The index of brick `b` in the per-brick arrays (x fastest).
+    #[inline(always)]
+    fn index(&self, b: [u32; 3]) -> usize {
+        b[0] as usize + self.bricks[0] as usize * (b[1] as usize + self.bricks[1] as usize * b[2] as usize)
     }
 
     /// [`Occupancy::distance`]'s counterpart for visible bricks: the Chebyshev distance to the
     /// nearest invisible brick (0 for an invisible one, 255 if there is none within 254).
     #[inline(always)]
     pub fn visible_reach(&self, b: [u32; 3]) -> u8 {
-        let i = b[0] as usize + self.bricks[0] as usize * (b[1] as usize + self.bricks[1] as usize * b[2] as usize);
-        self.visible_reach.get(i).copied().unwrap_or(0)
+        self.visible_reach.get(self.index(b)).copied().unwrap_or(0)
     }
 
     /// What a look at brick `b` finds: its [`Occupancy::distance`] `r` and the reach to pass to
@@ -181,17 +185,32 @@ impl Occupancy {
     /// datasets with a slack of 2 against none).
     #[inline(always)]
     pub fn look(&self, b: [u32; 3]) -> (u8, u8) {
-        let r = self.distance(b);
-        (r, if r > 0 { r } else { self.visible_reach(b).max(1).saturating_add(VISIBLE_SLACK) })
+        self.look_at(self.index(b))
+    }
+
+    /// [`Occupancy::look`] of the brick at index `i` (an index outside the grid reads 0 for both
+    /// distances, as [`Occupancy::distance`] and [`Occupancy::visible_reach`] do).
+    #[inline(always)]
+    fn look_at(&self, i: usize) -> (u8, u8) {
+        let r = self.dist.get(i).copied().unwrap_or(0);
+        (
+            r,
+            if r > 0 {
+                r
+            } else {
+                self.visible_reach.get(i).copied().unwrap_or(0).max(1).saturating_add(VISIBLE_SLACK)
+            },
+        )
     }
 
     /// Per brick, x fastest, the look's result as one number for the packet marcher's gathers:
     /// the distance `r` of an invisible brick, minus the reach of a visible one (with the slack).
     pub fn look_table(&self) -> Vec<f32> {
-        self.dist
-            .iter()
-            .zip(&self.visible_reach)
-            .map(|(&r, &v)| if r > 0 { r as f32 } else { -(v.max(1).saturating_add(VISIBLE_SLACK) as f32) })
+        (0..self.dist.len())
+            .map(|i| match self.look_at(i) {
+                (0, reach) => -(reach as f32),
+                (r, _) => r as f32,
+            })
             .collect()
     }
 

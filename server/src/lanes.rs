@@ -130,10 +130,6 @@ macro_rules! dispatch {
 }
 pub(crate) use dispatch;
 
-/// The most lanes a [`Lanes`] type has.
-#[cfg_attr(not(target_arch = "x86_64"), allow(dead_code))]
-pub(crate) const MAX_LANES: usize = 64;
-
 /// A mask of [`Lanes`]: a lane vector with all bits set or clear per lane (AVX2, `wide`) or a
 /// mask register (AVX-512).
 pub(crate) trait Mask: Copy + BitAnd<Output = Self> + BitOr<Output = Self> {
@@ -166,7 +162,7 @@ pub(crate) trait Lanes:
     type I: Copy + Add<Output = Self::I>;
     /// A mask of as many lanes.
     type M: Mask;
-    /// The number of lanes (at most [`MAX_LANES`]).
+    /// The number of lanes (at most 64: a mask's bits are a `u64`).
     const N: usize;
 
     /// All lanes `x`.
@@ -493,7 +489,7 @@ pub(crate) use avx2::Avx2;
 
 #[cfg(target_arch = "x86_64")]
 mod avx2 {
-    use super::{Lanes, Mask, MAX_LANES};
+    use super::{Lanes, Mask};
     use core::arch::x86_64::*;
     use core::ops::{Add, BitAnd, BitOr, Div, Mul, Sub};
 
@@ -612,8 +608,7 @@ mod avx2 {
         }
         #[inline(always)]
         fn mask_from_bits(bits: u64) -> Self {
-            let a: [f32; MAX_LANES] =
-                core::array::from_fn(|l| if l < 8 && bits >> l & 1 == 1 { f32::from_bits(!0) } else { 0.0 });
+            let a: [f32; 8] = core::array::from_fn(|l| if bits >> l & 1 == 1 { f32::from_bits(!0) } else { 0.0 });
             Avx2::new(&a)
         }
         #[inline(always)]
@@ -981,7 +976,10 @@ mod avx512 {
 #[cfg(test)]
 #[cfg(target_arch = "x86_64")]
 mod tests {
-    use super::{Avx2, Avx512, Lanes, Mask, MAX_LANES, X2};
+    use super::{Avx2, Avx512, Lanes, Mask, X2};
+
+    /// The most lanes a tested type has.
+    const MAX_LANES: usize = 64;
     use wide::f32x8;
 
     /// Every `Lanes` method of `A` against `W`'s (the same width), inlined into the caller.

@@ -147,10 +147,11 @@ pub struct Marcher {
     occupancy: Occupancy,
     /// Opacity-corrected, premultiplied table.
     lut: Vec<[f32; 4]>,
-    /// The same table as four planes (r, g, b, a) for the packet marcher's gathers.
-    lut_planes: Arc<Vec<f32>>,
+    /// The same table as (a, r, g, b) entries, one after another, for the packet marcher's
+    /// 64-bit gathers (opacity with red, green with blue).
+    lut_argb: Arc<Vec<f32>>,
     /// [`Occupancy::look_table`], for the packet marcher's gathers.
-    dist: Arc<Vec<f32>>,
+    looks: Arc<Vec<f32>>,
     opts: MarchOptions,
     dt: f32,
     inv_spacing: Vec3,
@@ -204,9 +205,9 @@ impl Marcher {
         debug_assert_eq!(lut.len(), LUT_SIZE);
         let occupancy = grid.occupancy(tf, sp);
         log::debug!("empty-space grid: {:.1} % of bricks visible", occupancy.fraction_occupied() * 100.0);
-        let lut_planes = Arc::new(lut.iter().flat_map(|&[r, g, b, a]| [a, r, g, b]).collect::<Vec<f32>>());
-        let dist = Arc::new(occupancy.look_table());
-        Marcher { volume, grid, occupancy, lut, lut_planes, dist, opts, dt, inv_spacing: 1.0 / sp }
+        let lut_argb = Arc::new(lut.iter().flat_map(|&[r, g, b, a]| [a, r, g, b]).collect::<Vec<f32>>());
+        let looks = Arc::new(occupancy.look_table());
+        Marcher { volume, grid, occupancy, lut, lut_argb, looks, opts, dt, inv_spacing: 1.0 / sp }
     }
 
     /// The same volume and grid with another transfer function or options (no rebuild of the
@@ -257,8 +258,8 @@ impl Marcher {
             m: self,
             data: self.volume.padded_data(),
             stencil: self.volume.code_stencil(),
-            lut: &self.lut_planes,
-            dist: &self.dist,
+            lut: &self.lut_argb,
+            looks: &self.looks,
         }
     }
 

@@ -227,7 +227,7 @@ pub(crate) struct Kernel<'a> {
     /// The opacity-corrected, premultiplied transfer function as (a, r, g, b) entries.
     pub(crate) lut: &'a [f32],
     /// [`crate::empty_space::Occupancy::look_table`].
-    pub(crate) dist: &'a [f32],
+    pub(crate) looks: &'a [f32],
 }
 
 impl Kernel<'_> {
@@ -289,8 +289,8 @@ impl Kernel<'_> {
         let (mx, my, mz) = (L::splat((nx - 1) as f32), L::splat((ny - 1) as f32), L::splat((nz - 1) as f32));
         let (snx, snxy) = (L::splat_i(nx as i32), L::splat_i((nx * ny) as i32));
         let sny = L::splat_i(ny as i32);
-        let (lut_max, lut_scale) =
-            (L::splat((self.lut.len() / 4).max(1) as f32 - 1.0), L::splat((self.lut.len() / 4).max(1) as f32 - 1.0));
+        // TransferFunction::index scales by the last entry's index and clamps to it.
+        let lut_max = L::splat((self.lut.len() / 4).max(1) as f32 - 1.0);
         let ert = L::splat(opts.early_termination);
         // No closure calls a lane method here (see `band`).
         let nb = occ.bricks();
@@ -333,7 +333,7 @@ impl Kernel<'_> {
                     let bi = bx + L::mul_i(snbx, by + L::mul_i(snby, bz));
                     // The look's result: an invisible brick's distance, or minus a visible one's
                     // reach (`Occupancy::look_table`).
-                    let dist = L::gather(self.dist, bi);
+                    let dist = L::gather(self.looks, bi);
                     let reach = dist.max(zero - dist) - one;
                     let (bxf, byf, bzf) = (L::int_to_float(bx), L::int_to_float(by), L::int_to_float(bz));
                     let mut t_out = L::splat(f32::INFINITY);
@@ -408,7 +408,7 @@ impl Kernel<'_> {
             let c1 = c01 + (c11 - c01) * fy;
             let v = c0 + (c1 - c0) * fz;
             // TransferFunction::index, in lanes.
-            let idx = (v * lut_scale + half).max(zero).min(lut_max).trunc_int();
+            let idx = (v * lut_max + half).max(zero).min(lut_max).trunc_int();
             // The table's entries are (a, r, g, b): opacity and red in one 64-bit gather.
             let q = idx + idx;
             let q = q + q;

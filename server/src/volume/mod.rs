@@ -161,16 +161,16 @@ impl Volume {
             && n <= MAX_STENCIL_VOXELS >> u32::from(hi - lo > 255.0)
             && values.iter().all(|v| v.is_finite() && v.fract() == 0.0 && v.abs() < 16_777_216.0);
         let mut codes: Vec<u16> = Vec::new();
+        let scale = code_scale(hi - lo);
         if coded {
-            let scale = code_scale(hi - lo);
             codes = values.iter().map(|&v| (v - lo) as u16).collect();
             for (v, &c) in values.iter_mut().zip(&codes) {
                 *v = c as f32 * scale;
             }
         } else {
-            let scale = if hi > lo { 1.0 / (hi as f64 - lo as f64) } else { 0.0 };
+            let inv_range = if hi > lo { 1.0 / (hi as f64 - lo as f64) } else { 0.0 };
             for v in values.iter_mut() {
-                *v = if v.is_finite() { ((*v as f64 - lo as f64) * scale).clamp(0.0, 1.0) as f32 } else { 0.0 };
+                *v = if v.is_finite() { ((*v as f64 - lo as f64) * inv_range).clamp(0.0, 1.0) as f32 } else { 0.0 };
             }
         }
         values.resize(values.len() + Volume::padding(dims), 0.0);
@@ -185,7 +185,7 @@ impl Volume {
                 let word = |c: [u64; 4]| c[0] | c[1] << 16 | c[2] << 32 | c[3] << 48;
                 Squares::Shorts((0..values.len()).map(|i| word(square(i))).collect())
             };
-            CodeStencil { squares, scale: code_scale(hi - lo) }
+            CodeStencil { squares, scale }
         });
         Ok(Volume { name: name.to_string(), dims, spacing, value_range: (lo, hi), data: values, stencil })
     }
