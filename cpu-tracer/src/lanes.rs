@@ -85,23 +85,50 @@ pub(crate) fn ray_dirs<L: Lanes>(b: &RayBasis, px: L, py: L) -> [L; 3] {
 /// same operations as core's scalar code, so the same `t` bit for bit.
 #[inline(always)]
 pub(crate) fn sphere_hits<L: Lanes>(o: &[f32; 3], d: &[L; 3], c: Vec3, r: f32, active: L) -> Option<(L, L)> {
-    let (ox, oy, oz) = (L::splat(c.x - o[0]), L::splat(c.y - o[1]), L::splat(c.z - o[2]));
+    let oc = [L::splat(c.x - o[0]), L::splat(c.y - o[1]), L::splat(c.z - o[2])];
+    let (b, disc) = closest_approach(d, oc, L::splat(r));
+    let ok = disc.simd_ge(L::splat(0.0)) & active;
+    if !ok.any() {
+        return None;
+    }
+    Some(nearest_hit(b, disc, ok))
+}
+
+/// [`sphere_hits`] for eight spheres at once, one per lane (centres less the rays' origin
+/// and radii `c`), each on its own unit ray `d`, for the `active` lanes: the hit distance per
+/// lane, `+∞` where the ray misses (or the lane is not active). The same operations per lane
+/// as [`sphere_hits`] with the origin at zero (`c − 0` is `c`), so the same `t` bit for bit.
+#[inline(always)]
+pub(crate) fn sphere_hits_lanes<L: Lanes>(d: &[L; 3], c: [L; 4], active: L) -> L {
+    let [ox, oy, oz, r] = c;
+    let (b, disc) = closest_approach(d, [ox, oy, oz], r);
+    let (t, hit) = nearest_hit(b, disc, disc.simd_ge(L::splat(0.0)) & active);
+    hit.select(t, L::splat(f32::INFINITY))
+}
+
+/// `sphere::intersect`'s first half: the distance `b` along the unit ray `d` to the point
+/// nearest the centre (`oc`: centre less origin) and the discriminant `r² − |oc − b·d|²`.
+#[inline(always)]
+fn closest_approach<L: Lanes>(d: &[L; 3], oc: [L; 3], r: L) -> (L, L) {
+    let [ox, oy, oz] = oc;
     let b = ox * d[0] + oy * d[1] + oz * d[2];
     let fx = ox - b * d[0];
     let fy = oy - b * d[1];
     let fz = oz - b * d[2];
-    let disc = L::splat(r * r) - (fx * fx + fy * fy + fz * fz);
+    (b, r * r - (fx * fx + fy * fy + fz * fz))
+}
+
+/// `sphere::intersect`'s second half for the lanes `ok` (discriminant at least zero): the
+/// nearer root in front of the origin, else the farther, and the mask of lanes with a hit in
+/// front.
+#[inline(always)]
+fn nearest_hit<L: Lanes>(b: L, disc: L, ok: L) -> (L, L) {
     let zero = L::splat(0.0);
-    let ok = disc.simd_ge(zero) & active;
-    if !ok.any() {
-        return None;
-    }
     let sq = disc.sqrt();
     let t0 = b - sq;
     let t1 = b + sq;
     let front = t0.simd_gt(zero);
-    let t = front.select(t0, t1);
-    Some((t, ok & (front | t1.simd_gt(zero))))
+    (front.select(t0, t1), ok & (front | t1.simd_gt(zero)))
 }
 
 /// The centres less `eye` and the radii of up to eight packed samples (lanes past `s` are
@@ -191,6 +218,20 @@ pub(crate) trait Lanes:
     /// Per lane, `⌈lo⌉` at least 0 and `⌊hi⌋` at most `max`, as integers, for lanes with
     /// `−1 ≤ lo < 2³¹` and `0 ≤ hi < 2³¹` (other lanes: unspecified values): the scalar
     /// `ceil_clamped(lo)` (truncation, plus one where it fell below) and `(hi as u32).min(max)`.
+    /// The integers `a` as `f32` lanes (`as f32`, rounding to nearest).
+    #[inline(always)]
+    fn from_ints(a: &[i32; 8]) -> Self {
+        Self::new([
+            a[0] as f32,
+            a[1] as f32,
+            a[2] as f32,
+            a[3] as f32,
+            a[4] as f32,
+            a[5] as f32,
+            a[6] as f32,
+            a[7] as f32,
+        ])
+    }
     #[inline(always)]
     fn span_ints(lo: Self, hi: Self, max: u32) -> ([i32; 8], [i32; 8]) {
         let (lo, hi) = (lo.to_array(), hi.to_array());
@@ -508,6 +549,11 @@ mod avx2 {
         #[inline(always)]
         fn permute_u(a: __m256i, idx: __m256i) -> __m256i {
             unsafe { _mm256_permutevar8x32_epi32(a, idx) }
+        }
+        #[inline(always)]
+        fn from_ints(a: &[i32; 8]) -> Self {
+            // `a` is 32 readable bytes; `vcvtdq2ps` rounds to nearest as `as f32` does.
+            unsafe { Avx2(_mm256_cvtepi32_ps(_mm256_loadu_si256(a.as_ptr().cast()))) }
         }
         #[inline(always)]
         fn span_ints(lo: Self, hi: Self, max: u32) -> ([i32; 8], [i32; 8]) {

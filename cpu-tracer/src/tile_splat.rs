@@ -10,7 +10,11 @@
 //!    near the eye plane — and,
 //!    per [`GROUP`] consecutive spheres, the union of their rectangles. The scene's order is
 //!    spatially coherent (Morton order when built, the server's image order when not), so a
-//!    group covers a small patch of the screen.
+//!    group covers a small patch of the screen. A *small* sphere (a rectangle of at most 2×2
+//!    pixels, most spheres of a frame drawn at half its resolution) also gets its hits there:
+//!    the ray–sphere test on the pixels of its 2×2 window, eight spheres per lane operation
+//!    (`small_hits`: full lanes, where a 4×2 block in step 3 would use one to four), kept in
+//!    place of its centre.
 //! 2. **Bin**: each group goes to the [`TILE`]×[`TILE`] tiles its rectangle overlaps (a serial
 //!    counting sort over a few tens of thousands of groups). A sphere overlapping more than
 //!    [`MAX_TILES`] tiles (large on screen, or touching the eye plane: its rectangle is then the
@@ -31,6 +35,8 @@
 //!    kernel (`lanes::sphere_hits`, AVX2 dispatch): as 4×2 blocks when the rectangle is at most
 //!    four pixels wide, as rows of 8 otherwise. The depth test runs in the same lanes (a nearer
 //!    hit takes the pixel; a hit at equal depth goes to a cold scalar path with the tie rule).
+//!    A small sphere only keeps its four hits by minimum, pixel by pixel (`splat_small`); the
+//!    tile's ray directions are made before the first sphere that is not small, if any.
 //!    A row block of a wider sphere is skipped when a conservative near distance of the sphere
 //!    lies beyond the depth of all its pixels (occlusion culling,
 //!    [`TileSplat::with_culling`]). The tile's ids or colors are then written straight into the
@@ -162,6 +168,11 @@ pub struct TileSplat {
     large_rects: Vec<Rect>,
     /// Per group, whether it holds a large sphere.
     group_large: Vec<bool>,
+    /// Per group, the mask of its small spheres (at most 2×2 pixels, not near the eye
+    /// plane), whose entry of `centres` holds their pixels' hits instead ([`small_hits`]).
+    group_small: Vec<u32>,
+    /// Small spheres in the last frame.
+    small: usize,
 }
 
 /// The tile grid of a viewport.
@@ -197,6 +208,8 @@ impl TileSplat {
             large: Vec::new(),
             large_rects: Vec::new(),
             group_large: Vec::new(),
+            group_small: Vec::new(),
+            small: 0,
         }
     }
 
@@ -237,6 +250,12 @@ impl TileSplat {
         self.lists.len() + self.large.len()
     }
 
+    /// Spheres of the last frame drawn from the hits the bound pass found (at most 2×2
+    /// pixels, away from the eye plane; most spheres of a frame drawn at half its resolution).
+    pub fn small_spheres(&self) -> usize {
+        self.small
+    }
+
     /// The number of threads it draws with.
     pub fn threads(&self) -> usize {
         self.threads.count()
@@ -254,7 +273,7 @@ impl TileSplat {
         let (lists, starts, rects) = (&self.lists[..], &self.starts[..], &self.rects[..]);
         let (pairs, culled) = (AtomicU64::new(0), AtomicU64::new(0));
         let cull = self.cull;
-        let (large, group_rects) = (&self.large[..], &self.group_rects[..]);
+        let (large, group_rects, group_small) = (&self.large[..], &self.group_rects[..], &self.group_small[..]);
         let large_rects = &self.large_rects[..];
         let centres = &self.centres[..];
         let band = |ty: usize, rows: &mut [u32]| {
@@ -274,7 +293,7 @@ impl TileSplat {
                     }
                     continue;
                 }
-                let lists = Lists { groups: list, large, large_rects, rects, centres, group_rects, cull };
+                let lists = Lists { groups: list, large, large_rects, rects, centres, group_rects, group_small, cull };
                 let (p, c) = tile_dispatch(&view, &tile, samples, scene, &lists, &mut buf);
                 counts = (counts.0 + p, counts.1 + c);
                 for (y, row) in rows.chunks_mut(w).enumerate() {
@@ -305,6 +324,7 @@ impl TileSplat {
         self.centres.resize(n, [0.0; 4]);
         self.group_rects.resize(groups, NO_RECT);
         self.group_large.resize(groups, false);
+        self.group_small.resize(groups, 0);
         // 1. rectangles, in parallel over runs of whole groups
         let per_task = (groups.div_ceil(self.threads.count() * 8)).max(1);
         let vf = ViewF32::new(view);
@@ -319,20 +339,24 @@ impl TileSplat {
                      centres: &mut [[f32; 4]],
                      grects: &mut [Rect],
                      glarge: &mut [bool],
+                     gsmall: &mut [u32],
                      pairs: &mut Vec<(u32, u64)>| {
             pairs.clear();
-            let groups =
-                rects.chunks_mut(GROUP).zip(centres.chunks_mut(GROUP)).zip(grects.iter_mut().zip(glarge.iter_mut()));
-            for (g, ((rects, centres), (grect, glarge))) in groups.enumerate() {
+            let groups = rects
+                .chunks_mut(GROUP)
+                .zip(centres.chunks_mut(GROUP))
+                .zip(grects.iter_mut().zip(glarge.iter_mut()).zip(gsmall.iter_mut()));
+            for (g, ((rects, centres), ((grect, glarge), gsmall))) in groups.enumerate() {
                 let base = (c * per_task + g) * GROUP;
                 let samples = &samples[base..base + rects.len()];
-                (*grect, *glarge) = bound_dispatch(view, &vf, deq, samples, rects, centres);
+                (*grect, *glarge, *gsmall) = bound_dispatch(view, &vf, deq, samples, rects, centres);
                 group_pairs((c * per_task + g) as u32, *grect, rects, grid, pairs);
             }
         };
         if self.threads.is_serial() {
             let pairs = &mut self.task_pairs[0];
-            bound(0, &mut self.rects, &mut self.centres, &mut self.group_rects, &mut self.group_large, pairs);
+            let (r, c, g) = (&mut self.rects, &mut self.centres, &mut self.group_rects);
+            bound(0, r, c, g, &mut self.group_large, &mut self.group_small, pairs);
         } else {
             self.threads.install(|| {
                 self.rects
@@ -340,11 +364,13 @@ impl TileSplat {
                     .zip(self.centres.par_chunks_mut(per_task * GROUP))
                     .zip(self.group_rects.par_chunks_mut(per_task))
                     .zip(self.group_large.par_chunks_mut(per_task))
+                    .zip(self.group_small.par_chunks_mut(per_task))
                     .zip(self.task_pairs.par_iter_mut())
                     .enumerate()
-                    .for_each(|(c, ((((r, cs), g), l), p))| bound(c, r, cs, g, l, p))
+                    .for_each(|(c, (((((r, cs), g), l), sm), p))| bound(c, r, cs, g, l, sm, p))
             });
         }
+        self.small = self.group_small.iter().map(|m| m.count_ones() as usize).sum();
         // 2. the pairs to per-tile lists (a counting sort, serial: a few tens of thousands of
         // pairs; each tile's list keeps the groups' order), and the large spheres to their own
         // list.
@@ -496,8 +522,8 @@ pub(crate) fn bound_group<L: Lanes>(
     samples: &[u64],
     rects: &mut [Rect],
     centres: &mut [[f32; 4]],
-) -> (Rect, bool) {
-    let (mut u, mut any_large) = (NO_RECT, false);
+) -> (Rect, bool, u32) {
+    let (mut u, mut any_large, mut small_all) = (NO_RECT, false, 0u32);
     let keep_centres = centres.len() == samples.len();
     for (k, (ss, rs)) in samples.chunks(8).zip(rects.chunks_mut(8)).enumerate() {
         // Eight at once in lanes where the CPU has them (`Lanes::decode8`: the same values).
@@ -505,12 +531,6 @@ pub(crate) fn bound_group<L: Lanes>(
             Some(eight) => L::decode8(deq, vf.eye, eight),
             None => lanes::decode_scalar(deq, vf.eye, ss),
         };
-        if keep_centres {
-            let (ax, ay, az, ar) = (rx.to_array(), ry.to_array(), rz.to_array(), r.to_array());
-            for (l, c) in centres[8 * k..].iter_mut().take(ss.len()).enumerate() {
-                *c = [ax[l], ay[l], az[l], ar[l]];
-            }
-        }
         let cx = rx * L::splat(vf.u[0]) + ry * L::splat(vf.u[1]) + rz * L::splat(vf.u[2]);
         let cy = rx * L::splat(vf.v[0]) + ry * L::splat(vf.v[1]) + rz * L::splat(vf.v[2]);
         let cz = rx * L::splat(vf.w[0]) + ry * L::splat(vf.w[1]) + rz * L::splat(vf.w[2]);
@@ -543,6 +563,7 @@ pub(crate) fn bound_group<L: Lanes>(
         // clamp, for the lanes of `ok`, whose values lie in its domain).
         let (xs0, xs1) = L::span_ints(ax.fast_max(L::splat(-1.0)), bx.fast_min(nw), view.width - 1);
         let (ys0, ys1) = L::span_ints(ay.fast_max(L::splat(-1.0)), by.fast_min(nh), view.height - 1);
+        let ok_v = ok;
         let (far, ok) = (far.to_bitmask(), ok.to_bitmask());
         // Branch-free per lane: the lanes of `ok` with a non-empty span get their rectangle,
         // the others the empty one (built in locals and stored once: reading `*rect` back
@@ -553,6 +574,28 @@ pub(crate) fn bound_group<L: Lanes>(
             let fast = ok >> l & 1 != 0 && x0 <= x1 && y0 <= y1;
             let rect = Rect { x0: x0 as u16, y0: y0 as u16, x1: x1 as u16, y1: y1 as u16 };
             *r = if fast { rect } else { NO_RECT };
+        }
+        if keep_centres {
+            // Spheres of at most 2×2 pixels (lanes of `ok`, non-empty spans at most two
+            // wide): their pixels' hits now, eight spheres per lane operation, in place of
+            // their centres (`small_hits`); the others' centres.
+            let (fx0, fx1, fy0, fy1) = (L::from_ints(&xs0), L::from_ints(&xs1), L::from_ints(&ys0), L::from_ints(&ys1));
+            let (wx, wy) = (fx1 - fx0, fy1 - fy0);
+            let (one, zero) = (L::splat(1.0), L::splat(0.0));
+            let small_v = ok_v & wx.simd_ge(zero) & wx.simd_le(one) & wy.simd_ge(zero) & wy.simd_le(one);
+            let small = small_v.to_bitmask() & ((1u32 << ss.len()) - 1);
+            let mut c = [rx, ry, rz, r];
+            if small != 0 {
+                let hits = small_hits(&view.basis, c, fx0, fy0, small_v, wx.simd_gt(zero), wy.simd_gt(zero));
+                for (c, h) in c.iter_mut().zip(hits) {
+                    *c = small_v.select(h, *c);
+                }
+            }
+            let [ax, ay, az, ar] = c.map(|v| v.to_array());
+            for (l, c) in centres[8 * k..].iter_mut().take(ss.len()).enumerate() {
+                *c = [ax[l], ay[l], az[l], ar[l]];
+            }
+            small_all |= small << (8 * k);
         }
         // Near the eye plane, behind it, or NaN (rare): the f64 bound.
         let mut slow = !ok & !far & ((1u32 << ss.len()) - 1);
@@ -574,7 +617,36 @@ pub(crate) fn bound_group<L: Lanes>(
             u = u.union(if large { NO_RECT } else { r });
         }
     }
-    (u, any_large)
+    (u, any_large, small_all)
+}
+
+/// The hits of eight spheres (centres less the eye and radii `c`, the lanes of the mask
+/// `small`) on the pixels of their 2×2 windows at `(x0, y0)` (pixel indices as `f32`; the
+/// masks `wide`, `tall`: the rectangle's second column, row), as [`splat_sphere`] would find
+/// them: per window pixel `(x0 + dx, y0 + dy)` (result `dx + 2·dy`), per lane, the distance
+/// [`sphere_hits`] gives on that pixel's ray ([`ray_dirs`] of the same pixel centre, the same
+/// operations, so the same bits), `+∞` where it misses or the pixel lies outside the rectangle.
+#[inline(always)]
+fn small_hits<L: Lanes>(
+    b: &volwarp_core::camera::RayBasis,
+    c: [L; 4],
+    x0: L,
+    y0: L,
+    small: L,
+    wide: L,
+    tall: L,
+) -> [L; 4] {
+    let (px, py) = (x0 + L::splat(0.5), y0 + L::splat(0.5));
+    let (px1, py1) = (px + L::splat(1.0), py + L::splat(1.0));
+    let inf = L::splat(f32::INFINITY);
+    let mut out = [inf; 4];
+    let windows = [(px, py, small), (px1, py, small & wide), (px, py1, small & tall), (px1, py1, small & wide & tall)];
+    for (o, (x, y, on)) in out.iter_mut().zip(windows) {
+        if on.any() {
+            *o = lanes::sphere_hits_lanes(&ray_dirs(b, x, y), c, on);
+        }
+    }
+    out
 }
 
 lanes::dispatch! {
@@ -586,7 +658,7 @@ lanes::dispatch! {
         samples: &[u64],
         rects: &mut [Rect],
         centres: &mut [[f32; 4]],
-    ) -> (Rect, bool)
+    ) -> (Rect, bool, u32)
 }
 
 /// The pixels `i < n` whose centre `i + 0.5` lies in `[a, b]`, widened by 0.01 pixel, as an
@@ -757,23 +829,6 @@ fn splat_tile<L: Lanes>(
     lists: &Lists,
     buf: &mut TileBuf,
 ) -> (u64, u64) {
-    let b = &view.basis;
-    // Directions: exactly `RayBasis::dir` (pixel centres x + l + 0.5, exact in f32).
-    let lane_c = L::new([0.5, 1.5, 2.5, 3.5, 4.5, 5.5, 6.5, 7.5]);
-    for y in 0..tile.h {
-        let py = L::splat((tile.y0 + y) as f32 + 0.5);
-        for x in (0..tile.w).step_by(8) {
-            let d = ray_dirs(b, L::splat((tile.x0 + x) as f32) + lane_c, py);
-            // All eight lanes, also past a narrow tile's last column (into the row's padding):
-            // those pixels are never active, so their directions are never used.
-            for (a, d) in d.iter().enumerate() {
-                let at = a * PLANE + (y & (TILE - 1)) * STRIDE + (x & (TILE - 1));
-                if let Some(s) = buf.dirs.get_mut(at..at + 8) {
-                    s.copy_from_slice(&d.to_array());
-                }
-            }
-        }
-    }
     buf.depth.fill(f32::INFINITY);
     buf.ids.fill(NO_HIT);
     // The centres are stored less the eye (exactly `sphere_hits`' `c − o`), so the rays start
@@ -790,6 +845,9 @@ fn splat_tile<L: Lanes>(
     let n = samples.len();
     let tt = TileTest::new(tile);
     let mut touch = 0u32;
+    // The pixels' ray directions, made before the first sphere that needs them (small
+    // spheres bring their hits).
+    let mut dirs_ready = false;
     for &e in lists.groups {
         let g = e as u32 as usize;
         if !tt.hits(lists.group_rects[g]) {
@@ -798,28 +856,129 @@ fn splat_tile<L: Lanes>(
         let first = g * GROUP;
         // Large spheres' rectangles are empty here (drawn from `large` below).
         let group = &rects[first..(first + GROUP).min(n)];
-        let mut hits = tt.hits_of(group) & (e >> 32) as u32;
+        let hits = tt.hits_of(group) & (e >> 32) as u32;
         // Read the group's colors now (its 32 colors lie in two or three cache lines), so
         // they are in cache when the tile's pixels are shaded: nothing waits for these loads.
         if hits != 0 {
             let colors = &scene.colors[first.min(n - 1)..(first + GROUP).min(n)];
             touch ^= colors[0] ^ colors[colors.len() / 2] ^ colors[colors.len() - 1];
         }
-        while hits != 0 {
-            let j = hits.trailing_zeros() as usize;
-            hits &= hits - 1;
+        let small = lists.group_small[g];
+        let (mut few, mut other) = (hits & small, hits & !small);
+        while few != 0 {
+            let j = few.trailing_zeros() as usize;
+            few &= few - 1;
+            pairs += 1;
+            splat_small(&k, tile, group[j], (first + j) as u32, buf);
+        }
+        if other != 0 && !dirs_ready {
+            tile_dirs::<L>(view, tile, buf);
+            dirs_ready = true;
+        }
+        while other != 0 {
+            let j = other.trailing_zeros() as usize;
+            other &= other - 1;
             pairs += 1;
             culled += splat_sphere(&k, tile, group[j], (first + j) as u32, buf) as u64;
         }
     }
     for (&i, &r) in lists.large.iter().zip(lists.large_rects) {
         if tt.hits(r) {
+            if !dirs_ready {
+                tile_dirs::<L>(view, tile, buf);
+                dirs_ready = true;
+            }
             pairs += 1;
             culled += splat_sphere(&k, tile, r, i, buf) as u64;
         }
     }
     std::hint::black_box(touch);
     (pairs, culled)
+}
+
+/// A tile's unit ray directions into `buf.dirs`: exactly `RayBasis::dir` (pixel centres
+/// `x + l + 0.5`, exact in f32).
+#[inline(always)]
+fn tile_dirs<L: Lanes>(view: &View, tile: &Tile, buf: &mut TileBuf) {
+    let b = &view.basis;
+    let lane_c = L::new([0.5, 1.5, 2.5, 3.5, 4.5, 5.5, 6.5, 7.5]);
+    for y in 0..tile.h {
+        let py = L::splat((tile.y0 + y) as f32 + 0.5);
+        for x in (0..tile.w).step_by(8) {
+            let d = ray_dirs(b, L::splat((tile.x0 + x) as f32) + lane_c, py);
+            // All eight lanes, also past a narrow tile's last column (into the row's padding):
+            // those pixels are never active, so their directions are never used.
+            for (a, d) in d.iter().enumerate() {
+                let at = a * PLANE + (y & (TILE - 1)) * STRIDE + (x & (TILE - 1));
+                if let Some(s) = buf.dirs.get_mut(at..at + 8) {
+                    s.copy_from_slice(&d.to_array());
+                }
+            }
+        }
+    }
+}
+
+/// A small sphere `i` (rectangle `r`, at most 2×2 pixels) into a tile's keys from the hits
+/// the bound pass found on its window's four pixels ([`small_hits`], `+∞` for none): per
+/// pixel, without a branch, a nearer hit takes it; a hit at equal depth takes [`keep_ties`].
+/// The four pixels are read and written one by one (two spheres in a row usually share
+/// pixels: a wider load over a narrower store just made waits on store forwarding).
+#[inline(always)]
+fn splat_small<L>(k: &Kernel<'_, L>, tile: &Tile, r: Rect, i: u32, buf: &mut TileBuf) {
+    let t4 = k.centres[i as usize];
+    let (depth, ids): (&mut [f32; KEYS], &mut [u32; KEYS]) = (&mut buf.depth, &mut buf.ids);
+    let (x0, y0) = (r.x0 as usize, r.y0 as usize);
+    if x0 >= tile.x0 && y0 >= tile.y0 && (r.x1 as usize) <= k.tx1 && (r.y1 as usize) <= k.ty1 {
+        // Inside the tile: the window's pixels `p`, `p + 1`, `p + TILE`, `p + TILE + 1` lie
+        // in the planes (a window pixel past the rectangle, in the next row or the padding
+        // row, has `t = +∞` and keeps its key).
+        let p = ((y0 - tile.y0) * TILE + (x0 - tile.x0)) & (TILE * TILE - 1);
+        let mut tie = 0u32;
+        for (l, q) in [p, p + 1, p + TILE, p + TILE + 1].into_iter().enumerate() {
+            let (t, d, id) = (t4[l], depth[q], ids[q]);
+            // Selects, not branches (which would guess wrong about half the time).
+            let win = t < d;
+            depth[q] = std::hint::select_unpredictable(win, t, d);
+            ids[q] = std::hint::select_unpredictable(win, i, id);
+            tie |= ((t == d) as u32 & (t < f32::INFINITY) as u32) << l;
+        }
+        // Equal and finite (`+∞ = +∞` is no hit).
+        if tie != 0 {
+            small_ties(depth, ids, p, tie, &t4, i, k.ties);
+        }
+    } else {
+        // Across the tile's border (rare): the window's pixels inside it.
+        for (l, &t) in t4.iter().enumerate() {
+            let (x, y) = (x0 + (l & 1), y0 + (l >> 1));
+            if t == f32::INFINITY || x < tile.x0 || y < tile.y0 || x > k.tx1 || y > k.ty1 {
+                continue;
+            }
+            let q = ((y - tile.y0) * TILE + (x - tile.x0)) & (TILE * TILE - 1);
+            if t < depth[q] {
+                (depth[q], ids[q]) = (t, i);
+            } else if t == depth[q] {
+                small_ties(depth, ids, q, 1, &[t; 4], i, k.ties);
+            }
+        }
+    }
+}
+
+/// [`splat_small`]'s pixels `bits` of the window at `p` (lane `l`: `p + (l / 2)·TILE + l % 2`)
+/// whose hit `t4[l]` equals their depth: the tie rule, as [`keep_ties`] applies it.
+#[inline(never)]
+#[cold]
+fn small_ties(depth: &mut [f32; KEYS], ids: &mut [u32; KEYS], p: usize, bits: u32, t4: &[f32; 4], i: u32, ties: Ties) {
+    for (l, &t) in t4.iter().enumerate() {
+        if bits >> l & 1 == 0 || t == f32::INFINITY {
+            continue;
+        }
+        let q = p + (l >> 1) * TILE + (l & 1);
+        let (mut ds, mut is) = ([depth[q]; 8], [ids[q]; 8]);
+        let mut tt = [0.0; 8];
+        tt[0] = t;
+        keep_ties(&mut ds, &mut is, 1, &tt, i, false, ties);
+        (depth[q], ids[q]) = (ds[0], is[0]);
+    }
 }
 
 /// What a tile reads of the binning.
@@ -832,6 +991,8 @@ struct Lists<'a> {
     /// Per sphere, its centre less the eye and its radius (`TileSplat::centres`).
     centres: &'a [[f32; 4]],
     group_rects: &'a [Rect],
+    /// Per group, the mask of its small spheres (`TileSplat::group_small`).
+    group_small: &'a [u32],
     /// Whether to skip spheres hidden in a block ([`TileSplat::with_culling`]).
     cull: bool,
 }
@@ -1045,5 +1206,47 @@ impl Renderer for TileSplat {
                 },
             );
         }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// A kernel with no centres (the small path reads a sphere's hits from `centres`).
+    fn kernel<'a>(centres: &'a [[f32; 4]], ties: Ties<'a>) -> Kernel<'a, wide::f32x8> {
+        let z = <wide::f32x8 as Lanes>::splat(0.0);
+        Kernel { ties, centres, o: [0.0; 3], lane: z, lane4: z, row2: z, tx1: 63, ty1: 63, cull: false }
+    }
+
+    #[test]
+    fn small_spheres_keep_the_nearer_hit_and_the_tie_rule() {
+        let tile = Tile { x0: 0, y0: 0, w: TILE, h: TILE };
+        let mut buf = TileBuf::new();
+        // Sphere 9 first: hits at 2.0 on (10, 5) and 3.0 on (11, 6); none on the other two.
+        let inf = f32::INFINITY;
+        let mut centres = vec![[0.0; 4]; 10];
+        centres[9] = [2.0, inf, inf, 3.0];
+        // Sphere 3: the same distance on (10, 5) (a tie: the smaller index wins), nearer on
+        // (11, 5), farther on (11, 6).
+        centres[3] = [2.0, 1.0, inf, 4.0];
+        let r = Rect { x0: 10, y0: 5, x1: 11, y1: 6 };
+        let k = kernel(&centres, Ties::Index);
+        splat_small(&k, &tile, r, 9, &mut buf);
+        splat_small(&k, &tile, r, 3, &mut buf);
+        let at = |x: usize, y: usize| (buf.depth[y * TILE + x], buf.ids[y * TILE + x]);
+        assert_eq!(at(10, 5), (2.0, 3));
+        assert_eq!(at(11, 5), (1.0, 3));
+        assert_eq!(at(10, 6), (inf, NO_HIT));
+        assert_eq!(at(11, 6), (3.0, 9));
+        // A window past a 12×7 tile's right and bottom edges, hitting all four pixels,
+        // writes only its pixel inside the tile, (11, 6).
+        let tile = Tile { x0: 0, y0: 0, w: 12, h: 7 };
+        let centres = [[1.0f32; 4]; 10];
+        let k = Kernel { tx1: 11, ty1: 6, ..kernel(&centres, Ties::Index) };
+        let mut buf = TileBuf::new();
+        splat_small(&k, &tile, Rect { x0: 11, y0: 6, x1: 12, y1: 7 }, 9, &mut buf);
+        let written: Vec<usize> = (0..KEYS).filter(|&p| buf.ids[p] != NO_HIT).collect();
+        assert_eq!(written, vec![6 * TILE + 11]);
     }
 }

@@ -92,6 +92,29 @@ fn clustered_and_identical() {
 }
 
 #[test]
+fn small_spheres_take_the_bound_pass_hits() {
+    // Spheres of at most 2×2 pixels are drawn from the hits the bound pass finds: on tile
+    // borders, at ties (identical spheres) and in a real-sized cloud, the reference's ids.
+    let identical = one_point_cloud(300, 128);
+    let cloud = random_cloud(20_000, 0.004, 31, 160);
+    let mut small = 0;
+    for (f, res) in [(&identical, 3u32), (&identical, 4), (&identical, 6), (&cloud, 160), (&cloud, 131)] {
+        let scene = build_scene(f);
+        for cam in [f.header.camera.with_viewport(res, res), f.header.camera.orbit(7.0, 3.0).with_viewport(res, res)] {
+            assert_splat_exact(f, &scene, &cam, &format!("small spheres at {res}²"));
+            let mut t = TileSplat::new(1);
+            assert!(t.splat_ids(&scene, &cam, &mut Vec::new()));
+            small += t.small_spheres();
+            if f.samples.len() == 300 {
+                // All identical: where one is small, all are.
+                assert!(t.small_spheres() == 0 || t.small_spheres() == 300, "{}", t.small_spheres());
+            }
+        }
+    }
+    assert!(small > 20_000, "{small}");
+}
+
+#[test]
 fn near_plane_eye_inside_and_zoomed_in() {
     let f = random_cloud(20_000, 0.01, 21, 128);
     let c = f.header.camera;
