@@ -122,11 +122,7 @@ fn summary(frame: &Frame, what: &str, scene: &Scene) {
 /// took) and the packet tracer, footprint and paper radius, 10° off and zoomed in, 1024² and
 /// 512², 1 and 2 threads; and the time from a frame's bytes to a drawable scene.
 fn issue18_summary(frame: &Frame, what: &str, scene: &Scene) {
-    let simd = if std::env::var_os("VOLWARP_PORTABLE_SIMD").is_some() {
-        "portable (wide)"
-    } else {
-        "AVX2 where the CPU has it"
-    };
+    let simd = volwarp_cpu_tracer::lane_kind();
     println!("\n## issue 18: sphere routes (medians, wall ms; SIMD: {simd})\nframe: {what}");
     println!("| radius | view | viewport | threads | splat-tiles | spheres (route) | spheres-cpu | splat | packet / spheres | splat-direct (samples' order, not in the registry) |");
     println!("|---|---|---|---|---|---|---|---|---|---|");

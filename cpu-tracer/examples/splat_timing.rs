@@ -121,7 +121,8 @@ fn main() {
             r.render(&scene, &cam, &mut img);
         }
         println!(
-            "{what} {res}²: {:.1} ms per frame wall, {:.1} ms on this thread's CPU",
+            "{what} {res}² ({} lanes): {:.1} ms per frame wall, {:.1} ms on this thread's CPU",
+            volwarp_cpu_tracer::lane_kind(),
             t.elapsed().as_secs_f64() * 1e3 / 30.0,
             (cpu_ns().unwrap_or(0) - c) as f64 / 1e6 / 30.0
         );

@@ -49,9 +49,52 @@ macro_rules! dispatch {
 }
 pub(crate) use dispatch;
 
-/// Whether the kernels take their AVX2 instances: the CPU has AVX2 and the environment
-/// variable `VOLWARP_PORTABLE_SIMD` is not set (set it to time the portable `wide` kernels, as
-/// on a CPU without AVX2 or on ARM). Read once.
+/// [`dispatch!`] with a third instance `$avx512`, compiled with AVX-512 F and DQ on
+/// [`crate::lanes::Avx512`] lanes (sixteen), taken where [`use_avx512`] says so; for kernels
+/// generic over [`BoundLanes`].
+macro_rules! dispatch16 {
+    ($(#[$doc:meta])* fn $name:ident / $avx2:ident / $avx512:ident => $kernel:ident($($arg:ident: $ty:ty),* $(,)?) $(-> $ret:ty)?) => {
+        $(#[$doc])*
+        fn $name($($arg: $ty),*) $(-> $ret)? {
+            #[cfg(target_arch = "x86_64")]
+            if $crate::lanes::use_avx512() {
+                // SAFETY: the CPU supports AVX2, AVX-512 F and DQ (`use_avx512` checks).
+                return unsafe { $avx512($($arg),*) };
+            }
+            #[cfg(target_arch = "x86_64")]
+            if $crate::lanes::use_avx2() {
+                // SAFETY: the CPU supports AVX2 (`use_avx2` checks).
+                return unsafe { $avx2($($arg),*) };
+            }
+            $kernel::<wide::f32x8>($($arg),*)
+        }
+
+        /// The kernel on [`crate::lanes::Avx2`] lanes, compiled with AVX2.
+        ///
+        /// # Safety
+        /// The CPU must support AVX2.
+        #[cfg(target_arch = "x86_64")]
+        #[target_feature(enable = "avx2")]
+        unsafe fn $avx2($($arg: $ty),*) $(-> $ret)? {
+            $kernel::<$crate::lanes::Avx2>($($arg),*)
+        }
+
+        /// The kernel on [`crate::lanes::Avx512`] lanes, compiled with AVX2 and AVX-512 F, DQ.
+        ///
+        /// # Safety
+        /// The CPU must support AVX2, AVX-512 F and DQ.
+        #[cfg(target_arch = "x86_64")]
+        #[target_feature(enable = "avx2,avx512f,avx512dq")]
+        unsafe fn $avx512($($arg: $ty),*) $(-> $ret)? {
+            $kernel::<$crate::lanes::Avx512>($($arg),*)
+        }
+    };
+}
+pub(crate) use dispatch16;
+
+/// Whether the kernels take their AVX2 instances: the CPU has AVX2, the environment variable
+/// `VOLWARP_PORTABLE_SIMD` is not set and `VOLWARP_LANES` is not `portable` (either times the
+/// portable `wide` kernels, as on a CPU without AVX2 or on ARM). Read once.
 #[cfg(target_arch = "x86_64")]
 pub(crate) fn use_avx2() -> bool {
     use std::sync::atomic::{AtomicU8, Ordering};
@@ -60,18 +103,56 @@ pub(crate) fn use_avx2() -> bool {
         1 => true,
         2 => false,
         _ => {
-            let yes = std::is_x86_feature_detected!("avx2") && std::env::var_os("VOLWARP_PORTABLE_SIMD").is_none();
+            let yes = std::is_x86_feature_detected!("avx2")
+                && std::env::var_os("VOLWARP_PORTABLE_SIMD").is_none()
+                && std::env::var("VOLWARP_LANES").ok().as_deref() != Some("portable");
             STATE.store(if yes { 1 } else { 2 }, Ordering::Relaxed);
             yes
         }
     }
 }
 
+/// Whether the kernels that have an AVX-512 instance (sixteen lanes: the tiled splatter's
+/// bound pass) take it: [`use_avx2`], the CPU has AVX-512 F and DQ, and `VOLWARP_LANES` is not
+/// `avx2` (which times the AVX2 instances on a CPU with AVX-512). Read once.
+#[cfg(target_arch = "x86_64")]
+pub(crate) fn use_avx512() -> bool {
+    use std::sync::atomic::{AtomicU8, Ordering};
+    static STATE: AtomicU8 = AtomicU8::new(0);
+    match STATE.load(Ordering::Relaxed) {
+        1 => true,
+        2 => false,
+        _ => {
+            let yes = use_avx2()
+                && std::is_x86_feature_detected!("avx512f")
+                && std::is_x86_feature_detected!("avx512dq")
+                && std::env::var("VOLWARP_LANES").ok().as_deref() != Some("avx2");
+            STATE.store(if yes { 1 } else { 2 }, Ordering::Relaxed);
+            yes
+        }
+    }
+}
+
+/// The lane kind the kernels take on this CPU (as `VOLWARP_LANES` names them): `avx512`
+/// where the bound pass takes its AVX-512 instance, `avx2`, or `portable`.
+pub fn lane_kind() -> &'static str {
+    #[cfg(target_arch = "x86_64")]
+    {
+        if use_avx512() {
+            return "avx512";
+        }
+        if use_avx2() {
+            return "avx2";
+        }
+    }
+    "portable"
+}
+
 /// `RayBasis::dir` for eight pixels whose centres are `(px, py)` (pixel index + 0.5): the same
 /// operations (`corner + du·px + dv·py`, then `d · (1 / sqrt(d·d))`), so the same unit
 /// directions bit for bit.
 #[inline(always)]
-pub(crate) fn ray_dirs<L: Lanes>(b: &RayBasis, px: L, py: L) -> [L; 3] {
+pub(crate) fn ray_dirs<L: Arith>(b: &RayBasis, px: L, py: L) -> [L; 3] {
     // No closure: one would be compiled without the caller's AVX2 target feature.
     let dx = L::splat(b.corner[0]) + L::splat(b.du[0]) * px + L::splat(b.dv[0]) * py;
     let dy = L::splat(b.corner[1]) + L::splat(b.du[1]) * px + L::splat(b.dv[1]) * py;
@@ -84,7 +165,7 @@ pub(crate) fn ray_dirs<L: Lanes>(b: &RayBasis, px: L, py: L) -> [L; 3] {
 /// `active` lanes: the hit distances and the mask of lanes that hit, `None` if none does. The
 /// same operations as core's scalar code, so the same `t` bit for bit.
 #[inline(always)]
-pub(crate) fn sphere_hits<L: Lanes>(o: &[f32; 3], d: &[L; 3], c: Vec3, r: f32, active: L) -> Option<(L, L)> {
+pub(crate) fn sphere_hits<L: Arith>(o: &[f32; 3], d: &[L; 3], c: Vec3, r: f32, active: L) -> Option<(L, L)> {
     let oc = [L::splat(c.x - o[0]), L::splat(c.y - o[1]), L::splat(c.z - o[2])];
     let (b, disc) = closest_approach(d, oc, L::splat(r));
     let ok = disc.simd_ge(L::splat(0.0)) & active;
@@ -99,7 +180,7 @@ pub(crate) fn sphere_hits<L: Lanes>(o: &[f32; 3], d: &[L; 3], c: Vec3, r: f32, a
 /// lane, `+∞` where the ray misses (or the lane is not active). The same operations per lane
 /// as [`sphere_hits`] with the origin at zero (`c − 0` is `c`), so the same `t` bit for bit.
 #[inline(always)]
-pub(crate) fn sphere_hits_lanes<L: Lanes>(d: &[L; 3], c: [L; 4], active: L) -> L {
+pub(crate) fn sphere_hits_lanes<L: Arith>(d: &[L; 3], c: [L; 4], active: L) -> L {
     let [ox, oy, oz, r] = c;
     let (b, disc) = closest_approach(d, [ox, oy, oz], r);
     let (t, hit) = nearest_hit(b, disc, disc.simd_ge(L::splat(0.0)) & active);
@@ -109,7 +190,7 @@ pub(crate) fn sphere_hits_lanes<L: Lanes>(d: &[L; 3], c: [L; 4], active: L) -> L
 /// `sphere::intersect`'s first half: the distance `b` along the unit ray `d` to the point
 /// nearest the centre (`oc`: centre less origin) and the discriminant `r² − |oc − b·d|²`.
 #[inline(always)]
-fn closest_approach<L: Lanes>(d: &[L; 3], oc: [L; 3], r: L) -> (L, L) {
+fn closest_approach<L: Arith>(d: &[L; 3], oc: [L; 3], r: L) -> (L, L) {
     let [ox, oy, oz] = oc;
     let b = ox * d[0] + oy * d[1] + oz * d[2];
     let fx = ox - b * d[0];
@@ -122,7 +203,7 @@ fn closest_approach<L: Lanes>(d: &[L; 3], oc: [L; 3], r: L) -> (L, L) {
 /// nearer root in front of the origin, else the farther, and the mask of lanes with a hit in
 /// front.
 #[inline(always)]
-fn nearest_hit<L: Lanes>(b: L, disc: L, ok: L) -> (L, L) {
+fn nearest_hit<L: Arith>(b: L, disc: L, ok: L) -> (L, L) {
     let zero = L::splat(0.0);
     let sq = disc.sqrt();
     let t0 = b - sq;
@@ -135,16 +216,26 @@ fn nearest_hit<L: Lanes>(b: L, disc: L, ok: L) -> (L, L) {
 /// zero): `Dequantizer::center` and `radius` and one subtraction per axis, in scalar code.
 #[inline(always)]
 pub(crate) fn decode_scalar<L: Lanes>(deq: &Dequantizer, eye: [f32; 3], s: &[u64]) -> [L; 4] {
-    let (mut x, mut y, mut z, mut r) = ([0f32; 8], [0f32; 8], [0f32; 8], [0f32; 8]);
-    for (l, &s) in s.iter().take(8).enumerate() {
-        let c = deq.center(s);
-        (x[l], y[l], z[l], r[l]) = (c.x - eye[0], c.y - eye[1], c.z - eye[2], deq.radius(s));
-    }
-    [L::new(x), L::new(y), L::new(z), L::new(r)]
+    let mut a = [[0f32; 16]; 4];
+    decode_scalar_into(deq, eye, &s[..s.len().min(8)], &mut a);
+    a.map(|v| L::new(first8(&v)))
 }
 
-/// Eight `f32` lanes (also used as masks) and their companion eight `u32` lanes.
-pub(crate) trait Lanes:
+/// [`decode_scalar`]'s values of up to sixteen samples into `out` (x, y, z, radius; entries
+/// past `s` unchanged).
+#[inline(always)]
+pub(crate) fn decode_scalar_into(deq: &Dequantizer, eye: [f32; 3], s: &[u64], out: &mut [[f32; 16]; 4]) {
+    for (l, &s) in s.iter().take(16).enumerate() {
+        let c = deq.center(s);
+        (out[0][l], out[1][l], out[2][l], out[3][l]) = (c.x - eye[0], c.y - eye[1], c.z - eye[2], deq.radius(s));
+    }
+}
+
+/// The lane operations the shared kernels need whatever the lane count (eight for [`Lanes`],
+/// sixteen for the AVX-512 bound pass): arithmetic, square root, comparisons (masks are lanes
+/// with all bits set or clear), selects. Every implementation has exactly the semantics noted
+/// per method, so a kernel generic over it computes the same values on every implementation.
+pub(crate) trait Arith:
     Copy
     + Add<Output = Self>
     + Sub<Output = Self>
@@ -153,21 +244,10 @@ pub(crate) trait Lanes:
     + BitAnd<Output = Self>
     + BitOr<Output = Self>
 {
-    /// Eight `u32` lanes.
-    type U: Copy;
-
     /// All lanes `x`.
     fn splat(x: f32) -> Self;
-    /// The lanes of `a`, lane 0 first.
-    fn new(a: [f32; 8]) -> Self;
     /// IEEE square root per lane.
     fn sqrt(self) -> Self;
-    /// `f32::floor` per lane.
-    fn floor(self) -> Self;
-    /// `f32::ceil` per lane.
-    fn ceil(self) -> Self;
-    /// `f32::min` per lane (a NaN operand gives the other one).
-    fn min(self, rhs: Self) -> Self;
     /// `f32::max` per lane (a NaN operand gives the other one).
     fn max(self, rhs: Self) -> Self;
     /// `if self < rhs { self } else { rhs }` per lane (`minps`).
@@ -184,14 +264,82 @@ pub(crate) trait Lanes:
     fn simd_ge(self, rhs: Self) -> Self;
     /// Mask of `self == rhs`.
     fn simd_eq(self, rhs: Self) -> Self;
-    /// Mask of the finite lanes.
-    fn is_finite(self) -> Self;
     /// Per lane, `if_true` where the mask `self` is set, else `if_false`.
     fn select(self, if_true: Self, if_false: Self) -> Self;
     /// Bit `l` is lane `l`'s sign bit (for a mask: whether it is set).
     fn to_bitmask(self) -> u32;
     /// Whether any lane of the mask is set.
     fn any(self) -> bool;
+}
+
+/// [`Arith`] lanes for the tiled splatter's bound pass, `N` of them (8, or 16 with AVX-512):
+/// the packed samples' decode, the integer pixel spans, and the lanes as arrays (their first
+/// `N` entries).
+pub(crate) trait BoundLanes: Arith {
+    /// Lanes per value.
+    const N: usize;
+    /// [`decode_scalar`]'s values for up to `N` samples (lanes past `s`: zero).
+    fn decode(deq: &Dequantizer, eye: [f32; 3], s: &[u64]) -> [Self; 4];
+    /// [`Lanes::span_ints`] on `N` lanes.
+    fn spans(lo: Self, hi: Self, max: u32) -> ([i32; 16], [i32; 16]);
+    /// [`Lanes::from_ints`] on `N` lanes.
+    fn from_ints16(a: &[i32; 16]) -> Self;
+    /// The lanes, lane 0 first (entries past `N`: zero).
+    fn lanes(self) -> [f32; 16];
+}
+
+/// The first eight entries of `a`.
+#[inline(always)]
+fn first8<T: Copy>(a: &[T; 16]) -> [T; 8] {
+    [a[0], a[1], a[2], a[3], a[4], a[5], a[6], a[7]]
+}
+
+/// `a` in the first eight of sixteen entries, the rest `z`.
+#[inline(always)]
+fn pad16<T: Copy>(a: [T; 8], z: T) -> [T; 16] {
+    [a[0], a[1], a[2], a[3], a[4], a[5], a[6], a[7], z, z, z, z, z, z, z, z]
+}
+
+impl<L: Lanes> BoundLanes for L {
+    const N: usize = 8;
+    #[inline(always)]
+    fn decode(deq: &Dequantizer, eye: [f32; 3], s: &[u64]) -> [Self; 4] {
+        // Eight at once in lanes where the CPU has them (`Lanes::decode8`: the same values).
+        match s.first_chunk::<8>() {
+            Some(eight) => L::decode8(deq, eye, eight),
+            None => decode_scalar(deq, eye, s),
+        }
+    }
+    #[inline(always)]
+    fn spans(lo: Self, hi: Self, max: u32) -> ([i32; 16], [i32; 16]) {
+        let (a, b) = L::span_ints(lo, hi, max);
+        (pad16(a, 0), pad16(b, 0))
+    }
+    #[inline(always)]
+    fn from_ints16(a: &[i32; 16]) -> Self {
+        L::from_ints(&first8(a))
+    }
+    #[inline(always)]
+    fn lanes(self) -> [f32; 16] {
+        pad16(self.to_array(), 0.0)
+    }
+}
+
+/// Eight `f32` lanes (also used as masks) and their companion eight `u32` lanes.
+pub(crate) trait Lanes: Arith {
+    /// Eight `u32` lanes.
+    type U: Copy;
+
+    /// The lanes of `a`, lane 0 first.
+    fn new(a: [f32; 8]) -> Self;
+    /// `f32::floor` per lane.
+    fn floor(self) -> Self;
+    /// `f32::ceil` per lane.
+    fn ceil(self) -> Self;
+    /// `f32::min` per lane (a NaN operand gives the other one).
+    fn min(self, rhs: Self) -> Self;
+    /// Mask of the finite lanes.
+    fn is_finite(self) -> Self;
     /// Whether all lanes of the mask are set.
     fn all(self) -> bool;
     /// All `u32` lanes `x`.
@@ -244,32 +392,14 @@ pub(crate) trait Lanes:
 }
 
 /// The portable lanes: `wide`'s, whatever it was compiled for.
-impl Lanes for f32x8 {
-    type U = u32x8;
-
+impl Arith for f32x8 {
     #[inline(always)]
     fn splat(x: f32) -> Self {
         f32x8::splat(x)
     }
     #[inline(always)]
-    fn new(a: [f32; 8]) -> Self {
-        f32x8::new(a)
-    }
-    #[inline(always)]
     fn sqrt(self) -> Self {
         f32x8::sqrt(self)
-    }
-    #[inline(always)]
-    fn floor(self) -> Self {
-        f32x8::floor(self)
-    }
-    #[inline(always)]
-    fn ceil(self) -> Self {
-        f32x8::ceil(self)
-    }
-    #[inline(always)]
-    fn min(self, rhs: Self) -> Self {
-        f32x8::min(self, rhs)
     }
     #[inline(always)]
     fn max(self, rhs: Self) -> Self {
@@ -304,10 +434,6 @@ impl Lanes for f32x8 {
         f32x8::simd_eq(self, rhs)
     }
     #[inline(always)]
-    fn is_finite(self) -> Self {
-        f32x8::is_finite(self)
-    }
-    #[inline(always)]
     fn select(self, if_true: Self, if_false: Self) -> Self {
         f32x8::select(self, if_true, if_false)
     }
@@ -318,6 +444,30 @@ impl Lanes for f32x8 {
     #[inline(always)]
     fn any(self) -> bool {
         f32x8::any(self)
+    }
+}
+
+impl Lanes for f32x8 {
+    type U = u32x8;
+    #[inline(always)]
+    fn new(a: [f32; 8]) -> Self {
+        f32x8::new(a)
+    }
+    #[inline(always)]
+    fn floor(self) -> Self {
+        f32x8::floor(self)
+    }
+    #[inline(always)]
+    fn ceil(self) -> Self {
+        f32x8::ceil(self)
+    }
+    #[inline(always)]
+    fn min(self, rhs: Self) -> Self {
+        f32x8::min(self, rhs)
+    }
+    #[inline(always)]
+    fn is_finite(self) -> Self {
+        f32x8::is_finite(self)
     }
     #[inline(always)]
     fn all(self) -> bool {
@@ -361,10 +511,15 @@ impl Lanes for f32x8 {
 
 #[cfg(target_arch = "x86_64")]
 pub(crate) use avx2::Avx2;
+#[cfg(target_arch = "x86_64")]
+pub(crate) use avx512::Avx512;
+
+#[cfg(target_arch = "x86_64")]
+mod avx512;
 
 #[cfg(target_arch = "x86_64")]
 mod avx2 {
-    use super::Lanes;
+    use super::{Arith, Lanes};
     use core::arch::x86_64::*;
     use core::ops::{Add, BitAnd, BitOr, Div, Mul, Sub};
     use volwarp_core::sample::{Dequantizer, POS_BITS, RADIUS_BITS};
@@ -412,37 +567,15 @@ mod avx2 {
     // SAFETY (every `unsafe` block of this impl): AVX and AVX2 are available (the type's
     // invariant); the intrinsics have no other precondition, except `_mm256_loadu_ps` and
     // `_mm256_storeu_si256`, whose pointers are to eight `f32` / `u32` as noted there.
-    impl Lanes for Avx2 {
-        type U = __m256i;
-
+    impl Arith for Avx2 {
         #[inline(always)]
         fn splat(x: f32) -> Self {
             Avx2(unsafe { _mm256_set1_ps(x) })
         }
         #[inline(always)]
-        fn new(a: [f32; 8]) -> Self {
-            // `a` is eight readable `f32`; the load needs no alignment.
-            Avx2(unsafe { _mm256_loadu_ps(a.as_ptr()) })
-        }
-        #[inline(always)]
         fn sqrt(self) -> Self {
             // `vsqrtps`: correctly rounded, as `sqrtps`.
             Avx2(unsafe { _mm256_sqrt_ps(self.0) })
-        }
-        #[inline(always)]
-        fn floor(self) -> Self {
-            // `vroundps` toward −∞, as `wide`'s AVX path and `f32::floor`.
-            Avx2(unsafe { _mm256_floor_ps(self.0) })
-        }
-        #[inline(always)]
-        fn ceil(self) -> Self {
-            // `vroundps` toward +∞, as `wide`'s AVX path and `f32::ceil`.
-            Avx2(unsafe { _mm256_ceil_ps(self.0) })
-        }
-        #[inline(always)]
-        fn min(self, rhs: Self) -> Self {
-            // `wide`: `rhs.is_nan().select(self, self.fast_min(rhs))`.
-            rhs.cmp::<_CMP_UNORD_Q>(rhs).select(self, self.fast_min(rhs))
         }
         #[inline(always)]
         fn max(self, rhs: Self) -> Self {
@@ -480,12 +613,6 @@ mod avx2 {
             self.cmp::<_CMP_EQ_OQ>(rhs)
         }
         #[inline(always)]
-        fn is_finite(self) -> Self {
-            // |x| < ∞: false for ±∞ and NaN, as `wide`'s exponent test.
-            let abs = Avx2(unsafe { _mm256_andnot_ps(_mm256_set1_ps(-0.0), self.0) });
-            abs.simd_lt(Avx2::splat(f32::INFINITY))
-        }
-        #[inline(always)]
         fn select(self, if_true: Self, if_false: Self) -> Self {
             // `vblendvps` reads the sign bit, i.e. the whole lane of a mask.
             Avx2(unsafe { _mm256_blendv_ps(if_false.0, if_true.0, self.0) })
@@ -498,6 +625,38 @@ mod avx2 {
         fn any(self) -> bool {
             // `vtestps`: ZF is set when no sign bit is.
             unsafe { _mm256_testz_ps(self.0, self.0) == 0 }
+        }
+    }
+
+    // SAFETY (every `unsafe` block of this impl): as for `Arith` above.
+    impl Lanes for Avx2 {
+        type U = __m256i;
+
+        #[inline(always)]
+        fn new(a: [f32; 8]) -> Self {
+            // `a` is eight readable `f32`; the load needs no alignment.
+            Avx2(unsafe { _mm256_loadu_ps(a.as_ptr()) })
+        }
+        #[inline(always)]
+        fn floor(self) -> Self {
+            // `vroundps` toward −∞, as `wide`'s AVX path and `f32::floor`.
+            Avx2(unsafe { _mm256_floor_ps(self.0) })
+        }
+        #[inline(always)]
+        fn ceil(self) -> Self {
+            // `vroundps` toward +∞, as `wide`'s AVX path and `f32::ceil`.
+            Avx2(unsafe { _mm256_ceil_ps(self.0) })
+        }
+        #[inline(always)]
+        fn min(self, rhs: Self) -> Self {
+            // `wide`: `rhs.is_nan().select(self, self.fast_min(rhs))`.
+            rhs.cmp::<_CMP_UNORD_Q>(rhs).select(self, self.fast_min(rhs))
+        }
+        #[inline(always)]
+        fn is_finite(self) -> Self {
+            // |x| < ∞: false for ±∞ and NaN, as `wide`'s exponent test.
+            let abs = Avx2(unsafe { _mm256_andnot_ps(_mm256_set1_ps(-0.0), self.0) });
+            abs.simd_lt(Avx2::splat(f32::INFINITY))
         }
         #[inline(always)]
         fn all(self) -> bool {
@@ -613,7 +772,7 @@ mod avx2 {
 
     #[cfg(test)]
     mod tests {
-        use super::{Avx2, Dequantizer, Lanes};
+        use super::{Arith, Avx2, Dequantizer, Lanes};
         use crate::lanes::decode_scalar;
         use core::arch::x86_64::{__m256, __m256i};
         use wide::{f32x8, u32x8};
@@ -649,32 +808,32 @@ mod avx2 {
                     assert!(ok, "{what}: {a:?} {b:?}: {r:?} {s:?}");
                 };
                 eq("new", x, p);
-                eq("splat", Avx2::splat(a[3]), <f32x8 as Lanes>::splat(a[3]));
+                eq("splat", Avx2::splat(a[3]), <f32x8 as Arith>::splat(a[3]));
                 same("add", x + y, p + q);
                 same("sub", x - y, p - q);
                 same("mul", x * y, p * q);
                 same("div", x / y, p / q);
-                same("sqrt", x.sqrt(), Lanes::sqrt(p));
+                same("sqrt", x.sqrt(), Arith::sqrt(p));
                 eq("min", Lanes::min(x, y), Lanes::min(p, q));
-                eq("max", Lanes::max(x, y), Lanes::max(p, q));
-                eq("fast_min", x.fast_min(y), Lanes::fast_min(p, q));
-                eq("fast_max", x.fast_max(y), Lanes::fast_max(p, q));
-                let (lt, wlt) = (x.simd_lt(y), Lanes::simd_lt(p, q));
-                let (ge, wge) = (x.simd_ge(y), Lanes::simd_ge(p, q));
+                eq("max", Arith::max(x, y), Arith::max(p, q));
+                eq("fast_min", x.fast_min(y), Arith::fast_min(p, q));
+                eq("fast_max", x.fast_max(y), Arith::fast_max(p, q));
+                let (lt, wlt) = (x.simd_lt(y), Arith::simd_lt(p, q));
+                let (ge, wge) = (x.simd_ge(y), Arith::simd_ge(p, q));
                 eq("lt", lt, wlt);
-                eq("le", x.simd_le(y), Lanes::simd_le(p, q));
-                eq("gt", x.simd_gt(y), Lanes::simd_gt(p, q));
+                eq("le", x.simd_le(y), Arith::simd_le(p, q));
+                eq("gt", x.simd_gt(y), Arith::simd_gt(p, q));
                 eq("ge", ge, wge);
-                eq("eq", x.simd_eq(y), Lanes::simd_eq(p, q));
+                eq("eq", x.simd_eq(y), Arith::simd_eq(p, q));
                 eq("is_finite", x.is_finite(), Lanes::is_finite(p));
                 eq("and", lt & ge, wlt & wge);
                 eq("or", lt | ge, wlt | wge);
-                eq("select", lt.select(x, y), Lanes::select(wlt, p, q));
-                assert_eq!(lt.to_bitmask(), Lanes::to_bitmask(wlt));
-                assert_eq!(x.to_bitmask(), Lanes::to_bitmask(p));
+                eq("select", lt.select(x, y), Arith::select(wlt, p, q));
+                assert_eq!(lt.to_bitmask(), Arith::to_bitmask(wlt));
+                assert_eq!(x.to_bitmask(), Arith::to_bitmask(p));
                 for m in [lt, ge, lt & ge, lt | ge] {
                     let w = f32x8::new(bytemuck::cast(bits(m)));
-                    assert_eq!(m.any(), Lanes::any(w));
+                    assert_eq!(m.any(), Arith::any(w));
                     assert_eq!(m.all(), Lanes::all(w));
                 }
             }

@@ -65,6 +65,7 @@ pub use build::{build_scene, BuildTimes, Method, ParallelBuilder};
 
 pub use direct_splat::DirectSplat;
 pub use hole_fill::{FillOptions, HoleFill, SampleIds};
+pub use lanes::lane_kind;
 pub use layer_splat::LayerSplat;
 pub use layer_trace::LayerTrace;
 pub use packet_tracer::PacketTracer;

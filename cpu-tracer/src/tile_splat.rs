@@ -51,7 +51,7 @@
 //! index), so the image is the built scene's.
 
 use crate::depth_buffer::{key, key_prim, EMPTY};
-use crate::lanes::{self, ray_dirs, sphere_hits, Lanes};
+use crate::lanes::{self, ray_dirs, sphere_hits, Arith, BoundLanes, Lanes};
 use crate::sphere_splat::View;
 use crate::threads::Threads;
 use crate::{begin_frame_overwritten, begin_frame_unbuilt_ok as begin_frame, shade, MAX_VIEWPORT, NO_HIT};
@@ -476,7 +476,7 @@ pub(crate) fn tight_bound(view: &View, c: Vec3, r: f32) -> Option<(u32, u32, u32
 
 /// `|a|` per lane (`f32::max(a, −a)`).
 #[inline(always)]
-fn lane_abs<L: Lanes>(a: L) -> L {
+fn lane_abs<L: Arith>(a: L) -> L {
     a.max(L::splat(0.0) - a)
 }
 
@@ -508,14 +508,16 @@ impl ViewF32 {
     }
 }
 
-/// The rectangles of `samples` (at most [`GROUP`]) into `rects`, eight at a time in f32
-/// lanes, and the union of those that are not large. [`tight_bound`]'s tangents with the radius
-/// widened by a relative 2·10⁻⁵ of the L1 distance (instead of 10⁻⁵ of the distance: the extra
-/// covers the f32 rounding of the bound itself, about 3·10⁻⁷ of the slope) for spheres at
-/// least two (widened) radii in front of the eye plane; the others (near, behind, NaN) take
-/// [`tight_bound`] in f64.
+/// The rectangles of `samples` (at most [`GROUP`]) into `rects`, `L::N` (8 or 16) at a time
+/// in f32 lanes, and the union of those that are not large; with `centres` as long as
+/// `samples`, each sphere's centre less the eye and radius into it, or for a small sphere its
+/// hits ([`small_hits`]), and the mask of the small spheres. [`tight_bound`]'s tangents with
+/// the radius widened by a relative 2·10⁻⁵ of the L1 distance (instead of 10⁻⁵ of the
+/// distance: the extra covers the f32 rounding of the bound itself, about 3·10⁻⁷ of the slope)
+/// for spheres at least two (widened) radii in front of the eye plane; the others (near,
+/// behind, NaN) take [`tight_bound`] in f64. Every instance computes the same values.
 #[inline(always)]
-pub(crate) fn bound_group<L: Lanes>(
+pub(crate) fn bound_group<L: BoundLanes>(
     view: &View,
     vf: &ViewF32,
     deq: &Dequantizer,
@@ -525,12 +527,8 @@ pub(crate) fn bound_group<L: Lanes>(
 ) -> (Rect, bool, u32) {
     let (mut u, mut any_large, mut small_all) = (NO_RECT, false, 0u32);
     let keep_centres = centres.len() == samples.len();
-    for (k, (ss, rs)) in samples.chunks(8).zip(rects.chunks_mut(8)).enumerate() {
-        // Eight at once in lanes where the CPU has them (`Lanes::decode8`: the same values).
-        let [rx, ry, rz, r] = match ss.first_chunk::<8>() {
-            Some(eight) => L::decode8(deq, vf.eye, eight),
-            None => lanes::decode_scalar(deq, vf.eye, ss),
-        };
+    for (k, (ss, rs)) in samples.chunks(L::N).zip(rects.chunks_mut(L::N)).enumerate() {
+        let [rx, ry, rz, r] = L::decode(deq, vf.eye, ss);
         let cx = rx * L::splat(vf.u[0]) + ry * L::splat(vf.u[1]) + rz * L::splat(vf.u[2]);
         let cy = rx * L::splat(vf.v[0]) + ry * L::splat(vf.v[1]) + rz * L::splat(vf.v[2]);
         let cz = rx * L::splat(vf.w[0]) + ry * L::splat(vf.w[1]) + rz * L::splat(vf.w[2]);
@@ -552,7 +550,7 @@ pub(crate) fn bound_group<L: Lanes>(
         let (ay, by) = (y0 - L::splat(0.52), y1 - L::splat(0.48));
         let (nw, nh) = (L::splat(view.width as f32), L::splat(view.height as f32));
         let zero = L::splat(0.0);
-        let ok = far
+        let ok_v = far
             & ax.simd_le(bx)
             & bx.simd_ge(zero)
             & ax.simd_lt(nw)
@@ -561,15 +559,15 @@ pub(crate) fn bound_group<L: Lanes>(
             & ay.simd_lt(nh);
         // The integer spans in lanes (`Lanes::span_ints`: `ceil_clamped` and the truncating
         // clamp, for the lanes of `ok`, whose values lie in its domain).
-        let (xs0, xs1) = L::span_ints(ax.fast_max(L::splat(-1.0)), bx.fast_min(nw), view.width - 1);
-        let (ys0, ys1) = L::span_ints(ay.fast_max(L::splat(-1.0)), by.fast_min(nh), view.height - 1);
-        let ok_v = ok;
-        let (far, ok) = (far.to_bitmask(), ok.to_bitmask());
+        let (xs0, xs1) = L::spans(ax.fast_max(L::splat(-1.0)), bx.fast_min(nw), view.width - 1);
+        let (ys0, ys1) = L::spans(ay.fast_max(L::splat(-1.0)), by.fast_min(nh), view.height - 1);
+        let live = if ss.len() >= 32 { u32::MAX } else { (1u32 << ss.len()) - 1 };
+        let (far, ok) = (far.to_bitmask(), ok_v.to_bitmask());
         // Branch-free per lane: the lanes of `ok` with a non-empty span get their rectangle,
         // the others the empty one (built in locals and stored once: reading `*rect` back
         // after four 16-bit stores stalled on store forwarding).
-        let mut out = [NO_RECT; 8];
-        for (l, r) in out.iter_mut().enumerate() {
+        let mut out = [NO_RECT; 16];
+        for (l, r) in out.iter_mut().enumerate().take(L::N) {
             let (x0, x1, y0, y1) = (xs0[l], xs1[l], ys0[l], ys1[l]);
             let fast = ok >> l & 1 != 0 && x0 <= x1 && y0 <= y1;
             let rect = Rect { x0: x0 as u16, y0: y0 as u16, x1: x1 as u16, y1: y1 as u16 };
@@ -577,13 +575,14 @@ pub(crate) fn bound_group<L: Lanes>(
         }
         if keep_centres {
             // Spheres of at most 2×2 pixels (lanes of `ok`, non-empty spans at most two
-            // wide): their pixels' hits now, eight spheres per lane operation, in place of
+            // wide): their pixels' hits now, `L::N` spheres per lane operation, in place of
             // their centres (`small_hits`); the others' centres.
-            let (fx0, fx1, fy0, fy1) = (L::from_ints(&xs0), L::from_ints(&xs1), L::from_ints(&ys0), L::from_ints(&ys1));
+            let (fx0, fx1) = (L::from_ints16(&xs0), L::from_ints16(&xs1));
+            let (fy0, fy1) = (L::from_ints16(&ys0), L::from_ints16(&ys1));
             let (wx, wy) = (fx1 - fx0, fy1 - fy0);
-            let (one, zero) = (L::splat(1.0), L::splat(0.0));
+            let one = L::splat(1.0);
             let small_v = ok_v & wx.simd_ge(zero) & wx.simd_le(one) & wy.simd_ge(zero) & wy.simd_le(one);
-            let small = small_v.to_bitmask() & ((1u32 << ss.len()) - 1);
+            let small = small_v.to_bitmask() & live;
             let mut c = [rx, ry, rz, r];
             if small != 0 {
                 let hits = small_hits(&view.basis, c, fx0, fy0, small_v, wx.simd_gt(zero), wy.simd_gt(zero));
@@ -591,14 +590,14 @@ pub(crate) fn bound_group<L: Lanes>(
                     *c = small_v.select(h, *c);
                 }
             }
-            let [ax, ay, az, ar] = c.map(|v| v.to_array());
-            for (l, c) in centres[8 * k..].iter_mut().take(ss.len()).enumerate() {
+            let [ax, ay, az, ar] = c.map(|v| v.lanes());
+            for (l, c) in centres[L::N * k..].iter_mut().take(ss.len()).enumerate() {
                 *c = [ax[l], ay[l], az[l], ar[l]];
             }
-            small_all |= small << (8 * k);
+            small_all |= small << (L::N * k);
         }
         // Near the eye plane, behind it, or NaN (rare): the f64 bound.
-        let mut slow = !ok & !far & ((1u32 << ss.len()) - 1);
+        let mut slow = !ok & !far & live;
         while slow != 0 {
             let l = slow.trailing_zeros() as usize;
             slow &= slow - 1;
@@ -627,7 +626,7 @@ pub(crate) fn bound_group<L: Lanes>(
 /// [`sphere_hits`] gives on that pixel's ray ([`ray_dirs`] of the same pixel centre, the same
 /// operations, so the same bits), `+∞` where it misses or the pixel lies outside the rectangle.
 #[inline(always)]
-fn small_hits<L: Lanes>(
+fn small_hits<L: Arith>(
     b: &volwarp_core::camera::RayBasis,
     c: [L; 4],
     x0: L,
@@ -649,9 +648,9 @@ fn small_hits<L: Lanes>(
     out
 }
 
-lanes::dispatch! {
-    /// [`bound_group`] on the best lanes this CPU has.
-    fn bound_dispatch / bound_avx2 => bound_group(
+lanes::dispatch16! {
+    /// [`bound_group`] on the best lanes this CPU has (sixteen with AVX-512, else eight).
+    fn bound_dispatch / bound_avx2 / bound_avx512 => bound_group(
         view: &View,
         vf: &ViewF32,
         deq: &Dequantizer,
@@ -1215,7 +1214,7 @@ mod tests {
 
     /// A kernel with no centres (the small path reads a sphere's hits from `centres`).
     fn kernel<'a>(centres: &'a [[f32; 4]], ties: Ties<'a>) -> Kernel<'a, wide::f32x8> {
-        let z = <wide::f32x8 as Lanes>::splat(0.0);
+        let z = <wide::f32x8 as Arith>::splat(0.0);
         Kernel { ties, centres, o: [0.0; 3], lane: z, lane4: z, row2: z, tx1: 63, ty1: 63, cull: false }
     }
 
@@ -1248,5 +1247,55 @@ mod tests {
         splat_small(&k, &tile, Rect { x0: 11, y0: 6, x1: 12, y1: 7 }, 9, &mut buf);
         let written: Vec<usize> = (0..KEYS).filter(|&p| buf.ids[p] != NO_HIT).collect();
         assert_eq!(written, vec![6 * TILE + 11]);
+    }
+
+    /// The bound pass's instances (portable, AVX2, AVX-512 where the CPU has them) give the
+    /// same rectangles, centres or hits (bit for bit), unions and masks, on whole and partial
+    /// groups, near the eye plane and far.
+    #[test]
+    fn bound_instances_agree() {
+        type Out = (Vec<u64>, Vec<[u32; 4]>, (u64, bool, u32));
+        let f = crate::synthetic::random_cloud(5000, 0.004, 41, 160);
+        let eye_inside = Camera::look_at(Vec3::splat(0.5), Vec3::new(0.9, 0.6, 0.1), Vec3::Y, 70.0, 128, 96);
+        let (c, deq) = (f.header.camera, f.header.dequantizer());
+        let cams = [c, c.with_viewport(40, 40), c.orbit(30.0, 10.0).with_viewport(97, 61), eye_inside, c.dolly(0.2)];
+        let mut small = 0;
+        for cam in cams {
+            let view = View::new(&cam);
+            let vf = ViewF32::new(&view);
+            for len in [GROUP, 13] {
+                for s in f.samples.chunks(len) {
+                    let run = |k: usize| -> Option<Out> {
+                        let (mut rects, mut centres) = (vec![NO_RECT; s.len()], vec![[0f32; 4]; s.len()]);
+                        let r = match k {
+                            0 => bound_group::<wide::f32x8>(&view, &vf, &deq, s, &mut rects, &mut centres),
+                            #[cfg(target_arch = "x86_64")]
+                            1 if std::is_x86_feature_detected!("avx2") => {
+                                // SAFETY: the CPU has AVX2 (checked).
+                                unsafe { bound_avx2(&view, &vf, &deq, s, &mut rects, &mut centres) }
+                            }
+                            #[cfg(target_arch = "x86_64")]
+                            2 if std::is_x86_feature_detected!("avx512f")
+                                && std::is_x86_feature_detected!("avx512dq") =>
+                            {
+                                // SAFETY: the CPU has AVX2, AVX-512 F and DQ (checked).
+                                unsafe { bound_avx512(&view, &vf, &deq, s, &mut rects, &mut centres) }
+                            }
+                            _ => return None,
+                        };
+                        let c = centres.iter().map(|c| c.map(f32::to_bits)).collect();
+                        Some((rects.iter().map(|r| r.bits()).collect(), c, (r.0.bits(), r.1, r.2)))
+                    };
+                    let portable = run(0).expect("the portable instance");
+                    small += portable.2 .2.count_ones();
+                    for k in [1, 2] {
+                        if let Some(o) = run(k) {
+                            assert!(o == portable, "instance {k}, {len} spheres");
+                        }
+                    }
+                }
+            }
+        }
+        assert!(small > 1000, "{small}");
     }
 }
