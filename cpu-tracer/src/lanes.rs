@@ -177,14 +177,15 @@ pub(crate) fn sphere_hits<L: Arith>(o: &[f32; 3], d: &[L; 3], c: Vec3, r: f32, a
 
 /// [`sphere_hits`] for eight spheres at once, one per lane (centres less the rays' origin
 /// and radii `c`), each on its own unit ray `d`, for the `active` lanes: the hit distance per
-/// lane, `+∞` where the ray misses (or the lane is not active). The same operations per lane
-/// as [`sphere_hits`] with the origin at zero (`c − 0` is `c`), so the same `t` bit for bit.
+/// lane, NaN where the ray misses (or the lane is not active: no comparison takes a NaN, so a
+/// miss never wins a depth test nor ties). The same operations per lane as [`sphere_hits`]
+/// with the origin at zero (`c − 0` is `c`), so the same `t` bit for bit.
 #[inline(always)]
 pub(crate) fn sphere_hits_lanes<L: Arith>(d: &[L; 3], c: [L; 4], active: L) -> L {
     let [ox, oy, oz, r] = c;
     let (b, disc) = closest_approach(d, [ox, oy, oz], r);
     let (t, hit) = nearest_hit(b, disc, disc.simd_ge(L::splat(0.0)) & active);
-    hit.select(t, L::splat(f32::INFINITY))
+    hit.select(t, L::splat(f32::NAN))
 }
 
 /// `sphere::intersect`'s first half: the distance `b` along the unit ray `d` to the point

@@ -169,8 +169,10 @@ pub struct TileSplat {
     /// Per group, whether it holds a large sphere.
     group_large: Vec<bool>,
     /// Per group, the mask of its small spheres (at most 2×2 pixels, not near the eye
-    /// plane), whose entry of `centres` holds their pixels' hits instead ([`small_hits`]).
-    group_small: Vec<u32>,
+    /// plane), whose entry of `centres` holds their pixels' hits instead ([`small_hits`]), in
+    /// the low 32 bits; in the high 32, the mask of its spheres drawn from the group (a
+    /// non-empty rectangle, not large).
+    group_small: Vec<u64>,
     /// Small spheres in the last frame.
     small: usize,
 }
@@ -339,7 +341,7 @@ impl TileSplat {
                      centres: &mut [[f32; 4]],
                      grects: &mut [Rect],
                      glarge: &mut [bool],
-                     gsmall: &mut [u32],
+                     gsmall: &mut [u64],
                      pairs: &mut Vec<(u32, u64)>| {
             pairs.clear();
             let groups = rects
@@ -370,7 +372,7 @@ impl TileSplat {
                     .for_each(|(c, (((((r, cs), g), l), sm), p))| bound(c, r, cs, g, l, sm, p))
             });
         }
-        self.small = self.group_small.iter().map(|m| m.count_ones() as usize).sum();
+        self.small = self.group_small.iter().map(|&m| (m as u32).count_ones() as usize).sum();
         // 2. the pairs to per-tile lists (a counting sort, serial: a few tens of thousands of
         // pairs; each tile's list keeps the groups' order), and the large spheres to their own
         // list.
@@ -511,7 +513,8 @@ impl ViewF32 {
 /// The rectangles of `samples` (at most [`GROUP`]) into `rects`, `L::N` (8 or 16) at a time
 /// in f32 lanes, and the union of those that are not large; with `centres` as long as
 /// `samples`, each sphere's centre less the eye and radius into it, or for a small sphere its
-/// hits ([`small_hits`]), and the mask of the small spheres. [`tight_bound`]'s tangents with
+/// hits ([`small_hits`]); and the masks of the small spheres (low 32 bits) and of those drawn
+/// from the group (non-empty, not large; high 32 bits). [`tight_bound`]'s tangents with
 /// the radius widened by a relative 2·10⁻⁵ of the L1 distance (instead of 10⁻⁵ of the
 /// distance: the extra covers the f32 rounding of the bound itself, about 3·10⁻⁷ of the slope)
 /// for spheres at least two (widened) radii in front of the eye plane; the others (near,
@@ -524,8 +527,8 @@ pub(crate) fn bound_group<L: BoundLanes>(
     samples: &[u64],
     rects: &mut [Rect],
     centres: &mut [[f32; 4]],
-) -> (Rect, bool, u32) {
-    let (mut u, mut any_large, mut small_all) = (NO_RECT, false, 0u32);
+) -> (Rect, bool, u64) {
+    let (mut u, mut any_large, mut small_all, mut drawn) = (NO_RECT, false, 0u32, 0u32);
     let keep_centres = centres.len() == samples.len();
     for (k, (ss, rs)) in samples.chunks(L::N).zip(rects.chunks_mut(L::N)).enumerate() {
         let [rx, ry, rz, r] = L::decode(deq, vf.eye, ss);
@@ -606,17 +609,18 @@ pub(crate) fn bound_group<L: BoundLanes>(
                 None => NO_RECT,
             };
         }
-        for (rect, &r) in rs.iter_mut().zip(&out) {
+        for (l, (rect, &r)) in rs.iter_mut().zip(&out).enumerate() {
             *rect = r;
             // Large: non-empty and over `MAX_TILES` tiles; the union takes the others, the
             // empty rectangle being its identity (`NO_RECT`'s corners lie beyond every
             // viewport, in the right order).
             let large = !r.is_empty() & r.is_large();
             any_large |= large;
+            drawn |= ((!r.is_empty() & !large) as u32) << (L::N * k + l);
             u = u.union(if large { NO_RECT } else { r });
         }
     }
-    (u, any_large, small_all)
+    (u, any_large, small_all as u64 | (drawn as u64) << 32)
 }
 
 /// The hits of eight spheres (centres less the eye and radii `c`, the lanes of the mask
@@ -624,7 +628,8 @@ pub(crate) fn bound_group<L: BoundLanes>(
 /// masks `wide`, `tall`: the rectangle's second column, row), as [`splat_sphere`] would find
 /// them: per window pixel `(x0 + dx, y0 + dy)` (result `dx + 2·dy`), per lane, the distance
 /// [`sphere_hits`] gives on that pixel's ray ([`ray_dirs`] of the same pixel centre, the same
-/// operations, so the same bits), `+∞` where it misses or the pixel lies outside the rectangle.
+/// operations, so the same bits), NaN where it misses or the pixel lies outside the rectangle
+/// (which no comparison takes).
 #[inline(always)]
 fn small_hits<L: Arith>(
     b: &volwarp_core::camera::RayBasis,
@@ -637,8 +642,7 @@ fn small_hits<L: Arith>(
 ) -> [L; 4] {
     let (px, py) = (x0 + L::splat(0.5), y0 + L::splat(0.5));
     let (px1, py1) = (px + L::splat(1.0), py + L::splat(1.0));
-    let inf = L::splat(f32::INFINITY);
-    let mut out = [inf; 4];
+    let mut out = [L::splat(f32::NAN); 4];
     let windows = [(px, py, small), (px1, py, small & wide), (px, py1, small & tall), (px1, py1, small & wide & tall)];
     for (o, (x, y, on)) in out.iter_mut().zip(windows) {
         if on.any() {
@@ -657,7 +661,7 @@ lanes::dispatch16! {
         samples: &[u64],
         rects: &mut [Rect],
         centres: &mut [[f32; 4]],
-    ) -> (Rect, bool, u32)
+    ) -> (Rect, bool, u64)
 }
 
 /// The pixels `i < n` whose centre `i + 0.5` lies in `[a, b]`, widened by 0.01 pixel, as an
@@ -711,6 +715,14 @@ impl TileTest {
         let minuend = self.last | (a & !LOW_FIELDS) | FIELD_SIGNS;
         let subtrahend = (a & LOW_FIELDS) | self.first;
         (minuend - subtrahend) & FIELD_SIGNS == FIELD_SIGNS
+    }
+
+    /// Whether a non-empty `r` lies inside the tile.
+    #[inline(always)]
+    fn contains(&self, r: Rect) -> bool {
+        let (x1, y1) = (self.last as u16, (self.last >> 16) as u16);
+        let (x0, y0) = ((self.first >> 32) as u16, (self.first >> 48) as u16);
+        r.x0 >= x0 && r.y0 >= y0 && r.x1 <= x1 && r.y1 <= y1
     }
 
     /// The spheres of `rects` (at most 32) that overlap the tile, as bits.
@@ -855,14 +867,17 @@ fn splat_tile<L: Lanes>(
         let first = g * GROUP;
         // Large spheres' rectangles are empty here (drawn from `large` below).
         let group = &rects[first..(first + GROUP).min(n)];
-        let hits = tt.hits_of(group) & (e >> 32) as u32;
+        let masks = lists.group_small[g];
+        // A group inside the tile (most, with 64-pixel tiles) needs no test per sphere.
+        let hits = if tt.contains(lists.group_rects[g]) { (masks >> 32) as u32 } else { tt.hits_of(group) };
+        let hits = hits & (e >> 32) as u32;
         // Read the group's colors now (its 32 colors lie in two or three cache lines), so
         // they are in cache when the tile's pixels are shaded: nothing waits for these loads.
         if hits != 0 {
             let colors = &scene.colors[first.min(n - 1)..(first + GROUP).min(n)];
             touch ^= colors[0] ^ colors[colors.len() / 2] ^ colors[colors.len() - 1];
         }
-        let small = lists.group_small[g];
+        let small = masks as u32;
         let (mut few, mut other) = (hits & small, hits & !small);
         while few != 0 {
             let j = few.trailing_zeros() as usize;
@@ -918,10 +933,10 @@ fn tile_dirs<L: Lanes>(view: &View, tile: &Tile, buf: &mut TileBuf) {
 }
 
 /// A small sphere `i` (rectangle `r`, at most 2×2 pixels) into a tile's keys from the hits
-/// the bound pass found on its window's four pixels ([`small_hits`], `+∞` for none): per
-/// pixel, without a branch, a nearer hit takes it; a hit at equal depth takes [`keep_ties`].
-/// The four pixels are read and written one by one (two spheres in a row usually share
-/// pixels: a wider load over a narrower store just made waits on store forwarding).
+/// the bound pass found on its window's four pixels ([`small_hits`], NaN for none): per
+/// pixel, without a branch, a nearer hit takes it; a hit at equal depth (rare) takes
+/// [`small_ties`]. The four pixels are read and written one by one (two spheres in a row
+/// usually share pixels: a wider load over a narrower store would wait on store forwarding).
 #[inline(always)]
 fn splat_small<L>(k: &Kernel<'_, L>, tile: &Tile, r: Rect, i: u32, buf: &mut TileBuf) {
     let t4 = k.centres[i as usize];
@@ -930,48 +945,47 @@ fn splat_small<L>(k: &Kernel<'_, L>, tile: &Tile, r: Rect, i: u32, buf: &mut Til
     if x0 >= tile.x0 && y0 >= tile.y0 && (r.x1 as usize) <= k.tx1 && (r.y1 as usize) <= k.ty1 {
         // Inside the tile: the window's pixels `p`, `p + 1`, `p + TILE`, `p + TILE + 1` lie
         // in the planes (a window pixel past the rectangle, in the next row or the padding
-        // row, has `t = +∞` and keeps its key).
+        // row, has no hit and keeps its key).
         let p = ((y0 - tile.y0) * TILE + (x0 - tile.x0)) & (TILE * TILE - 1);
-        let mut tie = 0u32;
+        let mut tie = false;
         for (l, q) in [p, p + 1, p + TILE, p + TILE + 1].into_iter().enumerate() {
             let (t, d, id) = (t4[l], depth[q], ids[q]);
             // Selects, not branches (which would guess wrong about half the time).
             let win = t < d;
             depth[q] = std::hint::select_unpredictable(win, t, d);
             ids[q] = std::hint::select_unpredictable(win, i, id);
-            tie |= ((t == d) as u32 & (t < f32::INFINITY) as u32) << l;
+            tie |= t == d;
         }
-        // Equal and finite (`+∞ = +∞` is no hit).
-        if tie != 0 {
-            small_ties(depth, ids, p, tie, &t4, i, k.ties);
+        if tie {
+            small_ties(depth, ids, [p, p + 1, p + TILE, p + TILE + 1], &t4, i, k.ties);
         }
     } else {
         // Across the tile's border (rare): the window's pixels inside it.
         for (l, &t) in t4.iter().enumerate() {
             let (x, y) = (x0 + (l & 1), y0 + (l >> 1));
-            if t == f32::INFINITY || x < tile.x0 || y < tile.y0 || x > k.tx1 || y > k.ty1 {
+            if x < tile.x0 || y < tile.y0 || x > k.tx1 || y > k.ty1 {
                 continue;
             }
             let q = ((y - tile.y0) * TILE + (x - tile.x0)) & (TILE * TILE - 1);
             if t < depth[q] {
                 (depth[q], ids[q]) = (t, i);
             } else if t == depth[q] {
-                small_ties(depth, ids, q, 1, &[t; 4], i, k.ties);
+                small_ties(depth, ids, [q; 4], &[t, f32::NAN, f32::NAN, f32::NAN], i, k.ties);
             }
         }
     }
 }
 
-/// [`splat_small`]'s pixels `bits` of the window at `p` (lane `l`: `p + (l / 2)·TILE + l % 2`)
-/// whose hit `t4[l]` equals their depth: the tie rule, as [`keep_ties`] applies it.
+/// [`splat_small`]'s pixels `q[l]` whose key (after the depth test) has the hit `t4[l]`'s
+/// distance: the smaller key of `(t4[l], i)` and the pixel's, the tie rule as [`keep_ties`]
+/// applies it (a pixel the hit just took holds `(t4[l], i)` itself, and keeps it).
 #[inline(never)]
 #[cold]
-fn small_ties(depth: &mut [f32; KEYS], ids: &mut [u32; KEYS], p: usize, bits: u32, t4: &[f32; 4], i: u32, ties: Ties) {
-    for (l, &t) in t4.iter().enumerate() {
-        if bits >> l & 1 == 0 || t == f32::INFINITY {
+fn small_ties(depth: &mut [f32; KEYS], ids: &mut [u32; KEYS], q: [usize; 4], t4: &[f32; 4], i: u32, ties: Ties) {
+    for (&q, &t) in q.iter().zip(t4) {
+        if t != depth[q] {
             continue;
         }
-        let q = p + (l >> 1) * TILE + (l & 1);
         let (mut ds, mut is) = ([depth[q]; 8], [ids[q]; 8]);
         let mut tt = [0.0; 8];
         tt[0] = t;
@@ -990,8 +1004,8 @@ struct Lists<'a> {
     /// Per sphere, its centre less the eye and its radius (`TileSplat::centres`).
     centres: &'a [[f32; 4]],
     group_rects: &'a [Rect],
-    /// Per group, the mask of its small spheres (`TileSplat::group_small`).
-    group_small: &'a [u32],
+    /// Per group, the masks of its small and its drawn spheres (`TileSplat::group_small`).
+    group_small: &'a [u64],
     /// Whether to skip spheres hidden in a block ([`TileSplat::with_culling`]).
     cull: bool,
 }
@@ -1223,12 +1237,12 @@ mod tests {
         let tile = Tile { x0: 0, y0: 0, w: TILE, h: TILE };
         let mut buf = TileBuf::new();
         // Sphere 9 first: hits at 2.0 on (10, 5) and 3.0 on (11, 6); none on the other two.
-        let inf = f32::INFINITY;
+        let (inf, no) = (f32::INFINITY, f32::NAN);
         let mut centres = vec![[0.0; 4]; 10];
-        centres[9] = [2.0, inf, inf, 3.0];
+        centres[9] = [2.0, no, no, 3.0];
         // Sphere 3: the same distance on (10, 5) (a tie: the smaller index wins), nearer on
         // (11, 5), farther on (11, 6).
-        centres[3] = [2.0, 1.0, inf, 4.0];
+        centres[3] = [2.0, 1.0, no, 4.0];
         let r = Rect { x0: 10, y0: 5, x1: 11, y1: 6 };
         let k = kernel(&centres, Ties::Index);
         splat_small(&k, &tile, r, 9, &mut buf);
@@ -1254,7 +1268,7 @@ mod tests {
     /// groups, near the eye plane and far.
     #[test]
     fn bound_instances_agree() {
-        type Out = (Vec<u64>, Vec<[u32; 4]>, (u64, bool, u32));
+        type Out = (Vec<u64>, Vec<[u32; 4]>, (u64, bool, u64));
         let f = crate::synthetic::random_cloud(5000, 0.004, 41, 160);
         let eye_inside = Camera::look_at(Vec3::splat(0.5), Vec3::new(0.9, 0.6, 0.1), Vec3::Y, 70.0, 128, 96);
         let (c, deq) = (f.header.camera, f.header.dequantizer());
@@ -1287,7 +1301,7 @@ mod tests {
                         Some((rects.iter().map(|r| r.bits()).collect(), c, (r.0.bits(), r.1, r.2)))
                     };
                     let portable = run(0).expect("the portable instance");
-                    small += portable.2 .2.count_ones();
+                    small += (portable.2 .2 as u32).count_ones();
                     for k in [1, 2] {
                         if let Some(o) = run(k) {
                             assert!(o == portable, "instance {k}, {len} spheres");
