@@ -287,6 +287,68 @@ pub(crate) trait BoundLanes: Arith {
     fn from_ints16(a: &[i32; 16]) -> Self;
     /// The lanes, lane 0 first (entries past `N`: zero).
     fn lanes(self) -> [f32; 16];
+    /// `c[0..4]`'s lanes as records: `out[l] = [c[0][l], c[1][l], c[2][l], c[3][l]]` for each
+    /// `l < out.len()` (at most `N`).
+    #[inline(always)]
+    fn store_records(c: [Self; 4], out: &mut [[f32; 4]]) {
+        let [a, b, x, r] = c.map(|v| v.lanes());
+        for (l, o) in out.iter_mut().take(Self::N).enumerate() {
+            *o = [a[l], b[l], x[l], r[l]];
+        }
+    }
+    /// The rectangles of the lanes of the mask `ok` with the inclusive pixel spans
+    /// `x0..=x1`, `y0..=y1` (non-empty ones only), and what binning needs of them
+    /// ([`RectLanes`]); tiles are `1 << tile_log2` pixels wide, and a rectangle over more
+    /// than `max_tiles` of them is large.
+    #[inline(always)]
+    fn rects(
+        ok: Self,
+        x0: &[i32; 16],
+        x1: &[i32; 16],
+        y0: &[i32; 16],
+        y1: &[i32; 16],
+        tile_log2: u32,
+        max_tiles: i32,
+    ) -> RectLanes {
+        let ok = ok.to_bitmask();
+        let mut out = RectLanes { bits: [EMPTY_RECT; 16], large: 0, drawn: 0, union: EMPTY_RECT };
+        let [mut ux0, mut uy0, mut ux1, mut uy1] = [0x7FFF, 0x7FFF, 0, 0];
+        for l in 0..Self::N {
+            let (a, b, c, d) = (x0[l], x1[l], y0[l], y1[l]);
+            if ok >> l & 1 == 0 || a > b || c > d {
+                continue;
+            }
+            out.bits[l] = a as u64 | (c as u64) << 16 | (b as u64) << 32 | (d as u64) << 48;
+            let tiles = ((b >> tile_log2) - (a >> tile_log2) + 1) * ((d >> tile_log2) - (c >> tile_log2) + 1);
+            if tiles > max_tiles {
+                out.large |= 1 << l;
+            } else {
+                out.drawn |= 1 << l;
+                (ux0, uy0, ux1, uy1) = (ux0.min(a), uy0.min(c), ux1.max(b), uy1.max(d));
+            }
+        }
+        if out.drawn != 0 {
+            out.union = ux0 as u64 | (uy0 as u64) << 16 | (ux1 as u64) << 32 | (uy1 as u64) << 48;
+        }
+        out
+    }
+}
+
+/// The empty rectangle's bits (`x0 = y0 = 0x7FFF`, `x1 = y1 = 0`: beyond every viewport, and
+/// the identity of the union).
+pub(crate) const EMPTY_RECT: u64 = 0x7FFF | 0x7FFF << 16;
+
+/// A chunk's rectangles, as [`BoundLanes::rects`] gives them.
+pub(crate) struct RectLanes {
+    /// Per lane, `x0 | y0 << 16 | x1 << 32 | y1 << 48`; [`EMPTY_RECT`] where the lane is not
+    /// in the mask or its span is empty.
+    pub(crate) bits: [u64; 16],
+    /// Lanes with a large rectangle.
+    pub(crate) large: u32,
+    /// Lanes with a rectangle that is not large.
+    pub(crate) drawn: u32,
+    /// The smallest rectangle holding the drawn ones ([`EMPTY_RECT`] if none).
+    pub(crate) union: u64,
 }
 
 /// The first eight entries of `a`.

@@ -89,8 +89,10 @@ const STRIDE: usize = TILE + 8;
 /// Rows of a direction plane: one of padding for the second row of a 4×2 block.
 const PLANE: usize = STRIDE * (TILE + 1);
 
-/// A sphere's inclusive pixel rectangle; `x0 > x1` when it covers no pixel.
+/// A sphere's inclusive pixel rectangle; `x0 > x1` when it covers no pixel. In memory as
+/// [`Rect::bits`] (on a little-endian CPU), so rectangles made as words store as one.
 #[derive(Clone, Copy, Debug, Default)]
+#[repr(C, align(8))]
 pub(crate) struct Rect {
     pub(crate) x0: u16,
     pub(crate) y0: u16,
@@ -123,6 +125,12 @@ impl Rect {
     #[inline(always)]
     fn union(self, o: Rect) -> Rect {
         Rect { x0: self.x0.min(o.x0), y0: self.y0.min(o.y0), x1: self.x1.max(o.x1), y1: self.y1.max(o.y1) }
+    }
+
+    /// The rectangle of [`Rect::bits`].
+    #[inline(always)]
+    fn from_bits(b: u64) -> Rect {
+        Rect { x0: b as u16, y0: (b >> 16) as u16, x1: (b >> 32) as u16, y1: (b >> 48) as u16 }
     }
 
     /// The four coordinates as one word: `x0` in the low 16 bits, then `y0`, `x1`, `y1`.
@@ -564,18 +572,12 @@ pub(crate) fn bound_group<L: BoundLanes>(
         // clamp, for the lanes of `ok`, whose values lie in its domain).
         let (xs0, xs1) = L::spans(ax.fast_max(L::splat(-1.0)), bx.fast_min(nw), view.width - 1);
         let (ys0, ys1) = L::spans(ay.fast_max(L::splat(-1.0)), by.fast_min(nh), view.height - 1);
-        let live = if ss.len() >= 32 { u32::MAX } else { (1u32 << ss.len()) - 1 };
+        let live = (1u32 << ss.len()) - 1;
         let (far, ok) = (far.to_bitmask(), ok_v.to_bitmask());
-        // Branch-free per lane: the lanes of `ok` with a non-empty span get their rectangle,
-        // the others the empty one (built in locals and stored once: reading `*rect` back
-        // after four 16-bit stores stalled on store forwarding).
-        let mut out = [NO_RECT; 16];
-        for (l, r) in out.iter_mut().enumerate().take(L::N) {
-            let (x0, x1, y0, y1) = (xs0[l], xs1[l], ys0[l], ys1[l]);
-            let fast = ok >> l & 1 != 0 && x0 <= x1 && y0 <= y1;
-            let rect = Rect { x0: x0 as u16, y0: y0 as u16, x1: x1 as u16, y1: y1 as u16 };
-            *r = if fast { rect } else { NO_RECT };
-        }
+        // The lanes of `ok` with a non-empty span get their rectangle, the others the empty
+        // one; with the large ones, the others, and the others' union.
+        let tile_log2 = TILE.trailing_zeros();
+        let mut rl = L::rects(ok_v, &xs0, &xs1, &ys0, &ys1, tile_log2, MAX_TILES as i32);
         if keep_centres {
             // Spheres of at most 2×2 pixels (lanes of `ok`, non-empty spans at most two
             // wide): their pixels' hits now, `L::N` spheres per lane operation, in place of
@@ -593,32 +595,33 @@ pub(crate) fn bound_group<L: BoundLanes>(
                     *c = small_v.select(h, *c);
                 }
             }
-            let [ax, ay, az, ar] = c.map(|v| v.lanes());
-            for (l, c) in centres[L::N * k..].iter_mut().take(ss.len()).enumerate() {
-                *c = [ax[l], ay[l], az[l], ar[l]];
-            }
+            let n = ss.len();
+            L::store_records(c, &mut centres[L::N * k..L::N * k + n]);
             small_all |= small << (L::N * k);
         }
-        // Near the eye plane, behind it, or NaN (rare): the f64 bound.
+        // Near the eye plane, behind it, or NaN (rare): the f64 bound, and the same rules.
         let mut slow = !ok & !far & live;
+        let mut union = Rect::from_bits(rl.union);
         while slow != 0 {
             let l = slow.trailing_zeros() as usize;
             slow &= slow - 1;
-            out[l] = match tight_bound(view, deq.center(ss[l]), deq.radius(ss[l])) {
-                Some((x0, x1, y0, y1)) => Rect { x0: x0 as u16, y0: y0 as u16, x1: x1 as u16, y1: y1 as u16 },
-                None => NO_RECT,
-            };
+            if let Some((x0, x1, y0, y1)) = tight_bound(view, deq.center(ss[l]), deq.radius(ss[l])) {
+                let r = Rect { x0: x0 as u16, y0: y0 as u16, x1: x1 as u16, y1: y1 as u16 };
+                rl.bits[l] = r.bits();
+                if r.is_large() {
+                    rl.large |= 1 << l;
+                } else {
+                    rl.drawn |= 1 << l;
+                    union = union.union(r);
+                }
+            }
         }
-        for (l, (rect, &r)) in rs.iter_mut().zip(&out).enumerate() {
-            *rect = r;
-            // Large: non-empty and over `MAX_TILES` tiles; the union takes the others, the
-            // empty rectangle being its identity (`NO_RECT`'s corners lie beyond every
-            // viewport, in the right order).
-            let large = !r.is_empty() & r.is_large();
-            any_large |= large;
-            drawn |= ((!r.is_empty() & !large) as u32) << (L::N * k + l);
-            u = u.union(if large { NO_RECT } else { r });
+        for (rect, &b) in rs.iter_mut().zip(&rl.bits) {
+            *rect = Rect::from_bits(b);
         }
+        any_large |= rl.large & live != 0;
+        drawn |= (rl.drawn & live) << (L::N * k);
+        u = u.union(union);
     }
     (u, any_large, small_all as u64 | (drawn as u64) << 32)
 }

@@ -10,7 +10,7 @@
 //! an AVX-512 mask register, widened to lanes (`vpmovm2d`), and selects narrow it back
 //! (`vpmovd2m`); one instruction each.
 
-use super::{decode_scalar_into, Arith, BoundLanes};
+use super::{decode_scalar_into, Arith, BoundLanes, RectLanes, EMPTY_RECT};
 use core::arch::x86_64::*;
 use core::ops::{Add, BitAnd, BitOr, Div, Mul, Sub};
 use volwarp_core::sample::{Dequantizer, POS_BITS, RADIUS_BITS};
@@ -205,6 +205,90 @@ impl BoundLanes for Avx512 {
         // `a` is 64 writable bytes.
         unsafe { _mm512_storeu_ps(a.as_mut_ptr(), self.0) };
         a
+    }
+
+    /// Sixteen records by a 4×16 transpose in registers (four 64-byte stores); fewer by the
+    /// lanes one at a time.
+    #[inline(always)]
+    fn store_records(c: [Self; 4], out: &mut [[f32; 4]]) {
+        let Some(out) = out.first_chunk_mut::<16>() else {
+            let [a, b, x, r] = c.map(|v| v.lanes());
+            for (l, o) in out.iter_mut().take(16).enumerate() {
+                *o = [a[l], b[l], x[l], r[l]];
+            }
+            return;
+        };
+        unsafe {
+            let [a, b, x, r] = c.map(|v| v.0);
+            // Per 128-bit block k: t0 = [a0 b0 a1 b1], t1 = [a2 b2 a3 b3] (lanes 4k…), …
+            let (t0, t1) = (_mm512_unpacklo_ps(a, b), _mm512_unpackhi_ps(a, b));
+            let (t2, t3) = (_mm512_unpacklo_ps(x, r), _mm512_unpackhi_ps(x, r));
+            let pd = _mm512_castps_pd;
+            // Records 4k, 4k + 1, 4k + 2, 4k + 3 in block k of u0, u1, u2, u3.
+            let u0 = _mm512_castpd_ps(_mm512_unpacklo_pd(pd(t0), pd(t2)));
+            let u1 = _mm512_castpd_ps(_mm512_unpackhi_pd(pd(t0), pd(t2)));
+            let u2 = _mm512_castpd_ps(_mm512_unpacklo_pd(pd(t1), pd(t3)));
+            let u3 = _mm512_castpd_ps(_mm512_unpackhi_pd(pd(t1), pd(t3)));
+            // Block k of the result j (records 4j…4j + 3) is block j of u_k.
+            let lo01 = _mm512_shuffle_f32x4::<0b01_00_01_00>(u0, u1); // u0.0 u0.1 u1.0 u1.1
+            let lo23 = _mm512_shuffle_f32x4::<0b01_00_01_00>(u2, u3); // u2.0 u2.1 u3.0 u3.1
+            let hi01 = _mm512_shuffle_f32x4::<0b11_10_11_10>(u0, u1); // u0.2 u0.3 u1.2 u1.3
+            let hi23 = _mm512_shuffle_f32x4::<0b11_10_11_10>(u2, u3); // u2.2 u2.3 u3.2 u3.3
+            let r0 = _mm512_shuffle_f32x4::<0b10_00_10_00>(lo01, lo23); // u0.0 u1.0 u2.0 u3.0
+            let r1 = _mm512_shuffle_f32x4::<0b11_01_11_01>(lo01, lo23); // u0.1 u1.1 u2.1 u3.1
+            let r2 = _mm512_shuffle_f32x4::<0b10_00_10_00>(hi01, hi23);
+            let r3 = _mm512_shuffle_f32x4::<0b11_01_11_01>(hi01, hi23);
+            // `out` is sixteen records of 16 bytes: four 64-byte stores.
+            let p = out.as_mut_ptr().cast::<f32>();
+            _mm512_storeu_ps(p, r0);
+            _mm512_storeu_ps(p.add(16), r1);
+            _mm512_storeu_ps(p.add(32), r2);
+            _mm512_storeu_ps(p.add(48), r3);
+        }
+    }
+
+    /// The default's rules on sixteen lanes at once: the rectangle fields packed in pairs of
+    /// 16 bits and interleaved to 64-bit words, the tile counts by shifts and a 32-bit
+    /// product, the union by masked reductions.
+    #[inline(always)]
+    fn rects(
+        ok: Self,
+        x0: &[i32; 16],
+        x1: &[i32; 16],
+        y0: &[i32; 16],
+        y1: &[i32; 16],
+        tile_log2: u32,
+        max_tiles: i32,
+    ) -> RectLanes {
+        unsafe {
+            let load = |a: &[i32; 16]| _mm512_loadu_si512(a.as_ptr().cast());
+            let (a, b, c, d) = (load(x0), load(x1), load(y0), load(y1));
+            let fast = ok.mask() & _mm512_cmple_epi32_mask(a, b) & _mm512_cmple_epi32_mask(c, d);
+            let s = _mm_cvtsi32_si128(tile_log2 as i32);
+            let one = _mm512_set1_epi32(1);
+            let tx = _mm512_add_epi32(_mm512_sub_epi32(_mm512_sra_epi32(b, s), _mm512_sra_epi32(a, s)), one);
+            let ty = _mm512_add_epi32(_mm512_sub_epi32(_mm512_sra_epi32(d, s), _mm512_sra_epi32(c, s)), one);
+            let large = fast & _mm512_cmpgt_epi32_mask(_mm512_mullo_epi32(tx, ty), _mm512_set1_epi32(max_tiles));
+            let drawn = fast & !large;
+            let lo = _mm512_or_si512(a, _mm512_slli_epi32::<16>(c));
+            let hi = _mm512_or_si512(b, _mm512_slli_epi32::<16>(d));
+            let lo = _mm512_mask_blend_epi32(fast, _mm512_set1_epi32(EMPTY_RECT as i32), lo);
+            let hi = _mm512_maskz_mov_epi32(fast, hi);
+            let first = _mm512_setr_epi32(0, 16, 1, 17, 2, 18, 3, 19, 4, 20, 5, 21, 6, 22, 7, 23);
+            let second = _mm512_setr_epi32(8, 24, 9, 25, 10, 26, 11, 27, 12, 28, 13, 29, 14, 30, 15, 31);
+            let mut bits = [0u64; 16];
+            // `bits` is 128 writable bytes: two 64-byte stores.
+            _mm512_storeu_si512(bits.as_mut_ptr().cast(), _mm512_permutex2var_epi32(lo, first, hi));
+            _mm512_storeu_si512(bits[8..].as_mut_ptr().cast(), _mm512_permutex2var_epi32(lo, second, hi));
+            let union = if drawn == 0 {
+                EMPTY_RECT
+            } else {
+                let (ux0, uy0) = (_mm512_mask_reduce_min_epi32(drawn, a), _mm512_mask_reduce_min_epi32(drawn, c));
+                let (ux1, uy1) = (_mm512_mask_reduce_max_epi32(drawn, b), _mm512_mask_reduce_max_epi32(drawn, d));
+                ux0 as u64 | (uy0 as u64) << 16 | (ux1 as u64) << 32 | (uy1 as u64) << 48
+            };
+            RectLanes { bits, large: large as u32, drawn: drawn as u32, union }
+        }
     }
 }
 
