@@ -55,6 +55,7 @@ pub(crate) use dispatch;
 macro_rules! dispatch16 {
     ($(#[$doc:meta])* fn $name:ident / $avx2:ident / $avx512:ident => $kernel:ident($($arg:ident: $ty:ty),* $(,)?) $(-> $ret:ty)?) => {
         $(#[$doc])*
+        #[allow(clippy::too_many_arguments)]
         fn $name($($arg: $ty),*) $(-> $ret)? {
             #[cfg(target_arch = "x86_64")]
             if $crate::lanes::use_avx512() {
@@ -75,6 +76,7 @@ macro_rules! dispatch16 {
         /// The CPU must support AVX2.
         #[cfg(target_arch = "x86_64")]
         #[target_feature(enable = "avx2")]
+        #[allow(clippy::too_many_arguments)]
         unsafe fn $avx2($($arg: $ty),*) $(-> $ret)? {
             $kernel::<$crate::lanes::Avx2>($($arg),*)
         }
@@ -85,6 +87,7 @@ macro_rules! dispatch16 {
         /// The CPU must support AVX2, AVX-512 F and DQ.
         #[cfg(target_arch = "x86_64")]
         #[target_feature(enable = "avx2,avx512f,avx512dq")]
+        #[allow(clippy::too_many_arguments)]
         unsafe fn $avx512($($arg: $ty),*) $(-> $ret)? {
             $kernel::<$crate::lanes::Avx512>($($arg),*)
         }

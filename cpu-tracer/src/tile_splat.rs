@@ -352,16 +352,10 @@ impl TileSplat {
                      gsmall: &mut [u64],
                      pairs: &mut Vec<(u32, u64)>| {
             pairs.clear();
-            let groups = rects
-                .chunks_mut(GROUP)
-                .zip(centres.chunks_mut(GROUP))
-                .zip(grects.iter_mut().zip(glarge.iter_mut()).zip(gsmall.iter_mut()));
-            for (g, ((rects, centres), ((grect, glarge), gsmall))) in groups.enumerate() {
-                let base = (c * per_task + g) * GROUP;
-                let samples = &samples[base..base + rects.len()];
-                (*grect, *glarge, *gsmall) = bound_dispatch(view, &vf, deq, samples, rects, centres);
-                group_pairs((c * per_task + g) as u32, *grect, rects, grid, pairs);
-            }
+            let first = c * per_task;
+            let samples = &samples[first * GROUP..first * GROUP + rects.len()];
+            let groups = Groups { rects: grects, large: glarge, small: gsmall, first: first as u32 };
+            bound_dispatch(view, &vf, deq, samples, rects, centres, groups, grid, pairs);
         };
         if self.threads.is_serial() {
             let pairs = &mut self.task_pairs[0];
@@ -655,16 +649,52 @@ fn small_hits<L: Arith>(
     out
 }
 
+/// Per group of a run, what the bound pass finds (`TileSplat`'s fields of the same names), and
+/// the index of the run's first group.
+struct Groups<'a> {
+    rects: &'a mut [Rect],
+    large: &'a mut [bool],
+    small: &'a mut [u64],
+    first: u32,
+}
+
+/// [`bound_group`] for a run of whole groups (`samples`, their `rects` and `centres`), and each
+/// group's (tile, entry) pairs ([`group_pairs`]) into `pairs`: one call per run, so that the
+/// kernel's constants are set up once, not per group.
+#[allow(clippy::too_many_arguments)]
+#[inline(always)]
+fn bound_run<L: BoundLanes>(
+    view: &View,
+    vf: &ViewF32,
+    deq: &Dequantizer,
+    samples: &[u64],
+    rects: &mut [Rect],
+    centres: &mut [[f32; 4]],
+    groups: Groups,
+    grid: Grid,
+    pairs: &mut Vec<(u32, u64)>,
+) {
+    let each = rects.chunks_mut(GROUP).zip(centres.chunks_mut(GROUP)).zip(samples.chunks(GROUP));
+    let per_group = groups.rects.iter_mut().zip(groups.large.iter_mut()).zip(groups.small.iter_mut());
+    for (g, (((rects, centres), samples), ((grect, glarge), gsmall))) in each.zip(per_group).enumerate() {
+        (*grect, *glarge, *gsmall) = bound_group::<L>(view, vf, deq, samples, rects, centres);
+        group_pairs(groups.first + g as u32, *grect, rects, grid, pairs);
+    }
+}
+
 lanes::dispatch16! {
-    /// [`bound_group`] on the best lanes this CPU has (sixteen with AVX-512, else eight).
-    fn bound_dispatch / bound_avx2 / bound_avx512 => bound_group(
+    /// [`bound_run`] on the best lanes this CPU has (sixteen with AVX-512, else eight).
+    fn bound_dispatch / bound_avx2 / bound_avx512 => bound_run(
         view: &View,
         vf: &ViewF32,
         deq: &Dequantizer,
         samples: &[u64],
         rects: &mut [Rect],
         centres: &mut [[f32; 4]],
-    ) -> (Rect, bool, u64)
+        groups: Groups,
+        grid: Grid,
+        pairs: &mut Vec<(u32, u64)>,
+    )
 }
 
 /// The pixels `i < n` whose centre `i + 0.5` lies in `[a, b]`, widened by 0.01 pixel, as an
@@ -1271,44 +1301,47 @@ mod tests {
     /// groups, near the eye plane and far.
     #[test]
     fn bound_instances_agree() {
-        type Out = (Vec<u64>, Vec<[u32; 4]>, (u64, bool, u64));
+        type Out = (Vec<u64>, Vec<[u32; 4]>, Vec<(u64, bool, u64)>, Vec<(u32, u64)>);
         let f = crate::synthetic::random_cloud(5000, 0.004, 41, 160);
         let eye_inside = Camera::look_at(Vec3::splat(0.5), Vec3::new(0.9, 0.6, 0.1), Vec3::Y, 70.0, 128, 96);
         let (c, deq) = (f.header.camera, f.header.dequantizer());
         let cams = [c, c.with_viewport(40, 40), c.orbit(30.0, 10.0).with_viewport(97, 61), eye_inside, c.dolly(0.2)];
         let mut small = 0;
         for cam in cams {
-            let view = View::new(&cam);
+            let (view, grid) = (View::new(&cam), Grid::new(&cam));
             let vf = ViewF32::new(&view);
-            for len in [GROUP, 13] {
-                for s in f.samples.chunks(len) {
-                    let run = |k: usize| -> Option<Out> {
-                        let (mut rects, mut centres) = (vec![NO_RECT; s.len()], vec![[0f32; 4]; s.len()]);
-                        let r = match k {
-                            0 => bound_group::<wide::f32x8>(&view, &vf, &deq, s, &mut rects, &mut centres),
-                            #[cfg(target_arch = "x86_64")]
-                            1 if std::is_x86_feature_detected!("avx2") => {
-                                // SAFETY: the CPU has AVX2 (checked).
-                                unsafe { bound_avx2(&view, &vf, &deq, s, &mut rects, &mut centres) }
-                            }
-                            #[cfg(target_arch = "x86_64")]
-                            2 if std::is_x86_feature_detected!("avx512f")
-                                && std::is_x86_feature_detected!("avx512dq") =>
-                            {
-                                // SAFETY: the CPU has AVX2, AVX-512 F and DQ (checked).
-                                unsafe { bound_avx512(&view, &vf, &deq, s, &mut rects, &mut centres) }
-                            }
-                            _ => return None,
-                        };
-                        let c = centres.iter().map(|c| c.map(f32::to_bits)).collect();
-                        Some((rects.iter().map(|r| r.bits()).collect(), c, (r.0.bits(), r.1, r.2)))
-                    };
-                    let portable = run(0).expect("the portable instance");
-                    small += (portable.2 .2 as u32).count_ones();
-                    for k in [1, 2] {
-                        if let Some(o) = run(k) {
-                            assert!(o == portable, "instance {k}, {len} spheres");
+            // A run of many groups ending in a partial one (5000 = 156·32 + 8), and one partial.
+            for s in [&f.samples[..], &f.samples[..13]] {
+                let run = |k: usize| -> Option<Out> {
+                    let (mut rects, mut centres) = (vec![NO_RECT; s.len()], vec![[0f32; 4]; s.len()]);
+                    let ng = s.len().div_ceil(GROUP);
+                    let (mut gr, mut gl, mut gs) = (vec![NO_RECT; ng], vec![false; ng], vec![0u64; ng]);
+                    let mut pairs = Vec::new();
+                    let groups = Groups { rects: &mut gr, large: &mut gl, small: &mut gs, first: 0 };
+                    let (r, c, p) = (&mut rects[..], &mut centres[..], &mut pairs);
+                    match k {
+                        0 => bound_run::<wide::f32x8>(&view, &vf, &deq, s, r, c, groups, grid, p),
+                        #[cfg(target_arch = "x86_64")]
+                        1 if std::is_x86_feature_detected!("avx2") => {
+                            // SAFETY: the CPU has AVX2 (checked).
+                            unsafe { bound_avx2(&view, &vf, &deq, s, r, c, groups, grid, p) }
                         }
+                        #[cfg(target_arch = "x86_64")]
+                        2 if std::is_x86_feature_detected!("avx512f") && std::is_x86_feature_detected!("avx512dq") => {
+                            // SAFETY: the CPU has AVX2, AVX-512 F and DQ (checked).
+                            unsafe { bound_avx512(&view, &vf, &deq, s, r, c, groups, grid, p) }
+                        }
+                        _ => return None,
+                    };
+                    let c = centres.iter().map(|c| c.map(f32::to_bits)).collect();
+                    let g = (0..ng).map(|i| (gr[i].bits(), gl[i], gs[i])).collect();
+                    Some((rects.iter().map(|r| r.bits()).collect(), c, g, pairs))
+                };
+                let portable = run(0).expect("the portable instance");
+                small += portable.2.iter().map(|g| (g.2 as u32).count_ones()).sum::<u32>();
+                for k in [1, 2] {
+                    if let Some(o) = run(k) {
+                        assert!(o == portable, "instance {k}, {} spheres", s.len());
                     }
                 }
             }
