@@ -888,11 +888,16 @@ fn splat_tile<L: Lanes>(
     let rects = lists.rects;
     let n = samples.len();
     let tt = TileTest::new(tile);
-    let mut touch = 0u32;
     // The pixels' ray directions, made before the first sphere that needs them (small
     // spheres bring their hits).
     let mut dirs_ready = false;
-    for &e in lists.groups {
+    for (at, &e) in lists.groups.iter().enumerate() {
+        // The group two entries ahead: its centres and rectangles on their way to the cache.
+        if let Some(&ahead) = lists.groups.get(at + 2) {
+            let a = (ahead as u32 as usize) * GROUP;
+            prefetch(lists.centres.get(a..a + GROUP).unwrap_or(&[]));
+            prefetch(rects.get(a..a + GROUP).unwrap_or(&[]));
+        }
         let g = e as u32 as usize;
         if !tt.hits(lists.group_rects[g]) {
             continue;
@@ -904,11 +909,10 @@ fn splat_tile<L: Lanes>(
         // A group inside the tile (most, with 64-pixel tiles) needs no test per sphere.
         let hits = if tt.contains(lists.group_rects[g]) { (masks >> 32) as u32 } else { tt.hits_of(group) };
         let hits = hits & (e >> 32) as u32;
-        // Read the group's colors now (its 32 colors lie in two or three cache lines), so
-        // they are in cache when the tile's pixels are shaded: nothing waits for these loads.
+        // The group's colors (two or three cache lines) on their way to the cache, for when
+        // the tile's pixels are shaded.
         if hits != 0 {
-            let colors = &scene.colors[first.min(n - 1)..(first + GROUP).min(n)];
-            touch ^= colors[0] ^ colors[colors.len() / 2] ^ colors[colors.len() - 1];
+            prefetch(scene.colors.get(first..(first + GROUP).min(n)).unwrap_or(&[]));
         }
         let small = masks as u32;
         let (mut few, mut other) = (hits & small, hits & !small);
@@ -939,8 +943,24 @@ fn splat_tile<L: Lanes>(
             culled += splat_sphere(&k, tile, r, i, buf) as u64;
         }
     }
-    std::hint::black_box(touch);
     (pairs, culled)
+}
+
+/// Asks the CPU to bring `s`'s cache lines to its caches (x86-64; nothing elsewhere).
+#[inline(always)]
+fn prefetch<T>(s: &[T]) {
+    #[cfg(target_arch = "x86_64")]
+    {
+        let bytes = core::mem::size_of_val(s);
+        let p = s.as_ptr().cast::<i8>();
+        for off in (0..bytes).step_by(64) {
+            // SAFETY: a prefetch has no effect on memory and no precondition (SSE, which every
+            // x86-64 CPU has); the address lies in `s`.
+            unsafe { core::arch::x86_64::_mm_prefetch::<{ core::arch::x86_64::_MM_HINT_T0 }>(p.add(off)) };
+        }
+    }
+    #[cfg(not(target_arch = "x86_64"))]
+    let _ = s;
 }
 
 /// A tile's unit ray directions into `buf.dirs`: exactly `RayBasis::dir` (pixel centres
@@ -980,15 +1000,14 @@ fn splat_small<L>(k: &Kernel<'_, L>, tile: &Tile, r: Rect, i: u32, buf: &mut Til
         // in the planes (a window pixel past the rectangle, in the next row or the padding
         // row, has no hit and keeps its key).
         let p = ((y0 - tile.y0) * TILE + (x0 - tile.x0)) & (TILE * TILE - 1);
-        let mut tie = false;
-        for (l, q) in [p, p + 1, p + TILE, p + TILE + 1].into_iter().enumerate() {
-            let (t, d, id) = (t4[l], depth[q], ids[q]);
-            // Selects, not branches (which would guess wrong about half the time).
-            let win = t < d;
-            depth[q] = std::hint::select_unpredictable(win, t, d);
-            ids[q] = std::hint::select_unpredictable(win, i, id);
-            tie |= t == d;
-        }
+        let (Some(d), Some(id)) = (depth.get_mut(p..p + TILE + 2), ids.get_mut(p..p + TILE + 2)) else {
+            return;
+        };
+        // Unrolled, with the offsets as constants: no bounds checks, nothing through memory.
+        let tie = keep_pixel(&mut d[0], &mut id[0], t4[0], i)
+            | keep_pixel(&mut d[1], &mut id[1], t4[1], i)
+            | keep_pixel(&mut d[TILE], &mut id[TILE], t4[2], i)
+            | keep_pixel(&mut d[TILE + 1], &mut id[TILE + 1], t4[3], i);
         if tie {
             small_ties(depth, ids, [p, p + 1, p + TILE, p + TILE + 1], &t4, i, k.ties);
         }
@@ -1007,6 +1026,18 @@ fn splat_small<L>(k: &Kernel<'_, L>, tile: &Tile, r: Rect, i: u32, buf: &mut Til
             }
         }
     }
+}
+
+/// One pixel of [`splat_small`]: a hit `t` nearer than the pixel's depth `d` takes it, by
+/// selects, not branches (which would guess wrong about half the time); whether `t` equals
+/// `d` (a tie for [`small_ties`]; never for a NaN, no hit).
+#[inline(always)]
+fn keep_pixel(d: &mut f32, id: &mut u32, t: f32, i: u32) -> bool {
+    let win = t < *d;
+    let tie = t == *d;
+    *d = std::hint::select_unpredictable(win, t, *d);
+    *id = std::hint::select_unpredictable(win, i, *id);
+    tie
 }
 
 /// [`splat_small`]'s pixels `q[l]` whose key (after the depth test) has the hit `t4[l]`'s
