@@ -916,11 +916,26 @@ fn splat_tile<L: Lanes>(
         }
         let small = masks as u32;
         let (mut few, mut other) = (hits & small, hits & !small);
-        while few != 0 {
-            let j = few.trailing_zeros() as usize;
-            few &= few - 1;
-            pairs += 1;
-            splat_small(&k, tile, group[j], (first + j) as u32, buf);
+        pairs += few.count_ones() as u64;
+        let whole = (group.first_chunk::<GROUP>(), lists.centres.get(first..).and_then(|c| c.first_chunk::<GROUP>()));
+        match whole {
+            // A whole group inside the tile (most): no test per sphere, no bounds checks.
+            (Some(rs), Some(cs)) if tt.contains(lists.group_rects[g]) => {
+                while few != 0 {
+                    let j = few.trailing_zeros() as usize & (GROUP - 1);
+                    few &= few - 1;
+                    let r = rs[j];
+                    let p = ((r.y0 as usize - tile.y0) * TILE + (r.x0 as usize - tile.x0)) & (TILE * TILE - 1);
+                    splat_small_at(&mut buf.depth, &mut buf.ids, p, cs[j], (first + j) as u32, k.ties);
+                }
+            }
+            _ => {
+                while few != 0 {
+                    let j = few.trailing_zeros() as usize;
+                    few &= few - 1;
+                    splat_small(&k, tile, group[j], (first + j) as u32, buf);
+                }
+            }
         }
         if other != 0 && !dirs_ready {
             tile_dirs::<L>(view, tile, buf);
@@ -1000,17 +1015,7 @@ fn splat_small<L>(k: &Kernel<'_, L>, tile: &Tile, r: Rect, i: u32, buf: &mut Til
         // in the planes (a window pixel past the rectangle, in the next row or the padding
         // row, has no hit and keeps its key).
         let p = ((y0 - tile.y0) * TILE + (x0 - tile.x0)) & (TILE * TILE - 1);
-        let (Some(d), Some(id)) = (depth.get_mut(p..p + TILE + 2), ids.get_mut(p..p + TILE + 2)) else {
-            return;
-        };
-        // Unrolled, with the offsets as constants: no bounds checks, nothing through memory.
-        let tie = keep_pixel(&mut d[0], &mut id[0], t4[0], i)
-            | keep_pixel(&mut d[1], &mut id[1], t4[1], i)
-            | keep_pixel(&mut d[TILE], &mut id[TILE], t4[2], i)
-            | keep_pixel(&mut d[TILE + 1], &mut id[TILE + 1], t4[3], i);
-        if tie {
-            small_ties(depth, ids, [p, p + 1, p + TILE, p + TILE + 1], &t4, i, k.ties);
-        }
+        splat_small_at(depth, ids, p, t4, i, k.ties);
     } else {
         // Across the tile's border (rare): the window's pixels inside it.
         for (l, &t) in t4.iter().enumerate() {
@@ -1025,6 +1030,23 @@ fn splat_small<L>(k: &Kernel<'_, L>, tile: &Tile, r: Rect, i: u32, buf: &mut Til
                 small_ties(depth, ids, [q; 4], &[t, f32::NAN, f32::NAN, f32::NAN], i, k.ties);
             }
         }
+    }
+}
+
+/// [`splat_small`] of a window inside the tile, at pixel `p` (`y·TILE + x`, below
+/// `TILE²`).
+#[inline(always)]
+fn splat_small_at(depth: &mut [f32; KEYS], ids: &mut [u32; KEYS], p: usize, t4: [f32; 4], i: u32, ties: Ties) {
+    let (Some(d), Some(id)) = (depth.get_mut(p..p + TILE + 2), ids.get_mut(p..p + TILE + 2)) else {
+        return;
+    };
+    // Unrolled, with the offsets as constants: no bounds checks, nothing through memory.
+    let tie = keep_pixel(&mut d[0], &mut id[0], t4[0], i)
+        | keep_pixel(&mut d[1], &mut id[1], t4[1], i)
+        | keep_pixel(&mut d[TILE], &mut id[TILE], t4[2], i)
+        | keep_pixel(&mut d[TILE + 1], &mut id[TILE + 1], t4[3], i);
+    if tie {
+        small_ties(depth, ids, [p, p + 1, p + TILE, p + TILE + 1], &t4, i, ties);
     }
 }
 
