@@ -294,18 +294,15 @@ pub(crate) trait BoundLanes: Arith {
     /// `l < out.len()` (at most `N`).
     #[inline(always)]
     fn store_records(c: [Self; 4], out: &mut [[f32; 4]]) {
-        let [a, b, x, r] = c.map(|v| v.lanes());
-        for (l, o) in out.iter_mut().take(Self::N).enumerate() {
-            *o = [a[l], b[l], x[l], r[l]];
-        }
+        store_records_scalar(c, out)
     }
-    /// The rectangles of the lanes of the mask `ok` with the inclusive pixel spans
+    /// The rectangles of the lanes of `ok` (bit `l`: lane `l`) with the inclusive pixel spans
     /// `x0..=x1`, `y0..=y1` (non-empty ones only), and what binning needs of them
     /// ([`RectLanes`]); tiles are `1 << tile_log2` pixels wide, and a rectangle over more
     /// than `max_tiles` of them is large.
     #[inline(always)]
     fn rects(
-        ok: Self,
+        ok: u32,
         x0: &[i32; 16],
         x1: &[i32; 16],
         y0: &[i32; 16],
@@ -313,28 +310,48 @@ pub(crate) trait BoundLanes: Arith {
         tile_log2: u32,
         max_tiles: i32,
     ) -> RectLanes {
-        let ok = ok.to_bitmask();
-        let mut out = RectLanes { bits: [EMPTY_RECT; 16], large: 0, drawn: 0, union: EMPTY_RECT };
-        let [mut ux0, mut uy0, mut ux1, mut uy1] = [0x7FFF, 0x7FFF, 0, 0];
-        for l in 0..Self::N {
-            let (a, b, c, d) = (x0[l], x1[l], y0[l], y1[l]);
-            if ok >> l & 1 == 0 || a > b || c > d {
-                continue;
-            }
-            out.bits[l] = a as u64 | (c as u64) << 16 | (b as u64) << 32 | (d as u64) << 48;
-            let tiles = ((b >> tile_log2) - (a >> tile_log2) + 1) * ((d >> tile_log2) - (c >> tile_log2) + 1);
-            if tiles > max_tiles {
-                out.large |= 1 << l;
-            } else {
-                out.drawn |= 1 << l;
-                (ux0, uy0, ux1, uy1) = (ux0.min(a), uy0.min(c), ux1.max(b), uy1.max(d));
-            }
-        }
-        if out.drawn != 0 {
-            out.union = ux0 as u64 | (uy0 as u64) << 16 | (ux1 as u64) << 32 | (uy1 as u64) << 48;
-        }
-        out
+        rects_scalar::<Self>(ok, [x0, x1, y0, y1], tile_log2, max_tiles)
     }
+}
+
+/// [`BoundLanes::store_records`] lane by lane.
+#[inline(always)]
+pub(crate) fn store_records_scalar<L: BoundLanes>(c: [L; 4], out: &mut [[f32; 4]]) {
+    let [a, b, x, r] = [c[0].lanes(), c[1].lanes(), c[2].lanes(), c[3].lanes()];
+    for (l, o) in out.iter_mut().take(L::N).enumerate() {
+        *o = [a[l], b[l], x[l], r[l]];
+    }
+}
+
+/// [`BoundLanes::rects`] lane by lane (spans `[x0, x1, y0, y1]`).
+#[inline(always)]
+pub(crate) fn rects_scalar<L: BoundLanes>(
+    ok: u32,
+    spans: [&[i32; 16]; 4],
+    tile_log2: u32,
+    max_tiles: i32,
+) -> RectLanes {
+    let [x0, x1, y0, y1] = spans;
+    let mut out = RectLanes { bits: [EMPTY_RECT; 16], large: 0, drawn: 0, union: EMPTY_RECT };
+    let [mut ux0, mut uy0, mut ux1, mut uy1] = [0x7FFF, 0x7FFF, 0, 0];
+    for l in 0..L::N {
+        let (a, b, c, d) = (x0[l], x1[l], y0[l], y1[l]);
+        if ok >> l & 1 == 0 || a > b || c > d {
+            continue;
+        }
+        out.bits[l] = a as u64 | (c as u64) << 16 | (b as u64) << 32 | (d as u64) << 48;
+        let tiles = ((b >> tile_log2) - (a >> tile_log2) + 1) * ((d >> tile_log2) - (c >> tile_log2) + 1);
+        if tiles > max_tiles {
+            out.large |= 1 << l;
+        } else {
+            out.drawn |= 1 << l;
+            (ux0, uy0, ux1, uy1) = (ux0.min(a), uy0.min(c), ux1.max(b), uy1.max(d));
+        }
+    }
+    if out.drawn != 0 {
+        out.union = ux0 as u64 | (uy0 as u64) << 16 | (ux1 as u64) << 32 | (uy1 as u64) << 48;
+    }
+    out
 }
 
 /// The empty rectangle's bits (`x0 = y0 = 0x7FFF`, `x1 = y1 = 0`: beyond every viewport, and
@@ -388,6 +405,22 @@ impl<L: Lanes> BoundLanes for L {
     #[inline(always)]
     fn lanes(self) -> [f32; 16] {
         pad16(self.to_array(), 0.0)
+    }
+    #[inline(always)]
+    fn store_records(c: [Self; 4], out: &mut [[f32; 4]]) {
+        L::store_records8(c, out)
+    }
+    #[inline(always)]
+    fn rects(
+        ok: u32,
+        x0: &[i32; 16],
+        x1: &[i32; 16],
+        y0: &[i32; 16],
+        y1: &[i32; 16],
+        tile_log2: u32,
+        max_tiles: i32,
+    ) -> RectLanes {
+        L::rects8(ok, [x0, x1, y0, y1], tile_log2, max_tiles)
     }
 }
 
@@ -454,6 +487,16 @@ pub(crate) trait Lanes: Arith {
             (if (l as f32) < a { l + 1 } else { l }).max(0)
         });
         (c, hi.map(|b| (b as u32).min(max) as i32))
+    }
+    /// [`BoundLanes::store_records`] of eight lanes (AVX2: a 4×8 transpose in registers).
+    #[inline(always)]
+    fn store_records8(c: [Self; 4], out: &mut [[f32; 4]]) {
+        store_records_scalar(c, out)
+    }
+    /// [`BoundLanes::rects`] of eight lanes (spans `[x0, x1, y0, y1]`; AVX2: in lanes).
+    #[inline(always)]
+    fn rects8(ok: u32, spans: [&[i32; 16]; 4], tile_log2: u32, max_tiles: i32) -> RectLanes {
+        rects_scalar::<Self>(ok, spans, tile_log2, max_tiles)
     }
 }
 
@@ -585,7 +628,7 @@ mod avx512;
 
 #[cfg(target_arch = "x86_64")]
 mod avx2 {
-    use super::{Arith, Lanes};
+    use super::{Arith, Lanes, RectLanes};
     use core::arch::x86_64::*;
     use core::ops::{Add, BitAnd, BitOr, Div, Mul, Sub};
     use volwarp_core::sample::{Dequantizer, POS_BITS, RADIUS_BITS};
@@ -775,6 +818,79 @@ mod avx2 {
         fn permute_u(a: __m256i, idx: __m256i) -> __m256i {
             unsafe { _mm256_permutevar8x32_epi32(a, idx) }
         }
+        /// Eight records by a 4×8 transpose in registers (four 32-byte stores); fewer by the
+        /// lanes one at a time.
+        #[inline(always)]
+        fn store_records8(c: [Self; 4], out: &mut [[f32; 4]]) {
+            let Some(out) = out.first_chunk_mut::<8>() else {
+                return super::store_records_scalar(c, out);
+            };
+            unsafe {
+                let [a, b, x, r] = [c[0].0, c[1].0, c[2].0, c[3].0];
+                let (t0, t1) = (_mm256_unpacklo_ps(a, b), _mm256_unpackhi_ps(a, b));
+                let (t2, t3) = (_mm256_unpacklo_ps(x, r), _mm256_unpackhi_ps(x, r));
+                let pd = _mm256_castps_pd;
+                // Records l and l + 4 in the halves of u_l.
+                let u0 = _mm256_castpd_ps(_mm256_unpacklo_pd(pd(t0), pd(t2)));
+                let u1 = _mm256_castpd_ps(_mm256_unpackhi_pd(pd(t0), pd(t2)));
+                let u2 = _mm256_castpd_ps(_mm256_unpacklo_pd(pd(t1), pd(t3)));
+                let u3 = _mm256_castpd_ps(_mm256_unpackhi_pd(pd(t1), pd(t3)));
+                // `out` is eight records of 16 bytes: four 32-byte stores.
+                let p = out.as_mut_ptr().cast::<f32>();
+                _mm256_storeu_ps(p, _mm256_permute2f128_ps::<0x20>(u0, u1));
+                _mm256_storeu_ps(p.add(8), _mm256_permute2f128_ps::<0x20>(u2, u3));
+                _mm256_storeu_ps(p.add(16), _mm256_permute2f128_ps::<0x31>(u0, u1));
+                _mm256_storeu_ps(p.add(24), _mm256_permute2f128_ps::<0x31>(u2, u3));
+            }
+        }
+
+        /// `rects_scalar`'s rules on eight lanes at once: the fields packed in pairs of 16 bits
+        /// and interleaved to 64-bit words, the tile counts by shifts and a 32-bit product,
+        /// the union as the minimum of packed 16-bit fields (`0x7FFF − x1`, `0x7FFF − y1` for
+        /// the maxima; every field is below 2¹⁵, so no field borrows from the next).
+        #[inline(always)]
+        fn rects8(ok: u32, spans: [&[i32; 16]; 4], tile_log2: u32, max_tiles: i32) -> RectLanes {
+            unsafe {
+                let load = |v: &[i32; 16]| _mm256_loadu_si256(v.as_ptr().cast());
+                let (a, b, c, d) = (load(spans[0]), load(spans[1]), load(spans[2]), load(spans[3]));
+                let bit = _mm256_setr_epi32(1, 2, 4, 8, 16, 32, 64, 128);
+                let okv = _mm256_cmpeq_epi32(_mm256_and_si256(_mm256_set1_epi32(ok as i32), bit), bit);
+                let empty = _mm256_or_si256(_mm256_cmpgt_epi32(a, b), _mm256_cmpgt_epi32(c, d));
+                let fast = _mm256_andnot_si256(empty, okv);
+                let s = _mm_cvtsi32_si128(tile_log2 as i32);
+                let one = _mm256_set1_epi32(1);
+                let tx = _mm256_add_epi32(_mm256_sub_epi32(_mm256_sra_epi32(b, s), _mm256_sra_epi32(a, s)), one);
+                let ty = _mm256_add_epi32(_mm256_sub_epi32(_mm256_sra_epi32(d, s), _mm256_sra_epi32(c, s)), one);
+                let over = _mm256_cmpgt_epi32(_mm256_mullo_epi32(tx, ty), _mm256_set1_epi32(max_tiles));
+                let large = _mm256_and_si256(fast, over);
+                let drawn = _mm256_andnot_si256(over, fast);
+                let top = _mm256_set1_epi32(0x7FFF_7FFF);
+                let lo = _mm256_or_si256(a, _mm256_slli_epi32::<16>(c));
+                let hi = _mm256_or_si256(b, _mm256_slli_epi32::<16>(d));
+                let lo_f = _mm256_blendv_epi8(_mm256_set1_epi32(super::EMPTY_RECT as i32), lo, fast);
+                let hi_f = _mm256_and_si256(hi, fast);
+                let (p0, p1) = (_mm256_unpacklo_epi32(lo_f, hi_f), _mm256_unpackhi_epi32(lo_f, hi_f));
+                let mut bits = [super::EMPTY_RECT; 16];
+                // `bits` is 128 writable bytes: two 32-byte stores into its first 64.
+                _mm256_storeu_si256(bits.as_mut_ptr().cast(), _mm256_permute2x128_si256::<0x20>(p0, p1));
+                _mm256_storeu_si256(bits[4..].as_mut_ptr().cast(), _mm256_permute2x128_si256::<0x31>(p0, p1));
+                let mins = _mm256_blendv_epi8(top, lo, drawn);
+                let maxs = _mm256_blendv_epi8(top, _mm256_sub_epi32(top, hi), drawn);
+                let w = _mm256_min_epu16(
+                    _mm256_permute2x128_si256::<0x20>(mins, maxs),
+                    _mm256_permute2x128_si256::<0x31>(mins, maxs),
+                );
+                let w = _mm256_min_epu16(w, _mm256_shuffle_epi32::<0b01_00_11_10>(w));
+                let w = _mm256_min_epu16(w, _mm256_shuffle_epi32::<0b10_11_00_01>(w));
+                let low = _mm256_cvtsi256_si32(w) as u32 as u64;
+                let high = 0x7FFF_7FFF - _mm256_extract_epi32::<4>(w) as u32 as u64;
+                let mask = |m: __m256i| _mm256_movemask_ps(_mm256_castsi256_ps(m)) as u32;
+                let drawn = mask(drawn);
+                let union = if drawn == 0 { super::EMPTY_RECT } else { low | high << 32 };
+                RectLanes { bits, large: mask(large), drawn, union }
+            }
+        }
+
         #[inline(always)]
         fn from_ints(a: &[i32; 8]) -> Self {
             // `a` is 32 readable bytes; `vcvtdq2ps` rounds to nearest as `as f32` does.

@@ -252,7 +252,7 @@ impl BoundLanes for Avx512 {
     /// product, the union by masked reductions.
     #[inline(always)]
     fn rects(
-        ok: Self,
+        ok: u32,
         x0: &[i32; 16],
         x1: &[i32; 16],
         y0: &[i32; 16],
@@ -263,7 +263,7 @@ impl BoundLanes for Avx512 {
         unsafe {
             let load = |a: &[i32; 16]| _mm512_loadu_si512(a.as_ptr().cast());
             let (a, b, c, d) = (load(x0), load(x1), load(y0), load(y1));
-            let fast = ok.mask() & _mm512_cmple_epi32_mask(a, b) & _mm512_cmple_epi32_mask(c, d);
+            let fast = ok as __mmask16 & _mm512_cmple_epi32_mask(a, b) & _mm512_cmple_epi32_mask(c, d);
             let s = _mm_cvtsi32_si128(tile_log2 as i32);
             let one = _mm512_set1_epi32(1);
             let tx = _mm512_add_epi32(_mm512_sub_epi32(_mm512_sra_epi32(b, s), _mm512_sra_epi32(a, s)), one);
