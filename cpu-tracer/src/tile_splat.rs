@@ -610,8 +610,20 @@ pub(crate) fn bound_group<L: BoundLanes>(
                 }
             }
         }
-        for (rect, &b) in rs.iter_mut().zip(&rl.bits) {
-            *rect = Rect::from_bits(b);
+        // Whole chunks as fixed-size copies (a copy of `rs.len()` words became a call of
+        // `memcpy` per chunk).
+        if rs.len() == 16 && L::N == 16 {
+            if let Some(r16) = rs.first_chunk_mut::<16>() {
+                *r16 = rl.bits.map(Rect::from_bits);
+            }
+        } else if rs.len() == 8 && L::N == 8 {
+            if let Some(r8) = rs.first_chunk_mut::<8>() {
+                *r8 = core::array::from_fn(|l| Rect::from_bits(rl.bits[l]));
+            }
+        } else {
+            for (rect, &b) in rs.iter_mut().zip(&rl.bits) {
+                *rect = Rect::from_bits(b);
+            }
         }
         any_large |= rl.large & live != 0;
         drawn |= (rl.drawn & live) << (L::N * k);
