@@ -13,6 +13,7 @@
 //! its list's end or already opaque adds exactly zero).
 
 use crate::frame_setup::over_background_fast;
+#[cfg(target_arch = "x86_64")]
 use crate::lanes;
 use crate::layer_splat::{LIST, OPAQUE};
 use volwarp_core::sample::pack_color_f32;
@@ -209,6 +210,7 @@ pub(crate) fn composite_keys(keys: &[u64], colors: &[u32]) -> u32 {
 /// with [`composite_keys`]; the same pixels either way.
 pub(crate) fn composite_run(keys: &[u64], count: &[u8], colors: &[u32], out: &mut [u32]) {
     let n = out.len().min(count.len()).min(keys.len() / LIST);
+    #[cfg_attr(not(target_arch = "x86_64"), allow(unused_mut))]
     let mut i = 0;
     #[cfg(target_arch = "x86_64")]
     if lanes::use_avx2() {

@@ -1743,11 +1743,7 @@ const PREFETCH: usize = 24;
 /// Asks the CPU to bring `q`'s cache line closer (a hint: no effect on any result).
 #[inline(always)]
 fn prefetch(q: &Quad) {
-    #[cfg(target_arch = "x86_64")]
-    // SAFETY: a prefetch reads nothing architecturally and cannot fault; SSE is baseline.
-    unsafe {
-        core::arch::x86_64::_mm_prefetch::<{ core::arch::x86_64::_MM_HINT_T0 }>(q as *const Quad as *const i8)
-    };
+    crate::lanes::prefetch(core::slice::from_ref(q));
 }
 
 thread_local! {

@@ -51,7 +51,7 @@
 //! index), so the image is the built scene's.
 
 use crate::depth_buffer::{key, key_prim, EMPTY};
-use crate::lanes::{self, ray_dirs, sphere_hits, Arith, BoundLanes, Lanes};
+use crate::lanes::{self, prefetch, ray_dirs, sphere_hits, Arith, BoundLanes, Lanes};
 use crate::sphere_splat::View;
 use crate::threads::Threads;
 use crate::{begin_frame_overwritten, begin_frame_unbuilt_ok as begin_frame, shade, MAX_VIEWPORT, NO_HIT};
@@ -971,23 +971,6 @@ fn splat_tile<L: Lanes>(
         }
     }
     (pairs, culled)
-}
-
-/// Asks the CPU to bring `s`'s cache lines to its caches (x86-64; nothing elsewhere).
-#[inline(always)]
-fn prefetch<T>(s: &[T]) {
-    #[cfg(target_arch = "x86_64")]
-    {
-        let bytes = core::mem::size_of_val(s);
-        let p = s.as_ptr().cast::<i8>();
-        for off in (0..bytes).step_by(64) {
-            // SAFETY: a prefetch has no effect on memory and no precondition (SSE, which every
-            // x86-64 CPU has); the address lies in `s`.
-            unsafe { core::arch::x86_64::_mm_prefetch::<{ core::arch::x86_64::_MM_HINT_T0 }>(p.add(off)) };
-        }
-    }
-    #[cfg(not(target_arch = "x86_64"))]
-    let _ = s;
 }
 
 /// A tile's unit ray directions into `buf.dirs`: exactly `RayBasis::dir` (pixel centres
