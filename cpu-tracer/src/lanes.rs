@@ -20,20 +20,22 @@ use wide::{f32x8, u32x8};
 /// Defines `$name`, which runs the kernel `$kernel::<L>` on the best lanes this CPU has: the
 /// instance `$avx2`, compiled with `#[target_feature(enable = "avx2")]` on [`Avx2`] lanes, where
 /// `is_x86_feature_detected!("avx2")` says the CPU has AVX2, and the portable `wide::f32x8`
-/// instance elsewhere. Both compute the same values (see the module docs), so the choice only
-/// changes the speed.
+/// instance elsewhere. With a third name, `fn name / avx2 / avx512 => kernel(…)`, also the
+/// instance `$avx512`, compiled with AVX-512 F and DQ on [`Avx512`] lanes (sixteen), taken first
+/// where [`use_avx512`] says so (for kernels generic over [`BoundLanes`]). All compute the same
+/// values (see the module docs), so the choice only changes the speed.
 macro_rules! dispatch {
-    ($(#[$doc:meta])* fn $name:ident / $avx2:ident => $kernel:ident($($arg:ident: $ty:ty),* $(,)?) $(-> $ret:ty)?) => {
-        $(#[$doc])*
-        fn $name($($arg: $ty),*) $(-> $ret)? {
-            #[cfg(target_arch = "x86_64")]
-            if $crate::lanes::use_avx2() {
-                // SAFETY: the CPU supports AVX2 (`use_avx2` checks).
-                return unsafe { $avx2($($arg),*) };
-            }
-            $kernel::<wide::f32x8>($($arg),*)
+    // The AVX2 instance, else the portable one (the end of every dispatcher).
+    (@narrow $avx2:ident $kernel:ident ($($arg:ident),*)) => {{
+        #[cfg(target_arch = "x86_64")]
+        if $crate::lanes::use_avx2() {
+            // SAFETY: the CPU supports AVX2 (`use_avx2` checks).
+            return unsafe { $avx2($($arg),*) };
         }
-
+        $kernel::<wide::f32x8>($($arg),*)
+    }};
+    // The AVX2 instance.
+    (@avx2 $avx2:ident $kernel:ident ($($arg:ident: $ty:ty),*) $(-> $ret:ty)?) => {
         /// The kernel on [`crate::lanes::Avx2`] lanes, compiled with AVX2 (the lane methods
         /// inline to ymm instructions).
         ///
@@ -41,18 +43,20 @@ macro_rules! dispatch {
         /// The CPU must support AVX2.
         #[cfg(target_arch = "x86_64")]
         #[target_feature(enable = "avx2")]
+        #[allow(clippy::too_many_arguments)]
         unsafe fn $avx2($($arg: $ty),*) $(-> $ret)? {
             // `Avx2`'s invariant holds: the caller guarantees AVX2.
             $kernel::<$crate::lanes::Avx2>($($arg),*)
         }
     };
-}
-pub(crate) use dispatch;
-
-/// [`dispatch!`] with a third instance `$avx512`, compiled with AVX-512 F and DQ on
-/// [`crate::lanes::Avx512`] lanes (sixteen), taken where [`use_avx512`] says so; for kernels
-/// generic over [`BoundLanes`].
-macro_rules! dispatch16 {
+    ($(#[$doc:meta])* fn $name:ident / $avx2:ident => $kernel:ident($($arg:ident: $ty:ty),* $(,)?) $(-> $ret:ty)?) => {
+        $(#[$doc])*
+        #[allow(clippy::too_many_arguments)]
+        fn $name($($arg: $ty),*) $(-> $ret)? {
+            $crate::lanes::dispatch!(@narrow $avx2 $kernel ($($arg),*))
+        }
+        $crate::lanes::dispatch!(@avx2 $avx2 $kernel ($($arg: $ty),*) $(-> $ret)?);
+    };
     ($(#[$doc:meta])* fn $name:ident / $avx2:ident / $avx512:ident => $kernel:ident($($arg:ident: $ty:ty),* $(,)?) $(-> $ret:ty)?) => {
         $(#[$doc])*
         #[allow(clippy::too_many_arguments)]
@@ -62,24 +66,9 @@ macro_rules! dispatch16 {
                 // SAFETY: the CPU supports AVX2, AVX-512 F and DQ (`use_avx512` checks).
                 return unsafe { $avx512($($arg),*) };
             }
-            #[cfg(target_arch = "x86_64")]
-            if $crate::lanes::use_avx2() {
-                // SAFETY: the CPU supports AVX2 (`use_avx2` checks).
-                return unsafe { $avx2($($arg),*) };
-            }
-            $kernel::<wide::f32x8>($($arg),*)
+            $crate::lanes::dispatch!(@narrow $avx2 $kernel ($($arg),*))
         }
-
-        /// The kernel on [`crate::lanes::Avx2`] lanes, compiled with AVX2.
-        ///
-        /// # Safety
-        /// The CPU must support AVX2.
-        #[cfg(target_arch = "x86_64")]
-        #[target_feature(enable = "avx2")]
-        #[allow(clippy::too_many_arguments)]
-        unsafe fn $avx2($($arg: $ty),*) $(-> $ret)? {
-            $kernel::<$crate::lanes::Avx2>($($arg),*)
-        }
+        $crate::lanes::dispatch!(@avx2 $avx2 $kernel ($($arg: $ty),*) $(-> $ret)?);
 
         /// The kernel on [`crate::lanes::Avx512`] lanes, compiled with AVX2 and AVX-512 F, DQ.
         ///
@@ -89,11 +78,12 @@ macro_rules! dispatch16 {
         #[target_feature(enable = "avx2,avx512f,avx512dq")]
         #[allow(clippy::too_many_arguments)]
         unsafe fn $avx512($($arg: $ty),*) $(-> $ret)? {
+            // `Avx512`'s invariant holds: the caller guarantees AVX2, AVX-512 F and DQ.
             $kernel::<$crate::lanes::Avx512>($($arg),*)
         }
     };
 }
-pub(crate) use dispatch16;
+pub(crate) use dispatch;
 
 /// Whether the kernels take their AVX2 instances: the CPU has AVX2, the environment variable
 /// `VOLWARP_PORTABLE_SIMD` is not set and `VOLWARP_LANES` is not `portable` (either times the

@@ -694,7 +694,7 @@ fn bound_run<L: BoundLanes>(
     }
 }
 
-lanes::dispatch16! {
+lanes::dispatch! {
     /// [`bound_run`] on the best lanes this CPU has (sixteen with AVX-512, else eight).
     fn bound_dispatch / bound_avx2 / bound_avx512 => bound_run(
         view: &View,

@@ -19,7 +19,7 @@ use volwarp_core::sample::{Dequantizer, POS_BITS, RADIUS_BITS};
 ///
 /// **Invariant**: values of this type and calls of its methods exist only on CPUs with AVX2,
 /// AVX-512 F and AVX-512 DQ. The type is private to the crate, whose only users of it are the
-/// `#[target_feature(enable = "avx2,avx512f,avx512dq")]` instances of `lanes::dispatch16!`,
+/// `#[target_feature(enable = "avx2,avx512f,avx512dq")]` instances of `lanes::dispatch!`,
 /// called only after `lanes::use_avx512()`. This is what every `unsafe` block below relies on.
 #[derive(Clone, Copy)]
 pub(crate) struct Avx512(__m512);
