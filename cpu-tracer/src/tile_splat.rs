@@ -4,15 +4,16 @@
 //! the image.
 //!
 //! 1. **Bound** (parallel over runs of spheres): each sphere's screen rectangle — the pixels
-//!    whose *centres* lie between the tangents from the eye (`tight_bound`), eight spheres at
-//!    a time in f32 lanes with a widened radius (their packed samples unpacked and their integer
-//!    pixel spans taken in lanes too: `Lanes::decode8`, `Lanes::span_ints`), in f64 for spheres
-//!    near the eye plane — and,
+//!    whose *centres* lie between the tangents from the eye (`tight_bound`), sixteen spheres at
+//!    a time in AVX-512 lanes where the CPU has them, else eight, in f32 with a widened radius
+//!    (the packed samples unpacked, the integer spans taken, the rectangles packed and the
+//!    records stored in lanes too: `BoundLanes`), in f64 for spheres near the eye plane; one
+//!    kernel call per run of groups (`bound_run`) — and,
 //!    per [`GROUP`] consecutive spheres, the union of their rectangles. The scene's order is
 //!    spatially coherent (Morton order when built, the server's image order when not), so a
 //!    group covers a small patch of the screen. A *small* sphere (a rectangle of at most 2×2
 //!    pixels, most spheres of a frame drawn at half its resolution) also gets its hits there:
-//!    the ray–sphere test on the pixels of its 2×2 window, eight spheres per lane operation
+//!    the ray–sphere test on the pixels of its 2×2 window, one sphere per lane
 //!    (`small_hits`: full lanes, where a 4×2 block in step 3 would use one to four), kept in
 //!    place of its centre.
 //! 2. **Bin**: each group goes to the [`TILE`]×[`TILE`] tiles its rectangle overlaps (a serial
@@ -484,7 +485,7 @@ fn lane_abs<L: Arith>(a: L) -> L {
     a.max(L::splat(0.0) - a)
 }
 
-/// [`View`]'s constants in f32, for the bounds of eight spheres at once.
+/// [`View`]'s constants in f32, for the bounds of a lane's worth of spheres at once.
 pub(crate) struct ViewF32 {
     eye: [f32; 3],
     u: [f32; 3],
@@ -562,7 +563,7 @@ pub(crate) fn bound_group<L: BoundLanes>(
             & ay.simd_le(by)
             & by.simd_ge(zero)
             & ay.simd_lt(nh);
-        // The integer spans in lanes (`Lanes::span_ints`: `ceil_clamped` and the truncating
+        // The integer spans in lanes (`BoundLanes::spans`: `ceil_clamped` and the truncating
         // clamp, for the lanes of `ok`, whose values lie in its domain).
         let (xs0, xs1) = L::spans(ax.fast_max(L::splat(-1.0)), bx.fast_min(nw), view.width - 1);
         let (ys0, ys1) = L::spans(ay.fast_max(L::splat(-1.0)), by.fast_min(nh), view.height - 1);
@@ -632,7 +633,7 @@ pub(crate) fn bound_group<L: BoundLanes>(
     (u, any_large, small_all as u64 | (drawn as u64) << 32)
 }
 
-/// The hits of eight spheres (centres less the eye and radii `c`, the lanes of the mask
+/// The hits of a lane's worth of spheres (centres less the eye and radii `c`, the lanes of the mask
 /// `small`) on the pixels of their 2×2 windows at `(x0, y0)` (pixel indices as `f32`; the
 /// masks `wide`, `tall`: the rectangle's second column, row), as [`splat_sphere`] would find
 /// them: per window pixel `(x0 + dx, y0 + dy)` (result `dx + 2·dy`), per lane, the distance
