@@ -45,6 +45,33 @@ binop!(BitAnd, bitand, _mm512_and_ps);
 binop!(BitOr, bitor, _mm512_or_ps);
 
 impl Avx512 {
+    /// The sixteen lanes of `a`.
+    #[inline(always)]
+    pub(crate) fn load16(a: &[f32; 16]) -> Avx512 {
+        // SAFETY: AVX-512 F is available (the type's invariant); `a` is 64 readable bytes.
+        Avx512(unsafe { _mm512_loadu_ps(a.as_ptr()) })
+    }
+
+    /// The mask of the lanes of `bits` (bit `l`: lane `l`).
+    #[inline(always)]
+    pub(crate) fn of_bits(bits: u32) -> Avx512 {
+        Avx512::of_mask(bits as __mmask16)
+    }
+
+    /// Writes the lanes of `bits` into `out` (the others keep what they hold).
+    #[inline(always)]
+    pub(crate) fn store_masked(self, out: &mut [f32; 16], bits: u32) {
+        // SAFETY: AVX-512 F is available (the type's invariant); `out` is 64 writable bytes.
+        unsafe { _mm512_mask_storeu_ps(out.as_mut_ptr(), bits as __mmask16, self.0) }
+    }
+
+    /// Writes `x` into the entries of `out` of the lanes of `bits`.
+    #[inline(always)]
+    pub(crate) fn store_u32_masked(out: &mut [u32; 16], bits: u32, x: u32) {
+        // SAFETY: AVX-512 F is available (the type's invariant); `out` is 64 writable bytes.
+        unsafe { _mm512_mask_storeu_epi32(out.as_mut_ptr().cast(), bits as __mmask16, _mm512_set1_epi32(x as i32)) }
+    }
+
     /// The mask register of a mask's lanes (their sign bits, `vpmovd2m`).
     #[inline(always)]
     fn mask(self) -> __mmask16 {
