@@ -435,6 +435,10 @@ impl<L: Lanes> BoundLanes for L {
 pub(crate) trait Lanes: Arith {
     /// Eight `u32` lanes.
     type U: Copy;
+    /// Whether these are the AVX2 lanes (whose kernels may call AVX-512 functions where the CPU
+    /// has AVX-512).
+    #[cfg_attr(not(target_arch = "x86_64"), allow(dead_code))]
+    const AVX2: bool = false;
 
     /// The lanes of `a`, lane 0 first.
     fn new(a: [f32; 8]) -> Self;
@@ -747,6 +751,7 @@ mod avx2 {
     // SAFETY (every `unsafe` block of this impl): as for `Arith` above.
     impl Lanes for Avx2 {
         type U = __m256i;
+        const AVX2: bool = true;
 
         #[inline(always)]
         fn new(a: [f32; 8]) -> Self {

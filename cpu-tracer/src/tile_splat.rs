@@ -876,7 +876,6 @@ fn put<T: Copy>(s: &mut [T], a: [T; 8], is_quad: bool) {
 
 /// Step 3 for one tile: its directions, then every sphere of `list` and every sphere of
 /// `large` that overlaps it, into `buf.keys`.
-#[allow(clippy::too_many_arguments)]
 #[inline(always)]
 fn splat_tile<L: Lanes>(
     view: &View,
@@ -885,8 +884,12 @@ fn splat_tile<L: Lanes>(
     scene: &Scene,
     lists: &Lists,
     buf: &mut TileBuf,
-    wide: bool,
 ) -> (u64, u64) {
+    // Rows of sixteen for wide spheres: from the AVX2 instance, where the CPU has AVX-512.
+    #[cfg(target_arch = "x86_64")]
+    let wide = L::AVX2 && lanes::use_avx512();
+    #[cfg(not(target_arch = "x86_64"))]
+    let wide = false;
     buf.depth.fill(f32::INFINITY);
     buf.ids.fill(NO_HIT);
     // The centres are stored less the eye (exactly `sphere_hits`' `c − o`), so the rays start
@@ -1280,41 +1283,19 @@ pub(crate) fn sorted_before(samples: &[u64], a: u32, b: u32) -> bool {
     (code(a), a) < (code(b), b)
 }
 
-/// [`splat_tile`] on the best lanes this CPU has: AVX2 (spheres wider than eight pixels in
-/// rows of sixteen where the CPU has AVX-512: [`rows16`]), else the portable lanes (the
-/// operations, and so the image, stay the same).
-fn tile_dispatch(
-    view: &View,
-    tile: &Tile,
-    samples: &[u64],
-    scene: &Scene,
-    lists: &Lists,
-    buf: &mut TileBuf,
-) -> (u64, u64) {
-    #[cfg(target_arch = "x86_64")]
-    if lanes::use_avx2() {
-        // SAFETY: the CPU supports AVX2 (`use_avx2` checks).
-        return unsafe { tile_avx2(view, tile, samples, scene, lists, buf) };
-    }
-    splat_tile::<wide::f32x8>(view, tile, samples, scene, lists, buf, false)
-}
-
-/// [`splat_tile`] on [`lanes::Avx2`] lanes, compiled with AVX2 (the whole kernel compiled with
-/// AVX-512 as well drew the small spheres 5 % slower, so only [`rows16`] is).
-///
-/// # Safety
-/// The CPU must support AVX2.
-#[cfg(target_arch = "x86_64")]
-#[target_feature(enable = "avx2")]
-unsafe fn tile_avx2(
-    view: &View,
-    tile: &Tile,
-    samples: &[u64],
-    scene: &Scene,
-    lists: &Lists,
-    buf: &mut TileBuf,
-) -> (u64, u64) {
-    splat_tile::<lanes::Avx2>(view, tile, samples, scene, lists, buf, lanes::use_avx512())
+lanes::dispatch! {
+    /// [`splat_tile`] on the best lanes this CPU has: AVX2 widens the vectors, and where the
+    /// CPU has AVX-512 spheres wider than eight pixels take rows of sixteen ([`rows16`], the
+    /// only function compiled with AVX-512: the whole kernel compiled so drew the small
+    /// spheres 5 % slower). The operations, and so the image, stay the same.
+    fn tile_dispatch / tile_avx2 => splat_tile(
+        view: &View,
+        tile: &Tile,
+        samples: &[u64],
+        scene: &Scene,
+        lists: &Lists,
+        buf: &mut TileBuf,
+    ) -> (u64, u64)
 }
 
 /// A sphere wider than eight pixels (`(c, r)`, sample `i`) over the rows `y0..=y1` of its
