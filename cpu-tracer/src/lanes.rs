@@ -13,6 +13,8 @@
 //! Masks are lanes with all bits set (true) or clear (false), as `wide`'s comparisons give.
 
 use core::ops::{Add, BitAnd, BitOr, Div, Mul, Sub};
+#[cfg(target_arch = "x86_64")]
+use std::sync::atomic::{AtomicU8, Ordering};
 use volwarp_core::sample::Dequantizer;
 use volwarp_core::{RayBasis, Vec3};
 use wide::{f32x8, u32x8};
@@ -90,19 +92,12 @@ pub(crate) use dispatch;
 /// portable `wide` kernels, as on a CPU without AVX2 or on ARM). Read once.
 #[cfg(target_arch = "x86_64")]
 pub(crate) fn use_avx2() -> bool {
-    use std::sync::atomic::{AtomicU8, Ordering};
     static STATE: AtomicU8 = AtomicU8::new(0);
-    match STATE.load(Ordering::Relaxed) {
-        1 => true,
-        2 => false,
-        _ => {
-            let yes = std::is_x86_feature_detected!("avx2")
-                && std::env::var_os("VOLWARP_PORTABLE_SIMD").is_none()
-                && std::env::var("VOLWARP_LANES").ok().as_deref() != Some("portable");
-            STATE.store(if yes { 1 } else { 2 }, Ordering::Relaxed);
-            yes
-        }
-    }
+    decided_once(&STATE, || {
+        std::is_x86_feature_detected!("avx2")
+            && std::env::var_os("VOLWARP_PORTABLE_SIMD").is_none()
+            && std::env::var("VOLWARP_LANES").ok().as_deref() != Some("portable")
+    })
 }
 
 /// Whether the kernels that have an AVX-512 instance (sixteen lanes: the tiled splatter's
@@ -110,17 +105,24 @@ pub(crate) fn use_avx2() -> bool {
 /// `avx2` (which times the AVX2 instances on a CPU with AVX-512). Read once.
 #[cfg(target_arch = "x86_64")]
 pub(crate) fn use_avx512() -> bool {
-    use std::sync::atomic::{AtomicU8, Ordering};
     static STATE: AtomicU8 = AtomicU8::new(0);
-    match STATE.load(Ordering::Relaxed) {
+    decided_once(&STATE, || {
+        use_avx2()
+            && std::is_x86_feature_detected!("avx512f")
+            && std::is_x86_feature_detected!("avx512dq")
+            && std::env::var("VOLWARP_LANES").ok().as_deref() != Some("avx2")
+    })
+}
+
+/// `decide()`, worked out on the first call and kept in `state` (0: not yet, 1: yes, 2: no).
+#[cfg(target_arch = "x86_64")]
+fn decided_once(state: &AtomicU8, decide: impl FnOnce() -> bool) -> bool {
+    match state.load(Ordering::Relaxed) {
         1 => true,
         2 => false,
         _ => {
-            let yes = use_avx2()
-                && std::is_x86_feature_detected!("avx512f")
-                && std::is_x86_feature_detected!("avx512dq")
-                && std::env::var("VOLWARP_LANES").ok().as_deref() != Some("avx2");
-            STATE.store(if yes { 1 } else { 2 }, Ordering::Relaxed);
+            let yes = decide();
+            state.store(if yes { 1 } else { 2 }, Ordering::Relaxed);
             yes
         }
     }
@@ -346,7 +348,7 @@ pub(crate) fn rects_scalar<L: BoundLanes>(
         if ok >> l & 1 == 0 || a > b || c > d {
             continue;
         }
-        out.bits[l] = a as u64 | (c as u64) << 16 | (b as u64) << 32 | (d as u64) << 48;
+        out.bits[l] = rect_word(a, c, b, d);
         let tiles = ((b >> tile_log2) - (a >> tile_log2) + 1) * ((d >> tile_log2) - (c >> tile_log2) + 1);
         if tiles > max_tiles {
             out.large |= 1 << l;
@@ -356,9 +358,16 @@ pub(crate) fn rects_scalar<L: BoundLanes>(
         }
     }
     if out.drawn != 0 {
-        out.union = ux0 as u64 | (uy0 as u64) << 16 | (ux1 as u64) << 32 | (uy1 as u64) << 48;
+        out.union = rect_word(ux0, uy0, ux1, uy1);
     }
     out
+}
+
+/// The word of the rectangle `x0..=x1`, `y0..=y1` (each below 2¹⁵): `x0` in the low 16 bits,
+/// then `y0`, `x1`, `y1`.
+#[inline(always)]
+fn rect_word(x0: i32, y0: i32, x1: i32, y1: i32) -> u64 {
+    x0 as u64 | (y0 as u64) << 16 | (x1 as u64) << 32 | (y1 as u64) << 48
 }
 
 /// The empty rectangle's bits (`x0 = y0 = 0x7FFF`, `x1 = y1 = 0`: beyond every viewport, and

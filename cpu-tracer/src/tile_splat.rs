@@ -103,7 +103,8 @@ pub(crate) struct Rect {
 
 /// The empty rectangle: `x0 > x1`, and `x0`, `y0` beyond every viewport ([`MAX_VIEWPORT`] <
 /// 2¹⁵), so that [`TileTest::hits`] refuses it without a test of its own.
-pub(crate) const NO_RECT: Rect = Rect { x0: 0x7FFF, y0: 0x7FFF, x1: 0, y1: 0 };
+/// One definition with the bound pass's lanes ([`lanes::EMPTY_RECT`]).
+pub(crate) const NO_RECT: Rect = Rect::from_bits(lanes::EMPTY_RECT);
 
 impl Rect {
     pub(crate) fn is_empty(&self) -> bool {
@@ -130,7 +131,7 @@ impl Rect {
 
     /// The rectangle of [`Rect::bits`].
     #[inline(always)]
-    fn from_bits(b: u64) -> Rect {
+    const fn from_bits(b: u64) -> Rect {
         Rect { x0: b as u16, y0: (b >> 16) as u16, x1: (b >> 32) as u16, y1: (b >> 48) as u16 }
     }
 
@@ -924,7 +925,8 @@ fn splat_tile<L: Lanes>(
         let group = &rects[first..(first + GROUP).min(n)];
         let masks = lists.group_small[g];
         // A group inside the tile (most, with 64-pixel tiles) needs no test per sphere.
-        let hits = if tt.contains(lists.group_rects[g]) { (masks >> 32) as u32 } else { tt.hits_of(group) };
+        let inside = tt.contains(lists.group_rects[g]);
+        let hits = if inside { (masks >> 32) as u32 } else { tt.hits_of(group) };
         let hits = hits & (e >> 32) as u32;
         // The group's colors (two or three cache lines) on their way to the cache, for when
         // the tile's pixels are shaded.
@@ -937,7 +939,7 @@ fn splat_tile<L: Lanes>(
         let whole = (group.first_chunk::<GROUP>(), lists.centres.get(first..).and_then(|c| c.first_chunk::<GROUP>()));
         match whole {
             // A whole group inside the tile (most): no test per sphere, no bounds checks.
-            (Some(rs), Some(cs)) if tt.contains(lists.group_rects[g]) => {
+            (Some(rs), Some(cs)) if inside => {
                 while few != 0 {
                     let j = few.trailing_zeros() as usize & (GROUP - 1);
                     few &= few - 1;
@@ -1024,9 +1026,7 @@ fn splat_small<L>(k: &Kernel<'_, L>, tile: &Tile, r: Rect, i: u32, buf: &mut Til
                 continue;
             }
             let q = ((y - tile.y0) * TILE + (x - tile.x0)) & (TILE * TILE - 1);
-            if t < depth[q] {
-                (depth[q], ids[q]) = (t, i);
-            } else if t == depth[q] {
+            if keep_pixel(&mut depth[q], &mut ids[q], t, i) {
                 small_ties(depth, ids, [q; 4], &[t, f32::NAN, f32::NAN, f32::NAN], i, k.ties);
             }
         }
@@ -1069,14 +1069,9 @@ fn keep_pixel(d: &mut f32, id: &mut u32, t: f32, i: u32) -> bool {
 #[cold]
 fn small_ties(depth: &mut [f32; KEYS], ids: &mut [u32; KEYS], q: [usize; 4], t4: &[f32; 4], i: u32, ties: Ties) {
     for (&q, &t) in q.iter().zip(t4) {
-        if t != depth[q] {
-            continue;
+        if t == depth[q] {
+            keep_ties(&mut depth[q..=q], &mut ids[q..=q], 1, &[t], i, false, ties);
         }
-        let (mut ds, mut is) = ([depth[q]; 8], [ids[q]; 8]);
-        let mut tt = [0.0; 8];
-        tt[0] = t;
-        keep_ties(&mut ds, &mut is, 1, &tt, i, false, ties);
-        (depth[q], ids[q]) = (ds[0], is[0]);
     }
 }
 
