@@ -10,7 +10,7 @@ use volwarp_core::wire::Frame;
 use volwarp_core::{Camera, Heuristic, Scene};
 use volwarp_cpu_tracer::PacketTracer;
 use volwarp_gpu_tracer::synthetic::bumpy_surface;
-use volwarp_gpu_tracer::{GpuSplat, GpuTracer};
+use volwarp_gpu_tracer::{GpuSplat, GpuTracer, WgScanKind};
 
 fn median(v: Vec<Duration>) -> Duration {
     let mut secs: Vec<f64> = v.iter().map(Duration::as_secs_f64).collect();
@@ -53,18 +53,32 @@ fn bench(gpu: &mut GpuTracer, splat: &mut GpuSplat, name: &str, frame: &Frame, c
     println!("\n## {name}: {n} samples, {}x{} view", cam.width, cam.height);
     let cpu_build = time(reps, || Scene::build(frame));
     let scene = Scene::build(frame);
-    let gpu_scene = gpu.build_scene(frame).expect("GPU build");
-    let t = gpu.last_build_timing();
-    let rebuild = median((0..reps).map(|_| gpu.rebuild_only(frame, 1).expect("GPU rebuild")).collect());
-    println!(
-        "LBVH build: GPU {:.1} ms (compute passes, median of {reps}); first build: upload {:.1} ms, passes {:.1} ms, readback {:.1} ms; CPU serial Scene::build {:.1} ms",
-        ms(rebuild),
-        ms(t.upload),
-        ms(t.build),
-        ms(t.readback),
-        ms(cpu_build)
-    );
-    assert_eq!(gpu_scene.samples, scene.samples);
+    // The build with each workgroup scan the device offers (the default, faster one last, so
+    // it stays selected), its tree checked against the CPU's byte for byte.
+    let default_scan = gpu.scan();
+    for kind in WgScanKind::ALL.into_iter().rev().filter(|&k| k != default_scan).chain([default_scan]) {
+        if gpu.set_scan(kind).is_err() {
+            continue;
+        }
+        let gpu_scene = gpu.build_scene(frame).expect("GPU build");
+        let t = gpu.last_build_timing();
+        let rebuild = median((0..reps).map(|_| gpu.rebuild_only(frame, 1).expect("GPU rebuild")).collect());
+        println!(
+            "LBVH build ({} scan): GPU {:.2} ms (compute passes, median of {reps}); first build: upload {:.1} ms, passes {:.1} ms, readback {:.1} ms; CPU serial Scene::build {:.1} ms",
+            kind.name(),
+            ms(rebuild),
+            ms(t.upload),
+            ms(t.build),
+            ms(t.readback),
+            ms(cpu_build)
+        );
+        assert_eq!(gpu_scene.samples, scene.samples);
+        assert!(
+            bytemuck::cast_slice::<_, u8>(&gpu_scene.nodes) == bytemuck::cast_slice::<_, u8>(&scene.nodes),
+            "the GPU tree ({} scan) differs from the CPU tree",
+            kind.name()
+        );
+    }
     let mut img = Image::new(1, 1);
     gpu.try_render(&scene, cam, &mut img).expect("render"); // upload + warm-up
     let with_readback = time(reps, || gpu.try_render(&scene, cam, &mut img).expect("render"));
@@ -101,7 +115,11 @@ fn main() {
             std::process::exit(1);
         }
     };
-    println!("adapter: {}", gpu.context().describe_driver());
+    println!(
+        "adapter: {}; workgroup scans: {}",
+        gpu.context().describe_driver(),
+        gpu.scan().describe(&gpu.context().info)
+    );
     let mut splat = match GpuSplat::with_adapter(adapter.as_deref()) {
         Ok(s) => s,
         Err(e) => {

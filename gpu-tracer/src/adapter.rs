@@ -1,6 +1,7 @@
 //! Picking a GPU: any adapter wgpu can open (Vulkan, Metal, DX12, GL), a real GPU preferred,
 //! a software one (lavapipe/llvmpipe, WARP) as the fallback, and a clear error when there is none.
 
+use crate::scan::WgScanKind;
 use crate::GpuError;
 use std::sync::{Arc, Mutex};
 
@@ -18,6 +19,10 @@ pub struct GpuContext {
     pub limits: wgpu::Limits,
     /// Errors wgpu reported outside any error scope since the last [`GpuContext::take_error`].
     uncaptured: Arc<Mutex<Option<String>>>,
+    /// Whether the device was opened with subgroup operations.
+    subgroups: bool,
+    /// The workgroup scan the shaders compiled on this context use.
+    scan: WgScanKind,
 }
 
 /// Preference order of device types: a discrete GPU first, a software rasterizer last.
@@ -107,9 +112,10 @@ impl GpuContext {
     fn open(adapter: wgpu::Adapter) -> Result<GpuContext, GpuError> {
         let info = adapter.get_info();
         let limits = adapter.limits();
+        let subgroups = WgScanKind::subgroups_usable(&adapter);
         let desc = wgpu::DeviceDescriptor {
             label: Some("volwarp-gpu-tracer"),
-            required_features: wgpu::Features::empty(),
+            required_features: if subgroups { wgpu::Features::SUBGROUP } else { wgpu::Features::empty() },
             required_limits: limits.clone(),
             experimental_features: wgpu::ExperimentalFeatures::disabled(),
             memory_hints: wgpu::MemoryHints::Performance,
@@ -125,15 +131,37 @@ impl GpuContext {
                 s.get_or_insert_with(|| e.to_string());
             }
         }));
+        let scan = if subgroups { WgScanKind::Subgroup } else { WgScanKind::Portable };
         log::info!(
-            "GPU adapter: {} ({:?}, {:?}, driver {} {})",
+            "GPU adapter: {} ({:?}, {:?}, driver {} {}), workgroup scans: {}",
             info.name,
             info.backend,
             info.device_type,
             info.driver,
-            info.driver_info
+            info.driver_info,
+            scan.describe(&info)
         );
-        Ok(GpuContext { adapter, device, queue, info, limits, uncaptured })
+        Ok(GpuContext { adapter, device, queue, info, limits, uncaptured, subgroups, scan })
+    }
+
+    /// The workgroup scan the shaders compiled on this context use: [`WgScanKind::Subgroup`]
+    /// where the device has subgroup operations, else [`WgScanKind::Portable`].
+    pub fn scan(&self) -> WgScanKind {
+        self.scan
+    }
+
+    /// Chooses the workgroup scan of the shaders compiled on this context from now on (the
+    /// portable one always works; the subgroup one needs a device opened with subgroup
+    /// operations). For comparing the two; [`GpuContext::scan`] is already the faster one.
+    pub fn set_scan(&mut self, kind: WgScanKind) -> Result<(), GpuError> {
+        if kind == WgScanKind::Subgroup && !self.subgroups {
+            return Err(GpuError::Device(format!(
+                "adapter {:?} was opened without subgroup operations (it lacks them, or VOLWARP_GPU_SUBGROUPS=0)",
+                self.info.name
+            )));
+        }
+        self.scan = kind;
+        Ok(())
     }
 
     /// A one-line description: name, backend and type.

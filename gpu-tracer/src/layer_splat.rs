@@ -19,7 +19,7 @@
 //!
 //! Every per-frame constant (camera bases, the footprint's half-pixel vectors in the new
 //! camera's basis, the grow ratio, the focal plane) is computed here with the CPU's own `f32`
-//! operations and passed in the uniform ([`LayerParams`], declared once in `prelude.wgsl`), so
+//! operations and passed in the uniform (`LayerParams`, declared once in `prelude.wgsl`), so
 //! the shader starts from the CPU's values and repeats its per-sample arithmetic in the same
 //! order. The lists' total is not known before the `scan`: they are sized from the last
 //! frame (or `2n` entries), and a frame whose total exceeds that is drawn again with room.
@@ -281,7 +281,7 @@ impl GpuLayerSplat {
         let module = ctx.device.create_shader_module(wgpu::ShaderModuleDescriptor {
             label: Some("layer_splat.wgsl"),
             source: wgpu::ShaderSource::Wgsl(
-                crate::layout::shader(&(consts + include_str!("layer_splat.wgsl"))).into(),
+                crate::layout::shader_with_scan(&(consts + include_str!("layer_splat.wgsl")), ctx.scan()).into(),
             ),
         });
         let buffer = |binding: u32, ty: wgpu::BufferBindingType| wgpu::BindGroupLayoutEntry {

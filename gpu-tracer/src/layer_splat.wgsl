@@ -246,11 +246,10 @@ fn covers(q: Quad, x: u32, y: u32) -> bool {
 // The scan of the pixels' counts, reduce-then-scan over blocks of SCAN_BLOCK counts (256
 // invocations × 16 consecutive counts each): `scan_blocks` sums each block, `scan_sums` (one
 // workgroup) turns the block sums into block offsets and the total, `scan_apply` writes each
-// count's exclusive prefix in place.
+// count's exclusive prefix in place. The workgroup prefix sums are `wg_exclusive_scan`
+// (`scan.rs`), invocations numbered in its order (`wg_thread`).
 // (SCAN_BLOCK is prepended by `layer_splat.rs`.)
 const SCAN_PER: u32 = SCAN_BLOCK / 256u;
-
-var<workgroup> part: array<u32, 256>;
 
 // Invocation `i`'s 16 counts of block `b`: their sum.
 fn scan_partial(b: u32, i: u32) -> u32 {
@@ -264,35 +263,29 @@ fn scan_partial(b: u32, i: u32) -> u32 {
     return s;
 }
 
-// Inclusive scan of `part` (Hillis–Steele); every invocation of the workgroup calls it.
-fn scan_part(i: u32) {
-    for (var d = 1u; d < 256u; d <<= 1u) {
-        var v = 0u;
-        if i >= d {
-            v = part[i - d];
-        }
-        workgroupBarrier();
-        part[i] += v;
-        workgroupBarrier();
-    }
+// The exclusive prefix of `s` over the workgroup, and the workgroup's total.
+fn scan_one(s: u32, w: Wg) -> vec2<u32> {
+    let r = wg_exclusive_scan(vec4<u32>(s, 0u, 0u, 0u), w);
+    return vec2<u32>(r.excl.x, r.total.x);
 }
 
 @compute @workgroup_size(256)
 fn scan_blocks(
     @builtin(workgroup_id) wid: vec3<u32>,
     @builtin(num_workgroups) nwg: vec3<u32>,
-    @builtin(local_invocation_index) i: u32,
+    w: Wg,
 ) {
+    let i = wg_thread(w);
     let b = wid.y * nwg.x + wid.x;
-    part[i] = scan_partial(b, i);
-    scan_part(i);
+    let total = scan_one(scan_partial(b, i), w).y;
     if i == 255u && b * SCAN_BLOCK < P.width * P.height {
-        atomicStore(&work[P.off_sums + b], part[255]);
+        atomicStore(&work[P.off_sums + b], total);
     }
 }
 
 @compute @workgroup_size(256)
-fn scan_sums(@builtin(local_invocation_index) i: u32) {
+fn scan_sums(w: Wg) {
+    let i = wg_thread(w);
     let blocks = (P.width * P.height + SCAN_BLOCK - 1u) / SCAN_BLOCK;
     let per = (blocks + 255u) / 256u;
     let lo = min(i * per, blocks);
@@ -301,11 +294,10 @@ fn scan_sums(@builtin(local_invocation_index) i: u32) {
     for (var k = lo; k < hi; k++) {
         s += atomicLoad(&work[P.off_sums + k]);
     }
-    part[i] = s;
-    scan_part(i);
-    var run = part[i] - s;
+    let scan = scan_one(s, w);
+    var run = scan.x;
     if i == 255u {
-        atomicMax(&work[0], part[255]);
+        atomicMax(&work[0], scan.y);
     }
     for (var k = lo; k < hi; k++) {
         let c = atomicLoad(&work[P.off_sums + k]);
@@ -318,19 +310,18 @@ fn scan_sums(@builtin(local_invocation_index) i: u32) {
 fn scan_apply(
     @builtin(workgroup_id) wid: vec3<u32>,
     @builtin(num_workgroups) nwg: vec3<u32>,
-    @builtin(local_invocation_index) i: u32,
+    w: Wg,
 ) {
+    let i = wg_thread(w);
     let b = wid.y * nwg.x + wid.x;
-    let s = scan_partial(b, i);
-    part[i] = s;
-    scan_part(i);
+    let prefix = scan_one(scan_partial(b, i), w).x;
     let t = P.width * P.height;
     if b * SCAN_BLOCK >= t {
         return;
     }
     // In place: each count becomes its pixel's first list entry (the scatter's cursor, which
     // ends at the next pixel's first entry).
-    var run = atomicLoad(&work[P.off_sums + b]) + part[i] - s;
+    var run = atomicLoad(&work[P.off_sums + b]) + prefix;
     let lo = min(b * SCAN_BLOCK + i * SCAN_PER, t);
     let hi = min(lo + SCAN_PER, t);
     for (var k = lo; k < hi; k++) {

@@ -17,6 +17,12 @@ pub fn shader(body: &str) -> String {
     s
 }
 
+/// A shader that scans across its workgroup: the prelude, then the workgroup scan of `scan`
+/// (`crate::scan`), then `body`.
+pub fn shader_with_scan(body: &str, scan: crate::WgScanKind) -> String {
+    shader(&format!("{}\n{body}", scan.source()))
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;

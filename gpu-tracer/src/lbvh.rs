@@ -13,8 +13,10 @@
 //! workgroup-shared histogram into column `block` of a digit-major histogram; a device-wide
 //! exclusive scan (multi-level block scan) gives every (digit, block) its first output
 //! position; `radix_downsweep` orders the block stably by digit in shared memory (four 2-bit
-//! splits, each a workgroup prefix sum — portable, no subgroup operations) and scatters. No
-//! invocation walks keys serially beyond its own four.
+//! splits, each a workgroup prefix sum) and scatters. No invocation walks keys serially beyond
+//! its own four. Every workgroup prefix sum is the context's [`crate::WgScanKind`]: subgroup
+//! operations where the device has them (two barriers per scan), workgroup memory and barriers
+//! where not (sixteen); [`LbvhBuilder::scan`] says which was compiled.
 //!
 //! **Fit.** One invocation per leaf walks up; an atomic counter per node lets the second
 //! arrival fit it. Fitted boxes are exchanged through a separate buffer, cleared first and read
@@ -78,6 +80,7 @@ pub(crate) struct Outputs<'a> {
 /// The GPU LBVH builder: pipelines and scratch buffers, reused across frames.
 pub struct LbvhBuilder {
     pipes: Pipelines,
+    scan: crate::WgScanKind,
     params: wgpu::Buffer,
     samples_in: GrowBuffer,
     colors_in: GrowBuffer,
@@ -103,12 +106,13 @@ fn scan_counts(count: u32) -> Vec<u32> {
 }
 
 impl LbvhBuilder {
-    /// Compiles the build shaders.
+    /// Compiles the build shaders, with the context's workgroup scan ([`GpuContext::scan`]).
     pub fn new(ctx: &GpuContext) -> Result<LbvhBuilder, GpuError> {
+        let scan = ctx.scan();
         let scope = ctx.device.push_error_scope(wgpu::ErrorFilter::Validation);
         let module = ctx.device.create_shader_module(wgpu::ShaderModuleDescriptor {
             label: Some("lbvh.wgsl"),
-            source: wgpu::ShaderSource::Wgsl(crate::layout::shader(include_str!("lbvh.wgsl")).into()),
+            source: wgpu::ShaderSource::Wgsl(crate::layout::shader_with_scan(include_str!("lbvh.wgsl"), scan).into()),
         });
         let pipe = |entry: &'static str| {
             ctx.device.create_compute_pipeline(&wgpu::ComputePipelineDescriptor {
@@ -144,6 +148,7 @@ impl LbvhBuilder {
         let st_io = st_dst | wgpu::BufferUsages::COPY_SRC;
         Ok(LbvhBuilder {
             pipes,
+            scan,
             params,
             samples_in: GrowBuffer::new("unsorted samples", st_dst),
             colors_in: GrowBuffer::new("unsorted colors", st_dst),
@@ -153,6 +158,11 @@ impl LbvhBuilder {
             flags: GrowBuffer::new("fit flags", st_dst),
             boxes: GrowBuffer::new("fit boxes", st_dst),
         })
+    }
+
+    /// The workgroup scan its shaders were compiled with.
+    pub fn scan(&self) -> crate::WgScanKind {
+        self.scan
     }
 
     /// Sizes the sort's buffers for `n` keys and writes the uniform slots; the scan levels.

@@ -92,7 +92,9 @@ fn make_keys(
 // locally and stably by the digit (four 2-bit splits, each a workgroup-wide prefix sum in shared
 // memory: portable, no subgroup operations) and scatters each key to its digit's position plus
 // its rank among the block's keys of that digit. Stable, so keys end up ordered by
-// (code, index), the CPU's order.
+// (code, index), the CPU's order. Every workgroup prefix sum is `wg_exclusive_scan` (`scan.rs`:
+// subgroup operations where the device has them, workgroup memory and barriers where not), and
+// invocations are numbered by `wg_thread` (the scan's order).
 
 fn digit(k: vec4<u32>, shift: u32) -> u32 {
     var v: u32;
@@ -111,8 +113,6 @@ var<workgroup> wg_hist: array<atomic<u32>, 256>;
 // The digit of each slot of the block, and the block's slots in their (partly) sorted order.
 var<workgroup> wg_digit: array<u32, 1024>;
 var<workgroup> wg_order: array<u32, 1024>;
-// Per-invocation counts of the four 2-bit values, scanned across the workgroup.
-var<workgroup> wg_split: array<vec4<u32>, 256>;
 // Each digit's first local position, and its first global position.
 var<workgroup> wg_start: array<u32, 256>;
 var<workgroup> wg_base: array<u32, 256>;
@@ -146,8 +146,9 @@ fn radix_upsweep(
 fn radix_downsweep(
     @builtin(workgroup_id) wid: vec3<u32>,
     @builtin(num_workgroups) nwg: vec3<u32>,
-    @builtin(local_invocation_index) lidx: u32,
+    w: Wg,
 ) {
+    let lidx = wg_thread(w);
     let block = wid.y * nwg.x + wid.x;
     let live = block < P.blocks;
     let base = block * SORT_BLOCK;
@@ -179,22 +180,10 @@ fn radix_downsweep(
             bits[j] = b;
             count[b] += 1u;
         }
-        wg_split[lidx] = count;
-        workgroupBarrier();
-        for (var off = 1u; off < SORT_WG; off <<= 1u) {
-            var add = vec4<u32>(0u);
-            if lidx >= off {
-                add = wg_split[lidx - off];
-            }
-            workgroupBarrier();
-            wg_split[lidx] += add;
-            workgroupBarrier();
-        }
-        let total = wg_split[SORT_WG - 1u];
-        var pos = wg_split[lidx] - count;
-        pos += vec4<u32>(0u, total.x, total.x + total.y, total.x + total.y + total.z);
-        // Everyone has read `wg_order` and `wg_split` before they are overwritten.
-        workgroupBarrier();
+        let scan = wg_exclusive_scan(count, w);
+        let total = scan.total;
+        var pos = scan.excl + vec4<u32>(0u, total.x, total.x + total.y, total.x + total.y + total.z);
+        // Everyone has read `wg_order` before it is overwritten (the scan ends with a barrier).
         for (var j = 0u; j < SORT_ITEMS; j++) {
             let b = bits[j];
             wg_order[pos[b]] = mine[j];
@@ -204,20 +193,7 @@ fn radix_downsweep(
     }
     // Each digit's first local position: an exclusive scan of the block's digit counts.
     let c = atomicLoad(&wg_hist[lidx]);
-    wg_start[lidx] = c;
-    workgroupBarrier();
-    for (var off = 1u; off < BUCKETS; off <<= 1u) {
-        var add = 0u;
-        if lidx >= off {
-            add = wg_start[lidx - off];
-        }
-        workgroupBarrier();
-        wg_start[lidx] += add;
-        workgroupBarrier();
-    }
-    let first = wg_start[lidx] - c;
-    workgroupBarrier();
-    wg_start[lidx] = first;
+    wg_start[lidx] = wg_exclusive_scan(vec4<u32>(c, 0u, 0u, 0u), w).excl.x;
     if live {
         wg_base[lidx] = hist[lidx * P.blocks + block];
     }
@@ -234,8 +210,6 @@ fn radix_downsweep(
     }
 }
 
-var<workgroup> scan_shared: array<u32, 256>;
-
 // Exclusive prefix sum of each block of `SCAN_BLOCK` (2048) values of `scan_data` (the first
 // `P.count`), in place: each of 256 invocations sums 8 consecutive values serially, a
 // workgroup scan combines the 256 partial sums. The block's total goes to `scan_sums[block]`.
@@ -243,8 +217,9 @@ var<workgroup> scan_shared: array<u32, 256>;
 fn scan_blocks(
     @builtin(workgroup_id) wid: vec3<u32>,
     @builtin(num_workgroups) nwg: vec3<u32>,
-    @builtin(local_invocation_index) lidx: u32,
+    w: Wg,
 ) {
+    let lidx = wg_thread(w);
     let block = wid.y * nwg.x + wid.x;
     let base = block * SCAN_BLOCK + lidx * SCAN_ITEMS;
     var sum = 0u;
@@ -253,18 +228,8 @@ fn scan_blocks(
             sum += scan_data[base + k];
         }
     }
-    scan_shared[lidx] = sum;
-    workgroupBarrier();
-    for (var off = 1u; off < 256u; off <<= 1u) {
-        var add = 0u;
-        if lidx >= off {
-            add = scan_shared[lidx - off];
-        }
-        workgroupBarrier();
-        scan_shared[lidx] += add;
-        workgroupBarrier();
-    }
-    var run = scan_shared[lidx] - sum;
+    let scan = wg_exclusive_scan(vec4<u32>(sum, 0u, 0u, 0u), w);
+    var run = scan.excl.x;
     for (var k = 0u; k < SCAN_ITEMS; k++) {
         if base + k < P.count {
             let v = scan_data[base + k];
@@ -274,7 +239,7 @@ fn scan_blocks(
     }
     let blocks = (P.count + SCAN_BLOCK - 1u) / SCAN_BLOCK;
     if lidx == 255u && block < blocks {
-        scan_sums[block] = scan_shared[255];
+        scan_sums[block] = scan.total.x;
     }
 }
 

@@ -29,12 +29,14 @@ pub mod buffers;
 pub mod layer_splat;
 pub mod layout;
 pub mod lbvh;
+pub mod scan;
 pub mod splat;
 pub mod synthetic;
 pub mod tracer;
 
 pub use adapter::GpuContext;
 pub use layer_splat::GpuLayerSplat;
+pub use scan::WgScanKind;
 pub use splat::GpuSplat;
 pub use tracer::{BuildTiming, GpuTracer};
 

@@ -386,6 +386,22 @@ impl GpuTracer {
         Ok(scene)
     }
 
+    /// Chooses the workgroup scan of the LBVH build's shaders (they are compiled again on the
+    /// next build); an error when the device has no subgroup operations and `kind` needs them.
+    /// The default, [`GpuContext::scan`], is the faster one; this is for comparing the two.
+    pub fn set_scan(&mut self, kind: crate::WgScanKind) -> Result<(), GpuError> {
+        self.ctx.set_scan(kind)?;
+        if self.builder.as_ref().is_some_and(|b| b.scan() != kind) {
+            self.builder = None;
+        }
+        Ok(())
+    }
+
+    /// The workgroup scan the LBVH build uses.
+    pub fn scan(&self) -> crate::WgScanKind {
+        self.ctx.scan()
+    }
+
     /// Sorts `keys` on the GPU with the LBVH build's radix sort (stable, by the low 56 bits of
     /// the code in words 0 and 1; see [`LbvhBuilder::sort_keys`]): for tests and benchmarks.
     pub fn sort_keys(&mut self, keys: &[[u32; 4]]) -> Result<Vec<[u32; 4]>, GpuError> {

@@ -13,7 +13,7 @@ use volwarp_core::{Camera, Heuristic, RendererKind, Scene};
 use volwarp_cpu_tracer::layer_splat::LayerOptions;
 use volwarp_cpu_tracer::route::unbuilt_scene;
 use volwarp_cpu_tracer::LayerSplat;
-use volwarp_gpu_tracer::{GpuContext, GpuLayerSplat};
+use volwarp_gpu_tracer::{GpuContext, GpuLayerSplat, WgScanKind};
 use volwarp_server::{Dataset, Marcher};
 
 fn gpu(opts: LayerOptions) -> Option<GpuLayerSplat> {
@@ -128,6 +128,38 @@ fn gpu_layers_match_the_cpu_on_odd_and_larger_viewports() {
                 compare(&mut cpu, &mut g, &format!("ct head 64×48 frame, {w}×{h} view, fill {fill}"), &scene, &cam);
             }
         }
+    }
+}
+
+#[test]
+fn both_workgroup_scans_draw_the_cpu_image() {
+    // The list scan in both forms (subgroup operations and the portable one) on a viewport of
+    // 30 scan blocks, warped, with the fill: the same image as each other and as the CPU.
+    if gpu(LayerOptions::DEFAULT).is_none() {
+        return;
+    }
+    let frame = layered_frame(&Dataset::default_bundled(), 160, 120);
+    let scene = unbuilt_scene(&frame);
+    let cam = frame.header.camera.orbit(9.0, 4.0).with_viewport(400, 300);
+    let mut cpu = LayerSplat::with_options(1, LayerOptions::DEFAULT);
+    let mut images = Vec::new();
+    for kind in WgScanKind::ALL {
+        let mut ctx = GpuContext::new().unwrap();
+        if let Err(e) = ctx.set_scan(kind) {
+            let offered = ctx.adapter.features().contains(wgpu::Features::SUBGROUP);
+            let disabled = std::env::var("VOLWARP_GPU_SUBGROUPS").is_ok_and(|v| v == "0");
+            assert!(!offered || disabled, "the adapter offers subgroups but the {kind:?} scan is refused: {e}");
+            eprintln!("{kind:?} scan not tested: {e}");
+            continue;
+        }
+        let mut g = GpuLayerSplat::with_context(ctx, LayerOptions::DEFAULT).unwrap();
+        compare(&mut cpu, &mut g, &format!("ct head, 400×300 view, {kind:?} scan"), &scene, &cam);
+        let mut img = Image::new(1, 1);
+        g.try_render(&scene, &cam, &mut img).unwrap();
+        images.push(img);
+    }
+    if let [a, b] = &images[..] {
+        assert!(a.pixels == b.pixels, "the two workgroup scans draw different images");
     }
 }
 

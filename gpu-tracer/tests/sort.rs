@@ -4,7 +4,7 @@
 
 use volwarp_core::Scene;
 use volwarp_gpu_tracer::synthetic::bumpy_surface;
-use volwarp_gpu_tracer::GpuTracer;
+use volwarp_gpu_tracer::{GpuTracer, WgScanKind};
 
 fn tracer() -> Option<GpuTracer> {
     if std::env::var("VOLWARP_SKIP_GPU").is_ok_and(|v| v == "1") {
@@ -15,6 +15,25 @@ fn tracer() -> Option<GpuTracer> {
         Ok(t) => Some(t),
         Err(e) => panic!("{e} (set VOLWARP_SKIP_GPU=1 to skip the GPU tests explicitly)"),
     }
+}
+
+/// The workgroup scans to test on this adapter: both where it has subgroup operations (lavapipe
+/// does), else the portable one, saying so. Leaves `gpu` on the first.
+fn scans(gpu: &mut GpuTracer) -> Vec<WgScanKind> {
+    let mut v = Vec::new();
+    for kind in WgScanKind::ALL {
+        match gpu.set_scan(kind) {
+            Ok(()) => v.push(kind),
+            Err(e) => {
+                let offered = gpu.context().adapter.features().contains(wgpu::Features::SUBGROUP);
+                let disabled = std::env::var("VOLWARP_GPU_SUBGROUPS").is_ok_and(|v| v == "0");
+                assert!(!offered || disabled, "the adapter offers subgroups but the {kind:?} scan is refused: {e}");
+                eprintln!("{kind:?} scan not tested: {e}");
+            }
+        }
+    }
+    gpu.set_scan(v[0]).unwrap();
+    v
 }
 
 /// A small deterministic generator (xorshift64*).
@@ -43,18 +62,27 @@ fn cpu_sort(k: &[[u32; 4]]) -> Vec<[u32; 4]> {
 #[test]
 fn gpu_sort_equals_a_cpu_stable_sort() {
     let Some(mut gpu) = tracer() else { return };
+    for scan in scans(&mut gpu) {
+        gpu.set_scan(scan).unwrap();
+        sort_cases(&mut gpu, scan);
+    }
+}
+
+fn sort_cases(gpu: &mut GpuTracer, scan: WgScanKind) {
     let mut rng = Rng(0x9e37_79b9_7f4a_7c15);
     const CODE: u64 = (1 << 54) - 1;
-    // Counts around the block (1024 keys) and the workgroup (256) sizes, and not multiples.
-    for n in [0usize, 1, 2, 3, 255, 256, 257, 1023, 1024, 1025, 3001, 70_001] {
+    // Counts around the block (1024 keys), the workgroup (256) and the scan block (2048
+    // histogram entries: 9 blocks) sizes, and not multiples; 300,001 keys make 294 blocks, a
+    // histogram of 75,264 entries and a scan of three levels.
+    for n in [0usize, 1, 2, 3, 255, 256, 257, 1023, 1024, 1025, 3001, 9 * 1024 + 1, 70_001, 300_001] {
         let random: Vec<u64> = (0..n).map(|_| rng.next() & CODE).collect();
         let few: Vec<u64> = (0..n).map(|_| [0, 7, 1 << 40, CODE][(rng.next() % 4) as usize]).collect();
         let equal = vec![0x0012_3456_789a_bcde_u64 & CODE; n];
         for (what, codes) in [("random", random), ("duplicate-heavy", few), ("all equal", equal)] {
             let k = keys(&codes);
-            let got = gpu.sort_keys(&k).unwrap_or_else(|e| panic!("{what} n = {n}: {e}"));
-            assert_eq!(got.len(), n, "{what} n = {n}");
-            assert!(got == cpu_sort(&k), "{what} n = {n}: the GPU sort differs from a stable CPU sort");
+            let got = gpu.sort_keys(&k).unwrap_or_else(|e| panic!("{scan:?} {what} n = {n}: {e}"));
+            assert_eq!(got.len(), n, "{scan:?} {what} n = {n}");
+            assert!(got == cpu_sort(&k), "{scan:?} {what} n = {n}: the GPU sort differs from a stable CPU sort");
         }
     }
 }
@@ -66,14 +94,24 @@ fn gpu_sort_of_sort_keys_matches_the_build_order() {
     let frame = bumpy_surface(97, 1.5, 5);
     let codes: Vec<u64> = frame.samples.iter().map(|&s| volwarp_core::morton::code_of_sample(s)).collect();
     let k = keys(&codes);
-    let got = gpu.sort_keys(&k).unwrap();
-    assert!(got == cpu_sort(&k));
+    for scan in scans(&mut gpu) {
+        gpu.set_scan(scan).unwrap();
+        let got = gpu.sort_keys(&k).unwrap();
+        assert!(got == cpu_sort(&k), "{scan:?}");
+    }
 }
 
 #[test]
 fn gpu_tree_equals_the_cpu_tree_byte_for_byte() {
     let Some(mut gpu) = tracer() else { return };
     let base = bumpy_surface(120, 1.5, 9);
+    for scan in scans(&mut gpu) {
+        gpu.set_scan(scan).unwrap();
+        tree_cases(&mut gpu, &base, scan);
+    }
+}
+
+fn tree_cases(gpu: &mut GpuTracer, base: &volwarp_core::wire::Frame, scan: WgScanKind) {
     for n in [2usize, 3, 1023, 1024, 1025, 5000, base.samples.len()] {
         let mut frame = base.clone();
         frame.samples.truncate(n);
@@ -87,9 +125,9 @@ fn gpu_tree_equals_the_cpu_tree_byte_for_byte() {
         }
         let cpu = Scene::build(&frame);
         let g = gpu.build_scene(&frame).unwrap();
-        assert_eq!(g.samples, cpu.samples, "n = {n}");
-        assert_eq!(g.colors, cpu.colors, "n = {n}");
+        assert_eq!(g.samples, cpu.samples, "{scan:?} n = {n}");
+        assert_eq!(g.colors, cpu.colors, "{scan:?} n = {n}");
         let bytes = |s: &Scene| bytemuck::cast_slice::<_, u8>(&s.nodes).to_vec();
-        assert!(bytes(&g) == bytes(&cpu), "n = {n}: GPU nodes differ from the CPU nodes");
+        assert!(bytes(&g) == bytes(&cpu), "{scan:?} n = {n}: GPU nodes differ from the CPU nodes");
     }
 }
