@@ -278,6 +278,22 @@ mod tests {
                 gpu.render(&scene, &cam, &mut b);
                 assert!(a.diff(&b).unwrap().meets_target());
                 assert!(a.pixels.iter().any(|&p| p != volwarp_core::BACKGROUND));
+                // It keeps frames too, and fills from them as the CPU does (issue 19).
+                assert!(gpu.keeps_frames());
+                let mut zoomed = depth_image_frame(48, 1.0, 7);
+                zoomed.header.camera.fov_y_deg /= 3.0;
+                let whole = depth_image_frame(48, 1.0, 9);
+                let (newest, older) = (
+                    volwarp_cpu_tracer::route::unbuilt_scene(&zoomed),
+                    volwarp_cpu_tracer::route::unbuilt_scene(&whole),
+                );
+                let cam = whole.header.camera.orbit(5.0, 0.0);
+                cpu.render_set(&[&newest, &older], &cam, &mut a);
+                gpu.render_set(&[&newest, &older], &cam, &mut b);
+                assert!(a.diff(&b).unwrap().meets_target());
+                let mut alone = Image::new(1, 1);
+                gpu.render(&newest, &cam, &mut alone);
+                assert!(alone.pixels.iter().zip(&b.pixels).filter(|(x, y)| x != y).count() > 100);
             }
             Err(e) => {
                 assert!(!cfg!(feature = "gpu") || e.contains("adapter"), "{e}");

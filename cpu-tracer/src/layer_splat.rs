@@ -305,9 +305,7 @@ pub struct LayerSplat {
     /// The newest frame's samples in its own camera (its own image and its `Sight` use them).
     own: OwnPass,
     /// What the newest frame saw, and per older frame what it did not see.
-    sight: Sight,
-    residual_for: Option<SceneId>,
-    residuals: Vec<(SceneId, Scene)>,
+    older: OlderFrames,
     /// Which tiles of the image still hold an unfilled pixel (see `Holes`).
     tiles: Vec<u8>,
 }
@@ -333,9 +331,7 @@ impl LayerSplat {
             bands: Vec::new(),
             scratch: Image::new(0, 0),
             own: OwnPass::default(),
-            sight: Sight::default(),
-            residual_for: None,
-            residuals: Vec::new(),
+            older: OlderFrames::default(),
             tiles: Vec::new(),
         }
     }
@@ -832,23 +828,11 @@ impl Renderer for LayerSplat {
         // Older frames, newest first, only where nothing is yet (issue 19's lever 3): what
         // each saw that the newest frame did not (see [`Sight`]), so an older sample never
         // stands where the newest frame saw empty space or the same surface.
-        if older.is_empty() {
-            self.residuals.clear();
-        } else {
-            self.update_residuals(scene, older);
-        }
+        let mut older_frames = core::mem::take(&mut self.older);
+        older_frames.update(&mut self.own, scene, older, &self.threads);
         let mut scratch = core::mem::replace(&mut self.scratch, Image::new(0, 0));
-        let residuals = core::mem::take(&mut self.residuals);
         let mut tiles = core::mem::take(&mut self.tiles);
-        // Turned more than 90° from the newest frame's view, its footprints face away and draw
-        // nothing: what it saw is then no reason to leave an older sample out, so older frames
-        // are drawn whole.
-        let back_facing = (fc.target - fc.eye).dot(camera.target - camera.eye) < 0.0;
-        let sets: Vec<&Scene> = if back_facing {
-            older.iter().take(residuals.len()).copied().filter(|o| crate::frame_setup::unbuilt_ok(o)).collect()
-        } else {
-            residuals.iter().map(|(_, r)| r).collect()
-        };
+        let sets = older_frames.sets(&fc, camera, older);
         // The tiles holding an unfilled pixel, once: a superset of those left after each older
         // frame, so nothing is missed.
         let tiles_w =
@@ -868,7 +852,7 @@ impl Renderer for LayerSplat {
             self.state = state;
             take_drawn(&self.threads, &mut self.state[..w * h], &self.count, &scratch.pixels, rows, false);
         }
-        self.residuals = residuals;
+        self.older = older_frames;
         self.scratch = scratch;
         self.tiles = tiles;
         if fill {
@@ -902,16 +886,34 @@ impl Renderer for LayerSplat {
     }
 }
 
-impl LayerSplat {
-    /// Brings [`LayerSplat::residuals`] up to date for `newest` and `older` (newest first):
-    /// per older frame the samples the newest frame did not see.
+/// Issue 19's older frames, each reduced to what the newest frame did not see (its *residual*,
+/// see the module docs): one definition for [`LayerSplat`] and the GPU's layered splatter,
+/// which draws the same sets in the same order (through [`OlderSets`]).
+#[derive(Debug, Default)]
+pub(crate) struct OlderFrames {
+    /// What the newest frame saw.
+    sight: Sight,
+    /// The newest frame the residuals are for.
+    residual_for: Option<SceneId>,
+    /// Per older frame (newest first) its residual.
+    residuals: Vec<(SceneId, Scene)>,
+}
+
+impl OlderFrames {
+    /// Brings the residuals up to date for `newest` (whose samples in its own camera are
+    /// `own`) and `older` (newest first; none: nothing kept): per older frame the samples the
+    /// newest frame did not see.
     ///
     /// When the set has moved on by one frame (the previous newest is now the first older
     /// frame), an older frame's residual is what is left of its last one: what the previous
     /// newest saw of it is already drawn before it, from the previous newest's own samples, so
     /// only the new newest's sight is applied to the (small) residuals, and only the previous
     /// newest is reduced whole. Any other change of the set reduces every older frame whole.
-    fn update_residuals(&mut self, newest: &Scene, older: &[&Scene]) {
+    fn update(&mut self, own: &mut OwnPass, newest: &Scene, older: &[&Scene], threads: &Threads) {
+        if older.is_empty() {
+            self.residuals.clear();
+            return;
+        }
         let id = SceneId::of(newest);
         let older = &older[..older.len().min(crate::hole_fill::MAX_FRAMES - 1)];
         let mut fresh = false;
@@ -920,8 +922,8 @@ impl LayerSplat {
             if !shifted {
                 self.residuals.clear();
             }
-            self.own.prepare(newest, &self.threads);
-            self.sight.update(newest, &self.own, &self.threads);
+            own.prepare(newest, threads);
+            self.sight.update(newest, own, threads);
             self.residual_for = Some(id);
             fresh = true;
         }
@@ -929,15 +931,65 @@ impl LayerSplat {
         for &o in older {
             let oid = SceneId::of(o);
             let r = match self.residuals.iter().position(|(i, _)| *i == oid) {
-                Some(i) if fresh => self.sight.residual(&self.residuals.swap_remove(i).1, &self.threads),
+                Some(i) if fresh => self.sight.residual(&self.residuals.swap_remove(i).1, threads),
                 Some(i) => self.residuals.swap_remove(i).1,
                 // An inconsistent scene adds nothing.
                 None if !crate::frame_setup::unbuilt_ok(o) => Scene::empty(&o.header),
-                None => self.sight.residual(o, &self.threads),
+                None => self.sight.residual(o, threads),
             };
             next.push((oid, r));
         }
         self.residuals = next;
+    }
+
+    /// The scenes to draw after the newest (whose frame camera is `fc`) for `camera`, in
+    /// order, each into the pixels still empty: the residuals of [`OlderFrames::update`]'s
+    /// `older`. Turned more than 90° from the newest frame's view, its footprints face away
+    /// and draw nothing: what it saw is then no reason to leave an older sample out, so the
+    /// older frames are drawn whole.
+    fn sets<'a>(&'a self, fc: &Camera, camera: &Camera, older: &[&'a Scene]) -> Vec<&'a Scene> {
+        let back_facing = (fc.target - fc.eye).dot(camera.target - camera.eye) < 0.0;
+        if back_facing {
+            older.iter().take(self.residuals.len()).copied().filter(|o| crate::frame_setup::unbuilt_ok(o)).collect()
+        } else {
+            self.residuals.iter().map(|(_, r)| r).collect()
+        }
+    }
+}
+
+/// What a renderer other than [`LayerSplat`] (the GPU's `splat-layers-gpu`) needs to draw
+/// issue 19's older frames as [`LayerSplat::render_set`] does: the scenes to draw after the
+/// newest, in order, each into the pixels still empty, made by the CPU's own code (the
+/// residuals are made once per arriving frame, on the CPU, and are small).
+#[derive(Debug)]
+pub struct OlderSets {
+    frames: OlderFrames,
+    own: OwnPass,
+    threads: Threads,
+}
+
+impl OlderSets {
+    /// On `threads` threads (0: one per core).
+    pub fn new(threads: usize) -> Self {
+        OlderSets { frames: OlderFrames::default(), own: OwnPass::default(), threads: Threads::new(threads) }
+    }
+
+    /// The scenes to draw for `camera` after `newest`, given the `older` frames kept (newest
+    /// first; at most `hole_fill::MAX_FRAMES − 1` are used) and whether holes are filled
+    /// (`fill`, [`LayerOptions::fill`]): each older frame's residual (or the older frames whole
+    /// when the camera has turned more than 90° from the newest frame's view). Empty where
+    /// [`LayerSplat::render_set`] draws no older frame (none kept; or the frame's own image at
+    /// its own camera, with the fill), and then, as there, the residuals are not touched: the
+    /// same calls leave both renderers with the same residuals. The caller has checked that
+    /// `newest` and `camera` can be drawn.
+    pub fn sets<'a>(&'a mut self, newest: &Scene, older: &[&'a Scene], camera: &Camera, fill: bool) -> Vec<&'a Scene> {
+        let fc = newest.header.camera;
+        let fill = fill && fc.validate(MAX_VIEWPORT).is_ok();
+        if (fill && *camera == fc) || (!fill && older.is_empty()) {
+            return Vec::new();
+        }
+        self.frames.update(&mut self.own, newest, older, &self.threads);
+        self.frames.sets(&fc, camera, older)
     }
 }
 

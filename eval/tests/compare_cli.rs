@@ -114,3 +114,55 @@ fn compare_replays_a_recorded_real_stream() {
     assert!(dir.join("frame0001_cam01.png").is_file());
     let _ = std::fs::remove_dir_all(&dir);
 }
+
+/// The client's default renderer on a recorded stream of layered frames: `splat-layers-gpu`
+/// against `splat-layers`, with the older frames kept (issue 19's multi-frame filling on both).
+#[test]
+fn compare_replays_layered_frames_with_the_older_frames_kept() {
+    if std::env::var("VOLWARP_SKIP_GPU").is_ok_and(|v| v == "1") {
+        eprintln!("VOLWARP_SKIP_GPU=1: GPU test skipped");
+        return;
+    }
+    let marcher = Marcher::from_dataset(&Dataset::default_bundled());
+    let cam = marcher.default_camera(96, 96);
+    let mut bytes = Vec::new();
+    let mut w = VecWriter(&mut bytes);
+    write_magic(&mut w).unwrap();
+    for i in 0..3u64 {
+        let fc = cam.orbit(-16.0 + 8.0 * i as f32, 3.0);
+        let frame = marcher.render_frame_layers(&request(i, fc, Heuristic::Threshold), 4).0;
+        assert!(frame.layers() > 1);
+        write_entry(&mut w, &Entry::Frame { t_us: i * 100_000, frame }).unwrap();
+        // The camera turned on past the frame and back behind it, as a user drags.
+        for (k, yaw) in [(1u64, 9.0f32), (2, -20.0)] {
+            let req = request(10 * i + k, fc.orbit(yaw, 2.0), Heuristic::Threshold);
+            write_entry(&mut w, &Entry::Camera { t_us: i * 100_000 + k * 16_000, request: req }).unwrap();
+        }
+    }
+    let dir = std::env::temp_dir().join(format!("volwarp-compare-layers-{}", std::process::id()));
+    std::fs::create_dir_all(&dir).unwrap();
+    let file = dir.join("layers.vwrec");
+    std::fs::write(&file, &bytes).unwrap();
+    let out = Command::new(env!("CARGO_BIN_EXE_volwarp-compare"))
+        .arg(&file)
+        .args(["--renderer", "splat-layers-gpu", "--keep-frames", "3"])
+        .output()
+        .unwrap();
+    let stdout = String::from_utf8_lossy(&out.stdout);
+    eprintln!("{stdout}{}", String::from_utf8_lossy(&out.stderr));
+    assert!(out.status.success(), "{:?}", out.status);
+    assert!(stdout.contains("CPU splat-layers against GPU splat-layers-gpu"));
+    let rows: Vec<&str> = stdout.lines().filter(|l| l.contains("within one step")).collect();
+    assert_eq!(rows.len(), 6, "two cameras for each of three frames");
+    assert!(rows[4].ends_with("3 frames") && rows[0].ends_with("1 frames"), "{rows:?}");
+    assert!(stdout.contains("worst within-one-step share"));
+    // Not a GPU renderer with a CPU twin: a clear usage error.
+    let out = Command::new(env!("CARGO_BIN_EXE_volwarp-compare"))
+        .arg(&file)
+        .args(["--renderer", "points2"])
+        .output()
+        .unwrap();
+    assert_eq!(out.status.code(), Some(2));
+    assert!(String::from_utf8_lossy(&out.stderr).contains("one of spheres-gpu, splat-gpu, splat-layers-gpu"));
+    let _ = std::fs::remove_dir_all(&dir);
+}

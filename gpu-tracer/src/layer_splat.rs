@@ -42,14 +42,21 @@ use std::time::{Duration, Instant};
 use volwarp_core::renderer::{Image, Renderer, BACKGROUND};
 use volwarp_core::warp_radius::warp_angle_deg;
 use volwarp_core::{Camera, RayBasis, RendererKind, Scene, Vec3};
+use volwarp_cpu_tracer::hole_fill::MAX_FRAMES;
 pub use volwarp_cpu_tracer::layer_splat::{LayerOptions, LIST, OPAQUE};
-use volwarp_cpu_tracer::layer_splat::{Setup, SlabCorners};
+use volwarp_cpu_tracer::layer_splat::{OlderSets, Setup, SlabCorners};
 
 /// Words at the start of the work buffer before the pixels' counts (`COUNTS` in the shader).
 const COUNTS: u32 = 16;
 
-/// Uniform slots (frame draw, new-camera draw) are this far apart.
+/// Uniform slots (frame draw, new-camera draw, then one per older frame) are this far apart.
 const SLOT: u64 = 1024;
+
+/// Older frames drawn at most (the CPU's bound: `hole_fill::MAX_FRAMES` kept in all).
+const MAX_OLDER: usize = MAX_FRAMES - 1;
+
+/// Uniform slots: the frame's composite, the new view, the older frames.
+const SLOTS: u64 = 2 + MAX_OLDER as u64;
 
 /// Storage buffers bound in one stage (bindings 1–9 of `layer_splat.wgsl`).
 const STORAGE_BINDINGS: u32 = 9;
@@ -93,7 +100,7 @@ pub(crate) struct LayerParams {
     pub cap: u32,
     pub off_spans: u32,
     pub off_sums: u32,
-    pub pad1: u32,
+    pub only_empty: u32,
     pub pad2: u32,
 }
 
@@ -189,7 +196,7 @@ fn params(
         cap,
         off_spans,
         off_sums,
-        pad1: 0,
+        only_empty: 0,
         pad2: 0,
     }
 }
@@ -232,6 +239,20 @@ pub struct GpuLayerSplat {
     frame_of: Option<(SceneKey, Camera)>,
     redraws: u64,
     last_error: Option<String>,
+    /// Issue 19's older frames: what to draw after the newest (the CPU's own residuals; taken
+    /// out while in use).
+    older_sets: Option<OlderSets>,
+    /// Per older-frame slot its samples and colors on the GPU and the scene they hold.
+    older: Vec<OlderBuffers>,
+    /// Per older frame drawn in the last call its bind group (uniform slot `2 + i`).
+    older_groups: Vec<wgpu::BindGroup>,
+}
+
+/// One older frame's samples and colors on the GPU.
+struct OlderBuffers {
+    samples: GrowBuffer,
+    colors: GrowBuffer,
+    uploaded: Option<SceneKey>,
 }
 
 impl std::fmt::Debug for GpuLayerSplat {
@@ -326,7 +347,7 @@ impl GpuLayerSplat {
         let (scan_blocks, scan_sums, scan_apply) = (pipe("scan_blocks"), pipe("scan_sums"), pipe("scan_apply"));
         let params = ctx.device.create_buffer(&wgpu::BufferDescriptor {
             label: Some("layer splat params"),
-            size: 2 * SLOT,
+            size: SLOTS * SLOT,
             usage: wgpu::BufferUsages::UNIFORM | wgpu::BufferUsages::COPY_DST,
             mapped_at_creation: false,
         });
@@ -368,6 +389,9 @@ impl GpuLayerSplat {
             frame_of: None,
             redraws: 0,
             last_error: None,
+            older_sets: Some(OlderSets::new(0)),
+            older: Vec::new(),
+            older_groups: Vec::new(),
             ctx,
         })
     }
@@ -393,8 +417,9 @@ impl GpuLayerSplat {
         self.redraws
     }
 
-    /// Uploads the scene, sizes the buffers, writes the uniforms; what to draw.
-    fn prepare(&mut self, scene: &Scene, camera: &Camera) -> Result<Plan, GpuError> {
+    /// Uploads the scene, sizes the buffers (the footprints for at least `quads_for` samples:
+    /// the older frames'), writes the uniforms; what to draw.
+    fn prepare(&mut self, scene: &Scene, camera: &Camera, quads_for: u64) -> Result<Plan, GpuError> {
         camera.validate(MAX_VIEWPORT).map_err(GpuError::BadCamera)?;
         let n = check_scene(scene)?;
         let key = SceneKey::of(scene);
@@ -428,7 +453,7 @@ impl GpuLayerSplat {
         let (w, h) = (camera.width, camera.height);
         let (fw, fh) = if fill { (fc.width, fc.height) } else { (0, 0) };
         let px = (w as u64 * h as u64).max(fw as u64 * fh as u64);
-        changed |= self.quads.ensure(&self.ctx, len * QUAD_BYTES)?;
+        changed |= self.quads.ensure(&self.ctx, len.max(quads_for) * QUAD_BYTES)?;
         changed |= self.work.ensure(&self.ctx, 4 * work_layout(w, h).0.max(work_layout(fw, fh).0))?;
         if self.cap == 0 {
             self.cap = (2 * n).max(4096);
@@ -498,17 +523,90 @@ impl GpuLayerSplat {
         Ok(plan)
     }
 
-    /// Encodes one draw (the four passes) of a `w × h` viewport with the uniform of `slot`.
-    fn encode_draw(&self, encoder: &mut wgpu::CommandEncoder, slot: usize, w: u32, h: u32, n: u32, fill: bool) {
-        let Some(bgs) = self.bind_groups.as_ref() else { return };
+    /// Writes the uniforms of the older frames' draws (`sets`, in order) for `camera`, uploads
+    /// their samples where they changed and makes their bind groups (after [`Self::prepare`]).
+    fn prepare_older(&mut self, sets: &[&Scene], camera: &Camera) -> Result<(), GpuError> {
+        self.older_groups.clear();
+        while self.older.len() < sets.len() {
+            let st_dst = wgpu::BufferUsages::STORAGE | wgpu::BufferUsages::COPY_DST;
+            self.older.push(OlderBuffers {
+                samples: GrowBuffer::new("older layer samples", st_dst),
+                colors: GrowBuffer::new("older layer colors", st_dst),
+                uploaded: None,
+            });
+        }
+        let size = std::mem::size_of::<LayerParams>();
+        for (i, &o) in sets.iter().enumerate() {
+            let b = &mut self.older[i];
+            let len = o.samples.len() as u64;
+            let key = SceneKey::of(o);
+            let grew = b.samples.ensure(&self.ctx, len * 8)? | b.colors.ensure(&self.ctx, len * 4)?;
+            if grew || b.uploaded != Some(key) {
+                self.ctx.queue.write_buffer(b.samples.get()?, 0, bytemuck::cast_slice(&o.samples));
+                self.ctx.queue.write_buffer(b.colors.get()?, 0, bytemuck::cast_slice(&o.colors));
+                b.uploaded = Some(key);
+            }
+            // Older frames grow with their own warp, and never share corners (the CPU's rule).
+            let oc = o.header.camera;
+            let g = if self.adaptive { self.opts.own_at(warp_angle_deg(&oc, camera)) } else { self.opts.own };
+            let p = LayerParams { only_empty: 1, ..params(o, camera, &oc, &self.opts, g, self.cap, false) };
+            let slot = 2 + i as u64;
+            self.ctx.queue.write_buffer(&self.params, slot * SLOT, bytemuck::bytes_of(&p));
+            let mut entries = vec![wgpu::BindGroupEntry {
+                binding: 0,
+                resource: wgpu::BindingResource::Buffer(wgpu::BufferBinding {
+                    buffer: &self.params,
+                    offset: slot * SLOT,
+                    size: std::num::NonZeroU64::new(size as u64),
+                }),
+            }];
+            for (binding, buf) in [
+                (1, &b.samples),
+                (2, &b.colors),
+                (3, &self.quads),
+                (4, &self.work),
+                (5, &self.list),
+                (6, &self.out),
+                (7, &self.count),
+                (8, &self.frame),
+                (9, &self.shared),
+            ] {
+                entries.push(wgpu::BindGroupEntry { binding, resource: buf.get()?.as_entire_binding() });
+            }
+            self.older_groups.push(self.ctx.device.create_bind_group(&wgpu::BindGroupDescriptor {
+                label: Some("older layer splat"),
+                layout: &self.layout,
+                entries: &entries,
+            }));
+        }
+        Ok(())
+    }
+
+    /// Encodes one draw (the four passes) of a `w × h` viewport with the bind group `bg`: a
+    /// first draw clears the spans, an older frame's (`keep_spans`) adds to them.
+    #[allow(clippy::too_many_arguments)]
+    fn encode_draw(
+        &self,
+        encoder: &mut wgpu::CommandEncoder,
+        bg: &wgpu::BindGroup,
+        w: u32,
+        h: u32,
+        n: u32,
+        keep_spans: bool,
+    ) {
         let Ok(work) = self.work.get() else { return };
-        let (words, _, _) = work_layout(w, h);
+        let (words, off_spans, off_sums) = work_layout(w, h);
         // The counts, the spans (zero: empty) and the block sums.
-        encoder.clear_buffer(work, 4 * COUNTS as u64, Some(4 * (words - COUNTS as u64)));
+        if keep_spans {
+            encoder.clear_buffer(work, 4 * COUNTS as u64, Some(4 * (off_spans - COUNTS) as u64));
+            encoder.clear_buffer(work, 4 * off_sums as u64, Some(4 * (words - off_sums as u64)));
+        } else {
+            encoder.clear_buffer(work, 4 * COUNTS as u64, Some(4 * (words - COUNTS as u64)));
+        }
         let (gx, gy) = grid(&self.ctx, n.div_ceil(64));
         let mut pass = encoder
             .begin_compute_pass(&wgpu::ComputePassDescriptor { label: Some("layer splat"), timestamp_writes: None });
-        pass.set_bind_group(0, &bgs[slot], &[]);
+        pass.set_bind_group(0, bg, &[]);
         if n > 0 {
             pass.set_pipeline(&self.setup);
             pass.dispatch_workgroups(gx, gy, 1);
@@ -526,24 +624,36 @@ impl GpuLayerSplat {
         }
         pass.set_pipeline(&self.raster);
         pass.dispatch_workgroups(w.div_ceil(8), h.div_ceil(8), 1);
-        if fill {
-            pass.set_pipeline(&self.fill);
-            pass.dispatch_workgroups(w.div_ceil(8), h.div_ceil(8), 1);
-        }
     }
 
-    /// Encodes everything `plan` asks for (the work buffer's first word cleared first).
-    fn encode(&self, encoder: &mut wgpu::CommandEncoder, plan: Plan, scene: &Scene, camera: &Camera) {
+    /// Encodes everything `plan` asks for (the work buffer's first word cleared first): the
+    /// frame's composite, the new view of the newest frame, each older frame of
+    /// [`Self::prepare_older`] into the pixels still empty, then the fill.
+    fn encode(&self, encoder: &mut wgpu::CommandEncoder, plan: Plan, scene: &Scene, camera: &Camera, older: &[u32]) {
+        let Some(bgs) = self.bind_groups.as_ref() else { return };
         if let Ok(work) = self.work.get() {
             encoder.clear_buffer(work, 0, Some(4 * COUNTS as u64));
         }
         let n = scene.samples.len() as u32;
         let fc = scene.header.camera;
         if plan.draw_frame {
-            self.encode_draw(encoder, 0, fc.width, fc.height, n, false);
+            self.encode_draw(encoder, &bgs[0], fc.width, fc.height, n, false);
         }
         if plan.draw_view {
-            self.encode_draw(encoder, 1, camera.width, camera.height, n, plan.fill);
+            let (w, h) = (camera.width, camera.height);
+            self.encode_draw(encoder, &bgs[1], w, h, n, false);
+            for (bg, &on) in self.older_groups.iter().zip(older) {
+                self.encode_draw(encoder, bg, w, h, on, true);
+            }
+            if plan.fill {
+                let mut pass = encoder.begin_compute_pass(&wgpu::ComputePassDescriptor {
+                    label: Some("layer fill"),
+                    timestamp_writes: None,
+                });
+                pass.set_bind_group(0, &bgs[1], &[]);
+                pass.set_pipeline(&self.fill);
+                pass.dispatch_workgroups(w.div_ceil(8), h.div_ceil(8), 1);
+            }
         }
     }
 
@@ -551,13 +661,36 @@ impl GpuLayerSplat {
     /// (resized to the viewport), reading the image back. Errors as
     /// [`crate::GpuTracer::try_render`]: a background image and a typed error.
     pub fn try_render(&mut self, scene: &Scene, camera: &Camera, out: &mut Image) -> Result<(), GpuError> {
+        self.try_render_set(&[scene], camera, out)
+    }
+
+    /// Renders the newest of `scenes` (newest first) for `camera` and fills what it leaves
+    /// uncovered from the older ones, as the CPU's `LayerSplat::render_set` does (issue 19's
+    /// multi-frame filling: each older frame's residual, made on the CPU, drawn into the
+    /// pixels still empty, newest first, then the fill). No scene: an empty image. Errors as
+    /// [`Self::try_render`].
+    pub fn try_render_set(&mut self, scenes: &[&Scene], camera: &Camera, out: &mut Image) -> Result<(), GpuError> {
+        let Some((&scene, older)) = scenes.split_first() else {
+            out.reset_for_unusable(camera, 0);
+            return Ok(());
+        };
         if let Err(e) = camera.validate(MAX_VIEWPORT) {
             out.reset_for_unusable(camera, MAX_VIEWPORT);
             return Err(GpuError::BadCamera(e));
         }
         out.reset_for(camera);
+        let mut older_sets = self.older_sets.take().unwrap_or_else(|| OlderSets::new(0));
+        // The older frames only count where the newest frame can be drawn (the CPU's order).
+        let sets: Vec<&Scene> = if check_scene(scene).is_err() {
+            Vec::new()
+        } else {
+            let sets = older_sets.sets(scene, older, camera, self.opts.fill);
+            sets.into_iter().filter(|o| check_scene(o).is_ok_and(|n| n > 0)).collect()
+        };
         let scope = self.ctx.device.push_error_scope(wgpu::ErrorFilter::Validation);
-        let result = self.render_inner(scene, camera, out);
+        let result = self.render_inner(scene, &sets, camera, out);
+        drop(sets);
+        self.older_sets = Some(older_sets);
         let err = pollster::block_on(scope.pop());
         if let Some(e) = err.map(|e| e.to_string()).or_else(|| self.ctx.take_error()) {
             out.pixels.fill(BACKGROUND);
@@ -571,12 +704,25 @@ impl GpuLayerSplat {
         result
     }
 
-    fn render_inner(&mut self, scene: &Scene, camera: &Camera, out: &mut Image) -> Result<(), GpuError> {
+    fn render_inner(
+        &mut self,
+        scene: &Scene,
+        sets: &[&Scene],
+        camera: &Camera,
+        out: &mut Image,
+    ) -> Result<(), GpuError> {
+        let sets = &sets[..sets.len().min(MAX_OLDER)];
+        let older_n: Vec<u32> = sets.iter().map(|o| o.samples.len() as u32).collect();
+        let quads_for = older_n.iter().copied().max().unwrap_or(0) as u64;
         loop {
-            let plan = self.prepare(scene, camera)?;
+            let plan = self.prepare(scene, camera, quads_for)?;
+            let older: &[u32] = if plan.draw_view { &older_n } else { &[] };
+            if plan.draw_view {
+                self.prepare_older(sets, camera)?;
+            }
             let bytes = 4 * camera.width as u64 * camera.height as u64;
             let mut encoder = self.ctx.device.create_command_encoder(&Default::default());
-            self.encode(&mut encoder, plan, scene, camera);
+            self.encode(&mut encoder, plan, scene, camera, older);
             let src = if plan.draw_view { self.out.get()? } else { self.frame.get()? };
             encoder.copy_buffer_to_buffer(src, 0, self.staging.get()?, 0, bytes);
             encoder.copy_buffer_to_buffer(self.work.get()?, 0, self.staging.get()?, bytes, 4);
@@ -613,12 +759,13 @@ impl GpuLayerSplat {
     pub fn draw_only(&mut self, scene: &Scene, camera: &Camera, frames: u32) -> Result<Duration, GpuError> {
         let mut img = Image::new(1, 1);
         self.try_render(scene, camera, &mut img)?;
-        let plan = self.prepare(scene, camera)?;
+        let plan = self.prepare(scene, camera, 0)?;
+        self.older_groups.clear();
         self.ctx.wait()?;
         let t0 = Instant::now();
         for _ in 0..frames {
             let mut encoder = self.ctx.device.create_command_encoder(&Default::default());
-            self.encode(&mut encoder, plan, scene, camera);
+            self.encode(&mut encoder, plan, scene, camera, &[]);
             self.ctx.queue.submit([encoder.finish()]);
         }
         self.ctx.wait()?;
@@ -638,7 +785,17 @@ impl Renderer for GpuLayerSplat {
 
     /// Renders; a failure leaves the background image and is logged once per distinct error.
     fn render(&mut self, scene: &Scene, camera: &Camera, out: &mut Image) {
-        match self.try_render(scene, camera, out) {
+        self.render_set(&[scene], camera, out);
+    }
+
+    fn keeps_frames(&self) -> bool {
+        true
+    }
+
+    /// [`GpuLayerSplat::try_render_set`]; a failure leaves the background image and is logged
+    /// once per distinct error.
+    fn render_set(&mut self, scenes: &[&Scene], camera: &Camera, out: &mut Image) {
+        match self.try_render_set(scenes, camera, out) {
             Ok(()) => self.last_error = None,
             Err(e) => {
                 let msg = e.to_string();

@@ -15,6 +15,11 @@
 //    and, for the fill, the covered row/column spans.
 // 5. `fill`, one invocation per pixel: `hole_fill::block_outside_silhouette` + `stale_lookup`.
 //
+// Older frames (issue 19's multi-frame filling, `LayerSplat::render_set`) are drawn after the
+// newest with P.only_empty = 1: passes 1–4 again on the older frame's samples, but only for the
+// pixels that nothing drawn before covered (`open`), so each such pixel takes the first older
+// frame that covers it; then the fill, once.
+//
 // LayerParams, PackedSample, RayBasis and the shared functions come from `prelude.wgsl`; LIST
 // (the CPU's constant) and SCAN_BLOCK are prepended by `layer_splat.rs`.
 
@@ -224,11 +229,17 @@ fn setup(
     }
     for (var y = y0; y <= y1; y++) {
         for (var x = x0; x <= x1; x++) {
-            if covers(q, x, y) {
+            if covers(q, x, y) && open(x, y) {
                 atomicAdd(&work[COUNTS + y * P.width + x], 1u);
             }
         }
     }
+}
+
+// Whether this draw may give pixel (x, y) a color: always, but for an older frame only where
+// nothing drawn before covered it.
+fn open(x: u32, y: u32) -> bool {
+    return P.only_empty == 0u || count[y * P.width + x] == 0u;
 }
 
 // The CPU's rasterization test: the pixel centre inside all four edges.
@@ -351,7 +362,7 @@ fn scatter(
     }
     for (var y = y0; y <= y1; y++) {
         for (var x = x0; x <= x1; x++) {
-            if covers(q, x, y) {
+            if covers(q, x, y) && open(x, y) {
                 let at = atomicAdd(&work[COUNTS + y * P.width + x], 1u);
                 if at < P.cap {
                     list[at] = id;
@@ -386,6 +397,9 @@ fn raster(@builtin(global_invocation_id) gid: vec3<u32>) {
         return;
     }
     let p = y * w + x;
+    if !open(x, y) {
+        return;
+    }
     // After the scatter each pixel's cursor is where its list ends and the next one's begins
     // (`work[COUNTS - 1]`, before the first pixel's, is a zero that is never written).
     let lo = min(atomicLoad(&work[COUNTS + p - 1u]), P.cap);

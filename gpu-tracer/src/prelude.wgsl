@@ -189,6 +189,9 @@ struct LayerParams {
     // Where the row and column spans and the scan's block sums start in the work buffer.
     off_spans: u32,
     off_sums: u32,
-    pad1: u32,
+    // 1 when drawing an older frame (issue 19's multi-frame filling): only the pixels that
+    // no earlier draw of this image covered (`count` 0) are counted, listed and composited,
+    // and the spans are kept; 0 for the newest frame and the frame's own composite.
+    only_empty: u32,
     pad2: u32,
 }

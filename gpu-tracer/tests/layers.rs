@@ -261,3 +261,68 @@ fn the_fill_matches_the_cpu_on_the_pixels_it_fills() {
     }
     assert!(filled_total > 100, "the views should open holes for the fill ({filled_total})");
 }
+
+/// Issue 19's multi-frame filling on the GPU: `render_set` with older frames draws the CPU's
+/// image (each older frame's residual into the pixels still empty, then the fill), through a
+/// sequence of arrivals (the residuals are carried over when the set shifts by one frame),
+/// with the fill on and off, adaptive sizing on and off, and a turn past 90° (older frames
+/// drawn whole). The older frames must change the image, or the comparison says nothing.
+#[test]
+fn older_frames_fill_as_on_the_cpu() {
+    if gpu(LayerOptions::DEFAULT).is_none() {
+        return;
+    }
+    let ds = Dataset::default_bundled();
+    let m = Marcher::from_dataset(&ds);
+    let base = m.default_camera(96, 80);
+    // Frames 8° apart along the orbit, oldest first: each arrival adds the next.
+    let frames: Vec<Scene> = (0..5)
+        .map(|i| {
+            let cam = base.orbit(-24.0 + 8.0 * i as f32, 4.0);
+            unbuilt_scene(&m.render_frame_layers(&request(i as u64 + 1, cam), 4).0)
+        })
+        .collect();
+    for fill in [false, true] {
+        for adaptive in [false, true] {
+            let opts = LayerOptions { fill, ..LayerOptions::DEFAULT };
+            let mut g = gpu(opts).unwrap();
+            let mut cpu = LayerSplat::with_options(1, opts);
+            assert!(g.keeps_frames() && cpu.keeps_frames());
+            g.set_adaptive_radius(adaptive);
+            cpu.set_adaptive_radius(adaptive);
+            let mut changed = 0;
+            // The client's pattern: after each arrival a few draws of the moving camera with
+            // the newest frames kept (newest first, at most 4), then a turn past 90°.
+            for newest in 1..frames.len() {
+                let set: Vec<&Scene> = frames[..=newest].iter().rev().take(4).collect();
+                let fc = set[0].header.camera;
+                for (view, cam) in [("10° on", fc.orbit(10.0, 0.0)), ("25° back", fc.orbit(-25.0, -6.0))] {
+                    let what = format!("fill {fill}, adaptive {adaptive}, {} frames, {view}", set.len());
+                    let (mut want, mut got, mut alone) = (Image::new(1, 1), Image::new(1, 1), Image::new(1, 1));
+                    cpu.render_set(&set, &cam, &mut want);
+                    g.try_render_set(&set, &cam, &mut got).unwrap_or_else(|e| panic!("{what}: {e}"));
+                    let share = within_one(&want, &got);
+                    eprintln!("{what}: {:.4} % within one step", 100.0 * share);
+                    assert!(share >= 0.999, "{what}: only {:.4} % of pixels within one step", 100.0 * share);
+                    let mut alone_cpu = LayerSplat::with_options(1, opts);
+                    alone_cpu.set_adaptive_radius(adaptive);
+                    alone_cpu.render(set[0], &cam, &mut alone);
+                    // On the pixels the older frames changed alone, too (few at these warps).
+                    let older_px: Vec<usize> =
+                        (0..want.pixels.len()).filter(|&i| alone.pixels[i] != want.pixels[i]).collect();
+                    let alike = older_px.iter().filter(|&&i| channel_diff(want.pixels[i], got.pixels[i]) <= 1).count();
+                    assert!(alike as f64 >= 0.999 * older_px.len() as f64, "{what}: the older frames' pixels differ");
+                    changed += older_px.len();
+                }
+            }
+            let set: Vec<&Scene> = frames.iter().rev().take(4).collect();
+            let turned = set[0].header.camera.orbit(150.0, 0.0);
+            let (mut want, mut got) = (Image::new(1, 1), Image::new(1, 1));
+            cpu.render_set(&set, &turned, &mut want);
+            g.try_render_set(&set, &turned, &mut got).unwrap();
+            assert!(within_one(&want, &got) >= 0.999, "fill {fill}, adaptive {adaptive}: 150° turn");
+            eprintln!("fill {fill}, adaptive {adaptive}: the older frames changed {changed} pixels");
+            assert!(changed > 50, "fill {fill}, adaptive {adaptive}: the older frames changed only {changed} pixels");
+        }
+    }
+}
