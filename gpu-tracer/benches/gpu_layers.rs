@@ -2,8 +2,9 @@
 //! time of the GPU layered splatter (`splat-layers-gpu`) beside the CPU's (`splat-layers`, one
 //! thread and all cores) on the same real frame: the MRI from `../shared/data` (the bundled CT
 //! head where it is missing) marched by the server with K = 4 segments per pixel at 512², drawn
-//! 10° off with the defaults (fill on) and adaptive growth on, as the client draws it. Prints
-//! medians over repeated runs and the adapter, device and driver.
+//! 10° off with the defaults (fill on) and adaptive growth on, as the client draws it; then with
+//! three older frames kept (issue 19's multi-frame filling, the client's default of 4 frames).
+//! Prints medians over repeated runs and the adapter, device and driver.
 
 use std::time::{Duration, Instant};
 use volwarp_core::renderer::{Image, Renderer};
@@ -85,4 +86,44 @@ fn main() {
         ms(only),
         gpu.list_regrowths()
     );
+
+    // The client's default keeps 4 frames: three older ones 5°, 10° and 15° back along the
+    // orbit, each drawn into the pixels the newest leaves empty (their residuals made once,
+    // in the warm-up draw).
+    let older: Vec<_> = (1..=3)
+        .map(|i| {
+            let req = CameraRequest { seq: 1 + i, camera: cam.orbit(-5.0 * i as f32, 0.0), ..req };
+            unbuilt_scene(&marcher.render_frame_layers(&req, 4).0)
+        })
+        .collect();
+    let set: Vec<_> = std::iter::once(&scene).chain(&older).collect();
+    let view = cam.orbit(-20.0, 0.0);
+    println!("\n## the same frame with 3 older frames kept (5°, 10°, 15° back), drawn 20° back");
+    for threads in [1, 0] {
+        let mut cpu = LayerSplat::new(threads);
+        cpu.set_adaptive_radius(true);
+        cpu.render_set(&set, &view, &mut img);
+        let t = median(
+            (0..reps)
+                .map(|_| {
+                    let t = Instant::now();
+                    cpu.render_set(&set, &view, &mut img);
+                    t.elapsed()
+                })
+                .collect(),
+        );
+        let label = if threads == 0 { "all cores".to_string() } else { format!("{threads} thread") };
+        println!("CPU splat-layers, 4 frames ({label}): {:.1} ms", ms(t));
+    }
+    gpu.try_render_set(&set, &view, &mut img).expect("draw");
+    let with_readback = median(
+        (0..reps)
+            .map(|_| {
+                let t = Instant::now();
+                gpu.try_render_set(&set, &view, &mut img).expect("draw");
+                t.elapsed()
+            })
+            .collect(),
+    );
+    println!("GPU splat-layers-gpu, 4 frames: {:.1} ms with readback", ms(with_readback));
 }
