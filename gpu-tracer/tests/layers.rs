@@ -204,6 +204,23 @@ fn zero_and_one_samples_and_garbage_draw_what_the_cpu_draws() {
     for cam in &cams {
         compare(&mut cpu, &mut g, "garbage samples", &unbuilt_scene(&frame), cam);
     }
+    // Older frames that are garbage, empty, inconsistent (a color short) or have an unusable
+    // camera: drawn as the CPU draws them (or left out, as there), no error, no panic.
+    let newest = unbuilt_scene(&layered_frame(&Dataset::default_bundled(), 48, 40));
+    let garbage = unbuilt_scene(&frame);
+    let mut short = garbage.clone();
+    short.colors.pop();
+    let mut bad_cam = garbage.clone();
+    bad_cam.header.camera.fov_y_deg = f32::NAN;
+    let empty = unbuilt_scene(&empty);
+    let set = [&newest, &garbage, &empty, &short, &bad_cam];
+    for cam in [fc.orbit(-12.0, 3.0), fc.orbit(170.0, 0.0)] {
+        let (mut want, mut got) = (Image::new(1, 1), Image::new(1, 1));
+        cpu.render_set(&set, &cam, &mut want);
+        g.try_render_set(&set, &cam, &mut got).unwrap();
+        let share = within_one(&want, &got);
+        assert!(share >= 0.999, "bad older frames: {:.4} % within one step", 100.0 * share);
+    }
 }
 
 #[test]
