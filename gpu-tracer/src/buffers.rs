@@ -106,3 +106,27 @@ pub fn grid(ctx: &GpuContext, groups: u32) -> (u32, u32) {
         (max, groups.div_ceil(max))
     }
 }
+
+/// A bind group of `layout`: binding 0 the `size` bytes of the uniform `params` at `offset` (one
+/// slot of a buffer of uniforms), then each `(binding, buffer)` whole.
+pub(crate) fn slot_bind_group(
+    ctx: &GpuContext,
+    label: &'static str,
+    layout: &wgpu::BindGroupLayout,
+    params: (&wgpu::Buffer, u64, u64),
+    storage: &[(u32, &GrowBuffer)],
+) -> Result<wgpu::BindGroup, GpuError> {
+    let (buffer, offset, size) = params;
+    let mut entries = vec![wgpu::BindGroupEntry {
+        binding: 0,
+        resource: wgpu::BindingResource::Buffer(wgpu::BufferBinding {
+            buffer,
+            offset,
+            size: std::num::NonZeroU64::new(size),
+        }),
+    }];
+    for &(binding, buf) in storage {
+        entries.push(wgpu::BindGroupEntry { binding, resource: buf.get()?.as_entire_binding() });
+    }
+    Ok(ctx.device.create_bind_group(&wgpu::BindGroupDescriptor { label: Some(label), layout, entries: &entries }))
+}

@@ -487,40 +487,40 @@ impl GpuLayerSplat {
         self.ctx.queue.write_buffer(&self.params, 0, &slots);
 
         if self.bind_groups.is_none() {
-            let make = |slot: u64| -> Result<wgpu::BindGroup, GpuError> {
-                let mut entries = vec![wgpu::BindGroupEntry {
-                    binding: 0,
-                    resource: wgpu::BindingResource::Buffer(wgpu::BufferBinding {
-                        buffer: &self.params,
-                        offset: slot * SLOT,
-                        size: std::num::NonZeroU64::new(size as u64),
-                    }),
-                }];
-                // Slot 0 draws the frame's composite into `frame`; slot 1 the new view into
-                // `out`, reading `frame` for the fill.
+            // Slot 0 draws the frame's composite into `frame`; slot 1 the new view into `out`,
+            // reading `frame` for the fill.
+            let make = |slot: u64| {
                 let (target, stale) = if slot == 0 { (&self.frame, &self.dummy) } else { (&self.out, &self.frame) };
-                for (b, buf) in [
-                    (1, &self.samples),
-                    (2, &self.colors),
-                    (3, &self.quads),
-                    (4, &self.work),
-                    (5, &self.list),
-                    (6, target),
-                    (7, &self.count),
-                    (8, stale),
-                    (9, &self.shared),
-                ] {
-                    entries.push(wgpu::BindGroupEntry { binding: b, resource: buf.get()?.as_entire_binding() });
-                }
-                Ok(self.ctx.device.create_bind_group(&wgpu::BindGroupDescriptor {
-                    label: Some("layer splat"),
-                    layout: &self.layout,
-                    entries: &entries,
-                }))
+                self.bind_group(slot, &self.samples, &self.colors, target, stale)
             };
             self.bind_groups = Some([make(0)?, make(1)?]);
         }
         Ok(plan)
+    }
+
+    /// The bind group of uniform slot `slot`: the scene's `samples` and `colors`, drawing into
+    /// `target` with `stale` as the fill's frame composite.
+    fn bind_group(
+        &self,
+        slot: u64,
+        samples: &GrowBuffer,
+        colors: &GrowBuffer,
+        target: &GrowBuffer,
+        stale: &GrowBuffer,
+    ) -> Result<wgpu::BindGroup, GpuError> {
+        let storage = [
+            (1, samples),
+            (2, colors),
+            (3, &self.quads),
+            (4, &self.work),
+            (5, &self.list),
+            (6, target),
+            (7, &self.count),
+            (8, stale),
+            (9, &self.shared),
+        ];
+        let uniform = (&self.params, slot * SLOT, std::mem::size_of::<LayerParams>() as u64);
+        crate::buffers::slot_bind_group(&self.ctx, "layer splat", &self.layout, uniform, &storage)
     }
 
     /// Writes the uniforms of the older frames' draws (`sets`, in order) for `camera`, uploads
@@ -535,7 +535,6 @@ impl GpuLayerSplat {
                 uploaded: None,
             });
         }
-        let size = std::mem::size_of::<LayerParams>();
         for (i, &o) in sets.iter().enumerate() {
             let b = &mut self.older[i];
             let len = o.samples.len() as u64;
@@ -552,32 +551,9 @@ impl GpuLayerSplat {
             let p = LayerParams { only_empty: 1, ..params(o, camera, &oc, &self.opts, g, self.cap, false) };
             let slot = 2 + i as u64;
             self.ctx.queue.write_buffer(&self.params, slot * SLOT, bytemuck::bytes_of(&p));
-            let mut entries = vec![wgpu::BindGroupEntry {
-                binding: 0,
-                resource: wgpu::BindingResource::Buffer(wgpu::BufferBinding {
-                    buffer: &self.params,
-                    offset: slot * SLOT,
-                    size: std::num::NonZeroU64::new(size as u64),
-                }),
-            }];
-            for (binding, buf) in [
-                (1, &b.samples),
-                (2, &b.colors),
-                (3, &self.quads),
-                (4, &self.work),
-                (5, &self.list),
-                (6, &self.out),
-                (7, &self.count),
-                (8, &self.frame),
-                (9, &self.shared),
-            ] {
-                entries.push(wgpu::BindGroupEntry { binding, resource: buf.get()?.as_entire_binding() });
-            }
-            self.older_groups.push(self.ctx.device.create_bind_group(&wgpu::BindGroupDescriptor {
-                label: Some("older layer splat"),
-                layout: &self.layout,
-                entries: &entries,
-            }));
+            let b = &self.older[i];
+            let group = self.bind_group(slot, &b.samples, &b.colors, &self.out, &self.frame)?;
+            self.older_groups.push(group);
         }
         Ok(())
     }

@@ -220,29 +220,10 @@ impl GpuSplat {
         self.ctx.queue.write_buffer(&self.params, 0, &slots);
 
         if self.bind_groups.is_none() {
-            let make = |slot: u64| -> Result<wgpu::BindGroup, GpuError> {
-                let mut entries = vec![wgpu::BindGroupEntry {
-                    binding: 0,
-                    resource: wgpu::BindingResource::Buffer(wgpu::BufferBinding {
-                        buffer: &self.params,
-                        offset: slot * SLOT,
-                        size: std::num::NonZeroU64::new(size as u64),
-                    }),
-                }];
-                for (b, buf) in [
-                    (1, self.samples.get()?),
-                    (2, self.colors.get()?),
-                    (3, self.depth.get()?),
-                    (4, self.ids.get()?),
-                    (5, self.out.get()?),
-                ] {
-                    entries.push(wgpu::BindGroupEntry { binding: b, resource: buf.as_entire_binding() });
-                }
-                Ok(self.ctx.device.create_bind_group(&wgpu::BindGroupDescriptor {
-                    label: Some("splat"),
-                    layout: &self.layout,
-                    entries: &entries,
-                }))
+            let storage = [(1, &self.samples), (2, &self.colors), (3, &self.depth), (4, &self.ids), (5, &self.out)];
+            let make = |slot: u64| {
+                let uniform = (&self.params, slot * SLOT, size as u64);
+                crate::buffers::slot_bind_group(&self.ctx, "splat", &self.layout, uniform, &storage)
             };
             self.bind_groups = Some([make(0)?, make(1)?]);
         }
