@@ -92,9 +92,36 @@ pub fn read_message_bytes_marked<G>(
     bytes.extend_from_slice(&head);
     bytes.resize(HEADER_LEN + h.len as usize, 0);
     stream.read_exact(&mut bytes[HEADER_LEN..]).map_err(|e| io_err(what, &e))?;
-    let mut payload: &[u8] = &bytes[HEADER_LEN..];
-    let msg = wire::read_payload(&mut payload, &h, limits).map_err(wire_err)?;
+    let msg = if h.ty == wire::MsgType::LayeredCompactFrame {
+        Message::Frame(decode_layered_parallel(&bytes[HEADER_LEN..], limits).map_err(wire_err)?)
+    } else {
+        let mut payload: &[u8] = &bytes[HEADER_LEN..];
+        wire::read_payload(&mut payload, &h, limits).map_err(wire_err)?
+    };
     Ok((bytes, msg))
+}
+
+/// A LayeredCompactFrame payload decoded as core's `segments::decode_layered_payload` does
+/// (the same frame, the same checks), with its layers — independent CompactFrames — decoded on
+/// up to as many threads as there are cores (layer `i` on thread `i mod threads`); core merges
+/// them. A layer whose thread failed is an `Inconsistent` frame.
+pub fn decode_layered_parallel(payload: &[u8], limits: &Limits) -> Result<wire::Frame, WireError> {
+    use volwarp_core::segments::{decode_layered_part, decode_layered_payload_with, LayerError, LayerPart};
+    decode_layered_payload_with(payload, limits, |parts| {
+        let threads = std::thread::available_parallelism().map_or(1, |n| n.get()).clamp(1, parts.len().max(1));
+        let decode_every = |first: usize| -> Vec<(usize, Result<LayerPart, WireError>)> {
+            (first..parts.len()).step_by(threads).map(|i| (i, decode_layered_part(parts[i], limits))).collect()
+        };
+        let mut out: Vec<Option<Result<LayerPart, WireError>>> = (0..parts.len()).map(|_| None).collect();
+        std::thread::scope(|s| {
+            let others: Vec<_> = (1..threads).map(|t| s.spawn(move || decode_every(t))).collect();
+            let mine = decode_every(0);
+            for (i, r) in mine.into_iter().chain(others.into_iter().filter_map(|h| h.join().ok()).flatten()) {
+                out[i] = Some(r);
+            }
+        });
+        out.into_iter().map(|r| r.unwrap_or(Err(WireError::Layers(LayerError::Inconsistent)))).collect()
+    })
 }
 
 /// Encodes and sends a CameraRequest.
@@ -184,4 +211,62 @@ pub fn connect_layers(
     };
     log::info!("connected to {sock}; volume bounds {:?} .. {:?}", bounds.min(), bounds.max());
     Ok(Connection { stream, addr: sock, hello: server_hello, bounds, limits })
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use volwarp_core::compact_frame::{encode_frame, EncodeOptions, Encoding};
+    use volwarp_core::sample::{pack_color, Quantizer};
+    use volwarp_core::wire::{Frame, FrameHeader};
+
+    /// A `w × w` layered frame, 0–4 segments per pixel on the pixel's ray.
+    fn layered(w: u32) -> Frame {
+        let camera = Camera::look_at(Vec3::new(0.5, 0.5, 3.0), Vec3::splat(0.5), Vec3::Y, 30.0, w, w);
+        let bounds = Bounds::new(Vec3::new(-1.0, -1.0, -1.0), Vec3::new(2.0, 2.0, 2.0));
+        let q = Quantizer::new(bounds, 0.001);
+        let basis = camera.ray_basis();
+        let (mut samples, mut colors, mut segments) = (Vec::new(), Vec::new(), Vec::new());
+        for y in 0..w {
+            for x in 0..w {
+                let d = basis.dir(x, y);
+                for j in 0..((x * 7 + y * 3) % 5) as u8 {
+                    samples.push(q.pack(camera.eye + d * (2.0 + 0.3 * j as f32 + 0.01 * (x % 16) as f32), 0.004));
+                    let a = 40 + 50 * j + (x % 16) as u8;
+                    colors.push(pack_color(a / 2, a / 3, a, a));
+                    segments.push(j);
+                }
+            }
+        }
+        let header = FrameHeader {
+            seq: 1,
+            camera,
+            heuristic: Heuristic::Threshold,
+            bounds,
+            radius_unit: 0.001,
+            render_us: 5,
+            count: samples.len() as u32,
+        };
+        Frame { header, samples, colors, segments }
+    }
+
+    #[test]
+    fn layered_frames_decode_on_threads_as_in_one() {
+        let (bytes, ty) = encode_frame(&layered(48), Encoding::Compact, &EncodeOptions::default());
+        assert_eq!(ty, Encoding::Compact);
+        assert_eq!(bytes[6], wire::MsgType::LayeredCompactFrame as u8);
+        let limits = Limits::default();
+        let serial = wire::read_message(&mut &bytes[..], &limits).unwrap();
+        let (got_bytes, parallel) = read_message_bytes(&mut &bytes[..], &limits, "test").unwrap();
+        assert_eq!(got_bytes, bytes);
+        assert!(parallel == serial, "the threads' frame differs from core's");
+        // Damaged messages: the same verdict as core's decoder, and no panic.
+        for i in (12..bytes.len()).step_by(5) {
+            let mut c = bytes.clone();
+            c[i] ^= 0x3c;
+            let want = wire::read_message(&mut &c[..], &limits);
+            let got = decode_layered_parallel(&c[HEADER_LEN..], &limits);
+            assert_eq!(want.is_ok(), got.is_ok(), "byte {i}");
+        }
+    }
 }

@@ -495,6 +495,42 @@ mod layered_compact {
     /// carry the frame's own fixed part (but its count) and a coverage mask inside the previous
     /// layer's, the counts must add up, and the merged frame must pass [`validate`].
     pub fn decode_layered_payload(payload: &[u8], limits: &Limits) -> Result<Frame, WireError> {
+        decode_layered_payload_with(payload, limits, |parts| {
+            parts.iter().map(|part| decode_layered_part(part, limits)).collect()
+        })
+    }
+
+    /// One layer of a LayeredCompactFrame, decoded ([`decode_layered_part`]): its coverage mask
+    /// and its samples in pixel order.
+    #[derive(Debug)]
+    pub struct LayerPart {
+        mask: Vec<u8>,
+        frame: Frame,
+    }
+
+    /// Decodes one layer's CompactFrame payload (one of the parts
+    /// [`decode_layered_payload_with`] hands out): decompression and reconstruction, bounded
+    /// by `limits` as any CompactFrame's.
+    pub fn decode_layered_part(part: &[u8], limits: &Limits) -> Result<LayerPart, WireError> {
+        let (sub, params) = compact_frame::read_params(part, limits)?;
+        let body = compact_frame::decompress(&part[COMPACT_FIXED_LEN..], &params)?;
+        let frame = compact_frame::decode_body(&sub, &params, &body)?;
+        let mlen = (sub.camera.width as usize * sub.camera.height as usize).div_ceil(8);
+        let mask = body.get(..mlen).ok_or(WireError::Layers(LayerError::Inconsistent))?.to_vec();
+        Ok(LayerPart { mask, frame })
+    }
+
+    /// [`decode_layered_payload`] with the layers' parts decoded by `decode_parts`, which gets
+    /// each layer's CompactFrame payload, layer 0 first, and returns
+    /// [`decode_layered_part`] of each in the same order — in parallel, for instance (std
+    /// clients decode the parts on several threads). The parts have passed the checks that need
+    /// no decoding (lengths, each part's fixed part against the frame's, the counts adding up to
+    /// the frame's, which bounds what all parts together may allocate) before it is called.
+    pub fn decode_layered_payload_with(
+        payload: &[u8],
+        limits: &Limits,
+        decode_parts: impl FnOnce(&[&[u8]]) -> Vec<Result<LayerPart, WireError>>,
+    ) -> Result<Frame, WireError> {
         let bad_len = WireError::BadLength { ty: MsgType::LayeredCompactFrame, len: payload.len() as u32 };
         let inconsistent = WireError::Layers(LayerError::Inconsistent);
         let fixed: &[u8; FRAME_FIXED_LEN] =
@@ -508,7 +544,7 @@ mod layered_compact {
         let (w, h) = (header.camera.width as usize, header.camera.height as usize);
         let mlen = (w * h).div_ceil(8);
         let mut rest = &payload[FRAME_FIXED_LEN..];
-        let mut parts: Vec<(Vec<u8>, Frame)> = Vec::with_capacity(layers as usize);
+        let mut raw_parts: Vec<&[u8]> = Vec::with_capacity(layers as usize);
         let mut total = 0u64;
         for _ in 0..layers {
             let len_bytes: [u8; 4] = rest.get(..4).ok_or(bad_len)?.try_into().map_err(|_| bad_len)?;
@@ -519,23 +555,32 @@ mod layered_compact {
             if part.len() < COMPACT_FIXED_LEN || part[..57] != fixed[..57] || part[58..92] != fixed[58..92] {
                 return Err(inconsistent);
             }
-            let (sub, params) = compact_frame::read_params(part, limits)?;
+            let (sub, _) = compact_frame::read_params(part, limits)?;
             total += sub.count as u64;
             if total > header.count as u64 {
                 return Err(inconsistent);
             }
-            let body = compact_frame::decompress(&part[COMPACT_FIXED_LEN..], &params)?;
-            let f = compact_frame::decode_body(&sub, &params, &body)?;
-            let mask = body[..mlen].to_vec();
+            raw_parts.push(part);
+        }
+        if !rest.is_empty() || total != header.count as u64 {
+            return Err(inconsistent);
+        }
+        let decoded = decode_parts(&raw_parts);
+        if decoded.len() != raw_parts.len() {
+            return Err(inconsistent);
+        }
+        let mut parts: Vec<(Vec<u8>, Frame)> = Vec::with_capacity(layers as usize);
+        for d in decoded {
+            let LayerPart { mask, frame: f } = d?;
+            if mask.len() != mlen {
+                return Err(inconsistent);
+            }
             if let Some((prev, _)) = parts.last() {
                 if mask.iter().zip(prev).any(|(m, p)| m & !p != 0) {
                     return Err(inconsistent);
                 }
             }
             parts.push((mask, f));
-        }
-        if !rest.is_empty() || total != header.count as u64 {
-            return Err(inconsistent);
         }
         // Merge in pixel order, each pixel's layers front to back.
         let n = header.count as usize;

@@ -274,3 +274,39 @@ fn layered_compact_frames_with_full_coverage_round_trip() {
         assert!((da.center(*a) - db.center(*b)).length() < 0.002);
     }
 }
+
+/// The layers' parts decoded by the caller (std clients do it on several threads): decoded in
+/// any order and handed back in layer order, the same frame as the serial decoder; handed back
+/// short, out of order or failing, a typed error and never a panic.
+#[test]
+fn layered_parts_decoded_by_the_caller_give_the_same_frame() {
+    use volwarp_core::segments::{decode_layered_part, decode_layered_payload_with};
+    let f = layered_big(4, 40);
+    let (b, _) = compact_frame::encode_frame(&f, Encoding::Compact, &EncodeOptions::default());
+    let lim = Limits::default();
+    let payload = &b[12..];
+    let serial = decode(&b, &lim).unwrap();
+    assert!(serial.samples.len() == f.samples.len() && serial.segments == f.segments);
+    let reversed = decode_layered_payload_with(payload, &lim, |parts| {
+        let mut v: Vec<_> = parts.iter().rev().map(|p| decode_layered_part(p, &lim)).collect();
+        v.reverse();
+        v
+    })
+    .unwrap();
+    assert!(reversed == serial, "decoded out of order, the frame differs");
+    let inconsistent = WireError::Layers(LayerError::Inconsistent);
+    let short = decode_layered_payload_with(payload, &lim, |parts| {
+        parts[1..].iter().map(|p| decode_layered_part(p, &lim)).collect()
+    });
+    assert_eq!(short.unwrap_err(), inconsistent);
+    let swapped = decode_layered_payload_with(payload, &lim, |parts| {
+        let mut v: Vec<_> = parts.iter().map(|p| decode_layered_part(p, &lim)).collect();
+        v.swap(0, 1);
+        v
+    });
+    assert_eq!(swapped.unwrap_err(), inconsistent);
+    let failing = decode_layered_payload_with(payload, &lim, |parts| {
+        parts.iter().map(|p| decode_layered_part(&p[..p.len() / 2], &lim)).collect()
+    });
+    assert!(failing.is_err());
+}
