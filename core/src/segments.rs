@@ -113,16 +113,25 @@ impl Segmenter {
 
     fn close(&mut self) {
         self.open = false;
-        let a0 = self.start[3];
+        self.push(self.start, self.last, self.weight, self.weighted_t);
+    }
+
+    /// Ends the open segment that went from the accumulated color `start` to `last`, its
+    /// samples' opacity weights summing to `weight` and their weighted `t` to `weighted_t`:
+    /// kept as the next segment unless it is empty or none is left. One definition for
+    /// [`Segmenter`] and [`SegmenterLanes`].
+    #[inline]
+    fn push(&mut self, start: [f32; 4], last: [f32; 4], weight: f32, weighted_t: f32) {
+        let a0 = start[3];
         let keep = 1.0 - a0;
-        let alpha = self.last[3] - a0;
-        if !(alpha > EMPTY_ALPHA && keep > 1e-6 && self.weight > 0.0) || self.count >= self.k {
+        let alpha = last[3] - a0;
+        if !(alpha > EMPTY_ALPHA && keep > 1e-6 && weight > 0.0) || self.count >= self.k {
             return;
         }
         let inv = 1.0 / keep;
         let a = (alpha * inv).clamp(0.0, 1.0);
-        let c = |i: usize| ((self.last[i] - self.start[i]) * inv).clamp(0.0, a);
-        let t = self.weighted_t / self.weight;
+        let c = |i: usize| ((last[i] - start[i]) * inv).clamp(0.0, a);
+        let t = weighted_t / weight;
         // Rounding may put the mean a hair outside the interval; keep the order strict.
         let t = match self.count.checked_sub(1) {
             Some(p) if !(t > self.out[p as usize].t) => self.out[p as usize].t.next_up(),
@@ -140,6 +149,124 @@ impl Segmenter {
         }
         &self.out[..self.count as usize]
     }
+}
+
+/// [`Segmenter`] for `M` rays at once, as the marcher's SIMD packets feed them: the same cuts,
+/// depths and colors bit for bit (the server's tests compare its packet kernel with its scalar
+/// one, which feeds [`Segmenter`]), with the per-sample bookkeeping as straight-line code over
+/// the `M` lanes (selects, no branches, so the compiler vectorizes it) and only the rare closing
+/// of a segment done lane by lane ([`Segmenter::push`], one definition). Lanes are fed only
+/// where their bit of `bits` is set.
+#[derive(Clone, Debug)]
+pub struct SegmenterLanes<const M: usize> {
+    k: f32,
+    gap: f32,
+    /// Per lane: segments kept so far (as `f32`: small integers, exact), whether a segment is
+    /// open, the accumulated color where it opened and after the last sample, that sample's
+    /// `t`, and the open segment's opacity weights and weighted `t`.
+    count: [f32; M],
+    open: [u32; M],
+    start: [[f32; M]; 4],
+    last: [[f32; M]; 4],
+    last_t: [f32; M],
+    weight: [f32; M],
+    weighted_t: [f32; M],
+    /// Per lane its kept segments.
+    segs: [Segmenter; M],
+}
+
+impl<const M: usize> SegmenterLanes<M> {
+    /// `M` segmenters as [`Segmenter::new`]`(k, step)`.
+    pub fn new(k: u32, step: f32) -> Self {
+        let one = Segmenter::new(k, step);
+        SegmenterLanes {
+            k: one.k as f32,
+            gap: one.gap,
+            count: [0.0; M],
+            open: [0; M],
+            start: [[0.0; M]; 4],
+            last: [[0.0; M]; 4],
+            last_t: [f32::NEG_INFINITY; M],
+            weight: [0.0; M],
+            weighted_t: [0.0; M],
+            segs: [one; M],
+        }
+    }
+
+    /// [`Segmenter::feed`] for each lane `l` whose bit `l` of `bits` is set: its sample's `t[l]`
+    /// and the accumulated color after it, `dst[c][l]`.
+    // Indexed loops over the lanes, one array per value: the form the compiler vectorizes.
+    #[allow(clippy::needless_range_loop)]
+    #[inline(always)]
+    pub fn feed(&mut self, bits: u64, t: &[f32; M], dst: [&[f32; M]; 4]) {
+        // Masks are all ones or zero per lane (u32), so every loop below is lane-wise selects.
+        let active: [u32; M] = core::array::from_fn(|l| (((bits >> (l & 63)) & 1) as u32).wrapping_neg());
+        // Which lanes end their open segment before this sample (Segmenter::feed's test).
+        let mut close = [0u32; M];
+        for l in 0..M {
+            let prev_a = self.last[3][l];
+            let seg_a = prev_a - self.start[3][l];
+            let level = (self.count[l] + 1.0) / self.k;
+            let gap = mask(t[l] - self.last_t[l] > self.gap) & mask(seg_a >= MIN_CUT_ALPHA);
+            let left = mask(self.count[l] + 1.0 < self.k);
+            close[l] = active[l] & self.open[l] & left & (gap | mask(prev_a >= level));
+        }
+        if close.iter().fold(0, |a, &c| a | c) != 0 {
+            for l in (0..M).filter(|&l| close[l] != 0) {
+                let start = [self.start[0][l], self.start[1][l], self.start[2][l], self.start[3][l]];
+                let last = [self.last[0][l], self.last[1][l], self.last[2][l], self.last[3][l]];
+                self.segs[l].push(start, last, self.weight[l], self.weighted_t[l]);
+                self.count[l] = self.segs[l].count as f32;
+                self.open[l] = 0;
+            }
+        }
+        // Open where none is, weigh the sample (with the opacity before it), remember it.
+        let mut opening = [0u32; M];
+        for l in 0..M {
+            opening[l] = active[l] & !self.open[l];
+            let weight = sel(opening[l], 0.0, self.weight[l]);
+            let weighted_t = sel(opening[l], 0.0, self.weighted_t[l]);
+            let w = dst[3][l] - self.last[3][l];
+            let add = active[l] & mask(w > 0.0);
+            self.weight[l] = sel(add, weight + w, weight);
+            self.weighted_t[l] = sel(add, weighted_t + w * t[l], weighted_t);
+            self.last_t[l] = sel(active[l], t[l], self.last_t[l]);
+            self.open[l] |= active[l];
+        }
+        for c in 0..4 {
+            for l in 0..M {
+                self.start[c][l] = sel(opening[l], self.last[c][l], self.start[c][l]);
+                self.last[c][l] = sel(active[l], dst[c][l], self.last[c][l]);
+            }
+        }
+    }
+
+    /// [`Segmenter::finish`] of lane `l` (none for a lane out of range).
+    pub fn finish(&mut self, l: usize) -> &[Segment] {
+        if l >= M {
+            return &[];
+        }
+        if self.open[l] != 0 {
+            self.open[l] = 0;
+            let start = [self.start[0][l], self.start[1][l], self.start[2][l], self.start[3][l]];
+            let last = [self.last[0][l], self.last[1][l], self.last[2][l], self.last[3][l]];
+            self.segs[l].push(start, last, self.weight[l], self.weighted_t[l]);
+        }
+        let seg = &self.segs[l];
+        &seg.out[..seg.count as usize]
+    }
+}
+
+/// All ones where `c`, else zero.
+#[inline(always)]
+fn mask(c: bool) -> u32 {
+    (c as u32).wrapping_neg()
+}
+
+/// `a` where `m` is all ones, `b` where it is zero (bit for bit).
+#[inline(always)]
+fn sel(m: u32, a: f32, b: f32) -> f32 {
+    f32::from_bits((a.to_bits() & m) | (b.to_bits() & !m))
 }
 
 /// Composites premultiplied segment colors front to back: `C += (1 − A)·c`. The order of the
@@ -679,6 +806,61 @@ mod tests {
             assert!(w[0].t < w[1].t);
         }
         assert!(segs.s[0].t > 1.0 && segs.s[0].t < 2.0);
+    }
+
+    /// `SegmenterLanes` against one `Segmenter` per lane, bit for bit: 16 lanes of random
+    /// profiles (runs of visible samples, gaps, thick and thin layers), each lane fed only at
+    /// the steps its bit is set, for K = 1 … 16.
+    #[test]
+    fn lanes_cut_rays_as_one_segmenter_per_lane() {
+        let mut x = 0x2545_f491_4f6c_dd1du64;
+        let mut rnd = move || {
+            x ^= x << 13;
+            x ^= x >> 7;
+            x ^= x << 17;
+            (x >> 11) as f32 / (1u64 << 53) as f32
+        };
+        for k in 1..=MAX_LAYERS as u32 {
+            const M: usize = 16;
+            let step = 0.5;
+            let mut lanes = SegmenterLanes::<M>::new(k, step);
+            let mut each = [Segmenter::new(k, step); M];
+            let mut acc = [[0.0f32; 4]; M];
+            for s in 0..200 {
+                let t: [f32; M] = core::array::from_fn(|_| s as f32 * step);
+                let mut bits = 0u64;
+                for (l, a) in acc.iter_mut().enumerate() {
+                    // Lane l sees material in bursts, with gaps of a few steps between.
+                    let visible = (s / (3 + l)) % 2 == 0 && rnd() < 0.9;
+                    if visible && a[3] < 0.99 {
+                        let alpha = 0.02 + 0.2 * rnd();
+                        let c = [alpha * rnd(), alpha * rnd(), alpha * rnd(), alpha];
+                        let w = 1.0 - a[3];
+                        for i in 0..4 {
+                            a[i] += w * c[i];
+                        }
+                        bits |= 1 << l;
+                    }
+                }
+                let dst: [[f32; M]; 4] = core::array::from_fn(|c| core::array::from_fn(|l| acc[l][c]));
+                lanes.feed(bits, &t, [&dst[0], &dst[1], &dst[2], &dst[3]]);
+                for (l, seg) in each.iter_mut().enumerate() {
+                    if bits >> l & 1 != 0 {
+                        seg.feed(t[l], acc[l]);
+                    }
+                }
+            }
+            for (l, seg) in each.iter_mut().enumerate() {
+                let want = seg.finish();
+                let got = lanes.finish(l);
+                assert_eq!(got.len(), want.len(), "K={k} lane {l}");
+                for (a, b) in got.iter().zip(want) {
+                    assert_eq!(a.t.to_bits(), b.t.to_bits(), "K={k} lane {l}");
+                    assert_eq!(a.color.map(f32::to_bits), b.color.map(f32::to_bits), "K={k} lane {l}");
+                }
+                assert!(k < 2 || l > 0 || want.len() > 1, "K={k}: lane 0 should have several segments");
+            }
+        }
     }
 
     #[test]

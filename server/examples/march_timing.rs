@@ -5,6 +5,7 @@
 //! may use. A steadier figure than criterion's on a shared machine, and a loop to profile.
 
 use std::time::Instant;
+use volwarp_core::wire::CameraRequest;
 use volwarp_core::Heuristic;
 use volwarp_server::{Dataset, Marcher};
 
@@ -32,19 +33,35 @@ fn main() {
     let ds = Dataset::load(&path, None).expect("loading the volume");
     let m = Marcher::from_dataset(&ds);
     let camera = m.default_camera(size, size).orbit(20.0, 10.0).dolly(0.68);
-    let (mut wall, mut cpu) = (Vec::new(), Vec::new());
+    // `VOLWARP_MARCH_LAYERS=K` (K > 1): the layered frame of K segments per pixel instead.
+    let layers: u32 = std::env::var("VOLWARP_MARCH_LAYERS").ok().and_then(|s| s.parse().ok()).unwrap_or(1);
+    let req0 = CameraRequest { seq: 1, camera, heuristic: Heuristic::Threshold, radius_scale: 1.0 };
+    let mut frame = m.render_frame(&req0).0;
+    let (mut wall, mut cpu, mut split) = (Vec::new(), Vec::new(), Vec::new());
     let mut samples = 0;
     for _ in 0..n {
         let (w0, c0) = (Instant::now(), cpu_ms());
-        let s = m.march(&camera, Heuristic::Threshold);
+        if layers > 1 {
+            // The layered frame as the server makes it: the march with its segments and the pack.
+            let st = m.render_frame_layers_into(&req0, layers, &mut frame);
+            samples = frame.samples.len();
+            split.push((st.march_us as f64 / 1e3, st.compact_us as f64 / 1e3));
+        } else {
+            let s = m.march(&camera, Heuristic::Threshold);
+            samples = s.t.iter().filter(|t| t.is_finite()).count();
+        }
         cpu.push(cpu_ms() - c0);
         wall.push(w0.elapsed().as_secs_f64() * 1e3);
-        samples = s.t.iter().filter(|t| t.is_finite()).count();
     }
     println!(
-        "{path} {size}², {:?} lanes: {samples} samples, wall {:.1} ms, cpu {:.1} ms (medians of {n})",
+        "{path} {size}², K = {layers}, {:?} lanes: {samples} samples, wall {:.1} ms, cpu {:.1} ms (medians of {n})",
         volwarp_server::lane_kind(),
         median(wall),
         median(cpu)
     );
+    if !split.is_empty() {
+        let march = median(split.iter().map(|s| s.0).collect());
+        let gather = median(split.iter().map(|s| s.1).collect());
+        println!("  of which the march (segments and pack included) {march:.1} ms, gathering the frame {gather:.1} ms");
+    }
 }
