@@ -2,7 +2,9 @@
 //! marches the MRI benchmark view (the `server` bench's camera) N times and prints the median
 //! wall and on-CPU (process CPU time, all threads) milliseconds; `RAYON_NUM_THREADS` picks the
 //! threads, `VOLWARP_LANES` (`portable`, `avx2`, `avx512`) the widest lanes the packet marcher
-//! may use. A steadier figure than criterion's on a shared machine, and a loop to profile.
+//! may use, `VOLWARP_MARCH_LAYERS=K` (K > 1) the layered frame of K segments per pixel as the
+//! server makes it (march, segments, pack; the split printed). A steadier figure than
+//! criterion's on a shared machine, and a loop to profile.
 
 use std::time::Instant;
 use volwarp_core::wire::CameraRequest;
