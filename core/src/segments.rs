@@ -155,7 +155,7 @@ impl Segmenter {
 /// depths and colors bit for bit (the server's tests compare its packet kernel with its scalar
 /// one, which feeds [`Segmenter`]), with the per-sample bookkeeping as straight-line code over
 /// the `M` lanes (selects, no branches, so the compiler vectorizes it) and only the rare closing
-/// of a segment done lane by lane ([`Segmenter::push`], one definition). Lanes are fed only
+/// of a segment done lane by lane (`Segmenter::push`, one definition). Lanes are fed only
 /// where their bit of `bits` is set.
 #[derive(Clone, Debug)]
 pub struct SegmenterLanes<const M: usize> {

@@ -168,7 +168,7 @@ fn write_quality(results: &[(String, DatasetResult)], heuristics: &[Heuristic], 
     Ok(())
 }
 
-/// Parses a `quality.csv` written by [`quality`] (rows with unknown heuristics or unparsable
+/// Parses a `quality.csv` written by [`quality()`] (rows with unknown heuristics or unparsable
 /// numbers are an error naming the line).
 pub fn parse_quality_csv(text: &str) -> Result<Vec<Row>, ErrorBox> {
     let mut lines = text.lines();
