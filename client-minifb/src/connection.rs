@@ -178,7 +178,8 @@ pub fn connect_layers(
 
     // Ask for CompactFrames (about 3 bytes per sample instead of 12; the server decides).
     let mut hello =
-        Hello::new(wire::CAP_COMPACT | if cfg!(feature = "gpu") { wire::CAP_GPU } else { 0 }).with_layers(layers);
+        Hello::new(wire::CAP_COMPACT | wire::CAP_COLOR_GREEN | if cfg!(feature = "gpu") { wire::CAP_GPU } else { 0 })
+            .with_layers(layers);
     if let Some(t) = token {
         hello =
             hello.with_token(t.as_bytes()).map_err(|_| ClientError::Usage("--token is longer than 64 bytes".into()))?;

@@ -102,6 +102,8 @@ pub enum CompactError {
     },
     /// A radius residual outside the 10-bit code range.
     BadRadiusResidual,
+    /// Unknown color coding code (byte 113).
+    BadColorCoding(u8),
 }
 
 impl core::fmt::Display for CompactError {
@@ -118,6 +120,7 @@ impl core::fmt::Display for CompactError {
                 write!(f, "compact frame: coverage mask has {mask} pixels, header says {count} samples")
             }
             CompactError::BadRadiusResidual => f.write_str("compact frame: radius residual out of range"),
+            CompactError::BadColorCoding(c) => write!(f, "compact frame: unknown color coding {c}"),
         }
     }
 }
@@ -165,6 +168,30 @@ pub struct RadiusPrediction {
     pub per_depth: f32,
 }
 
+/// How the color residual planes are coded (byte 113 of a CompactFrame).
+#[repr(u8)]
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Hash)]
+pub enum ColorCoding {
+    /// Each channel's residual as it is.
+    Plain = 0,
+    /// Green's residual as it is; red's, blue's and alpha's minus green's (mod 256): the
+    /// channels of a transfer function with one hue move together, so their residuals do too
+    /// (LOCO-I's modular color transform, on the residuals). Only sent to receivers that
+    /// announced [`crate::wire::CAP_COLOR_GREEN`].
+    AgainstGreen = 1,
+}
+
+impl ColorCoding {
+    /// The coding with wire code `c`.
+    pub fn from_code(c: u8) -> Option<ColorCoding> {
+        match c {
+            0 => Some(ColorCoding::Plain),
+            1 => Some(ColorCoding::AgainstGreen),
+            _ => None,
+        }
+    }
+}
+
 /// Encoder settings.
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct EncodeOptions {
@@ -176,11 +203,14 @@ pub struct EncodeOptions {
     pub radius: Option<RadiusPrediction>,
     /// Entropy coder of the body.
     pub coder: Coder,
+    /// Whether the receiver reads [`ColorCoding::AgainstGreen`] (it announced
+    /// [`crate::wire::CAP_COLOR_GREEN`]): then [`code_colors`] takes it where it is smaller.
+    pub colors_against_green: bool,
 }
 
 impl Default for EncodeOptions {
     fn default() -> Self {
-        EncodeOptions { depth_bits: DEFAULT_DEPTH_BITS, radius: None, coder: Coder::Zstd }
+        EncodeOptions { depth_bits: DEFAULT_DEPTH_BITS, radius: None, coder: Coder::Zstd, colors_against_green: false }
     }
 }
 
@@ -195,6 +225,8 @@ pub struct CompactParams {
     pub radius: RadiusPrediction,
     /// Entropy coder of the body.
     pub coder: Coder,
+    /// How the color residual planes are coded.
+    pub colors: ColorCoding,
     /// Decompressed body length: `⌈w·h/8⌉ + 8·count`.
     pub raw_len: u32,
 }
@@ -287,12 +319,14 @@ impl Encoding {
 fn parse_params(b: &[u8; 24], header: &FrameHeader) -> Result<CompactParams, WireError> {
     let f = |i: usize| f32::from_le_bytes([b[i], b[i + 1], b[i + 2], b[i + 3]]);
     let coder = Coder::from_code(b[16]).ok_or(WireError::Compact(CompactError::BadCoder(b[16])))?;
+    let colors = ColorCoding::from_code(b[17]).ok_or(WireError::Compact(CompactError::BadColorCoding(b[17])))?;
     let raw_len = u32::from_le_bytes([b[20], b[21], b[22], b[23]]);
     let p = CompactParams {
         depth_min: f(0),
         depth_step: f(4),
         radius: RadiusPrediction { constant: f(8), per_depth: f(12) },
         coder,
+        colors,
         raw_len,
     };
     if !(p.depth_min.is_finite()
@@ -616,6 +650,7 @@ mod codec {
             depth_step: step,
             radius,
             coder: opts.coder,
+            colors: ColorCoding::Plain,
             raw_len: u32::try_from(raw_len).map_err(|_| EncodeError::DepthRange)?,
         };
         if !params_valid(&params) {
@@ -741,7 +776,7 @@ mod codec {
         for v in [params.depth_min, params.depth_step, params.radius.constant, params.radius.per_depth] {
             out.extend_from_slice(&v.to_le_bytes());
         }
-        out.extend_from_slice(&[params.coder as u8, 0, 0, 0]);
+        out.extend_from_slice(&[params.coder as u8, params.colors as u8, 0, 0]);
         out.extend_from_slice(&params.raw_len.to_le_bytes());
         out.extend_from_slice(coded);
         Ok(out)
@@ -750,7 +785,10 @@ mod codec {
     /// Encodes a frame as one CompactFrame message (header and payload). The frame's `count` is
     /// taken from its samples.
     pub fn encode(frame: &Frame, opts: &EncodeOptions) -> Result<Vec<u8>, EncodeError> {
-        let planes = build_planes(frame, opts)?;
+        let mut planes = build_planes(frame, opts)?;
+        if opts.colors_against_green {
+            code_colors(&mut planes, frame.samples.len());
+        }
         let coded = compress(&planes.body, planes.params.coder);
         let header = FrameHeader { count: frame.samples.len() as u32, ..frame.header };
         assemble(&header, &planes.params, &coded)
@@ -804,7 +842,8 @@ mod codec {
         let cb: &[u8; 24] = payload[FRAME_FIXED_LEN..COMPACT_FIXED_LEN].try_into().map_err(|_| bad_len)?;
         let params = parse_params(cb, &header)?;
         let coded = &payload[COMPACT_FIXED_LEN..];
-        let body = decompress(coded, &params)?;
+        let mut body = decompress(coded, &params)?;
+        undo_color_coding(&mut body, &params, header.count as usize);
         decode_body(&header, &params, &body)
     }
 
@@ -820,6 +859,59 @@ mod codec {
         {
             decompress_ruzstd(coded, params)
         }
+    }
+
+    /// The color residual planes of a body of `n` samples: red, green, blue, alpha, `n` bytes
+    /// each, the body's last `4n` bytes (none if the body is shorter).
+    fn color_planes(body: &mut [u8], n: usize) -> Option<[&mut [u8]; 4]> {
+        let at = body.len().checked_sub(n.checked_mul(4)?)?;
+        let (r, rest) = body[at..].split_at_mut(n);
+        let (g, rest) = rest.split_at_mut(n);
+        let (b, a) = rest.split_at_mut(n);
+        Some([r, g, b, a])
+    }
+
+    /// Undoes [`ColorCoding::AgainstGreen`] on a decompressed body of `n` samples (nothing for
+    /// [`ColorCoding::Plain`]): red's, blue's and alpha's residuals plus green's, mod 256.
+    pub fn undo_color_coding(body: &mut [u8], params: &CompactParams, n: usize) {
+        if params.colors != ColorCoding::AgainstGreen {
+            return;
+        }
+        if let Some([r, g, b, a]) = color_planes(body, n) {
+            for (((r, g), b), a) in r.iter_mut().zip(g.iter()).zip(b.iter_mut()).zip(a.iter_mut()) {
+                *r = r.wrapping_add(*g);
+                *b = b.wrapping_add(*g);
+                *a = a.wrapping_add(*g);
+            }
+        }
+    }
+
+    /// Codes the color residual planes of `planes` (a frame of `n` samples) against green's
+    /// ([`ColorCoding::AgainstGreen`]) where that is smaller by a cheap estimate (the sum of the
+    /// residuals' magnitudes, each byte read as a signed step); leaves them plain otherwise.
+    /// Returns the coding chosen.
+    pub fn code_colors(planes: &mut Planes, n: usize) -> ColorCoding {
+        let Some([r, g, b, a]) = color_planes(&mut planes.body, n) else { return ColorCoding::Plain };
+        let (plain, green) = {
+            let mag = |v: u8| (v as i8).unsigned_abs() as u64;
+            let mut plain = 0u64;
+            let mut green = 0u64;
+            for i in 0..n {
+                plain += mag(r[i]) + mag(b[i]) + mag(a[i]);
+                green += mag(r[i].wrapping_sub(g[i])) + mag(b[i].wrapping_sub(g[i])) + mag(a[i].wrapping_sub(g[i]));
+            }
+            (plain, green)
+        };
+        if green >= plain {
+            return ColorCoding::Plain;
+        }
+        for i in 0..n {
+            r[i] = r[i].wrapping_sub(g[i]);
+            b[i] = b[i].wrapping_sub(g[i]);
+            a[i] = a[i].wrapping_sub(g[i]);
+        }
+        planes.params.colors = ColorCoding::AgainstGreen;
+        ColorCoding::AgainstGreen
     }
 
     /// [`decompress`] with the C zstd library: one zstd frame that fills a buffer of exactly

@@ -640,7 +640,8 @@ mod layered_compact {
     /// by `limits` as any CompactFrame's.
     pub fn decode_layered_part(part: &[u8], limits: &Limits) -> Result<LayerPart, WireError> {
         let (sub, params) = compact_frame::read_params(part, limits)?;
-        let body = compact_frame::decompress(&part[COMPACT_FIXED_LEN..], &params)?;
+        let mut body = compact_frame::decompress(&part[COMPACT_FIXED_LEN..], &params)?;
+        compact_frame::undo_color_coding(&mut body, &params, sub.count as usize);
         let frame = compact_frame::decode_body(&sub, &params, &body)?;
         let mlen = (sub.camera.width as usize * sub.camera.height as usize).div_ceil(8);
         let mask = body.get(..mlen).ok_or(WireError::Layers(LayerError::Inconsistent))?.to_vec();

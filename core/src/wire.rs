@@ -43,6 +43,10 @@ pub const CAP_GPU: u32 = 1;
 /// Capability bit: in a client's Hello, "send me CompactFrames"; in the server's answer, "I
 /// will" (version 2). A server that answers without it sends only 12-byte Frames.
 pub const CAP_COMPACT: u32 = 2;
+/// Capability bit: the peer reads CompactFrames whose color residuals are coded against
+/// green's (`compact_frame::ColorCoding::AgainstGreen`, byte 113); a sender uses that coding
+/// only with peers that announced it (older receivers would misread the colors).
+pub const CAP_COLOR_GREEN: u32 = 4;
 
 /// Message types.
 #[repr(u8)]

@@ -201,6 +201,7 @@ fn random_body(rng: &mut Rng, w: u32, h: u32, density: f32, count_off: i64) -> (
         depth_step: 1e-5 + rng.f() * 1e-3,
         radius: RadiusPrediction { constant: rng.f() * 0.02, per_depth: rng.f() * 0.01 },
         coder: volwarp_core::compact_frame::Coder::Stored,
+        colors: volwarp_core::compact_frame::ColorCoding::Plain,
         raw_len: body.len() as u32,
     };
     (header, params, body)

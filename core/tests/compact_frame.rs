@@ -362,3 +362,51 @@ fn refused(bytes: &[u8], limits: &Limits) -> WireError {
         Err(e) => e,
     }
 }
+
+/// Colors coded against green (`ColorCoding::AgainstGreen`, byte 113): the same frame as the
+/// plain coding, bit for bit, whichever the encoder picks, also with a forced choice on a frame
+/// where the estimate says plain; undoing is the exact inverse on any bytes; an unknown code is
+/// a typed error; and a receiver that did not ask (the default options) never gets it.
+#[test]
+fn colors_coded_against_green_decode_to_the_same_frame() {
+    use volwarp_core::compact_frame::{code_colors, undo_color_coding, ColorCoding};
+    let lim = Limits::default();
+    for (w, h, yaw, cut) in [(64, 48, 10.0, 0), (40, 30, 200.0, 7)] {
+        let (frame, model) = sphere_frame(w, h, yaw, cut);
+        let n = frame.samples.len();
+        let opts = EncodeOptions { radius: Some(model), ..Default::default() };
+        let plain = encode(&frame, &opts).unwrap();
+        assert_eq!(plain[HEADER_LEN + 113], 0, "default options: plain colors");
+        let want = decode_msg(&plain, &lim).unwrap();
+        let green = encode(&frame, &EncodeOptions { colors_against_green: true, ..opts }).unwrap();
+        assert!(green[HEADER_LEN + 113] <= 1);
+        assert!(decode_msg(&green, &lim).unwrap() == want, "{w}×{h}: the chosen coding decodes differently");
+        // Forced against green, whatever the estimate says.
+        let mut planes = build_planes(&frame, &opts).unwrap();
+        let before = planes.body.clone();
+        if code_colors(&mut planes, n) == ColorCoding::Plain {
+            planes.params.colors = ColorCoding::AgainstGreen;
+            let at = planes.body.len() - 4 * n;
+            let (r, rest) = planes.body[at..].split_at_mut(n);
+            let (g, rest) = rest.split_at_mut(n);
+            let (b, a) = rest.split_at_mut(n);
+            for i in 0..n {
+                r[i] = r[i].wrapping_sub(g[i]);
+                b[i] = b[i].wrapping_sub(g[i]);
+                a[i] = a[i].wrapping_sub(g[i]);
+            }
+        }
+        assert_ne!(planes.body, before, "the color planes changed");
+        let mut undone = planes.body.clone();
+        undo_color_coding(&mut undone, &planes.params, n);
+        assert_eq!(undone, before, "undoing is the exact inverse");
+        let coded = compress(&planes.body, planes.params.coder);
+        let forced = assemble(&frame.header, &planes.params, &coded).unwrap();
+        assert_eq!(forced[HEADER_LEN + 113], 1);
+        assert!(decode_msg(&forced, &lim).unwrap() == want, "{w}×{h}: forced coding decodes differently");
+        // An unknown coding.
+        let mut bad = forced.clone();
+        bad[HEADER_LEN + 113] = 2;
+        assert_eq!(decode_msg(&bad, &lim).unwrap_err(), WireError::Compact(CompactError::BadColorCoding(2)));
+    }
+}

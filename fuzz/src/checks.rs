@@ -718,6 +718,11 @@ pub fn compact_frame_from(data: &[u8]) -> Option<(Vec<u8>, Vec<u8>)> {
         depth_step,
         radius: compact_frame::RadiusPrediction { constant, per_depth },
         coder: if zstd { compact_frame::Coder::Zstd } else { compact_frame::Coder::Stored },
+        colors: if b.u8() & 1 == 1 {
+            compact_frame::ColorCoding::AgainstGreen
+        } else {
+            compact_frame::ColorCoding::Plain
+        },
         raw_len: body.len() as u32,
     };
     // C zstd (fast; ruzstd's encoder under the sanitizer made this target crawl).

@@ -19,11 +19,13 @@ use volwarp_core::wire::{self, CameraRequest, Frame, FrameHeader, Message};
 pub const ZSTD_LEVEL: i32 = 1;
 
 /// The compact encoder's settings for a frame the marcher rendered for `req`: the frame's own
-/// radius model, default depth precision, zstd.
+/// radius model, default depth precision, zstd, and colors coded against green where that is
+/// smaller (a receiver that announced `CAP_COLOR_GREEN`; see [`encode_frame_for`]).
 pub fn encode_options(marcher: &Marcher, req: &CameraRequest) -> EncodeOptions {
     let r = marcher.frame_radius(req);
     EncodeOptions {
         radius: Some(RadiusPrediction { constant: r.constant(), per_depth: r.per_depth() }),
+        colors_against_green: true,
         ..EncodeOptions::default()
     }
 }
@@ -39,7 +41,10 @@ pub fn encode_compact(frame: &Frame, opts: &EncodeOptions, level: i32) -> Option
             layers.par_iter().map(|layer| encode_compact(layer, opts, level)).collect::<Option<_>>()?;
         return volwarp_core::segments::assemble_layered(frame, &msgs).ok();
     }
-    let planes = compact_frame::build_planes(frame, opts).ok()?;
+    let mut planes = compact_frame::build_planes(frame, opts).ok()?;
+    if opts.colors_against_green {
+        compact_frame::code_colors(&mut planes, frame.samples.len());
+    }
     let coded = match planes.params.coder {
         Coder::Zstd => compact_frame::compress_c(&planes.body, level),
         Coder::Stored => planes.body,
@@ -52,8 +57,21 @@ pub fn encode_compact(frame: &Frame, opts: &EncodeOptions, level: i32) -> Option
 /// `encoding`; a frame the compact form cannot hold (samples off their pixels' rays, e.g. at
 /// extreme zoom) goes out in the 12-byte form. Returns the bytes and the form they are in.
 pub fn encode_frame(marcher: &Marcher, req: &CameraRequest, frame: &Frame, encoding: Encoding) -> (Vec<u8>, Encoding) {
+    encode_frame_for(marcher, req, frame, encoding, true)
+}
+
+/// [`encode_frame`] for a receiver that reads colors coded against green (`green`: it
+/// announced [`wire::CAP_COLOR_GREEN`]) or not.
+pub fn encode_frame_for(
+    marcher: &Marcher,
+    req: &CameraRequest,
+    frame: &Frame,
+    encoding: Encoding,
+    green: bool,
+) -> (Vec<u8>, Encoding) {
     if encoding == Encoding::Compact {
-        if let Some(b) = encode_compact(frame, &encode_options(marcher, req), ZSTD_LEVEL) {
+        let opts = EncodeOptions { colors_against_green: green, ..encode_options(marcher, req) };
+        if let Some(b) = encode_compact(frame, &opts, ZSTD_LEVEL) {
             return (b, Encoding::Compact);
         }
     }

@@ -413,11 +413,14 @@ fn serve(sh: &Shared, stream: &TcpStream, id: u64) -> String {
     // The encoding: compact if the client asks and the server allows it.
     let compact = cfg.compact && hello.capabilities & wire::CAP_COMPACT != 0;
     let encoding = if compact { Encoding::Compact } else { Encoding::Raw12 };
+    // Colors coded against green only for clients that read them.
+    let green = compact && hello.capabilities & wire::CAP_COLOR_GREEN != 0;
     // Layered frames (issue 14): as many segments per pixel as the client asks, up to ours.
     let layers = hello.layers.clamp(1, cfg.layers.max(1));
     {
         let mut w = embedded_io_adapters::std::FromStd::new(stream);
-        let answer = Hello::new(if compact { wire::CAP_COMPACT } else { 0 }).with_layers(layers);
+        let caps = if compact { wire::CAP_COMPACT } else { 0 } | if green { wire::CAP_COLOR_GREEN } else { 0 };
+        let answer = Hello::new(caps).with_layers(layers);
         if let Err(e) = wire::write_hello(&mut w, &answer) {
             return format!("cannot send Hello: {e}");
         }
@@ -459,7 +462,7 @@ fn serve(sh: &Shared, stream: &TcpStream, id: u64) -> String {
         let stats = sh.queue.render_layers(&req, layers as u32, &mut frame);
         let t_send = Instant::now();
         let sent = if encoding == Encoding::Compact {
-            let (bytes, _) = crate::encoding::encode_frame(&sh.marcher, &req, &frame, encoding);
+            let (bytes, _) = crate::encoding::encode_frame_for(&sh.marcher, &req, &frame, encoding, green);
             io::Write::write_all(&mut out, &bytes).map_err(|e| e.to_string())
         } else {
             let mut w = embedded_io_adapters::std::FromStd::new(&mut out);

@@ -97,3 +97,55 @@ fn clients_that_do_not_ask_and_servers_that_refuse_send_12_byte_frames() {
         server.shutdown();
     }
 }
+
+/// The color coding of each part of a LayeredCompactFrame message (byte 113 of each part).
+fn part_color_codes(bytes: &[u8]) -> Vec<u8> {
+    assert_eq!(bytes[6], MsgType::LayeredCompactFrame as u8);
+    let mut at = HEADER_LEN + 96;
+    let mut codes = Vec::new();
+    while at < bytes.len() {
+        let len = u32::from_le_bytes(bytes[at..at + 4].try_into().unwrap()) as usize;
+        codes.push(bytes[at + 4 + 113]);
+        at += 4 + len;
+    }
+    codes
+}
+
+#[test]
+fn colors_are_coded_against_green_only_for_clients_that_read_it() {
+    let (server, m) = start(true);
+    let req = CameraRequest {
+        seq: 2,
+        camera: m.default_camera(160, 128).orbit(20.0, 10.0),
+        heuristic: Heuristic::Threshold,
+        radius_scale: 1.0,
+    };
+    let mut frames = Vec::new();
+    for caps in [wire::CAP_COMPACT | wire::CAP_COLOR_GREEN, wire::CAP_COMPACT] {
+        let mut c = Client::connect(server.local_addr());
+        c.send(&Message::Hello(Hello::new(caps).with_layers(4)));
+        let answer = match c.recv() {
+            Ok(Message::Hello(h)) => h,
+            other => panic!("expected Hello, got {other:?}"),
+        };
+        assert_eq!(answer.capabilities & wire::CAP_COLOR_GREEN, caps & wire::CAP_COLOR_GREEN);
+        c.send(&Message::CameraRequest(req));
+        let bytes = recv_bytes(&mut c);
+        let codes = part_color_codes(&bytes);
+        assert_eq!(codes.len(), 4, "four layers");
+        if caps & wire::CAP_COLOR_GREEN != 0 {
+            assert!(codes.iter().all(|&k| k <= 1));
+            assert!(codes.contains(&1), "the CT head's layers are cheaper against green: {codes:?}");
+        } else {
+            assert!(codes.iter().all(|&k| k == 0), "a client that did not ask gets plain colors: {codes:?}");
+        }
+        match wire::read_message(&mut &bytes[..], &Limits::default()).unwrap() {
+            Message::Frame(f) => frames.push((f, bytes.len())),
+            other => panic!("{other:?}"),
+        }
+    }
+    // The same frame either way (colors are lossless), in fewer bytes against green.
+    assert!(frames[0].0 == frames[1].0, "the two codings decode to different frames");
+    assert!(frames[0].1 < frames[1].1, "{} bytes against green, {} plain", frames[0].1, frames[1].1);
+    server.shutdown();
+}
