@@ -174,10 +174,11 @@ pub struct RadiusPrediction {
 pub enum ColorCoding {
     /// Each channel's residual as it is.
     Plain = 0,
-    /// Green's residual as it is; red's, blue's and alpha's minus green's (mod 256): the
-    /// channels of a transfer function with one hue move together, so their residuals do too
-    /// (LOCO-I's modular color transform, on the residuals). Only sent to receivers that
-    /// announced [`crate::wire::CAP_COLOR_GREEN`].
+    /// Green's residual as it is; red's, blue's and alpha's minus green's times a scale per
+    /// channel ([`CompactParams::color_scale`], in eighths), mod 256: the channels of a transfer
+    /// function with one hue move together, so their residuals do too (LOCO-I's modular color
+    /// transform on the residuals, with a gain). Only sent to receivers that announced
+    /// [`crate::wire::CAP_COLOR_GREEN`].
     AgainstGreen = 1,
 }
 
@@ -227,6 +228,10 @@ pub struct CompactParams {
     pub coder: Coder,
     /// How the color residual planes are coded.
     pub colors: ColorCoding,
+    /// With [`ColorCoding::AgainstGreen`]: red's, blue's and alpha's scale of green's
+    /// residual, in eighths (0 … 31; 0: that channel as it is); zero otherwise. Bytes 114–115:
+    /// red in bits 0–4, blue in bits 5–9, alpha in bits 10–14, bit 15 zero.
+    pub color_scale: [u8; 3],
     /// Decompressed body length: `⌈w·h/8⌉ + 8·count`.
     pub raw_len: u32,
 }
@@ -320,6 +325,11 @@ fn parse_params(b: &[u8; 24], header: &FrameHeader) -> Result<CompactParams, Wir
     let f = |i: usize| f32::from_le_bytes([b[i], b[i + 1], b[i + 2], b[i + 3]]);
     let coder = Coder::from_code(b[16]).ok_or(WireError::Compact(CompactError::BadCoder(b[16])))?;
     let colors = ColorCoding::from_code(b[17]).ok_or(WireError::Compact(CompactError::BadColorCoding(b[17])))?;
+    let scales = u16::from_le_bytes([b[18], b[19]]);
+    if scales & 0x8000 != 0 || (colors == ColorCoding::Plain && scales != 0) {
+        return Err(WireError::Compact(CompactError::BadColorCoding(b[17])));
+    }
+    let color_scale = [(scales & 31) as u8, ((scales >> 5) & 31) as u8, ((scales >> 10) & 31) as u8];
     let raw_len = u32::from_le_bytes([b[20], b[21], b[22], b[23]]);
     let p = CompactParams {
         depth_min: f(0),
@@ -327,6 +337,7 @@ fn parse_params(b: &[u8; 24], header: &FrameHeader) -> Result<CompactParams, Wir
         radius: RadiusPrediction { constant: f(8), per_depth: f(12) },
         coder,
         colors,
+        color_scale,
         raw_len,
     };
     if !(p.depth_min.is_finite()
@@ -651,6 +662,7 @@ mod codec {
             radius,
             coder: opts.coder,
             colors: ColorCoding::Plain,
+            color_scale: [0; 3],
             raw_len: u32::try_from(raw_len).map_err(|_| EncodeError::DepthRange)?,
         };
         if !params_valid(&params) {
@@ -776,7 +788,9 @@ mod codec {
         for v in [params.depth_min, params.depth_step, params.radius.constant, params.radius.per_depth] {
             out.extend_from_slice(&v.to_le_bytes());
         }
-        out.extend_from_slice(&[params.coder as u8, params.colors as u8, 0, 0]);
+        let [kr, kb, ka] = params.color_scale.map(|k| (k & 31) as u16);
+        let scales = (kr | kb << 5 | ka << 10).to_le_bytes();
+        out.extend_from_slice(&[params.coder as u8, params.colors as u8, scales[0], scales[1]]);
         out.extend_from_slice(&params.raw_len.to_le_bytes());
         out.extend_from_slice(coded);
         Ok(out)
@@ -871,46 +885,68 @@ mod codec {
         Some([r, g, b, a])
     }
 
+    /// What channel residual `x` is coded against: green's residual `g` times `k`/8, rounded
+    /// (both read as signed steps), as a byte.
+    #[inline(always)]
+    fn scaled_green(g: u8, k: u8) -> u8 {
+        ((g as i8 as i32 * k as i32 + 4).div_euclid(8)) as u8
+    }
+
     /// Undoes [`ColorCoding::AgainstGreen`] on a decompressed body of `n` samples (nothing for
-    /// [`ColorCoding::Plain`]): red's, blue's and alpha's residuals plus green's, mod 256.
+    /// [`ColorCoding::Plain`]): red's, blue's and alpha's residuals plus green's times their
+    /// scales ([`CompactParams::color_scale`]), mod 256.
     pub fn undo_color_coding(body: &mut [u8], params: &CompactParams, n: usize) {
         if params.colors != ColorCoding::AgainstGreen {
             return;
         }
+        let [kr, kb, ka] = params.color_scale;
         if let Some([r, g, b, a]) = color_planes(body, n) {
-            for (((r, g), b), a) in r.iter_mut().zip(g.iter()).zip(b.iter_mut()).zip(a.iter_mut()) {
-                *r = r.wrapping_add(*g);
-                *b = b.wrapping_add(*g);
-                *a = a.wrapping_add(*g);
+            for (((r, &g), b), a) in r.iter_mut().zip(g.iter()).zip(b.iter_mut()).zip(a.iter_mut()) {
+                *r = r.wrapping_add(scaled_green(g, kr));
+                *b = b.wrapping_add(scaled_green(g, kb));
+                *a = a.wrapping_add(scaled_green(g, ka));
             }
         }
     }
 
     /// Codes the color residual planes of `planes` (a frame of `n` samples) against green's
-    /// ([`ColorCoding::AgainstGreen`]) where that is smaller by a cheap estimate (the sum of the
-    /// residuals' magnitudes, each byte read as a signed step); leaves them plain otherwise.
-    /// Returns the coding chosen.
+    /// ([`ColorCoding::AgainstGreen`]) where that is smaller by a cheap estimate, and leaves them
+    /// plain otherwise; returns the coding chosen. Per channel (red, blue, alpha) the scale
+    /// `k`/8 is the least-squares fit of its residuals to green's (clamped to 0 … 31 eighths);
+    /// a channel keeps it only if it lowers the sum of its residuals' magnitudes (each byte read
+    /// as a signed step), else 0 (the channel as it is).
     pub fn code_colors(planes: &mut Planes, n: usize) -> ColorCoding {
         let Some([r, g, b, a]) = color_planes(&mut planes.body, n) else { return ColorCoding::Plain };
-        let (plain, green) = {
-            let mag = |v: u8| (v as i8).unsigned_abs() as u64;
-            let mut plain = 0u64;
-            let mut green = 0u64;
-            for i in 0..n {
-                plain += mag(r[i]) + mag(b[i]) + mag(a[i]);
-                green += mag(r[i].wrapping_sub(g[i])) + mag(b[i].wrapping_sub(g[i])) + mag(a[i].wrapping_sub(g[i]));
+        let s = |v: u8| v as i8 as i64;
+        let gg: i64 = g.iter().map(|&v| s(v) * s(v)).sum();
+        let mut scale = [0u8; 3];
+        for (k, x) in scale.iter_mut().zip([&*r, &*b, &*a]) {
+            if gg == 0 {
+                break;
             }
-            (plain, green)
-        };
-        if green >= plain {
+            let xg: i64 = x.iter().zip(g.iter()).map(|(&x, &g)| s(x) * s(g)).sum();
+            let fit = ((8 * xg) as f64 / gg as f64).round().clamp(0.0, 31.0) as u8;
+            let mag = |k: u8| -> u64 {
+                x.iter()
+                    .zip(g.iter())
+                    .map(|(&x, &g)| (x.wrapping_sub(scaled_green(g, k)) as i8).unsigned_abs() as u64)
+                    .sum()
+            };
+            if fit > 0 && mag(fit) < mag(0) {
+                *k = fit;
+            }
+        }
+        if scale == [0; 3] {
             return ColorCoding::Plain;
         }
-        for i in 0..n {
-            r[i] = r[i].wrapping_sub(g[i]);
-            b[i] = b[i].wrapping_sub(g[i]);
-            a[i] = a[i].wrapping_sub(g[i]);
+        let [kr, kb, ka] = scale;
+        for (((r, &g), b), a) in r.iter_mut().zip(g.iter()).zip(b.iter_mut()).zip(a.iter_mut()) {
+            *r = r.wrapping_sub(scaled_green(g, kr));
+            *b = b.wrapping_sub(scaled_green(g, kb));
+            *a = a.wrapping_sub(scaled_green(g, ka));
         }
         planes.params.colors = ColorCoding::AgainstGreen;
+        planes.params.color_scale = scale;
         ColorCoding::AgainstGreen
     }
 

@@ -202,6 +202,7 @@ fn random_body(rng: &mut Rng, w: u32, h: u32, density: f32, count_off: i64) -> (
         radius: RadiusPrediction { constant: rng.f() * 0.02, per_depth: rng.f() * 0.01 },
         coder: volwarp_core::compact_frame::Coder::Stored,
         colors: volwarp_core::compact_frame::ColorCoding::Plain,
+        color_scale: [0; 3],
         raw_len: body.len() as u32,
     };
     (header, params, body)

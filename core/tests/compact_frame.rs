@@ -385,7 +385,9 @@ fn colors_coded_against_green_decode_to_the_same_frame() {
         let mut planes = build_planes(&frame, &opts).unwrap();
         let before = planes.body.clone();
         if code_colors(&mut planes, n) == ColorCoding::Plain {
+            // Against green with scale 8/8 on every channel: minus green's residual.
             planes.params.colors = ColorCoding::AgainstGreen;
+            planes.params.color_scale = [8; 3];
             let at = planes.body.len() - 4 * n;
             let (r, rest) = planes.body[at..].split_at_mut(n);
             let (g, rest) = rest.split_at_mut(n);
@@ -404,9 +406,38 @@ fn colors_coded_against_green_decode_to_the_same_frame() {
         let forced = assemble(&frame.header, &planes.params, &coded).unwrap();
         assert_eq!(forced[HEADER_LEN + 113], 1);
         assert!(decode_msg(&forced, &lim).unwrap() == want, "{w}×{h}: forced coding decodes differently");
-        // An unknown coding.
+        // An unknown coding, a set reserved bit of the scales, scales with plain colors.
         let mut bad = forced.clone();
         bad[HEADER_LEN + 113] = 2;
         assert_eq!(decode_msg(&bad, &lim).unwrap_err(), WireError::Compact(CompactError::BadColorCoding(2)));
+        let mut bad = forced.clone();
+        bad[HEADER_LEN + 115] |= 0x80;
+        assert_eq!(decode_msg(&bad, &lim).unwrap_err(), WireError::Compact(CompactError::BadColorCoding(1)));
+        let mut bad = plain.clone();
+        bad[HEADER_LEN + 114] = 1;
+        assert_eq!(decode_msg(&bad, &lim).unwrap_err(), WireError::Compact(CompactError::BadColorCoding(0)));
+        // Every scale round-trips: each channel against green at k/8 for k = 0 … 31.
+        for k in [0u8, 1, 5, 8, 13, 31] {
+            let mut p = build_planes(&frame, &opts).unwrap();
+            let plain_body = p.body.clone();
+            let at = p.body.len() - 4 * n;
+            let (r, rest) = p.body[at..].split_at_mut(n);
+            let (g, rest) = rest.split_at_mut(n);
+            let (b, a) = rest.split_at_mut(n);
+            let pred = |g: u8| ((g as i8 as i32 * k as i32 + 4).div_euclid(8)) as u8;
+            for i in 0..n {
+                r[i] = r[i].wrapping_sub(pred(g[i]));
+                b[i] = b[i].wrapping_sub(pred(g[i]));
+                a[i] = a[i].wrapping_sub(pred(g[i]));
+            }
+            p.params.colors = ColorCoding::AgainstGreen;
+            p.params.color_scale = [k; 3];
+            let mut undone = p.body.clone();
+            undo_color_coding(&mut undone, &p.params, n);
+            assert_eq!(undone, plain_body, "k = {k}: undoing is the exact inverse");
+            let coded = compress(&p.body, p.params.coder);
+            let msg = assemble(&frame.header, &p.params, &coded).unwrap();
+            assert!(decode_msg(&msg, &lim).unwrap() == want, "k = {k}: decodes differently");
+        }
     }
 }

@@ -713,16 +713,16 @@ pub fn compact_frame_from(data: &[u8]) -> Option<(Vec<u8>, Vec<u8>)> {
         render_us: 0,
         count: n as u32,
     };
+    // Colors plain, or against green with any scales (0–31 eighths).
+    let green = b.u8() & 1 == 1;
+    let color_scale = if green { [b.u8() & 31, b.u8() & 31, b.u8() & 31] } else { [0; 3] };
     let params = compact_frame::CompactParams {
         depth_min,
         depth_step,
         radius: compact_frame::RadiusPrediction { constant, per_depth },
         coder: if zstd { compact_frame::Coder::Zstd } else { compact_frame::Coder::Stored },
-        colors: if b.u8() & 1 == 1 {
-            compact_frame::ColorCoding::AgainstGreen
-        } else {
-            compact_frame::ColorCoding::Plain
-        },
+        colors: if green { compact_frame::ColorCoding::AgainstGreen } else { compact_frame::ColorCoding::Plain },
+        color_scale,
         raw_len: body.len() as u32,
     };
     // C zstd (fast; ruzstd's encoder under the sanitizer made this target crawl).
