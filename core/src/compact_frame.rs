@@ -796,13 +796,21 @@ mod codec {
         Ok(out)
     }
 
-    /// Encodes a frame as one CompactFrame message (header and payload). The frame's `count` is
-    /// taken from its samples.
-    pub fn encode(frame: &Frame, opts: &EncodeOptions) -> Result<Vec<u8>, EncodeError> {
+    /// The planes a frame is sent as: [`build_planes`], then, where the receiver reads it
+    /// (`opts.colors_against_green`), the colors coded against green where smaller
+    /// ([`code_colors`]). What every encoder entropy codes.
+    pub fn wire_planes(frame: &Frame, opts: &EncodeOptions) -> Result<Planes, EncodeError> {
         let mut planes = build_planes(frame, opts)?;
         if opts.colors_against_green {
             code_colors(&mut planes, frame.samples.len());
         }
+        Ok(planes)
+    }
+
+    /// Encodes a frame as one CompactFrame message (header and payload). The frame's `count` is
+    /// taken from its samples.
+    pub fn encode(frame: &Frame, opts: &EncodeOptions) -> Result<Vec<u8>, EncodeError> {
+        let planes = wire_planes(frame, opts)?;
         let coded = compress(&planes.body, planes.params.coder);
         let header = FrameHeader { count: frame.samples.len() as u32, ..frame.header };
         assemble(&header, &planes.params, &coded)
@@ -856,8 +864,7 @@ mod codec {
         let cb: &[u8; 24] = payload[FRAME_FIXED_LEN..COMPACT_FIXED_LEN].try_into().map_err(|_| bad_len)?;
         let params = parse_params(cb, &header)?;
         let coded = &payload[COMPACT_FIXED_LEN..];
-        let mut body = decompress(coded, &params)?;
-        undo_color_coding(&mut body, &params, header.count as usize);
+        let body = decompress_planes(coded, &params, header.count as usize)?;
         decode_body(&header, &params, &body)
     }
 
@@ -873,6 +880,14 @@ mod codec {
         {
             decompress_ruzstd(coded, params)
         }
+    }
+
+    /// The mask and residual planes of a CompactFrame of `n` samples from its entropy-coded
+    /// body: [`decompress`], then [`undo_color_coding`]. What every decoder reconstructs from.
+    pub fn decompress_planes(coded: &[u8], params: &CompactParams, n: usize) -> Result<Vec<u8>, WireError> {
+        let mut body = decompress(coded, params)?;
+        undo_color_coding(&mut body, params, n);
+        Ok(body)
     }
 
     /// The color residual planes of a body of `n` samples: red, green, blue, alpha, `n` bytes

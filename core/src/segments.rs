@@ -213,11 +213,7 @@ impl<const M: usize> SegmenterLanes<M> {
         }
         if close.iter().fold(0, |a, &c| a | c) != 0 {
             for l in (0..M).filter(|&l| close[l] != 0) {
-                let start = [self.start[0][l], self.start[1][l], self.start[2][l], self.start[3][l]];
-                let last = [self.last[0][l], self.last[1][l], self.last[2][l], self.last[3][l]];
-                self.segs[l].push(start, last, self.weight[l], self.weighted_t[l]);
-                self.count[l] = self.segs[l].count as f32;
-                self.open[l] = 0;
+                self.close(l);
             }
         }
         // Open where none is, weigh the sample (with the opacity before it), remember it.
@@ -247,13 +243,19 @@ impl<const M: usize> SegmenterLanes<M> {
             return &[];
         }
         if self.open[l] != 0 {
-            self.open[l] = 0;
-            let start = [self.start[0][l], self.start[1][l], self.start[2][l], self.start[3][l]];
-            let last = [self.last[0][l], self.last[1][l], self.last[2][l], self.last[3][l]];
-            self.segs[l].push(start, last, self.weight[l], self.weighted_t[l]);
+            self.close(l);
         }
         let seg = &self.segs[l];
         &seg.out[..seg.count as usize]
+    }
+
+    /// Ends lane `l`'s open segment (`Segmenter::close` for one lane).
+    fn close(&mut self, l: usize) {
+        let start = [self.start[0][l], self.start[1][l], self.start[2][l], self.start[3][l]];
+        let last = [self.last[0][l], self.last[1][l], self.last[2][l], self.last[3][l]];
+        self.segs[l].push(start, last, self.weight[l], self.weighted_t[l]);
+        self.count[l] = self.segs[l].count as f32;
+        self.open[l] = 0;
     }
 }
 
@@ -640,10 +642,9 @@ mod layered_compact {
     /// by `limits` as any CompactFrame's.
     pub fn decode_layered_part(part: &[u8], limits: &Limits) -> Result<LayerPart, WireError> {
         let (sub, params) = compact_frame::read_params(part, limits)?;
-        let mut body = compact_frame::decompress(&part[COMPACT_FIXED_LEN..], &params)?;
-        compact_frame::undo_color_coding(&mut body, &params, sub.count as usize);
+        let body = compact_frame::decompress_planes(&part[COMPACT_FIXED_LEN..], &params, sub.count as usize)?;
         let frame = compact_frame::decode_body(&sub, &params, &body)?;
-        let mlen = (sub.camera.width as usize * sub.camera.height as usize).div_ceil(8);
+        let mlen = compact_frame::mask_len(sub.camera.width, sub.camera.height) as usize;
         let mask = body.get(..mlen).ok_or(WireError::Layers(LayerError::Inconsistent))?.to_vec();
         Ok(LayerPart { mask, frame })
     }
@@ -669,8 +670,7 @@ mod layered_compact {
             return Err(WireError::Layers(LayerError::BadIndex { index: 0 }));
         }
         crate::wire::check_count_layers(&header, layers, limits)?;
-        let (w, h) = (header.camera.width as usize, header.camera.height as usize);
-        let mlen = (w * h).div_ceil(8);
+        let mlen = compact_frame::mask_len(header.camera.width, header.camera.height) as usize;
         let mut rest = &payload[FRAME_FIXED_LEN..];
         let mut raw_parts: Vec<&[u8]> = Vec::with_capacity(layers as usize);
         let mut total = 0u64;

@@ -560,7 +560,6 @@ impl GpuLayerSplat {
 
     /// Encodes one draw (the four passes) of a `w × h` viewport with the bind group `bg`: a
     /// first draw clears the spans, an older frame's (`keep_spans`) adds to them.
-    #[allow(clippy::too_many_arguments)]
     fn encode_draw(
         &self,
         encoder: &mut wgpu::CommandEncoder,

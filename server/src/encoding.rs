@@ -41,10 +41,7 @@ pub fn encode_compact(frame: &Frame, opts: &EncodeOptions, level: i32) -> Option
             layers.par_iter().map(|layer| encode_compact(layer, opts, level)).collect::<Option<_>>()?;
         return volwarp_core::segments::assemble_layered(frame, &msgs).ok();
     }
-    let mut planes = compact_frame::build_planes(frame, opts).ok()?;
-    if opts.colors_against_green {
-        compact_frame::code_colors(&mut planes, frame.samples.len());
-    }
+    let planes = compact_frame::wire_planes(frame, opts).ok()?;
     let coded = match planes.params.coder {
         Coder::Zstd => compact_frame::compress_c(&planes.body, level),
         Coder::Stored => planes.body,

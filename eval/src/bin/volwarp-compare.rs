@@ -109,7 +109,8 @@ impl Pair {
         }
     }
 
-    /// Whether a frame's GPU-built tree is used (the tracer's).
+    /// The GPU tracer, whose own LBVH build each frame's tree comes from (the splatters draw
+    /// unbuilt or CPU-built scenes).
     fn gpu_tracer(&mut self) -> Option<&mut GpuTracer> {
         match self {
             Pair::Spheres(p) => Some(&mut p.1),
