@@ -21,8 +21,9 @@ cargo fmt --all --check
 echo "== cargo clippy --all-targets -- -D warnings"
 cargo clippy --workspace --all-targets -- -D warnings
 
-echo "== no_std build of volwarp-core for thumbv7em-none-eabihf"
+echo "== no_std build of volwarp-core for thumbv7em-none-eabihf (bare, and with alloc: the compact codec)"
 cargo build -p volwarp-core --no-default-features --target thumbv7em-none-eabihf
+cargo build -p volwarp-core --no-default-features --features alloc --target thumbv7em-none-eabihf
 
 echo "== ARM thin client: cargo check for aarch64-unknown-linux-gnu (portable SIMD maps to NEON)"
 cargo check --target aarch64-unknown-linux-gnu -p volwarp-cpu-tracer -p volwarp-client

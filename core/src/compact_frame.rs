@@ -940,7 +940,8 @@ mod codec {
                 break;
             }
             let xg: i64 = x.iter().zip(g.iter()).map(|(&x, &g)| s(x) * s(g)).sum();
-            let fit = ((8 * xg) as f64 / gg as f64).round().clamp(0.0, 31.0) as u8;
+            // (libm: no_std + alloc has no `f64::round`.)
+            let fit = libm::round((8 * xg) as f64 / gg as f64).clamp(0.0, 31.0) as u8;
             let mag = |k: u8| -> u64 {
                 x.iter()
                     .zip(g.iter())
