@@ -3,9 +3,10 @@
 # the committed seeds (fuzz/seeds/<target>/; new inputs go to the ignored fuzz/corpus/).
 # Fails on the first finding; the crash input is left under fuzz/artifacts/<target>/.
 #
-# The five volwarp-core targets always run (clean sanitizer build ≈ 3 min on 2 loaded cores).
-# `volume_header` fuzzes the server's parsers and needs the server's dependencies (a clean build of several
-# minutes more): it runs with VOLWARP_FUZZ_VOLUME=1. Its stable mirror runs in `cargo test`.
+# Seven targets: the five volwarp-core ones, and `volume_header` and `volume_load`, which fuzz the
+# server's volume parsers and loaders and need the server's dependencies (a clean sanitizer build of
+# several minutes more; VOLWARP_FUZZ_VOLUME=0 leaves them out for a quick local run). Their stable
+# mirrors run in `cargo test`.
 # The libFuzzer seed is fixed (VOLWARP_FUZZ_SEED, default 1) so that a CI failure reproduces;
 # long campaigns with random seeds are run by hand (docs/fuzzing.md).
 # Needs: a nightly toolchain and `cargo install cargo-fuzz --locked` (scripts/setup.sh).
@@ -14,8 +15,8 @@ secs="${1:-30}"
 cd "$(dirname "$0")/../fuzz"
 targets=(wire_decode_chunked frame_decode roundtrip lbvh compact_decode)
 features=()
-if [ "${VOLWARP_FUZZ_VOLUME:-0}" = 1 ]; then
-  targets+=(volume_header)
+if [ "${VOLWARP_FUZZ_VOLUME:-1}" = 1 ]; then
+  targets+=(volume_header volume_load)
   features=(--features volume)
 fi
 cargo +nightly fuzz build "${features[@]}"

@@ -533,3 +533,68 @@ fn volume_header_mirror() {
         volume_checks::volume_header(&v);
     }
 }
+
+// ---------------------------------------------------------------- volume_load fuzz mirror
+
+/// Stable mirror of the `volume_load` fuzz target: its seeds (among them the dims that wrap a
+/// 64-bit voxel count to 0), then deterministic mutations of them: digit changes in the sizes,
+/// byte flips, header syntax inserted, truncations.
+#[test]
+fn volume_load_mirror() {
+    let dir = std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("../fuzz/seeds/volume_load");
+    let mut seeds: Vec<Vec<u8>> =
+        std::fs::read_dir(&dir).map(|d| d.flatten().map(|e| std::fs::read(e.path()).unwrap()).collect()).unwrap();
+    seeds.sort();
+    assert!(seeds.len() >= 8, "seed corpus missing under {}", dir.display());
+    let tokens: [&[u8]; 10] = [
+        b"4194304",
+        b"65536",
+        b"sizes: 65536 65536 65536\n",
+        b"encoding: gzip\n",
+        b"data file: d.raw\n",
+        b"byte skip: -1\n",
+        b"type: double\n",
+        b"\n\n",
+        b"x",
+        b"_float32.raw\n",
+    ];
+    let mut x: u64 = 0x9E37_79B9_7F4A_7C15;
+    let mut next = |n: usize| {
+        x ^= x << 13;
+        x ^= x >> 7;
+        x ^= x << 17;
+        (x % n.max(1) as u64) as usize
+    };
+    for s in &seeds {
+        volume_checks::volume_load(s);
+    }
+    for _ in 0..3_000 {
+        let mut v = seeds[next(seeds.len())].clone();
+        for _ in 0..1 + next(3) {
+            let n = v.len();
+            match next(5) {
+                0 if n > 1 => {
+                    let i = 1 + next(n - 1);
+                    v[i] ^= 1 << next(8);
+                }
+                1 => {
+                    let t = tokens[next(tokens.len())];
+                    let i = (1 + next(n)).min(n);
+                    v.splice(i..i, t.iter().copied());
+                }
+                2 if n > 1 => {
+                    // A digit made another digit: sizes and names that grow and wrap.
+                    if let Some(i) = (1..n).map(|k| (k + next(n)) % n).find(|&i| i > 0 && v[i].is_ascii_digit()) {
+                        v[i] = b'0' + next(10) as u8;
+                    }
+                }
+                3 => v.truncate(next(n + 1)),
+                _ => v[0] ^= 1,
+            }
+            if v.is_empty() {
+                v.push(0);
+            }
+        }
+        volume_checks::volume_load(&v);
+    }
+}

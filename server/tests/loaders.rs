@@ -98,6 +98,46 @@ fn loader_errors_name_the_file_and_the_problem() {
     assert!(e.to_string().contains("thing_1x1x1_uint8.raw"), "{e}");
 }
 
+/// Dims whose product wraps a 64-bit voxel count (4194304³ = 2⁶⁶ wraps to 0) once passed the
+/// voxel limit and the size check of an empty data file, and the allocation that followed
+/// aborted the process. Each is a clear error now, whatever the limit.
+#[test]
+fn dims_that_overflow_a_voxel_count_are_refused_before_allocating() {
+    let dir = common::temp_dir("overflow");
+    let huge = "4194304 4194304 4194304";
+    let nhdr = dir.join("wrap.nhdr");
+    std::fs::write(dir.join("wrap.raw"), b"").unwrap();
+    let header = format!("NRRD0004\ntype: uchar\ndimension: 3\nsizes: {huge}\nencoding: raw\ndata file: wrap.raw\n\n");
+    std::fs::write(&nhdr, header).unwrap();
+    let attached = dir.join("wrap.nrrd");
+    std::fs::write(&attached, format!("NRRD0004\ntype: uchar\ndimension: 3\nsizes: {huge}\nencoding: raw\n\n"))
+        .unwrap();
+    let gz = dir.join("wrapgz.nrrd");
+    std::fs::write(&gz, format!("NRRD0004\ntype: uchar\ndimension: 3\nsizes: {huge}\nencoding: gzip\n\n")).unwrap();
+    let raw = dir.join("x_4194304x4194304x4194304_uint8.raw");
+    std::fs::write(&raw, b"").unwrap();
+    // 2²¹ cubed is 2⁶³ voxels (a count that fits) of 2 bytes: 2⁶⁴ bytes (a size that does not).
+    let bytes = dir.join("y_2097152x2097152x2097152_uint16.raw");
+    std::fs::write(&bytes, b"").unwrap();
+    for limit in [LoadOptions::default().max_voxels, u64::MAX] {
+        let opts = LoadOptions { max_voxels: limit, ..LoadOptions::default() };
+        for p in [&nhdr, &attached, &gz, &raw, &bytes] {
+            let e = load_volume(p, &opts).unwrap_err();
+            let msg = e.to_string();
+            assert!(msg.contains(p.file_name().unwrap().to_str().unwrap()), "{msg}");
+            if limit == u64::MAX {
+                assert!(matches!(e.kind, VolumeErrorKind::BadGeometry(_)), "{}: {msg}", p.display());
+                assert!(msg.contains("2^64"), "{msg}");
+            }
+        }
+        // Dims given as options overflow the same way.
+        let forced = LoadOptions { dims: Some([1 << 22; 3]), voxel_type: Some(VoxelType::U8), ..opts.clone() };
+        for p in [&nhdr, &raw] {
+            assert!(load_volume(p, &forced).is_err(), "{}", p.display());
+        }
+    }
+}
+
 #[test]
 fn nrrd_raw_gzip_and_detached_round_trips() {
     let dir = common::temp_dir("nrrd");

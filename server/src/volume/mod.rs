@@ -128,11 +128,29 @@ pub(crate) fn check_geometry(dims: [u32; 3], spacing: Vec3, max_voxels: u64) -> 
             "spacing {spacing} must be positive and finite"
         ))));
     }
-    let voxels = dims.iter().map(|&d| d as u64).product::<u64>();
+    let voxels = voxel_count(dims)?;
     if voxels > max_voxels {
         return Err(VolumeError::new(VolumeErrorKind::TooLarge { voxels, limit: max_voxels }));
     }
     Ok(voxels)
+}
+
+/// The number of voxels of `dims`, an error where the product does not fit in 64 bits (a
+/// header's dims must never wrap around to a small count that passes the size checks).
+pub(crate) fn voxel_count(dims: [u32; 3]) -> Result<u64, VolumeError> {
+    dims.iter().try_fold(1u64, |n, &d| n.checked_mul(u64::from(d))).ok_or_else(|| {
+        VolumeError::new(VolumeErrorKind::BadGeometry(format!(
+            "dimensions {}x{}x{} give more than 2^64 voxels",
+            dims[0], dims[1], dims[2]
+        )))
+    })
+}
+
+/// The bytes of `voxels` voxels of `ty`, an error where that does not fit in 64 bits.
+pub(crate) fn voxel_bytes(voxels: u64, ty: VoxelType) -> Result<u64, VolumeError> {
+    voxels.checked_mul(ty.size() as u64).ok_or_else(|| {
+        VolumeError::new(VolumeErrorKind::BadGeometry(format!("{voxels} voxels of {ty:?} give more than 2^64 bytes")))
+    })
 }
 
 impl Volume {

@@ -229,11 +229,8 @@ pub fn load(path: &Path, opts: &LoadOptions) -> Result<Volume, VolumeError> {
     let dims = opts.dims.unwrap_or(h.dims);
     let ty = opts.voxel_type.unwrap_or(h.voxel_type);
     let spacing = opts.spacing.or(h.spacing).unwrap_or(Vec3::ONE);
-    let voxels = dims.iter().map(|&d| d as u64).product::<u64>();
-    if voxels > opts.max_voxels {
-        return Err(VolumeError::new(VolumeErrorKind::TooLarge { voxels, limit: opts.max_voxels }).at(path));
-    }
-    let expected = voxels * ty.size() as u64;
+    let voxels = super::check_geometry(dims, spacing, opts.max_voxels).map_err(|e| e.at(path))?;
+    let expected = super::voxel_bytes(voxels, ty).map_err(|e| e.at(path))?;
     let (data_path, offset): (PathBuf, u64) = match &h.data_file {
         Some(f) => (path.parent().unwrap_or(Path::new(".")).join(f), 0),
         None => (path.to_path_buf(), h.data_offset as u64),

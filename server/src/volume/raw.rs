@@ -170,7 +170,7 @@ pub(super) fn load_raw(path: &Path, opts: &LoadOptions) -> Result<Volume, Volume
     };
     let spacing = opts.spacing.unwrap_or(Vec3::ONE);
     let voxels = check_geometry(dims, spacing, opts.max_voxels).map_err(|e| e.at(path))?;
-    let expected = voxels * ty.size() as u64;
+    let expected = super::voxel_bytes(voxels, ty).map_err(|e| e.at(path))?;
     let meta = std::fs::metadata(path).map_err(|e| io_err(path, e))?;
     if meta.len() != expected {
         return Err(VolumeError::new(VolumeErrorKind::SizeMismatch { expected, actual: meta.len() }).at(path));
