@@ -2,6 +2,9 @@
 //! marcher's, K = 1 against today's frames, segments recomposited against the ground truth,
 //! and the transparent and opaque extremes.
 
+mod common;
+
+use common::{for_each_lane_kind, widest_lanes};
 use std::path::Path;
 use std::sync::Arc;
 use volwarp_core::sample::{over_background, pack_color_f32};
@@ -42,17 +45,23 @@ fn packet_and_scalar_marchers_give_the_same_segments() {
         let packet = Marcher::with_options(ds.volume.clone(), &ds.tf, MarchOptions::default());
         let scalar =
             packet.with_transfer_function(&ds.tf, MarchOptions { kernel: MarchKernel::Scalar, ..packet.options() });
-        for k in [2, 4, 7] {
-            let req = request(&packet, 37, 20.0);
-            let a = packet.march_layers(&req.camera, k);
-            let b = scalar.march_layers(&req.camera, k);
-            assert_eq!(a.count, b.count, "{} K={k}: segment counts", ds.name);
-            assert_eq!(a.color, b.color, "{} K={k}: colors", ds.name);
-            let same = a.t.iter().zip(&b.t).all(|(x, y)| x.to_bits() == y.to_bits());
-            assert!(same, "{} K={k}: depths", ds.name);
-            assert!(a.count.iter().any(|&c| c > 1), "{} K={k}: no pixel has two segments", ds.name);
-            assert!(a.count.iter().all(|&c| c as u32 <= k));
-        }
+        // Every lane kind: AVX-512's and AVX2's lane-wise segmenters (`SegmenterLanes`) and the
+        // portable lanes' one `Segmenter` per lane.
+        for_each_lane_kind(|kind| {
+            for k in [1, 2, 4, 7, 16] {
+                let req = request(&packet, 37, 20.0);
+                let a = packet.march_layers(&req.camera, k);
+                let b = scalar.march_layers(&req.camera, k);
+                assert_eq!(a.count, b.count, "{kind:?} {} K={k}: segment counts", ds.name);
+                assert_eq!(a.color, b.color, "{kind:?} {} K={k}: colors", ds.name);
+                let same = a.t.iter().zip(&b.t).all(|(x, y)| x.to_bits() == y.to_bits());
+                assert!(same, "{kind:?} {} K={k}: depths", ds.name);
+                if k > 1 {
+                    assert!(a.count.iter().any(|&c| c > 1), "{} K={k}: no pixel has two segments", ds.name);
+                }
+                assert!(a.count.iter().all(|&c| c as u32 <= k));
+            }
+        });
     }
 }
 
@@ -60,17 +69,20 @@ fn packet_and_scalar_marchers_give_the_same_segments() {
 fn one_layer_is_todays_frame_bit_for_bit() {
     for ds in datasets() {
         let m = Marcher::from_dataset(&ds);
-        let req = request(&m, 48, 30.0);
-        let (today, _) = m.render_frame(&req);
-        let (mut one, _) = m.render_frame_layers(&req, 1);
-        one.header.render_us = today.header.render_us;
-        assert!(one == today, "{}: K = 1 differs from today's frame", ds.name);
-        assert!(one.segments.is_empty());
+        for_each_lane_kind(|kind| {
+            let req = request(&m, 48, 30.0);
+            let (today, _) = m.render_frame(&req);
+            let (mut one, _) = m.render_frame_layers(&req, 1);
+            one.header.render_us = today.header.render_us;
+            assert!(one == today, "{kind:?} {}: K = 1 differs from today's frame", ds.name);
+            assert!(one.segments.is_empty());
+        });
     }
 }
 
 #[test]
 fn layered_frames_are_valid_and_recomposite_to_the_ground_truth() {
+    let _lanes = widest_lanes();
     for ds in datasets() {
         let m = Marcher::from_dataset(&ds);
         let req = request(&m, 40, -15.0);
@@ -97,6 +109,7 @@ fn layered_frames_are_valid_and_recomposite_to_the_ground_truth() {
 fn a_transparent_volume_has_no_segments_and_an_opaque_one_one_per_pixel() {
     let vol = Arc::new(Volume::from_values("box", [16; 3], Vec3::ONE, vec![7.0; 16 * 16 * 16]).unwrap());
     let cam = Camera::look_at(Vec3::new(8.0, 8.0, 40.0), Vec3::new(8.0, 8.0, 0.0), Vec3::Y, 20.0, 24, 24);
+    let _lanes = widest_lanes();
     for kernel in [MarchKernel::Packet, MarchKernel::Scalar] {
         let opts = MarchOptions { kernel, ..MarchOptions::default() };
         let clear = TransferFunction::from_points("c", &[(0.0, [1.0, 0.5, 0.25])], &[(0.0, 0.0)]);

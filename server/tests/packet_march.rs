@@ -10,34 +10,17 @@ use std::path::Path;
 use volwarp_core::wire::CameraRequest;
 use volwarp_core::{Camera, Heuristic, Vec3};
 use volwarp_server::transfer_function::TransferFunction;
-use volwarp_server::{
-    lane_kind, limit_lanes, Dataset, LaneKind, MarchKernel, MarchOptions, Marcher, PixelBuffer, Volume,
-};
+use volwarp_server::{Dataset, MarchKernel, MarchOptions, Marcher, PixelBuffer, Volume};
 
-/// Tests that limit the lanes hold this while they do (the limit is process-wide; tests that
-/// do not hold it may run on any kind, which computes the same values).
-static LANES: std::sync::Mutex<()> = std::sync::Mutex::new(());
+mod common;
 
-/// Runs `f` with each lane kind this CPU has (widest first), then lifts the limit; prints the
-/// kinds it could not run.
-fn for_each_lane_kind(mut f: impl FnMut(LaneKind)) {
-    let _guard = LANES.lock().unwrap_or_else(|e| e.into_inner());
-    for kind in [LaneKind::Avx512, LaneKind::Avx2, LaneKind::Portable] {
-        limit_lanes(kind);
-        if lane_kind() != kind {
-            eprintln!("this CPU lacks {kind:?} lanes: not tested here");
-            continue;
-        }
-        f(kind);
-    }
-    limit_lanes(LaneKind::Avx512);
-}
+use common::for_each_lane_kind;
 
 fn data(name: &str) -> std::path::PathBuf {
     Path::new(env!("CARGO_MANIFEST_DIR")).join("..").join(name)
 }
 
-/// The bundled datasets, the shared ones when present, and a procedural one.
+/// The bundled datasets, the shared ones (see `volwarp_server::testdata`), and a procedural one.
 fn datasets() -> Vec<Dataset> {
     let mut out = vec![
         Dataset::load(data("data/ct_head_quarter.nhdr"), None).unwrap(),
@@ -50,10 +33,7 @@ fn datasets() -> Vec<Dataset> {
         "mri_colin27_181x217x181_uint8.raw",
         "ct_head_quarter_64x64x93_int16.raw",
     ] {
-        let p = data("../shared/data").join(f);
-        if p.exists() {
-            out.push(Dataset::load(p, None).unwrap());
-        }
+        out.extend(volwarp_server::testdata::shared_dataset(f));
     }
     out
 }
@@ -164,11 +144,13 @@ fn packet_marcher_equals_scalar_without_skipping_or_early_termination_and_at_oth
         MarchOptions { step_voxels: 0.2, early_termination: 0.5, ..MarchOptions::default() },
     ] {
         let (fast, slow) = pair(&ds, opts);
-        for (view, cam) in cameras(&fast).into_iter().take(4) {
-            for h in [Heuristic::Threshold, Heuristic::Exit, Heuristic::RelThreshold] {
-                assert_same(&format!("{opts:?} {view} {h}"), &fast.march(&cam, h), &slow.march(&cam, h));
+        for_each_lane_kind(|kind| {
+            for (view, cam) in cameras(&fast).into_iter().take(4) {
+                for h in [Heuristic::Threshold, Heuristic::Exit, Heuristic::RelThreshold] {
+                    assert_same(&format!("{kind:?} {opts:?} {view} {h}"), &fast.march(&cam, h), &slow.march(&cam, h));
+                }
             }
-        }
+        });
     }
 }
 
@@ -177,11 +159,14 @@ fn skipping_changes_no_packet_image() {
     for ds in datasets() {
         let (fast, _) = pair(&ds, MarchOptions::default());
         let plain = fast.with_transfer_function(&ds.tf, MarchOptions { skip_empty: false, ..MarchOptions::default() });
-        for (view, cam) in cameras(&fast).into_iter().take(6) {
-            for h in [Heuristic::Threshold, Heuristic::Entrance, Heuristic::EnExMean] {
-                assert_same(&format!("{} {view} {h} skip", ds.name), &fast.march(&cam, h), &plain.march(&cam, h));
+        for_each_lane_kind(|kind| {
+            for (view, cam) in cameras(&fast).into_iter().take(6) {
+                for h in [Heuristic::Threshold, Heuristic::Entrance, Heuristic::EnExMean] {
+                    let what = format!("{kind:?} {} {view} {h} skip", ds.name);
+                    assert_same(&what, &fast.march(&cam, h), &plain.march(&cam, h));
+                }
             }
-        }
+        });
     }
 }
 

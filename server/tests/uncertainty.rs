@@ -2,6 +2,9 @@
 //! radius, fuzzy rays get a larger one within the cap, nothing overflows or turns NaN, and the
 //! packet marcher's frames equal the scalar marcher's.
 
+mod common;
+
+use common::{for_each_lane_kind, widest_lanes};
 use std::path::Path;
 use volwarp_core::sample::{radius_code, RADIUS_MAX};
 use volwarp_core::wire::{CameraRequest, Frame};
@@ -81,6 +84,7 @@ fn radii(ds: &Dataset, params: UncertaintyParams, h: Heuristic) -> Vec<(f32, f32
 
 #[test]
 fn opaque_surfaces_keep_the_footprint_radius() {
+    let _lanes = widest_lanes();
     let ds = Dataset::new(block(), opaque_tf());
     let m = marcher(&ds, RadiusModel::Uncertainty, UncertaintyParams::DEFAULT, MarchKernel::Scalar);
     // The ray through the centre: one opaque sample, no spread, factor exactly 1.
@@ -102,6 +106,7 @@ fn opaque_surfaces_keep_the_footprint_radius() {
 
 #[test]
 fn fuzzy_rays_get_larger_spheres_within_the_cap() {
+    let _lanes = widest_lanes();
     let ds = Dataset::new(block(), fuzzy_tf());
     let params = UncertaintyParams { gain: 0.2, max: 3.0, ..SPREAD };
     let m = marcher(&ds, RadiusModel::Uncertainty, params, MarchKernel::Scalar);
@@ -130,6 +135,7 @@ fn fuzzy_rays_get_larger_spheres_within_the_cap() {
 
 #[test]
 fn extreme_inputs_give_valid_codes() {
+    let _lanes = widest_lanes();
     // Empty rays have no sample; huge gains and caps clamp to the code range, never NaN.
     let ds = Dataset::new(block(), fuzzy_tf());
     let wild = UncertaintyParams { gain: 1e30, opacity_gain: 1e30, max: 16.0, ..SPREAD };
@@ -183,31 +189,30 @@ fn uncertainty_frames_of_the_packet_marcher_equal_the_scalar_marchers() {
         Dataset::load(data("data/ct_head_quarter.nhdr"), None).unwrap(),
         Dataset::new(block(), fuzzy_tf()),
     ];
-    let iron = data("../shared/data/iron_protein_68x68x68_uint8.raw");
-    if iron.exists() {
-        sets.push(Dataset::load(iron, None).unwrap());
-    }
+    sets.extend(volwarp_server::testdata::shared_dataset("iron_protein_68x68x68_uint8.raw"));
     let params = UncertaintyParams { gain: 0.1, opacity_gain: 0.5, max: 4.0, ..SPREAD };
     for ds in &sets {
         for p in [params, UncertaintyParams { measure: SpreadMeasure::Span, ..params }] {
             let fast = marcher(ds, RadiusModel::Uncertainty, p, MarchKernel::Packet);
             let slow = marcher(ds, RadiusModel::Uncertainty, p, MarchKernel::Scalar);
-            for h in Heuristic::ALL {
-                let (a, req) = frame(&fast, h, 45);
-                let (b, _) = frame(&slow, h, 45);
-                assert!(!a.samples.is_empty(), "{} {h}", ds.name);
-                assert_eq!(a.samples, b.samples, "{} {h}", ds.name);
-                assert_eq!(a.colors, b.colors, "{} {h}", ds.name);
-                assert_eq!(a.header.radius_unit, b.header.radius_unit);
-                // Quantizing the marched buffer (re-marching each ray for its spread) gives the
-                // same samples.
-                let pb = fast.march(&req.camera, h);
-                let (mut all, unit) = fast.quantize(&req, &pb);
-                let mut cols = pb.color.clone();
-                let k = volwarp_core::compaction::compact_in_place(&mut all, &mut cols);
-                assert_eq!(a.samples, all[..k], "{} {h}: quantize", ds.name);
-                assert_eq!(a.header.radius_unit, unit);
-            }
+            let want: Vec<Frame> = Heuristic::ALL.iter().map(|&h| frame(&slow, h, 45).0).collect();
+            for_each_lane_kind(|kind| {
+                for (&h, b) in Heuristic::ALL.iter().zip(&want) {
+                    let (a, req) = frame(&fast, h, 45);
+                    assert!(!a.samples.is_empty(), "{} {h}", ds.name);
+                    assert_eq!(a.samples, b.samples, "{kind:?} {} {h}", ds.name);
+                    assert_eq!(a.colors, b.colors, "{kind:?} {} {h}", ds.name);
+                    assert_eq!(a.header.radius_unit, b.header.radius_unit);
+                    // Quantizing the marched buffer (re-marching each ray for its spread) gives
+                    // the same samples.
+                    let pb = fast.march(&req.camera, h);
+                    let (mut all, unit) = fast.quantize(&req, &pb);
+                    let mut cols = pb.color.clone();
+                    let k = volwarp_core::compaction::compact_in_place(&mut all, &mut cols);
+                    assert_eq!(a.samples, all[..k], "{kind:?} {} {h}: quantize", ds.name);
+                    assert_eq!(a.header.radius_unit, unit);
+                }
+            });
         }
     }
 }

@@ -55,3 +55,34 @@ impl Client {
         c
     }
 }
+
+/// Tests that depend on the lane kind hold this while they run (the limit is process-wide, so a
+/// test that limits the lanes would change the kind another test runs on).
+static LANES: std::sync::Mutex<()> = std::sync::Mutex::new(());
+
+/// Runs `f` with each lane kind this CPU has (widest first), holding the lane lock, then lifts
+/// the limit; prints the kinds this CPU lacks. The portable kind runs everywhere.
+pub fn for_each_lane_kind(mut f: impl FnMut(volwarp_server::LaneKind)) {
+    use volwarp_server::{lane_kind, limit_lanes, LaneKind};
+    let _guard = LANES.lock().unwrap_or_else(|e| e.into_inner());
+    let mut ran = Vec::new();
+    for kind in [LaneKind::Avx512, LaneKind::Avx2, LaneKind::Portable] {
+        limit_lanes(kind);
+        if lane_kind() != kind {
+            eprintln!("this CPU lacks {kind:?} lanes: not tested here");
+            continue;
+        }
+        f(kind);
+        ran.push(kind);
+    }
+    limit_lanes(LaneKind::Avx512);
+    assert!(ran.contains(&LaneKind::Portable), "the portable lanes did not run: {ran:?}");
+}
+
+/// Holds the lane lock with the lanes at the widest kind this CPU has, for a test that needs
+/// one known kind (the guard keeps other tests from limiting the lanes meanwhile).
+pub fn widest_lanes() -> std::sync::MutexGuard<'static, ()> {
+    let guard = LANES.lock().unwrap_or_else(|e| e.into_inner());
+    volwarp_server::limit_lanes(volwarp_server::LaneKind::Avx512);
+    guard
+}
