@@ -120,10 +120,10 @@ fn direct_near_plane_eye_inside_and_zoomed_in() {
 
 #[test]
 fn direct_real_frames() {
-    let Some((frame, what)) = frames::mri_frame(256) else {
-        eprintln!("notice: real-frame test skipped (no ../shared/data)");
+    if volwarp_server::testdata::shared_data(volwarp_server::testdata::MRI).is_none() {
         return;
-    };
+    }
+    let (frame, what) = frames::mri_frame(256).expect("the shared MRI renders a frame");
     let scene = build_scene(&frame);
     let c = frame.header.camera;
     for (label, cam) in [
@@ -141,10 +141,10 @@ fn direct_real_frames() {
 
 #[test]
 fn direct_bands_split_the_spheres_and_hand_over_few_in_scanline_order() {
-    let Some((frame, _)) = frames::mri_frame(256) else {
-        eprintln!("notice: real-frame test skipped (no ../shared/data)");
+    if volwarp_server::testdata::shared_data(volwarp_server::testdata::MRI).is_none() {
         return;
-    };
+    }
+    let (frame, _) = frames::mri_frame(256).expect("the shared MRI renders a frame");
     let unbuilt = unbuilt_scene(&frame);
     let cam = frame.header.camera.orbit(10.0, 0.0);
     let mut d = DirectSplat::new(2);

@@ -1,6 +1,6 @@
 //! Real frames from the server's marcher (the MRI of `../shared/data`): packet == scalar,
-//! parallel build == serial build, splat == trace. Skipped with a notice when the data is
-//! absent.
+//! parallel build == serial build, splat == trace. A missing MRI fails the test unless
+//! `VOLWARP_NO_SHARED_DATA=1` (`volwarp_server::testdata`).
 
 mod common;
 
@@ -13,10 +13,10 @@ use volwarp_cpu_tracer::{PacketTracer, ParallelBuilder, SphereSplat, NO_HIT};
 
 #[test]
 fn mri_frames_trace_exactly() {
-    let Some((frame, what)) = frames::mri_frame(256) else {
-        eprintln!("notice: real-frame test skipped (no ../shared/data)");
+    if volwarp_server::testdata::shared_data(volwarp_server::testdata::MRI).is_none() {
         return;
-    };
+    }
+    let (frame, what) = frames::mri_frame(256).expect("the shared MRI renders a frame");
     assert!(frame.samples.len() > 10_000, "{what}");
     let serial = Scene::build(&frame);
     let par = ParallelBuilder::new(2).build(&frame);

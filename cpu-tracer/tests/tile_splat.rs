@@ -131,10 +131,10 @@ fn near_plane_eye_inside_and_zoomed_in() {
 
 #[test]
 fn real_frames() {
-    let Some((frame, what)) = frames::mri_frame(256) else {
-        eprintln!("notice: real-frame test skipped (no ../shared/data)");
+    if volwarp_server::testdata::shared_data(volwarp_server::testdata::MRI).is_none() {
         return;
-    };
+    }
+    let (frame, what) = frames::mri_frame(256).expect("the shared MRI renders a frame");
     let scene = build_scene(&frame);
     let c = frame.header.camera;
     for (label, cam) in [

@@ -21,17 +21,14 @@ fn data(name: &str) -> std::path::PathBuf {
     Path::new(env!("CARGO_MANIFEST_DIR")).join("..").join(name)
 }
 
-/// The bundled datasets (and the shared ones where present).
+/// The bundled datasets and the shared ones (see `volwarp_server::testdata`).
 fn datasets() -> Vec<Dataset> {
     let mut out = vec![
         Dataset::load(data("data/ct_head_quarter.nhdr"), None).unwrap(),
         Dataset::load(data("data/neghip_64x64x64_uint8.raw"), None).unwrap(),
     ];
     for f in ["iron_protein_68x68x68_uint8.raw", "tooth_103x94x161_uint8.raw", "mri_colin27_181x217x181_uint8.raw"] {
-        let p = data("../shared/data").join(f);
-        if p.exists() {
-            out.push(Dataset::load(p, None).unwrap());
-        }
+        out.extend(volwarp_server::testdata::shared_dataset(f));
     }
     out
 }

@@ -1,6 +1,6 @@
 //! The GPU layered splatter (`splat-layers-gpu`) against the CPU's `LayerSplat` (issues 14 and
 //! 17): real layered frames of the server's marcher (K = 4; the bundled CT head and neghip, the
-//! MRI from `../shared/data` where it exists) at the frame's own camera and warped, fill and
+//! MRI from `../shared/data`, see `volwarp_server::testdata`) at the frame's own camera and warped, fill and
 //! adaptive growth on and off, and edge cases (0 and 1 samples, odd viewports, a viewport larger
 //! than the frame, garbage samples). Target: ≥ 99.9 % of pixels within one 8-bit step per
 //! channel. Needs a GPU adapter (lavapipe in CI); `VOLWARP_SKIP_GPU=1` skips explicitly.
@@ -107,10 +107,8 @@ fn gpu_layers_match_the_cpu_on_a_real_ct_head_frame() {
 fn gpu_layers_match_the_cpu_on_real_neghip_and_mri_frames() {
     let neghip = Dataset::load(data("data/neghip_64x64x64_uint8.raw"), None).unwrap();
     check_frame("neghip 80×96", &layered_frame(&neghip, 80, 96));
-    let mri = data("../shared/data/mri_colin27_181x217x181_uint8.raw");
-    match Dataset::load(&mri, None) {
-        Ok(ds) => check_frame("mri 128×96", &layered_frame(&ds, 128, 96)),
-        Err(_) => eprintln!("{} not found: the MRI frame is not compared", mri.display()),
+    if let Some(ds) = volwarp_server::testdata::shared_dataset(volwarp_server::testdata::MRI) {
+        check_frame("mri 128×96", &layered_frame(&ds, 128, 96));
     }
 }
 

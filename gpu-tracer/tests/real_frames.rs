@@ -1,9 +1,8 @@
 //! Real frames: the server's ray marcher on the bundled CT head (and the MRI from
-//! `../shared/data` where it exists), traced on the GPU and on the CPU (`volwarp-eval`'s tests
+//! `../shared/data`, see `volwarp_server::testdata`), traced on the GPU and on the CPU (`volwarp-eval`'s tests
 //! replay a recorded real stream through `volwarp-compare`). Needs a GPU adapter (lavapipe in CI);
 //! `VOLWARP_SKIP_GPU=1` skips explicitly.
 
-use std::path::Path;
 use volwarp_core::renderer::{Image, Renderer, BACKGROUND};
 use volwarp_core::wire::{CameraRequest, Frame};
 use volwarp_core::{Camera, Heuristic, Scene};
@@ -79,11 +78,7 @@ fn gpu_matches_cpu_on_a_real_frame_of_the_mri_where_available() {
     if skip() {
         return;
     }
-    let path = Path::new(env!("CARGO_MANIFEST_DIR")).join("../../shared/data/mri_colin27_181x217x181_uint8.raw");
-    let Ok(ds) = Dataset::load(&path, None) else {
-        eprintln!("{} not found: the MRI frame is not compared (the CT head frames are)", path.display());
-        return;
-    };
+    let Some(ds) = volwarp_server::testdata::shared_dataset(volwarp_server::testdata::MRI) else { return };
     let mut gpu = GpuTracer::new().unwrap_or_else(|e| panic!("{e} (VOLWARP_SKIP_GPU=1 skips explicitly)"));
     let marcher = Marcher::from_dataset(&ds);
     let cam = marcher.default_camera(256, 256);

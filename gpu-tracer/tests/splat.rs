@@ -1,9 +1,8 @@
 //! The GPU exact sphere splatter (`splat-gpu`) against the CPU's exact splatter and the packet
 //! tracer: synthetic clouds from several views, and real frames of the server's marcher (the
-//! bundled CT head, the MRI from `../shared/data` where it exists). Needs a GPU adapter
+//! bundled CT head, the MRI from `../shared/data`, see `volwarp_server::testdata`). Needs a GPU adapter
 //! (lavapipe in CI); `VOLWARP_SKIP_GPU=1` skips explicitly.
 
-use std::path::Path;
 use volwarp_core::renderer::{Image, Renderer, BACKGROUND};
 use volwarp_core::wire::{CameraRequest, Frame};
 use volwarp_core::{Camera, Heuristic, RendererKind, Scene, Vec3};
@@ -113,10 +112,8 @@ fn request(seq: u64, camera: Camera, heuristic: Heuristic) -> CameraRequest {
 fn gpu_splat_matches_the_cpu_on_real_frames() {
     let Some(mut gpu) = splatter() else { return };
     let mut marchers = vec![("ct head", Marcher::from_dataset(&Dataset::default_bundled()))];
-    let mri = Path::new(env!("CARGO_MANIFEST_DIR")).join("../../shared/data/mri_colin27_181x217x181_uint8.raw");
-    match Dataset::load(&mri, None) {
-        Ok(ds) => marchers.push(("mri", Marcher::from_dataset(&ds))),
-        Err(_) => eprintln!("{} not found: only the CT head is compared", mri.display()),
+    if let Some(ds) = volwarp_server::testdata::shared_dataset(volwarp_server::testdata::MRI) {
+        marchers.push(("mri", Marcher::from_dataset(&ds)));
     }
     for (name, marcher) in &marchers {
         let cam = marcher.default_camera(256, 256);

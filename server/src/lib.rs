@@ -20,6 +20,7 @@
 //! | [`compaction`] | the parallel compaction of a frame's samples |
 //! | [`render_queue`] | one marcher pool shared by all clients; identical requests rendered once |
 //! | [`server`] | the TCP server: handshake, latest-wins requests, limits |
+//! | [`testdata`] | the shared datasets beside the project, for tests and benchmarks |
 //!
 //! ```no_run
 //! use volwarp_server::{dataset::Dataset, server::{Server, ServerConfig}};
@@ -42,6 +43,7 @@ pub use volume::nrrd;
 pub mod radius;
 pub mod render_queue;
 pub mod server;
+pub mod testdata;
 pub mod transfer_function;
 pub mod volume;
 

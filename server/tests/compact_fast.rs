@@ -1,7 +1,8 @@
 //! The compact codec's fast paths on real frames of the marcher (issue 16, speed): the fast
 //! encoder gives the scalar reference's planes byte for byte, the fast reconstruction the
 //! reference's frame bit for bit, and C zstd (what std clients decompress with) the same body as
-//! ruzstd (no_std clients), on the bundled CT head and, where `../shared/data` has it, the MRI.
+//! ruzstd (no_std clients), on the bundled CT head and, the MRI of `../shared/data`
+//! (`volwarp_server::testdata`).
 
 use volwarp_core::compact_frame::{
     build_planes, build_planes_reference, decode_body, decode_body_reference, decode_payload, decompress_c,
@@ -11,8 +12,6 @@ use volwarp_core::wire::{CameraRequest, FrameHeader, Limits, HEADER_LEN};
 use volwarp_core::Heuristic;
 use volwarp_server::encoding::{encode_compact, encode_options, ZSTD_LEVEL};
 use volwarp_server::{Dataset, Marcher};
-
-const MRI: &str = concat!(env!("CARGO_MANIFEST_DIR"), "/../../shared/data/mri_colin27_181x217x181_uint8.raw");
 
 fn check(m: &Marcher, name: &str) {
     let mut checked = 0;
@@ -57,10 +56,7 @@ fn fast_codec_equals_the_reference_on_the_ct_head() {
 
 #[test]
 fn fast_codec_equals_the_reference_on_the_mri() {
-    let Ok(ds) = Dataset::load(MRI, None) else {
-        eprintln!("skipped: {MRI} not found");
-        return;
-    };
+    let Some(ds) = volwarp_server::testdata::shared_dataset(volwarp_server::testdata::MRI) else { return };
     check(&Marcher::from_dataset(&ds), "mri");
 }
 
