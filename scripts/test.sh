@@ -25,6 +25,9 @@ echo "== no_std build of volwarp-core for thumbv7em-none-eabihf (bare, and with 
 cargo build -p volwarp-core --no-default-features --target thumbv7em-none-eabihf
 cargo build -p volwarp-core --no-default-features --features alloc --target thumbv7em-none-eabihf
 
+echo "== volwarp-core's codec tests on its no_std + alloc build (ruzstd, libm; its own workspace)"
+(cd core/alloc-tests && cargo test)
+
 echo "== ARM thin client: cargo check for aarch64-unknown-linux-gnu (portable SIMD maps to NEON)"
 cargo check --target aarch64-unknown-linux-gnu -p volwarp-cpu-tracer -p volwarp-client
 

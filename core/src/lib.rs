@@ -85,3 +85,7 @@ pub use scene::{Scene, SceneError};
 pub use traversal::Hit;
 
 pub use glam::Vec3;
+
+/// Whether this build of the crate has the `std` feature (tests check which build they run on:
+/// the no_std + alloc build takes other code paths, ruzstd and libm among them).
+pub const BUILT_WITH_STD: bool = cfg!(feature = "std");
