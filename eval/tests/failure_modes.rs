@@ -28,7 +28,25 @@ fn every_renderer_survives_every_failure_case() {
                 case.name,
                 o.renderer
             );
-            assert!((0.0..=1.0).contains(&m.flip), "{}: {}: FLIP {}", case.name, o.renderer, m.flip);
+            // The scores are those of the image shown: recomputed from it, and ꟻLIP 0 exactly
+            // where it is the truth pixel for pixel.
+            let again = volwarp_eval::Metrics::of(&res.truth, &o.image).expect("same size");
+            assert_eq!(
+                again.flip.to_bits(),
+                m.flip.to_bits(),
+                "{}: {}: the scores are not the image's",
+                case.name,
+                o.renderer
+            );
+            let exact = o.image.pixels == res.truth.pixels;
+            assert_eq!(
+                m.flip == 0.0,
+                exact,
+                "{}: {}: ꟻLIP {} for an image exact: {exact}",
+                case.name,
+                o.renderer,
+                m.flip
+            );
         }
         let spheres = res.outcomes.iter().find(|o| o.renderer == "spheres-cpu").unwrap();
         match case.name {

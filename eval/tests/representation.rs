@@ -50,6 +50,14 @@ fn finer_quantization_converges_to_float() {
         |sweep: &str, value: u32| vs.iter().find(|v| v.sweep == sweep && v.value == value).unwrap().metrics[0].psnr;
     assert!((at("position", 21) - float).abs() < 0.05, "21 bits {} vs float {float}", at("position", 21));
     assert!((at("radius", 10) - float).abs() < 0.5);
-    assert!(at("position", 10) < float + 1.0);
+    // Coarse positions cost accuracy (6 bits: 1 dB less); from 15 bits on, the image is the
+    // float one up to single pixels (PSNR within 0.05 dB), and so it is from 9 radius bits on.
+    assert!(at("position", 6) < float - 0.5, "6 bits {} vs float {float}", at("position", 6));
+    for bits in 15..=21 {
+        assert!((at("position", bits) - float).abs() < 0.05, "{bits} bits {} vs float {float}", at("position", bits));
+    }
+    for bits in [9, 10] {
+        assert!((at("radius", bits) - float).abs() < 1e-9, "{bits} radius bits");
+    }
     assert!(vs.iter().all(|v| v.metrics.iter().all(|x| x.psnr.is_finite())));
 }
