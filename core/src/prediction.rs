@@ -1,4 +1,4 @@
-//! Camera prediction (issue 19, lever 1): the camera a client expects to show when the frame it
+//! Camera prediction: the camera a client expects to show when the frame it
 //! asks for now arrives, extrapolated from its two most recent cameras.
 //!
 //! **Orbit-aware.** A volwarp camera moves about its target (drag to orbit, wheel to dolly), so

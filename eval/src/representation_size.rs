@@ -1,4 +1,4 @@
-//! How small can a sample be? Error against the representation's size (issue 7, "model no more
+//! How small can a sample be? Error against the representation's size ("model no more
 //! than a scene needs").
 //!
 //! The frame's samples are taken before quantization (float positions `o + d·t` and the float

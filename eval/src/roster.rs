@@ -77,7 +77,7 @@ pub fn roster(opts: RosterOptions) -> Vec<Entry> {
 /// core's `warp_radius`); in sessions the `volwarp` method adds prediction and the guard band.
 pub const DEFAULT_NAME: &str = "volwarp";
 
-/// The hole-filling variants measured beside `spheres-fill` (issue 19): the stale frame plus
+/// The hole-filling variants measured beside `spheres-fill`: the stale frame plus
 /// 3 levels of pull-push, and pull-push alone.
 pub const FILL_VARIANTS: [(&str, FillOptions); 2] = [
     ("spheres-fill-pp3", FillOptions { stale: true, enclosed_only: true, pull_push_levels: 3 }),

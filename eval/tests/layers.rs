@@ -1,4 +1,4 @@
-//! Layered samples end to end (issue 14): the server's layered frames drawn by `splat-layers`
+//! Layered samples end to end: the server's layered frames drawn by `splat-layers`
 //! against the marcher's truth at the frame's own camera, order independence, K = 1 against
 //! today's images, the transparent extreme and a session with layered frames.
 

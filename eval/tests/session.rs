@@ -1,4 +1,4 @@
-//! The session simulator (issue 13): determinism, exactness where nothing is outdated,
+//! The session simulator: determinism, exactness where nothing is outdated,
 //! monotonic sanity, bad input, and any raw volume by path.
 
 use volwarp_core::compact_frame::{encode_frame, encoded_size, EncodeOptions, Encoding};

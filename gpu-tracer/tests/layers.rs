@@ -279,7 +279,7 @@ fn the_fill_matches_the_cpu_on_the_pixels_it_fills() {
     assert!(filled_total > 100, "the views should open holes for the fill ({filled_total})");
 }
 
-/// Issue 19's multi-frame filling on the GPU: `render_set` with older frames draws the CPU's
+/// The multi-frame filling on the GPU: `render_set` with older frames draws the CPU's
 /// image (each older frame's residual into the pixels still empty, then the fill), through a
 /// sequence of arrivals (the residuals are carried over when the set shifts by one frame),
 /// with the fill on and off, adaptive sizing on and off, and a turn past 90° (older frames
