@@ -9,7 +9,7 @@ use volwarp_core::{Heuristic, RendererKind};
 pub const DEFAULT_GUARD: f32 = 0.0;
 
 /// How many of the newest frames the client keeps by default (`--keep-frames`), chosen on the
-/// session results (`docs/results.md`, "Older frames for layered frames").
+/// session results (`docs/results.md`, "Older frames").
 pub const DEFAULT_KEEP_FRAMES: usize = 4;
 
 /// The window controls, printed by `--help`.

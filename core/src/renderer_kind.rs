@@ -205,7 +205,7 @@ impl RendererKind {
     /// The renderer a client starts with: the layered splatter (the client then asks
     /// for 4 segments per pixel), with hole filling and, with the client's default prediction
     /// and warp-grown footprints, the most accurate method of the session results
-    /// (`docs/results.md`, "Layered frames as the default").
+    /// (`docs/results.md`, "The default method").
     pub const DEFAULT: RendererKind = RendererKind::SplatLayers;
 
     /// Whether it composites a layered frame's segments (the client then asks for

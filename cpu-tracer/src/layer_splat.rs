@@ -100,7 +100,7 @@ pub const OPAQUE: f32 = 0.999;
 /// against rounding cracks (0.05 in a first version) counts semi-transparent segments
 /// twice along every footprint edge, a grid of bright lines once the view zooms in; without it
 /// the session ꟻLIP of the iron protein's dolly fell from 0.0187 to 0.0064 and the MRI's orbit
-/// from 0.0262 to 0.0200 (`docs/results.md`, "Layered frames as the default").
+/// from 0.0262 to 0.0200 (`docs/results.md`, "The layered levers").
 pub const OWN_MARGIN: f32 = 0.0;
 
 /// The default depth tolerance of watertight slabs, source pixels ([`LayerOptions::watertight`]).

@@ -187,7 +187,7 @@ impl Default for UncertaintyParams {
 
 impl UncertaintyParams {
     /// The constants `--radius uncertainty` uses: the least harmful of the variants measured
-    /// (`docs/results.md`, "Samples sized by what is known": growing by the spread along the ray
+    /// (`docs/results.md`, "Samples sized by their spread along the ray": growing by the spread along the ray
     /// lost to the footprint at every gain, so only the opacity term is on; the footprint
     /// model stays the default).
     pub const DEFAULT: UncertaintyParams =

@@ -135,7 +135,7 @@ pub struct MethodSpec {
 }
 
 /// The method the window client runs by default and the sessions' `volwarp` alias, chosen on
-/// the session results (`docs/results.md`, "Warps that beat the stale frame").
+/// the session results (`docs/results.md`, "The default method").
 pub const DEFAULT_METHOD: &str = "splat-layers+predict+frames=4+adapt+layers=4";
 
 /// The methods of `all`: what a send-image system shows, the 2.5D points of ZAL12, the exact

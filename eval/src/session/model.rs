@@ -141,7 +141,7 @@ pub struct Calibration {
 }
 
 /// The client draw times at 512² used when no calibration file is given: the medians of
-/// `docs/results.md` (2 threads; Table "Mean FLIP over the five datasets"), scaled with the
+/// `docs/results.md` (2 threads; "One-sample renderers against angle"), scaled with the
 /// pixel count at other sizes.
 /// `splat-fill` (with warp-sized radii) is splat's figure times 1.57, the ratio of the two
 /// measured in one `session-calibrate` run (tooth, 512², 2 threads; `docs/perf.md`);
