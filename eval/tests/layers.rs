@@ -65,7 +65,7 @@ fn at_the_frames_own_camera_the_composite_is_the_servers_render() {
             assert!(q.psnr >= 40.0, "{} K={k}: {:.1} dB", ds.name, q.psnr);
             assert!(q.flip <= 0.005, "{} K={k}: ꟻLIP {:.4}", ds.name, q.flip);
         }
-        // A warp 10° away still beats the stale frame (the point).
+        // A warp 10° away still beats the stale frame (the point of layers).
         let (f, _) = m.render_frame_layers(&req, 4);
         let cam = orbit(&req.camera, 10.0);
         let truth = m.render_image(&cam);

@@ -1,4 +1,4 @@
-//! The layered splatter on the GPU (`splat-layers-gpu`, issues 14 and 17), mirroring the CPU's
+//! The layered splatter on the GPU (`splat-layers-gpu`), mirroring the CPU's
 //! `volwarp_cpu_tracer::layer_splat::LayerSplat` (`layer_splat.wgsl`): each sample of a layered
 //! frame is drawn as its source pixel's footprint quad, every pixel keeps the nearest
 //! [`LIST`] `(dist², id)` keys of the footprints that cover its centre, sorts them and

@@ -1,5 +1,5 @@
-//! The GPU layered splatter (`splat-layers-gpu`) against the CPU's `LayerSplat` (issues 14 and
-//! 17): real layered frames of the server's marcher (K = 4; the bundled CT head and neghip, the
+//! The GPU layered splatter (`splat-layers-gpu`) against the CPU's `LayerSplat`:
+//! real layered frames of the server's marcher (K = 4; the bundled CT head and neghip, the
 //! MRI from `../shared/data` where it exists) at the frame's own camera and warped, fill and
 //! adaptive growth on and off, and edge cases (0 and 1 samples, odd viewports, a viewport larger
 //! than the frame, garbage samples). Target: ≥ 99.9 % of pixels within one 8-bit step per

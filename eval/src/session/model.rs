@@ -86,7 +86,7 @@ pub struct NetworkModel {
 }
 
 impl NetworkModel {
-    /// The issue-19 setting: 500 ms per frame, 50 ms one way, 100 Mbit/s.
+    /// The sessions' default setting: 500 ms per frame, 50 ms one way, 100 Mbit/s.
     pub const DEFAULT: NetworkModel = NetworkModel { server_ms: 500.0, latency_ms: 50.0, mbps: 100.0 };
 
     /// Checks the figures: a clear error for a bandwidth of 0, negative or NaN times.
