@@ -2,7 +2,7 @@
 //! N = 1, 2, 3, the CPU sphere tracer (and its radius variants ×0.5 and ×2), the GPU sphere
 //! tracer where an adapter opens, the exact sphere splatter and its GPU twin (`splat-gpu`)
 //! where an adapter opens, the hole-filling tracer (`spheres-fill`) with its variants, and
-//! `volwarp`, the window client's default drawing (hole-filling splatter, warp-sized radii).
+//! `volwarp`, the one-sample default drawing (hole-filling splatter, warp-sized radii).
 
 use volwarp_core::renderer::Renderer;
 use volwarp_core::wire::Frame;
