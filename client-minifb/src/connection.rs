@@ -158,7 +158,7 @@ pub fn connect(addr: &str, token: Option<&str>, timeout: Duration) -> Result<Con
     connect_layers(addr, token, timeout, 1)
 }
 
-/// [`connect`] asking for layered frames of at most `layers` segments per pixel (issue 14; 1:
+/// [`connect`] asking for layered frames of at most `layers` segments per pixel (1:
 /// one sample per pixel). The server answers with the count it will render (at most this),
 /// and the connection's limits refuse frames with more.
 pub fn connect_layers(

@@ -1,6 +1,6 @@
 //! A link model for the loopback stream (`--bandwidth-mbps`): a token bucket on the client's
 //! socket reads (frames) and writes (camera requests), so the window and `--bench` show what a
-//! slow network does to frame age — and what the compact encoding (issue 16) saves there.
+//! slow network does to frame age — and what the compact encoding saves there.
 //!
 //! The bucket fills at the link rate up to a burst of [`BURST`] bytes (or 2 ms of the rate,
 //! whichever is larger); each read or write first waits until at least one byte's worth of

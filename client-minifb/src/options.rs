@@ -9,7 +9,7 @@ use volwarp_core::{Heuristic, RendererKind};
 pub const DEFAULT_GUARD: f32 = 0.0;
 
 /// How many of the newest frames the client keeps by default (`--keep-frames`), chosen on the
-/// session results (`docs/results.md`, "Older frames for layered frames").
+/// session results (`docs/results.md`, "Older frames").
 pub const DEFAULT_KEEP_FRAMES: usize = 4;
 
 /// The window controls, printed by `--help`.
@@ -160,7 +160,7 @@ pub struct Options {
     /// Seconds to wait for the server (connect, handshake, each frame).
     #[arg(long, value_name = "S", default_value_t = 30)]
     pub timeout_s: u64,
-    /// Layered samples (issue 14): ask the server for up to K depth segments per pixel, 1–16
+    /// Layered samples: ask the server for up to K depth segments per pixel, 1–16
     /// (renderers `splat-layers` and `splat-layers-gpu` composite them front to back). Default:
     /// 4 with `--renderer splat-layers`, `splat-layers-gpu` or `spheres-layers`, else 1 (one
     /// sample per pixel).

@@ -278,7 +278,7 @@ mod tests {
                 gpu.render(&scene, &cam, &mut b);
                 assert!(a.diff(&b).unwrap().meets_target());
                 assert!(a.pixels.iter().any(|&p| p != volwarp_core::BACKGROUND));
-                // It keeps frames too, and fills from them as the CPU does (issue 19).
+                // It keeps frames too, and fills from them as the CPU does.
                 assert!(gpu.keeps_frames());
                 let mut zoomed = depth_image_frame(48, 1.0, 7);
                 zoomed.header.camera.fov_y_deg /= 3.0;

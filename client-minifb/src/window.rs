@@ -118,7 +118,7 @@ pub fn title(
     )
 }
 
-/// The warp levers that are on, for the title (issue 19): camera prediction, the guard band,
+/// The warp levers that are on, for the title: camera prediction, the guard band,
 /// warp-sized radii (only where the current renderer can), the frames kept (only where the
 /// current renderer uses older frames), watertight slabs (only with a layered renderer), or
 /// `no levers`.

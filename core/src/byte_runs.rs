@@ -16,7 +16,7 @@
 //! Huffman-codes the literals and FSE-codes the few sequences. The result is an ordinary zstd
 //! frame (RFC 8878): the decoders (C zstd, ruzstd) and the wire format do not change. On the
 //! MRI 1024² bench frame it is about 2.4× faster to encode, 2.2× faster to decode and 10 %
-//! smaller than zstd level 1 (`docs/perf.md`, "Twelfth session: issue 16").
+//! smaller than zstd level 1 (`docs/perf.md`, "The compact codec").
 //!
 //! The zstd crates expose `ZSTD_compressSequences` only as the raw binding (`zstd-sys`, feature
 //! `experimental`), hence the `unsafe` block in [`compress`]. The parse reads 64 bytes at a

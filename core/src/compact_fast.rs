@@ -1,9 +1,9 @@
-//! The fast paths of the compact frame codec (issue 16, speed): [`build_planes`] and
+//! The fast paths of the compact frame codec: [`build_planes`] and
 //! [`decode_body`] give exactly what `compact_frame::build_planes_reference` and
 //! `compact_frame::decode_body_reference` give (the same body bytes, the same decoded frame,
 //! the same errors; tested in `core/tests/compact_fast.rs` on random frames and bodies and in
 //! `server/tests/compact_fast.rs` on the marcher's), in about half the time or less
-//! (`docs/perf.md`, "Issue 16 (speed)").
+//! (`docs/perf.md`, "The compact codec").
 //!
 //! What makes them fast, and why the result cannot differ:
 //!

@@ -1,4 +1,4 @@
-//! Guard bands (issue 19, lever 2): the client asks the server for a wider view than it
+//! Guard bands: the client asks the server for a wider view than it
 //! displays, at the same pixel density, so that a turn reveals samples already sent instead of
 //! empty space.
 //!

@@ -12,7 +12,7 @@
 //! | [`warp_radius`] | sphere radii sized by how far the view moved from the frame's camera |
 //! | [`heuristics`] | the ZAL12 representative-depth heuristics, as state machines |
 //! | [`compact_frame`] | the compact frame encoding: coverage mask, predicted depths, radii and colors, zstd (≈3 B/sample) |
-//! | [`segments`] | layered samples: a ray cut into depth segments, their wire checks and compact form (issue 14) |
+//! | [`segments`] | layered samples: a ray cut into depth segments, their wire checks and compact form |
 //! | [`compaction`] | stable removal of empty (radius 0) samples |
 //! | [`morton`] | Morton codes of quantized positions and their radix sort |
 //! | [`lbvh`] | Karras-style LBVH over the sorted codes, built into caller buffers |

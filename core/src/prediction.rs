@@ -1,4 +1,4 @@
-//! Camera prediction (issue 19, lever 1): the camera a client expects to show when the frame it
+//! Camera prediction: the camera a client expects to show when the frame it
 //! asks for now arrives, extrapolated from its two most recent cameras.
 //!
 //! **Orbit-aware.** A volwarp camera moves about its target (drag to orbit, wheel to dolly), so
@@ -24,7 +24,7 @@ pub const MAX_HORIZON_S: f32 = 1.0;
 /// The largest extrapolated azimuth or elevation change, in degrees.
 pub const MAX_TURN_DEG: f32 = 90.0;
 /// The fraction of the recent zoom rate that is extrapolated (1: all of it). Measured in the
-/// session simulator (`docs/results.md`, "Dolly prediction"; the dolly scenario, 512², all
+/// session simulator (`docs/results.md`, "Dolly prediction: half the zoom rate"; the dolly scenario, 512², all
 /// five datasets, the default method): mean ꟻLIP 0.0140 with the full rate, 0.0127 with none,
 /// 0.0116 with half, the lowest on every dataset.
 pub const ZOOM_GAIN: f32 = 0.5;

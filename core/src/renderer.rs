@@ -85,7 +85,7 @@ pub trait Renderer {
 
     /// Draws the newest of `scenes` (newest first) for `camera` and, where this renderer keeps
     /// frames ([`Renderer::keeps_frames`]), fills what it leaves uncovered from the older ones
-    /// (issue 19's multi-frame filling). By default it draws the newest alone; with no scene
+    /// (the multi-frame filling). By default it draws the newest alone; with no scene
     /// `out` is left empty (0×0).
     fn render_set(&mut self, scenes: &[&Scene], camera: &Camera, out: &mut Image) {
         match scenes.first() {

@@ -48,7 +48,7 @@ pub enum RendererKind {
     /// The exact sphere splatter as wgpu compute shaders, no LBVH (`splat-gpu`, key 13: no
     /// window key).
     SplatGpu,
-    /// Layered samples (issue 14): every segment a sphere hits, owned by the output ray where
+    /// Layered samples: every segment a sphere hits, owned by the output ray where
     /// it passes through the segment's own source pixel, composited front to back; no LBVH
     /// (`splat-layers`, key 14: no window key).
     SplatLayers,
@@ -202,10 +202,10 @@ impl RendererKind {
         RendererKind::SpheresLayers,
     ];
 
-    /// The renderer a client starts with: the layered splatter (issue 14; the client then asks
+    /// The renderer a client starts with: the layered splatter (the client then asks
     /// for 4 segments per pixel), with hole filling and, with the client's default prediction
     /// and warp-grown footprints, the most accurate method of the session results
-    /// (`docs/results.md`, "Layered frames as the default").
+    /// (`docs/results.md`, "The default method").
     pub const DEFAULT: RendererKind = RendererKind::SplatLayers;
 
     /// Whether it composites a layered frame's segments (the client then asks for

@@ -1,4 +1,4 @@
-//! Layered samples (issue 14): a ray cut into at most K depth segments, each with its own
+//! Layered samples: a ray cut into at most K depth segments, each with its own
 //! composited premultiplied color and opacity and a representative depth.
 //!
 //! The marcher feeds every sample it composites, front to back, with [`Segmenter::feed`]: the
@@ -25,7 +25,7 @@
 pub const MAX_LAYERS: usize = 16;
 
 /// The segments per pixel a client asks for by default with the `splat-layers` renderer,
-/// chosen by measurement (`docs/perf.md` and `docs/results.md`, issue 14): against K = 2 it
+/// chosen by measurement (`docs/perf.md` and `docs/results.md`, "Choosing K"): against K = 2 it
 /// lowers the mean ꟻLIP at 10–30° by 10–12 % for about twice the samples and bytes.
 pub const DEFAULT_LAYERS: usize = 4;
 

@@ -1,4 +1,4 @@
-//! Warp-sized radii (issue 19, lever 4, "samples sized by what is known"): how large a sphere a
+//! Warp-sized radii ("samples sized by what is known"): how large a sphere a
 //! client should draw depends on how far the view has moved from the frame's camera.
 //!
 //! At the frame's own camera a sphere half the default footprint (half a pixel diagonal)

@@ -17,7 +17,7 @@ use glam::Vec3;
 
 /// The four magic bytes that start every message.
 pub const MAGIC: [u8; 4] = *b"VWRP";
-/// The protocol version this crate speaks (and writes in every header). Version 3 (issue 14)
+/// The protocol version this crate speaks (and writes in every header). Version 3 (layered frames)
 /// added layered frames: a layer count in a Frame's byte 57 and a segment-index plane after its
 /// colors, the LayeredCompactFrame message (type 7) and the layer count in the Hello.
 pub const VERSION: u16 = 3;

@@ -1,4 +1,4 @@
-//! Layered frames on the wire (issue 14, version 3): round trips through the 12-byte form and
+//! Layered frames on the wire (version 3): round trips through the 12-byte form and
 //! the LayeredCompactFrame, and every kind of bad segment data as a typed error.
 
 use volwarp_core::compact_frame::{self, EncodeOptions, Encoding};

@@ -118,12 +118,12 @@ fn summary(frame: &Frame, what: &str, scene: &Scene) {
     println!();
 }
 
-/// Issue 18's table: the tiled splatter, the default renderer (`spheres`, with the route it
-/// took) and the packet tracer, footprint and paper radius, 10° off and zoomed in, 1024² and
-/// 512², 1 and 2 threads; and the time from a frame's bytes to a drawable scene.
-fn issue18_summary(frame: &Frame, what: &str, scene: &Scene) {
+/// The sphere image's target table: the tiled splatter, the default renderer (`spheres`, with
+/// the route it took) and the packet tracer, footprint and paper radius, 10° off and zoomed in,
+/// 1024² and 512², 1 and 2 threads; and the time from a frame's bytes to a drawable scene.
+fn sphere_targets_summary(frame: &Frame, what: &str, scene: &Scene) {
     let simd = volwarp_cpu_tracer::lane_kind();
-    println!("\n## issue 18: sphere routes (medians, wall ms; SIMD: {simd})\nframe: {what}");
+    println!("\n## sphere routes (medians, wall ms; SIMD: {simd})\nframe: {what}");
     println!("| radius | view | viewport | threads | splat-tiles | spheres (route) | spheres-cpu | splat | packet / spheres | splat-direct (samples' order, not in the registry) |");
     println!("|---|---|---|---|---|---|---|---|---|---|");
     let mut img = Image::new(1, 1);
@@ -205,8 +205,8 @@ fn unbuilt_scene_from(frame: Frame) -> Scene {
 fn benches(c: &mut Criterion) {
     let (frame, what) = bench_frame();
     let scene = Scene::build(&frame);
-    issue18_summary(&frame, &what, &scene);
-    if std::env::var_os("VOLWARP_BENCH_ISSUE18_ONLY").is_some() {
+    sphere_targets_summary(&frame, &what, &scene);
+    if std::env::var_os("VOLWARP_BENCH_SPHERE_TARGETS_ONLY").is_some() {
         return;
     }
     if std::env::var_os("VOLWARP_BENCH_NO_SUMMARY").is_none() {

@@ -3,7 +3,7 @@
 //! primary ray and core's tie rule — like [`crate::TileSplat`], but with no tiles, no bins and
 //! no second read of the spheres. **Not the default and not in the renderer registry**: on the
 //! MRI benchmark frame it is measured 1.2–1.4× slower than the tiled splatter at 1024² and
-//! level with it at 512² (`docs/perf.md`, issue 18, sixth session); it stays for measurements
+//! level with it at 512² (`docs/perf.md`, "Measured and not built"); it stays for measurements
 //! (`examples/splat_timing.rs` names it `splat-direct`, the bench times it) and as the tested
 //! record of that route.
 //!
@@ -624,7 +624,7 @@ fn sorted_tie(samples: &[u64], a: u64, b: u64) -> u64 {
 impl DirectSplat {
     /// Draws `scene` from `camera` into `out` (resized, background where nothing is hit), as a
     /// [`Renderer`] would. It is not one of the registry's renderers (it is not faster than the
-    /// tiled splatter on the benchmark frame: `docs/perf.md`, issue 18, sixth session), so it
+    /// tiled splatter on the benchmark frame: `docs/perf.md`, "Measured and not built"), so it
     /// has no [`RendererKind`] and does not implement the trait.
     pub fn render(&mut self, scene: &Scene, camera: &Camera, out: &mut Image) {
         if begin_frame(scene, camera, out) {

@@ -1,5 +1,5 @@
 //! Hole filling: what a sphere renderer shows where no sample of the newest frame covers a
-//! pixel (issue 19, levers 3 and 5). A post-pass over the sample-id buffer, so every CPU
+//! pixel (older frames and hole filling). A post-pass over the sample-id buffer, so every CPU
 //! renderer that yields ids ([`SampleIds`]: the packet tracer, the scalar tracer, the exact
 //! splatter) can use it, and every one of them draws the same filled image (the ids are the
 //! same, and every later stage is shared).

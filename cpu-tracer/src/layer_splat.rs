@@ -1,4 +1,4 @@
-//! Layered samples composited front to back (issue 14; renderer `splat-layers`).
+//! Layered samples composited front to back (renderer `splat-layers`).
 //!
 //! A layered frame carries up to K samples per pixel of the frame's camera, one per depth
 //! segment, each with its own premultiplied color and opacity. Where the exact splatter
@@ -9,12 +9,12 @@
 //! representative depth), widened by [`OWN_MARGIN`] pixels (none by default). The quad is
 //! projected into the new camera and every output pixel whose centre lies inside it takes the
 //! sample. (A plane facing the frame's camera instead shrinks footprints seen obliquely and
-//! opens cracks between them; `docs/perf.md`, issue 14.) Footprints of one depth tile the plane, so nothing is
+//! opens cracks between them.) Footprints of one depth tile the plane, so nothing is
 //! counted twice where neighbouring segments lie at similar depths, and at the frame's own
 //! camera every pixel takes exactly its own segments: the image is the server's render up to
 //! 8-bit rounding. (A first version tested each pixel of the sphere's bound exactly and kept
 //! the hits whose point nearest the centre projected into the sample's own pixel: the same rule
-//! about 10× slower; `docs/perf.md`, issue 14.) The spheres' radii are not used.
+//! about 10× slower.) The spheres' radii are not used.
 //!
 //! Per output pixel the samples go to a short list (the nearest, at most [`LIST`], as
 //! `(distance from the eye, sample id)` keys); the list is sorted (ties by id, so the result
@@ -38,7 +38,7 @@
 //! shared corner projects onto its pixel corner at any depth, so the frame is still reproduced
 //! there.
 //!
-//! **Hole filling** ([`LayerOptions::fill`], issue 19's lever 5): pixels no segment covers,
+//! **Hole filling** ([`LayerOptions::fill`]): pixels no segment covers,
 //! inside the covered pixels' row and column spans, take the frame's own composited image for
 //! their view direction (the stale frame, looked up as [`crate::hole_fill`]'s stage 3 does), so
 //! what the warp knows nothing about shows what a send-image system would, not the background.
@@ -47,7 +47,7 @@
 //! by source pixel once (`OwnPass`), and each hole composites the pixel it looks up on the
 //! spot; the whole image is composited only when the frame's own camera is drawn.
 //!
-//! **Older frames** ([`Renderer::render_set`], issue 19's multi-frame filling; the client keeps
+//! **Older frames** ([`Renderer::render_set`], the multi-frame filling; the client keeps
 //! 4 frames by default): pixels no segment of the newest frame covers first take the older
 //! frames' segments, newest first, before the hole filling above. Only what the newest frame did
 //! not see comes back: when a newest frame arrives, its [`Sight`] (per pixel of its camera, the
@@ -97,10 +97,10 @@ pub const LIST: usize = 16;
 pub const OPAQUE: f32 = 0.999;
 
 /// How far (in source pixels) beyond its own pixel a sample's footprint reaches. 0: a margin
-/// against rounding cracks (0.05 in issue 14's first version) counts semi-transparent segments
+/// against rounding cracks (0.05 in a first version) counts semi-transparent segments
 /// twice along every footprint edge, a grid of bright lines once the view zooms in; without it
 /// the session ꟻLIP of the iron protein's dolly fell from 0.0187 to 0.0064 and the MRI's orbit
-/// from 0.0262 to 0.0200 (`docs/results.md`, "Layered frames as the default").
+/// from 0.0262 to 0.0200 (`docs/results.md`, "The layered levers").
 pub const OWN_MARGIN: f32 = 0.0;
 
 /// The default depth tolerance of watertight slabs, source pixels ([`LayerOptions::watertight`]).
@@ -215,7 +215,7 @@ fn edges_of(q: [(f32, f32); 4]) -> [[f32; 3]; 4] {
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct LayerOptions {
     /// Half the footprint's side, in source pixels: 0.5 is the source pixel itself; the default
-    /// adds [`OWN_MARGIN`]. Measured (`docs/perf.md`, issue 14): 0.7 double-counts more than it
+    /// adds [`OWN_MARGIN`]. Measured: 0.7 double-counts more than it
     /// fills.
     pub own: f32,
     /// Fill the pixels no segment covers from the frame's image (see the module docs).
@@ -825,7 +825,7 @@ impl Renderer for LayerSplat {
         let rows = PIXEL_PASS_ROWS * w;
         self.state.resize(w * h, UNFILLED);
         take_drawn(&self.threads, &mut self.state[..w * h], &self.count, &out.pixels, rows, true);
-        // Older frames, newest first, only where nothing is yet (issue 19's lever 3): what
+        // Older frames, newest first, only where nothing is yet: what
         // each saw that the newest frame did not (see [`Sight`]), so an older sample never
         // stands where the newest frame saw empty space or the same surface.
         let mut older_frames = core::mem::take(&mut self.older);
@@ -886,7 +886,7 @@ impl Renderer for LayerSplat {
     }
 }
 
-/// Issue 19's older frames, each reduced to what the newest frame did not see (its *residual*,
+/// The older frames, each reduced to what the newest frame did not see (its *residual*,
 /// see the module docs): one definition for [`LayerSplat`] and the GPU's layered splatter,
 /// which draws the same sets in the same order (through [`OlderSets`]).
 #[derive(Debug, Default)]
@@ -958,7 +958,7 @@ impl OlderFrames {
 }
 
 /// What a renderer other than [`LayerSplat`] (the GPU's `splat-layers-gpu`) needs to draw
-/// issue 19's older frames as [`LayerSplat::render_set`] does: the scenes to draw after the
+/// the older frames as [`LayerSplat::render_set`] does: the scenes to draw after the
 /// newest, in order, each into the pixels still empty, made by the CPU's own code (the
 /// residuals are made once per arriving frame, on the CPU, and are small).
 #[derive(Debug)]

@@ -1,4 +1,4 @@
-//! The layered tracer (renderer name `spheres-layers`, issue 14's "for the tracer, multi-hit
+//! The layered tracer (renderer name `spheres-layers`, "for the tracer, multi-hit
 //! traversal"): per pixel, every segment sphere its ray hits through the LBVH
 //! ([`volwarp_core::Lbvh::hits`]), the nearest [`LIST`] kept, sorted by hit distance and
 //! composited front to back over the background — the same compositing as `splat-layers`

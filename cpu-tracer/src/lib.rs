@@ -13,7 +13,7 @@
 //! | [`scalar_tracer`] | core's scalar reference traversal per pixel | `spheres-scalar` |
 //! | [`point_splat`] | ZAL12 2.5D points: fixed N×N squares with a depth test | `points1`, `points2`, `points3` |
 //! | [`sphere_splat`] | exact object-order sphere splatting (no BVH) | `splat` |
-//! | [`layer_splat`] | layered samples (issue 14): segments owned per output ray, composited front to back | `splat-layers` |
+//! | [`layer_splat`] | layered samples: segments owned per output ray, composited front to back | `splat-layers` |
 //! | [`layer_trace`] | the same layered compositing by multi-hit LBVH traversal (the reference tracer) | `spheres-layers` |
 //! | [`stale_image`] | the frame as it was rendered, not warped | `stale` |
 //! | [`build`] (also `parallel_build`) | rayon LBVH build, byte-identical to `Scene::build` | — |

@@ -1,6 +1,6 @@
 //! The default sphere renderer (name `spheres`): the exact first-hit image by the cheaper route
 //! for the frame at hand, chosen per frame by a cost model whose constants were measured on the
-//! MRI benchmark frame (`examples/splat_timing.rs`, `docs/perf.md`, issue 18):
+//! MRI benchmark frame (`examples/splat_timing.rs`, `docs/perf.md`, "The route's cost model"):
 //!
 //! * **splat** ([`TileSplat`]): cost grows with the spheres in view and the pixels their
 //!   bounds cover, and needs no LBVH;
@@ -88,7 +88,7 @@ pub enum Route {
 ///
 /// The default constants are a least-squares fit (relative error) to the twelve views of
 /// `examples/splat_timing.rs` on the MRI benchmark frame (footprint and voxel radius, 10° off
-/// and zoomed in ×0.5 and ×0.25, 1024² and 512²; `docs/perf.md`, issue 18, fifth session); an
+/// and zoomed in ×0.5 and ×0.25, 1024² and 512²; `docs/perf.md`, "The route's cost model"); an
 /// earlier form with the tracer growing with the bound's side mispredicted zoomed-in views.
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct CostModel {

@@ -66,7 +66,7 @@ use volwarp_core::{Camera, Scene, Vec3, BACKGROUND};
 
 /// Tile side in pixels: a tile's keys (33 KB) and ray directions (≈ 56 KB) stay in L2 (with 32,
 /// which fit L1, the frame took 9–11 % longer: more spheres cut by tile borders and more groups
-/// per tile list; `docs/perf.md`, eleventh session).
+/// per tile list; `docs/perf.md`, "Measured and not built").
 pub const TILE: usize = 64;
 const _: () = assert!(TILE.is_power_of_two());
 

@@ -1,4 +1,4 @@
-//! Hole filling (issue 19): the filled renderers never change a pixel the newest frame covers,
+//! Hole filling: the filled renderers never change a pixel the newest frame covers,
 //! fill the ones it leaves empty (from older frames on a disocclusion and a 180° turn, from the
 //! stale frame otherwise), and every CPU sphere renderer draws the same filled image.
 

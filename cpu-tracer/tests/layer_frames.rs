@@ -1,4 +1,4 @@
-//! Older frames for layered frames (issue 19's multi-frame filling in `splat-layers`): an older
+//! Older frames for layered frames (the multi-frame filling in `splat-layers`): an older
 //! frame fills only pixels the newest frame leaves uncovered, only with what the newest frame
 //! did not see (the newest frame's samples again, from other cameras, add nothing), and fills a
 //! disocclusion and a 180° turn.

@@ -1,4 +1,4 @@
-//! Client draw time of the layered default against the one-sample splatter (issue 14's budget:
+//! Client draw time of the layered default against the one-sample splatter (the budget:
 //! "client draw time at 512² on 1 thread ≤ 2× the one-sample splatter's for the default K"), on
 //! every bundled dataset:
 //!
@@ -6,7 +6,7 @@
 //! cargo run --release -p volwarp-eval --example layer_time -- ../shared/data [--size 512] [--runs 15] [--threads 1] [--only NAME] [--frames K]
 //! ```
 //!
-//! With `--frames K` (issue 19's multi-frame filling) it also times the layered default keeping
+//! With `--frames K` (the multi-frame filling) it also times the layered default keeping
 //! `K` frames: the newest as above and `K − 1` older layered frames rendered 5°, 10°, … further
 //! back along the orbit, which fill what the newest leaves uncovered (`LayerSplat::render_set`),
 //! and what the first draw after a frame arrives costs more than the next draw of the same set,

@@ -1,4 +1,4 @@
-//! Issue 14's single-warp measurement of layered samples: for every dataset of a folder, the
+//! The single-warp measurement of layered samples: for every dataset of a folder, the
 //! C0 frame (default framing, 512², heuristic `threshold`) is rendered with one sample per pixel
 //! and with K segments per pixel (`--layers 2,4,8`), warped along the orbit to 0–30° and scored
 //! (PSNR, ꟻLIP, SSIM) against the marcher's truth:

@@ -1,4 +1,4 @@
-//! Issue 19's own measurement of the warp levers on single warps (until the session simulator
+//! The measurement of the warp levers on single warps (until the session simulator
 //! lands): for every dataset of a folder, the C0 frame (default framing, `--size`, heuristic
 //! `--heuristic`) is warped along the orbit to 2.5–30° and scored (ꟻLIP) against the marcher's
 //! truth, for

@@ -1,9 +1,9 @@
-//! The README demo's side-by-side strip (issue 19): for a few display frames of a recorded
+//! The README demo's side-by-side strip: for a few display frames of a recorded
 //! client session (`volwarp-client --record`), the truth (the server's marcher for the camera
 //! shown), the stale frame (the newest frame as rendered, unwarped, cropped to the display where
 //! it has a guard band: what a send-image system shows, except that volwarp asked for a
 //! predicted camera, so this column flatters the send-image system) and
-//! what volwarp's default drawing showed: for layered frames (issue 14, the client's default)
+//! what volwarp's default drawing showed: for layered frames (the client's default)
 //! the layered splatter with hole filling and warp-grown footprints, for one-sample frames the
 //! hole-filling sphere splatter with warp-sized radii. The stale frame of a layered frame is its
 //! segments composited at the frame's own camera.

@@ -1,4 +1,4 @@
-//! The cases where warping breaks down (issue 7, "where methods fail"): a transfer function
+//! The cases where warping breaks down ("where methods fail"): a transfer function
 //! that makes everything transparent (a frame with no samples), one that makes everything
 //! opaque, a thin isosurface, a camera inside the volume, a 180° turn (looking at the back of
 //! the samples), extreme zoom in and out, and heavy disocclusion. Each case is a transfer

@@ -1,6 +1,6 @@
 //! # volwarp-eval
 //!
-//! The evaluation of volwarp (GitHub issue 7): how accurate each way of warping a frame is
+//! The evaluation of volwarp: how accurate each way of warping a frame is
 //! against the ground truth, how fast it is, where each method breaks down, and how small the
 //! representation of a sample can be. The `volwarp-eval` binary drives it; the integration tests
 //! in `tests/` run the same code on small bundled volumes.

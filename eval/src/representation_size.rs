@@ -1,4 +1,4 @@
-//! How small can a sample be? Error against the representation's size (issue 7, "model no more
+//! How small can a sample be? Error against the representation's size ("model no more
 //! than a scene needs").
 //!
 //! The frame's samples are taken before quantization (float positions `o + d·t` and the float
@@ -26,7 +26,7 @@ use volwarp_core::{Camera, Heuristic, Image, Vec3, BACKGROUND};
 use volwarp_server::dataset::Dataset;
 use volwarp_server::{MarchOptions, Marcher, RadiusModel};
 
-/// Position bits per axis swept (the issue asks for 10 to 21; the sweep starts lower to find
+/// Position bits per axis swept (10 to 21 asked for; the sweep starts lower to find
 /// where the error sets in).
 pub const POSITION_BITS: std::ops::RangeInclusive<u32> = 6..=21;
 /// Radius code bits swept.

@@ -2,7 +2,7 @@
 //! N = 1, 2, 3, the CPU sphere tracer (and its radius variants ×0.5 and ×2), the GPU sphere
 //! tracer where an adapter opens, the exact sphere splatter and its GPU twin (`splat-gpu`)
 //! where an adapter opens, the hole-filling tracer (`spheres-fill`) with its variants, and
-//! `volwarp`, the window client's default drawing (hole-filling splatter, warp-sized radii).
+//! `volwarp`, the one-sample default drawing (hole-filling splatter, warp-sized radii).
 
 use volwarp_core::renderer::Renderer;
 use volwarp_core::wire::Frame;
@@ -77,7 +77,7 @@ pub fn roster(opts: RosterOptions) -> Vec<Entry> {
 /// core's `warp_radius`); in sessions the `volwarp` method adds prediction and the guard band.
 pub const DEFAULT_NAME: &str = "volwarp";
 
-/// The hole-filling variants measured beside `spheres-fill` (issue 19): the stale frame plus
+/// The hole-filling variants measured beside `spheres-fill`: the stale frame plus
 /// 3 levels of pull-push, and pull-push alone.
 pub const FILL_VARIANTS: [(&str, FillOptions); 2] = [
     ("spheres-fill-pp3", FillOptions { stale: true, enclosed_only: true, pull_push_levels: 3 }),

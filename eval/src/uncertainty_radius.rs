@@ -1,4 +1,4 @@
-//! Samples sized by what is known (issue 19, lever 4): single warps of frames whose spheres are
+//! Samples sized by what is known: single warps of frames whose spheres are
 //! sized by different radius models ([`volwarp_server::radius`]: the footprint default and
 //! `uncertainty` with its constants), drawn with the default client drawing (`volwarp`: the
 //! hole-filling splatter with warp-sized radii) and with the plain splatter (`splat`), scored

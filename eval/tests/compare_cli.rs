@@ -116,7 +116,7 @@ fn compare_replays_a_recorded_real_stream() {
 }
 
 /// The client's default renderer on a recorded stream of layered frames: `splat-layers-gpu`
-/// against `splat-layers`, with the older frames kept (issue 19's multi-frame filling on both).
+/// against `splat-layers`, with the older frames kept (the multi-frame filling on both).
 #[test]
 fn compare_replays_layered_frames_with_the_older_frames_kept() {
     if std::env::var("VOLWARP_SKIP_GPU").is_ok_and(|v| v == "1") {

@@ -1,4 +1,4 @@
-//! Layered samples end to end (issue 14): the server's layered frames drawn by `splat-layers`
+//! Layered samples end to end: the server's layered frames drawn by `splat-layers`
 //! against the marcher's truth at the frame's own camera, order independence, K = 1 against
 //! today's images, the transparent extreme and a session with layered frames.
 
@@ -62,7 +62,7 @@ fn at_the_frames_own_camera_the_composite_is_the_servers_render() {
             assert!(q.psnr >= 40.0, "{} K={k}: {:.1} dB", ds.name, q.psnr);
             assert!(q.flip <= 0.005, "{} K={k}: ꟻLIP {:.4}", ds.name, q.flip);
         }
-        // A warp 10° away still beats the stale frame (the issue's point).
+        // A warp 10° away still beats the stale frame (the point of layers).
         let (f, _) = m.render_frame_layers(&req, 4);
         let cam = orbit(&req.camera, 10.0);
         let truth = m.render_image(&cam);

@@ -1,6 +1,6 @@
 //! The quality sweep end to end on the bundled dataset at 64² (no timing): every renderer is
 //! scored at every angle, the GPU tracer (where present) agrees with the CPU tracer, the CSV has
-//! exactly the columns and the charts are drawn.
+//! exactly the documented columns and the charts are drawn.
 
 use volwarp_eval::quality::{evaluate, QualityOptions, QUALITY_COLUMNS};
 use volwarp_eval::roster::{roster, RosterOptions};

@@ -594,7 +594,7 @@ pub fn camera_request(seq: u64, camera: Camera, heuristic: Heuristic, radius_sca
 
 // ---------------------------------------------------------------- target 5: compact_decode
 
-/// Target `compact_decode` (issue 16). Byte 0 even: the rest is a stream of messages, decoded
+/// Target `compact_decode`. Byte 0 even: the rest is a stream of messages, decoded
 /// with `read_message` under [`LIMITS`] (CompactFrames among them): no panic, every decode within
 /// [`decode_alloc_limit`], accepted frames valid ([`check_frame`]), and a CompactFrame decodes to
 /// the same result through `compact_frame::decode_payload` on its payload. Byte 0 odd: the rest

@@ -3,7 +3,7 @@
 //! thread and all cores) on the same real frame: the MRI from `../shared/data` (the bundled CT
 //! head where it is missing) marched by the server with K = 4 segments per pixel at 512², drawn
 //! 10° off with the defaults (fill on) and adaptive growth on, as the client draws it; then with
-//! three older frames kept (issue 19's multi-frame filling, the client's default of 4 frames).
+//! three older frames kept (the multi-frame filling; the client's default keeps 4 frames).
 //! Prints medians over repeated runs and the adapter, device and driver.
 
 use std::time::{Duration, Instant};

@@ -1,4 +1,4 @@
-//! The layered splatter on the GPU (`splat-layers-gpu`, issues 14 and 17), mirroring the CPU's
+//! The layered splatter on the GPU (`splat-layers-gpu`), mirroring the CPU's
 //! `volwarp_cpu_tracer::layer_splat::LayerSplat` (`layer_splat.wgsl`): each sample of a layered
 //! frame is drawn as its source pixel's footprint quad, every pixel keeps the nearest
 //! [`LIST`] `(dist², id)` keys of the footprints that cover its centre, sorts them and
@@ -239,7 +239,7 @@ pub struct GpuLayerSplat {
     frame_of: Option<(SceneKey, Camera)>,
     redraws: u64,
     last_error: Option<String>,
-    /// Issue 19's older frames: what to draw after the newest (the CPU's own residuals; taken
+    /// The older frames: what to draw after the newest (the CPU's own residuals; taken
     /// out while in use).
     older_sets: Option<OlderSets>,
     /// Per older-frame slot its samples and colors on the GPU and the scene they hold.
@@ -640,7 +640,7 @@ impl GpuLayerSplat {
     }
 
     /// Renders the newest of `scenes` (newest first) for `camera` and fills what it leaves
-    /// uncovered from the older ones, as the CPU's `LayerSplat::render_set` does (issue 19's
+    /// uncovered from the older ones, as the CPU's `LayerSplat::render_set` does (the
     /// multi-frame filling: each older frame's residual, made on the CPU, drawn into the
     /// pixels still empty, newest first, then the fill). No scene: an empty image. Errors as
     /// [`Self::try_render`].

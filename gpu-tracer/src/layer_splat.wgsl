@@ -15,7 +15,7 @@
 //    and, for the fill, the covered row/column spans.
 // 5. `fill`, one invocation per pixel: `hole_fill::block_outside_silhouette` + `stale_lookup`.
 //
-// Older frames (issue 19's multi-frame filling, `LayerSplat::render_set`) are drawn after the
+// Older frames (the multi-frame filling, `LayerSplat::render_set`) are drawn after the
 // newest with P.only_empty = 1: passes 1–4 again on the older frame's samples, but only for the
 // pixels that nothing drawn before covered (`open`), so each such pixel takes the first older
 // frame that covers it; then the fill, once.

@@ -189,7 +189,7 @@ struct LayerParams {
     // Where the row and column spans and the scan's block sums start in the work buffer.
     off_spans: u32,
     off_sums: u32,
-    // 1 when drawing an older frame (issue 19's multi-frame filling): only the pixels that
+    // 1 when drawing an older frame (the multi-frame filling): only the pixels that
     // no earlier draw of this image covered (`count` 0) are counted, listed and composited,
     // and the spans are kept; 0 for the newest frame and the frame's own composite.
     only_empty: u32,

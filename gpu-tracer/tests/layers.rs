@@ -1,5 +1,5 @@
-//! The GPU layered splatter (`splat-layers-gpu`) against the CPU's `LayerSplat` (issues 14 and
-//! 17): real layered frames of the server's marcher (K = 4; the bundled CT head and neghip, the
+//! The GPU layered splatter (`splat-layers-gpu`) against the CPU's `LayerSplat`:
+//! real layered frames of the server's marcher (K = 4; the bundled CT head and neghip, the
 //! MRI from `../shared/data`, see `volwarp_server::testdata`) at the frame's own camera and warped, fill and
 //! adaptive growth on and off, and edge cases (0 and 1 samples, odd viewports, a viewport larger
 //! than the frame, garbage samples). Target: every pixel identical on a software rasterizer
@@ -317,7 +317,7 @@ fn the_fill_matches_the_cpu_on_the_pixels_it_fills() {
     assert!(filled_total > 100, "the views should open holes for the fill ({filled_total})");
 }
 
-/// Issue 19's multi-frame filling on the GPU: `render_set` with older frames draws the CPU's
+/// The multi-frame filling on the GPU: `render_set` with older frames draws the CPU's
 /// image (each older frame's residual into the pixels still empty, then the fill), through a
 /// sequence of arrivals (the residuals are carried over when the set shifts by one frame),
 /// with the fill on and off, adaptive sizing on and off, and a turn past 90° (older frames

@@ -1,4 +1,4 @@
-//! `cargo bench -p volwarp-server --bench compact`: the compact frame encoding (issue 16) of a
+//! `cargo bench -p volwarp-server --bench compact`: the compact frame encoding of a
 //! 1024² MRI frame (the framing of the `server` bench, about 630k samples), on one thread:
 //! building the residual planes (the fast path — AVX2 where the CPU has it —, the portable code
 //! and the scalar reference), entropy coding them (the server's byte-run parse with C zstd's

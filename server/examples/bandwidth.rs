@@ -1,5 +1,5 @@
 //! Bytes per sample of a frame in every encoding, and what the compact form costs in image
-//! quality (issue 16; the table in `docs/perf.md`):
+//! quality (the table in `docs/perf.md`):
 //!
 //! ```sh
 //! cargo run --release -p volwarp-server --example bandwidth -- [SIZE ...]   # default 512 1024

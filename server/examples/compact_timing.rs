@@ -1,4 +1,4 @@
-//! Every step of the compact frame codec on the 1024² MRI bench frame (issue 16, speed), as
+//! Every step of the compact frame codec on the 1024² MRI bench frame, as
 //! on-CPU time of the one measuring thread (`CLOCK_THREAD_CPUTIME_ID`: robust on a machine
 //! other builds keep busy, where wall time is mostly waiting for a core):
 //!

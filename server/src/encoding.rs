@@ -8,7 +8,7 @@
 //! body's runs of identical bytes as its only matches (`volwarp_core::byte_runs`): about 10×
 //! faster than ruzstd's pure-Rust encoder (core's default) at a better ratio, and 2.4× faster
 //! than the library's own level 1; clients decode either with ruzstd or C zstd
-//! (`docs/perf.md`, issue 16).
+//! (`docs/perf.md`, "The compact codec").
 
 use crate::marcher::Marcher;
 use rayon::prelude::*;
@@ -34,7 +34,7 @@ pub fn encode_options(marcher: &Marcher, req: &CameraRequest) -> EncodeOptions {
 /// parse ([`compact_frame::compress_c`]), or `None` if the frame does not fit the compact form.
 pub fn encode_compact(frame: &Frame, opts: &EncodeOptions, level: i32) -> Option<Vec<u8>> {
     if !frame.segments.is_empty() {
-        // A layered frame (issue 14): one compact part per layer, in a LayeredCompactFrame;
+        // A layered frame: one compact part per layer, in a LayeredCompactFrame;
         // the parts are encoded in parallel (the same bytes as one after another).
         let layers = volwarp_core::segments::layer_frames(frame).ok()?;
         let msgs: Vec<Vec<u8>> =

@@ -87,7 +87,7 @@ struct DataArgs {
     heuristic: String,
     /// Sphere radius model: `footprint` (a pixel diagonal at the sample's depth),
     /// `voxel` (half a voxel diagonal, the seed paper's) or `uncertainty` (the footprint grown
-    /// where the ray's color is spread along it; issue 19 lever 4).
+    /// where the ray's color is spread along it).
     #[arg(long, global = true, default_value = "footprint")]
     radius: RadiusModel,
     /// Sphere radius as a multiple of the model's (for `dump`; clients send their own).
@@ -103,7 +103,7 @@ struct DataArgs {
     /// Accumulated opacity at which a ray stops (1 or more: never).
     #[arg(long, global = true, default_value_t = 0.99)]
     early_termination: f32,
-    /// Layered samples (issue 14), 1–16 segments per pixel: for `dump`, the frame's count
+    /// Layered samples, 1–16 segments per pixel: for `dump`, the frame's count
     /// (default 1: one sample per pixel at the heuristic's depth); when serving, the most a
     /// client may ask for in its Hello (default 16).
     #[arg(long, global = true, value_parser = clap::value_parser!(u8).range(1..=16))]

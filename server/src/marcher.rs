@@ -99,7 +99,7 @@ impl PixelBuffer {
     }
 }
 
-/// The uncompacted result of a layered march (issue 14).
+/// The uncompacted result of a layered march.
 #[derive(Clone, Debug, PartialEq)]
 pub struct LayerBuffer {
     /// Width in pixels.
@@ -382,7 +382,7 @@ impl Marcher {
         (c, t, spread.finish())
     }
 
-    /// One ray's layered samples (issue 14): at most `layers` segments, front to back (the
+    /// One ray's layered samples: at most `layers` segments, front to back (the
     /// scalar reference of the packet marcher's layered path).
     pub fn segments(&self, o: Vec3, d: Vec3, layers: u32) -> Vec<Segment> {
         let mut seg = Segmenter::new(layers, self.dt);
@@ -562,7 +562,7 @@ impl Marcher {
         (frame, stats)
     }
 
-    /// A layered frame (issue 14): each pixel's ray cut into at most `layers` segments, each
+    /// A layered frame: each pixel's ray cut into at most `layers` segments, each
     /// one sample at its segment's depth with the segment's own color and opacity, in pixel
     /// order and front to back within a pixel (`Frame::segments` holds each sample's index).
     /// `layers` ≤ 1 gives [`Marcher::render_frame`]'s frame exactly (the heuristic's depth).

@@ -83,7 +83,7 @@ fn for_lanes(mut bits: u64, mut f: impl FnMut(usize)) {
     }
 }
 
-/// What cuts a packet's rays into segments (issue 14): the segmenters and each lane's result.
+/// What cuts a packet's rays into segments: the segmenters and each lane's result.
 trait LayerFeed<const M: usize>: Feed<M> {
     /// Segmenters for at most `k` segments per ray, sampled every `step`.
     fn new(k: u32, step: f32) -> Self;

@@ -14,7 +14,7 @@
 //!   over five datasets its mean FLIP against the truth is lower than the voxel model's at
 //!   every angle up to 20°; a smaller footprint (one pixel) is slightly better up to 5° and
 //!   worse beyond.
-//! * [`RadiusModel::Uncertainty`] — issue 19's lever 4, "samples sized by what is known": the
+//! * [`RadiusModel::Uncertainty`] — "samples sized by what is known": the
 //!   footprint radius × [`uncertainty_factor`], a factor ≥ 1 that grows with how unsure the
 //!   ray is about *where* its color lies: the spread of the ray's color along it
 //!   ([`RaySpread`]: the opacity-weighted standard deviation of the depths that contributed,
@@ -22,7 +22,7 @@
 //!   in pixels at the sample's depth, and optionally how transparent the ray stayed. An opaque
 //!   surface (all the color at one depth) keeps exactly the footprint radius; the factor is
 //!   capped at [`UncertaintyParams::max`], and the frame's radius unit grows by that cap so the
-//!   largest radius still fits the 10-bit code. Layered frames (issue 14) size every segment by
+//!   largest radius still fits the 10-bit code. Layered frames size every segment by
 //!   the footprint: a segment already says where its color lies.
 //!
 //! A request's `radius_scale` multiplies either. Both are encoded with the wire's per-sample
@@ -187,7 +187,7 @@ impl Default for UncertaintyParams {
 
 impl UncertaintyParams {
     /// The constants `--radius uncertainty` uses: the least harmful of the variants measured
-    /// (`docs/results.md`, "Samples sized by what is known": growing by the spread along the ray
+    /// (`docs/results.md`, "Samples sized by their spread along the ray": growing by the spread along the ray
     /// lost to the footprint at every gain, so only the opacity term is on; the footprint
     /// model stays the default).
     pub const DEFAULT: UncertaintyParams =

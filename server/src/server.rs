@@ -59,7 +59,7 @@ pub struct ServerConfig {
     /// default true. Off, every client gets 12-byte Frames.
     pub compact: bool,
     /// Most segments per pixel the server renders for a client that asks for layered frames
-    /// in its Hello (issue 14; 1: one sample per pixel for everyone). Default
+    /// in its Hello (1: one sample per pixel for everyone). Default
     /// [`volwarp_core::segments::MAX_LAYERS`]: the client chooses.
     pub layers: u8,
 }
@@ -415,7 +415,7 @@ fn serve(sh: &Shared, stream: &TcpStream, id: u64) -> String {
     let encoding = if compact { Encoding::Compact } else { Encoding::Raw12 };
     // Colors coded against green only for clients that read them.
     let green = compact && hello.capabilities & wire::CAP_COLOR_GREEN != 0;
-    // Layered frames (issue 14): as many segments per pixel as the client asks, up to ours.
+    // Layered frames: as many segments per pixel as the client asks, up to ours.
     let layers = hello.layers.clamp(1, cfg.layers.max(1));
     {
         let mut w = embedded_io_adapters::std::FromStd::new(stream);

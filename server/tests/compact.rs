@@ -1,4 +1,4 @@
-//! The compact encoding over loopback (issue 16): a client that sets `CAP_COMPACT` gets
+//! The compact encoding over loopback: a client that sets `CAP_COMPACT` gets
 //! CompactFrames that decode to the 12-byte frame's colors and radius codes exactly and its
 //! positions within the stated bound; a client that does not, or a server started with
 //! `compact: false`, gets 12-byte Frames.

@@ -1,4 +1,4 @@
-//! The compact codec's fast paths on real frames of the marcher (issue 16, speed): the fast
+//! The compact codec's fast paths on real frames of the marcher: the fast
 //! encoder gives the scalar reference's planes byte for byte, the fast reconstruction the
 //! reference's frame bit for bit, and C zstd (what std clients decompress with) the same body as
 //! ruzstd (no_std clients), on the bundled CT head and, the MRI of `../shared/data`

@@ -1,4 +1,4 @@
-//! Guard bands (issue 19): the displayed region of a frame rendered for a guard-band camera is
+//! Guard bands: the displayed region of a frame rendered for a guard-band camera is
 //! the frame rendered for the display camera (the rays agree up to float rounding), and the
 //! guard frame costs more samples.
 

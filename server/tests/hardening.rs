@@ -1,4 +1,4 @@
-//! Hardening against garbage, hostile and slow clients (issue 8): a real server on loopback
+//! Hardening against garbage, hostile and slow clients: a real server on loopback
 //! with short limits, attacked by bad clients, while a well-behaved client keeps checking
 //! that its frames are exactly what the marcher renders; the server's memory (this process's
 //! RSS) stays bounded. `docs/security.md` has the threat model these tests exercise.

@@ -1,4 +1,4 @@
-//! Layered samples (issue 14) from the marcher: the packet marcher's segments against the scalar
+//! Layered samples from the marcher: the packet marcher's segments against the scalar
 //! marcher's, K = 1 against today's frames, segments recomposited against the ground truth,
 //! and the transparent and opaque extremes.
 

@@ -1,6 +1,6 @@
 //! The packet (SIMD) marcher against the scalar marcher, its oracle.
 //!
-//! Tolerance: the issue allows a per-channel difference of 1/255 and the same depth on at
+//! Tolerance: a per-channel difference of 1/255 at most and the same depth on at
 //! least 99.9 % of the pixels; the packet marcher performs the scalar marcher's operations in
 //! the same order and rounding, so these tests ask for more: identical colors and depths on
 //! every pixel (they report the first difference, and the per-channel maximum and the share of
@@ -44,7 +44,7 @@ fn pair(ds: &Dataset, opts: MarchOptions) -> (Marcher, Marcher) {
     (packet, scalar)
 }
 
-/// Asserts two pixel buffers are equal within the issue's tolerance and, beyond it, identical.
+/// Asserts two pixel buffers are equal within the allowed tolerance and, beyond it, identical.
 fn assert_same(what: &str, fast: &PixelBuffer, slow: &PixelBuffer) {
     assert_eq!((fast.width, fast.height), (slow.width, slow.height), "{what}");
     let n = slow.t.len();

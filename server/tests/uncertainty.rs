@@ -1,4 +1,4 @@
-//! The uncertainty radius model (issue 19, lever 4): opaque surfaces keep the footprint
+//! The uncertainty radius model: opaque surfaces keep the footprint
 //! radius, fuzzy rays get a larger one within the cap, nothing overflows or turns NaN, and the
 //! packet marcher's frames equal the scalar marcher's.
 

@@ -1,4 +1,4 @@
-//! `volwarp-eval`: accuracy against speed (issue 7).
+//! `volwarp-eval`: accuracy against speed.
 //!
 //! ```text
 //! volwarp-eval quality  --volume FILE [--tf FILE] [--heuristic H|all] --out DIR
@@ -140,7 +140,7 @@ enum Cmd {
         #[arg(long, default_value_t = 5)]
         runs: usize,
     },
-    /// Samples sized by what is known (issue 19 lever 4): single warps of frames of each radius
+    /// Samples sized by what is known: single warps of frames of each radius
     /// model, drawn with `splat` and the default drawing (`volwarp`), against the stale frame.
     Uncertainty {
         #[command(flatten)]
@@ -304,12 +304,12 @@ struct SessionArgs {
     /// The frames' wire encoding, charged on the link: compact (the server's default) or raw12.
     #[arg(long, default_value = "compact")]
     encoding: String,
-    /// Segments per pixel of the server's frames (issue 14, layered samples, 1–16; method
+    /// Segments per pixel of the server's frames (layered samples, 1–16; method
     /// `splat-layers` composites them; 1: one sample per pixel).
     #[arg(long, default_value_t = 1, value_parser = clap::value_parser!(u32).range(1..=16))]
     layers: u32,
     /// The server's sphere radius model: `footprint`, `voxel`, `uncertainty` or
-    /// `uncertainty:gain=G:max=M:opacity=O:measure=sigma|span` (issue 19 lever 4).
+    /// `uncertainty:gain=G:max=M:opacity=O:measure=sigma|span`.
     #[arg(long, default_value = "footprint")]
     radius: String,
 }

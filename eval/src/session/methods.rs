@@ -6,18 +6,18 @@
 //! `splat-fill+predict+guard=0.1+frames=2` or `splat-layers+predict+adapt+layers=4`.
 //!
 //! - `+predict`: the client asks for the camera it expects to show when the frame is on screen
-//!   (core's `prediction`, horizon from core's `prediction::Horizon`), issue 19 lever 1;
+//!   (core's `prediction`, horizon from core's `prediction::Horizon`);
 //! - `+guard=G`: it asks for a view widened by `G` of its size on every side at the same pixel
-//!   density (core's `guard`), lever 2;
+//!   density (core's `guard`);
 //! - `+frames=K`: it keeps the `K` newest frames and fills what the newest does not cover from
-//!   the older ones, lever 3 (the `*-fill` renderers: cpu-tracer's `hole_fill`; `splat-layers`:
+//!   the older ones (the `*-fill` renderers: cpu-tracer's `hole_fill`; `splat-layers`:
 //!   what each older frame saw that the newest did not, `layer_splat`);
 //! - `+adapt`: it draws spheres sized by how far the view moved from the frame's camera (core's
 //!   `warp_radius`: half the footprint at the frame's camera, growing to the frame's own radius
-//!   by 10°; the splatters only; `splat-layers` grows its footprints instead), lever 4;
+//!   by 10°; the splatters only; `splat-layers` grows its footprints instead);
 //! - `+pp=L`: pull-push over `L` levels into the holes left inside the silhouette (only the
-//!   `*-fill` renderers), lever 5;
-//! - `+layers=K`: it asks for frames of `K` segments per pixel (issue 14; drawn by
+//!   `*-fill` renderers);
+//! - `+layers=K`: it asks for frames of `K` segments per pixel (drawn by
 //!   `splat-layers`), whatever the session's `--layers`.
 //!
 //! [`DEFAULT_METHOD`] (alias `volwarp`) is the method the window client runs by default.
@@ -135,7 +135,7 @@ pub struct MethodSpec {
 }
 
 /// The method the window client runs by default and the sessions' `volwarp` alias, chosen on
-/// the session results (`docs/results.md`, "Warps that beat the stale frame").
+/// the session results (`docs/results.md`, "The default method").
 pub const DEFAULT_METHOD: &str = "splat-layers+predict+frames=4+adapt+layers=4";
 
 /// The methods of `all`: what a send-image system shows, the 2.5D points of ZAL12, the exact

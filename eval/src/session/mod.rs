@@ -1,4 +1,4 @@
-//! The session simulator (issue 13): what a user sees while dragging the camera as the server
+//! The session simulator: what a user sees while dragging the camera as the server
 //! renders at its own pace and frames cross a network.
 //!
 //! A session is a dataset, a camera path over time ([`paths`]), a server, network and client
@@ -179,7 +179,7 @@ pub fn calibrate(
         cal.ms.insert(("server".into(), ds.name.clone(), size), server);
         log::info!("{}: server {server:.1} ms per frame at {size}²", ds.name);
         let held = methods::HeldFrame::new(frame.ok_or("no frame")?);
-        // Methods that ask for layered frames draw one (issue 14), K segments per pixel.
+        // Methods that ask for layered frames draw one, K segments per pixel.
         let mut layered: Vec<(u32, methods::HeldFrame)> = Vec::new();
         let cam = c0.orbit(10.0, 0.0);
         for mut method in methods::make_methods(list, threads)? {

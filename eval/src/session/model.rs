@@ -55,7 +55,7 @@ pub fn server_policy(name: &str) -> Result<Box<dyn ServerPolicy>, ErrorBox> {
     }
 }
 
-/// What the client asks the server for (issue 19's levers 1 and 2): the camera it shows, or
+/// What the client asks the server for (prediction and the guard band): the camera it shows, or
 /// the camera it expects to show when the frame is on screen (`predict`), widened by a guard
 /// band of `guard` of its size on every side. The policy of each method of a session; the
 /// frames of each distinct policy are served separately.
@@ -65,7 +65,7 @@ pub struct RequestPolicy {
     pub predict: bool,
     /// Guard band fraction (0: none).
     pub guard: f32,
-    /// Segments per pixel it asks for (issue 14; 0: the session's `--layers`).
+    /// Segments per pixel it asks for (0: the session's `--layers`).
     pub layers: u32,
 }
 
@@ -86,7 +86,7 @@ pub struct NetworkModel {
 }
 
 impl NetworkModel {
-    /// The issue-19 setting: 500 ms per frame, 50 ms one way, 100 Mbit/s.
+    /// The sessions' default setting: 500 ms per frame, 50 ms one way, 100 Mbit/s.
     pub const DEFAULT: NetworkModel = NetworkModel { server_ms: 500.0, latency_ms: 50.0, mbps: 100.0 };
 
     /// Checks the figures: a clear error for a bandwidth of 0, negative or NaN times.
@@ -141,13 +141,13 @@ pub struct Calibration {
 }
 
 /// The client draw times at 512² used when no calibration file is given: the medians of
-/// `docs/results.md` (2 threads; Table "Mean FLIP over the five datasets"), scaled with the
+/// `docs/results.md` (2 threads; "One-sample renderers against angle"), scaled with the
 /// pixel count at other sizes.
 /// `splat-fill` (with warp-sized radii) is splat's figure times 1.57, the ratio of the two
 /// measured in one `session-calibrate` run (tooth, 512², 2 threads; `docs/perf.md`);
 /// `splat-layers` (4 segments per pixel, hole filling, warp-grown footprints: `volwarp`) is
 /// splat-fill's figure times 1.50, the median ratio of the two in three `session-calibrate
-/// --all` runs (512², 2 threads; `docs/perf.md`, "Issue 14 (sixth session)"; 2.74 before the
+/// --all` runs (512², 2 threads; `docs/perf.md`; 2.74 before the
 /// SIMD set-up and band-at-a-time compositing).
 pub const DEFAULT_DRAW_MS_512: [(&str, f64); 8] = [
     ("stale", 0.9),
@@ -162,7 +162,7 @@ pub const DEFAULT_DRAW_MS_512: [(&str, f64); 8] = [
 
 /// What each older frame a `splat-layers` method keeps adds to its draw time, as a fraction of
 /// the one-frame draw: the median over the five datasets of `layer_time --frames 4` (512², one
-/// thread; `docs/perf.md`, "Issue 19: older frames for layered frames").
+/// thread; `docs/perf.md`).
 pub const OLDER_FRAME_COST: f64 = 0.06;
 
 impl Calibration {

@@ -55,7 +55,7 @@ pub struct SessionConfig {
     pub exact_when_still: bool,
     /// The frames' wire encoding (the server's default is compact).
     pub encoding: Encoding,
-    /// Segments per pixel of the frames (issue 14; 1: one sample per pixel).
+    /// Segments per pixel of the frames (1: one sample per pixel).
     pub layers: u32,
 }
 
@@ -404,7 +404,7 @@ pub fn run_session(
         };
         stream_of.push(i);
     }
-    // Layered frames (issue 14) are shown as they were rendered by compositing their segments.
+    // Layered frames are shown as they were rendered by compositing their segments.
     let mut exact_one = volwarp_cpu_tracer::create(RendererKind::Stale, 0).ok_or("the stale renderer is missing")?;
     let mut exact_layers =
         volwarp_cpu_tracer::create(RendererKind::SplatLayers, 0).ok_or("the layered splatter is missing")?;

@@ -1,5 +1,5 @@
 //! Exports the packet tracer's benchmark scene for `embree_bench.c`, and times our
-//! `PacketTracer` on it, so both tracers are measured on the same machine in the same session.
+//! `PacketTracer` on it, so both tracers are measured on the same machine in the same run.
 //!
 //! * `volwarp-embree-bench export OUT_DIR` marches the MRI with both radius models (exactly as
 //!   `cpu-tracer/benches/support/frames.rs`: default camera orbited 20°/10°, dolly 0.66, 1024²,
