@@ -513,91 +513,34 @@ fn the_token_is_checked_and_a_wrong_one_gets_an_error_and_a_close() {
     server.shutdown();
 }
 
-// ---------------------------------------------------------------- volume_header fuzz mirror
+// ---------------------------------------------------------------- volume fuzz mirrors
 
-/// Stable mirror of the `volume_header` fuzz target: its seeds, then deterministic mutations
-/// of them (byte flips, insertions of header syntax, truncations).
-#[test]
-fn volume_header_mirror() {
-    let dir = std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("../fuzz/seeds/volume_header");
+/// The committed seeds of fuzz target `target`, sorted.
+fn fuzz_seeds(target: &str) -> Vec<Vec<u8>> {
+    let dir = std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("../fuzz/seeds").join(target);
     let mut seeds: Vec<Vec<u8>> =
         std::fs::read_dir(&dir).map(|d| d.flatten().map(|e| std::fs::read(e.path()).unwrap()).collect()).unwrap();
     seeds.sort();
     assert!(seeds.len() >= 5, "seed corpus missing under {}", dir.display());
-    let tokens: [&[u8]; 10] =
-        [b"\n\n", b"\r\n", b": ", b":=", b"sizes: 0 1 2", b"spacings: nan 1 1", b"byte skip: -2", b"(1,0", b"_", b"x"];
-    let mut x: u64 = 0x2545_F491_4F6C_DD1D;
-    let mut next = |n: usize| {
-        x ^= x << 13;
-        x ^= x >> 7;
-        x ^= x << 17;
-        (x % n.max(1) as u64) as usize
-    };
-    for s in &seeds {
-        volume_checks::volume_header(s);
-    }
-    for _ in 0..20_000 {
-        let mut v = seeds[next(seeds.len())].clone();
-        for _ in 0..1 + next(4) {
-            let n = v.len();
-            match next(4) {
-                0 if n > 1 => {
-                    let i = 1 + next(n - 1);
-                    v[i] ^= 1 << next(8);
-                }
-                1 => {
-                    let t = tokens[next(tokens.len())];
-                    let i = 1 + next(n.saturating_sub(1) + 1).min(n.saturating_sub(1));
-                    v.splice(i.min(v.len())..i.min(v.len()), t.iter().copied());
-                }
-                2 => v.truncate(next(n + 1)),
-                _ => v[0] ^= 1,
-            }
-            if v.is_empty() {
-                v.push(0);
-            }
-        }
-        volume_checks::volume_header(&v);
-    }
+    seeds
 }
 
-// ---------------------------------------------------------------- volume_load fuzz mirror
-
-/// Stable mirror of the `volume_load` fuzz target: its seeds (among them the dims that wrap a
-/// 64-bit voxel count to 0), then deterministic mutations of them: digit changes in the sizes,
-/// byte flips, header syntax inserted, truncations.
-#[test]
-fn volume_load_mirror() {
-    let dir = std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("../fuzz/seeds/volume_load");
-    let mut seeds: Vec<Vec<u8>> =
-        std::fs::read_dir(&dir).map(|d| d.flatten().map(|e| std::fs::read(e.path()).unwrap()).collect()).unwrap();
-    seeds.sort();
-    assert!(seeds.len() >= 8, "seed corpus missing under {}", dir.display());
-    let tokens: [&[u8]; 10] = [
-        b"4194304",
-        b"65536",
-        b"sizes: 65536 65536 65536\n",
-        b"encoding: gzip\n",
-        b"data file: d.raw\n",
-        b"byte skip: -1\n",
-        b"type: double\n",
-        b"\n\n",
-        b"x",
-        b"_float32.raw\n",
-    ];
-    let mut x: u64 = 0x9E37_79B9_7F4A_7C15;
+/// Runs `check` on every seed, then on `rounds` deterministic mutations of them (xorshift):
+/// byte flips, insertions of `tokens`, digits changed into other digits (sizes and names that
+/// grow and wrap), truncations and a flip of byte 0 (the target's selector), 1 to 4 at a time.
+fn mirror(seeds: &[Vec<u8>], tokens: &[&[u8]], rounds: usize, mut x: u64, check: fn(&[u8])) {
     let mut next = |n: usize| {
         x ^= x << 13;
         x ^= x >> 7;
         x ^= x << 17;
         (x % n.max(1) as u64) as usize
     };
-    for s in &seeds {
-        volume_checks::volume_load(s);
+    for s in seeds {
+        check(s);
     }
-    for _ in 0..3_000 {
+    for _ in 0..rounds {
         let mut v = seeds[next(seeds.len())].clone();
-        for _ in 0..1 + next(3) {
+        for _ in 0..1 + next(4) {
             let n = v.len();
             match next(5) {
                 0 if n > 1 => {
@@ -610,8 +553,8 @@ fn volume_load_mirror() {
                     v.splice(i..i, t.iter().copied());
                 }
                 2 if n > 1 => {
-                    // A digit made another digit: sizes and names that grow and wrap.
-                    if let Some(i) = (1..n).map(|k| (k + next(n)) % n).find(|&i| i > 0 && v[i].is_ascii_digit()) {
+                    let start = 1 + next(n - 1);
+                    if let Some(i) = (start..n).chain(1..start).find(|&i| v[i].is_ascii_digit()) {
                         v[i] = b'0' + next(10) as u8;
                     }
                 }
@@ -622,6 +565,34 @@ fn volume_load_mirror() {
                 v.push(0);
             }
         }
-        volume_checks::volume_load(&v);
+        check(&v);
     }
+}
+
+/// Stable mirror of the `volume_header` fuzz target: its seeds, then 20,000 deterministic
+/// mutations of them.
+#[test]
+fn volume_header_mirror() {
+    let tokens: [&[u8]; 10] =
+        [b"\n\n", b"\r\n", b": ", b":=", b"sizes: 0 1 2", b"spacings: nan 1 1", b"byte skip: -2", b"(1,0", b"_", b"x"];
+    mirror(&fuzz_seeds("volume_header"), &tokens, 20_000, 0x2545_F491_4F6C_DD1D, volume_checks::volume_header);
+}
+
+/// Stable mirror of the `volume_load` fuzz target: its seeds (among them the dims that wrap a
+/// 64-bit voxel count to 0), then 3,000 deterministic mutations of them (each a load from a file).
+#[test]
+fn volume_load_mirror() {
+    let tokens: [&[u8]; 10] = [
+        b"4194304",
+        b"65536",
+        b"sizes: 65536 65536 65536\n",
+        b"encoding: gzip\n",
+        b"data file: d.raw\n",
+        b"byte skip: -1\n",
+        b"type: double\n",
+        b"\n\n",
+        b"x",
+        b"_float32.raw\n",
+    ];
+    mirror(&fuzz_seeds("volume_load"), &tokens, 3_000, 0x9E37_79B9_7F4A_7C15, volume_checks::volume_load);
 }
