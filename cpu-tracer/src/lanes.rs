@@ -13,134 +13,55 @@
 //! Masks are lanes with all bits set (true) or clear (false), as `wide`'s comparisons give.
 
 use core::ops::{Add, BitAnd, BitOr, Div, Mul, Sub};
-#[cfg(target_arch = "x86_64")]
-use std::sync::atomic::{AtomicU8, Ordering};
 use volwarp_core::sample::Dequantizer;
 use volwarp_core::{RayBasis, Vec3};
 use wide::{f32x8, u32x8};
 
-/// Defines `$name`, which runs the kernel `$kernel::<L>` on the best lanes this CPU has: the
-/// instance `$avx2`, compiled with `#[target_feature(enable = "avx2")]` on [`Avx2`] lanes, where
-/// `is_x86_feature_detected!("avx2")` says the CPU has AVX2, and the portable `wide::f32x8`
-/// instance elsewhere. With a third name, `fn name / avx2 / avx512 => kernel(…)`, also the
-/// instance `$avx512`, compiled with AVX-512 F and DQ on [`Avx512`] lanes (sixteen), taken first
-/// where [`use_avx512`] says so (for kernels generic over [`BoundLanes`]). All compute the same
-/// values (see the module docs), so the choice only changes the speed.
+/// Defines `$name`, which runs the kernel `$kernel::<L>` on the lanes
+/// [`volwarp_lanes::level`] picks (with [`volwarp_lanes::dispatch!`]): the instance `$avx2`,
+/// compiled with AVX2 on [`Avx2`] lanes, where the level is AVX2 or wider, and the portable
+/// `wide::f32x8` instance elsewhere. With a third name, `fn name / avx2 / avx512 => kernel(…)`,
+/// also the instance `$avx512`, compiled with AVX2, AVX-512 F and DQ on [`Avx512`] lanes
+/// (sixteen), taken where the level is AVX-512 (for kernels generic over [`BoundLanes`]). All
+/// compute the same values (see the module docs), so the choice only changes the speed.
 macro_rules! dispatch {
-    // The AVX2 instance, else the portable one (the end of every dispatcher).
-    (@narrow $avx2:ident $kernel:ident ($($arg:ident),*)) => {{
-        #[cfg(target_arch = "x86_64")]
-        if $crate::lanes::use_avx2() {
-            // SAFETY: the CPU supports AVX2 (`use_avx2` checks).
-            return unsafe { $avx2($($arg),*) };
-        }
-        $kernel::<wide::f32x8>($($arg),*)
-    }};
-    // The AVX2 instance.
-    (@avx2 $avx2:ident $kernel:ident ($($arg:ident: $ty:ty),*) $(-> $ret:ty)?) => {
-        /// The kernel on [`crate::lanes::Avx2`] lanes, compiled with AVX2 (the lane methods
-        /// inline to ymm instructions).
-        ///
-        /// # Safety
-        /// The CPU must support AVX2.
-        #[cfg(target_arch = "x86_64")]
-        #[target_feature(enable = "avx2")]
-        #[allow(clippy::too_many_arguments)]
-        unsafe fn $avx2($($arg: $ty),*) $(-> $ret)? {
-            // `Avx2`'s invariant holds: the caller guarantees AVX2.
-            $kernel::<$crate::lanes::Avx2>($($arg),*)
+    ($(#[$doc:meta])* fn $name:ident / $avx2:ident / $avx512:ident => $($kernel:tt)*) => {
+        volwarp_lanes::dispatch! {
+            $(#[$doc])*
+            fn $name / $avx2 / $avx512 => $($kernel)*;
+            portable = [wide::f32x8], avx2 = [$crate::lanes::Avx2], avx512 = [$crate::lanes::Avx512]
         }
     };
-    ($(#[$doc:meta])* fn $name:ident / $avx2:ident => $kernel:ident($($arg:ident: $ty:ty),* $(,)?) $(-> $ret:ty)?) => {
-        $(#[$doc])*
-        #[allow(clippy::too_many_arguments)]
-        fn $name($($arg: $ty),*) $(-> $ret)? {
-            $crate::lanes::dispatch!(@narrow $avx2 $kernel ($($arg),*))
-        }
-        $crate::lanes::dispatch!(@avx2 $avx2 $kernel ($($arg: $ty),*) $(-> $ret)?);
-    };
-    ($(#[$doc:meta])* fn $name:ident / $avx2:ident / $avx512:ident => $kernel:ident($($arg:ident: $ty:ty),* $(,)?) $(-> $ret:ty)?) => {
-        $(#[$doc])*
-        #[allow(clippy::too_many_arguments)]
-        fn $name($($arg: $ty),*) $(-> $ret)? {
-            #[cfg(target_arch = "x86_64")]
-            if $crate::lanes::use_avx512() {
-                // SAFETY: the CPU supports AVX2, AVX-512 F and DQ (`use_avx512` checks).
-                return unsafe { $avx512($($arg),*) };
-            }
-            $crate::lanes::dispatch!(@narrow $avx2 $kernel ($($arg),*))
-        }
-        $crate::lanes::dispatch!(@avx2 $avx2 $kernel ($($arg: $ty),*) $(-> $ret)?);
-
-        /// The kernel on [`crate::lanes::Avx512`] lanes, compiled with AVX2 and AVX-512 F, DQ.
-        ///
-        /// # Safety
-        /// The CPU must support AVX2, AVX-512 F and DQ.
-        #[cfg(target_arch = "x86_64")]
-        #[target_feature(enable = "avx2,avx512f,avx512dq")]
-        #[allow(clippy::too_many_arguments)]
-        unsafe fn $avx512($($arg: $ty),*) $(-> $ret)? {
-            // `Avx512`'s invariant holds: the caller guarantees AVX2, AVX-512 F and DQ.
-            $kernel::<$crate::lanes::Avx512>($($arg),*)
+    ($(#[$doc:meta])* fn $name:ident / $avx2:ident => $($kernel:tt)*) => {
+        volwarp_lanes::dispatch! {
+            $(#[$doc])*
+            fn $name / $avx2 => $($kernel)*;
+            portable = [wide::f32x8], avx2 = [$crate::lanes::Avx2]
         }
     };
 }
 pub(crate) use dispatch;
 
-/// Whether the kernels take their AVX2 instances: the CPU has AVX2, the environment variable
-/// `VOLWARP_PORTABLE_SIMD` is not set and `VOLWARP_LANES` is not `portable` (either times the
-/// portable `wide` kernels, as on a CPU without AVX2 or on ARM). Read once.
+/// Whether the kernels take their AVX2 instances: the lane level
+/// ([`volwarp_lanes::lane_kind`]: the CPU's, clamped by `VOLWARP_LANES` and
+/// [`volwarp_lanes::limit_lanes`]) is AVX2 or wider.
 #[cfg(target_arch = "x86_64")]
 pub(crate) fn use_avx2() -> bool {
-    static STATE: AtomicU8 = AtomicU8::new(0);
-    decided_once(&STATE, || {
-        std::is_x86_feature_detected!("avx2")
-            && std::env::var_os("VOLWARP_PORTABLE_SIMD").is_none()
-            && std::env::var("VOLWARP_LANES").ok().as_deref() != Some("portable")
-    })
+    volwarp_lanes::Avx2Token::new().is_some()
 }
 
 /// Whether the kernels that have an AVX-512 instance (sixteen lanes: the tiled splatter's
-/// bound pass) take it: [`use_avx2`], the CPU has AVX-512 F and DQ, and `VOLWARP_LANES` is not
-/// `avx2` (which times the AVX2 instances on a CPU with AVX-512). Read once.
+/// bound pass) take it: the lane level is AVX-512 (`VOLWARP_LANES=avx2` times the AVX2
+/// instances on a CPU with AVX-512).
 #[cfg(target_arch = "x86_64")]
 pub(crate) fn use_avx512() -> bool {
-    static STATE: AtomicU8 = AtomicU8::new(0);
-    decided_once(&STATE, || {
-        use_avx2()
-            && std::is_x86_feature_detected!("avx512f")
-            && std::is_x86_feature_detected!("avx512dq")
-            && std::env::var("VOLWARP_LANES").ok().as_deref() != Some("avx2")
-    })
-}
-
-/// `decide()`, worked out on the first call and kept in `state` (0: not yet, 1: yes, 2: no).
-#[cfg(target_arch = "x86_64")]
-fn decided_once(state: &AtomicU8, decide: impl FnOnce() -> bool) -> bool {
-    match state.load(Ordering::Relaxed) {
-        1 => true,
-        2 => false,
-        _ => {
-            let yes = decide();
-            state.store(if yes { 1 } else { 2 }, Ordering::Relaxed);
-            yes
-        }
-    }
+    volwarp_lanes::Avx512Token::new().is_some()
 }
 
 /// The lane kind the kernels take on this CPU (as `VOLWARP_LANES` names them): `avx512`
 /// where the bound pass takes its AVX-512 instance, `avx2`, or `portable`.
 pub fn lane_kind() -> &'static str {
-    #[cfg(target_arch = "x86_64")]
-    {
-        if use_avx512() {
-            return "avx512";
-        }
-        if use_avx2() {
-            return "avx2";
-        }
-    }
-    "portable"
+    volwarp_lanes::lane_kind().name()
 }
 
 /// Asks the CPU to bring the cache lines of `s` closer (a hint: no effect on any result; on
@@ -1114,8 +1035,8 @@ mod avx2 {
 
         #[test]
         fn avx2_lanes_equal_wide_bit_for_bit() {
-            if std::is_x86_feature_detected!("avx2") {
-                // SAFETY: the CPU supports AVX2 (checked just above).
+            if volwarp_lanes::Avx2Token::detected().is_some() {
+                // SAFETY: the token proves the CPU supports AVX2.
                 unsafe { check() }
             }
         }

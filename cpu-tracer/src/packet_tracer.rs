@@ -354,7 +354,7 @@ mod tests {
                     ids_by_band(&scene, &cam, |l, b, w, i, rows| trace_band::<f32x8>(l, b, w, i, rows, &|id| id));
                 assert!(portable == scalar, "portable kernel");
                 #[cfg(target_arch = "x86_64")]
-                if std::is_x86_feature_detected!("avx2") {
+                if volwarp_lanes::Avx2Token::detected().is_some() {
                     let avx2 = ids_by_band(&scene, &cam, |l, b, w, i, rows| {
                         // SAFETY: the CPU supports AVX2 (checked just above).
                         unsafe { trace_band_avx2(l, b, w, i, rows, &|id| id) }

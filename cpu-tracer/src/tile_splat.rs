@@ -1449,12 +1449,12 @@ mod tests {
                     match k {
                         0 => bound_run::<wide::f32x8>(&view, &vf, &deq, s, r, c, groups, grid, p),
                         #[cfg(target_arch = "x86_64")]
-                        1 if std::is_x86_feature_detected!("avx2") => {
+                        1 if volwarp_lanes::Avx2Token::detected().is_some() => {
                             // SAFETY: the CPU has AVX2 (checked).
                             unsafe { bound_avx2(&view, &vf, &deq, s, r, c, groups, grid, p) }
                         }
                         #[cfg(target_arch = "x86_64")]
-                        2 if std::is_x86_feature_detected!("avx512f") && std::is_x86_feature_detected!("avx512dq") => {
+                        2 if volwarp_lanes::Avx512Token::detected().is_some() => {
                             // SAFETY: the CPU has AVX2, AVX-512 F and DQ (checked).
                             unsafe { bound_avx512(&view, &vf, &deq, s, r, c, groups, grid, p) }
                         }

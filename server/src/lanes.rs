@@ -16,115 +16,33 @@
 use core::ops::{Add, BitAnd, BitOr, Div, Mul, Sub};
 use wide::{f32x8, i32x8};
 
-/// Which lanes the packet marcher may use: the widest this CPU has (the default), or no
-/// wider than a given kind (tests run every kind this CPU has against the scalar marcher;
-/// benchmarks compare them).
-#[derive(Clone, Copy, Debug, PartialEq, Eq, PartialOrd, Ord)]
-pub enum LaneKind {
-    /// `wide`'s lanes, compiled for the build's baseline (SSE2 on x86-64, NEON on aarch64):
-    /// sixteen rays of a 4×4 pixel block as two `f32x8` per value.
-    Portable = 0,
-    /// Thirty-two rays of an 8×4 block as four AVX2 registers per value.
-    Avx2 = 1,
-    /// Sixty-four rays of an 8×8 block as four AVX-512 registers per value (AVX-512 F and DQ).
-    Avx512 = 2,
-}
+pub use volwarp_lanes::{lane_kind, limit_lanes, LaneKind};
 
-static LANE_LIMIT: core::sync::atomic::AtomicU8 = core::sync::atomic::AtomicU8::new(LaneKind::Avx512 as u8);
-
-/// Limits the packet marcher to lanes no wider than `kind` (process-wide; every kind computes
-/// the same values).
-pub fn limit_lanes(kind: LaneKind) {
-    LANE_LIMIT.store(kind as u8, core::sync::atomic::Ordering::Relaxed);
-}
-
-impl core::str::FromStr for LaneKind {
-    type Err = String;
-    /// `portable`, `avx2` or `avx512`.
-    fn from_str(s: &str) -> Result<LaneKind, String> {
-        match s.to_ascii_lowercase().as_str() {
-            "portable" => Ok(LaneKind::Portable),
-            "avx2" => Ok(LaneKind::Avx2),
-            "avx512" => Ok(LaneKind::Avx512),
-            _ => Err(format!("unknown lane kind {s:?} (portable, avx2 or avx512)")),
-        }
-    }
-}
-
-/// Applies `VOLWARP_LANES` (`portable`, `avx2` or `avx512`), if set, with [`limit_lanes`]; an
-/// unknown value is logged and ignored. The server, its benches and `march_timing` call this.
+/// Warns (in the log) where `VOLWARP_LANES` is set to no known lane kind; a known one already
+/// clamps every kernel's lanes ([`volwarp_lanes::lane_kind`] reads it once). The server, its
+/// benches and `march_timing` call this.
 pub fn limit_lanes_from_env() {
     if let Ok(v) = std::env::var("VOLWARP_LANES") {
-        match v.parse() {
-            Ok(kind) => limit_lanes(kind),
-            Err(e) => log::warn!("VOLWARP_LANES: {e}"),
+        if let Err(e) = v.parse::<LaneKind>() {
+            log::warn!("VOLWARP_LANES: {v:?}: {e}");
         }
     }
 }
 
-/// The lanes the packet marcher uses now: the widest this CPU has within [`limit_lanes`].
-pub fn lane_kind() -> LaneKind {
-    let limit = LANE_LIMIT.load(core::sync::atomic::Ordering::Relaxed);
-    #[cfg(target_arch = "x86_64")]
-    {
-        if limit >= LaneKind::Avx512 as u8
-            && std::is_x86_feature_detected!("avx512f")
-            && std::is_x86_feature_detected!("avx512dq")
-        {
-            return LaneKind::Avx512;
-        }
-        if limit >= LaneKind::Avx2 as u8 && std::is_x86_feature_detected!("avx2") {
-            return LaneKind::Avx2;
-        }
-    }
-    let _ = limit;
-    LaneKind::Portable
-}
-
-/// Defines `$name`, which runs the kernel `$kernel::<L>` on the lanes [`lane_kind`] picks: the
-/// instance `$avx512`, compiled with AVX-512 F and DQ on `X2<X2<Avx512>>` (64 lanes); the
-/// instance `$avx2`, compiled with AVX2 on `X2<X2<Avx2>>` (32); or the portable
-/// `X2<wide::f32x8>` instance (16). Each instance's packet arrays are sized for its lanes (the
-/// kernel's const `M`). All compute the same values.
+/// Defines `$name`, which runs the kernel `$kernel::<L, M>` on the lanes
+/// [`volwarp_lanes::level`] picks (with [`volwarp_lanes::dispatch!`]): the instance `$avx512`,
+/// compiled with AVX-512 F and DQ on `X2<X2<Avx512>>` (64 lanes); the instance `$avx2`,
+/// compiled with AVX2 on `X2<X2<Avx2>>` (32); or the portable `X2<wide::f32x8>` instance (16).
+/// Each instance's packet arrays are sized for its lanes (the kernel's const `M`). All compute
+/// the same values.
 macro_rules! dispatch {
-    ($(#[$doc:meta])* fn $name:ident / $avx2:ident / $avx512:ident => $kernel:ident($($arg:ident: $ty:ty),* $(,)?)) => {
-        $(#[$doc])*
-        pub(crate) fn $name($($arg: $ty),*) {
-            match $crate::lanes::lane_kind() {
-                // SAFETY: `lane_kind` returns `Avx512` only where the CPU has AVX-512 F and DQ.
-                #[cfg(target_arch = "x86_64")]
-                $crate::lanes::LaneKind::Avx512 => unsafe { $avx512($($arg),*) },
-                // SAFETY: `lane_kind` returns `Avx2` only where the CPU has AVX2.
-                #[cfg(target_arch = "x86_64")]
-                $crate::lanes::LaneKind::Avx2 => unsafe { $avx2($($arg),*) },
-                _ => $kernel::<$crate::lanes::X2<wide::f32x8>, 16>($($arg),*),
-            }
-        }
-
-        /// The kernel on thirty-two [`crate::lanes::Avx2`] lanes (`X2<X2<Avx2>>`), compiled with
-        /// AVX2.
-        ///
-        /// # Safety
-        /// The CPU must support AVX2.
-        #[cfg(target_arch = "x86_64")]
-        #[target_feature(enable = "avx2")]
-        #[allow(clippy::too_many_arguments)]
-        unsafe fn $avx2($($arg: $ty),*) {
-            // `Avx2`'s invariant holds: the caller guarantees AVX2.
-            $kernel::<$crate::lanes::X2<$crate::lanes::X2<$crate::lanes::Avx2>>, 32>($($arg),*)
-        }
-
-        /// The kernel on sixty-four [`crate::lanes::Avx512`] lanes (`X2<X2<Avx512>>`), compiled
-        /// with AVX-512 F and DQ.
-        ///
-        /// # Safety
-        /// The CPU must support AVX-512 F and DQ.
-        #[cfg(target_arch = "x86_64")]
-        #[target_feature(enable = "avx512f,avx512dq")]
-        #[allow(clippy::too_many_arguments)]
-        unsafe fn $avx512($($arg: $ty),*) {
-            // `Avx512`'s invariant holds: the caller guarantees AVX-512 F and DQ.
-            $kernel::<$crate::lanes::X2<$crate::lanes::X2<$crate::lanes::Avx512>>, 64>($($arg),*)
+    ($(#[$doc:meta])* fn $name:ident / $avx2:ident / $avx512:ident => $($kernel:tt)*) => {
+        volwarp_lanes::dispatch! {
+            $(#[$doc])*
+            pub(crate) fn $name / $avx2 / $avx512 => $($kernel)*;
+            portable = [$crate::lanes::X2<wide::f32x8>, 16],
+            avx2 = [$crate::lanes::X2<$crate::lanes::X2<$crate::lanes::Avx2>>, 32],
+            avx512 = [$crate::lanes::X2<$crate::lanes::X2<$crate::lanes::Avx512>>, 64]
         }
     };
 }
@@ -1069,8 +987,8 @@ mod tests {
 
     #[test]
     fn avx2_lanes_equal_portable_lanes() {
-        if std::is_x86_feature_detected!("avx2") {
-            // SAFETY: the CPU supports AVX2 (checked just above).
+        if volwarp_lanes::Avx2Token::detected().is_some() {
+            // SAFETY: the token proves the CPU supports AVX2.
             unsafe { check() }
         }
     }
@@ -1086,8 +1004,8 @@ mod tests {
 
     #[test]
     fn avx512_lanes_equal_portable_lanes() {
-        if std::is_x86_feature_detected!("avx512f") && std::is_x86_feature_detected!("avx512dq") {
-            // SAFETY: the CPU supports AVX-512 F and DQ (checked just above).
+        if volwarp_lanes::Avx512Token::detected().is_some() {
+            // SAFETY: the token proves the CPU supports AVX-512 F and DQ.
             unsafe { check512() }
         } else {
             eprintln!("this CPU lacks AVX-512 F/DQ: the AVX-512 lanes are not tested here");

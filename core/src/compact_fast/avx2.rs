@@ -1,5 +1,5 @@
 //! The AVX2 kernels of the compact frame codec's fast paths (x86-64 with std, chosen at run
-//! time by `is_x86_feature_detected!`): the same results as the portable code of the parent
+//! time by `volwarp_lanes`: the CPU's level, clamped by `VOLWARP_LANES`): the same results as the portable code of the parent
 //! module, bit for bit (every float operation is the same IEEE operation in the same order;
 //! no fused multiply-add), written with intrinsics because the compiler's vectorization of
 //! the portable code packs and unpacks lanes in the dependent chains.

@@ -20,7 +20,7 @@ use volwarp_core::sample::{Dequantizer, POS_BITS, RADIUS_BITS};
 /// **Invariant**: values of this type and calls of its methods exist only on CPUs with AVX2,
 /// AVX-512 F and AVX-512 DQ. The type is private to the crate, whose only users of it are the
 /// `#[target_feature(enable = "avx2,avx512f,avx512dq")]` instances of `lanes::dispatch!`,
-/// called only after `lanes::use_avx512()`. This is what every `unsafe` block below relies on.
+/// called only where `volwarp_lanes::level()` gave an `Avx512Token`. This is what every `unsafe` block below relies on.
 #[derive(Clone, Copy)]
 pub(crate) struct Avx512(__m512);
 
@@ -436,7 +436,7 @@ mod tests {
 
     #[test]
     fn avx512_lanes_equal_avx2_bit_for_bit() {
-        if std::is_x86_feature_detected!("avx512f") && std::is_x86_feature_detected!("avx512dq") {
+        if volwarp_lanes::Avx512Token::detected().is_some() {
             // SAFETY: the CPU supports AVX2, AVX-512 F and DQ (every AVX-512 CPU has AVX2).
             unsafe { check() }
         } else {
