@@ -560,154 +560,133 @@ impl Lanes for f32x8 {
 }
 
 #[cfg(target_arch = "x86_64")]
-pub(crate) use avx2::Avx2;
+pub(crate) use volwarp_lanes::{Avx2, Avx512};
+
+/// The AVX2 token inside the AVX2 lanes' methods and kernels.
+///
+/// `volwarp_lanes`' invariant (a value of its lane types exists only where the CPU has their
+/// features) holds for every value made in this crate too: the `Arith`, `Lanes` and
+/// `BoundLanes` methods of [`Avx2`] and [`Avx512`] run only inside the instances of
+/// [`dispatch!`] compiled for their features, which run only where `volwarp_lanes::level()`
+/// gave the token (tests: a token's `detected()`).
 #[cfg(target_arch = "x86_64")]
-pub(crate) use avx512::Avx512;
+#[inline(always)]
+pub(crate) fn avx2() -> volwarp_lanes::Avx2Token {
+    // SAFETY: called only where the CPU has AVX2 (see above).
+    unsafe { volwarp_lanes::Avx2Token::new_unchecked() }
+}
+
+/// The AVX-512 token inside the AVX-512 lanes' methods (see [`avx2`]).
+#[cfg(target_arch = "x86_64")]
+#[inline(always)]
+pub(crate) fn avx512() -> volwarp_lanes::Avx512Token {
+    // SAFETY: called only where the CPU has AVX2, AVX-512 F and DQ (see [`avx2`]).
+    unsafe { volwarp_lanes::Avx512Token::new_unchecked() }
+}
+
+/// [`Arith`] on the base lane types: their methods of the same names and semantics.
+#[cfg(target_arch = "x86_64")]
+macro_rules! arith_on_base {
+    ($($t:ident => $token:ident),*) => {$(
+        impl Arith for $t {
+            #[inline(always)]
+            fn splat(x: f32) -> Self {
+                $t::splat($token(), x)
+            }
+            #[inline(always)]
+            fn sqrt(self) -> Self {
+                $t::sqrt(self)
+            }
+            #[inline(always)]
+            fn max(self, rhs: Self) -> Self {
+                $t::max(self, rhs)
+            }
+            #[inline(always)]
+            fn fast_min(self, rhs: Self) -> Self {
+                $t::fast_min(self, rhs)
+            }
+            #[inline(always)]
+            fn fast_max(self, rhs: Self) -> Self {
+                $t::fast_max(self, rhs)
+            }
+            #[inline(always)]
+            fn simd_lt(self, rhs: Self) -> Self {
+                $t::simd_lt(self, rhs)
+            }
+            #[inline(always)]
+            fn simd_le(self, rhs: Self) -> Self {
+                $t::simd_le(self, rhs)
+            }
+            #[inline(always)]
+            fn simd_gt(self, rhs: Self) -> Self {
+                $t::simd_gt(self, rhs)
+            }
+            #[inline(always)]
+            fn simd_ge(self, rhs: Self) -> Self {
+                $t::simd_ge(self, rhs)
+            }
+            #[inline(always)]
+            fn simd_eq(self, rhs: Self) -> Self {
+                $t::simd_eq(self, rhs)
+            }
+            #[inline(always)]
+            fn select(self, if_true: Self, if_false: Self) -> Self {
+                $t::select(self, if_true, if_false)
+            }
+            #[inline(always)]
+            fn to_bitmask(self) -> u32 {
+                $t::to_bitmask(self)
+            }
+            #[inline(always)]
+            fn any(self) -> bool {
+                $t::any(self)
+            }
+        }
+    )*};
+}
+#[cfg(target_arch = "x86_64")]
+arith_on_base!(Avx2 => avx2, Avx512 => avx512);
 
 #[cfg(target_arch = "x86_64")]
 mod avx512;
 
 #[cfg(target_arch = "x86_64")]
 mod avx2 {
-    use super::{Arith, Lanes, RectLanes};
+    use super::{avx2, Arith, Avx2, Lanes, RectLanes};
     use core::arch::x86_64::*;
-    use core::ops::{Add, BitAnd, BitOr, Div, Mul, Sub};
     use volwarp_core::sample::{Dequantizer, POS_BITS, RADIUS_BITS};
 
-    /// Eight `f32` lanes in one AVX register, for the kernel compiled with AVX2.
-    ///
-    /// **Invariant**: values of this type and calls of its methods exist only on CPUs with
-    /// AVX2. The type is private to the crate, whose only users of it are the
-    /// `#[target_feature(enable = "avx2")]` kernels of the packet tracer and the sphere
-    /// splatter, called only after `is_x86_feature_detected!("avx2")`. This is what every
-    /// `unsafe` block below relies on.
-    #[derive(Clone, Copy)]
-    pub(crate) struct Avx2(__m256);
-
-    /// A binary operator as one AVX instruction.
-    macro_rules! binop {
-        ($tr:ident, $f:ident, $intr:ident) => {
-            impl $tr for Avx2 {
-                type Output = Avx2;
-                #[inline(always)]
-                fn $f(self, rhs: Avx2) -> Avx2 {
-                    // SAFETY: AVX is available (the type's invariant).
-                    Avx2(unsafe { $intr(self.0, rhs.0) })
-                }
-            }
-        };
-    }
-    binop!(Add, add, _mm256_add_ps);
-    binop!(Sub, sub, _mm256_sub_ps);
-    binop!(Mul, mul, _mm256_mul_ps);
-    binop!(Div, div, _mm256_div_ps);
-    binop!(BitAnd, bitand, _mm256_and_ps);
-    binop!(BitOr, bitor, _mm256_or_ps);
-
-    impl Avx2 {
-        /// Ordered, non-signalling comparison `P` (a `_CMP_*_OQ`), as `wide`'s comparisons:
-        /// false where either lane is NaN.
-        #[inline(always)]
-        fn cmp<const P: i32>(self, rhs: Avx2) -> Avx2 {
-            // SAFETY: AVX is available (the type's invariant).
-            Avx2(unsafe { _mm256_cmp_ps::<P>(self.0, rhs.0) })
-        }
-    }
-
-    // SAFETY (every `unsafe` block of this impl): AVX and AVX2 are available (the type's
-    // invariant); the intrinsics have no other precondition, except `_mm256_loadu_ps` and
-    // `_mm256_storeu_si256`, whose pointers are to eight `f32` / `u32` as noted there.
-    impl Arith for Avx2 {
-        #[inline(always)]
-        fn splat(x: f32) -> Self {
-            Avx2(unsafe { _mm256_set1_ps(x) })
-        }
-        #[inline(always)]
-        fn sqrt(self) -> Self {
-            // `vsqrtps`: correctly rounded, as `sqrtps`.
-            Avx2(unsafe { _mm256_sqrt_ps(self.0) })
-        }
-        #[inline(always)]
-        fn max(self, rhs: Self) -> Self {
-            // `wide`: `rhs.is_nan().select(self, self.fast_max(rhs))`.
-            rhs.cmp::<_CMP_UNORD_Q>(rhs).select(self, self.fast_max(rhs))
-        }
-        #[inline(always)]
-        fn fast_min(self, rhs: Self) -> Self {
-            // `vminps` with `minps`'s operand order: `self < rhs ? self : rhs`.
-            Avx2(unsafe { _mm256_min_ps(self.0, rhs.0) })
-        }
-        #[inline(always)]
-        fn fast_max(self, rhs: Self) -> Self {
-            // `vmaxps` with `maxps`'s operand order: `self > rhs ? self : rhs`.
-            Avx2(unsafe { _mm256_max_ps(self.0, rhs.0) })
-        }
-        #[inline(always)]
-        fn simd_lt(self, rhs: Self) -> Self {
-            self.cmp::<_CMP_LT_OQ>(rhs)
-        }
-        #[inline(always)]
-        fn simd_le(self, rhs: Self) -> Self {
-            self.cmp::<_CMP_LE_OQ>(rhs)
-        }
-        #[inline(always)]
-        fn simd_gt(self, rhs: Self) -> Self {
-            self.cmp::<_CMP_GT_OQ>(rhs)
-        }
-        #[inline(always)]
-        fn simd_ge(self, rhs: Self) -> Self {
-            self.cmp::<_CMP_GE_OQ>(rhs)
-        }
-        #[inline(always)]
-        fn simd_eq(self, rhs: Self) -> Self {
-            self.cmp::<_CMP_EQ_OQ>(rhs)
-        }
-        #[inline(always)]
-        fn select(self, if_true: Self, if_false: Self) -> Self {
-            // `vblendvps` reads the sign bit, i.e. the whole lane of a mask.
-            Avx2(unsafe { _mm256_blendv_ps(if_false.0, if_true.0, self.0) })
-        }
-        #[inline(always)]
-        fn to_bitmask(self) -> u32 {
-            (unsafe { _mm256_movemask_ps(self.0) }) as u32
-        }
-        #[inline(always)]
-        fn any(self) -> bool {
-            // `vtestps`: ZF is set when no sign bit is.
-            unsafe { _mm256_testz_ps(self.0, self.0) == 0 }
-        }
-    }
-
-    // SAFETY (every `unsafe` block of this impl): as for `Arith` above.
+    // SAFETY (every `unsafe` block of this impl): AVX2 is available (`volwarp_lanes`'
+    // invariant: a value proves it, and the methods without one run only in the AVX2
+    // instances); the loads and stores are of the sizes noted there.
     impl Lanes for Avx2 {
         type U = __m256i;
         const AVX2: bool = true;
 
         #[inline(always)]
         fn new(a: [f32; 8]) -> Self {
-            // `a` is eight readable `f32`; the load needs no alignment.
-            Avx2(unsafe { _mm256_loadu_ps(a.as_ptr()) })
+            Avx2::load(avx2(), &a)
         }
         #[inline(always)]
         fn floor(self) -> Self {
             // `vroundps` toward −∞, as `wide`'s AVX path and `f32::floor`.
-            Avx2(unsafe { _mm256_floor_ps(self.0) })
+            unsafe { Avx2::from_raw(_mm256_floor_ps(self.raw())) }
         }
         #[inline(always)]
         fn ceil(self) -> Self {
             // `vroundps` toward +∞, as `wide`'s AVX path and `f32::ceil`.
-            Avx2(unsafe { _mm256_ceil_ps(self.0) })
+            unsafe { Avx2::from_raw(_mm256_ceil_ps(self.raw())) }
         }
         #[inline(always)]
         fn min(self, rhs: Self) -> Self {
             // `wide`: `rhs.is_nan().select(self, self.fast_min(rhs))`.
-            rhs.cmp::<_CMP_UNORD_Q>(rhs).select(self, self.fast_min(rhs))
+            Avx2::min(self, rhs)
         }
         #[inline(always)]
         fn is_finite(self) -> Self {
             // |x| < ∞: false for ±∞ and NaN, as `wide`'s exponent test.
-            let abs = Avx2(unsafe { _mm256_andnot_ps(_mm256_set1_ps(-0.0), self.0) });
-            abs.simd_lt(Avx2::splat(f32::INFINITY))
+            let abs = self.and_not(Avx2::splat(avx2(), -0.0));
+            abs.simd_lt(Avx2::splat(avx2(), f32::INFINITY))
         }
         #[inline(always)]
         fn all(self) -> bool {
@@ -722,14 +701,14 @@ mod avx2 {
             // Unsigned `a < b` is signed `b > a` with the top bits flipped (`wide` does the same).
             unsafe {
                 let h = _mm256_set1_epi32(i32::MIN);
-                Avx2(_mm256_castsi256_ps(_mm256_cmpgt_epi32(_mm256_xor_si256(b, h), _mm256_xor_si256(a, h))))
+                Avx2::from_raw(_mm256_castsi256_ps(_mm256_cmpgt_epi32(_mm256_xor_si256(b, h), _mm256_xor_si256(a, h))))
             }
         }
         #[inline(always)]
         fn select_u(self, if_true: __m256i, if_false: __m256i) -> __m256i {
             unsafe {
                 let (t, f) = (_mm256_castsi256_ps(if_true), _mm256_castsi256_ps(if_false));
-                _mm256_castps_si256(_mm256_blendv_ps(f, t, self.0))
+                _mm256_castps_si256(_mm256_blendv_ps(f, t, self.raw()))
             }
         }
         #[inline(always)]
@@ -746,15 +725,12 @@ mod avx2 {
         }
         #[inline(always)]
         fn to_array(self) -> [f32; 8] {
-            let mut a = [0f32; 8];
-            // `a` is 32 writable bytes; the store needs no alignment.
-            unsafe { _mm256_storeu_ps(a.as_mut_ptr(), self.0) };
-            a
+            Avx2::to_array(self)
         }
         #[inline(always)]
         fn permute(self, idx: __m256i) -> Self {
             // `vpermps` reads the low three bits of each index.
-            Avx2(unsafe { _mm256_permutevar8x32_ps(self.0, idx) })
+            unsafe { Avx2::from_raw(_mm256_permutevar8x32_ps(self.raw(), idx)) }
         }
         #[inline(always)]
         fn permute_u(a: __m256i, idx: __m256i) -> __m256i {
@@ -768,7 +744,7 @@ mod avx2 {
                 return super::store_records_scalar(c, out);
             };
             unsafe {
-                let [a, b, x, r] = [c[0].0, c[1].0, c[2].0, c[3].0];
+                let [a, b, x, r] = [c[0].raw(), c[1].raw(), c[2].raw(), c[3].raw()];
                 let (t0, t1) = (_mm256_unpacklo_ps(a, b), _mm256_unpackhi_ps(a, b));
                 let (t2, t3) = (_mm256_unpacklo_ps(x, r), _mm256_unpackhi_ps(x, r));
                 let pd = _mm256_castps_pd;
@@ -836,17 +812,17 @@ mod avx2 {
         #[inline(always)]
         fn from_ints(a: &[i32; 8]) -> Self {
             // `a` is 32 readable bytes; `vcvtdq2ps` rounds to nearest as `as f32` does.
-            unsafe { Avx2(_mm256_cvtepi32_ps(_mm256_loadu_si256(a.as_ptr().cast()))) }
+            unsafe { Avx2::from_raw(_mm256_cvtepi32_ps(_mm256_loadu_si256(a.as_ptr().cast()))) }
         }
         #[inline(always)]
         fn span_ints(lo: Self, hi: Self, max: u32) -> ([i32; 8], [i32; 8]) {
             // `vcvttps2dq` truncates as `as i32` does in range; the comparison and the
             // integer max/min are the scalar ones per lane.
             unsafe {
-                let t = _mm256_cvttps_epi32(lo.0);
-                let below = _mm256_castps_si256(_mm256_cmp_ps::<_CMP_LT_OQ>(_mm256_cvtepi32_ps(t), lo.0));
+                let t = _mm256_cvttps_epi32(lo.raw());
+                let below = _mm256_castps_si256(_mm256_cmp_ps::<_CMP_LT_OQ>(_mm256_cvtepi32_ps(t), lo.raw()));
                 let c = _mm256_max_epi32(_mm256_sub_epi32(t, below), _mm256_setzero_si256());
-                let h = _mm256_min_epi32(_mm256_cvttps_epi32(hi.0), _mm256_set1_epi32(max as i32));
+                let h = _mm256_min_epi32(_mm256_cvttps_epi32(hi.raw()), _mm256_set1_epi32(max as i32));
                 let (mut a, mut b) = ([0i32; 8], [0i32; 8]);
                 // `a`, `b` are 32 writable bytes each; the stores need no alignment.
                 _mm256_storeu_si256(a.as_mut_ptr().cast(), c);
@@ -879,16 +855,19 @@ mod avx2 {
                 let r = _mm256_srli_epi32::<22>(hi);
                 // No closures: one would be compiled without AVX2, every intrinsic a call.
                 let (fx, fy, fz, fr) = (
-                    Avx2(_mm256_cvtepi32_ps(x)),
-                    Avx2(_mm256_cvtepi32_ps(y)),
-                    Avx2(_mm256_cvtepi32_ps(z)),
-                    Avx2(_mm256_cvtepi32_ps(r)),
+                    Avx2::from_raw(_mm256_cvtepi32_ps(x)),
+                    Avx2::from_raw(_mm256_cvtepi32_ps(y)),
+                    Avx2::from_raw(_mm256_cvtepi32_ps(z)),
+                    Avx2::from_raw(_mm256_cvtepi32_ps(r)),
                 );
                 [
-                    (Avx2::splat(deq.min.x) + fx * Avx2::splat(deq.step.x)) - Avx2::splat(eye[0]),
-                    (Avx2::splat(deq.min.y) + fy * Avx2::splat(deq.step.y)) - Avx2::splat(eye[1]),
-                    (Avx2::splat(deq.min.z) + fz * Avx2::splat(deq.step.z)) - Avx2::splat(eye[2]),
-                    fr * Avx2::splat(deq.radius_unit),
+                    (<Avx2 as Arith>::splat(deq.min.x) + fx * <Avx2 as Arith>::splat(deq.step.x))
+                        - <Avx2 as Arith>::splat(eye[0]),
+                    (<Avx2 as Arith>::splat(deq.min.y) + fy * <Avx2 as Arith>::splat(deq.step.y))
+                        - <Avx2 as Arith>::splat(eye[1]),
+                    (<Avx2 as Arith>::splat(deq.min.z) + fz * <Avx2 as Arith>::splat(deq.step.z))
+                        - <Avx2 as Arith>::splat(eye[2]),
+                    fr * <Avx2 as Arith>::splat(deq.radius_unit),
                 ]
             }
         }
@@ -903,7 +882,7 @@ mod avx2 {
 
         fn bits(x: Avx2) -> [u32; 8] {
             // SAFETY: `__m256` is 32 bytes of plain data, as is `[u32; 8]`.
-            unsafe { core::mem::transmute::<__m256, [u32; 8]>(x.0) }
+            unsafe { core::mem::transmute::<__m256, [u32; 8]>(x.raw()) }
         }
 
         fn wbits(x: f32x8) -> [u32; 8] {
@@ -932,7 +911,7 @@ mod avx2 {
                     assert!(ok, "{what}: {a:?} {b:?}: {r:?} {s:?}");
                 };
                 eq("new", x, p);
-                eq("splat", Avx2::splat(a[3]), <f32x8 as Arith>::splat(a[3]));
+                eq("splat", <Avx2 as Arith>::splat(a[3]), <f32x8 as Arith>::splat(a[3]));
                 same("add", x + y, p + q);
                 same("sub", x - y, p - q);
                 same("mul", x * y, p * q);

@@ -15,6 +15,10 @@
 //!   be obtained where the CPU has the features (as `pulp`'s and `safe_arch`'s tokens): a
 //!   function holding one may call the code compiled for them. [`level`] hands out the token
 //!   of the level [`lane_kind`] picks.
+//! - **Base lane types.** [`Avx2`] and [`Avx512`] (x86-64, module [`x86`]): the registers
+//!   and the operations every kernel shares, with one set of operator impls; a value exists
+//!   only where the CPU has the features (the safe constructors take a token). The server's
+//!   marcher lanes and the CPU tracer's lanes implement their traits on them.
 //! - **One dispatch macro.** [`dispatch!`] defines a function that runs a kernel generic over
 //!   its lanes on the level [`level`] picks: the kernel's instances compiled with
 //!   `#[target_feature]`, or the portable one.
@@ -30,6 +34,11 @@
 extern crate std;
 
 use core::sync::atomic::{AtomicU8, Ordering};
+
+#[cfg(target_arch = "x86_64")]
+pub mod x86;
+#[cfg(target_arch = "x86_64")]
+pub use x86::{Avx2, Avx2I, Avx512, Avx512I};
 
 /// A level of SIMD lanes, narrowest first (the order [`limit_lanes`] clamps by).
 #[derive(Clone, Copy, Debug, PartialEq, Eq, PartialOrd, Ord, Hash)]
