@@ -12,7 +12,6 @@
 //!
 //! Masks are lanes with all bits set (true) or clear (false), as `wide`'s comparisons give.
 
-use core::ops::{Add, BitAnd, BitOr, Div, Mul, Sub};
 use volwarp_core::sample::Dequantizer;
 use volwarp_core::{RayBasis, Vec3};
 use wide::{f32x8, u32x8};
@@ -155,6 +154,39 @@ pub(crate) fn decode_scalar<L: Lanes>(deq: &Dequantizer, eye: [f32; 3], s: &[u64
     a.map(|v| L::new(first8(&v)))
 }
 
+/// The fields of packed samples as float lanes `[x, y, z, radius code]`, from the samples' low
+/// and high 32-bit words `lo`, `hi` in integer lanes, with one width's intrinsics (no
+/// closures: one would be compiled without the kernel's target features, every intrinsic a
+/// call). The layout is `volwarp_core::sample`'s: x in bits 0–17, y in 18–35, z in 36–53, the
+/// radius code in 54–63. Used inside `unsafe` blocks of the lanes' methods.
+#[cfg(target_arch = "x86_64")]
+macro_rules! sample_fields {
+    ($t:ident, $lo:expr, $hi:expr; $and:ident $or:ident $srli:ident $slli:ident $set1:ident $cvt:ident) => {{
+        let (lo, hi) = ($lo, $hi);
+        let m = $set1(0x3ffff);
+        let x = $and(lo, m);
+        let y = $or($srli::<18>(lo), $slli::<14>($and(hi, $set1(0xf))));
+        let z = $and($srli::<4>(hi), m);
+        let r = $srli::<22>(hi);
+        [$t::from_raw($cvt(x)), $t::from_raw($cvt(y)), $t::from_raw($cvt(z)), $t::from_raw($cvt(r))]
+    }};
+}
+
+/// The centres less `eye` and the radii from the fields of packed samples as lanes
+/// (`[x, y, z, radius code]`): `Dequantizer::center`'s and `radius`'s f32 operations in the
+/// same order (`min + q·step`, `code·unit`), then one subtraction per axis.
+#[cfg(target_arch = "x86_64")]
+#[inline(always)]
+fn dequantize<L: Arith>(deq: &Dequantizer, eye: [f32; 3], q: [L; 4]) -> [L; 4] {
+    let [fx, fy, fz, fr] = q;
+    [
+        (L::splat(deq.min.x) + fx * L::splat(deq.step.x)) - L::splat(eye[0]),
+        (L::splat(deq.min.y) + fy * L::splat(deq.step.y)) - L::splat(eye[1]),
+        (L::splat(deq.min.z) + fz * L::splat(deq.step.z)) - L::splat(eye[2]),
+        fr * L::splat(deq.radius_unit),
+    ]
+}
+
 /// [`decode_scalar`]'s values of up to sixteen samples into `out` (x, y, z, radius; entries
 /// past `s` unchanged).
 #[inline(always)]
@@ -169,15 +201,7 @@ pub(crate) fn decode_scalar_into(deq: &Dequantizer, eye: [f32; 3], s: &[u64], ou
 /// sixteen for the AVX-512 bound pass): arithmetic, square root, comparisons (masks are lanes
 /// with all bits set or clear), selects. Every implementation has exactly the semantics noted
 /// per method, so a kernel generic over it computes the same values on every implementation.
-pub(crate) trait Arith:
-    Copy
-    + Add<Output = Self>
-    + Sub<Output = Self>
-    + Mul<Output = Self>
-    + Div<Output = Self>
-    + BitAnd<Output = Self>
-    + BitOr<Output = Self>
-{
+pub(crate) trait Arith: volwarp_lanes::Ops {
     /// All lanes `x`.
     fn splat(x: f32) -> Self;
     /// IEEE square root per lane.
@@ -227,20 +251,12 @@ pub(crate) trait BoundLanes: Arith {
         store_records_scalar(c, out)
     }
     /// The rectangles of the lanes of `ok` (bit `l`: lane `l`) with the inclusive pixel spans
-    /// `x0..=x1`, `y0..=y1` (non-empty ones only), and what binning needs of them
+    /// `x0..=x1`, `y0..=y1` (`spans`: `[x0, x1, y0, y1]`; non-empty ones only), and what binning needs of them
     /// ([`RectLanes`]); tiles are `1 << tile_log2` pixels wide, and a rectangle over more
     /// than `max_tiles` of them is large.
     #[inline(always)]
-    fn rects(
-        ok: u32,
-        x0: &[i32; 16],
-        x1: &[i32; 16],
-        y0: &[i32; 16],
-        y1: &[i32; 16],
-        tile_log2: u32,
-        max_tiles: i32,
-    ) -> RectLanes {
-        rects_scalar::<Self>(ok, [x0, x1, y0, y1], tile_log2, max_tiles)
+    fn rects(ok: u32, spans: [&[i32; 16]; 4], tile_log2: u32, max_tiles: i32) -> RectLanes {
+        rects_scalar::<Self>(ok, spans, tile_log2, max_tiles)
     }
 }
 
@@ -308,6 +324,39 @@ pub(crate) struct RectLanes {
     pub(crate) union: u64,
 }
 
+/// The operands of the lanes' tests: every pair of NaNs, signed zeros, infinities, subnormals
+/// and ordinary values, `N` pairs at a time (as two arrays of lanes).
+#[cfg(all(test, target_arch = "x86_64"))]
+pub(crate) fn test_operands<const N: usize>() -> Vec<([f32; N], [f32; N])> {
+    let vals = [0.0, -0.0, 1.0, -1.0, 0.5, 3.0, 1e-40, f32::MAX, f32::INFINITY, -f32::INFINITY, f32::NAN, -f32::NAN];
+    let pairs: Vec<(f32, f32)> = vals.iter().flat_map(|&a| vals.iter().map(move |&b| (a, b))).collect();
+    pairs.chunks_exact(N).map(|c| (core::array::from_fn(|l| c[l].0), core::array::from_fn(|l| c[l].1))).collect()
+}
+
+/// The dequantizer of the lanes' decode tests.
+#[cfg(all(test, target_arch = "x86_64"))]
+pub(crate) fn test_dequantizer() -> Dequantizer {
+    use volwarp_core::sample::Bounds;
+    Dequantizer::new(Bounds::new(Vec3::new(-1.5, 0.25, 3.0), Vec3::new(2.0, 7.0, 3.5)), 0.0123)
+}
+
+/// `N` packed samples for the lanes' decode tests, from the xorshift state `x`: every bit
+/// pattern class (random, all ones, zero, no radius bits) by turns.
+#[cfg(all(test, target_arch = "x86_64"))]
+pub(crate) fn test_samples<const N: usize>(round: usize, x: &mut u64) -> [u64; N] {
+    core::array::from_fn(|l| {
+        *x ^= *x << 13;
+        *x ^= *x >> 7;
+        *x ^= *x << 17;
+        match (round + l) % 4 {
+            0 => *x,
+            1 => u64::MAX,
+            2 => 0,
+            _ => *x & 0x0000_000f_ffff_ffff,
+        }
+    })
+}
+
 /// The first eight entries of `a`.
 #[inline(always)]
 fn first8<T: Copy>(a: &[T; 16]) -> [T; 8] {
@@ -348,16 +397,8 @@ impl<L: Lanes> BoundLanes for L {
         L::store_records8(c, out)
     }
     #[inline(always)]
-    fn rects(
-        ok: u32,
-        x0: &[i32; 16],
-        x1: &[i32; 16],
-        y0: &[i32; 16],
-        y1: &[i32; 16],
-        tile_log2: u32,
-        max_tiles: i32,
-    ) -> RectLanes {
-        L::rects8(ok, [x0, x1, y0, y1], tile_log2, max_tiles)
+    fn rects(ok: u32, spans: [&[i32; 16]; 4], tile_log2: u32, max_tiles: i32) -> RectLanes {
+        L::rects8(ok, spans, tile_log2, max_tiles)
     }
 }
 
@@ -441,61 +482,54 @@ pub(crate) trait Lanes: Arith {
     }
 }
 
-/// The portable lanes: `wide`'s, whatever it was compiled for.
-impl Arith for f32x8 {
-    #[inline(always)]
-    fn splat(x: f32) -> Self {
-        f32x8::splat(x)
-    }
-    #[inline(always)]
-    fn sqrt(self) -> Self {
-        f32x8::sqrt(self)
-    }
-    #[inline(always)]
-    fn max(self, rhs: Self) -> Self {
-        f32x8::max(self, rhs)
-    }
-    #[inline(always)]
-    fn fast_min(self, rhs: Self) -> Self {
-        f32x8::fast_min(self, rhs)
-    }
-    #[inline(always)]
-    fn fast_max(self, rhs: Self) -> Self {
-        f32x8::fast_max(self, rhs)
-    }
-    #[inline(always)]
-    fn simd_lt(self, rhs: Self) -> Self {
-        f32x8::simd_lt(self, rhs)
-    }
-    #[inline(always)]
-    fn simd_le(self, rhs: Self) -> Self {
-        f32x8::simd_le(self, rhs)
-    }
-    #[inline(always)]
-    fn simd_gt(self, rhs: Self) -> Self {
-        f32x8::simd_gt(self, rhs)
-    }
-    #[inline(always)]
-    fn simd_ge(self, rhs: Self) -> Self {
-        f32x8::simd_ge(self, rhs)
-    }
-    #[inline(always)]
-    fn simd_eq(self, rhs: Self) -> Self {
-        f32x8::simd_eq(self, rhs)
-    }
-    #[inline(always)]
-    fn select(self, if_true: Self, if_false: Self) -> Self {
-        f32x8::select(self, if_true, if_false)
-    }
-    #[inline(always)]
-    fn to_bitmask(self) -> u32 {
-        f32x8::to_bitmask(self)
-    }
-    #[inline(always)]
-    fn any(self) -> bool {
-        f32x8::any(self)
-    }
+/// [`Arith`] on lane types whose own methods of the same names have its semantics: `wide`'s
+/// `f32x8` (the portable lanes, whatever `wide` was compiled for) and the base types of
+/// `volwarp_lanes` (whose `splat` takes their token, `$token()`).
+macro_rules! arith_by_methods {
+    ($($t:ident $(($token:ident))?),*) => {$(
+        impl Arith for $t {
+            #[inline(always)]
+            fn splat(x: f32) -> Self {
+                $t::splat($($token(),)? x)
+            }
+            by_methods!($t: unary sqrt; binary max fast_min fast_max simd_lt simd_le simd_gt simd_ge simd_eq);
+            #[inline(always)]
+            fn select(self, if_true: Self, if_false: Self) -> Self {
+                $t::select(self, if_true, if_false)
+            }
+            #[inline(always)]
+            fn to_bitmask(self) -> u32 {
+                $t::to_bitmask(self)
+            }
+            #[inline(always)]
+            fn any(self) -> bool {
+                $t::any(self)
+            }
+        }
+    )*};
 }
+
+/// Trait methods that are the type's own methods of the same names: `unary` ones taking
+/// `self`, `binary` ones `self` and `rhs`.
+macro_rules! by_methods {
+    ($t:ident: unary $($u:ident)*; binary $($b:ident)*) => {
+        $(
+            #[inline(always)]
+            fn $u(self) -> Self {
+                $t::$u(self)
+            }
+        )*
+        $(
+            #[inline(always)]
+            fn $b(self, rhs: Self) -> Self {
+                $t::$b(self, rhs)
+            }
+        )*
+    };
+}
+arith_by_methods!(f32x8);
+#[cfg(target_arch = "x86_64")]
+arith_by_methods!(Avx2(avx2), Avx512(avx512));
 
 impl Lanes for f32x8 {
     type U = u32x8;
@@ -503,22 +537,7 @@ impl Lanes for f32x8 {
     fn new(a: [f32; 8]) -> Self {
         f32x8::new(a)
     }
-    #[inline(always)]
-    fn floor(self) -> Self {
-        f32x8::floor(self)
-    }
-    #[inline(always)]
-    fn ceil(self) -> Self {
-        f32x8::ceil(self)
-    }
-    #[inline(always)]
-    fn min(self, rhs: Self) -> Self {
-        f32x8::min(self, rhs)
-    }
-    #[inline(always)]
-    fn is_finite(self) -> Self {
-        f32x8::is_finite(self)
-    }
+    by_methods!(f32x8: unary floor ceil is_finite; binary min);
     #[inline(always)]
     fn all(self) -> bool {
         f32x8::all(self)
@@ -584,77 +603,15 @@ pub(crate) fn avx512() -> volwarp_lanes::Avx512Token {
     unsafe { volwarp_lanes::Avx512Token::new_unchecked() }
 }
 
-/// [`Arith`] on the base lane types: their methods of the same names and semantics.
-#[cfg(target_arch = "x86_64")]
-macro_rules! arith_on_base {
-    ($($t:ident => $token:ident),*) => {$(
-        impl Arith for $t {
-            #[inline(always)]
-            fn splat(x: f32) -> Self {
-                $t::splat($token(), x)
-            }
-            #[inline(always)]
-            fn sqrt(self) -> Self {
-                $t::sqrt(self)
-            }
-            #[inline(always)]
-            fn max(self, rhs: Self) -> Self {
-                $t::max(self, rhs)
-            }
-            #[inline(always)]
-            fn fast_min(self, rhs: Self) -> Self {
-                $t::fast_min(self, rhs)
-            }
-            #[inline(always)]
-            fn fast_max(self, rhs: Self) -> Self {
-                $t::fast_max(self, rhs)
-            }
-            #[inline(always)]
-            fn simd_lt(self, rhs: Self) -> Self {
-                $t::simd_lt(self, rhs)
-            }
-            #[inline(always)]
-            fn simd_le(self, rhs: Self) -> Self {
-                $t::simd_le(self, rhs)
-            }
-            #[inline(always)]
-            fn simd_gt(self, rhs: Self) -> Self {
-                $t::simd_gt(self, rhs)
-            }
-            #[inline(always)]
-            fn simd_ge(self, rhs: Self) -> Self {
-                $t::simd_ge(self, rhs)
-            }
-            #[inline(always)]
-            fn simd_eq(self, rhs: Self) -> Self {
-                $t::simd_eq(self, rhs)
-            }
-            #[inline(always)]
-            fn select(self, if_true: Self, if_false: Self) -> Self {
-                $t::select(self, if_true, if_false)
-            }
-            #[inline(always)]
-            fn to_bitmask(self) -> u32 {
-                $t::to_bitmask(self)
-            }
-            #[inline(always)]
-            fn any(self) -> bool {
-                $t::any(self)
-            }
-        }
-    )*};
-}
-#[cfg(target_arch = "x86_64")]
-arith_on_base!(Avx2 => avx2, Avx512 => avx512);
-
 #[cfg(target_arch = "x86_64")]
 mod avx512;
 
 #[cfg(target_arch = "x86_64")]
 mod avx2 {
-    use super::{avx2, Arith, Avx2, Lanes, RectLanes};
+    use super::{avx2, Avx2, Lanes, RectLanes};
     use core::arch::x86_64::*;
     use volwarp_core::sample::{Dequantizer, POS_BITS, RADIUS_BITS};
+    use volwarp_lanes::Avx2I;
 
     // SAFETY (every `unsafe` block of this impl): AVX2 is available (`volwarp_lanes`'
     // invariant: a value proves it, and the methods without one run only in the AVX2
@@ -744,15 +701,9 @@ mod avx2 {
                 return super::store_records_scalar(c, out);
             };
             unsafe {
-                let [a, b, x, r] = [c[0].raw(), c[1].raw(), c[2].raw(), c[3].raw()];
-                let (t0, t1) = (_mm256_unpacklo_ps(a, b), _mm256_unpackhi_ps(a, b));
-                let (t2, t3) = (_mm256_unpacklo_ps(x, r), _mm256_unpackhi_ps(x, r));
-                let pd = _mm256_castps_pd;
                 // Records l and l + 4 in the halves of u_l.
-                let u0 = _mm256_castpd_ps(_mm256_unpacklo_pd(pd(t0), pd(t2)));
-                let u1 = _mm256_castpd_ps(_mm256_unpackhi_pd(pd(t0), pd(t2)));
-                let u2 = _mm256_castpd_ps(_mm256_unpacklo_pd(pd(t1), pd(t3)));
-                let u3 = _mm256_castpd_ps(_mm256_unpackhi_pd(pd(t1), pd(t3)));
+                let [u0, u1, u2, u3] = Avx2::transpose_blocks(c);
+                let (u0, u1, u2, u3) = (u0.raw(), u1.raw(), u2.raw(), u3.raw());
                 // `out` is eight records of 16 bytes: four 32-byte stores.
                 let p = out.as_mut_ptr().cast::<f32>();
                 _mm256_storeu_ps(p, _mm256_permute2f128_ps::<0x20>(u0, u1));
@@ -823,11 +774,7 @@ mod avx2 {
                 let below = _mm256_castps_si256(_mm256_cmp_ps::<_CMP_LT_OQ>(_mm256_cvtepi32_ps(t), lo.raw()));
                 let c = _mm256_max_epi32(_mm256_sub_epi32(t, below), _mm256_setzero_si256());
                 let h = _mm256_min_epi32(_mm256_cvttps_epi32(hi.raw()), _mm256_set1_epi32(max as i32));
-                let (mut a, mut b) = ([0i32; 8], [0i32; 8]);
-                // `a`, `b` are 32 writable bytes each; the stores need no alignment.
-                _mm256_storeu_si256(a.as_mut_ptr().cast(), c);
-                _mm256_storeu_si256(b.as_mut_ptr().cast(), h);
-                (a, b)
+                (Avx2I::from_raw(c).to_array(), Avx2I::from_raw(h).to_array())
             }
         }
         /// The sample layout (`volwarp_core::sample`): x in bits 0–17, y in 18–35, z in
@@ -845,38 +792,17 @@ mod avx2 {
                 let (pa, pb) = (_mm256_permutevar8x32_epi32(a, idx), _mm256_permutevar8x32_epi32(b, idx));
                 let lo = _mm256_permute2x128_si256::<0x20>(pa, pb);
                 let hi = _mm256_permute2x128_si256::<0x31>(pa, pb);
-                let m = _mm256_set1_epi32(0x3ffff);
-                let x = _mm256_and_si256(lo, m);
-                let y = _mm256_or_si256(
-                    _mm256_srli_epi32::<18>(lo),
-                    _mm256_slli_epi32::<14>(_mm256_and_si256(hi, _mm256_set1_epi32(0xf))),
-                );
-                let z = _mm256_and_si256(_mm256_srli_epi32::<4>(hi), m);
-                let r = _mm256_srli_epi32::<22>(hi);
-                // No closures: one would be compiled without AVX2, every intrinsic a call.
-                let (fx, fy, fz, fr) = (
-                    Avx2::from_raw(_mm256_cvtepi32_ps(x)),
-                    Avx2::from_raw(_mm256_cvtepi32_ps(y)),
-                    Avx2::from_raw(_mm256_cvtepi32_ps(z)),
-                    Avx2::from_raw(_mm256_cvtepi32_ps(r)),
-                );
-                [
-                    (<Avx2 as Arith>::splat(deq.min.x) + fx * <Avx2 as Arith>::splat(deq.step.x))
-                        - <Avx2 as Arith>::splat(eye[0]),
-                    (<Avx2 as Arith>::splat(deq.min.y) + fy * <Avx2 as Arith>::splat(deq.step.y))
-                        - <Avx2 as Arith>::splat(eye[1]),
-                    (<Avx2 as Arith>::splat(deq.min.z) + fz * <Avx2 as Arith>::splat(deq.step.z))
-                        - <Avx2 as Arith>::splat(eye[2]),
-                    fr * <Avx2 as Arith>::splat(deq.radius_unit),
-                ]
+                let fields = sample_fields!(Avx2, lo, hi; _mm256_and_si256 _mm256_or_si256 _mm256_srli_epi32
+                    _mm256_slli_epi32 _mm256_set1_epi32 _mm256_cvtepi32_ps);
+                super::dequantize(deq, eye, fields)
             }
         }
     }
 
     #[cfg(test)]
     mod tests {
-        use super::{Arith, Avx2, Dequantizer, Lanes};
         use crate::lanes::decode_scalar;
+        use crate::lanes::{Arith, Avx2, Lanes};
         use core::arch::x86_64::{__m256, __m256i};
         use wide::{f32x8, u32x8};
 
@@ -894,12 +820,7 @@ mod avx2 {
         /// function).
         #[target_feature(enable = "avx2")]
         fn check() {
-            let vals =
-                [0.0, -0.0, 1.0, -1.0, 0.5, 3.0, 1e-40, f32::MAX, f32::INFINITY, -f32::INFINITY, f32::NAN, -f32::NAN];
-            let pairs: Vec<(f32, f32)> = vals.iter().flat_map(|&a| vals.iter().map(move |&b| (a, b))).collect();
-            for c in pairs.chunks_exact(8) {
-                let a: [f32; 8] = core::array::from_fn(|l| c[l].0);
-                let b: [f32; 8] = core::array::from_fn(|l| c[l].1);
+            for (a, b) in crate::lanes::test_operands::<8>() {
                 let (x, y) = (<Avx2 as Lanes>::new(a), <Avx2 as Lanes>::new(b));
                 let (p, q) = (f32x8::new(a), f32x8::new(b));
                 let eq = |what: &str, r: Avx2, s: f32x8| assert_eq!(bits(r), wbits(s), "{what}: {a:?} {b:?}");
@@ -956,26 +877,10 @@ mod avx2 {
                 assert_eq!(Avx2::u_to_array(u), wu.to_array());
             }
             // decode8: the lanes' unpacking against the scalar decode, every bit pattern class.
-            let deq = Dequantizer::new(
-                volwarp_core::sample::Bounds::new(
-                    volwarp_core::Vec3::new(-1.5, 0.25, 3.0),
-                    volwarp_core::Vec3::new(2.0, 7.0, 3.5),
-                ),
-                0.0123,
-            );
+            let deq = crate::lanes::test_dequantizer();
             let mut x = 0x9e37_79b9_7f4a_7c15u64;
             for round in 0..200 {
-                let s: [u64; 8] = core::array::from_fn(|l| {
-                    x ^= x << 13;
-                    x ^= x >> 7;
-                    x ^= x << 17;
-                    match (round + l) % 4 {
-                        0 => x,
-                        1 => u64::MAX,
-                        2 => 0,
-                        _ => x & 0x0000_000f_ffff_ffff,
-                    }
-                });
+                let s: [u64; 8] = crate::lanes::test_samples(round, &mut x);
                 let eye = [0.5, -2.0, 10.0];
                 let (a, w) = (Avx2::decode8(&deq, eye, &s), decode_scalar::<f32x8>(&deq, eye, &s));
                 for (p, q) in a.iter().zip(&w) {

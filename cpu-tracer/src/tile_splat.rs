@@ -573,7 +573,7 @@ pub(crate) fn bound_group<L: BoundLanes>(
         // The lanes of `ok` with a non-empty span get their rectangle, the others the empty
         // one; with the large ones, the others, and the others' union.
         let tile_log2 = TILE.trailing_zeros();
-        let mut rl = L::rects(ok, &xs0, &xs1, &ys0, &ys1, tile_log2, MAX_TILES as i32);
+        let mut rl = L::rects(ok, [&xs0, &xs1, &ys0, &ys1], tile_log2, MAX_TILES as i32);
         if keep_centres {
             // Spheres of at most 2×2 pixels (lanes of `ok`, non-empty spans at most two
             // wide): their pixels' hits now, `L::N` spheres per lane operation, in place of

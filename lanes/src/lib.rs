@@ -33,12 +33,24 @@
 #[cfg(feature = "std")]
 extern crate std;
 
+use core::ops::{Add, BitAnd, BitOr, Div, Mul, Sub};
 use core::sync::atomic::{AtomicU8, Ordering};
 
 #[cfg(target_arch = "x86_64")]
 pub mod x86;
 #[cfg(target_arch = "x86_64")]
 pub use x86::{Avx2, Avx2I, Avx512, Avx512I};
+
+/// Defines [`Ops`] as the operators `$op` and its blanket impl.
+macro_rules! ops_trait {
+    ($($op:ident),*) => {
+        /// The operators every lane type has (`+ − × ÷`, and `& |` on masks): the common
+        /// supertrait of the kernels' lane traits (implemented for every type that has them).
+        pub trait Ops: Copy $(+ $op<Output = Self>)* {}
+        impl<T: Copy $(+ $op<Output = T>)*> Ops for T {}
+    };
+}
+ops_trait!(Add, Sub, Mul, Div, BitAnd, BitOr);
 
 /// A level of SIMD lanes, narrowest first (the order [`limit_lanes`] clamps by).
 #[derive(Clone, Copy, Debug, PartialEq, Eq, PartialOrd, Ord, Hash)]
@@ -214,65 +226,53 @@ pub fn level() -> Level {
     }
 }
 
-/// Proof that the CPU has AVX2 (and so AVX, SSE4.2, …): obtainable only where it does.
-#[cfg(target_arch = "x86_64")]
-#[derive(Clone, Copy, Debug)]
-pub struct Avx2Token(());
+/// A token type: proof of a lane kind's features, obtainable only where the CPU has them.
+macro_rules! token {
+    ($(#[$doc:meta])* $t:ident: $kind:ident, $features:literal) => {
+        $(#[$doc])*
+        #[cfg(target_arch = "x86_64")]
+        #[derive(Clone, Copy, Debug)]
+        pub struct $t(());
 
-#[cfg(target_arch = "x86_64")]
-impl Avx2Token {
-    /// The token where the kernels use AVX2 or wider now ([`lane_kind`], overrides applied).
-    #[inline]
-    pub fn new() -> Option<Avx2Token> {
-        (lane_kind() >= LaneKind::Avx2).then_some(Avx2Token(()))
-    }
+        #[cfg(target_arch = "x86_64")]
+        impl $t {
+            #[doc = concat!("The token where the kernels use ", $features, " now ([`lane_kind`], overrides applied).")]
+            #[inline]
+            pub fn new() -> Option<$t> {
+                (lane_kind() >= LaneKind::$kind).then_some($t(()))
+            }
 
-    /// The token where the CPU has AVX2, whatever the overrides (for tests that compare the
-    /// instances with each other).
-    #[inline]
-    pub fn detected() -> Option<Avx2Token> {
-        (detected() >= LaneKind::Avx2).then_some(Avx2Token(()))
-    }
+            #[doc = concat!("The token where the CPU has ", $features, ", whatever the overrides (for tests that")]
+            /// compare the instances with each other).
+            #[inline]
+            pub fn detected() -> Option<$t> {
+                (detected() >= LaneKind::$kind).then_some($t(()))
+            }
 
-    /// The token without a check, for code that runs only where one was obtained before
-    /// (a kernel's methods inside the instances [`dispatch!`] calls with a token).
-    ///
-    /// # Safety
-    /// The CPU must have AVX2.
-    #[inline(always)]
-    pub unsafe fn new_unchecked() -> Avx2Token {
-        Avx2Token(())
-    }
+            /// The token without a check, for code that runs only where one was obtained before
+            /// (a kernel's methods inside the instances [`dispatch!`] calls with a token).
+            ///
+            /// # Safety
+            #[doc = concat!("The CPU must have ", $features, ".")]
+            #[inline(always)]
+            pub unsafe fn new_unchecked() -> $t {
+                $t(())
+            }
+        }
+    };
 }
 
-/// Proof that the CPU has AVX-512 F and DQ, and AVX2: obtainable only where it does.
-#[cfg(target_arch = "x86_64")]
-#[derive(Clone, Copy, Debug)]
-pub struct Avx512Token(());
+token!(
+    /// Proof that the CPU has AVX2 (and so AVX, SSE4.2, …).
+    Avx2Token: Avx2, "AVX2"
+);
+token!(
+    /// Proof that the CPU has AVX-512 F and DQ, and AVX2.
+    Avx512Token: Avx512, "AVX-512 F and DQ (and AVX2)"
+);
 
 #[cfg(target_arch = "x86_64")]
 impl Avx512Token {
-    /// The token where the kernels use AVX-512 now ([`lane_kind`], overrides applied).
-    #[inline]
-    pub fn new() -> Option<Avx512Token> {
-        (lane_kind() >= LaneKind::Avx512).then_some(Avx512Token(()))
-    }
-
-    /// The token where the CPU has AVX-512 F and DQ, whatever the overrides.
-    #[inline]
-    pub fn detected() -> Option<Avx512Token> {
-        (detected() >= LaneKind::Avx512).then_some(Avx512Token(()))
-    }
-
-    /// The token without a check (see [`Avx2Token::new_unchecked`]).
-    ///
-    /// # Safety
-    /// The CPU must have AVX2, AVX-512 F and DQ.
-    #[inline(always)]
-    pub unsafe fn new_unchecked() -> Avx512Token {
-        Avx512Token(())
-    }
-
     /// Every CPU with AVX-512 F has AVX2.
     #[inline]
     pub fn avx2(self) -> Avx2Token {

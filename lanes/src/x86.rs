@@ -57,39 +57,10 @@ binops!(Avx512: Add add _mm512_add_ps, Sub sub _mm512_sub_ps, Mul mul _mm512_mul
 binops!(Avx2I: Add add _mm256_add_epi32);
 binops!(Avx512I: Add add _mm512_add_epi32);
 
-/// The construction and the raw register of an integer lane type.
-macro_rules! int_lanes {
-    ($t:ident, $raw:ty, $token:ident, $set1:ident) => {
-        impl $t {
-            /// Lanes from a register.
-            ///
-            /// # Safety
-            /// The CPU must have the type's features (the module's invariant).
-            #[inline(always)]
-            pub unsafe fn from_raw(v: $raw) -> $t {
-                $t(v)
-            }
-            /// The register.
-            #[inline(always)]
-            pub fn raw(self) -> $raw {
-                self.0
-            }
-            /// All lanes `x`.
-            #[inline(always)]
-            pub fn splat(_: $token, x: i32) -> $t {
-                // SAFETY: the token proves the CPU has the features.
-                $t(unsafe { $set1(x) })
-            }
-        }
-    };
-}
-int_lanes!(Avx2I, __m256i, Avx2Token, _mm256_set1_epi32);
-int_lanes!(Avx512I, __m512i, Avx512Token, _mm512_set1_epi32);
-
-/// What both float lane types share, with the same semantics at either width.
-macro_rules! float_lanes {
-    ($t:ident, $raw:ty, $token:ident, $n:literal, $set1:ident, $load:ident, $store:ident, $sqrt:ident,
-     $min:ident, $max:ident) => {
+/// What every lane type has: the raw register, its construction, the token and the lanes as
+/// an array.
+macro_rules! lane_type {
+    ($($t:ident($raw:ty): $token:ident, [$e:ty; $n:literal], $set1:ident, $store:ident;)*) => {$(
         impl $t {
             /// The number of lanes.
             pub const LANES: usize = $n;
@@ -114,10 +85,76 @@ macro_rules! float_lanes {
             }
             /// All lanes `x`.
             #[inline(always)]
-            pub fn splat(_: $token, x: f32) -> $t {
+            pub fn splat(_: $token, x: $e) -> $t {
                 // SAFETY: the token proves the CPU has the features.
                 $t(unsafe { $set1(x) })
             }
+            /// The lanes, lane 0 first.
+            #[inline(always)]
+            pub fn to_array(self) -> [$e; $n] {
+                let mut a = [<$e>::default(); $n];
+                // SAFETY: the module's invariant; `a` is writable (unaligned store).
+                unsafe { $store(a.as_mut_ptr().cast(), self.0) };
+                a
+            }
+        }
+    )*};
+}
+lane_type! {
+    Avx2(__m256): Avx2Token, [f32; 8], _mm256_set1_ps, _mm256_storeu_ps;
+    Avx2I(__m256i): Avx2Token, [i32; 8], _mm256_set1_epi32, _mm256_storeu_si256;
+    Avx512(__m512): Avx512Token, [f32; 16], _mm512_set1_ps, _mm512_storeu_ps;
+    Avx512I(__m512i): Avx512Token, [i32; 16], _mm512_set1_epi32, _mm512_storeu_si512;
+}
+
+/// The conversions between a width's float and integer lanes, and the integer product.
+macro_rules! conversions {
+    ($($t:ident / $ti:ident: $trunc:ident, $float:ident, $mullo:ident;)*) => {$(
+        impl $t {
+            /// Truncation toward zero per lane (`x as i32` for lanes in `i32`'s range; others
+            /// give `i32::MIN`).
+            #[inline(always)]
+            pub fn trunc_int(self) -> $ti {
+                // SAFETY: the module's invariant.
+                $ti(unsafe { $trunc(self.0) })
+            }
+        }
+        impl $ti {
+            /// The lanes as `f32`, rounded to nearest (`as f32`).
+            #[inline(always)]
+            pub fn to_float(self) -> $t {
+                // SAFETY: the module's invariant.
+                $t(unsafe { $float(self.0) })
+            }
+            /// Per lane `self * rhs`, the low 32 bits.
+            #[inline(always)]
+            pub fn mul_lo(self, rhs: $ti) -> $ti {
+                // SAFETY: the module's invariant.
+                $ti(unsafe { $mullo(self.0, rhs.0) })
+            }
+        }
+    )*};
+}
+conversions! {
+    Avx2 / Avx2I: _mm256_cvttps_epi32, _mm256_cvtepi32_ps, _mm256_mullo_epi32;
+    Avx512 / Avx512I: _mm512_cvttps_epi32, _mm512_cvtepi32_ps, _mm512_mullo_epi32;
+}
+
+/// Comparison methods, each an ordered, non-signalling predicate (false if either lane is NaN).
+macro_rules! compare_methods {
+    ($t:ident: $($f:ident $p:ident $op:literal),*) => {$(
+        #[doc = concat!("Mask of `self ", $op, " rhs` (false if either is NaN).")]
+        #[inline(always)]
+        pub fn $f(self, rhs: $t) -> $t {
+            self.compare::<$p>(rhs)
+        }
+    )*};
+}
+
+/// What both float lane types share, with the same semantics at either width.
+macro_rules! float_lanes {
+    ($t:ident, $token:ident, $n:literal, $load:ident, $store:ident, $sqrt:ident, $min:ident, $max:ident) => {
+        impl $t {
             /// The lanes of `a`, lane 0 first.
             #[inline(always)]
             pub fn load(_: $token, a: &[f32; $n]) -> $t {
@@ -129,13 +166,6 @@ macro_rules! float_lanes {
             pub fn store(self, out: &mut [f32; $n]) {
                 // SAFETY: the module's invariant; `out` is writable (unaligned store).
                 unsafe { $store(out.as_mut_ptr(), self.0) }
-            }
-            /// The lanes, lane 0 first.
-            #[inline(always)]
-            pub fn to_array(self) -> [f32; $n] {
-                let mut a = [0.0; $n];
-                self.store(&mut a);
-                a
             }
             /// IEEE square root per lane (correctly rounded).
             #[inline(always)]
@@ -166,58 +196,46 @@ macro_rules! float_lanes {
             pub fn max(self, rhs: $t) -> $t {
                 rhs.compare::<_CMP_UNORD_Q>(rhs).select(self, self.fast_max(rhs))
             }
-            /// Mask of `self < rhs` (false if either is NaN).
-            #[inline(always)]
-            pub fn simd_lt(self, rhs: $t) -> $t {
-                self.compare::<_CMP_LT_OQ>(rhs)
-            }
-            /// Mask of `self <= rhs` (false if either is NaN).
-            #[inline(always)]
-            pub fn simd_le(self, rhs: $t) -> $t {
-                self.compare::<_CMP_LE_OQ>(rhs)
-            }
-            /// Mask of `self > rhs` (false if either is NaN).
-            #[inline(always)]
-            pub fn simd_gt(self, rhs: $t) -> $t {
-                self.compare::<_CMP_GT_OQ>(rhs)
-            }
-            /// Mask of `self >= rhs` (false if either is NaN).
-            #[inline(always)]
-            pub fn simd_ge(self, rhs: $t) -> $t {
-                self.compare::<_CMP_GE_OQ>(rhs)
-            }
-            /// Mask of `self == rhs` (false if either is NaN).
-            #[inline(always)]
-            pub fn simd_eq(self, rhs: $t) -> $t {
-                self.compare::<_CMP_EQ_OQ>(rhs)
-            }
+            compare_methods!($t: simd_lt _CMP_LT_OQ "<", simd_le _CMP_LE_OQ "<=", simd_gt _CMP_GT_OQ ">",
+                simd_ge _CMP_GE_OQ ">=", simd_eq _CMP_EQ_OQ "==");
         }
     };
 }
-float_lanes!(
-    Avx2,
-    __m256,
-    Avx2Token,
-    8,
-    _mm256_set1_ps,
-    _mm256_loadu_ps,
-    _mm256_storeu_ps,
-    _mm256_sqrt_ps,
-    _mm256_min_ps,
-    _mm256_max_ps
-);
-float_lanes!(
-    Avx512,
-    __m512,
-    Avx512Token,
-    16,
-    _mm512_set1_ps,
-    _mm512_loadu_ps,
-    _mm512_storeu_ps,
-    _mm512_sqrt_ps,
-    _mm512_min_ps,
-    _mm512_max_ps
-);
+float_lanes!(Avx2, Avx2Token, 8, _mm256_loadu_ps, _mm256_storeu_ps, _mm256_sqrt_ps, _mm256_min_ps, _mm256_max_ps);
+float_lanes!(Avx512, Avx512Token, 16, _mm512_loadu_ps, _mm512_storeu_ps, _mm512_sqrt_ps, _mm512_min_ps, _mm512_max_ps);
+
+/// A 4×4 transpose in every 128-bit block.
+macro_rules! transpose_blocks {
+    ($($t:ident: $lo:ident $hi:ident $lopd:ident $hipd:ident $pd:ident $ps:ident;)*) => {$(
+        impl $t {
+            /// Four vectors `[a, b, x, r]` regrouped per 128-bit block: block k of `u_j` is lane
+            /// j of block k of each, `[a_j b_j x_j r_j]` (the first step of storing the lanes
+            /// as records of four).
+            #[inline(always)]
+            pub fn transpose_blocks(v: [$t; 4]) -> [$t; 4] {
+                let [a, b, x, r] = [v[0].0, v[1].0, v[2].0, v[3].0];
+                // SAFETY: the module's invariant.
+                unsafe {
+                    // t0 = [a0 b0 a1 b1], t1 = [a2 b2 a3 b3], t2, t3 likewise of x and r.
+                    let (t0, t1) = ($lo(a, b), $hi(a, b));
+                    let (t2, t3) = ($lo(x, r), $hi(x, r));
+                    [
+                        $t($ps($lopd($pd(t0), $pd(t2)))),
+                        $t($ps($hipd($pd(t0), $pd(t2)))),
+                        $t($ps($lopd($pd(t1), $pd(t3)))),
+                        $t($ps($hipd($pd(t1), $pd(t3)))),
+                    ]
+                }
+            }
+        }
+    )*};
+}
+transpose_blocks! {
+    Avx2: _mm256_unpacklo_ps _mm256_unpackhi_ps _mm256_unpacklo_pd _mm256_unpackhi_pd _mm256_castps_pd
+        _mm256_castpd_ps;
+    Avx512: _mm512_unpacklo_ps _mm512_unpackhi_ps _mm512_unpacklo_pd _mm512_unpackhi_pd _mm512_castps_pd
+        _mm512_castpd_ps;
+}
 
 impl Avx2 {
     /// Ordered or unordered, non-signalling comparison `P` (a `_CMP_*`) as a mask: with an

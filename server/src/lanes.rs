@@ -67,15 +67,7 @@ pub(crate) trait Mask: Copy + BitAnd<Output = Self> + BitOr<Output = Self> {
 }
 
 /// `N` `f32` lanes and their companion `N` `i32` lanes and mask (`N` = 8, 16 or 32).
-pub(crate) trait Lanes:
-    Copy
-    + Add<Output = Self>
-    + Sub<Output = Self>
-    + Mul<Output = Self>
-    + Div<Output = Self>
-    + BitAnd<Output = Self>
-    + BitOr<Output = Self>
-{
+pub(crate) trait Lanes: volwarp_lanes::Ops {
     /// `i32` lanes, as many.
     type I: Copy + Add<Output = Self::I>;
     /// A mask of as many lanes.
@@ -419,6 +411,51 @@ mod x86 {
     use core::ops::{BitAnd, BitOr};
     use volwarp_lanes::{Avx2, Avx2I, Avx2Token, Avx512, Avx512I, Avx512Token};
 
+    /// The `Lanes` methods that are the base type's own operations (the same at both widths);
+    /// `$token()` gives the type's token.
+    macro_rules! base_methods {
+        ($t:ident, $ti:ident, $token:ident) => {
+            #[inline(always)]
+            fn splat(x: f32) -> Self {
+                $t::splat($token(), x)
+            }
+            #[inline(always)]
+            fn new(a: &[f32]) -> Self {
+                $t::load($token(), a.first_chunk().expect("a whole vector"))
+            }
+            #[inline(always)]
+            fn min(self, rhs: Self) -> Self {
+                // `vminps(self, rhs)`: `self < rhs ? self : rhs`, as `wide`'s `fast_min`.
+                self.fast_min(rhs)
+            }
+            #[inline(always)]
+            fn max(self, rhs: Self) -> Self {
+                self.fast_max(rhs)
+            }
+            #[inline(always)]
+            fn store(self, out: &mut [f32]) {
+                $t::store(self, out.first_chunk_mut().expect("a whole vector"))
+            }
+            #[inline(always)]
+            fn trunc_int(self) -> $ti {
+                // `vcvttps2dq`: truncation, exact for the documented range.
+                $t::trunc_int(self)
+            }
+            #[inline(always)]
+            fn int_to_float(i: $ti) -> Self {
+                i.to_float()
+            }
+            #[inline(always)]
+            fn splat_i(x: i32) -> $ti {
+                $ti::splat($token(), x)
+            }
+            #[inline(always)]
+            fn mul_i(a: $ti, b: $ti) -> $ti {
+                a.mul_lo(b)
+            }
+        };
+    }
+
     /// The AVX2 token inside the AVX2 lanes' methods.
     #[inline(always)]
     fn avx2() -> Avx2Token {
@@ -468,23 +505,7 @@ mod x86 {
         type M = Avx2;
         const N: usize = 8;
 
-        #[inline(always)]
-        fn splat(x: f32) -> Self {
-            Avx2::splat(avx2(), x)
-        }
-        #[inline(always)]
-        fn new(a: &[f32]) -> Self {
-            Avx2::load(avx2(), a.first_chunk().expect("eight lanes"))
-        }
-        #[inline(always)]
-        fn min(self, rhs: Self) -> Self {
-            // `vminps(self, rhs)`: `self < rhs ? self : rhs`, as `wide`'s `fast_min`.
-            self.fast_min(rhs)
-        }
-        #[inline(always)]
-        fn max(self, rhs: Self) -> Self {
-            self.fast_max(rhs)
-        }
+        base_methods!(Avx2, Avx2I, avx2);
         #[inline(always)]
         fn simd_lt(self, rhs: Self) -> Self {
             Avx2::simd_lt(self, rhs)
@@ -505,30 +526,6 @@ mod x86 {
         fn mask_from_bits(bits: u64) -> Self {
             let a: [f32; 8] = core::array::from_fn(|l| if bits >> l & 1 == 1 { f32::from_bits(!0) } else { 0.0 });
             Avx2::load(avx2(), &a)
-        }
-        #[inline(always)]
-        fn store(self, out: &mut [f32]) {
-            Avx2::store(self, out.first_chunk_mut().expect("eight lanes"))
-        }
-        #[inline(always)]
-        fn trunc_int(self) -> Avx2I {
-            // `vcvttps2dq`: truncation, exact for the documented range.
-            // SAFETY: `self` proves AVX2 (`volwarp_lanes`' invariant).
-            unsafe { Avx2I::from_raw(_mm256_cvttps_epi32(self.raw())) }
-        }
-        #[inline(always)]
-        fn int_to_float(i: Avx2I) -> Self {
-            // SAFETY: `i` proves AVX2.
-            unsafe { Avx2::from_raw(_mm256_cvtepi32_ps(i.raw())) }
-        }
-        #[inline(always)]
-        fn splat_i(x: i32) -> Avx2I {
-            Avx2I::splat(avx2(), x)
-        }
-        #[inline(always)]
-        fn mul_i(a: Avx2I, b: Avx2I) -> Avx2I {
-            // SAFETY: `a` proves AVX2.
-            unsafe { Avx2I::from_raw(_mm256_mullo_epi32(a.raw(), b.raw())) }
         }
         #[inline(always)]
         fn gather(data: &[f32], idx: Avx2I) -> Self {
@@ -673,23 +670,7 @@ mod x86 {
         type M = K16;
         const N: usize = 16;
 
-        #[inline(always)]
-        fn splat(x: f32) -> Self {
-            Avx512::splat(avx512(), x)
-        }
-        #[inline(always)]
-        fn new(a: &[f32]) -> Self {
-            Avx512::load(avx512(), a.first_chunk().expect("sixteen lanes"))
-        }
-        #[inline(always)]
-        fn min(self, rhs: Self) -> Self {
-            // `vminps(self, rhs)`: `self < rhs ? self : rhs`, as `Avx2`'s.
-            self.fast_min(rhs)
-        }
-        #[inline(always)]
-        fn max(self, rhs: Self) -> Self {
-            self.fast_max(rhs)
-        }
+        base_methods!(Avx512, Avx512I, avx512);
         #[inline(always)]
         fn simd_lt(self, rhs: Self) -> K16 {
             K16(self.cmp_mask::<_CMP_LT_OQ>(rhs))
@@ -709,29 +690,6 @@ mod x86 {
         #[inline(always)]
         fn mask_from_bits(bits: u64) -> K16 {
             K16(bits as u16)
-        }
-        #[inline(always)]
-        fn store(self, out: &mut [f32]) {
-            Avx512::store(self, out.first_chunk_mut().expect("sixteen lanes"))
-        }
-        #[inline(always)]
-        fn trunc_int(self) -> Avx512I {
-            // SAFETY: `self` proves AVX-512 F (`volwarp_lanes`' invariant).
-            unsafe { Avx512I::from_raw(_mm512_cvttps_epi32(self.raw())) }
-        }
-        #[inline(always)]
-        fn int_to_float(i: Avx512I) -> Self {
-            // SAFETY: `i` proves AVX-512 F.
-            unsafe { Avx512::from_raw(_mm512_cvtepi32_ps(i.raw())) }
-        }
-        #[inline(always)]
-        fn splat_i(x: i32) -> Avx512I {
-            Avx512I::splat(avx512(), x)
-        }
-        #[inline(always)]
-        fn mul_i(a: Avx512I, b: Avx512I) -> Avx512I {
-            // SAFETY: `a` proves AVX-512 F.
-            unsafe { Avx512I::from_raw(_mm512_mullo_epi32(a.raw(), b.raw())) }
         }
         #[inline(always)]
         fn gather(data: &[f32], idx: Avx512I) -> Self {

@@ -10,9 +10,10 @@
 //! an AVX-512 mask register, widened to lanes (`vpmovm2d`), and selects narrow it back
 //! (`vpmovd2m`); one instruction each.
 
-use super::{avx512, decode_scalar_into, Arith, Avx512, BoundLanes, RectLanes, EMPTY_RECT};
+use super::{avx512, decode_scalar_into, Avx512, BoundLanes, RectLanes, EMPTY_RECT};
 use core::arch::x86_64::*;
 use volwarp_core::sample::{Dequantizer, POS_BITS, RADIUS_BITS};
+use volwarp_lanes::Avx512I;
 
 // SAFETY (every `unsafe` block of this impl): AVX2, AVX-512 F and DQ are available
 // (`volwarp_lanes`' invariant: a value proves them, and the methods without one run only in the
@@ -43,25 +44,9 @@ impl BoundLanes for Avx512 {
                 _mm512_cvtepi64_epi32(_mm512_srli_epi64::<32>(a)),
                 _mm512_cvtepi64_epi32(_mm512_srli_epi64::<32>(b)),
             );
-            let m = _mm512_set1_epi32(0x3ffff);
-            let x = _mm512_and_si512(lo, m);
-            let y = _mm512_or_si512(
-                _mm512_srli_epi32::<18>(lo),
-                _mm512_slli_epi32::<14>(_mm512_and_si512(hi, _mm512_set1_epi32(0xf))),
-            );
-            let z = _mm512_and_si512(_mm512_srli_epi32::<4>(hi), m);
-            let r = _mm512_srli_epi32::<22>(hi);
-            let f = |v: __m512i| Avx512::from_raw(_mm512_cvtepi32_ps(v));
-            let (fx, fy, fz, fr) = (f(x), f(y), f(z), f(r));
-            [
-                (<Avx512 as Arith>::splat(deq.min.x) + fx * <Avx512 as Arith>::splat(deq.step.x))
-                    - <Avx512 as Arith>::splat(eye[0]),
-                (<Avx512 as Arith>::splat(deq.min.y) + fy * <Avx512 as Arith>::splat(deq.step.y))
-                    - <Avx512 as Arith>::splat(eye[1]),
-                (<Avx512 as Arith>::splat(deq.min.z) + fz * <Avx512 as Arith>::splat(deq.step.z))
-                    - <Avx512 as Arith>::splat(eye[2]),
-                fr * <Avx512 as Arith>::splat(deq.radius_unit),
-            ]
+            let fields = sample_fields!(Avx512, lo, hi; _mm512_and_si512 _mm512_or_si512 _mm512_srli_epi32
+                _mm512_slli_epi32 _mm512_set1_epi32 _mm512_cvtepi32_ps);
+            super::dequantize(deq, eye, fields)
         }
     }
 
@@ -74,11 +59,7 @@ impl BoundLanes for Avx512 {
             let below = _mm512_cmp_ps_mask::<_CMP_LT_OQ>(_mm512_cvtepi32_ps(t), lo.raw());
             let c = _mm512_max_epi32(_mm512_mask_add_epi32(t, below, t, _mm512_set1_epi32(1)), _mm512_setzero_si512());
             let h = _mm512_min_epi32(_mm512_cvttps_epi32(hi.raw()), _mm512_set1_epi32(max as i32));
-            let (mut a, mut b) = ([0i32; 16], [0i32; 16]);
-            // `a`, `b` are 64 writable bytes each.
-            _mm512_storeu_si512(a.as_mut_ptr().cast(), c);
-            _mm512_storeu_si512(b.as_mut_ptr().cast(), h);
-            (a, b)
+            (Avx512I::from_raw(c).to_array(), Avx512I::from_raw(h).to_array())
         }
     }
 
@@ -105,16 +86,9 @@ impl BoundLanes for Avx512 {
             return;
         };
         unsafe {
-            let [a, b, x, r] = c.map(|v| v.raw());
-            // Per 128-bit block k: t0 = [a0 b0 a1 b1], t1 = [a2 b2 a3 b3] (lanes 4k…), …
-            let (t0, t1) = (_mm512_unpacklo_ps(a, b), _mm512_unpackhi_ps(a, b));
-            let (t2, t3) = (_mm512_unpacklo_ps(x, r), _mm512_unpackhi_ps(x, r));
-            let pd = _mm512_castps_pd;
             // Records 4k, 4k + 1, 4k + 2, 4k + 3 in block k of u0, u1, u2, u3.
-            let u0 = _mm512_castpd_ps(_mm512_unpacklo_pd(pd(t0), pd(t2)));
-            let u1 = _mm512_castpd_ps(_mm512_unpackhi_pd(pd(t0), pd(t2)));
-            let u2 = _mm512_castpd_ps(_mm512_unpacklo_pd(pd(t1), pd(t3)));
-            let u3 = _mm512_castpd_ps(_mm512_unpackhi_pd(pd(t1), pd(t3)));
+            let [u0, u1, u2, u3] = Avx512::transpose_blocks(c);
+            let (u0, u1, u2, u3) = (u0.raw(), u1.raw(), u2.raw(), u3.raw());
             // Block k of the result j (records 4j…4j + 3) is block j of u_k.
             let lo01 = _mm512_shuffle_f32x4::<0b01_00_01_00>(u0, u1); // u0.0 u0.1 u1.0 u1.1
             let lo23 = _mm512_shuffle_f32x4::<0b01_00_01_00>(u2, u3); // u2.0 u2.1 u3.0 u3.1
@@ -137,17 +111,10 @@ impl BoundLanes for Avx512 {
     /// 16 bits and interleaved to 64-bit words, the tile counts by shifts and a 32-bit
     /// product, the union by masked reductions.
     #[inline(always)]
-    fn rects(
-        ok: u32,
-        x0: &[i32; 16],
-        x1: &[i32; 16],
-        y0: &[i32; 16],
-        y1: &[i32; 16],
-        tile_log2: u32,
-        max_tiles: i32,
-    ) -> RectLanes {
+    fn rects(ok: u32, spans: [&[i32; 16]; 4], tile_log2: u32, max_tiles: i32) -> RectLanes {
         unsafe {
             let load = |a: &[i32; 16]| _mm512_loadu_si512(a.as_ptr().cast());
+            let [x0, x1, y0, y1] = spans;
             let (a, b, c, d) = (load(x0), load(x1), load(y0), load(y1));
             let fast = ok as __mmask16 & _mm512_cmple_epi32_mask(a, b) & _mm512_cmple_epi32_mask(c, d);
             let s = _mm_cvtsi32_si128(tile_log2 as i32);
@@ -183,8 +150,6 @@ mod tests {
     use super::{Avx512, BoundLanes};
     use crate::lanes::{decode_scalar_into, Arith, Avx2, Lanes};
     use core::arch::x86_64::__m512;
-    use volwarp_core::sample::{Bounds, Dequantizer};
-    use volwarp_core::Vec3;
 
     fn bits(x: Avx512) -> [u32; 16] {
         // SAFETY: `__m512` is 64 bytes of plain data, as is `[u32; 16]`.
@@ -205,12 +170,7 @@ mod tests {
     /// subnormals and ordinary values, compiled as the kernel is.
     #[target_feature(enable = "avx2,avx512f,avx512dq")]
     fn check(t: volwarp_lanes::Avx512Token) {
-        let vals =
-            [0.0, -0.0, 1.0, -1.0, 0.5, 3.0, 1e-40, f32::MAX, f32::INFINITY, -f32::INFINITY, f32::NAN, -f32::NAN];
-        let pairs: Vec<(f32, f32)> = vals.iter().flat_map(|&a| vals.iter().map(move |&b| (a, b))).collect();
-        for c in pairs.chunks_exact(16) {
-            let a: [f32; 16] = core::array::from_fn(|l| c[l].0);
-            let b: [f32; 16] = core::array::from_fn(|l| c[l].1);
+        for (a, b) in crate::lanes::test_operands::<16>() {
             let load = |v: [f32; 16]| Avx512::load(t, &v);
             let (x, y) = (load(a), load(b));
             let ([p0, p1], [q0, q1]) = (halves(a), halves(b));
@@ -248,20 +208,10 @@ mod tests {
             }
         }
         // decode: sixteen samples in lanes, and fewer by the scalar decode.
-        let deq = Dequantizer::new(Bounds::new(Vec3::new(-1.5, 0.25, 3.0), Vec3::new(2.0, 7.0, 3.5)), 0.0123);
+        let deq = crate::lanes::test_dequantizer();
         let mut x = 0x9e37_79b9_7f4a_7c15u64;
         for round in 0..200 {
-            let s: [u64; 16] = core::array::from_fn(|l| {
-                x ^= x << 13;
-                x ^= x >> 7;
-                x ^= x << 17;
-                match (round + l) % 4 {
-                    0 => x,
-                    1 => u64::MAX,
-                    2 => 0,
-                    _ => x & 0x0000_000f_ffff_ffff,
-                }
-            });
+            let s: [u64; 16] = crate::lanes::test_samples(round, &mut x);
             let eye = [0.5, -2.0, 10.0];
             for n in [16, 15, 9, 1, 0] {
                 let mut want = [[0f32; 16]; 4];
