@@ -627,11 +627,13 @@ mod avx2 {
         #[inline(always)]
         fn floor(self) -> Self {
             // `vroundps` toward −∞, as `wide`'s AVX path and `f32::floor`.
+            // SAFETY: AVX2 is available (`volwarp_lanes`' invariant, see [`super::avx2`]).
             unsafe { Avx2::from_raw(_mm256_floor_ps(self.raw())) }
         }
         #[inline(always)]
         fn ceil(self) -> Self {
             // `vroundps` toward +∞, as `wide`'s AVX path and `f32::ceil`.
+            // SAFETY: AVX2 is available (`volwarp_lanes`' invariant, see [`super::avx2`]).
             unsafe { Avx2::from_raw(_mm256_ceil_ps(self.raw())) }
         }
         #[inline(always)]
@@ -651,11 +653,13 @@ mod avx2 {
         }
         #[inline(always)]
         fn splat_u(x: u32) -> __m256i {
+            // SAFETY: AVX2 is available (`volwarp_lanes`' invariant, see [`super::avx2`]).
             unsafe { _mm256_set1_epi32(x as i32) }
         }
         #[inline(always)]
         fn lt_u(a: __m256i, b: __m256i) -> Self {
             // Unsigned `a < b` is signed `b > a` with the top bits flipped (`wide` does the same).
+            // SAFETY: AVX2 is available (`volwarp_lanes`' invariant, see [`super::avx2`]).
             unsafe {
                 let h = _mm256_set1_epi32(i32::MIN);
                 Avx2::from_raw(_mm256_castsi256_ps(_mm256_cmpgt_epi32(_mm256_xor_si256(b, h), _mm256_xor_si256(a, h))))
@@ -663,6 +667,7 @@ mod avx2 {
         }
         #[inline(always)]
         fn select_u(self, if_true: __m256i, if_false: __m256i) -> __m256i {
+            // SAFETY: AVX2 is available (`volwarp_lanes`' invariant, see [`super::avx2`]).
             unsafe {
                 let (t, f) = (_mm256_castsi256_ps(if_true), _mm256_castsi256_ps(if_false));
                 _mm256_castps_si256(_mm256_blendv_ps(f, t, self.raw()))
@@ -671,12 +676,14 @@ mod avx2 {
         #[inline(always)]
         fn new_u(a: [u32; 8]) -> __m256i {
             // `a` is 32 readable bytes; the load needs no alignment.
+            // SAFETY: AVX2 is available (`volwarp_lanes`' invariant, see [`super::avx2`]); `a` is 32 readable bytes.
             unsafe { _mm256_loadu_si256(a.as_ptr().cast()) }
         }
         #[inline(always)]
         fn u_to_array(u: __m256i) -> [u32; 8] {
             let mut a = [0u32; 8];
             // `a` is 32 writable bytes; the store needs no alignment.
+            // SAFETY: AVX2 is available (`volwarp_lanes`' invariant, see [`super::avx2`]); `a` is 32 writable bytes.
             unsafe { _mm256_storeu_si256(a.as_mut_ptr().cast(), u) };
             a
         }
@@ -687,10 +694,12 @@ mod avx2 {
         #[inline(always)]
         fn permute(self, idx: __m256i) -> Self {
             // `vpermps` reads the low three bits of each index.
+            // SAFETY: AVX2 is available (`volwarp_lanes`' invariant, see [`super::avx2`]).
             unsafe { Avx2::from_raw(_mm256_permutevar8x32_ps(self.raw(), idx)) }
         }
         #[inline(always)]
         fn permute_u(a: __m256i, idx: __m256i) -> __m256i {
+            // SAFETY: AVX2 is available (`volwarp_lanes`' invariant, see [`super::avx2`]).
             unsafe { _mm256_permutevar8x32_epi32(a, idx) }
         }
         /// Eight records by a 4×8 transpose in registers (four 32-byte stores); fewer by the
@@ -700,6 +709,7 @@ mod avx2 {
             let Some(out) = out.first_chunk_mut::<8>() else {
                 return super::store_records_scalar(c, out);
             };
+            // SAFETY: AVX2 is available (`volwarp_lanes`' invariant, see [`super::avx2`]); the stores write the 128 bytes of `out` (noted below).
             unsafe {
                 // Records l and l + 4 in the halves of u_l.
                 let [u0, u1, u2, u3] = Avx2::transpose_blocks(c);
@@ -719,6 +729,7 @@ mod avx2 {
         /// the maxima; every field is below 2¹⁵, so no field borrows from the next).
         #[inline(always)]
         fn rects8(ok: u32, spans: [&[i32; 16]; 4], tile_log2: u32, max_tiles: i32) -> RectLanes {
+            // SAFETY: AVX2 is available (`volwarp_lanes`' invariant, see [`super::avx2`]); the loads read the 64 bytes of the spans, the stores write `bits` (noted below).
             unsafe {
                 let load = |v: &[i32; 16]| _mm256_loadu_si256(v.as_ptr().cast());
                 let (a, b, c, d) = (load(spans[0]), load(spans[1]), load(spans[2]), load(spans[3]));
@@ -763,12 +774,14 @@ mod avx2 {
         #[inline(always)]
         fn from_ints(a: &[i32; 8]) -> Self {
             // `a` is 32 readable bytes; `vcvtdq2ps` rounds to nearest as `as f32` does.
+            // SAFETY: AVX2 is available (`volwarp_lanes`' invariant, see [`super::avx2`]); `a` is 32 readable bytes.
             unsafe { Avx2::from_raw(_mm256_cvtepi32_ps(_mm256_loadu_si256(a.as_ptr().cast()))) }
         }
         #[inline(always)]
         fn span_ints(lo: Self, hi: Self, max: u32) -> ([i32; 8], [i32; 8]) {
             // `vcvttps2dq` truncates as `as i32` does in range; the comparison and the
             // integer max/min are the scalar ones per lane.
+            // SAFETY: AVX2 is available (`volwarp_lanes`' invariant, see [`super::avx2`]).
             unsafe {
                 let t = _mm256_cvttps_epi32(lo.raw());
                 let below = _mm256_castps_si256(_mm256_cmp_ps::<_CMP_LT_OQ>(_mm256_cvtepi32_ps(t), lo.raw()));
@@ -784,7 +797,8 @@ mod avx2 {
         #[inline(always)]
         fn decode8(deq: &Dequantizer, eye: [f32; 3], s: &[u64; 8]) -> [Self; 4] {
             const _: () = assert!(POS_BITS == 18 && RADIUS_BITS == 10);
-            // `s` is 64 readable bytes; the loads need no alignment.
+            // SAFETY: AVX2 is available (`volwarp_lanes`' invariant, see [`super::avx2`]); `s` is
+            // 64 readable bytes; the loads need no alignment.
             unsafe {
                 let a = _mm256_loadu_si256(s.as_ptr().cast());
                 let b = _mm256_loadu_si256(s[4..].as_ptr().cast());

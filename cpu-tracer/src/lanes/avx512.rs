@@ -34,6 +34,7 @@ impl BoundLanes for Avx512 {
             decode_scalar_into(deq, eye, s, &mut a);
             return a.map(|v| Avx512::load(avx512(), &v));
         };
+        // SAFETY: AVX2, AVX-512 F and DQ are available (`volwarp_lanes`' invariant, see [`super::avx512`]); the loads read the 128 bytes of `s`.
         unsafe {
             // `s` is 128 readable bytes.
             let a = _mm512_loadu_si512(s.as_ptr().cast());
@@ -54,6 +55,7 @@ impl BoundLanes for Avx512 {
     /// below `lo`, at least 0; `hi` truncated, at most `max`.
     #[inline(always)]
     fn spans(lo: Self, hi: Self, max: u32) -> ([i32; 16], [i32; 16]) {
+        // SAFETY: AVX2, AVX-512 F and DQ are available (`volwarp_lanes`' invariant, see [`super::avx512`]).
         unsafe {
             let t = _mm512_cvttps_epi32(lo.raw());
             let below = _mm512_cmp_ps_mask::<_CMP_LT_OQ>(_mm512_cvtepi32_ps(t), lo.raw());
@@ -66,6 +68,7 @@ impl BoundLanes for Avx512 {
     #[inline(always)]
     fn from_ints16(a: &[i32; 16]) -> Self {
         // `a` is 64 readable bytes; `vcvtdq2ps` rounds to nearest as `as f32` does.
+        // SAFETY: AVX2, AVX-512 F and DQ are available (`volwarp_lanes`' invariant, see [`super::avx512`]); `a` is 64 readable bytes.
         unsafe { Avx512::from_raw(_mm512_cvtepi32_ps(_mm512_loadu_si512(a.as_ptr().cast()))) }
     }
 
@@ -85,6 +88,7 @@ impl BoundLanes for Avx512 {
             }
             return;
         };
+        // SAFETY: AVX2, AVX-512 F and DQ are available (`volwarp_lanes`' invariant, see [`super::avx512`]); the stores write the 256 bytes of `out` (noted below).
         unsafe {
             // Records 4k, 4k + 1, 4k + 2, 4k + 3 in block k of u0, u1, u2, u3.
             let [u0, u1, u2, u3] = Avx512::transpose_blocks(c);
@@ -112,6 +116,7 @@ impl BoundLanes for Avx512 {
     /// product, the union by masked reductions.
     #[inline(always)]
     fn rects(ok: u32, spans: [&[i32; 16]; 4], tile_log2: u32, max_tiles: i32) -> RectLanes {
+        // SAFETY: AVX2, AVX-512 F and DQ are available (`volwarp_lanes`' invariant, see [`super::avx512`]); the loads read the spans, the stores write `bits` (noted below).
         unsafe {
             let load = |a: &[i32; 16]| _mm512_loadu_si512(a.as_ptr().cast());
             let [x0, x1, y0, y1] = spans;
