@@ -3,8 +3,9 @@
 //! the ray–sphere test, each exactly as core's scalar code computes them.
 //!
 //! `wide` chooses its `f32x8` representation when *it* is compiled (two SSE halves on baseline
-//! x86-64), so enabling AVX2 on the calling function does not widen it. `Avx2` (x86-64 only)
-//! wraps the 256-bit registers directly; once its `#[inline(always)]` methods are inlined into a
+//! x86-64), so enabling AVX2 on the calling function does not widen it. `Avx2` (x86-64 only,
+//! `volwarp_lanes`' base type, which also gives the lane level and the dispatch macro) wraps
+//! the 256-bit registers directly; once its `#[inline(always)]` methods are inlined into a
 //! function compiled with AVX2 they are single ymm instructions. Every method has exactly the
 //! semantics of the `wide` operation it replaces (noted per method), so both kernels compute
 //! the same values: the same bits, except that a NaN's sign and payload are unspecified in Rust

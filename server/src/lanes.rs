@@ -1,13 +1,13 @@
 //! The vector types (8 to 64 lanes) the packet marcher ([`crate::packet_march`]) is generic over:
 //! `f32` lanes (also used as masks), `i32` lanes, and gathers from `f32` slices.
 //!
-//! The same approach as the CPU tracer's lanes (`cpu-tracer/src/lanes.rs`), with the
-//! operations a marcher needs (truncation to integers, integer index arithmetic, gathers)
-//! instead of a tracer's; the server does not depend on the tracer, so the two trait
-//! definitions are separate. `wide` picks its representation when *it* is compiled (two SSE
-//! halves on baseline x86-64), so [`Avx2`] wraps the 256-bit registers directly; its
-//! `#[inline(always)]` methods become single AVX2 instructions once inlined into a function
-//! compiled with AVX2. Every method computes exactly what the scalar marcher's operation does
+//! The lane level, its tokens, the dispatch macro and the base types [`Avx2`] and [`Avx512`]
+//! are `volwarp_lanes`' (shared with the CPU tracer and core's codec); this module adds the
+//! operations a marcher needs (truncation to integers, integer index arithmetic, gathers) as
+//! the [`Lanes`] trait. `wide` picks its representation when *it* is compiled (two SSE halves
+//! on baseline x86-64), so the AVX types wrap the registers directly; their
+//! `#[inline(always)]` methods become single instructions once inlined into a function
+//! compiled with the features. Every method computes exactly what the scalar marcher's operation does
 //! (IEEE single precision, no fused multiply-add), so the packet marcher's results are the
 //! scalar marcher's bit for bit.
 //!
