@@ -456,6 +456,30 @@ mod x86 {
         };
     }
 
+    /// `Lanes::unpack_bytes` and `unpack_shorts` with one width's intrinsics: each field by an
+    /// `and` and a logical shift right, converted to `f32` exactly.
+    macro_rules! unpack_methods {
+        ($t:ident, $ti:ident: $and:ident $srli:ident $set1:ident $cvt:ident) => {
+            #[inline(always)]
+            fn unpack_bytes(w: $ti) -> [Self; 4] {
+                // SAFETY: `w` proves the type's features (`volwarp_lanes`' invariant).
+                unsafe {
+                    let (w, m) = (w.raw(), $set1(255));
+                    [$and(w, m), $and($srli::<8>(w), m), $and($srli::<16>(w), m), $srli::<24>(w)]
+                        .map(|b| $t::from_raw($cvt(b)))
+                }
+            }
+            #[inline(always)]
+            fn unpack_shorts(w: $ti) -> [Self; 2] {
+                // SAFETY: `w` proves the type's features (`volwarp_lanes`' invariant).
+                unsafe {
+                    let lo = $and(w.raw(), $set1(0xffff));
+                    [lo, $srli::<16>(w.raw())].map(|b| $t::from_raw($cvt(b)))
+                }
+            }
+        };
+    }
+
     /// The AVX2 token inside the AVX2 lanes' methods.
     #[inline(always)]
     fn avx2() -> Avx2Token {
@@ -568,20 +592,6 @@ mod x86 {
             unsafe { Avx2I::from_raw(_mm256_i32gather_epi32::<4>(data.as_ptr().cast(), i)) }
         }
         #[inline(always)]
-        fn unpack_bytes(w: Avx2I) -> [Self; 4] {
-            // SAFETY: `w` proves AVX2.
-            unsafe {
-                let (w, m) = (w.raw(), _mm256_set1_epi32(255));
-                [
-                    _mm256_and_si256(w, m),
-                    _mm256_and_si256(_mm256_srli_epi32::<8>(w), m),
-                    _mm256_and_si256(_mm256_srli_epi32::<16>(w), m),
-                    _mm256_srli_epi32::<24>(w),
-                ]
-                .map(|b| Avx2::from_raw(_mm256_cvtepi32_ps(b)))
-            }
-        }
-        #[inline(always)]
         fn gather_quads(data: &[u64], idx: Avx2I) -> (Avx2I, Avx2I) {
             if data.is_empty() {
                 return (Avx2I::splat(avx2(), 0), Avx2I::splat(avx2(), 0));
@@ -601,14 +611,7 @@ mod x86 {
                 (Avx2I::from_raw(order(a)), Avx2I::from_raw(order(b)))
             }
         }
-        #[inline(always)]
-        fn unpack_shorts(w: Avx2I) -> [Self; 2] {
-            // SAFETY: `w` proves AVX2.
-            unsafe {
-                let lo = _mm256_and_si256(w.raw(), _mm256_set1_epi32(0xffff));
-                [lo, _mm256_srli_epi32::<16>(w.raw())].map(|b| Avx2::from_raw(_mm256_cvtepi32_ps(b)))
-            }
-        }
+        unpack_methods!(Avx2, Avx2I: _mm256_and_si256 _mm256_srli_epi32 _mm256_set1_epi32 _mm256_cvtepi32_ps);
     }
 
     /// A mask of sixteen lanes: an AVX-512 mask register (`k`), bit `l` lane `l`.
@@ -730,20 +733,6 @@ mod x86 {
             unsafe { Avx512I::from_raw(_mm512_i32gather_epi32::<4>(i, data.as_ptr().cast())) }
         }
         #[inline(always)]
-        fn unpack_bytes(w: Avx512I) -> [Self; 4] {
-            // SAFETY: `w` proves AVX-512 F.
-            unsafe {
-                let (w, m) = (w.raw(), _mm512_set1_epi32(255));
-                [
-                    _mm512_and_si512(w, m),
-                    _mm512_and_si512(_mm512_srli_epi32::<8>(w), m),
-                    _mm512_and_si512(_mm512_srli_epi32::<16>(w), m),
-                    _mm512_srli_epi32::<24>(w),
-                ]
-                .map(|b| Avx512::from_raw(_mm512_cvtepi32_ps(b)))
-            }
-        }
-        #[inline(always)]
         fn gather_quads(data: &[u64], idx: Avx512I) -> (Avx512I, Avx512I) {
             if data.is_empty() {
                 return (Avx512I::splat(avx512(), 0), Avx512I::splat(avx512(), 0));
@@ -759,14 +748,7 @@ mod x86 {
                 (Avx512I::from_raw(a), Avx512I::from_raw(b))
             }
         }
-        #[inline(always)]
-        fn unpack_shorts(w: Avx512I) -> [Self; 2] {
-            // SAFETY: `w` proves AVX-512 F.
-            unsafe {
-                let lo = _mm512_and_si512(w.raw(), _mm512_set1_epi32(0xffff));
-                [lo, _mm512_srli_epi32::<16>(w.raw())].map(|b| Avx512::from_raw(_mm512_cvtepi32_ps(b)))
-            }
-        }
+        unpack_methods!(Avx512, Avx512I: _mm512_and_si512 _mm512_srli_epi32 _mm512_set1_epi32 _mm512_cvtepi32_ps);
     }
 }
 
