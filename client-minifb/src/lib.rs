@@ -22,6 +22,7 @@
 //!
 //! The wire format, record format and the client's use of them are documented in `docs/`.
 #![deny(missing_docs)]
+#![forbid(unsafe_code)]
 
 pub mod app;
 pub mod bench;

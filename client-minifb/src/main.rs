@@ -1,4 +1,5 @@
 //! `volwarp-client`: the volwarp thin client (`--help` lists options and window controls).
+#![forbid(unsafe_code)]
 
 use clap::Parser;
 use std::process::ExitCode;

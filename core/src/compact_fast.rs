@@ -126,8 +126,8 @@ fn next_row(i0: usize, n: usize, w: u64, key: impl Fn(usize) -> u64) -> (u64, u6
 /// path of `compact_frame::decode_body_reference` (the same frame and the same errors).
 pub(crate) fn decode_body(header: &FrameHeader, params: &CompactParams, body: &[u8]) -> Result<Frame, WireError> {
     #[cfg(all(feature = "std", target_arch = "x86_64"))]
-    if std::is_x86_feature_detected!("avx2") {
-        // SAFETY: the CPU has AVX2.
+    if volwarp_lanes::Avx2Token::new().is_some() {
+        // SAFETY: the token proves the CPU has AVX2 (and the lane level allows it).
         return unsafe { decode_body_avx2(header, params, body) };
     }
     decode_body_lanes::<false>(header, params, body)
@@ -529,8 +529,8 @@ fn code_lanes<const L: usize>(
 /// `compact_frame::build_planes_reference` (the same planes, or the reference's error).
 pub(crate) fn build_planes(frame: &Frame, opts: &EncodeOptions) -> Result<Planes, EncodeError> {
     #[cfg(all(feature = "std", target_arch = "x86_64"))]
-    if std::is_x86_feature_detected!("avx2") {
-        // SAFETY: the CPU has AVX2.
+    if volwarp_lanes::Avx2Token::new().is_some() {
+        // SAFETY: the token proves the CPU has AVX2 (and the lane level allows it).
         return unsafe { build_planes_avx2(frame, opts) };
     }
     build_planes_lanes::<false>(frame, opts)

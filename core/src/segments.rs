@@ -353,8 +353,8 @@ pub fn validate(
     layers: u8,
 ) -> Result<(), LayerError> {
     #[cfg(all(feature = "std", target_arch = "x86_64"))]
-    if std::is_x86_feature_detected!("avx2") {
-        // SAFETY: the CPU has AVX2.
+    if volwarp_lanes::Avx2Token::new().is_some() {
+        // SAFETY: the token proves the CPU has AVX2 (and the lane level allows it).
         return unsafe { validate_avx2(header, samples, colors, segments, layers) };
     }
     validate_blocks(header, samples, colors, segments, layers)

@@ -3,8 +3,9 @@
 //! the ray–sphere test, each exactly as core's scalar code computes them.
 //!
 //! `wide` chooses its `f32x8` representation when *it* is compiled (two SSE halves on baseline
-//! x86-64), so enabling AVX2 on the calling function does not widen it. `Avx2` (x86-64 only)
-//! wraps the 256-bit registers directly; once its `#[inline(always)]` methods are inlined into a
+//! x86-64), so enabling AVX2 on the calling function does not widen it. `Avx2` (x86-64 only,
+//! `volwarp_lanes`' base type, which also gives the lane level and the dispatch macro) wraps
+//! the 256-bit registers directly; once its `#[inline(always)]` methods are inlined into a
 //! function compiled with AVX2 they are single ymm instructions. Every method has exactly the
 //! semantics of the `wide` operation it replaces (noted per method), so both kernels compute
 //! the same values: the same bits, except that a NaN's sign and payload are unspecified in Rust
@@ -12,135 +13,55 @@
 //!
 //! Masks are lanes with all bits set (true) or clear (false), as `wide`'s comparisons give.
 
-use core::ops::{Add, BitAnd, BitOr, Div, Mul, Sub};
-#[cfg(target_arch = "x86_64")]
-use std::sync::atomic::{AtomicU8, Ordering};
 use volwarp_core::sample::Dequantizer;
 use volwarp_core::{RayBasis, Vec3};
 use wide::{f32x8, u32x8};
 
-/// Defines `$name`, which runs the kernel `$kernel::<L>` on the best lanes this CPU has: the
-/// instance `$avx2`, compiled with `#[target_feature(enable = "avx2")]` on [`Avx2`] lanes, where
-/// `is_x86_feature_detected!("avx2")` says the CPU has AVX2, and the portable `wide::f32x8`
-/// instance elsewhere. With a third name, `fn name / avx2 / avx512 => kernel(…)`, also the
-/// instance `$avx512`, compiled with AVX-512 F and DQ on [`Avx512`] lanes (sixteen), taken first
-/// where [`use_avx512`] says so (for kernels generic over [`BoundLanes`]). All compute the same
-/// values (see the module docs), so the choice only changes the speed.
+/// Defines `$name`, which runs the kernel `$kernel::<L>` on the lanes
+/// [`volwarp_lanes::level`] picks (with [`volwarp_lanes::dispatch!`]): the instance `$avx2`,
+/// compiled with AVX2 on [`Avx2`] lanes, where the level is AVX2 or wider, and the portable
+/// `wide::f32x8` instance elsewhere. With a third name, `fn name / avx2 / avx512 => kernel(…)`,
+/// also the instance `$avx512`, compiled with AVX2, AVX-512 F and DQ on [`Avx512`] lanes
+/// (sixteen), taken where the level is AVX-512 (for kernels generic over [`BoundLanes`]). All
+/// compute the same values (see the module docs), so the choice only changes the speed.
 macro_rules! dispatch {
-    // The AVX2 instance, else the portable one (the end of every dispatcher).
-    (@narrow $avx2:ident $kernel:ident ($($arg:ident),*)) => {{
-        #[cfg(target_arch = "x86_64")]
-        if $crate::lanes::use_avx2() {
-            // SAFETY: the CPU supports AVX2 (`use_avx2` checks).
-            return unsafe { $avx2($($arg),*) };
-        }
-        $kernel::<wide::f32x8>($($arg),*)
-    }};
-    // The AVX2 instance.
-    (@avx2 $avx2:ident $kernel:ident ($($arg:ident: $ty:ty),*) $(-> $ret:ty)?) => {
-        /// The kernel on [`crate::lanes::Avx2`] lanes, compiled with AVX2 (the lane methods
-        /// inline to ymm instructions).
-        ///
-        /// # Safety
-        /// The CPU must support AVX2.
-        #[cfg(target_arch = "x86_64")]
-        #[target_feature(enable = "avx2")]
-        #[allow(clippy::too_many_arguments)]
-        unsafe fn $avx2($($arg: $ty),*) $(-> $ret)? {
-            // `Avx2`'s invariant holds: the caller guarantees AVX2.
-            $kernel::<$crate::lanes::Avx2>($($arg),*)
+    ($(#[$doc:meta])* fn $name:ident / $avx2:ident / $avx512:ident => $($kernel:tt)*) => {
+        volwarp_lanes::dispatch! {
+            $(#[$doc])*
+            fn $name / $avx2 / $avx512 => $($kernel)*;
+            portable = [wide::f32x8], avx2 = [$crate::lanes::Avx2], avx512 = [$crate::lanes::Avx512]
         }
     };
-    ($(#[$doc:meta])* fn $name:ident / $avx2:ident => $kernel:ident($($arg:ident: $ty:ty),* $(,)?) $(-> $ret:ty)?) => {
-        $(#[$doc])*
-        #[allow(clippy::too_many_arguments)]
-        fn $name($($arg: $ty),*) $(-> $ret)? {
-            $crate::lanes::dispatch!(@narrow $avx2 $kernel ($($arg),*))
-        }
-        $crate::lanes::dispatch!(@avx2 $avx2 $kernel ($($arg: $ty),*) $(-> $ret)?);
-    };
-    ($(#[$doc:meta])* fn $name:ident / $avx2:ident / $avx512:ident => $kernel:ident($($arg:ident: $ty:ty),* $(,)?) $(-> $ret:ty)?) => {
-        $(#[$doc])*
-        #[allow(clippy::too_many_arguments)]
-        fn $name($($arg: $ty),*) $(-> $ret)? {
-            #[cfg(target_arch = "x86_64")]
-            if $crate::lanes::use_avx512() {
-                // SAFETY: the CPU supports AVX2, AVX-512 F and DQ (`use_avx512` checks).
-                return unsafe { $avx512($($arg),*) };
-            }
-            $crate::lanes::dispatch!(@narrow $avx2 $kernel ($($arg),*))
-        }
-        $crate::lanes::dispatch!(@avx2 $avx2 $kernel ($($arg: $ty),*) $(-> $ret)?);
-
-        /// The kernel on [`crate::lanes::Avx512`] lanes, compiled with AVX2 and AVX-512 F, DQ.
-        ///
-        /// # Safety
-        /// The CPU must support AVX2, AVX-512 F and DQ.
-        #[cfg(target_arch = "x86_64")]
-        #[target_feature(enable = "avx2,avx512f,avx512dq")]
-        #[allow(clippy::too_many_arguments)]
-        unsafe fn $avx512($($arg: $ty),*) $(-> $ret)? {
-            // `Avx512`'s invariant holds: the caller guarantees AVX2, AVX-512 F and DQ.
-            $kernel::<$crate::lanes::Avx512>($($arg),*)
+    ($(#[$doc:meta])* fn $name:ident / $avx2:ident => $($kernel:tt)*) => {
+        volwarp_lanes::dispatch! {
+            $(#[$doc])*
+            fn $name / $avx2 => $($kernel)*;
+            portable = [wide::f32x8], avx2 = [$crate::lanes::Avx2]
         }
     };
 }
 pub(crate) use dispatch;
 
-/// Whether the kernels take their AVX2 instances: the CPU has AVX2, the environment variable
-/// `VOLWARP_PORTABLE_SIMD` is not set and `VOLWARP_LANES` is not `portable` (either times the
-/// portable `wide` kernels, as on a CPU without AVX2 or on ARM). Read once.
+/// Whether the kernels take their AVX2 instances: the lane level
+/// ([`volwarp_lanes::lane_kind`]: the CPU's, clamped by `VOLWARP_LANES` and
+/// [`volwarp_lanes::limit_lanes`]) is AVX2 or wider.
 #[cfg(target_arch = "x86_64")]
 pub(crate) fn use_avx2() -> bool {
-    static STATE: AtomicU8 = AtomicU8::new(0);
-    decided_once(&STATE, || {
-        std::is_x86_feature_detected!("avx2")
-            && std::env::var_os("VOLWARP_PORTABLE_SIMD").is_none()
-            && std::env::var("VOLWARP_LANES").ok().as_deref() != Some("portable")
-    })
+    volwarp_lanes::Avx2Token::new().is_some()
 }
 
 /// Whether the kernels that have an AVX-512 instance (sixteen lanes: the tiled splatter's
-/// bound pass) take it: [`use_avx2`], the CPU has AVX-512 F and DQ, and `VOLWARP_LANES` is not
-/// `avx2` (which times the AVX2 instances on a CPU with AVX-512). Read once.
+/// bound pass) take it: the lane level is AVX-512 (`VOLWARP_LANES=avx2` times the AVX2
+/// instances on a CPU with AVX-512).
 #[cfg(target_arch = "x86_64")]
 pub(crate) fn use_avx512() -> bool {
-    static STATE: AtomicU8 = AtomicU8::new(0);
-    decided_once(&STATE, || {
-        use_avx2()
-            && std::is_x86_feature_detected!("avx512f")
-            && std::is_x86_feature_detected!("avx512dq")
-            && std::env::var("VOLWARP_LANES").ok().as_deref() != Some("avx2")
-    })
-}
-
-/// `decide()`, worked out on the first call and kept in `state` (0: not yet, 1: yes, 2: no).
-#[cfg(target_arch = "x86_64")]
-fn decided_once(state: &AtomicU8, decide: impl FnOnce() -> bool) -> bool {
-    match state.load(Ordering::Relaxed) {
-        1 => true,
-        2 => false,
-        _ => {
-            let yes = decide();
-            state.store(if yes { 1 } else { 2 }, Ordering::Relaxed);
-            yes
-        }
-    }
+    volwarp_lanes::Avx512Token::new().is_some()
 }
 
 /// The lane kind the kernels take on this CPU (as `VOLWARP_LANES` names them): `avx512`
 /// where the bound pass takes its AVX-512 instance, `avx2`, or `portable`.
 pub fn lane_kind() -> &'static str {
-    #[cfg(target_arch = "x86_64")]
-    {
-        if use_avx512() {
-            return "avx512";
-        }
-        if use_avx2() {
-            return "avx2";
-        }
-    }
-    "portable"
+    volwarp_lanes::lane_kind().name()
 }
 
 /// Asks the CPU to bring the cache lines of `s` closer (a hint: no effect on any result; on
@@ -234,6 +155,39 @@ pub(crate) fn decode_scalar<L: Lanes>(deq: &Dequantizer, eye: [f32; 3], s: &[u64
     a.map(|v| L::new(first8(&v)))
 }
 
+/// The fields of packed samples as float lanes `[x, y, z, radius code]`, from the samples' low
+/// and high 32-bit words `lo`, `hi` in integer lanes, with one width's intrinsics (no
+/// closures: one would be compiled without the kernel's target features, every intrinsic a
+/// call). The layout is `volwarp_core::sample`'s: x in bits 0–17, y in 18–35, z in 36–53, the
+/// radius code in 54–63. Used inside `unsafe` blocks of the lanes' methods.
+#[cfg(target_arch = "x86_64")]
+macro_rules! sample_fields {
+    ($t:ident, $lo:expr, $hi:expr; $and:ident $or:ident $srli:ident $slli:ident $set1:ident $cvt:ident) => {{
+        let (lo, hi) = ($lo, $hi);
+        let m = $set1(0x3ffff);
+        let x = $and(lo, m);
+        let y = $or($srli::<18>(lo), $slli::<14>($and(hi, $set1(0xf))));
+        let z = $and($srli::<4>(hi), m);
+        let r = $srli::<22>(hi);
+        [$t::from_raw($cvt(x)), $t::from_raw($cvt(y)), $t::from_raw($cvt(z)), $t::from_raw($cvt(r))]
+    }};
+}
+
+/// The centres less `eye` and the radii from the fields of packed samples as lanes
+/// (`[x, y, z, radius code]`): `Dequantizer::center`'s and `radius`'s f32 operations in the
+/// same order (`min + q·step`, `code·unit`), then one subtraction per axis.
+#[cfg(target_arch = "x86_64")]
+#[inline(always)]
+fn dequantize<L: Arith>(deq: &Dequantizer, eye: [f32; 3], q: [L; 4]) -> [L; 4] {
+    let [fx, fy, fz, fr] = q;
+    [
+        (L::splat(deq.min.x) + fx * L::splat(deq.step.x)) - L::splat(eye[0]),
+        (L::splat(deq.min.y) + fy * L::splat(deq.step.y)) - L::splat(eye[1]),
+        (L::splat(deq.min.z) + fz * L::splat(deq.step.z)) - L::splat(eye[2]),
+        fr * L::splat(deq.radius_unit),
+    ]
+}
+
 /// [`decode_scalar`]'s values of up to sixteen samples into `out` (x, y, z, radius; entries
 /// past `s` unchanged).
 #[inline(always)]
@@ -248,15 +202,7 @@ pub(crate) fn decode_scalar_into(deq: &Dequantizer, eye: [f32; 3], s: &[u64], ou
 /// sixteen for the AVX-512 bound pass): arithmetic, square root, comparisons (masks are lanes
 /// with all bits set or clear), selects. Every implementation has exactly the semantics noted
 /// per method, so a kernel generic over it computes the same values on every implementation.
-pub(crate) trait Arith:
-    Copy
-    + Add<Output = Self>
-    + Sub<Output = Self>
-    + Mul<Output = Self>
-    + Div<Output = Self>
-    + BitAnd<Output = Self>
-    + BitOr<Output = Self>
-{
+pub(crate) trait Arith: volwarp_lanes::Ops {
     /// All lanes `x`.
     fn splat(x: f32) -> Self;
     /// IEEE square root per lane.
@@ -306,20 +252,12 @@ pub(crate) trait BoundLanes: Arith {
         store_records_scalar(c, out)
     }
     /// The rectangles of the lanes of `ok` (bit `l`: lane `l`) with the inclusive pixel spans
-    /// `x0..=x1`, `y0..=y1` (non-empty ones only), and what binning needs of them
+    /// `x0..=x1`, `y0..=y1` (`spans`: `[x0, x1, y0, y1]`; non-empty ones only), and what binning needs of them
     /// ([`RectLanes`]); tiles are `1 << tile_log2` pixels wide, and a rectangle over more
     /// than `max_tiles` of them is large.
     #[inline(always)]
-    fn rects(
-        ok: u32,
-        x0: &[i32; 16],
-        x1: &[i32; 16],
-        y0: &[i32; 16],
-        y1: &[i32; 16],
-        tile_log2: u32,
-        max_tiles: i32,
-    ) -> RectLanes {
-        rects_scalar::<Self>(ok, [x0, x1, y0, y1], tile_log2, max_tiles)
+    fn rects(ok: u32, spans: [&[i32; 16]; 4], tile_log2: u32, max_tiles: i32) -> RectLanes {
+        rects_scalar::<Self>(ok, spans, tile_log2, max_tiles)
     }
 }
 
@@ -387,6 +325,39 @@ pub(crate) struct RectLanes {
     pub(crate) union: u64,
 }
 
+/// The operands of the lanes' tests: every pair of NaNs, signed zeros, infinities, subnormals
+/// and ordinary values, `N` pairs at a time (as two arrays of lanes).
+#[cfg(all(test, target_arch = "x86_64"))]
+pub(crate) fn test_operands<const N: usize>() -> Vec<([f32; N], [f32; N])> {
+    let vals = [0.0, -0.0, 1.0, -1.0, 0.5, 3.0, 1e-40, f32::MAX, f32::INFINITY, -f32::INFINITY, f32::NAN, -f32::NAN];
+    let pairs: Vec<(f32, f32)> = vals.iter().flat_map(|&a| vals.iter().map(move |&b| (a, b))).collect();
+    pairs.chunks_exact(N).map(|c| (core::array::from_fn(|l| c[l].0), core::array::from_fn(|l| c[l].1))).collect()
+}
+
+/// The dequantizer of the lanes' decode tests.
+#[cfg(all(test, target_arch = "x86_64"))]
+pub(crate) fn test_dequantizer() -> Dequantizer {
+    use volwarp_core::sample::Bounds;
+    Dequantizer::new(Bounds::new(Vec3::new(-1.5, 0.25, 3.0), Vec3::new(2.0, 7.0, 3.5)), 0.0123)
+}
+
+/// `N` packed samples for the lanes' decode tests, from the xorshift state `x`: every bit
+/// pattern class (random, all ones, zero, no radius bits) by turns.
+#[cfg(all(test, target_arch = "x86_64"))]
+pub(crate) fn test_samples<const N: usize>(round: usize, x: &mut u64) -> [u64; N] {
+    core::array::from_fn(|l| {
+        *x ^= *x << 13;
+        *x ^= *x >> 7;
+        *x ^= *x << 17;
+        match (round + l) % 4 {
+            0 => *x,
+            1 => u64::MAX,
+            2 => 0,
+            _ => *x & 0x0000_000f_ffff_ffff,
+        }
+    })
+}
+
 /// The first eight entries of `a`.
 #[inline(always)]
 fn first8<T: Copy>(a: &[T; 16]) -> [T; 8] {
@@ -427,16 +398,8 @@ impl<L: Lanes> BoundLanes for L {
         L::store_records8(c, out)
     }
     #[inline(always)]
-    fn rects(
-        ok: u32,
-        x0: &[i32; 16],
-        x1: &[i32; 16],
-        y0: &[i32; 16],
-        y1: &[i32; 16],
-        tile_log2: u32,
-        max_tiles: i32,
-    ) -> RectLanes {
-        L::rects8(ok, [x0, x1, y0, y1], tile_log2, max_tiles)
+    fn rects(ok: u32, spans: [&[i32; 16]; 4], tile_log2: u32, max_tiles: i32) -> RectLanes {
+        L::rects8(ok, spans, tile_log2, max_tiles)
     }
 }
 
@@ -520,61 +483,54 @@ pub(crate) trait Lanes: Arith {
     }
 }
 
-/// The portable lanes: `wide`'s, whatever it was compiled for.
-impl Arith for f32x8 {
-    #[inline(always)]
-    fn splat(x: f32) -> Self {
-        f32x8::splat(x)
-    }
-    #[inline(always)]
-    fn sqrt(self) -> Self {
-        f32x8::sqrt(self)
-    }
-    #[inline(always)]
-    fn max(self, rhs: Self) -> Self {
-        f32x8::max(self, rhs)
-    }
-    #[inline(always)]
-    fn fast_min(self, rhs: Self) -> Self {
-        f32x8::fast_min(self, rhs)
-    }
-    #[inline(always)]
-    fn fast_max(self, rhs: Self) -> Self {
-        f32x8::fast_max(self, rhs)
-    }
-    #[inline(always)]
-    fn simd_lt(self, rhs: Self) -> Self {
-        f32x8::simd_lt(self, rhs)
-    }
-    #[inline(always)]
-    fn simd_le(self, rhs: Self) -> Self {
-        f32x8::simd_le(self, rhs)
-    }
-    #[inline(always)]
-    fn simd_gt(self, rhs: Self) -> Self {
-        f32x8::simd_gt(self, rhs)
-    }
-    #[inline(always)]
-    fn simd_ge(self, rhs: Self) -> Self {
-        f32x8::simd_ge(self, rhs)
-    }
-    #[inline(always)]
-    fn simd_eq(self, rhs: Self) -> Self {
-        f32x8::simd_eq(self, rhs)
-    }
-    #[inline(always)]
-    fn select(self, if_true: Self, if_false: Self) -> Self {
-        f32x8::select(self, if_true, if_false)
-    }
-    #[inline(always)]
-    fn to_bitmask(self) -> u32 {
-        f32x8::to_bitmask(self)
-    }
-    #[inline(always)]
-    fn any(self) -> bool {
-        f32x8::any(self)
-    }
+/// [`Arith`] on lane types whose own methods of the same names have its semantics: `wide`'s
+/// `f32x8` (the portable lanes, whatever `wide` was compiled for) and the base types of
+/// `volwarp_lanes` (whose `splat` takes their token, `$token()`).
+macro_rules! arith_by_methods {
+    ($($t:ident $(($token:ident))?),*) => {$(
+        impl Arith for $t {
+            #[inline(always)]
+            fn splat(x: f32) -> Self {
+                $t::splat($($token(),)? x)
+            }
+            by_methods!($t: unary sqrt; binary max fast_min fast_max simd_lt simd_le simd_gt simd_ge simd_eq);
+            #[inline(always)]
+            fn select(self, if_true: Self, if_false: Self) -> Self {
+                $t::select(self, if_true, if_false)
+            }
+            #[inline(always)]
+            fn to_bitmask(self) -> u32 {
+                $t::to_bitmask(self)
+            }
+            #[inline(always)]
+            fn any(self) -> bool {
+                $t::any(self)
+            }
+        }
+    )*};
 }
+
+/// Trait methods that are the type's own methods of the same names: `unary` ones taking
+/// `self`, `binary` ones `self` and `rhs`.
+macro_rules! by_methods {
+    ($t:ident: unary $($u:ident)*; binary $($b:ident)*) => {
+        $(
+            #[inline(always)]
+            fn $u(self) -> Self {
+                $t::$u(self)
+            }
+        )*
+        $(
+            #[inline(always)]
+            fn $b(self, rhs: Self) -> Self {
+                $t::$b(self, rhs)
+            }
+        )*
+    };
+}
+arith_by_methods!(f32x8);
+#[cfg(target_arch = "x86_64")]
+arith_by_methods!(Avx2(avx2), Avx512(avx512));
 
 impl Lanes for f32x8 {
     type U = u32x8;
@@ -582,22 +538,7 @@ impl Lanes for f32x8 {
     fn new(a: [f32; 8]) -> Self {
         f32x8::new(a)
     }
-    #[inline(always)]
-    fn floor(self) -> Self {
-        f32x8::floor(self)
-    }
-    #[inline(always)]
-    fn ceil(self) -> Self {
-        f32x8::ceil(self)
-    }
-    #[inline(always)]
-    fn min(self, rhs: Self) -> Self {
-        f32x8::min(self, rhs)
-    }
-    #[inline(always)]
-    fn is_finite(self) -> Self {
-        f32x8::is_finite(self)
-    }
+    by_methods!(f32x8: unary floor ceil is_finite; binary min);
     #[inline(always)]
     fn all(self) -> bool {
         f32x8::all(self)
@@ -639,154 +580,73 @@ impl Lanes for f32x8 {
 }
 
 #[cfg(target_arch = "x86_64")]
-pub(crate) use avx2::Avx2;
+pub(crate) use volwarp_lanes::{Avx2, Avx512};
+
+/// The AVX2 token inside the AVX2 lanes' methods and kernels.
+///
+/// `volwarp_lanes`' invariant (a value of its lane types exists only where the CPU has their
+/// features) holds for every value made in this crate too: the `Arith`, `Lanes` and
+/// `BoundLanes` methods of [`Avx2`] and [`Avx512`] run only inside the instances of
+/// [`dispatch!`] compiled for their features, which run only where `volwarp_lanes::level()`
+/// gave the token (tests: a token's `detected()`).
 #[cfg(target_arch = "x86_64")]
-pub(crate) use avx512::Avx512;
+#[inline(always)]
+pub(crate) fn avx2() -> volwarp_lanes::Avx2Token {
+    // SAFETY: called only where the CPU has AVX2 (see above).
+    unsafe { volwarp_lanes::Avx2Token::new_unchecked() }
+}
+
+/// The AVX-512 token inside the AVX-512 lanes' methods (see [`avx2`]).
+#[cfg(target_arch = "x86_64")]
+#[inline(always)]
+pub(crate) fn avx512() -> volwarp_lanes::Avx512Token {
+    // SAFETY: called only where the CPU has AVX2, AVX-512 F and DQ (see [`avx2`]).
+    unsafe { volwarp_lanes::Avx512Token::new_unchecked() }
+}
 
 #[cfg(target_arch = "x86_64")]
 mod avx512;
 
 #[cfg(target_arch = "x86_64")]
 mod avx2 {
-    use super::{Arith, Lanes, RectLanes};
+    use super::{avx2, Avx2, Lanes, RectLanes};
     use core::arch::x86_64::*;
-    use core::ops::{Add, BitAnd, BitOr, Div, Mul, Sub};
     use volwarp_core::sample::{Dequantizer, POS_BITS, RADIUS_BITS};
+    use volwarp_lanes::Avx2I;
 
-    /// Eight `f32` lanes in one AVX register, for the kernel compiled with AVX2.
-    ///
-    /// **Invariant**: values of this type and calls of its methods exist only on CPUs with
-    /// AVX2. The type is private to the crate, whose only users of it are the
-    /// `#[target_feature(enable = "avx2")]` kernels of the packet tracer and the sphere
-    /// splatter, called only after `is_x86_feature_detected!("avx2")`. This is what every
-    /// `unsafe` block below relies on.
-    #[derive(Clone, Copy)]
-    pub(crate) struct Avx2(__m256);
-
-    /// A binary operator as one AVX instruction.
-    macro_rules! binop {
-        ($tr:ident, $f:ident, $intr:ident) => {
-            impl $tr for Avx2 {
-                type Output = Avx2;
-                #[inline(always)]
-                fn $f(self, rhs: Avx2) -> Avx2 {
-                    // SAFETY: AVX is available (the type's invariant).
-                    Avx2(unsafe { $intr(self.0, rhs.0) })
-                }
-            }
-        };
-    }
-    binop!(Add, add, _mm256_add_ps);
-    binop!(Sub, sub, _mm256_sub_ps);
-    binop!(Mul, mul, _mm256_mul_ps);
-    binop!(Div, div, _mm256_div_ps);
-    binop!(BitAnd, bitand, _mm256_and_ps);
-    binop!(BitOr, bitor, _mm256_or_ps);
-
-    impl Avx2 {
-        /// Ordered, non-signalling comparison `P` (a `_CMP_*_OQ`), as `wide`'s comparisons:
-        /// false where either lane is NaN.
-        #[inline(always)]
-        fn cmp<const P: i32>(self, rhs: Avx2) -> Avx2 {
-            // SAFETY: AVX is available (the type's invariant).
-            Avx2(unsafe { _mm256_cmp_ps::<P>(self.0, rhs.0) })
-        }
-    }
-
-    // SAFETY (every `unsafe` block of this impl): AVX and AVX2 are available (the type's
-    // invariant); the intrinsics have no other precondition, except `_mm256_loadu_ps` and
-    // `_mm256_storeu_si256`, whose pointers are to eight `f32` / `u32` as noted there.
-    impl Arith for Avx2 {
-        #[inline(always)]
-        fn splat(x: f32) -> Self {
-            Avx2(unsafe { _mm256_set1_ps(x) })
-        }
-        #[inline(always)]
-        fn sqrt(self) -> Self {
-            // `vsqrtps`: correctly rounded, as `sqrtps`.
-            Avx2(unsafe { _mm256_sqrt_ps(self.0) })
-        }
-        #[inline(always)]
-        fn max(self, rhs: Self) -> Self {
-            // `wide`: `rhs.is_nan().select(self, self.fast_max(rhs))`.
-            rhs.cmp::<_CMP_UNORD_Q>(rhs).select(self, self.fast_max(rhs))
-        }
-        #[inline(always)]
-        fn fast_min(self, rhs: Self) -> Self {
-            // `vminps` with `minps`'s operand order: `self < rhs ? self : rhs`.
-            Avx2(unsafe { _mm256_min_ps(self.0, rhs.0) })
-        }
-        #[inline(always)]
-        fn fast_max(self, rhs: Self) -> Self {
-            // `vmaxps` with `maxps`'s operand order: `self > rhs ? self : rhs`.
-            Avx2(unsafe { _mm256_max_ps(self.0, rhs.0) })
-        }
-        #[inline(always)]
-        fn simd_lt(self, rhs: Self) -> Self {
-            self.cmp::<_CMP_LT_OQ>(rhs)
-        }
-        #[inline(always)]
-        fn simd_le(self, rhs: Self) -> Self {
-            self.cmp::<_CMP_LE_OQ>(rhs)
-        }
-        #[inline(always)]
-        fn simd_gt(self, rhs: Self) -> Self {
-            self.cmp::<_CMP_GT_OQ>(rhs)
-        }
-        #[inline(always)]
-        fn simd_ge(self, rhs: Self) -> Self {
-            self.cmp::<_CMP_GE_OQ>(rhs)
-        }
-        #[inline(always)]
-        fn simd_eq(self, rhs: Self) -> Self {
-            self.cmp::<_CMP_EQ_OQ>(rhs)
-        }
-        #[inline(always)]
-        fn select(self, if_true: Self, if_false: Self) -> Self {
-            // `vblendvps` reads the sign bit, i.e. the whole lane of a mask.
-            Avx2(unsafe { _mm256_blendv_ps(if_false.0, if_true.0, self.0) })
-        }
-        #[inline(always)]
-        fn to_bitmask(self) -> u32 {
-            (unsafe { _mm256_movemask_ps(self.0) }) as u32
-        }
-        #[inline(always)]
-        fn any(self) -> bool {
-            // `vtestps`: ZF is set when no sign bit is.
-            unsafe { _mm256_testz_ps(self.0, self.0) == 0 }
-        }
-    }
-
-    // SAFETY (every `unsafe` block of this impl): as for `Arith` above.
+    // SAFETY (every `unsafe` block of this impl): AVX2 is available (`volwarp_lanes`'
+    // invariant: a value proves it, and the methods without one run only in the AVX2
+    // instances); the loads and stores are of the sizes noted there.
     impl Lanes for Avx2 {
         type U = __m256i;
         const AVX2: bool = true;
 
         #[inline(always)]
         fn new(a: [f32; 8]) -> Self {
-            // `a` is eight readable `f32`; the load needs no alignment.
-            Avx2(unsafe { _mm256_loadu_ps(a.as_ptr()) })
+            Avx2::load(avx2(), &a)
         }
         #[inline(always)]
         fn floor(self) -> Self {
             // `vroundps` toward −∞, as `wide`'s AVX path and `f32::floor`.
-            Avx2(unsafe { _mm256_floor_ps(self.0) })
+            // SAFETY: AVX2 is available (`volwarp_lanes`' invariant, see [`super::avx2`]).
+            unsafe { Avx2::from_raw(_mm256_floor_ps(self.raw())) }
         }
         #[inline(always)]
         fn ceil(self) -> Self {
             // `vroundps` toward +∞, as `wide`'s AVX path and `f32::ceil`.
-            Avx2(unsafe { _mm256_ceil_ps(self.0) })
+            // SAFETY: AVX2 is available (`volwarp_lanes`' invariant, see [`super::avx2`]).
+            unsafe { Avx2::from_raw(_mm256_ceil_ps(self.raw())) }
         }
         #[inline(always)]
         fn min(self, rhs: Self) -> Self {
             // `wide`: `rhs.is_nan().select(self, self.fast_min(rhs))`.
-            rhs.cmp::<_CMP_UNORD_Q>(rhs).select(self, self.fast_min(rhs))
+            Avx2::min(self, rhs)
         }
         #[inline(always)]
         fn is_finite(self) -> Self {
             // |x| < ∞: false for ±∞ and NaN, as `wide`'s exponent test.
-            let abs = Avx2(unsafe { _mm256_andnot_ps(_mm256_set1_ps(-0.0), self.0) });
-            abs.simd_lt(Avx2::splat(f32::INFINITY))
+            let abs = self.and_not(Avx2::splat(avx2(), -0.0));
+            abs.simd_lt(Avx2::splat(avx2(), f32::INFINITY))
         }
         #[inline(always)]
         fn all(self) -> bool {
@@ -794,49 +654,53 @@ mod avx2 {
         }
         #[inline(always)]
         fn splat_u(x: u32) -> __m256i {
+            // SAFETY: AVX2 is available (`volwarp_lanes`' invariant, see [`super::avx2`]).
             unsafe { _mm256_set1_epi32(x as i32) }
         }
         #[inline(always)]
         fn lt_u(a: __m256i, b: __m256i) -> Self {
             // Unsigned `a < b` is signed `b > a` with the top bits flipped (`wide` does the same).
+            // SAFETY: AVX2 is available (`volwarp_lanes`' invariant, see [`super::avx2`]).
             unsafe {
                 let h = _mm256_set1_epi32(i32::MIN);
-                Avx2(_mm256_castsi256_ps(_mm256_cmpgt_epi32(_mm256_xor_si256(b, h), _mm256_xor_si256(a, h))))
+                Avx2::from_raw(_mm256_castsi256_ps(_mm256_cmpgt_epi32(_mm256_xor_si256(b, h), _mm256_xor_si256(a, h))))
             }
         }
         #[inline(always)]
         fn select_u(self, if_true: __m256i, if_false: __m256i) -> __m256i {
+            // SAFETY: AVX2 is available (`volwarp_lanes`' invariant, see [`super::avx2`]).
             unsafe {
                 let (t, f) = (_mm256_castsi256_ps(if_true), _mm256_castsi256_ps(if_false));
-                _mm256_castps_si256(_mm256_blendv_ps(f, t, self.0))
+                _mm256_castps_si256(_mm256_blendv_ps(f, t, self.raw()))
             }
         }
         #[inline(always)]
         fn new_u(a: [u32; 8]) -> __m256i {
             // `a` is 32 readable bytes; the load needs no alignment.
+            // SAFETY: AVX2 is available (`volwarp_lanes`' invariant, see [`super::avx2`]); `a` is 32 readable bytes.
             unsafe { _mm256_loadu_si256(a.as_ptr().cast()) }
         }
         #[inline(always)]
         fn u_to_array(u: __m256i) -> [u32; 8] {
             let mut a = [0u32; 8];
             // `a` is 32 writable bytes; the store needs no alignment.
+            // SAFETY: AVX2 is available (`volwarp_lanes`' invariant, see [`super::avx2`]); `a` is 32 writable bytes.
             unsafe { _mm256_storeu_si256(a.as_mut_ptr().cast(), u) };
             a
         }
         #[inline(always)]
         fn to_array(self) -> [f32; 8] {
-            let mut a = [0f32; 8];
-            // `a` is 32 writable bytes; the store needs no alignment.
-            unsafe { _mm256_storeu_ps(a.as_mut_ptr(), self.0) };
-            a
+            Avx2::to_array(self)
         }
         #[inline(always)]
         fn permute(self, idx: __m256i) -> Self {
             // `vpermps` reads the low three bits of each index.
-            Avx2(unsafe { _mm256_permutevar8x32_ps(self.0, idx) })
+            // SAFETY: AVX2 is available (`volwarp_lanes`' invariant, see [`super::avx2`]).
+            unsafe { Avx2::from_raw(_mm256_permutevar8x32_ps(self.raw(), idx)) }
         }
         #[inline(always)]
         fn permute_u(a: __m256i, idx: __m256i) -> __m256i {
+            // SAFETY: AVX2 is available (`volwarp_lanes`' invariant, see [`super::avx2`]).
             unsafe { _mm256_permutevar8x32_epi32(a, idx) }
         }
         /// Eight records by a 4×8 transpose in registers (four 32-byte stores); fewer by the
@@ -846,16 +710,11 @@ mod avx2 {
             let Some(out) = out.first_chunk_mut::<8>() else {
                 return super::store_records_scalar(c, out);
             };
+            // SAFETY: AVX2 is available (`volwarp_lanes`' invariant, see [`super::avx2`]); the stores write the 128 bytes of `out` (noted below).
             unsafe {
-                let [a, b, x, r] = [c[0].0, c[1].0, c[2].0, c[3].0];
-                let (t0, t1) = (_mm256_unpacklo_ps(a, b), _mm256_unpackhi_ps(a, b));
-                let (t2, t3) = (_mm256_unpacklo_ps(x, r), _mm256_unpackhi_ps(x, r));
-                let pd = _mm256_castps_pd;
                 // Records l and l + 4 in the halves of u_l.
-                let u0 = _mm256_castpd_ps(_mm256_unpacklo_pd(pd(t0), pd(t2)));
-                let u1 = _mm256_castpd_ps(_mm256_unpackhi_pd(pd(t0), pd(t2)));
-                let u2 = _mm256_castpd_ps(_mm256_unpacklo_pd(pd(t1), pd(t3)));
-                let u3 = _mm256_castpd_ps(_mm256_unpackhi_pd(pd(t1), pd(t3)));
+                let [u0, u1, u2, u3] = Avx2::transpose_blocks(c);
+                let (u0, u1, u2, u3) = (u0.raw(), u1.raw(), u2.raw(), u3.raw());
                 // `out` is eight records of 16 bytes: four 32-byte stores.
                 let p = out.as_mut_ptr().cast::<f32>();
                 _mm256_storeu_ps(p, _mm256_permute2f128_ps::<0x20>(u0, u1));
@@ -871,6 +730,7 @@ mod avx2 {
         /// the maxima; every field is below 2¹⁵, so no field borrows from the next).
         #[inline(always)]
         fn rects8(ok: u32, spans: [&[i32; 16]; 4], tile_log2: u32, max_tiles: i32) -> RectLanes {
+            // SAFETY: AVX2 is available (`volwarp_lanes`' invariant, see [`super::avx2`]); the loads read the 64 bytes of the spans, the stores write `bits` (noted below).
             unsafe {
                 let load = |v: &[i32; 16]| _mm256_loadu_si256(v.as_ptr().cast());
                 let (a, b, c, d) = (load(spans[0]), load(spans[1]), load(spans[2]), load(spans[3]));
@@ -915,22 +775,20 @@ mod avx2 {
         #[inline(always)]
         fn from_ints(a: &[i32; 8]) -> Self {
             // `a` is 32 readable bytes; `vcvtdq2ps` rounds to nearest as `as f32` does.
-            unsafe { Avx2(_mm256_cvtepi32_ps(_mm256_loadu_si256(a.as_ptr().cast()))) }
+            // SAFETY: AVX2 is available (`volwarp_lanes`' invariant, see [`super::avx2`]); `a` is 32 readable bytes.
+            unsafe { Avx2::from_raw(_mm256_cvtepi32_ps(_mm256_loadu_si256(a.as_ptr().cast()))) }
         }
         #[inline(always)]
         fn span_ints(lo: Self, hi: Self, max: u32) -> ([i32; 8], [i32; 8]) {
             // `vcvttps2dq` truncates as `as i32` does in range; the comparison and the
             // integer max/min are the scalar ones per lane.
+            // SAFETY: AVX2 is available (`volwarp_lanes`' invariant, see [`super::avx2`]).
             unsafe {
-                let t = _mm256_cvttps_epi32(lo.0);
-                let below = _mm256_castps_si256(_mm256_cmp_ps::<_CMP_LT_OQ>(_mm256_cvtepi32_ps(t), lo.0));
+                let t = _mm256_cvttps_epi32(lo.raw());
+                let below = _mm256_castps_si256(_mm256_cmp_ps::<_CMP_LT_OQ>(_mm256_cvtepi32_ps(t), lo.raw()));
                 let c = _mm256_max_epi32(_mm256_sub_epi32(t, below), _mm256_setzero_si256());
-                let h = _mm256_min_epi32(_mm256_cvttps_epi32(hi.0), _mm256_set1_epi32(max as i32));
-                let (mut a, mut b) = ([0i32; 8], [0i32; 8]);
-                // `a`, `b` are 32 writable bytes each; the stores need no alignment.
-                _mm256_storeu_si256(a.as_mut_ptr().cast(), c);
-                _mm256_storeu_si256(b.as_mut_ptr().cast(), h);
-                (a, b)
+                let h = _mm256_min_epi32(_mm256_cvttps_epi32(hi.raw()), _mm256_set1_epi32(max as i32));
+                (Avx2I::from_raw(c).to_array(), Avx2I::from_raw(h).to_array())
             }
         }
         /// The sample layout (`volwarp_core::sample`): x in bits 0–17, y in 18–35, z in
@@ -940,7 +798,8 @@ mod avx2 {
         #[inline(always)]
         fn decode8(deq: &Dequantizer, eye: [f32; 3], s: &[u64; 8]) -> [Self; 4] {
             const _: () = assert!(POS_BITS == 18 && RADIUS_BITS == 10);
-            // `s` is 64 readable bytes; the loads need no alignment.
+            // SAFETY: AVX2 is available (`volwarp_lanes`' invariant, see [`super::avx2`]); `s` is
+            // 64 readable bytes; the loads need no alignment.
             unsafe {
                 let a = _mm256_loadu_si256(s.as_ptr().cast());
                 let b = _mm256_loadu_si256(s[4..].as_ptr().cast());
@@ -948,41 +807,23 @@ mod avx2 {
                 let (pa, pb) = (_mm256_permutevar8x32_epi32(a, idx), _mm256_permutevar8x32_epi32(b, idx));
                 let lo = _mm256_permute2x128_si256::<0x20>(pa, pb);
                 let hi = _mm256_permute2x128_si256::<0x31>(pa, pb);
-                let m = _mm256_set1_epi32(0x3ffff);
-                let x = _mm256_and_si256(lo, m);
-                let y = _mm256_or_si256(
-                    _mm256_srli_epi32::<18>(lo),
-                    _mm256_slli_epi32::<14>(_mm256_and_si256(hi, _mm256_set1_epi32(0xf))),
-                );
-                let z = _mm256_and_si256(_mm256_srli_epi32::<4>(hi), m);
-                let r = _mm256_srli_epi32::<22>(hi);
-                // No closures: one would be compiled without AVX2, every intrinsic a call.
-                let (fx, fy, fz, fr) = (
-                    Avx2(_mm256_cvtepi32_ps(x)),
-                    Avx2(_mm256_cvtepi32_ps(y)),
-                    Avx2(_mm256_cvtepi32_ps(z)),
-                    Avx2(_mm256_cvtepi32_ps(r)),
-                );
-                [
-                    (Avx2::splat(deq.min.x) + fx * Avx2::splat(deq.step.x)) - Avx2::splat(eye[0]),
-                    (Avx2::splat(deq.min.y) + fy * Avx2::splat(deq.step.y)) - Avx2::splat(eye[1]),
-                    (Avx2::splat(deq.min.z) + fz * Avx2::splat(deq.step.z)) - Avx2::splat(eye[2]),
-                    fr * Avx2::splat(deq.radius_unit),
-                ]
+                let fields = sample_fields!(Avx2, lo, hi; _mm256_and_si256 _mm256_or_si256 _mm256_srli_epi32
+                    _mm256_slli_epi32 _mm256_set1_epi32 _mm256_cvtepi32_ps);
+                super::dequantize(deq, eye, fields)
             }
         }
     }
 
     #[cfg(test)]
     mod tests {
-        use super::{Arith, Avx2, Dequantizer, Lanes};
         use crate::lanes::decode_scalar;
+        use crate::lanes::{Arith, Avx2, Lanes};
         use core::arch::x86_64::{__m256, __m256i};
         use wide::{f32x8, u32x8};
 
         fn bits(x: Avx2) -> [u32; 8] {
             // SAFETY: `__m256` is 32 bytes of plain data, as is `[u32; 8]`.
-            unsafe { core::mem::transmute::<__m256, [u32; 8]>(x.0) }
+            unsafe { core::mem::transmute::<__m256, [u32; 8]>(x.raw()) }
         }
 
         fn wbits(x: f32x8) -> [u32; 8] {
@@ -994,12 +835,7 @@ mod avx2 {
         /// function).
         #[target_feature(enable = "avx2")]
         fn check() {
-            let vals =
-                [0.0, -0.0, 1.0, -1.0, 0.5, 3.0, 1e-40, f32::MAX, f32::INFINITY, -f32::INFINITY, f32::NAN, -f32::NAN];
-            let pairs: Vec<(f32, f32)> = vals.iter().flat_map(|&a| vals.iter().map(move |&b| (a, b))).collect();
-            for c in pairs.chunks_exact(8) {
-                let a: [f32; 8] = core::array::from_fn(|l| c[l].0);
-                let b: [f32; 8] = core::array::from_fn(|l| c[l].1);
+            for (a, b) in crate::lanes::test_operands::<8>() {
                 let (x, y) = (<Avx2 as Lanes>::new(a), <Avx2 as Lanes>::new(b));
                 let (p, q) = (f32x8::new(a), f32x8::new(b));
                 let eq = |what: &str, r: Avx2, s: f32x8| assert_eq!(bits(r), wbits(s), "{what}: {a:?} {b:?}");
@@ -1011,7 +847,7 @@ mod avx2 {
                     assert!(ok, "{what}: {a:?} {b:?}: {r:?} {s:?}");
                 };
                 eq("new", x, p);
-                eq("splat", Avx2::splat(a[3]), <f32x8 as Arith>::splat(a[3]));
+                eq("splat", <Avx2 as Arith>::splat(a[3]), <f32x8 as Arith>::splat(a[3]));
                 same("add", x + y, p + q);
                 same("sub", x - y, p - q);
                 same("mul", x * y, p * q);
@@ -1056,26 +892,10 @@ mod avx2 {
                 assert_eq!(Avx2::u_to_array(u), wu.to_array());
             }
             // decode8: the lanes' unpacking against the scalar decode, every bit pattern class.
-            let deq = Dequantizer::new(
-                volwarp_core::sample::Bounds::new(
-                    volwarp_core::Vec3::new(-1.5, 0.25, 3.0),
-                    volwarp_core::Vec3::new(2.0, 7.0, 3.5),
-                ),
-                0.0123,
-            );
+            let deq = crate::lanes::test_dequantizer();
             let mut x = 0x9e37_79b9_7f4a_7c15u64;
             for round in 0..200 {
-                let s: [u64; 8] = core::array::from_fn(|l| {
-                    x ^= x << 13;
-                    x ^= x >> 7;
-                    x ^= x << 17;
-                    match (round + l) % 4 {
-                        0 => x,
-                        1 => u64::MAX,
-                        2 => 0,
-                        _ => x & 0x0000_000f_ffff_ffff,
-                    }
-                });
+                let s: [u64; 8] = crate::lanes::test_samples(round, &mut x);
                 let eye = [0.5, -2.0, 10.0];
                 let (a, w) = (Avx2::decode8(&deq, eye, &s), decode_scalar::<f32x8>(&deq, eye, &s));
                 for (p, q) in a.iter().zip(&w) {
@@ -1114,8 +934,8 @@ mod avx2 {
 
         #[test]
         fn avx2_lanes_equal_wide_bit_for_bit() {
-            if std::is_x86_feature_detected!("avx2") {
-                // SAFETY: the CPU supports AVX2 (checked just above).
+            if volwarp_lanes::Avx2Token::detected().is_some() {
+                // SAFETY: the token proves the CPU supports AVX2.
                 unsafe { check() }
             }
         }

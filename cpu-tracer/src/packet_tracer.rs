@@ -17,7 +17,7 @@
 //!   and compiled twice: with `wide::f32x8` (portable: two SSE halves on baseline x86-64,
 //!   whatever `wide` was built for elsewhere) and, on x86-64, with `lanes::Avx2` (`__m256`
 //!   intrinsics) inside a `#[target_feature(enable = "avx2")]` function, chosen per band by
-//!   `is_x86_feature_detected!("avx2")`. So one portable binary runs 256-bit ymm code where the
+//!   the lane level `volwarp_lanes` detected once. So one portable binary runs 256-bit ymm code where the
 //!   CPU has AVX2 (`wide` alone would not: it picks its representation when it is compiled, not
 //!   per function). Each `Avx2` operation reproduces the `wide` one it replaces (comparisons
 //!   ordered, `min`/`max` operand order and NaN handling, blends on full-lane masks), and no
@@ -354,7 +354,7 @@ mod tests {
                     ids_by_band(&scene, &cam, |l, b, w, i, rows| trace_band::<f32x8>(l, b, w, i, rows, &|id| id));
                 assert!(portable == scalar, "portable kernel");
                 #[cfg(target_arch = "x86_64")]
-                if std::is_x86_feature_detected!("avx2") {
+                if volwarp_lanes::Avx2Token::detected().is_some() {
                     let avx2 = ids_by_band(&scene, &cam, |l, b, w, i, rows| {
                         // SAFETY: the CPU supports AVX2 (checked just above).
                         unsafe { trace_band_avx2(l, b, w, i, rows, &|id| id) }

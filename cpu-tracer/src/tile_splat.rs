@@ -573,7 +573,7 @@ pub(crate) fn bound_group<L: BoundLanes>(
         // The lanes of `ok` with a non-empty span get their rectangle, the others the empty
         // one; with the large ones, the others, and the others' union.
         let tile_log2 = TILE.trailing_zeros();
-        let mut rl = L::rects(ok, &xs0, &xs1, &ys0, &ys1, tile_log2, MAX_TILES as i32);
+        let mut rl = L::rects(ok, [&xs0, &xs1, &ys0, &ys1], tile_log2, MAX_TILES as i32);
         if keep_centres {
             // Spheres of at most 2×2 pixels (lanes of `ok`, non-empty spans at most two
             // wide): their pixels' hits now, `L::N` spheres per lane operation, in place of
@@ -1317,9 +1317,11 @@ unsafe fn rows16(
     ties: Ties,
 ) -> bool {
     use lanes::Avx512;
+    // SAFETY: the caller guarantees AVX2, AVX-512 F and DQ (this function's contract).
+    let t = unsafe { volwarp_lanes::Avx512Token::new_unchecked() };
     let [x0, x1, y0, y1] = rect;
     let (c, r, i) = sphere;
-    let near = Avx512::splat(near);
+    let near = Avx512::splat(t, near);
     let mut all_culled = true;
     for y in y0..=y1 {
         for x in (x0..=x1).step_by(16) {
@@ -1332,7 +1334,7 @@ unsafe fn rows16(
             ) else {
                 continue;
             };
-            let d = Avx512::load16(ds);
+            let d = Avx512::load(t, ds);
             if cull && (near.simd_le(d).to_bitmask() & active) == 0 {
                 continue;
             }
@@ -1342,14 +1344,14 @@ unsafe fn rows16(
             let (Some(dx), Some(dy), Some(dz)) = (plane(0), plane(1), plane(2)) else {
                 continue;
             };
-            let dirs = [Avx512::load16(dx), Avx512::load16(dy), Avx512::load16(dz)];
-            if let Some((t, m)) = sphere_hits(&[0.0; 3], &dirs, c, r, Avx512::of_bits(active)) {
-                let win = (m & t.simd_lt(d)).to_bitmask();
-                let tie = (m & t.simd_eq(d)).to_bitmask();
-                t.store_masked(ds, win);
-                Avx512::store_u32_masked(is, win, i);
+            let dirs = [Avx512::load(t, dx), Avx512::load(t, dy), Avx512::load(t, dz)];
+            if let Some((hit, m)) = sphere_hits(&[0.0; 3], &dirs, c, r, Avx512::of_bits(t, active)) {
+                let win = (m & hit.simd_lt(d)).to_bitmask();
+                let tie = (m & hit.simd_eq(d)).to_bitmask();
+                hit.store_masked(ds, win);
+                Avx512::store_u32_masked(t, is, win, i);
                 if tie != 0 {
-                    keep_ties(ds, is, tie, &t.lanes(), i, false, ties);
+                    keep_ties(ds, is, tie, &hit.lanes(), i, false, ties);
                 }
             }
         }
@@ -1449,12 +1451,12 @@ mod tests {
                     match k {
                         0 => bound_run::<wide::f32x8>(&view, &vf, &deq, s, r, c, groups, grid, p),
                         #[cfg(target_arch = "x86_64")]
-                        1 if std::is_x86_feature_detected!("avx2") => {
+                        1 if volwarp_lanes::Avx2Token::detected().is_some() => {
                             // SAFETY: the CPU has AVX2 (checked).
                             unsafe { bound_avx2(&view, &vf, &deq, s, r, c, groups, grid, p) }
                         }
                         #[cfg(target_arch = "x86_64")]
-                        2 if std::is_x86_feature_detected!("avx512f") && std::is_x86_feature_detected!("avx512dq") => {
+                        2 if volwarp_lanes::Avx512Token::detected().is_some() => {
                             // SAFETY: the CPU has AVX2, AVX-512 F and DQ (checked).
                             unsafe { bound_avx512(&view, &vf, &deq, s, r, c, groups, grid, p) }
                         }

@@ -9,7 +9,7 @@ use volwarp_cpu_tracer::{build_scene, lane_kind, ScalarTracer, TileSplat, NO_HIT
 fn avx2_instances_equal_the_scalar_reference() {
     // SAFETY: set before any other thread of this process exists or reads the environment.
     unsafe { std::env::set_var("VOLWARP_LANES", "avx2") };
-    let avx2 = cfg!(target_arch = "x86_64") && std::is_x86_feature_detected!("avx2");
+    let avx2 = volwarp_lanes::detected() >= volwarp_lanes::LaneKind::Avx2;
     assert_eq!(lane_kind(), if avx2 { "avx2" } else { "portable" });
     let r = random_cloud(20_000, 0.004, 71, 128);
     let d = depth_image_frame(160, 1.5, 72);

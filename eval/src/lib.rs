@@ -22,6 +22,7 @@
 //! | [`demo_strip`] | the README demo's truth / stale / volwarp strip from a recorded session |
 //! | [`report`] | the `volwarp-eval` commands: files, charts, markdown |
 #![deny(missing_docs)]
+#![forbid(unsafe_code)]
 
 pub mod camera_paths;
 pub mod charts;

@@ -67,6 +67,7 @@ pub struct CountingAlloc;
 // thread-locals without destructors, which never allocate.
 unsafe impl GlobalAlloc for CountingAlloc {
     unsafe fn alloc(&self, l: Layout) -> *mut u8 {
+        // SAFETY: the caller keeps `GlobalAlloc::alloc`'s contract, which `System` takes over.
         let p = unsafe { System.alloc(l) };
         if !p.is_null() {
             note_alloc(l.size());
@@ -74,6 +75,7 @@ unsafe impl GlobalAlloc for CountingAlloc {
         p
     }
     unsafe fn alloc_zeroed(&self, l: Layout) -> *mut u8 {
+        // SAFETY: the caller keeps `GlobalAlloc::alloc_zeroed`'s contract, which `System` takes over.
         let p = unsafe { System.alloc_zeroed(l) };
         if !p.is_null() {
             note_alloc(l.size());
@@ -81,10 +83,12 @@ unsafe impl GlobalAlloc for CountingAlloc {
         p
     }
     unsafe fn dealloc(&self, p: *mut u8, l: Layout) {
+        // SAFETY: `p` and `l` come from this allocator, i.e. from `System` (its contract).
         unsafe { System.dealloc(p, l) };
         note_free(l.size());
     }
     unsafe fn realloc(&self, p: *mut u8, l: Layout, new: usize) -> *mut u8 {
+        // SAFETY: `p`, `l` and `new` keep `GlobalAlloc::realloc`'s contract, which `System` takes over.
         let q = unsafe { System.realloc(p, l, new) };
         if !q.is_null() {
             note_free(l.size());

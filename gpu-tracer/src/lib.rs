@@ -23,6 +23,7 @@
 //!
 //! [`Renderer`]: volwarp_core::Renderer
 #![deny(missing_docs)]
+#![forbid(unsafe_code)]
 
 pub mod adapter;
 pub mod buffers;

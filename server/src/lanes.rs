@@ -1,13 +1,13 @@
 //! The vector types (8 to 64 lanes) the packet marcher ([`crate::packet_march`]) is generic over:
 //! `f32` lanes (also used as masks), `i32` lanes, and gathers from `f32` slices.
 //!
-//! The same approach as the CPU tracer's lanes (`cpu-tracer/src/lanes.rs`), with the
-//! operations a marcher needs (truncation to integers, integer index arithmetic, gathers)
-//! instead of a tracer's; the server does not depend on the tracer, so the two trait
-//! definitions are separate. `wide` picks its representation when *it* is compiled (two SSE
-//! halves on baseline x86-64), so [`Avx2`] wraps the 256-bit registers directly; its
-//! `#[inline(always)]` methods become single AVX2 instructions once inlined into a function
-//! compiled with AVX2. Every method computes exactly what the scalar marcher's operation does
+//! The lane level, its tokens, the dispatch macro and the base types [`Avx2`] and [`Avx512`]
+//! are `volwarp_lanes`' (shared with the CPU tracer and core's codec); this module adds the
+//! operations a marcher needs (truncation to integers, integer index arithmetic, gathers) as
+//! the [`Lanes`] trait. `wide` picks its representation when *it* is compiled (two SSE halves
+//! on baseline x86-64), so the AVX types wrap the registers directly; their
+//! `#[inline(always)]` methods become single instructions once inlined into a function
+//! compiled with the features. Every method computes exactly what the scalar marcher's operation does
 //! (IEEE single precision, no fused multiply-add), so the packet marcher's results are the
 //! scalar marcher's bit for bit.
 //!
@@ -16,115 +16,33 @@
 use core::ops::{Add, BitAnd, BitOr, Div, Mul, Sub};
 use wide::{f32x8, i32x8};
 
-/// Which lanes the packet marcher may use: the widest this CPU has (the default), or no
-/// wider than a given kind (tests run every kind this CPU has against the scalar marcher;
-/// benchmarks compare them).
-#[derive(Clone, Copy, Debug, PartialEq, Eq, PartialOrd, Ord)]
-pub enum LaneKind {
-    /// `wide`'s lanes, compiled for the build's baseline (SSE2 on x86-64, NEON on aarch64):
-    /// sixteen rays of a 4×4 pixel block as two `f32x8` per value.
-    Portable = 0,
-    /// Thirty-two rays of an 8×4 block as four AVX2 registers per value.
-    Avx2 = 1,
-    /// Sixty-four rays of an 8×8 block as four AVX-512 registers per value (AVX-512 F and DQ).
-    Avx512 = 2,
-}
+pub use volwarp_lanes::{lane_kind, limit_lanes, LaneKind};
 
-static LANE_LIMIT: core::sync::atomic::AtomicU8 = core::sync::atomic::AtomicU8::new(LaneKind::Avx512 as u8);
-
-/// Limits the packet marcher to lanes no wider than `kind` (process-wide; every kind computes
-/// the same values).
-pub fn limit_lanes(kind: LaneKind) {
-    LANE_LIMIT.store(kind as u8, core::sync::atomic::Ordering::Relaxed);
-}
-
-impl core::str::FromStr for LaneKind {
-    type Err = String;
-    /// `portable`, `avx2` or `avx512`.
-    fn from_str(s: &str) -> Result<LaneKind, String> {
-        match s.to_ascii_lowercase().as_str() {
-            "portable" => Ok(LaneKind::Portable),
-            "avx2" => Ok(LaneKind::Avx2),
-            "avx512" => Ok(LaneKind::Avx512),
-            _ => Err(format!("unknown lane kind {s:?} (portable, avx2 or avx512)")),
-        }
-    }
-}
-
-/// Applies `VOLWARP_LANES` (`portable`, `avx2` or `avx512`), if set, with [`limit_lanes`]; an
-/// unknown value is logged and ignored. The server, its benches and `march_timing` call this.
+/// Warns (in the log) where `VOLWARP_LANES` is set to no known lane kind; a known one already
+/// clamps every kernel's lanes ([`volwarp_lanes::lane_kind`] reads it once). The server, its
+/// benches and `march_timing` call this.
 pub fn limit_lanes_from_env() {
     if let Ok(v) = std::env::var("VOLWARP_LANES") {
-        match v.parse() {
-            Ok(kind) => limit_lanes(kind),
-            Err(e) => log::warn!("VOLWARP_LANES: {e}"),
+        if let Err(e) = v.parse::<LaneKind>() {
+            log::warn!("VOLWARP_LANES: {v:?}: {e}");
         }
     }
 }
 
-/// The lanes the packet marcher uses now: the widest this CPU has within [`limit_lanes`].
-pub fn lane_kind() -> LaneKind {
-    let limit = LANE_LIMIT.load(core::sync::atomic::Ordering::Relaxed);
-    #[cfg(target_arch = "x86_64")]
-    {
-        if limit >= LaneKind::Avx512 as u8
-            && std::is_x86_feature_detected!("avx512f")
-            && std::is_x86_feature_detected!("avx512dq")
-        {
-            return LaneKind::Avx512;
-        }
-        if limit >= LaneKind::Avx2 as u8 && std::is_x86_feature_detected!("avx2") {
-            return LaneKind::Avx2;
-        }
-    }
-    let _ = limit;
-    LaneKind::Portable
-}
-
-/// Defines `$name`, which runs the kernel `$kernel::<L>` on the lanes [`lane_kind`] picks: the
-/// instance `$avx512`, compiled with AVX-512 F and DQ on `X2<X2<Avx512>>` (64 lanes); the
-/// instance `$avx2`, compiled with AVX2 on `X2<X2<Avx2>>` (32); or the portable
-/// `X2<wide::f32x8>` instance (16). Each instance's packet arrays are sized for its lanes (the
-/// kernel's const `M`). All compute the same values.
+/// Defines `$name`, which runs the kernel `$kernel::<L, M>` on the lanes
+/// [`volwarp_lanes::level`] picks (with [`volwarp_lanes::dispatch!`]): the instance `$avx512`,
+/// compiled with AVX-512 F and DQ on `X2<X2<Avx512>>` (64 lanes); the instance `$avx2`,
+/// compiled with AVX2 on `X2<X2<Avx2>>` (32); or the portable `X2<wide::f32x8>` instance (16).
+/// Each instance's packet arrays are sized for its lanes (the kernel's const `M`). All compute
+/// the same values.
 macro_rules! dispatch {
-    ($(#[$doc:meta])* fn $name:ident / $avx2:ident / $avx512:ident => $kernel:ident($($arg:ident: $ty:ty),* $(,)?)) => {
-        $(#[$doc])*
-        pub(crate) fn $name($($arg: $ty),*) {
-            match $crate::lanes::lane_kind() {
-                // SAFETY: `lane_kind` returns `Avx512` only where the CPU has AVX-512 F and DQ.
-                #[cfg(target_arch = "x86_64")]
-                $crate::lanes::LaneKind::Avx512 => unsafe { $avx512($($arg),*) },
-                // SAFETY: `lane_kind` returns `Avx2` only where the CPU has AVX2.
-                #[cfg(target_arch = "x86_64")]
-                $crate::lanes::LaneKind::Avx2 => unsafe { $avx2($($arg),*) },
-                _ => $kernel::<$crate::lanes::X2<wide::f32x8>, 16>($($arg),*),
-            }
-        }
-
-        /// The kernel on thirty-two [`crate::lanes::Avx2`] lanes (`X2<X2<Avx2>>`), compiled with
-        /// AVX2.
-        ///
-        /// # Safety
-        /// The CPU must support AVX2.
-        #[cfg(target_arch = "x86_64")]
-        #[target_feature(enable = "avx2")]
-        #[allow(clippy::too_many_arguments)]
-        unsafe fn $avx2($($arg: $ty),*) {
-            // `Avx2`'s invariant holds: the caller guarantees AVX2.
-            $kernel::<$crate::lanes::X2<$crate::lanes::X2<$crate::lanes::Avx2>>, 32>($($arg),*)
-        }
-
-        /// The kernel on sixty-four [`crate::lanes::Avx512`] lanes (`X2<X2<Avx512>>`), compiled
-        /// with AVX-512 F and DQ.
-        ///
-        /// # Safety
-        /// The CPU must support AVX-512 F and DQ.
-        #[cfg(target_arch = "x86_64")]
-        #[target_feature(enable = "avx512f,avx512dq")]
-        #[allow(clippy::too_many_arguments)]
-        unsafe fn $avx512($($arg: $ty),*) {
-            // `Avx512`'s invariant holds: the caller guarantees AVX-512 F and DQ.
-            $kernel::<$crate::lanes::X2<$crate::lanes::X2<$crate::lanes::Avx512>>, 64>($($arg),*)
+    ($(#[$doc:meta])* fn $name:ident / $avx2:ident / $avx512:ident => $($kernel:tt)*) => {
+        volwarp_lanes::dispatch! {
+            $(#[$doc])*
+            pub(crate) fn $name / $avx2 / $avx512 => $($kernel)*;
+            portable = [$crate::lanes::X2<wide::f32x8>, 16],
+            avx2 = [$crate::lanes::X2<$crate::lanes::X2<$crate::lanes::Avx2>>, 32],
+            avx512 = [$crate::lanes::X2<$crate::lanes::X2<$crate::lanes::Avx512>>, 64]
         }
     };
 }
@@ -149,15 +67,7 @@ pub(crate) trait Mask: Copy + BitAnd<Output = Self> + BitOr<Output = Self> {
 }
 
 /// `N` `f32` lanes and their companion `N` `i32` lanes and mask (`N` = 8, 16 or 32).
-pub(crate) trait Lanes:
-    Copy
-    + Add<Output = Self>
-    + Sub<Output = Self>
-    + Mul<Output = Self>
-    + Div<Output = Self>
-    + BitAnd<Output = Self>
-    + BitOr<Output = Self>
-{
+pub(crate) trait Lanes: volwarp_lanes::Ops {
     /// `i32` lanes, as many.
     type I: Copy + Add<Output = Self::I>;
     /// A mask of as many lanes.
@@ -485,84 +395,133 @@ impl<L: Lanes> Lanes for X2<L> {
 }
 
 #[cfg(target_arch = "x86_64")]
-pub(crate) use avx2::Avx2;
+pub(crate) use volwarp_lanes::{Avx2, Avx512};
 
+/// The lanes of AVX2 and AVX-512 (x86-64): the base types of `volwarp_lanes` with the packet
+/// marcher's operations.
+///
+/// `volwarp_lanes`' invariant (a value exists only where the CPU has the type's features)
+/// holds for every value made here too: this crate calls the `Lanes` and `Mask` methods of
+/// these types only inside the instances of [`dispatch!`] compiled for their features, which
+/// run only where `volwarp_lanes::level()` gave the token (tests: a token's `detected()`).
 #[cfg(target_arch = "x86_64")]
-mod avx2 {
+mod x86 {
     use super::{Lanes, Mask};
     use core::arch::x86_64::*;
-    use core::ops::{Add, BitAnd, BitOr, Div, Mul, Sub};
+    use core::ops::{BitAnd, BitOr};
+    use volwarp_lanes::{Avx2, Avx2I, Avx2Token, Avx512, Avx512I, Avx512Token};
 
-    /// Eight `f32` lanes in one AVX register, for the kernel compiled with AVX2.
-    ///
-    /// **Invariant**: values of this type and calls of its methods exist only on CPUs with
-    /// AVX2. The type is private to the crate, whose only user of it is the
-    /// `#[target_feature(enable = "avx2")]` instance of the packet marcher, called only after
-    /// `is_x86_feature_detected!("avx2")`. Every `unsafe` block below relies on this.
-    #[derive(Clone, Copy)]
-    pub(crate) struct Avx2(__m256);
+    /// The `Lanes` methods that are the base type's own operations (the same at both widths);
+    /// `$token()` gives the type's token.
+    macro_rules! base_methods {
+        ($t:ident, $ti:ident, $token:ident) => {
+            #[inline(always)]
+            fn splat(x: f32) -> Self {
+                $t::splat($token(), x)
+            }
+            #[inline(always)]
+            fn new(a: &[f32]) -> Self {
+                $t::load($token(), a.first_chunk().expect("a whole vector"))
+            }
+            #[inline(always)]
+            fn min(self, rhs: Self) -> Self {
+                // `vminps(self, rhs)`: `self < rhs ? self : rhs`, as `wide`'s `fast_min`.
+                self.fast_min(rhs)
+            }
+            #[inline(always)]
+            fn max(self, rhs: Self) -> Self {
+                self.fast_max(rhs)
+            }
+            #[inline(always)]
+            fn store(self, out: &mut [f32]) {
+                $t::store(self, out.first_chunk_mut().expect("a whole vector"))
+            }
+            #[inline(always)]
+            fn trunc_int(self) -> $ti {
+                // `vcvttps2dq`: truncation, exact for the documented range.
+                $t::trunc_int(self)
+            }
+            #[inline(always)]
+            fn int_to_float(i: $ti) -> Self {
+                i.to_float()
+            }
+            #[inline(always)]
+            fn splat_i(x: i32) -> $ti {
+                $ti::splat($token(), x)
+            }
+            #[inline(always)]
+            fn mul_i(a: $ti, b: $ti) -> $ti {
+                a.mul_lo(b)
+            }
+        };
+    }
 
-    /// Eight `i32` lanes in one AVX register (the same invariant as [`Avx2`]).
-    #[derive(Clone, Copy)]
-    pub(crate) struct Avx2I(__m256i);
-
-    macro_rules! binop {
-        ($tr:ident, $f:ident, $intr:ident) => {
-            impl $tr for Avx2 {
-                type Output = Avx2;
-                #[inline(always)]
-                fn $f(self, rhs: Avx2) -> Avx2 {
-                    // SAFETY: AVX is available (the type's invariant).
-                    Avx2(unsafe { $intr(self.0, rhs.0) })
+    /// `Lanes::unpack_bytes` and `unpack_shorts` with one width's intrinsics: each field by an
+    /// `and` and a logical shift right, converted to `f32` exactly.
+    macro_rules! unpack_methods {
+        ($t:ident, $ti:ident: $and:ident $srli:ident $set1:ident $cvt:ident) => {
+            #[inline(always)]
+            fn unpack_bytes(w: $ti) -> [Self; 4] {
+                // SAFETY: `w` proves the type's features (`volwarp_lanes`' invariant).
+                unsafe {
+                    let (w, m) = (w.raw(), $set1(255));
+                    [$and(w, m), $and($srli::<8>(w), m), $and($srli::<16>(w), m), $srli::<24>(w)]
+                        .map(|b| $t::from_raw($cvt(b)))
+                }
+            }
+            #[inline(always)]
+            fn unpack_shorts(w: $ti) -> [Self; 2] {
+                // SAFETY: `w` proves the type's features (`volwarp_lanes`' invariant).
+                unsafe {
+                    let lo = $and(w.raw(), $set1(0xffff));
+                    [lo, $srli::<16>(w.raw())].map(|b| $t::from_raw($cvt(b)))
                 }
             }
         };
     }
-    binop!(Add, add, _mm256_add_ps);
-    binop!(Sub, sub, _mm256_sub_ps);
-    binop!(Mul, mul, _mm256_mul_ps);
-    binop!(Div, div, _mm256_div_ps);
-    binop!(BitAnd, bitand, _mm256_and_ps);
-    binop!(BitOr, bitor, _mm256_or_ps);
 
-    impl Add for Avx2I {
-        type Output = Avx2I;
-        #[inline(always)]
-        fn add(self, rhs: Avx2I) -> Avx2I {
-            // SAFETY: AVX2 is available (the type's invariant).
-            Avx2I(unsafe { _mm256_add_epi32(self.0, rhs.0) })
-        }
+    /// The AVX2 token inside the AVX2 lanes' methods.
+    #[inline(always)]
+    fn avx2() -> Avx2Token {
+        // SAFETY: these methods run only where the CPU has AVX2 (the module's docs).
+        unsafe { Avx2Token::new_unchecked() }
     }
 
-    impl Avx2 {
-        /// Ordered, non-signalling comparison `P`: false where either lane is NaN.
-        #[inline(always)]
-        fn cmp<const P: i32>(self, rhs: Avx2) -> Avx2 {
-            // SAFETY: AVX is available (the type's invariant).
-            Avx2(unsafe { _mm256_cmp_ps::<P>(self.0, rhs.0) })
-        }
+    /// The AVX-512 token inside the AVX-512 lanes' methods.
+    #[inline(always)]
+    fn avx512() -> Avx512Token {
+        // SAFETY: these methods run only where the CPU has AVX-512 F and DQ (the module's docs).
+        unsafe { Avx512Token::new_unchecked() }
     }
 
-    // SAFETY (every `unsafe` block of this impl): AVX and AVX2 are available (the type's
-    // invariant); the intrinsics have no other precondition, except the loads, stores and
-    // gathers, whose pointers are noted there.
     impl Mask for Avx2 {
         const LANES: usize = 8;
         #[inline(always)]
         fn to_bitmask(self) -> u64 {
-            // SAFETY: AVX is available (the type's invariant).
-            (unsafe { _mm256_movemask_ps(self.0) }) as u32 as u64
+            Avx2::to_bitmask(self) as u64
         }
         #[inline(always)]
         fn any(self) -> bool {
-            // `vtestps`: ZF is set when no sign bit is. SAFETY: AVX is available.
-            unsafe { _mm256_testz_ps(self.0, self.0) == 0 }
+            Avx2::any(self)
         }
         #[inline(always)]
         fn and_not(self, rhs: Self) -> Self {
-            // SAFETY: AVX is available (the type's invariant).
-            Avx2(unsafe { _mm256_andnot_ps(rhs.0, self.0) })
+            Avx2::and_not(self, rhs)
         }
+    }
+
+    /// Every index of `idx` clamped to `0 ..= last` (signed max with 0, then min with `last`).
+    #[inline(always)]
+    fn clamp8(idx: Avx2I, last: i32) -> __m256i {
+        // SAFETY: `idx` proves AVX2 (`volwarp_lanes`' invariant).
+        unsafe { _mm256_min_epi32(_mm256_max_epi32(idx.raw(), _mm256_setzero_si256()), _mm256_set1_epi32(last)) }
+    }
+
+    /// The last index of a slice of `len` elements less `less` (lengths above `i32::MAX` are
+    /// never passed, as volumes hold at most 2²⁸ voxels).
+    #[inline(always)]
+    fn last_index(len: usize, less: usize) -> i32 {
+        (len - less).min(i32::MAX as usize) as i32
     }
 
     impl Lanes for Avx2 {
@@ -570,96 +529,48 @@ mod avx2 {
         type M = Avx2;
         const N: usize = 8;
 
-        #[inline(always)]
-        fn splat(x: f32) -> Self {
-            Avx2(unsafe { _mm256_set1_ps(x) })
-        }
-        #[inline(always)]
-        fn new(a: &[f32]) -> Self {
-            let a = &a[..8];
-            // `a` is eight readable `f32`; the load needs no alignment.
-            Avx2(unsafe { _mm256_loadu_ps(a.as_ptr()) })
-        }
-        #[inline(always)]
-        fn min(self, rhs: Self) -> Self {
-            // `vminps(self, rhs)`: `self < rhs ? self : rhs`, as `wide`'s `fast_min`.
-            Avx2(unsafe { _mm256_min_ps(self.0, rhs.0) })
-        }
-        #[inline(always)]
-        fn max(self, rhs: Self) -> Self {
-            Avx2(unsafe { _mm256_max_ps(self.0, rhs.0) })
-        }
+        base_methods!(Avx2, Avx2I, avx2);
         #[inline(always)]
         fn simd_lt(self, rhs: Self) -> Self {
-            self.cmp::<_CMP_LT_OQ>(rhs)
+            Avx2::simd_lt(self, rhs)
         }
         #[inline(always)]
         fn simd_gt(self, rhs: Self) -> Self {
-            self.cmp::<_CMP_GT_OQ>(rhs)
+            Avx2::simd_gt(self, rhs)
         }
         #[inline(always)]
         fn simd_ge(self, rhs: Self) -> Self {
-            self.cmp::<_CMP_GE_OQ>(rhs)
+            Avx2::simd_ge(self, rhs)
         }
         #[inline(always)]
         fn blend(m: Self, if_true: Self, if_false: Self) -> Self {
-            // `vblendvps` reads the sign bit, i.e. the whole lane of a mask.
-            Avx2(unsafe { _mm256_blendv_ps(if_false.0, if_true.0, m.0) })
+            Avx2::select(m, if_true, if_false)
         }
         #[inline(always)]
         fn mask_from_bits(bits: u64) -> Self {
             let a: [f32; 8] = core::array::from_fn(|l| if bits >> l & 1 == 1 { f32::from_bits(!0) } else { 0.0 });
-            Avx2::new(&a)
-        }
-        #[inline(always)]
-        fn store(self, out: &mut [f32]) {
-            let out = &mut out[..8];
-            // `out` is 32 writable bytes; the store needs no alignment.
-            unsafe { _mm256_storeu_ps(out.as_mut_ptr(), self.0) };
-        }
-        #[inline(always)]
-        fn trunc_int(self) -> Avx2I {
-            // `vcvttps2dq`: truncation, exact for the documented range.
-            Avx2I(unsafe { _mm256_cvttps_epi32(self.0) })
-        }
-        #[inline(always)]
-        fn int_to_float(i: Avx2I) -> Self {
-            Avx2(unsafe { _mm256_cvtepi32_ps(i.0) })
-        }
-        #[inline(always)]
-        fn splat_i(x: i32) -> Avx2I {
-            Avx2I(unsafe { _mm256_set1_epi32(x) })
-        }
-        #[inline(always)]
-        fn mul_i(a: Avx2I, b: Avx2I) -> Avx2I {
-            Avx2I(unsafe { _mm256_mullo_epi32(a.0, b.0) })
+            Avx2::load(avx2(), &a)
         }
         #[inline(always)]
         fn gather(data: &[f32], idx: Avx2I) -> Self {
             if data.is_empty() {
-                return Avx2::splat(0.0);
+                return Avx2::splat(avx2(), 0.0);
             }
-            // Clamp every index to 0 ..= len − 1 (signed max with 0, unsigned min with the
-            // last index: lengths above i32::MAX are never passed, as volumes hold at most
-            // 2²⁸ voxels), so each gathered element lies inside `data`.
-            let last = (data.len() - 1).min(i32::MAX as usize) as i32;
-            unsafe {
-                let i = _mm256_min_epi32(_mm256_max_epi32(idx.0, _mm256_setzero_si256()), _mm256_set1_epi32(last));
-                // SAFETY: every index is in 0 ..= len − 1 (just above), scale 4 is `f32`'s size.
-                Avx2(_mm256_i32gather_ps::<4>(data.as_ptr(), i))
-            }
+            let i = clamp8(idx, last_index(data.len(), 1));
+            // SAFETY: `idx` proves AVX2; every index is in 0 ..= len − 1 (just above), scale 4
+            // is `f32`'s size, so each gathered element lies inside `data`.
+            unsafe { Avx2::from_raw(_mm256_i32gather_ps::<4>(data.as_ptr(), i)) }
         }
         #[inline(always)]
         fn gather_pairs(data: &[f32], idx: Avx2I) -> (Self, Self) {
             if data.len() < 2 {
-                return (Avx2::splat(0.0), Avx2::splat(0.0));
+                return (Avx2::splat(avx2(), 0.0), Avx2::splat(avx2(), 0.0));
             }
-            let last = (data.len() - 2).min(i32::MAX as usize) as i32;
+            let i = clamp8(idx, last_index(data.len(), 2));
+            // SAFETY: `idx` proves AVX2; every index is in 0 ..= len − 2 (just above), so each
+            // 8-byte element (two `f32`, read as one `f64` at byte offset 4·index; gathers need
+            // no alignment) lies inside `data`.
             unsafe {
-                let i = _mm256_min_epi32(_mm256_max_epi32(idx.0, _mm256_setzero_si256()), _mm256_set1_epi32(last));
-                // SAFETY: every index is in 0 ..= len − 2 (just above), so each 8-byte element
-                // (two `f32`, read as one `f64` at byte offset 4·index; gathers need no
-                // alignment) lies inside `data`.
                 let p = data.as_ptr().cast::<f64>();
                 let lo = _mm256_castpd_ps(_mm256_i32gather_pd::<4>(p, _mm256_castsi256_si128(i)));
                 let hi = _mm256_castpd_ps(_mm256_i32gather_pd::<4>(p, _mm256_extracti128_si256::<1>(i)));
@@ -667,43 +578,28 @@ mod avx2 {
                 let a = _mm256_shuffle_ps::<0b10_00_10_00>(lo, hi); // a0 a1 a4 a5 | a2 a3 a6 a7
                 let b = _mm256_shuffle_ps::<0b11_01_11_01>(lo, hi); // b0 b1 b4 b5 | b2 b3 b6 b7
                 let order = |v: __m256| _mm256_castpd_ps(_mm256_permute4x64_pd::<0b11_01_10_00>(_mm256_castps_pd(v)));
-                (Avx2(order(a)), Avx2(order(b)))
+                (Avx2::from_raw(order(a)), Avx2::from_raw(order(b)))
             }
         }
         #[inline(always)]
         fn gather_words(data: &[u32], idx: Avx2I) -> Avx2I {
             if data.is_empty() {
-                return Avx2::splat_i(0);
+                return Avx2I::splat(avx2(), 0);
             }
-            let last = (data.len() - 1).min(i32::MAX as usize) as i32;
-            unsafe {
-                let i = _mm256_min_epi32(_mm256_max_epi32(idx.0, _mm256_setzero_si256()), _mm256_set1_epi32(last));
-                // SAFETY: every index is in 0 ..= len − 1 (just above), scale 4 is `u32`'s size.
-                Avx2I(_mm256_i32gather_epi32::<4>(data.as_ptr().cast(), i))
-            }
-        }
-        #[inline(always)]
-        fn unpack_bytes(w: Avx2I) -> [Self; 4] {
-            unsafe {
-                let m = _mm256_set1_epi32(255);
-                [
-                    _mm256_and_si256(w.0, m),
-                    _mm256_and_si256(_mm256_srli_epi32::<8>(w.0), m),
-                    _mm256_and_si256(_mm256_srli_epi32::<16>(w.0), m),
-                    _mm256_srli_epi32::<24>(w.0),
-                ]
-                .map(|b| Avx2(_mm256_cvtepi32_ps(b)))
-            }
+            let i = clamp8(idx, last_index(data.len(), 1));
+            // SAFETY: `idx` proves AVX2; every index is in 0 ..= len − 1 (just above), scale 4
+            // is `u32`'s size.
+            unsafe { Avx2I::from_raw(_mm256_i32gather_epi32::<4>(data.as_ptr().cast(), i)) }
         }
         #[inline(always)]
         fn gather_quads(data: &[u64], idx: Avx2I) -> (Avx2I, Avx2I) {
             if data.is_empty() {
-                return (Avx2::splat_i(0), Avx2::splat_i(0));
+                return (Avx2I::splat(avx2(), 0), Avx2I::splat(avx2(), 0));
             }
-            let last = (data.len() - 1).min(i32::MAX as usize) as i32;
+            let i = clamp8(idx, last_index(data.len(), 1));
+            // SAFETY: `idx` proves AVX2; every index is in 0 ..= len − 1 (just above), scale 8
+            // is `u64`'s size.
             unsafe {
-                let i = _mm256_min_epi32(_mm256_max_epi32(idx.0, _mm256_setzero_si256()), _mm256_set1_epi32(last));
-                // SAFETY: every index is in 0 ..= len − 1 (just above), scale 8 is `u64`'s size.
                 let p = data.as_ptr().cast::<i64>();
                 let lo = _mm256_castsi256_ps(_mm256_i32gather_epi64::<8>(p, _mm256_castsi256_si128(i)));
                 let hi = _mm256_castsi256_ps(_mm256_i32gather_epi64::<8>(p, _mm256_extracti128_si256::<1>(i)));
@@ -712,40 +608,11 @@ mod avx2 {
                 let b = _mm256_shuffle_ps::<0b11_01_11_01>(lo, hi);
                 let order =
                     |v: __m256| _mm256_castpd_si256(_mm256_permute4x64_pd::<0b11_01_10_00>(_mm256_castps_pd(v)));
-                (Avx2I(order(a)), Avx2I(order(b)))
+                (Avx2I::from_raw(order(a)), Avx2I::from_raw(order(b)))
             }
         }
-        #[inline(always)]
-        fn unpack_shorts(w: Avx2I) -> [Self; 2] {
-            unsafe {
-                let lo = _mm256_and_si256(w.0, _mm256_set1_epi32(0xffff));
-                [lo, _mm256_srli_epi32::<16>(w.0)].map(|b| Avx2(_mm256_cvtepi32_ps(b)))
-            }
-        }
+        unpack_methods!(Avx2, Avx2I: _mm256_and_si256 _mm256_srli_epi32 _mm256_set1_epi32 _mm256_cvtepi32_ps);
     }
-}
-
-#[cfg(target_arch = "x86_64")]
-pub(crate) use avx512::Avx512;
-
-#[cfg(target_arch = "x86_64")]
-mod avx512 {
-    use super::{Lanes, Mask};
-    use core::arch::x86_64::*;
-    use core::ops::{Add, BitAnd, BitOr, Div, Mul, Sub};
-
-    /// Sixteen `f32` lanes in one AVX-512 register, for the kernel compiled with AVX-512 F and
-    /// DQ; its masks are mask registers ([`K16`]).
-    ///
-    /// **Invariant**: values of this type and calls of its methods exist only on CPUs with
-    /// AVX-512 F and DQ (the kernel instance that uses it is called only after
-    /// `is_x86_feature_detected!` said so). Every `unsafe` block below relies on this.
-    #[derive(Clone, Copy)]
-    pub(crate) struct Avx512(__m512);
-
-    /// Sixteen `i32` lanes in one AVX-512 register (the same invariant as [`Avx512`]).
-    #[derive(Clone, Copy)]
-    pub(crate) struct Avx512I(__m512i);
 
     /// A mask of sixteen lanes: an AVX-512 mask register (`k`), bit `l` lane `l`.
     #[derive(Clone, Copy)]
@@ -783,193 +650,105 @@ mod avx512 {
         }
     }
 
-    macro_rules! binop {
-        ($tr:ident, $f:ident, $intr:ident) => {
-            impl $tr for Avx512 {
-                type Output = Avx512;
-                #[inline(always)]
-                fn $f(self, rhs: Avx512) -> Avx512 {
-                    // SAFETY: AVX-512 F and DQ are available (the type's invariant).
-                    Avx512(unsafe { $intr(self.0, rhs.0) })
-                }
-            }
-        };
+    /// Every index of `idx` clamped to `0 ..= last` (as [`clamp8`]).
+    #[inline(always)]
+    fn clamp16(idx: Avx512I, last: i32) -> __m512i {
+        // SAFETY: `idx` proves AVX-512 F (`volwarp_lanes`' invariant).
+        unsafe { _mm512_min_epi32(_mm512_max_epi32(idx.raw(), _mm512_setzero_si512()), _mm512_set1_epi32(last)) }
     }
-    binop!(Add, add, _mm512_add_ps);
-    binop!(Sub, sub, _mm512_sub_ps);
-    binop!(Mul, mul, _mm512_mul_ps);
-    binop!(Div, div, _mm512_div_ps);
-    binop!(BitAnd, bitand, _mm512_and_ps);
-    binop!(BitOr, bitor, _mm512_or_ps);
 
-    impl Add for Avx512I {
-        type Output = Avx512I;
-        #[inline(always)]
-        fn add(self, rhs: Avx512I) -> Avx512I {
-            // SAFETY: AVX-512 F is available (the type's invariant).
-            Avx512I(unsafe { _mm512_add_epi32(self.0, rhs.0) })
+    /// The even and the odd 32-bit elements of `lo` then `hi` (eight 64-bit elements each).
+    #[inline(always)]
+    fn deinterleave(_: Avx512Token, lo: __m512i, hi: __m512i) -> (__m512i, __m512i) {
+        // SAFETY: the token proves AVX-512 F.
+        unsafe {
+            let even = _mm512_setr_epi32(0, 2, 4, 6, 8, 10, 12, 14, 16, 18, 20, 22, 24, 26, 28, 30);
+            let odd = _mm512_setr_epi32(1, 3, 5, 7, 9, 11, 13, 15, 17, 19, 21, 23, 25, 27, 29, 31);
+            (_mm512_permutex2var_epi32(lo, even, hi), _mm512_permutex2var_epi32(lo, odd, hi))
         }
     }
 
-    impl Avx512 {
-        /// Ordered, non-signalling comparison `P`: false where either is NaN.
-        #[inline(always)]
-        fn cmp<const P: i32>(self, rhs: Avx512) -> K16 {
-            // SAFETY: AVX-512 F is available (the type's invariant).
-            K16(unsafe { _mm512_cmp_ps_mask::<P>(self.0, rhs.0) })
-        }
-    }
-
-    // SAFETY (every `unsafe` block of this impl): AVX-512 F and DQ are available (the type's
-    // invariant); the intrinsics have no other precondition, except the loads, stores and
-    // gathers, whose pointers are noted there.
     impl Lanes for Avx512 {
         type I = Avx512I;
         type M = K16;
         const N: usize = 16;
 
-        #[inline(always)]
-        fn splat(x: f32) -> Self {
-            Avx512(unsafe { _mm512_set1_ps(x) })
-        }
-        #[inline(always)]
-        fn new(a: &[f32]) -> Self {
-            let a = &a[..16];
-            // `a` is sixteen readable `f32`; the load needs no alignment.
-            Avx512(unsafe { _mm512_loadu_ps(a.as_ptr()) })
-        }
-        #[inline(always)]
-        fn min(self, rhs: Self) -> Self {
-            // `vminps(self, rhs)`: `self < rhs ? self : rhs`, as `Avx2`'s.
-            Avx512(unsafe { _mm512_min_ps(self.0, rhs.0) })
-        }
-        #[inline(always)]
-        fn max(self, rhs: Self) -> Self {
-            Avx512(unsafe { _mm512_max_ps(self.0, rhs.0) })
-        }
+        base_methods!(Avx512, Avx512I, avx512);
         #[inline(always)]
         fn simd_lt(self, rhs: Self) -> K16 {
-            self.cmp::<_CMP_LT_OQ>(rhs)
+            K16(self.cmp_mask::<_CMP_LT_OQ>(rhs))
         }
         #[inline(always)]
         fn simd_gt(self, rhs: Self) -> K16 {
-            self.cmp::<_CMP_GT_OQ>(rhs)
+            K16(self.cmp_mask::<_CMP_GT_OQ>(rhs))
         }
         #[inline(always)]
         fn simd_ge(self, rhs: Self) -> K16 {
-            self.cmp::<_CMP_GE_OQ>(rhs)
+            K16(self.cmp_mask::<_CMP_GE_OQ>(rhs))
         }
         #[inline(always)]
         fn blend(m: K16, if_true: Self, if_false: Self) -> Self {
-            Avx512(unsafe { _mm512_mask_blend_ps(m.0, if_false.0, if_true.0) })
+            if_true.blend_mask(m.0, if_false)
         }
         #[inline(always)]
         fn mask_from_bits(bits: u64) -> K16 {
             K16(bits as u16)
         }
         #[inline(always)]
-        fn store(self, out: &mut [f32]) {
-            let out = &mut out[..16];
-            // `out` is 64 writable bytes; the store needs no alignment.
-            unsafe { _mm512_storeu_ps(out.as_mut_ptr(), self.0) };
-        }
-        #[inline(always)]
-        fn trunc_int(self) -> Avx512I {
-            Avx512I(unsafe { _mm512_cvttps_epi32(self.0) })
-        }
-        #[inline(always)]
-        fn int_to_float(i: Avx512I) -> Self {
-            Avx512(unsafe { _mm512_cvtepi32_ps(i.0) })
-        }
-        #[inline(always)]
-        fn splat_i(x: i32) -> Avx512I {
-            Avx512I(unsafe { _mm512_set1_epi32(x) })
-        }
-        #[inline(always)]
-        fn mul_i(a: Avx512I, b: Avx512I) -> Avx512I {
-            Avx512I(unsafe { _mm512_mullo_epi32(a.0, b.0) })
-        }
-        #[inline(always)]
         fn gather(data: &[f32], idx: Avx512I) -> Self {
             if data.is_empty() {
-                return Avx512::splat(0.0);
+                return Avx512::splat(avx512(), 0.0);
             }
-            // Clamp every index to 0 ..= len − 1 (see `Avx2::gather`).
-            let last = (data.len() - 1).min(i32::MAX as usize) as i32;
-            unsafe {
-                let i = _mm512_min_epi32(_mm512_max_epi32(idx.0, _mm512_setzero_si512()), _mm512_set1_epi32(last));
-                // SAFETY: every index is in 0 ..= len − 1 (just above), scale 4 is `f32`'s size.
-                Avx512(_mm512_i32gather_ps::<4>(i, data.as_ptr()))
-            }
+            let i = clamp16(idx, last_index(data.len(), 1));
+            // SAFETY: `idx` proves AVX-512 F; every index is in 0 ..= len − 1 (just above),
+            // scale 4 is `f32`'s size.
+            unsafe { Avx512::from_raw(_mm512_i32gather_ps::<4>(i, data.as_ptr())) }
         }
         #[inline(always)]
         fn gather_pairs(data: &[f32], idx: Avx512I) -> (Self, Self) {
             if data.len() < 2 {
-                return (Avx512::splat(0.0), Avx512::splat(0.0));
+                return (Avx512::splat(avx512(), 0.0), Avx512::splat(avx512(), 0.0));
             }
-            let last = (data.len() - 2).min(i32::MAX as usize) as i32;
+            let i = clamp16(idx, last_index(data.len(), 2));
+            // SAFETY: `idx` proves AVX-512 F; every index is in 0 ..= len − 2 (just above), so
+            // each 8-byte element (two `f32`, read as one `f64` at byte offset 4·index) lies
+            // inside `data`.
             unsafe {
-                let i = _mm512_min_epi32(_mm512_max_epi32(idx.0, _mm512_setzero_si512()), _mm512_set1_epi32(last));
-                // SAFETY: every index is in 0 ..= len − 2 (just above), so each 8-byte element
-                // (two `f32`, read as one `f64` at byte offset 4·index) lies inside `data`.
                 let p = data.as_ptr().cast::<f64>();
-                let lo = _mm512_castpd_ps(_mm512_i32gather_pd::<4>(_mm512_castsi512_si256(i), p));
-                let hi = _mm512_castpd_ps(_mm512_i32gather_pd::<4>(_mm512_extracti64x4_epi64::<1>(i), p));
+                let lo = _mm512_castpd_si512(_mm512_i32gather_pd::<4>(_mm512_castsi512_si256(i), p));
+                let hi = _mm512_castpd_si512(_mm512_i32gather_pd::<4>(_mm512_extracti64x4_epi64::<1>(i), p));
                 // lo = a0 b0 … a7 b7, hi = a8 b8 … a15 b15: the even and the odd elements.
-                let even = _mm512_setr_epi32(0, 2, 4, 6, 8, 10, 12, 14, 16, 18, 20, 22, 24, 26, 28, 30);
-                let odd = _mm512_setr_epi32(1, 3, 5, 7, 9, 11, 13, 15, 17, 19, 21, 23, 25, 27, 29, 31);
-                (Avx512(_mm512_permutex2var_ps(lo, even, hi)), Avx512(_mm512_permutex2var_ps(lo, odd, hi)))
+                let (a, b) = deinterleave(avx512(), lo, hi);
+                (Avx512::from_raw(_mm512_castsi512_ps(a)), Avx512::from_raw(_mm512_castsi512_ps(b)))
             }
         }
         #[inline(always)]
         fn gather_words(data: &[u32], idx: Avx512I) -> Avx512I {
             if data.is_empty() {
-                return Avx512::splat_i(0);
+                return Avx512I::splat(avx512(), 0);
             }
-            let last = (data.len() - 1).min(i32::MAX as usize) as i32;
-            unsafe {
-                let i = _mm512_min_epi32(_mm512_max_epi32(idx.0, _mm512_setzero_si512()), _mm512_set1_epi32(last));
-                // SAFETY: every index is in 0 ..= len − 1 (just above), scale 4 is `u32`'s size.
-                Avx512I(_mm512_i32gather_epi32::<4>(i, data.as_ptr().cast()))
-            }
-        }
-        #[inline(always)]
-        fn unpack_bytes(w: Avx512I) -> [Self; 4] {
-            unsafe {
-                let m = _mm512_set1_epi32(255);
-                [
-                    _mm512_and_si512(w.0, m),
-                    _mm512_and_si512(_mm512_srli_epi32::<8>(w.0), m),
-                    _mm512_and_si512(_mm512_srli_epi32::<16>(w.0), m),
-                    _mm512_srli_epi32::<24>(w.0),
-                ]
-                .map(|b| Avx512(_mm512_cvtepi32_ps(b)))
-            }
+            let i = clamp16(idx, last_index(data.len(), 1));
+            // SAFETY: `idx` proves AVX-512 F; every index is in 0 ..= len − 1 (just above),
+            // scale 4 is `u32`'s size.
+            unsafe { Avx512I::from_raw(_mm512_i32gather_epi32::<4>(i, data.as_ptr().cast())) }
         }
         #[inline(always)]
         fn gather_quads(data: &[u64], idx: Avx512I) -> (Avx512I, Avx512I) {
             if data.is_empty() {
-                return (Avx512::splat_i(0), Avx512::splat_i(0));
+                return (Avx512I::splat(avx512(), 0), Avx512I::splat(avx512(), 0));
             }
-            let last = (data.len() - 1).min(i32::MAX as usize) as i32;
+            let i = clamp16(idx, last_index(data.len(), 1));
+            // SAFETY: `idx` proves AVX-512 F; every index is in 0 ..= len − 1 (just above),
+            // scale 8 is `u64`'s size.
             unsafe {
-                let i = _mm512_min_epi32(_mm512_max_epi32(idx.0, _mm512_setzero_si512()), _mm512_set1_epi32(last));
-                // SAFETY: every index is in 0 ..= len − 1 (just above), scale 8 is `u64`'s size.
                 let p = data.as_ptr().cast::<i64>();
                 let lo = _mm512_i32gather_epi64::<8>(_mm512_castsi512_si256(i), p);
                 let hi = _mm512_i32gather_epi64::<8>(_mm512_extracti64x4_epi64::<1>(i), p);
-                let even = _mm512_setr_epi32(0, 2, 4, 6, 8, 10, 12, 14, 16, 18, 20, 22, 24, 26, 28, 30);
-                let odd = _mm512_setr_epi32(1, 3, 5, 7, 9, 11, 13, 15, 17, 19, 21, 23, 25, 27, 29, 31);
-                (Avx512I(_mm512_permutex2var_epi32(lo, even, hi)), Avx512I(_mm512_permutex2var_epi32(lo, odd, hi)))
+                let (a, b) = deinterleave(avx512(), lo, hi);
+                (Avx512I::from_raw(a), Avx512I::from_raw(b))
             }
         }
-        #[inline(always)]
-        fn unpack_shorts(w: Avx512I) -> [Self; 2] {
-            unsafe {
-                let lo = _mm512_and_si512(w.0, _mm512_set1_epi32(0xffff));
-                [lo, _mm512_srli_epi32::<16>(w.0)].map(|b| Avx512(_mm512_cvtepi32_ps(b)))
-            }
-        }
+        unpack_methods!(Avx512, Avx512I: _mm512_and_si512 _mm512_srli_epi32 _mm512_set1_epi32 _mm512_cvtepi32_ps);
     }
 }
 
@@ -1069,8 +848,8 @@ mod tests {
 
     #[test]
     fn avx2_lanes_equal_portable_lanes() {
-        if std::is_x86_feature_detected!("avx2") {
-            // SAFETY: the CPU supports AVX2 (checked just above).
+        if volwarp_lanes::Avx2Token::detected().is_some() {
+            // SAFETY: the token proves the CPU supports AVX2.
             unsafe { check() }
         }
     }
@@ -1086,8 +865,8 @@ mod tests {
 
     #[test]
     fn avx512_lanes_equal_portable_lanes() {
-        if std::is_x86_feature_detected!("avx512f") && std::is_x86_feature_detected!("avx512dq") {
-            // SAFETY: the CPU supports AVX-512 F and DQ (checked just above).
+        if volwarp_lanes::Avx512Token::detected().is_some() {
+            // SAFETY: the token proves the CPU supports AVX-512 F and DQ.
             unsafe { check512() }
         } else {
             eprintln!("this CPU lacks AVX-512 F/DQ: the AVX-512 lanes are not tested here");

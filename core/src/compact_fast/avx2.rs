@@ -1,5 +1,5 @@
 //! The AVX2 kernels of the compact frame codec's fast paths (x86-64 with std, chosen at run
-//! time by `is_x86_feature_detected!`): the same results as the portable code of the parent
+//! time by `volwarp_lanes`: the CPU's level, clamped by `VOLWARP_LANES`): the same results as the portable code of the parent
 //! module, bit for bit (every float operation is the same IEEE operation in the same order;
 //! no fused multiply-add), written with intrinsics because the compiler's vectorization of
 //! the portable code packs and unpacks lanes in the dependent chains.
@@ -249,7 +249,8 @@ pub(super) fn project(
     let chunks = n / 8;
     for c in 0..chunks {
         let k = 8 * c;
-        // SAFETY (of the loads and stores): `k + 8 ≤ n` and every slice is `n` long.
+        // SAFETY: AVX2 (the function's target feature); the loads and stores: `k + 8 ≤ n` and
+        // every slice is `n` long.
         let (a, b) =
             unsafe { (_mm256_loadu_si256(s.as_ptr().add(k).cast()), _mm256_loadu_si256(s.as_ptr().add(k + 4).cast())) };
         let qx = low_dwords(_mm256_and_si256(a, pm), _mm256_and_si256(b, pm));
@@ -368,7 +369,8 @@ pub(super) fn code(
     let chunks = n / 8;
     for c in 0..chunks {
         let k = 8 * c;
-        // SAFETY (of the loads and stores): `k + 8 ≤ n` and every slice is `n` long.
+        // SAFETY: AVX2 (the function's target feature); the loads and stores: `k + 8 ≤ n` and
+        // every slice is `n` long.
         let (a, b, tv, fv) = unsafe {
             (
                 _mm256_loadu_si256(s.as_ptr().add(k).cast()),
@@ -496,7 +498,8 @@ pub(super) fn place(geo: &Geo, params: &CompactParams, rlo: &[u8], rhi: &[u8], s
     let chunks = n / 8;
     for c in 0..chunks {
         let k = 8 * c;
-        // SAFETY (of the loads and stores): `k + 8 ≤ n` and every slice is `n` long.
+        // SAFETY: AVX2 (the function's target feature); the loads and stores: `k + 8 ≤ n` and
+        // every slice is `n` long.
         let (a, b, lo8, hi8) = unsafe {
             (
                 _mm256_loadu_si256(samples.as_ptr().add(k).cast()),

@@ -10,155 +10,15 @@
 //! an AVX-512 mask register, widened to lanes (`vpmovm2d`), and selects narrow it back
 //! (`vpmovd2m`); one instruction each.
 
-use super::{decode_scalar_into, Arith, BoundLanes, RectLanes, EMPTY_RECT};
+use super::{avx512, decode_scalar_into, Avx512, BoundLanes, RectLanes, EMPTY_RECT};
 use core::arch::x86_64::*;
-use core::ops::{Add, BitAnd, BitOr, Div, Mul, Sub};
 use volwarp_core::sample::{Dequantizer, POS_BITS, RADIUS_BITS};
+use volwarp_lanes::Avx512I;
 
-/// Sixteen `f32` lanes in one AVX-512 register.
-///
-/// **Invariant**: values of this type and calls of its methods exist only on CPUs with AVX2,
-/// AVX-512 F and AVX-512 DQ. The type is private to the crate, whose only users of it are the
-/// `#[target_feature(enable = "avx2,avx512f,avx512dq")]` instances of `lanes::dispatch!`,
-/// called only after `lanes::use_avx512()`. This is what every `unsafe` block below relies on.
-#[derive(Clone, Copy)]
-pub(crate) struct Avx512(__m512);
-
-/// A binary operator as one AVX-512 instruction.
-macro_rules! binop {
-    ($tr:ident, $f:ident, $intr:ident) => {
-        impl $tr for Avx512 {
-            type Output = Avx512;
-            #[inline(always)]
-            fn $f(self, rhs: Avx512) -> Avx512 {
-                // SAFETY: AVX-512 F and DQ are available (the type's invariant).
-                Avx512(unsafe { $intr(self.0, rhs.0) })
-            }
-        }
-    };
-}
-binop!(Add, add, _mm512_add_ps);
-binop!(Sub, sub, _mm512_sub_ps);
-binop!(Mul, mul, _mm512_mul_ps);
-binop!(Div, div, _mm512_div_ps);
-binop!(BitAnd, bitand, _mm512_and_ps);
-binop!(BitOr, bitor, _mm512_or_ps);
-
-impl Avx512 {
-    /// The sixteen lanes of `a`.
-    #[inline(always)]
-    pub(crate) fn load16(a: &[f32; 16]) -> Avx512 {
-        // SAFETY: AVX-512 F is available (the type's invariant); `a` is 64 readable bytes.
-        Avx512(unsafe { _mm512_loadu_ps(a.as_ptr()) })
-    }
-
-    /// The mask of the lanes of `bits` (bit `l`: lane `l`).
-    #[inline(always)]
-    pub(crate) fn of_bits(bits: u32) -> Avx512 {
-        Avx512::of_mask(bits as __mmask16)
-    }
-
-    /// Writes the lanes of `bits` into `out` (the others keep what they hold).
-    #[inline(always)]
-    pub(crate) fn store_masked(self, out: &mut [f32; 16], bits: u32) {
-        // SAFETY: AVX-512 F is available (the type's invariant); `out` is 64 writable bytes.
-        unsafe { _mm512_mask_storeu_ps(out.as_mut_ptr(), bits as __mmask16, self.0) }
-    }
-
-    /// Writes `x` into the entries of `out` of the lanes of `bits`.
-    #[inline(always)]
-    pub(crate) fn store_u32_masked(out: &mut [u32; 16], bits: u32, x: u32) {
-        // SAFETY: AVX-512 F is available (the type's invariant); `out` is 64 writable bytes.
-        unsafe { _mm512_mask_storeu_epi32(out.as_mut_ptr().cast(), bits as __mmask16, _mm512_set1_epi32(x as i32)) }
-    }
-
-    /// The mask register of a mask's lanes (their sign bits, `vpmovd2m`).
-    #[inline(always)]
-    fn mask(self) -> __mmask16 {
-        // SAFETY: AVX-512 DQ is available (the type's invariant).
-        unsafe { _mm512_movepi32_mask(_mm512_castps_si512(self.0)) }
-    }
-
-    /// A mask register as lanes with all bits set or clear (`vpmovm2d`).
-    #[inline(always)]
-    fn of_mask(k: __mmask16) -> Avx512 {
-        // SAFETY: AVX-512 DQ is available (the type's invariant).
-        Avx512(unsafe { _mm512_castsi512_ps(_mm512_movm_epi32(k)) })
-    }
-
-    /// Ordered, non-signalling comparison `P` (a `_CMP_*_OQ`), as `Avx2`'s: false where either
-    /// lane is NaN.
-    #[inline(always)]
-    fn cmp<const P: i32>(self, rhs: Avx512) -> Avx512 {
-        // SAFETY: AVX-512 F is available (the type's invariant).
-        Avx512::of_mask(unsafe { _mm512_cmp_ps_mask::<P>(self.0, rhs.0) })
-    }
-}
-
-// SAFETY (every `unsafe` block of this impl): AVX-512 F and DQ are available (the type's
-// invariant); the intrinsics have no other precondition.
-impl Arith for Avx512 {
-    #[inline(always)]
-    fn splat(x: f32) -> Self {
-        Avx512(unsafe { _mm512_set1_ps(x) })
-    }
-    #[inline(always)]
-    fn sqrt(self) -> Self {
-        // `vsqrtps`: correctly rounded.
-        Avx512(unsafe { _mm512_sqrt_ps(self.0) })
-    }
-    #[inline(always)]
-    fn max(self, rhs: Self) -> Self {
-        // As `Avx2::max`: `rhs.is_nan().select(self, self.fast_max(rhs))`.
-        rhs.cmp::<_CMP_UNORD_Q>(rhs).select(self, self.fast_max(rhs))
-    }
-    #[inline(always)]
-    fn fast_min(self, rhs: Self) -> Self {
-        // `vminps` with `minps`'s operand order: `self < rhs ? self : rhs`.
-        Avx512(unsafe { _mm512_min_ps(self.0, rhs.0) })
-    }
-    #[inline(always)]
-    fn fast_max(self, rhs: Self) -> Self {
-        // `vmaxps` with `maxps`'s operand order: `self > rhs ? self : rhs`.
-        Avx512(unsafe { _mm512_max_ps(self.0, rhs.0) })
-    }
-    #[inline(always)]
-    fn simd_lt(self, rhs: Self) -> Self {
-        self.cmp::<_CMP_LT_OQ>(rhs)
-    }
-    #[inline(always)]
-    fn simd_le(self, rhs: Self) -> Self {
-        self.cmp::<_CMP_LE_OQ>(rhs)
-    }
-    #[inline(always)]
-    fn simd_gt(self, rhs: Self) -> Self {
-        self.cmp::<_CMP_GT_OQ>(rhs)
-    }
-    #[inline(always)]
-    fn simd_ge(self, rhs: Self) -> Self {
-        self.cmp::<_CMP_GE_OQ>(rhs)
-    }
-    #[inline(always)]
-    fn simd_eq(self, rhs: Self) -> Self {
-        self.cmp::<_CMP_EQ_OQ>(rhs)
-    }
-    #[inline(always)]
-    fn select(self, if_true: Self, if_false: Self) -> Self {
-        // By the sign bit of each lane, as `vblendvps`.
-        Avx512(unsafe { _mm512_mask_blend_ps(self.mask(), if_false.0, if_true.0) })
-    }
-    #[inline(always)]
-    fn to_bitmask(self) -> u32 {
-        self.mask() as u32
-    }
-    #[inline(always)]
-    fn any(self) -> bool {
-        self.mask() != 0
-    }
-}
-
-// SAFETY (every `unsafe` block of this impl): as for `Arith` above; the loads and stores are
-// of sixteen `i32` / `f32` or eight `u64`, as noted there.
+// SAFETY (every `unsafe` block of this impl): AVX2, AVX-512 F and DQ are available
+// (`volwarp_lanes`' invariant: a value proves them, and the methods without one run only in the
+// AVX-512 instances); the loads and stores are of sixteen `i32` / `f32` or eight `u64`, as
+// noted there.
 impl BoundLanes for Avx512 {
     const N: usize = 16;
 
@@ -172,8 +32,9 @@ impl BoundLanes for Avx512 {
         let Some(s) = s.first_chunk::<16>() else {
             let mut a = [[0f32; 16]; 4];
             decode_scalar_into(deq, eye, s, &mut a);
-            return a.map(|v| Avx512(unsafe { _mm512_loadu_ps(v.as_ptr()) }));
+            return a.map(|v| Avx512::load(avx512(), &v));
         };
+        // SAFETY: AVX2, AVX-512 F and DQ are available (`volwarp_lanes`' invariant, see [`super::avx512`]); the loads read the 128 bytes of `s`.
         unsafe {
             // `s` is 128 readable bytes.
             let a = _mm512_loadu_si512(s.as_ptr().cast());
@@ -184,22 +45,9 @@ impl BoundLanes for Avx512 {
                 _mm512_cvtepi64_epi32(_mm512_srli_epi64::<32>(a)),
                 _mm512_cvtepi64_epi32(_mm512_srli_epi64::<32>(b)),
             );
-            let m = _mm512_set1_epi32(0x3ffff);
-            let x = _mm512_and_si512(lo, m);
-            let y = _mm512_or_si512(
-                _mm512_srli_epi32::<18>(lo),
-                _mm512_slli_epi32::<14>(_mm512_and_si512(hi, _mm512_set1_epi32(0xf))),
-            );
-            let z = _mm512_and_si512(_mm512_srli_epi32::<4>(hi), m);
-            let r = _mm512_srli_epi32::<22>(hi);
-            let f = |v: __m512i| Avx512(_mm512_cvtepi32_ps(v));
-            let (fx, fy, fz, fr) = (f(x), f(y), f(z), f(r));
-            [
-                (Avx512::splat(deq.min.x) + fx * Avx512::splat(deq.step.x)) - Avx512::splat(eye[0]),
-                (Avx512::splat(deq.min.y) + fy * Avx512::splat(deq.step.y)) - Avx512::splat(eye[1]),
-                (Avx512::splat(deq.min.z) + fz * Avx512::splat(deq.step.z)) - Avx512::splat(eye[2]),
-                fr * Avx512::splat(deq.radius_unit),
-            ]
+            let fields = sample_fields!(Avx512, lo, hi; _mm512_and_si512 _mm512_or_si512 _mm512_srli_epi32
+                _mm512_slli_epi32 _mm512_set1_epi32 _mm512_cvtepi32_ps);
+            super::dequantize(deq, eye, fields)
         }
     }
 
@@ -207,31 +55,26 @@ impl BoundLanes for Avx512 {
     /// below `lo`, at least 0; `hi` truncated, at most `max`.
     #[inline(always)]
     fn spans(lo: Self, hi: Self, max: u32) -> ([i32; 16], [i32; 16]) {
+        // SAFETY: AVX2, AVX-512 F and DQ are available (`volwarp_lanes`' invariant, see [`super::avx512`]).
         unsafe {
-            let t = _mm512_cvttps_epi32(lo.0);
-            let below = _mm512_cmp_ps_mask::<_CMP_LT_OQ>(_mm512_cvtepi32_ps(t), lo.0);
+            let t = _mm512_cvttps_epi32(lo.raw());
+            let below = _mm512_cmp_ps_mask::<_CMP_LT_OQ>(_mm512_cvtepi32_ps(t), lo.raw());
             let c = _mm512_max_epi32(_mm512_mask_add_epi32(t, below, t, _mm512_set1_epi32(1)), _mm512_setzero_si512());
-            let h = _mm512_min_epi32(_mm512_cvttps_epi32(hi.0), _mm512_set1_epi32(max as i32));
-            let (mut a, mut b) = ([0i32; 16], [0i32; 16]);
-            // `a`, `b` are 64 writable bytes each.
-            _mm512_storeu_si512(a.as_mut_ptr().cast(), c);
-            _mm512_storeu_si512(b.as_mut_ptr().cast(), h);
-            (a, b)
+            let h = _mm512_min_epi32(_mm512_cvttps_epi32(hi.raw()), _mm512_set1_epi32(max as i32));
+            (Avx512I::from_raw(c).to_array(), Avx512I::from_raw(h).to_array())
         }
     }
 
     #[inline(always)]
     fn from_ints16(a: &[i32; 16]) -> Self {
         // `a` is 64 readable bytes; `vcvtdq2ps` rounds to nearest as `as f32` does.
-        unsafe { Avx512(_mm512_cvtepi32_ps(_mm512_loadu_si512(a.as_ptr().cast()))) }
+        // SAFETY: AVX2, AVX-512 F and DQ are available (`volwarp_lanes`' invariant, see [`super::avx512`]); `a` is 64 readable bytes.
+        unsafe { Avx512::from_raw(_mm512_cvtepi32_ps(_mm512_loadu_si512(a.as_ptr().cast()))) }
     }
 
     #[inline(always)]
     fn lanes(self) -> [f32; 16] {
-        let mut a = [0f32; 16];
-        // `a` is 64 writable bytes.
-        unsafe { _mm512_storeu_ps(a.as_mut_ptr(), self.0) };
-        a
+        self.to_array()
     }
 
     /// Sixteen records by a 4×16 transpose in registers (four 64-byte stores); fewer by the
@@ -245,17 +88,11 @@ impl BoundLanes for Avx512 {
             }
             return;
         };
+        // SAFETY: AVX2, AVX-512 F and DQ are available (`volwarp_lanes`' invariant, see [`super::avx512`]); the stores write the 256 bytes of `out` (noted below).
         unsafe {
-            let [a, b, x, r] = c.map(|v| v.0);
-            // Per 128-bit block k: t0 = [a0 b0 a1 b1], t1 = [a2 b2 a3 b3] (lanes 4k…), …
-            let (t0, t1) = (_mm512_unpacklo_ps(a, b), _mm512_unpackhi_ps(a, b));
-            let (t2, t3) = (_mm512_unpacklo_ps(x, r), _mm512_unpackhi_ps(x, r));
-            let pd = _mm512_castps_pd;
             // Records 4k, 4k + 1, 4k + 2, 4k + 3 in block k of u0, u1, u2, u3.
-            let u0 = _mm512_castpd_ps(_mm512_unpacklo_pd(pd(t0), pd(t2)));
-            let u1 = _mm512_castpd_ps(_mm512_unpackhi_pd(pd(t0), pd(t2)));
-            let u2 = _mm512_castpd_ps(_mm512_unpacklo_pd(pd(t1), pd(t3)));
-            let u3 = _mm512_castpd_ps(_mm512_unpackhi_pd(pd(t1), pd(t3)));
+            let [u0, u1, u2, u3] = Avx512::transpose_blocks(c);
+            let (u0, u1, u2, u3) = (u0.raw(), u1.raw(), u2.raw(), u3.raw());
             // Block k of the result j (records 4j…4j + 3) is block j of u_k.
             let lo01 = _mm512_shuffle_f32x4::<0b01_00_01_00>(u0, u1); // u0.0 u0.1 u1.0 u1.1
             let lo23 = _mm512_shuffle_f32x4::<0b01_00_01_00>(u2, u3); // u2.0 u2.1 u3.0 u3.1
@@ -278,17 +115,11 @@ impl BoundLanes for Avx512 {
     /// 16 bits and interleaved to 64-bit words, the tile counts by shifts and a 32-bit
     /// product, the union by masked reductions.
     #[inline(always)]
-    fn rects(
-        ok: u32,
-        x0: &[i32; 16],
-        x1: &[i32; 16],
-        y0: &[i32; 16],
-        y1: &[i32; 16],
-        tile_log2: u32,
-        max_tiles: i32,
-    ) -> RectLanes {
+    fn rects(ok: u32, spans: [&[i32; 16]; 4], tile_log2: u32, max_tiles: i32) -> RectLanes {
+        // SAFETY: AVX2, AVX-512 F and DQ are available (`volwarp_lanes`' invariant, see [`super::avx512`]); the loads read the spans, the stores write `bits` (noted below).
         unsafe {
             let load = |a: &[i32; 16]| _mm512_loadu_si512(a.as_ptr().cast());
+            let [x0, x1, y0, y1] = spans;
             let (a, b, c, d) = (load(x0), load(x1), load(y0), load(y1));
             let fast = ok as __mmask16 & _mm512_cmple_epi32_mask(a, b) & _mm512_cmple_epi32_mask(c, d);
             let s = _mm_cvtsi32_si128(tile_log2 as i32);
@@ -324,12 +155,10 @@ mod tests {
     use super::{Avx512, BoundLanes};
     use crate::lanes::{decode_scalar_into, Arith, Avx2, Lanes};
     use core::arch::x86_64::__m512;
-    use volwarp_core::sample::{Bounds, Dequantizer};
-    use volwarp_core::Vec3;
 
     fn bits(x: Avx512) -> [u32; 16] {
         // SAFETY: `__m512` is 64 bytes of plain data, as is `[u32; 16]`.
-        unsafe { core::mem::transmute::<__m512, [u32; 16]>(x.0) }
+        unsafe { core::mem::transmute::<__m512, [u32; 16]>(x.raw()) }
     }
 
     fn halves(x: [f32; 16]) -> [Avx2; 2] {
@@ -345,14 +174,9 @@ mod tests {
     /// Every method against `Avx2`'s on each half, on NaNs, signed zeros, infinities,
     /// subnormals and ordinary values, compiled as the kernel is.
     #[target_feature(enable = "avx2,avx512f,avx512dq")]
-    fn check() {
-        let vals =
-            [0.0, -0.0, 1.0, -1.0, 0.5, 3.0, 1e-40, f32::MAX, f32::INFINITY, -f32::INFINITY, f32::NAN, -f32::NAN];
-        let pairs: Vec<(f32, f32)> = vals.iter().flat_map(|&a| vals.iter().map(move |&b| (a, b))).collect();
-        for c in pairs.chunks_exact(16) {
-            let a: [f32; 16] = core::array::from_fn(|l| c[l].0);
-            let b: [f32; 16] = core::array::from_fn(|l| c[l].1);
-            let load = |v: [f32; 16]| Avx512(unsafe { core::arch::x86_64::_mm512_loadu_ps(v.as_ptr()) });
+    fn check(t: volwarp_lanes::Avx512Token) {
+        for (a, b) in crate::lanes::test_operands::<16>() {
+            let load = |v: [f32; 16]| Avx512::load(t, &v);
             let (x, y) = (load(a), load(b));
             let ([p0, p1], [q0, q1]) = (halves(a), halves(b));
             let two = |f: &dyn Fn(Avx2, Avx2) -> Avx2| [f(p0, q0), f(p1, q1)];
@@ -364,7 +188,7 @@ mod tests {
                 assert!((0..16).all(|l| r[l] == s[l] || (nan(r[l]) && nan(s[l]))), "{what}: {a:?} {b:?}");
             };
             eq("lanes", load(x.lanes()), [p0, p1]);
-            eq("splat", Avx512::splat(a[3]), [Avx2::splat(a[3]); 2]);
+            eq("splat", <Avx512 as Arith>::splat(a[3]), [<Avx2 as Arith>::splat(a[3]); 2]);
             same("add", x + y, two(&|p, q| p + q));
             same("sub", x - y, two(&|p, q| p - q));
             same("mul", x * y, two(&|p, q| p * q));
@@ -389,20 +213,10 @@ mod tests {
             }
         }
         // decode: sixteen samples in lanes, and fewer by the scalar decode.
-        let deq = Dequantizer::new(Bounds::new(Vec3::new(-1.5, 0.25, 3.0), Vec3::new(2.0, 7.0, 3.5)), 0.0123);
+        let deq = crate::lanes::test_dequantizer();
         let mut x = 0x9e37_79b9_7f4a_7c15u64;
         for round in 0..200 {
-            let s: [u64; 16] = core::array::from_fn(|l| {
-                x ^= x << 13;
-                x ^= x >> 7;
-                x ^= x << 17;
-                match (round + l) % 4 {
-                    0 => x,
-                    1 => u64::MAX,
-                    2 => 0,
-                    _ => x & 0x0000_000f_ffff_ffff,
-                }
-            });
+            let s: [u64; 16] = crate::lanes::test_samples(round, &mut x);
             let eye = [0.5, -2.0, 10.0];
             for n in [16, 15, 9, 1, 0] {
                 let mut want = [[0f32; 16]; 4];
@@ -420,7 +234,7 @@ mod tests {
             let lo: [f32; 16] = core::array::from_fn(|l| c[l]);
             let hi: [f32; 16] = core::array::from_fn(|l| (c[(l * 7) % 16] + 0.75).max(0.0));
             for max in [0u32, 1, 511, 1023, 8191] {
-                let load = |v: [f32; 16]| Avx512(unsafe { core::arch::x86_64::_mm512_loadu_ps(v.as_ptr()) });
+                let load = |v: [f32; 16]| Avx512::load(t, &v);
                 let (a, b) = Avx512::spans(load(lo), load(hi), max);
                 let ([l0, l1], [h0, h1]) = (halves(lo), halves(hi));
                 let (w0, w1) = (Avx2::span_ints(l0, h0, max), Avx2::span_ints(l1, h1, max));
@@ -436,9 +250,9 @@ mod tests {
 
     #[test]
     fn avx512_lanes_equal_avx2_bit_for_bit() {
-        if std::is_x86_feature_detected!("avx512f") && std::is_x86_feature_detected!("avx512dq") {
-            // SAFETY: the CPU supports AVX2, AVX-512 F and DQ (every AVX-512 CPU has AVX2).
-            unsafe { check() }
+        if let Some(t) = volwarp_lanes::Avx512Token::detected() {
+            // SAFETY: the token proves AVX2, AVX-512 F and DQ.
+            unsafe { check(t) }
         } else {
             eprintln!("notice: this CPU has no AVX-512 F and DQ; the AVX-512 lanes were not run");
         }

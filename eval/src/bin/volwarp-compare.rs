@@ -8,6 +8,7 @@
 //! Exit status: 0 when every image reaches 99.9 % identical pixels (the layered splatter:
 //! 99.9 % within one 8-bit step, the tests' target), 3 when one does not, 1 on errors
 //! (unreadable file, no GPU).
+#![forbid(unsafe_code)]
 
 use clap::Parser;
 use std::path::PathBuf;

@@ -15,6 +15,7 @@
 //! volwarp-eval fixtures --out eval/fixtures
 //! ```
 //! Without `--volume`, the bundled dataset (`data/ct_head_quarter.nhdr`) is used.
+#![forbid(unsafe_code)]
 
 use clap::{Args, Parser, Subcommand};
 use std::path::{Path, PathBuf};
