@@ -7,6 +7,7 @@
 //! |---|---|
 //! | [`camera`] | the pinhole camera and its primary rays (one convention for marcher, tracers and shader) |
 //! | [`sample`] | the object-space sample: quantized position + radius in 64 bits, RGBA8 color in 32 |
+//! | [`method`] | the method (renderer and levers, its default) and the request policy: when a client asks for which camera |
 //! | [`prediction`] | the camera expected when a requested frame arrives (orbit-aware extrapolation) |
 //! | [`guard`] | guard bands: a wider requested view at the same pixel density |
 //! | [`warp_radius`] | sphere radii sized by how far the view moved from the frame's camera |
@@ -49,6 +50,7 @@ pub mod heuristics;
 #[cfg(feature = "alloc")]
 pub mod image_diff;
 pub mod lbvh;
+pub mod method;
 pub mod morton;
 #[cfg(feature = "png")]
 pub mod png;

@@ -103,8 +103,9 @@ pub const OPAQUE: f32 = 0.999;
 /// from 0.0262 to 0.0200 (`docs/results.md`, "Layered frames as the default").
 pub const OWN_MARGIN: f32 = 0.0;
 
-/// The default depth tolerance of watertight slabs, source pixels ([`LayerOptions::watertight`]).
-pub const WATERTIGHT: f32 = 1.5;
+/// The default depth tolerance of watertight slabs, source pixels ([`LayerOptions::watertight`]):
+/// the method's (core's `method::WATERTIGHT`).
+pub use volwarp_core::method::WATERTIGHT;
 
 /// The widest footprint adaptive sizing grows to by default (half side, source pixels).
 pub const MAX_OWN: f32 = 2.0;
