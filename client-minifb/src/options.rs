@@ -12,9 +12,9 @@ Window controls:
   left drag / arrow keys     orbit around the volume
   right drag / W A S D       pan
   wheel / + -                zoom
-  1..9                       renderer (see --renderer; key k is the k-th of its list;
-                             9 is spheres, the fastest exact route)
-  0                          the default renderer, splat-layers
+  1 (or 0)                   the default renderer, splat-layers
+  2..9                       stale, points1, points2, points3, splat, spheres-gpu,
+                             spheres-scalar, spheres (see --renderer)
   H / Shift+H                next / previous depth heuristic (sent to the server)
   [ ]                        smaller / larger sample radius (sent to the server)
   R                          reset the camera
@@ -70,12 +70,14 @@ pub struct Options {
     /// Threads of the network thread's LBVH build (0: all cores).
     #[arg(long, value_name = "N", default_value_t = 1)]
     pub build_threads: usize,
-    /// Renderer, in key order (keys 1–9, then no key): spheres-cpu, points1, points2, points3,
-    /// splat (exact sphere splatting), stale (unwarped frame), spheres-gpu (GPU opened on first
-    /// use), spheres-scalar, spheres (the fastest exact route: tiles or tracer), splat-tiles,
-    /// spheres-fill and splat-fill (holes filled from the stale frame), splat-gpu (GPU exact
-    /// splatting), splat-layers (layered frames composited front to back, holes filled: the
-    /// default; it asks the server for 4 segments per pixel).
+    /// Renderer: the product, splat-layers (layered frames composited front to back, holes
+    /// filled: the default, window key 1; it asks the server for 4 segments per pixel) and
+    /// splat-layers-gpu (its wgpu twin); the baselines stale (unwarped frame, key 2), points1,
+    /// points2, points3 (2.5D points, keys 3–5), splat (exact sphere splatting, key 6),
+    /// spheres-gpu (GPU opened on first use, key 7), spheres (the fastest exact route: tiles or
+    /// tracer, key 9), spheres-cpu, splat-tiles, splat-gpu, spheres-fill and splat-fill (holes
+    /// filled from the stale frame); the reference oracles spheres-scalar (key 8) and
+    /// spheres-layers.
     #[arg(long, value_name = "NAME", default_value_t = Method::DEFAULT.renderer, value_parser = parse_renderer)]
     pub renderer: RendererKind,
     /// GPU renderers: the adapter whose name contains NAME (case-insensitive; default: the best

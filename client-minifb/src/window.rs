@@ -73,8 +73,8 @@ impl Screen {
         !self.window.is_open() || self.window.is_key_down(Key::Escape) || self.window.is_key_down(Key::Q)
     }
 
-    /// Number key 0–9 pressed this frame, if any (0: the default renderer).
-    pub fn renderer_key(&self) -> Option<usize> {
+    /// Number key 0–9 pressed this frame, if any (0: the default renderer, as 1).
+    pub fn renderer_key(&self) -> Option<u8> {
         let w = &self.window;
         if w.is_key_pressed(Key::Key0, KeyRepeat::No) || w.is_key_pressed(Key::NumPad0, KeyRepeat::No) {
             return Some(0);
@@ -92,7 +92,7 @@ impl Screen {
         ];
         KEYS.iter()
             .position(|(a, b)| w.is_key_pressed(*a, KeyRepeat::No) || w.is_key_pressed(*b, KeyRepeat::No))
-            .map(|i| i + 1)
+            .map(|i| i as u8 + 1)
     }
 }
 

@@ -25,7 +25,7 @@ fn gpu_switch_draws_the_cpu_image_or_explains_why_not() {
             let same = gpu.pixels.iter().zip(&cpu.pixels).filter(|(a, b)| a == b).count();
             assert!(same * 100 >= cpu.pixels.len() * 99, "GPU and CPU images agree on only {same} pixels");
             // Switching back and forth keeps the opened tracer.
-            r.select_key(1).unwrap();
+            r.select(RendererKind::SpheresCpu).unwrap();
             r.select_key(7).unwrap();
             assert_eq!(r.name(), "spheres-gpu");
         }

@@ -23,7 +23,7 @@
 //! | [`wire`] | the framed, versioned wire codec over `embedded-io` |
 //! | `scene` (feature `alloc`) | an owned, traceable scene built from a received frame |
 //! | `renderer` (feature `alloc`) | the one interface every way of drawing a scene implements |
-//! | [`renderer_kind`] | the one registry of renderers: names, client keys, capabilities |
+//! | [`renderer_kind`] | the one registry of renderers: names, roles, window keys, capabilities |
 //! | `image_diff` (feature `alloc`) | identical-pixel share and largest channel difference of two images |
 //! | [`record`] | the record file of a received stream, for replay |
 //! | `png` (feature `png`) | saving and loading [`Image`]s as PNG files |
@@ -80,7 +80,7 @@ pub use image_diff::ImageDiff;
 pub use lbvh::{Lbvh, Node};
 #[cfg(feature = "alloc")]
 pub use renderer::{Image, Renderer, BACKGROUND};
-pub use renderer_kind::{RendererKind, REGISTRY};
+pub use renderer_kind::{RendererKind, Role, REGISTRY};
 pub use sample::{Bounds, Dequantizer, Quantizer};
 #[cfg(feature = "alloc")]
 pub use scene::{Scene, SceneError};

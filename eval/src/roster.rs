@@ -92,20 +92,12 @@ pub const FILL_VARIANTS: [(&str, FillOptions); 2] = [
 /// adapter opens.
 #[cfg(feature = "gpu")]
 fn gpu_entry(kind: RendererKind) -> Option<Entry> {
-    let made = match kind {
-        RendererKind::SplatGpu => volwarp_gpu_tracer::GpuSplat::new().map(|g| {
-            log::info!("{kind} on {}", g.context().describe());
-            Box::new(g) as Box<dyn Renderer>
-        }),
-        RendererKind::SplatLayersGpu => volwarp_gpu_tracer::GpuLayerSplat::new().map(|g| {
-            log::info!("{kind} on {}", g.context().describe());
-            Box::new(g) as Box<dyn Renderer>
-        }),
-        _ => volwarp_gpu_tracer::GpuTracer::new().map(|g| {
-            log::info!("{kind} on {}", g.context().describe());
-            Box::new(g) as Box<dyn Renderer>
-        }),
-    };
+    let made = volwarp_gpu_tracer::GpuContext::new().and_then(|ctx| {
+        let on = ctx.describe();
+        let r = volwarp_gpu_tracer::create(kind, ctx, volwarp_cpu_tracer::layer_splat::LayerOptions::DEFAULT)?;
+        log::info!("{kind} on {on}");
+        Ok(r)
+    });
     match made {
         Ok(renderer) => Some(Entry { name: kind.name().into(), radius_scale: 1.0, gpu: true, renderer }),
         Err(e) => {
