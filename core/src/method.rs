@@ -26,6 +26,10 @@ use crate::segments::DEFAULT_LAYERS;
 /// corners (0: off).
 pub const WATERTIGHT: f32 = 1.5;
 
+/// The most frames a method keeps (the newest included); renderers given more use the newest
+/// this many.
+pub const MAX_FRAMES: usize = 8;
+
 /// A method: a renderer and the levers of the client around it.
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct Method {

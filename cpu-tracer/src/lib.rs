@@ -40,6 +40,7 @@ pub mod direct_splat;
 pub mod hole_fill;
 pub mod layer_splat;
 pub mod layer_trace;
+pub mod layered;
 pub mod packet_tracer;
 pub mod point_splat;
 pub mod route;

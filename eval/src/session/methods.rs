@@ -24,7 +24,6 @@
 //! client runs by default.
 //! The `stale` method never predicts nor widens: it is what a send-image system shows.
 
-use super::model::SessionRequest;
 use crate::ErrorBox;
 use volwarp_core::guard::MAX_GUARD;
 use volwarp_core::method::Method as CoreMethod;
@@ -34,6 +33,30 @@ use volwarp_core::wire::Frame;
 use volwarp_core::{Camera, Image, RendererKind, Scene};
 use volwarp_cpu_tracer::hole_fill::{FillOptions, HoleFill, SampleIds, MAX_FRAMES};
 use volwarp_cpu_tracer::{PacketTracer, SphereSplat};
+
+/// What a session's client asks the server for: core's request policy (the camera it shows, or
+/// the one it expects to show when the frame is on screen, widened by a guard band) and the
+/// segments per pixel. The request of each method of a session; the frames of each distinct
+/// request are served separately.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct SessionRequest {
+    /// Ask for the predicted camera.
+    pub predict: bool,
+    /// Guard band fraction (0: none).
+    pub guard: f32,
+    /// Segments per pixel it asks for (0: the session's `--layers`).
+    pub layers: u32,
+}
+
+impl SessionRequest {
+    /// Asks for the camera shown (what a send-image system does).
+    pub const NONE: SessionRequest = SessionRequest { predict: false, guard: 0.0, layers: 0 };
+
+    /// Its request policy (core's `method::RequestPolicy`).
+    pub const fn policy(&self) -> volwarp_core::method::RequestPolicy {
+        volwarp_core::method::RequestPolicy { predict: self.predict, guard: self.guard }
+    }
+}
 
 /// A frame the client holds, with its scene built once for every method.
 pub struct HeldFrame {

@@ -55,29 +55,8 @@ pub fn server_policy(name: &str) -> Result<Box<dyn ServerPolicy>, ErrorBox> {
     }
 }
 
-/// What a session's client asks the server for: core's request policy (the camera it shows, or
-/// the one it expects to show when the frame is on screen, widened by a guard band) and the
-/// segments per pixel. The request of each method of a session; the frames of each distinct
-/// request are served separately.
-#[derive(Clone, Copy, Debug, PartialEq)]
-pub struct SessionRequest {
-    /// Ask for the predicted camera.
-    pub predict: bool,
-    /// Guard band fraction (0: none).
-    pub guard: f32,
-    /// Segments per pixel it asks for (0: the session's `--layers`).
-    pub layers: u32,
-}
-
-impl SessionRequest {
-    /// Asks for the camera shown (what a send-image system does).
-    pub const NONE: SessionRequest = SessionRequest { predict: false, guard: 0.0, layers: 0 };
-
-    /// Its request policy (core's `method::RequestPolicy`).
-    pub const fn policy(&self) -> volwarp_core::method::RequestPolicy {
-        volwarp_core::method::RequestPolicy { predict: self.predict, guard: self.guard }
-    }
-}
+/// What a session's client asks the server for (defined with the methods that ask it).
+pub use super::methods::SessionRequest;
 
 /// The server and the network.
 #[derive(Clone, Copy, Debug, PartialEq)]

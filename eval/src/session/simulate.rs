@@ -21,9 +21,9 @@
 //! 4. **Scoring** every `score_every`-th tick: the truth (the marcher's image for that tick's
 //!    camera, cached between methods and runs) against what each method shows.
 
-use super::methods::{HeldFrame, Method};
-use super::model::{ClientModel, NetworkModel, Request, ServerPolicy, SessionRequest};
-use super::paths::{CameraPath, MAX_VIEWPORT};
+use super::methods::{HeldFrame, Method, SessionRequest};
+use super::model::{ClientModel, NetworkModel, Request, ServerPolicy};
+use super::paths::{CameraPath, MAX_RECORDED_VIEWPORT};
 use crate::{ErrorBox, Metrics};
 use rayon::prelude::*;
 use std::collections::HashMap;
@@ -63,8 +63,8 @@ impl SessionConfig {
     /// Checks the figures (a clear error for each bad one).
     pub fn check(&self) -> Result<(), ErrorBox> {
         self.net.check()?;
-        if self.size == 0 || self.size > MAX_VIEWPORT {
-            return Err(format!("size must be 1..={MAX_VIEWPORT} (got {})", self.size).into());
+        if self.size == 0 || self.size > MAX_RECORDED_VIEWPORT {
+            return Err(format!("size must be 1..={MAX_RECORDED_VIEWPORT} (got {})", self.size).into());
         }
         if !self.duration_s.is_finite() || self.duration_s <= 0.0 || self.duration_s > 3600.0 {
             return Err(format!("duration must be in (0, 3600] s (got {})", self.duration_s).into());
@@ -196,7 +196,8 @@ pub fn tick_cameras(marcher: &Marcher, path: &CameraPath, cfg: &SessionConfig) -
     (0..n)
         .map(|k| {
             let c = path.camera(&c0, k as f64 / cfg.client.display_hz);
-            c.validate(MAX_VIEWPORT).map_err(|e| format!("scenario {}: camera at tick {k}: {e}", path.name))?;
+            c.validate(MAX_RECORDED_VIEWPORT)
+                .map_err(|e| format!("scenario {}: camera at tick {k}: {e}", path.name))?;
             Ok(c)
         })
         .collect()
@@ -206,13 +207,13 @@ pub fn tick_cameras(marcher: &Marcher, path: &CameraPath, cfg: &SessionConfig) -
 /// `tick_ms`: the horizon takes off that tick, a frame's arrival alone asks for nothing (the
 /// client asks when its view moves), and a predicting client asks once more at the first tick
 /// the view holds still (so the server renders the still view, not the overshoot of the last
-/// prediction); guard bands widen to at most [`MAX_VIEWPORT`].
+/// prediction); guard bands widen to at most [`MAX_RECORDED_VIEWPORT`].
 pub fn cadence(tick_ms: f64) -> Cadence {
     Cadence {
         display_tick_s: (tick_ms * 1e-3) as f32,
         on_frame_arrival: false,
         on_first_still: true,
-        max_viewport: MAX_VIEWPORT,
+        max_viewport: MAX_RECORDED_VIEWPORT,
     }
 }
 
