@@ -35,9 +35,8 @@ use crate::sample::Dequantizer;
 use crate::wire::{decode_frame_fixed, FrameHeader, Limits, MsgType, WireError, FRAME_FIXED_LEN};
 #[cfg(feature = "alloc")]
 use crate::wire::{encode_frame_fixed, HEADER_LEN};
+pub use crate::wire::{CompactError, COMPACT_FIXED_LEN};
 
-/// Bytes of a CompactFrame payload before the compressed body.
-pub const COMPACT_FIXED_LEN: usize = FRAME_FIXED_LEN + 24;
 /// The zstd window a decoder allows even for a body shorter than it (ruzstd's encoder always
 /// declares 128 KiB); otherwise the window may not exceed the body.
 pub const MIN_ZSTD_WINDOW: u64 = 128 << 10;
@@ -72,59 +71,6 @@ impl Coder {
     }
 }
 
-/// Why a compact frame could not be decoded. Carried by [`WireError::Compact`].
-#[derive(Clone, Copy, Debug, PartialEq, Eq)]
-pub enum CompactError {
-    /// The depth origin or step is NaN, infinite, not positive, or the largest depth code
-    /// decodes to a non-finite depth.
-    BadDepth,
-    /// The radius model's constant or slope is NaN or infinite.
-    BadRadiusModel,
-    /// Unknown entropy coder code.
-    BadCoder(u8),
-    /// The stated decompressed length is not `⌈w·h/8⌉ + 8·count`.
-    BadRawLength {
-        /// Stated.
-        stated: u32,
-        /// What the header's dimensions and count give.
-        expected: u64,
-    },
-    /// The entropy-coded body is corrupt (zstd refused it, it decompresses to another length,
-    /// or a stored body has the wrong length).
-    Corrupt,
-    /// The coverage mask has another number of set bits than the sample count, or bits set
-    /// past the last pixel.
-    MaskCount {
-        /// Set bits of the mask (within the viewport).
-        mask: u32,
-        /// The header's sample count.
-        count: u32,
-    },
-    /// A radius residual outside the 10-bit code range.
-    BadRadiusResidual,
-    /// Unknown color coding code (byte 113).
-    BadColorCoding(u8),
-}
-
-impl core::fmt::Display for CompactError {
-    fn fmt(&self, f: &mut core::fmt::Formatter<'_>) -> core::fmt::Result {
-        match self {
-            CompactError::BadDepth => f.write_str("compact frame: bad depth origin or step"),
-            CompactError::BadRadiusModel => f.write_str("compact frame: bad radius model"),
-            CompactError::BadCoder(c) => write!(f, "compact frame: unknown entropy coder {c}"),
-            CompactError::BadRawLength { stated, expected } => {
-                write!(f, "compact frame: body length {stated}, expected {expected}")
-            }
-            CompactError::Corrupt => f.write_str("compact frame: corrupt compressed body"),
-            CompactError::MaskCount { mask, count } => {
-                write!(f, "compact frame: coverage mask has {mask} pixels, header says {count} samples")
-            }
-            CompactError::BadRadiusResidual => f.write_str("compact frame: radius residual out of range"),
-            CompactError::BadColorCoding(c) => write!(f, "compact frame: unknown color coding {c}"),
-        }
-    }
-}
-
 /// Why a frame could not be put in compact form (the sender then sends the 12-byte form).
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 pub enum EncodeError {
@@ -153,8 +99,6 @@ impl core::fmt::Display for EncodeError {
     }
 }
 
-#[cfg(feature = "std")]
-impl std::error::Error for CompactError {}
 #[cfg(feature = "std")]
 impl std::error::Error for EncodeError {}
 

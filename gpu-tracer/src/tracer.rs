@@ -78,16 +78,7 @@ impl SceneKey {
     }
 }
 
-/// Timings of the last GPU LBVH build.
-#[derive(Clone, Copy, Debug, Default, PartialEq)]
-pub struct BuildTiming {
-    /// Uploading the unsorted samples and colors.
-    pub upload: Duration,
-    /// The compute passes (keys, sort, reorder, hierarchy, fit), submit to completion.
-    pub build: Duration,
-    /// Reading the sorted samples, colors and nodes back into a [`Scene`].
-    pub readback: Duration,
-}
+pub use crate::lbvh::BuildTiming;
 
 /// The wgpu compute tracer. Implements [`Renderer`] as `spheres-gpu`.
 ///
