@@ -449,7 +449,7 @@ pub fn encode(frame: &Frame, opts: &EncodeOptions) -> Result<Vec<u8>, EncodeErro
 /// value says which form the bytes are in.
 pub fn encode_frame(frame: &Frame, encoding: Encoding, opts: &EncodeOptions) -> (Vec<u8>, Encoding) {
     if encoding == Encoding::Compact {
-        // A layered frame (issue 14) goes as one CompactFrame per layer.
+        // A layered frame goes as one CompactFrame per layer.
         let layered = !frame.segments.is_empty();
         let compact = if layered { crate::segments::encode_layered(frame, opts) } else { encode(frame, opts) };
         if let Ok(b) = compact {

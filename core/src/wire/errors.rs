@@ -1,7 +1,7 @@
 //! The payload codecs' errors, carried by [`super::WireError`] (the codecs themselves, above
 //! the framing, re-export them: `compact_frame::CompactError`, `segments::LayerError`).
 
-/// Why a compact frame could not be decoded. Carried by [`WireError::Compact`].
+/// Why a compact frame could not be decoded. Carried by [`WireError::Compact`](super::WireError::Compact).
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 pub enum CompactError {
     /// The depth origin or step is NaN, infinite, not positive, or the largest depth code

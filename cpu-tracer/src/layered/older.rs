@@ -9,8 +9,8 @@ use crate::threads::Threads;
 use crate::MAX_VIEWPORT;
 use volwarp_core::{Camera, Scene};
 
-/// Issue 19's older frames, each reduced to what the newest frame did not see (its *residual*,
-/// see the module docs): one definition for [`LayerSplat`] and the GPU's layered splatter,
+/// The older frames kept, each reduced to what the newest frame did not see (its *residual*,
+/// see `crate::layer_splat`): one definition for [`LayerSplat`](crate::LayerSplat) and the GPU's layered splatter,
 /// which draws the same sets in the same order (through [`OlderSets`]).
 #[derive(Debug, Default)]
 pub(crate) struct OlderFrames {
@@ -80,8 +80,8 @@ impl OlderFrames {
     }
 }
 
-/// What a renderer other than [`LayerSplat`] (the GPU's `splat-layers-gpu`) needs to draw
-/// issue 19's older frames as [`LayerSplat::render_set`] does: the scenes to draw after the
+/// What a renderer other than [`LayerSplat`](crate::LayerSplat) (the GPU's `splat-layers-gpu`) needs to draw
+/// the older frames kept as [`LayerSplat::render_set`](crate::LayerSplat) does: the scenes to draw after the
 /// newest, in order, each into the pixels still empty, made by the CPU's own code (the
 /// residuals are made once per arriving frame, on the CPU, and are small).
 #[derive(Debug)]
@@ -101,7 +101,7 @@ impl OlderSets {
     /// first; at most `hole_fill::MAX_FRAMES − 1` are used) and whether holes are filled
     /// (`fill`, [`LayerOptions::fill`]): each older frame's residual (or the older frames whole
     /// when the camera has turned more than 90° from the newest frame's view). Empty where
-    /// [`LayerSplat::render_set`] draws no older frame (none kept; or the frame's own image at
+    /// [`LayerSplat::render_set`](crate::LayerSplat) draws no older frame (none kept; or the frame's own image at
     /// its own camera, with the fill), and then, as there, the residuals are not touched: the
     /// same calls leave both renderers with the same residuals. The caller has checked that
     /// `newest` and `camera` can be drawn.

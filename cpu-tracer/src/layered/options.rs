@@ -6,7 +6,7 @@ pub use crate::key_list::{LIST, OPAQUE};
 pub use volwarp_core::method::MAX_FRAMES;
 
 /// How far (in source pixels) beyond its own pixel a sample's footprint reaches. 0: a margin
-/// against rounding cracks (0.05 in issue 14's first version) counts semi-transparent segments
+/// against rounding cracks (0.05 in the first version) counts semi-transparent segments
 /// twice along every footprint edge, a grid of bright lines once the view zooms in; without it
 /// the session ꟻLIP of the iron protein's dolly fell from 0.0187 to 0.0064 and the MRI's orbit
 /// from 0.0262 to 0.0200 (`docs/results.md`, "Layered frames as the default").
@@ -50,7 +50,7 @@ pub(crate) const PIXEL_PASS_ROWS: usize = 64;
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct LayerOptions {
     /// Half the footprint's side, in source pixels: 0.5 is the source pixel itself; the default
-    /// adds [`OWN_MARGIN`]. Measured (`docs/perf.md`, issue 14): 0.7 double-counts more than it
+    /// adds [`OWN_MARGIN`]. Measured (`docs/perf.md`, layered samples): 0.7 double-counts more than it
     /// fills.
     pub own: f32,
     /// Fill the pixels no segment covers from the frame's image (see the module docs).

@@ -190,7 +190,7 @@ pub(crate) fn corner(sum: f32, count: f32) -> f32 {
     }
 }
 
-/// The slab-shared corner depths of layered frames, as [`LayerSplat`] finds them for its newest
+/// The slab-shared corner depths of layered frames, as [`LayerSplat`](crate::LayerSplat) finds them for its newest
 /// frame (see [`LayerOptions::watertight`]): what the GPU layered splatter uploads beside the
 /// samples, so both sides draw the same footprints. Keeps its buffers from frame to frame.
 #[derive(Debug, Default)]
