@@ -82,8 +82,7 @@ fn run_connected(opts: &Options, addr: &str) -> Result<(), ClientError> {
         timeout,
         lazy_build: !opts.renderer.info().caps.needs_lbvh,
         bandwidth_mbps: (opts.bandwidth_mbps > 0.0).then_some(opts.bandwidth_mbps),
-        predict: opts.predict,
-        guard: opts.guard,
+        request: opts.method().request(),
     };
     let net = Network::start(conn, cfg, recorder.as_ref().map(Recorder::sink))?;
     let mut display = Display::new(net, renderers, recorder.as_ref().map(Recorder::sink));

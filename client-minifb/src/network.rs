@@ -28,7 +28,7 @@ use std::sync::atomic::{AtomicBool, AtomicU64, Ordering};
 use std::sync::{Arc, Condvar, Mutex, MutexGuard};
 use std::thread::JoinHandle;
 use std::time::{Duration, Instant};
-use volwarp_core::guard::GuardBand;
+use volwarp_core::method::{Cadence, RequestPolicy, ViewEvents};
 use volwarp_core::prediction::{Horizon, Predictor};
 use volwarp_core::wire::{CameraRequest, Frame, Limits, Message};
 use volwarp_core::{Camera, Heuristic, Scene};
@@ -84,14 +84,18 @@ pub struct NetConfig {
     /// Link rate in Mbit/s that the socket's reads and writes are throttled to
     /// (`--bandwidth-mbps`; [`crate::link`]); `None`: loopback speed.
     pub bandwidth_mbps: Option<f64>,
-    /// Ask for the camera predicted for when the frame will be shown (core's `prediction`,
-    /// orbit-aware, horizon: the measured request-to-ready time plus half the frame interval)
-    /// instead of the current one.
-    pub predict: bool,
-    /// Guard band: ask for a view wider by this fraction of the display on every side, at the
-    /// same pixel density (core's `guard`; 0: none, at most 0.5).
-    pub guard: f32,
+    /// What the writer asks for (core's `method::RequestPolicy`, the method's `predict` and
+    /// `guard`): the camera predicted for when the frame will be shown (orbit-aware, horizon:
+    /// the measured request-to-ready time plus half the frame interval) or the current one,
+    /// widened by a guard band of this fraction of the display on every side (0: none).
+    pub request: RequestPolicy,
 }
+
+/// The window client's side of the request policy: the display runs at about 60 Hz (a tick of
+/// ~16 ms) and a frame's arrival alone triggers a request, so the server always has work; no
+/// extra request when the view stops (the arrival of the next frame asks for the still view).
+pub const CADENCE: Cadence =
+    Cadence { display_tick_s: 1.0 / 60.0, on_frame_arrival: true, on_first_still: false, max_viewport: MAX_VIEWPORT };
 
 struct Pending {
     frame: Frame,
@@ -218,13 +222,13 @@ impl Network {
                 .map_err(spawn_err)?,
         );
         let sh = shared.clone();
-        let (predict, guard) = (cfg.predict, cfg.guard);
+        let request = cfg.request;
         threads.push(
             std::thread::Builder::new()
                 .name("volwarp-net-write".into())
                 .spawn(move || match link(write_mbps) {
-                    Some(b) => write_loop(&sh, Throttled::new(ws, b), predict, guard),
-                    None => write_loop(&sh, ws, predict, guard),
+                    Some(b) => write_loop(&sh, Throttled::new(ws, b), request),
+                    None => write_loop(&sh, ws, request),
                 })
                 .map_err(spawn_err)?,
         );
@@ -423,25 +427,10 @@ fn build_loop(sh: &Shared, cfg: &NetConfig) {
     }
 }
 
-/// The camera to request for `camera`: predicted for the measured horizon (`predict`; the
-/// display's own predictor, which has seen every camera shown), widened by a guard band
-/// (`guard`).
-fn request_camera(sh: &Shared, predictor: &Predictor, camera: Camera, predict: bool, guard: f32) -> Camera {
-    let mut cam = camera;
-    if predict {
-        // The display runs at about 60 Hz (a tick of ~16 ms) in the window.
-        let horizon = lock(&sh.horizon).0.seconds(1.0 / 60.0);
-        cam = predictor.predict(horizon).unwrap_or(camera);
-    }
-    if guard > 0.0 {
-        if let Ok(g) = GuardBand::new(&cam, guard, MAX_VIEWPORT) {
-            cam = g.camera;
-        }
-    }
-    cam
-}
-
-fn write_loop(sh: &Shared, mut stream: impl Write, predict: bool, guard: f32) {
+/// Sends a request whenever core's request policy says one is due on the [`CADENCE`] (at most
+/// every [`THROTTLE`]), for the camera it picks: predicted for the measured horizon by the
+/// display's own predictor (which has seen every camera shown), widened by a guard band.
+fn write_loop(sh: &Shared, mut stream: impl Write, request: RequestPolicy) {
     let mut seq = 0u64;
     let mut last_send: Option<Instant> = None;
     loop {
@@ -453,7 +442,8 @@ fn write_loop(sh: &Shared, mut stream: impl Write, predict: bool, guard: f32) {
                     send_bye(&mut stream);
                     return;
                 }
-                if let Some(v) = g.view.filter(|_| g.changed || g.frame_arrived) {
+                let events = ViewEvents { moved: g.changed, first_still: false, frame_arrived: g.frame_arrived };
+                if let Some(v) = g.view.filter(|_| request.due(&CADENCE, events)) {
                     let now = Instant::now();
                     match last_send.map(|t| t + THROTTLE).filter(|next| *next > now) {
                         Some(next) => {
@@ -471,7 +461,8 @@ fn write_loop(sh: &Shared, mut stream: impl Write, predict: bool, guard: f32) {
             }
         };
         seq += 1;
-        let camera = request_camera(sh, &predictor, view.camera, predict, guard);
+        let horizon = lock(&sh.horizon).0;
+        let camera = request.camera(view.camera, &predictor, &horizon, &CADENCE).camera;
         let req = CameraRequest { seq, camera, heuristic: view.heuristic, radius_scale: view.radius_scale };
         let now = Instant::now();
         {

@@ -3,14 +3,8 @@
 use crate::error::ClientError;
 use clap::Parser;
 use std::path::PathBuf;
+use volwarp_core::method::Method;
 use volwarp_core::{Heuristic, RendererKind};
-
-/// The default guard band (`--guard`), chosen on the session results (`docs/results.md`).
-pub const DEFAULT_GUARD: f32 = 0.0;
-
-/// How many of the newest frames the client keeps by default (`--keep-frames`), chosen on the
-/// session results (`docs/results.md`, "Older frames").
-pub const DEFAULT_KEEP_FRAMES: usize = 4;
 
 /// The window controls, printed by `--help`.
 pub const CONTROLS: &str = "\
@@ -18,9 +12,9 @@ Window controls:
   left drag / arrow keys     orbit around the volume
   right drag / W A S D       pan
   wheel / + -                zoom
-  1..9                       renderer (see --renderer; key k is the k-th of its list;
-                             9 is spheres, the fastest exact route)
-  0                          the default renderer, splat-layers
+  1 (or 0)                   the default renderer, splat-layers
+  2..9                       stale, points1, points2, points3, splat, spheres-gpu,
+                             spheres-scalar, spheres (see --renderer)
   H / Shift+H                next / previous depth heuristic (sent to the server)
   [ ]                        smaller / larger sample radius (sent to the server)
   R                          reset the camera
@@ -76,13 +70,15 @@ pub struct Options {
     /// Threads of the network thread's LBVH build (0: all cores).
     #[arg(long, value_name = "N", default_value_t = 1)]
     pub build_threads: usize,
-    /// Renderer, in key order (keys 1–9, then no key): spheres-cpu, points1, points2, points3,
-    /// splat (exact sphere splatting), stale (unwarped frame), spheres-gpu (GPU opened on first
-    /// use), spheres-scalar, spheres (the fastest exact route: tiles or tracer), splat-tiles,
-    /// spheres-fill and splat-fill (holes filled from the stale frame), splat-gpu (GPU exact
-    /// splatting), splat-layers (layered frames composited front to back, holes filled: the
-    /// default; it asks the server for 4 segments per pixel).
-    #[arg(long, value_name = "NAME", default_value_t = RendererKind::DEFAULT, value_parser = parse_renderer)]
+    /// Renderer: the product, splat-layers (layered frames composited front to back, holes
+    /// filled: the default, window key 1; it asks the server for 4 segments per pixel) and
+    /// splat-layers-gpu (its wgpu twin); the baselines stale (unwarped frame, key 2), points1,
+    /// points2, points3 (2.5D points, keys 3–5), splat (exact sphere splatting, key 6),
+    /// spheres-gpu (GPU opened on first use, key 7), spheres (the fastest exact route: tiles or
+    /// tracer, key 9), spheres-cpu, splat-tiles, splat-gpu, spheres-fill and splat-fill (holes
+    /// filled from the stale frame); the reference oracles spheres-scalar (key 8) and
+    /// spheres-layers.
+    #[arg(long, value_name = "NAME", default_value_t = Method::DEFAULT.renderer, value_parser = parse_renderer)]
     pub renderer: RendererKind,
     /// GPU renderers: the adapter whose name contains NAME (case-insensitive; default: the best
     /// there is, a real GPU before a software one). The adapter opened is logged.
@@ -116,22 +112,22 @@ pub struct Options {
     /// Ask the server for the camera predicted for when its frame will be shown (orbit-aware
     /// extrapolation over the measured request-to-display time plus half the frame interval)
     /// instead of the current one: `--predict false` turns it off.
-    #[arg(long, value_name = "BOOL", default_value_t = true, action = clap::ArgAction::Set)]
+    #[arg(long, value_name = "BOOL", default_value_t = Method::DEFAULT.predict, action = clap::ArgAction::Set)]
     pub predict: bool,
     /// Guard band: ask for a view wider by this fraction of the window on every side (same
     /// pixel density, (1 + 2G)² the pixels), so turns reveal samples already sent; 0..=0.5.
-    #[arg(long, value_name = "G", default_value_t = DEFAULT_GUARD, value_parser = parse_guard)]
+    #[arg(long, value_name = "G", default_value_t = Method::DEFAULT.guard, value_parser = parse_guard)]
     pub guard: f32,
     /// Size spheres by how far the view moved from the frame's camera (half the footprint at
     /// the frame's own camera, so it is shown exactly; the frame's radius from a 10° turn on;
     /// the splatters only; `splat-layers` grows the footprints of opaque segments instead):
     /// `--adapt false` draws the frame's radii.
-    #[arg(long, value_name = "BOOL", default_value_t = true, action = clap::ArgAction::Set)]
+    #[arg(long, value_name = "BOOL", default_value_t = Method::DEFAULT.adapt, action = clap::ArgAction::Set)]
     pub adapt: bool,
     /// Keep the K newest frames and fill what the newest does not cover from what the older
     /// ones saw that it did not (renderers that keep frames: `splat-layers`; the others draw
     /// the newest alone); 1..=8.
-    #[arg(long, value_name = "K", default_value_t = DEFAULT_KEEP_FRAMES, value_parser = parse_keep_frames)]
+    #[arg(long, value_name = "K", default_value_t = Method::DEFAULT.frames, value_parser = parse_keep_frames)]
     pub keep_frames: usize,
     /// Watertight slabs (`splat-layers`, `splat-layers-gpu`): neighbouring segments of one slab
     /// share their footprints' corners where their depths lie within T source pixels, so a
@@ -140,7 +136,7 @@ pub struct Options {
     #[arg(
         long,
         value_name = "T",
-        default_value_t = volwarp_cpu_tracer::layer_splat::WATERTIGHT,
+        default_value_t = Method::DEFAULT.watertight,
         value_parser = parse_watertight
     )]
     pub watertight: f32,
@@ -171,11 +167,21 @@ pub struct Options {
 impl Options {
     /// The segments per pixel to ask the server for (see `--layers`).
     pub fn layers(&self) -> u8 {
-        self.layers.unwrap_or(if self.renderer.draws_layers() {
-            volwarp_core::segments::DEFAULT_LAYERS as u8
-        } else {
-            1
-        })
+        self.layers.unwrap_or(Method::layers_for(self.renderer))
+    }
+
+    /// The method the options ask for (core's [`Method`]; with no options
+    /// [`Method::DEFAULT`]).
+    pub fn method(&self) -> Method {
+        Method {
+            renderer: self.renderer,
+            layers: self.layers(),
+            frames: self.keep_frames,
+            predict: self.predict,
+            adapt: self.adapt,
+            watertight: self.watertight,
+            guard: self.guard,
+        }
     }
 }
 
@@ -327,5 +333,13 @@ mod tests {
         }
         let o = Options::parse_from(["volwarp-client", "--renderer", "splat-layers-gpu", "--layers", "2"]);
         assert_eq!(o.layers(), 2);
+    }
+
+    #[test]
+    fn no_options_ask_for_the_default_method() {
+        assert_eq!(Options::parse_from(["volwarp-client"]).method(), Method::DEFAULT);
+        let o = Options::parse_from(["volwarp-client", "--predict", "false", "--guard", "0.1", "--keep-frames", "2"]);
+        let m = o.method();
+        assert_eq!((m.predict, m.guard, m.frames), (false, 0.1, 2));
     }
 }

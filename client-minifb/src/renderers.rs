@@ -1,5 +1,5 @@
-//! The interchangeable renderers of the client and their live switching (keys 1–9 of core's
-//! [`RendererKind`] registry). Every renderer draws the same scene for the same camera; the GPU
+//! The interchangeable renderers of the client and their live switching (the window number
+//! keys 1–9 of core's [`RendererKind`] registry, the default on 1). Every renderer draws the same scene for the same camera; the GPU
 //! tracer is opened lazily the first time it is chosen, and if no adapter can be opened the
 //! client says so and keeps the current renderer.
 
@@ -49,10 +49,7 @@ pub fn create(kind: RendererKind, threads: usize) -> Result<Box<dyn Renderer>, S
     if kind.info().caps.gpu {
         return create_gpu(kind);
     }
-    if kind == RendererKind::SplatLayers {
-        return Ok(Box::new(volwarp_cpu_tracer::LayerSplat::with_options(threads, layer_options())));
-    }
-    match volwarp_cpu_tracer::create(kind, threads) {
+    match volwarp_cpu_tracer::create_with(kind, threads, layer_options()) {
         Some(r) => Ok(r),
         None => Err(format!("no CPU renderer `{kind}`")),
     }
@@ -65,14 +62,7 @@ fn create_gpu(kind: RendererKind) -> Result<Box<dyn Renderer>, String> {
     let ctx = volwarp_gpu_tracer::GpuContext::with_adapter(ADAPTER.get().and_then(|a| a.as_deref()))
         .map_err(|e| e.to_string())?;
     log::info!("{kind} ready on {} ({:.0} ms)", ctx.describe_driver(), t.elapsed().as_secs_f64() * 1e3);
-    let r: Box<dyn Renderer> = match kind {
-        RendererKind::SplatGpu => Box::new(volwarp_gpu_tracer::GpuSplat::with_context(ctx).map_err(|e| e.to_string())?),
-        RendererKind::SplatLayersGpu => {
-            Box::new(volwarp_gpu_tracer::GpuLayerSplat::with_context(ctx, layer_options()).map_err(|e| e.to_string())?)
-        }
-        _ => Box::new(volwarp_gpu_tracer::GpuTracer::with_context(ctx).map_err(|e| e.to_string())?),
-    };
-    Ok(r)
+    volwarp_gpu_tracer::create(kind, ctx, layer_options()).map_err(|e| e.to_string())
 }
 
 #[cfg(not(feature = "gpu"))]
@@ -140,9 +130,10 @@ impl Renderers {
         Ok(())
     }
 
-    /// Switches to the renderer of key `1..=9`.
-    pub fn select_key(&mut self, key: usize) -> Result<(), String> {
-        match RendererKind::from_key(key) {
+    /// Switches to the renderer of window number key `1..=9` (core's
+    /// [`RendererKind::window_key`]).
+    pub fn select_key(&mut self, key: u8) -> Result<(), String> {
+        match RendererKind::from_window_key(key) {
             Some(kind) => self.select(kind),
             None => Err(format!("no renderer on key {key}")),
         }
@@ -215,10 +206,12 @@ mod tests {
         r.render(&scene, &cam, &mut b);
         assert_eq!(a, b, "packet and scalar tracers draw the same image");
         assert!(a.pixels.iter().any(|&p| p != volwarp_core::BACKGROUND));
-        for k in 1..=6 {
+        for k in 1..=9 {
             r.select_key(k).unwrap();
-            assert_eq!(r.kind(), RendererKind::ALL[k - 1]);
+            assert_eq!(r.kind().window_key(), Some(k));
         }
+        r.select_key(1).unwrap();
+        assert_eq!(r.kind(), RendererKind::DEFAULT, "the default is on key 1");
         r.select_key(9).unwrap();
         assert_eq!(r.kind(), RendererKind::Spheres);
         let mut c = Image::new(1, 1);
@@ -226,13 +219,14 @@ mod tests {
         assert_eq!(a, c, "the default renderer draws the same image");
         // An unbuilt scene (lazy build): the exact renderers draw the built scene's image.
         let unbuilt = volwarp_cpu_tracer::route::unbuilt_scene(&frame);
-        for key in [9, 1, 8, 5] {
+        for key in [9, 8, 6] {
             r.select_key(key).unwrap();
             let mut d = Image::new(1, 1);
             r.render(&unbuilt, &cam, &mut d);
             assert_eq!(a, d, "{} on the unbuilt scene", r.name());
         }
-        assert!(r.select_key(RendererKind::ALL.len() + 1).is_err());
+        assert!(r.select_key(10).is_err());
+        assert!(r.select_key(0).is_err());
     }
 
     #[test]

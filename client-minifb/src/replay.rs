@@ -5,11 +5,12 @@
 //! `--headless`) and a line of `timings.csv`; in a window the entries play at their recorded
 //! times.
 
-use crate::display::FrameReport;
+use crate::display::{FrameReport, RateMeter};
 use crate::error::ClientError;
 use crate::headless::{csv_line, frame_file, CSV_HEADER};
 use crate::options::Options;
 use crate::renderers::Renderers;
+use crate::window::{title, Screen, TITLE_EVERY};
 use embedded_io_adapters::std::FromStd;
 use std::collections::VecDeque;
 use std::fs::File;
@@ -166,7 +167,7 @@ pub fn run(opts: &Options, path: &Path) -> Result<(), ClientError> {
     replay.set_lazy_build(!opts.renderer.info().caps.needs_lbvh);
     replay.set_keep_frames(opts.keep_frames);
     if !opts.headless {
-        return crate::window::run_replay(opts, &mut replay, &mut renderers);
+        return run_window(opts, &mut replay, &mut renderers);
     }
     let out = opts.out.as_deref().ok_or_else(|| ClientError::Usage("--headless --replay needs --out DIR".into()))?;
     std::fs::create_dir_all(out).map_err(|e| ClientError::Io(format!("cannot create {}: {e}", out.display())))?;
@@ -194,4 +195,39 @@ pub fn run(opts: &Options, path: &Path) -> Result<(), ClientError> {
 pub fn wait_until(start: Instant, t_us: u64) {
     let due = start + Duration::from_micros(t_us);
     std::thread::sleep(due.saturating_duration_since(Instant::now()).min(Duration::from_secs(1)));
+}
+
+/// Plays a record file in a window at its recorded pace; the number keys switch the renderer.
+fn run_window(opts: &Options, replay: &mut Replay, renderers: &mut Renderers) -> Result<(), ClientError> {
+    let mut screen = Screen::open("volwarp replay", opts.size.0, opts.size.1, opts.fps.unwrap_or(60))?;
+    let mut image = Image::new(1, 1);
+    let mut meter = RateMeter::default();
+    let mut last_title = Instant::now() - TITLE_EVERY;
+    let mut start: Option<(Instant, u64)> = None;
+    let mut done = false;
+    while !screen.quit() {
+        if let Some(k) = screen.renderer_key() {
+            let _ = renderers.select_key(k);
+        }
+        if done {
+            screen.present(&image)?;
+            continue;
+        }
+        let Some((t_us, req)) = replay.next_camera()? else {
+            log::info!("replay finished; close the window to quit");
+            done = true;
+            continue;
+        };
+        let (t0, first_us) = *start.get_or_insert((Instant::now(), t_us));
+        wait_until(t0, t_us.saturating_sub(first_us));
+        let r = draw(replay, renderers, &req, &mut image);
+        screen.present(&image)?;
+        meter.add(1, Instant::now());
+        if last_title.elapsed() >= TITLE_EVERY {
+            last_title = Instant::now();
+            let t = title(meter.rate(last_title), 0.0, None, r.samples, renderers.name(), req.heuristic);
+            screen.window.set_title(&format!("{t} | replay"));
+        }
+    }
+    Ok(())
 }

@@ -10,15 +10,13 @@ use crate::display::{to_0rgb, Display, RateMeter};
 use crate::error::ClientError;
 use crate::network::View;
 use crate::options::Options;
-use crate::renderers::Renderers;
-use crate::replay::{draw, wait_until, Replay};
 use minifb::{Key, KeyRepeat, MouseButton, MouseMode, Window, WindowOptions};
 use std::time::{Duration, Instant};
 use volwarp_core::renderer::Image;
 use volwarp_core::{Camera, Heuristic};
 
 /// How often the title is refreshed.
-const TITLE_EVERY: Duration = Duration::from_millis(250);
+pub(crate) const TITLE_EVERY: Duration = Duration::from_millis(250);
 
 /// Checks there is a display to open a window on (Unix: `DISPLAY` or `WAYLAND_DISPLAY`).
 pub fn check_display() -> Result<(), ClientError> {
@@ -73,8 +71,8 @@ impl Screen {
         !self.window.is_open() || self.window.is_key_down(Key::Escape) || self.window.is_key_down(Key::Q)
     }
 
-    /// Number key 0–9 pressed this frame, if any (0: the default renderer).
-    pub fn renderer_key(&self) -> Option<usize> {
+    /// Number key 0–9 pressed this frame, if any (0: the default renderer, as 1).
+    pub fn renderer_key(&self) -> Option<u8> {
         let w = &self.window;
         if w.is_key_pressed(Key::Key0, KeyRepeat::No) || w.is_key_pressed(Key::NumPad0, KeyRepeat::No) {
             return Some(0);
@@ -92,7 +90,7 @@ impl Screen {
         ];
         KEYS.iter()
             .position(|(a, b)| w.is_key_pressed(*a, KeyRepeat::No) || w.is_key_pressed(*b, KeyRepeat::No))
-            .map(|i| i + 1)
+            .map(|i| i as u8 + 1)
     }
 }
 
@@ -252,41 +250,6 @@ pub fn run_live(opts: &Options, display: &mut Display, home: Camera) -> Result<(
         }
     }
     log::info!("window closed after {frames} display frames");
-    Ok(())
-}
-
-/// Plays a record file in a window at its recorded pace; keys 1–0 switch the renderer.
-pub fn run_replay(opts: &Options, replay: &mut Replay, renderers: &mut Renderers) -> Result<(), ClientError> {
-    let mut screen = Screen::open("volwarp replay", opts.size.0, opts.size.1, opts.fps.unwrap_or(60))?;
-    let mut image = Image::new(1, 1);
-    let mut meter = RateMeter::default();
-    let mut last_title = Instant::now() - TITLE_EVERY;
-    let mut start: Option<(Instant, u64)> = None;
-    let mut done = false;
-    while !screen.quit() {
-        if let Some(k) = screen.renderer_key() {
-            let _ = renderers.select_key(k);
-        }
-        if done {
-            screen.present(&image)?;
-            continue;
-        }
-        let Some((t_us, req)) = replay.next_camera()? else {
-            log::info!("replay finished; close the window to quit");
-            done = true;
-            continue;
-        };
-        let (t0, first_us) = *start.get_or_insert((Instant::now(), t_us));
-        wait_until(t0, t_us.saturating_sub(first_us));
-        let r = draw(replay, renderers, &req, &mut image);
-        screen.present(&image)?;
-        meter.add(1, Instant::now());
-        if last_title.elapsed() >= TITLE_EVERY {
-            last_title = Instant::now();
-            let t = title(meter.rate(last_title), 0.0, None, r.samples, renderers.name(), req.heuristic);
-            screen.window.set_title(&format!("{t} | replay"));
-        }
-    }
     Ok(())
 }
 

@@ -33,7 +33,7 @@ fn gpu_switch_draws_the_cpu_image_or_explains_why_not() {
                 cpu.pixels.len()
             );
             // Switching back and forth keeps the opened tracer.
-            r.select_key(1).unwrap();
+            r.select(RendererKind::SpheresCpu).unwrap();
             r.select_key(7).unwrap();
             assert_eq!(r.name(), "spheres-gpu");
         }

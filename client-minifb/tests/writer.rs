@@ -42,8 +42,7 @@ fn writer_sends_only_the_newest_camera_throttled() {
             timeout: Duration::from_secs(10),
             lazy_build: false,
             bandwidth_mbps: None,
-            predict: false,
-            guard: 0.0,
+            request: volwarp_core::method::RequestPolicy::NONE,
         },
         None,
     )

@@ -30,6 +30,11 @@ use bytemuck::{Pod, Zeroable};
 
 /// Flag of a child reference that points at a leaf.
 pub const LEAF_BIT: u32 = 0x8000_0000;
+
+/// Depth of a traversal stack over the tree: the Karras tree over 54-bit codes plus 32-bit
+/// tie-breaks is at most 97 levels deep, and near-first traversal keeps at most one entry per
+/// level.
+pub const STACK_SIZE: usize = 128;
 /// Parent of the root.
 pub const NO_PARENT: u32 = u32::MAX;
 
@@ -296,7 +301,7 @@ impl<'a> Lbvh<'a> {
         if n == 1 {
             return Ok(());
         }
-        let mut stack = [0u32; crate::traversal::STACK_SIZE];
+        let mut stack = [0u32; STACK_SIZE];
         let mut sp = 1;
         stack[0] = 0;
         seen[0] = 1;

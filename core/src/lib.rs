@@ -7,6 +7,7 @@
 //! |---|---|
 //! | [`camera`] | the pinhole camera and its primary rays (one convention for marcher, tracers and shader) |
 //! | [`sample`] | the object-space sample: quantized position + radius in 64 bits, RGBA8 color in 32 |
+//! | [`method`] | the method (renderer and levers, its default) and the request policy: when a client asks for which camera |
 //! | [`prediction`] | the camera expected when a requested frame arrives (orbit-aware extrapolation) |
 //! | [`guard`] | guard bands: a wider requested view at the same pixel density |
 //! | [`warp_radius`] | sphere radii sized by how far the view moved from the frame's camera |
@@ -22,7 +23,7 @@
 //! | [`wire`] | the framed, versioned wire codec over `embedded-io` |
 //! | `scene` (feature `alloc`) | an owned, traceable scene built from a received frame |
 //! | `renderer` (feature `alloc`) | the one interface every way of drawing a scene implements |
-//! | [`renderer_kind`] | the one registry of renderers: names, client keys, capabilities |
+//! | [`renderer_kind`] | the one registry of renderers: names, roles, window keys, capabilities |
 //! | `image_diff` (feature `alloc`) | identical-pixel share and largest channel difference of two images |
 //! | [`record`] | the record file of a received stream, for replay |
 //! | `png` (feature `png`) | saving and loading [`Image`]s as PNG files |
@@ -49,6 +50,7 @@ pub mod heuristics;
 #[cfg(feature = "alloc")]
 pub mod image_diff;
 pub mod lbvh;
+pub mod method;
 pub mod morton;
 #[cfg(feature = "png")]
 pub mod png;
@@ -78,7 +80,7 @@ pub use image_diff::ImageDiff;
 pub use lbvh::{Lbvh, Node};
 #[cfg(feature = "alloc")]
 pub use renderer::{Image, Renderer, BACKGROUND};
-pub use renderer_kind::{RendererKind, REGISTRY};
+pub use renderer_kind::{RendererKind, Role, REGISTRY};
 pub use sample::{Bounds, Dequantizer, Quantizer};
 #[cfg(feature = "alloc")]
 pub use scene::{Scene, SceneError};

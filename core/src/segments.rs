@@ -21,8 +21,7 @@
 //! front to back (`C += (1 − A)·c`, `A += (1 − A)·α`) the segments give `dst_end` exactly in
 //! real arithmetic.
 
-/// Most segments per pixel a frame may carry (the wire's and the marcher's cap).
-pub const MAX_LAYERS: usize = 16;
+pub use crate::wire::{LayerError, MAX_LAYERS};
 
 /// The segments per pixel a client asks for by default with the `splat-layers` renderer,
 /// chosen by measurement (`docs/perf.md` and `docs/results.md`, "Choosing K"): against K = 2 it
@@ -283,63 +282,6 @@ pub fn composite(colors: impl IntoIterator<Item = [f32; 4]>) -> [f32; 4] {
     }
     acc
 }
-
-/// Why a layered frame's segments were refused (`WireError::Layers`).
-#[derive(Clone, Copy, Debug, PartialEq, Eq)]
-pub enum LayerError {
-    /// The frame has more segments per pixel than the receiver negotiated (or than
-    /// [`MAX_LAYERS`]).
-    TooManyLayers {
-        /// The frame's layer count.
-        layers: u8,
-        /// The receiver's maximum.
-        limit: u8,
-    },
-    /// Sample `index`'s segment index is not 0 (a new pixel) or the previous one + 1, or is not
-    /// below the frame's layer count.
-    BadIndex {
-        /// The sample.
-        index: usize,
-    },
-    /// Sample `index` is not strictly behind the previous segment of its pixel (depths unsorted
-    /// or overlapping), or not on the same pixel's ray.
-    Unsorted {
-        /// The sample.
-        index: usize,
-    },
-    /// Sample `index`'s premultiplied color has a channel above its opacity (an opacity-
-    /// normalised color above 1).
-    Opacity {
-        /// The sample.
-        index: usize,
-    },
-    /// The segment plane's length differs from the sample count, or a layer's part of a
-    /// LayeredCompactFrame disagrees with the frame (header, nesting of the layers' masks).
-    Inconsistent,
-    /// A layered frame where only a one-sample-per-pixel frame can be read (the allocation-free
-    /// `wire::read_frame_header`).
-    Layered,
-}
-
-impl core::fmt::Display for LayerError {
-    fn fmt(&self, f: &mut core::fmt::Formatter<'_>) -> core::fmt::Result {
-        match self {
-            LayerError::TooManyLayers { layers, limit } => {
-                write!(f, "layered frame with {layers} segments per pixel, over the negotiated {limit}")
-            }
-            LayerError::BadIndex { index } => write!(f, "layered frame: bad segment index at sample {index}"),
-            LayerError::Unsorted { index } => {
-                write!(f, "layered frame: sample {index} is not behind its pixel's previous segment")
-            }
-            LayerError::Opacity { index } => write!(f, "layered frame: sample {index} has color above its opacity"),
-            LayerError::Inconsistent => f.write_str("layered frame: segment data inconsistent with the frame"),
-            LayerError::Layered => f.write_str("layered frame where a one-sample-per-pixel frame was expected"),
-        }
-    }
-}
-
-#[cfg(feature = "std")]
-impl std::error::Error for LayerError {}
 
 /// Checks a layered frame's segments (what every receiver relies on): one index per sample; a
 /// pixel's samples consecutive with indices 0, 1, 2, … below `layers`; each strictly farther

@@ -11,9 +11,8 @@ use crate::sample::Dequantizer;
 use crate::sphere::{intersect, intersect_box};
 use glam::Vec3;
 
-/// Depth of the traversal stack: the Karras tree over 54-bit codes plus 32-bit tie-breaks is
-/// at most 97 levels deep, and near-first traversal keeps at most one entry per level.
-pub const STACK_SIZE: usize = 128;
+/// Depth of the traversal stack (the tree's, [`crate::lbvh::STACK_SIZE`]).
+pub use crate::lbvh::STACK_SIZE;
 
 /// A first hit: ray parameter and primitive (sorted sample) index.
 #[derive(Clone, Copy, Debug, PartialEq)]

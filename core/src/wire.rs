@@ -15,6 +15,9 @@ use crate::sample::{Bounds, RADIUS_MAX};
 use embedded_io::{ErrorKind, Read, ReadExactError, Write};
 use glam::Vec3;
 
+mod errors;
+pub use errors::{CompactError, LayerError};
+
 /// The four magic bytes that start every message.
 pub const MAGIC: [u8; 4] = *b"VWRP";
 /// The protocol version this crate speaks (and writes in every header). Version 3 (layered frames)
@@ -32,6 +35,10 @@ pub const CAMERA_LEN: usize = 48;
 pub const CAMERA_REQUEST_LEN: usize = 64;
 /// Bytes of a Frame payload before the sample array.
 pub const FRAME_FIXED_LEN: usize = 96;
+/// Bytes of a CompactFrame payload before the compressed body (`crate::compact_frame`).
+pub const COMPACT_FIXED_LEN: usize = FRAME_FIXED_LEN + 24;
+/// Most segments per pixel a frame may carry (the wire's and the marcher's cap).
+pub const MAX_LAYERS: usize = 16;
 /// Bytes per sample in a Frame (8 position/radius + 4 color).
 pub const BYTES_PER_SAMPLE: usize = 12;
 /// Longest token a Hello carries.
@@ -115,23 +122,23 @@ impl Limits {
         let raw = max_samples as u64 * BYTES_PER_SAMPLE as u64 + FRAME_FIXED_LEN as u64;
         // A CompactFrame holds a mask and 8 bytes per sample, which zstd can grow a little.
         let body = (max_samples as u64).div_ceil(8) + 8 * max_samples as u64;
-        let compact = crate::compact_frame::COMPACT_FIXED_LEN as u64 + body + body / 64 + 1024;
+        let compact = COMPACT_FIXED_LEN as u64 + body + body / 64 + 1024;
         let max_payload = if compact > raw { compact } else { raw };
         Limits {
             max_payload: if max_payload > u32::MAX as u64 { u32::MAX } else { max_payload as u32 },
             max_samples,
             max_viewport,
-            max_layers: crate::segments::MAX_LAYERS as u8,
+            max_layers: MAX_LAYERS as u8,
         }
     }
 
     /// These limits with at most `layers` segments per pixel (clamped to
-    /// `1..=`[`crate::segments::MAX_LAYERS`]).
+    /// `1..=`[`MAX_LAYERS`]).
     pub const fn with_layers(mut self, layers: u8) -> Limits {
         self.max_layers = if layers == 0 {
             1
-        } else if layers as usize > crate::segments::MAX_LAYERS {
-            crate::segments::MAX_LAYERS as u8
+        } else if layers as usize > MAX_LAYERS {
+            MAX_LAYERS as u8
         } else {
             layers
         };
@@ -200,9 +207,9 @@ pub enum WireError {
     /// Caller-provided buffers are too small for the frame.
     BufferTooSmall,
     /// A CompactFrame's own fields or body are invalid.
-    Compact(crate::compact_frame::CompactError),
+    Compact(CompactError),
     /// A layered frame's segments are invalid (version 3).
-    Layers(crate::segments::LayerError),
+    Layers(LayerError),
 }
 
 impl core::fmt::Display for WireError {
@@ -269,9 +276,9 @@ impl Hello {
     pub fn new(capabilities: u32) -> Self {
         Hello { version: VERSION, capabilities, token: heapless::Vec::new(), layers: 1 }
     }
-    /// Sets the layer count (clamped to `1..=`[`crate::segments::MAX_LAYERS`]).
+    /// Sets the layer count (clamped to `1..=`[`MAX_LAYERS`]).
     pub fn with_layers(mut self, layers: u8) -> Self {
-        self.layers = layers.clamp(1, crate::segments::MAX_LAYERS as u8);
+        self.layers = layers.clamp(1, MAX_LAYERS as u8);
         self
     }
     /// Sets the token; `Err` if it is longer than [`MAX_TOKEN`].
@@ -599,7 +606,7 @@ pub fn parse_header(h: &[u8; HEADER_LEN], limits: &Limits) -> Result<Header, Wir
         }
         MsgType::Error => (4..=4 + MAX_ERROR_TEXT as u32).contains(&len),
         MsgType::Bye => len == 0,
-        MsgType::CompactFrame => len >= crate::compact_frame::COMPACT_FIXED_LEN as u32,
+        MsgType::CompactFrame => len >= COMPACT_FIXED_LEN as u32,
         MsgType::LayeredCompactFrame => len >= FRAME_FIXED_LEN as u32,
     };
     if len > limits.max_payload {
@@ -626,7 +633,7 @@ pub fn read_hello<R: Read>(r: &mut R, h: &Header) -> Result<Hello, WireError> {
     let b: [u8; 9 + MAX_TOKEN] = read_fixed(r, len)?;
     let mut c = Cur::new(&b[..len]);
     let version = c.u16();
-    let layers = c.u16().clamp(1, crate::segments::MAX_LAYERS as u16) as u8;
+    let layers = c.u16().clamp(1, MAX_LAYERS as u16) as u8;
     let capabilities = c.u32();
     let tlen = c.u8() as usize;
     if 9 + tlen != len {
@@ -658,11 +665,11 @@ pub fn read_camera_request<R: Read>(r: &mut R, h: &Header, limits: &Limits) -> R
 /// Reads the fixed part of a one-sample-per-pixel Frame payload (after its header), checking it
 /// against the header's length and the limits. The samples follow; read them with
 /// [`read_frame_body`]. A layered frame (version 3, byte 57 non-zero) is refused with
-/// [`crate::segments::LayerError::Layered`]: read it with [`read_message`] (feature `alloc`).
+/// [`LayerError::Layered`]: read it with [`read_message`] (feature `alloc`).
 pub fn read_frame_header<R: Read>(r: &mut R, h: &Header, limits: &Limits) -> Result<FrameHeader, WireError> {
     let (fh, layers) = read_frame_header_layered(r, h, limits)?;
     if layers != 0 {
-        return Err(WireError::Layers(crate::segments::LayerError::Layered));
+        return Err(WireError::Layers(LayerError::Layered));
     }
     Ok(fh)
 }
@@ -695,10 +702,7 @@ pub fn read_frame_header_layered<R: Read>(
 /// the layer count against `limits.max_layers`, the count against `layers × pixels`.
 pub fn check_count_layers(fh: &FrameHeader, layers: u8, limits: &Limits) -> Result<(), WireError> {
     if layers > limits.max_layers.max(1) {
-        return Err(WireError::Layers(crate::segments::LayerError::TooManyLayers {
-            layers,
-            limit: limits.max_layers.max(1),
-        }));
+        return Err(WireError::Layers(LayerError::TooManyLayers { layers, limit: limits.max_layers.max(1) }));
     }
     let pixels = fh.camera.width as u64 * fh.camera.height as u64 * layers.max(1) as u64;
     let limit = (limits.max_samples as u64).min(pixels) as u32;
@@ -821,130 +825,6 @@ pub fn skip_payload<R: Read>(r: &mut R, h: &Header) -> Result<(), WireError> {
 }
 
 #[cfg(feature = "alloc")]
-pub use owned::*;
-
+mod message;
 #[cfg(feature = "alloc")]
-mod owned {
-    use super::*;
-    use alloc::vec::Vec;
-
-    /// A whole Frame with its samples.
-    #[derive(Clone, Debug, PartialEq)]
-    pub struct Frame {
-        /// The fixed part.
-        pub header: FrameHeader,
-        /// Packed samples.
-        pub samples: Vec<u64>,
-        /// Premultiplied RGBA8 colors, one per sample.
-        pub colors: Vec<u32>,
-        /// Layered frames (version 3, `crate::segments`): each sample's index among its pixel's
-        /// segments, front to back (a pixel's samples are consecutive, its first has index 0).
-        /// Empty for a one-sample-per-pixel frame.
-        pub segments: Vec<u8>,
-    }
-
-    impl Frame {
-        /// A one-sample-per-pixel frame.
-        pub fn new(header: FrameHeader, samples: Vec<u64>, colors: Vec<u32>) -> Frame {
-            Frame { header, samples, colors, segments: Vec::new() }
-        }
-
-        /// The most segments any pixel has (1 for a one-sample-per-pixel frame).
-        pub fn layers(&self) -> u8 {
-            self.segments.iter().max().map_or(1, |&m| m.saturating_add(1))
-        }
-    }
-
-    /// Any message.
-    #[derive(Clone, Debug, PartialEq)]
-    pub enum Message {
-        /// Hello.
-        Hello(Hello),
-        /// CameraRequest.
-        CameraRequest(CameraRequest),
-        /// Frame.
-        Frame(Frame),
-        /// Error.
-        Error(ErrorMsg),
-        /// Bye.
-        Bye,
-    }
-
-    /// Reads one whole message. Allocates at most `count × 12` bytes for a Frame, and only
-    /// after its header passed the limits.
-    pub fn read_message<R: Read>(r: &mut R, limits: &Limits) -> Result<Message, WireError> {
-        let h = read_header(r, limits)?;
-        read_payload(r, &h, limits)
-    }
-
-    /// Reads the payload of a message whose header was read already.
-    pub fn read_payload<R: Read>(r: &mut R, h: &Header, limits: &Limits) -> Result<Message, WireError> {
-        Ok(match h.ty {
-            MsgType::Hello => Message::Hello(read_hello(r, h)?),
-            MsgType::CameraRequest => Message::CameraRequest(read_camera_request(r, h, limits)?),
-            MsgType::Frame => {
-                let (header, layers) = read_frame_header_layered(r, h, limits)?;
-                let n = header.count as usize;
-                let mut samples = alloc::vec![0u64; n];
-                let mut colors = alloc::vec![0u32; n];
-                read_frame_body(r, &header, &mut samples, &mut colors)?;
-                let mut segments = Vec::new();
-                if layers > 0 {
-                    segments = alloc::vec![0u8; n];
-                    r.read_exact(&mut segments)?;
-                    crate::segments::validate(&header, &samples, &colors, &segments, layers)
-                        .map_err(WireError::Layers)?;
-                }
-                Message::Frame(Frame { header, samples, colors, segments })
-            }
-            MsgType::Error => Message::Error(read_error(r, h)?),
-            MsgType::Bye => Message::Bye,
-            MsgType::CompactFrame => {
-                // The length passed the limit in `read_header`; the decoder bounds the rest.
-                let mut payload = alloc::vec![0u8; h.len as usize];
-                r.read_exact(&mut payload)?;
-                Message::Frame(crate::compact_frame::decode_payload(&payload, limits)?)
-            }
-            MsgType::LayeredCompactFrame => {
-                let mut payload = alloc::vec![0u8; h.len as usize];
-                r.read_exact(&mut payload)?;
-                Message::Frame(crate::segments::decode_layered_payload(&payload, limits)?)
-            }
-        })
-    }
-
-    /// Writes any message.
-    pub fn write_message<W: Write>(w: &mut W, m: &Message) -> Result<(), WireError> {
-        match m {
-            Message::Hello(h) => write_hello(w, h),
-            Message::CameraRequest(c) => write_camera_request(w, c),
-            Message::Frame(f) => write_frame_layered(w, &f.header, &f.samples, &f.colors, &f.segments),
-            Message::Error(e) => write_error(w, e),
-            Message::Bye => write_bye(w),
-        }
-    }
-
-    /// Encodes a message into a new buffer.
-    pub fn encode_to_vec(m: &Message) -> Vec<u8> {
-        let mut v = Vec::new();
-        write_message(&mut VecWriter(&mut v), m).expect("writing to a Vec cannot fail");
-        v
-    }
-
-    /// An `embedded_io::Write` into a `Vec<u8>`.
-    pub struct VecWriter<'a>(pub &'a mut Vec<u8>);
-
-    impl embedded_io::ErrorType for VecWriter<'_> {
-        type Error = core::convert::Infallible;
-    }
-
-    impl Write for VecWriter<'_> {
-        fn write(&mut self, buf: &[u8]) -> Result<usize, Self::Error> {
-            self.0.extend_from_slice(buf);
-            Ok(buf.len())
-        }
-        fn flush(&mut self) -> Result<(), Self::Error> {
-            Ok(())
-        }
-    }
-}
+pub use message::*;

@@ -15,8 +15,7 @@ use volwarp_core::wire::Frame;
 use volwarp_core::{Camera, Scene};
 use volwarp_cpu_tracer::synthetic::depth_image_frame;
 use volwarp_cpu_tracer::{
-    AutoSpheres, DirectSplat, PacketTracer, ParallelBuilder, PointSplat, ScalarTracer, SphereSplat, StaleImage,
-    TileSplat,
+    AutoSpheres, PacketTracer, ParallelBuilder, PointSplat, ScalarTracer, SphereSplat, StaleImage, TileSplat,
 };
 
 #[path = "support/frames.rs"]
@@ -124,8 +123,8 @@ fn summary(frame: &Frame, what: &str, scene: &Scene) {
 fn sphere_targets_summary(frame: &Frame, what: &str, scene: &Scene) {
     let simd = volwarp_cpu_tracer::lane_kind();
     println!("\n## sphere routes (medians, wall ms; SIMD: {simd})\nframe: {what}");
-    println!("| radius | view | viewport | threads | splat-tiles | spheres (route) | spheres-cpu | splat | packet / spheres | splat-direct (samples' order, not in the registry) |");
-    println!("|---|---|---|---|---|---|---|---|---|---|");
+    println!("| radius | view | viewport | threads | splat-tiles | spheres (route) | spheres-cpu | splat | packet / spheres |");
+    println!("|---|---|---|---|---|---|---|---|---|");
     let mut img = Image::new(1, 1);
     let paper = frames::mri_frame_with(1024, volwarp_server::RadiusModel::Voxel).map(|(f, _)| {
         let s = Scene::build(&f);
@@ -163,11 +162,9 @@ fn sphere_targets_summary(frame: &Frame, what: &str, scene: &Scene) {
                     } else {
                         "—".into()
                     };
-                    let mut ds = DirectSplat::new(threads);
-                    let sd = median_secs(11, Duration::from_secs(3), || ds.render(scene, &cam, &mut img)) * 1e3;
                     let e = a.last_estimate();
                     println!(
-                        "| {radius} | {view} | {res}² | {threads} | {st:.1} ({:.1} FPS) | {sa:.1} ({:.1} FPS, {:?}, side {:.1} px) | {sp:.1} | {old} | {:.2} | {sd:.1} |",
+                        "| {radius} | {view} | {res}² | {threads} | {st:.1} ({:.1} FPS) | {sa:.1} ({:.1} FPS, {:?}, side {:.1} px) | {sp:.1} | {old} | {:.2} |",
                         1e3 / st,
                         1e3 / sa,
                         a.last_route().unwrap_or(volwarp_cpu_tracer::Route::Splat),

@@ -14,7 +14,7 @@ use std::time::Instant;
 use volwarp_core::renderer::{Image, Renderer};
 use volwarp_core::wire::{self, Frame, Limits, Message};
 use volwarp_core::Scene;
-use volwarp_cpu_tracer::{route, AutoSpheres, DirectSplat, PacketTracer, SphereSplat, TileSplat};
+use volwarp_cpu_tracer::{route, AutoSpheres, PacketTracer, SphereSplat, TileSplat};
 
 #[path = "../benches/support/frames.rs"]
 mod frames;
@@ -37,16 +37,73 @@ fn frame(model: volwarp_server::RadiusModel, dir: &str) -> Option<Frame> {
     Some(f)
 }
 
-/// [`DirectSplat`] behind the `Renderer` interface for the timing loop (it is not in the
-/// registry; the kind reported is never read here).
-struct Direct<'a>(&'a mut DirectSplat);
+/// `splat-direct`: the splatter in the samples' order (`splat-direct-one`, `-two`: one or two
+/// 4×2 windows for small rectangles instead of the per-frame choice), with feature
+/// `direct-splat`.
+#[cfg(feature = "direct-splat")]
+mod direct {
+    use super::*;
+    use volwarp_cpu_tracer::DirectSplat;
 
-impl Renderer for Direct<'_> {
-    fn kind(&self) -> volwarp_core::RendererKind {
-        volwarp_core::RendererKind::SplatTiles
+    /// [`DirectSplat`] behind the `Renderer` interface for the timing loop (it is not in the
+    /// registry; the kind reported is never read here).
+    pub struct Direct(DirectSplat);
+
+    impl Renderer for Direct {
+        fn kind(&self) -> volwarp_core::RendererKind {
+            volwarp_core::RendererKind::SplatTiles
+        }
+        fn render(&mut self, scene: &Scene, camera: &volwarp_core::Camera, out: &mut Image) {
+            self.0.render(scene, camera, out)
+        }
     }
-    fn render(&mut self, scene: &Scene, camera: &volwarp_core::Camera, out: &mut Image) {
-        self.0.render(scene, camera, out)
+
+    pub fn make(what: &str, threads: usize) -> Option<Direct> {
+        what.starts_with("splat-direct").then(|| {
+            Direct(match what {
+                "splat-direct-one" => DirectSplat::new(threads).with_windows(false),
+                "splat-direct-two" => DirectSplat::new(threads).with_windows(true),
+                _ => DirectSplat::new(threads),
+            })
+        })
+    }
+
+    pub fn report(d: &Direct) {
+        println!(
+            "bands {:?}, spheres handed over {}, two windows {}",
+            d.0.band_rows(),
+            d.0.handed_over(),
+            d.0.last_two_windows()
+        );
+    }
+}
+
+/// Without feature `direct-splat` there is no `splat-direct`.
+#[cfg(not(feature = "direct-splat"))]
+mod direct {
+    use super::*;
+
+    pub enum Direct {}
+
+    impl Renderer for Direct {
+        fn kind(&self) -> volwarp_core::RendererKind {
+            match *self {}
+        }
+        fn render(&mut self, _: &Scene, _: &volwarp_core::Camera, _: &mut Image) {
+            match *self {}
+        }
+    }
+
+    pub fn make(what: &str, _threads: usize) -> Option<Direct> {
+        if what.starts_with("splat-direct") {
+            eprintln!("{what}: build with `--features direct-splat`");
+            std::process::exit(2);
+        }
+        None
+    }
+
+    pub fn report(d: &Direct) {
+        match *d {}
     }
 }
 
@@ -92,13 +149,7 @@ fn main() {
         // `splat-tiles-nocull`: the tiled splatter without occlusion culling.
         let mut tiles = (what.starts_with("splat-tiles"))
             .then(|| TileSplat::new(threads).with_culling(what != "splat-tiles-nocull"));
-        // `splat-direct`: the splatter in the samples' order (`splat-direct-one`, `-two`: one or
-        // two 4×2 windows for small rectangles instead of the per-frame choice).
-        let mut direct = (what.starts_with("splat-direct")).then(|| match what.as_str() {
-            "splat-direct-one" => DirectSplat::new(threads).with_windows(false),
-            "splat-direct-two" => DirectSplat::new(threads).with_windows(true),
-            _ => DirectSplat::new(threads),
-        });
+        let mut direct = direct::make(what, threads);
         let mut other = match (&tiles, &direct) {
             (Some(_), _) | (_, Some(_)) => None,
             (None, None) => {
@@ -106,8 +157,7 @@ fn main() {
                 Some(volwarp_cpu_tracer::create(kind, threads).expect("a CPU renderer"))
             }
         };
-        let mut direct_adapter = direct.as_mut().map(Direct);
-        let r: &mut dyn Renderer = match (&mut tiles, &mut direct_adapter, &mut other) {
+        let r: &mut dyn Renderer = match (&mut tiles, &mut direct, &mut other) {
             (Some(t), _, _) => t,
             (_, Some(d), _) => d,
             (_, _, Some(o)) => o.as_mut(),
@@ -127,12 +177,7 @@ fn main() {
             (cpu_ns().unwrap_or(0) - c) as f64 / 1e6 / 30.0
         );
         if let Some(d) = &direct {
-            println!(
-                "bands {:?}, spheres handed over {}, two windows {}",
-                d.band_rows(),
-                d.handed_over(),
-                d.last_two_windows()
-            );
+            direct::report(d);
         }
         if let Some(t) = &tiles {
             let (pairs, culled) = t.culled();

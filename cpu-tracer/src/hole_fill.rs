@@ -39,8 +39,8 @@ use volwarp_core::renderer::{Image, Renderer};
 use volwarp_core::sample::pack_color_f32;
 use volwarp_core::{Camera, RendererKind, Scene, BACKGROUND};
 
-/// The most frames [`HoleFill::render_set`] uses (newest included); more are ignored.
-pub const MAX_FRAMES: usize = 8;
+/// The most frames a client keeps (core's `method::MAX_FRAMES`).
+pub use volwarp_core::method::MAX_FRAMES;
 
 /// A renderer that can give the first-hit sample id of every pixel.
 pub trait SampleIds: Send {

@@ -15,9 +15,14 @@
 use crate::frame_setup::over_background_fast;
 #[cfg(target_arch = "x86_64")]
 use crate::lanes;
-use crate::layer_splat::{LIST, OPAQUE};
 use volwarp_core::sample::pack_color_f32;
 use volwarp_core::BACKGROUND;
+
+/// Most segments kept per output pixel (the nearest ones).
+pub const LIST: usize = 16;
+
+/// Accumulated opacity at which a pixel's compositing stops.
+pub const OPAQUE: f32 = 0.999;
 
 /// The depth key: the centre's distance from the eye (ordered bits of a non-negative float)
 /// and the sample id.

@@ -18,7 +18,7 @@
 //! cost, more for the hits it keeps), in parallel over rows. `splat-layers` is the default.
 
 use crate::key_list::{composite_keys, insert, key};
-use crate::layer_splat::{pixel, Proj, LIST};
+use crate::layered::{pixel, Proj, LIST};
 use crate::sphere_splat::View;
 use crate::threads::Threads;
 use crate::{begin_frame, MAX_VIEWPORT};

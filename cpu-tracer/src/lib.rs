@@ -8,7 +8,7 @@
 //! |---|---|---|
 //! | [`route`] | the default: tiled splatting or packet tracing, chosen per frame by a measured cost model | `spheres` |
 //! | [`tile_splat`] | exact object-order sphere splatting in cache-sized screen tiles (no BVH) | `splat-tiles` |
-//! | [`direct_splat`] | the same exact splatting in the samples' own order, no binning (measured slower; not in the registry) | — |
+//! | `direct_splat` (feature `direct-splat`) | the same exact splatting in the samples' own order, no binning: a superseded experiment (measured slower; not in the registry), built for its tests only | — |
 //! | [`packet_tracer`] | first-hit sphere tracing with 8-ray SIMD packets (`wide::f32x8`) | `spheres-cpu` |
 //! | [`scalar_tracer`] | core's scalar reference traversal per pixel | `spheres-scalar` |
 //! | [`point_splat`] | ZAL12 2.5D points: fixed N×N squares with a depth test | `points1`, `points2`, `points3` |
@@ -35,10 +35,12 @@
 #![allow(clippy::neg_cmp_op_on_partial_ord)]
 
 pub mod build;
+#[cfg(feature = "direct-splat")]
 pub mod direct_splat;
 pub mod hole_fill;
 pub mod layer_splat;
 pub mod layer_trace;
+pub mod layered;
 pub mod packet_tracer;
 pub mod point_splat;
 pub mod route;
@@ -52,6 +54,8 @@ pub mod tile_splat;
 mod depth_buffer;
 mod frame_setup;
 mod key_list;
+// The lanes' permutes serve only `DirectSplat` (feature `direct-splat`).
+#[cfg_attr(not(feature = "direct-splat"), allow(dead_code))]
 mod lanes;
 
 pub(crate) use frame_setup::{begin_frame, begin_frame_overwritten, begin_frame_unbuilt_ok, shade, trace_ids_with};
@@ -63,6 +67,7 @@ pub use build::sort as parallel_sort;
 
 pub use build::{build_scene, BuildTimes, Method, ParallelBuilder};
 
+#[cfg(feature = "direct-splat")]
 pub use direct_splat::DirectSplat;
 pub use hole_fill::{FillOptions, HoleFill, SampleIds};
 pub use lanes::lane_kind;
@@ -87,9 +92,20 @@ pub const MAX_VIEWPORT: u32 = 8192;
 /// The pixel value for "no hit" in sample-id buffers.
 pub const NO_HIT: u32 = u32::MAX;
 
-/// A CPU renderer of the registry, drawing with `threads` threads (0: all cores); `None` for
-/// a renderer that is not a CPU one ([`RendererKind::SpheresGpu`]).
+/// A CPU renderer of the registry, drawing with `threads` threads (0: all cores) and the
+/// layered renderer's default options; `None` for a renderer that is not a CPU one
+/// ([`RendererKind::SpheresGpu`]).
 pub fn create(kind: RendererKind, threads: usize) -> Option<Box<dyn Renderer + Send>> {
+    create_with(kind, threads, layer_splat::LayerOptions::DEFAULT)
+}
+
+/// The one factory of the CPU renderers of the registry: [`create`] with the layered
+/// renderer's options `layers` (the GPU renderers: `volwarp_gpu_tracer::create`).
+pub fn create_with(
+    kind: RendererKind,
+    threads: usize,
+    layers: layer_splat::LayerOptions,
+) -> Option<Box<dyn Renderer + Send>> {
     Some(match kind {
         RendererKind::SpheresCpu => Box::new(PacketTracer::new(threads)),
         RendererKind::SpheresScalar => Box::new(ScalarTracer::new(threads)),
@@ -106,7 +122,7 @@ pub fn create(kind: RendererKind, threads: usize) -> Option<Box<dyn Renderer + S
         RendererKind::SplatFill => {
             Box::new(HoleFill::new(SphereSplat::new(threads), kind, FillOptions::DEFAULT, threads))
         }
-        RendererKind::SplatLayers => Box::new(LayerSplat::new(threads)),
+        RendererKind::SplatLayers => Box::new(LayerSplat::with_options(threads, layers)),
         RendererKind::SpheresLayers => Box::new(LayerTrace::new(threads)),
         RendererKind::SpheresGpu | RendererKind::SplatGpu | RendererKind::SplatLayersGpu => return None,
     })

@@ -311,12 +311,6 @@ impl LazyBuild {
     }
 }
 
-/// Whether the renderer of this name draws unbuilt scenes itself (so a client may skip the
-/// LBVH build when it is the current one).
-pub fn draws_unbuilt(name: &str) -> bool {
-    matches!(name, "spheres" | "splat-tiles")
-}
-
 impl Renderer for AutoSpheres {
     fn kind(&self) -> RendererKind {
         RendererKind::Spheres

@@ -1,12 +1,12 @@
 //! The portable (`wide`, non-AVX2) kernels, forced with `VOLWARP_PORTABLE_SIMD` (read once per
 //! process: this file holds one test, so it runs in its own process), give the scalar
-//! reference's sample ids too: the tiled splatter, the direct splatter, the default renderer and
-//! the packet tracer.
+//! reference's sample ids too: the tiled splatter, the direct splatter (feature `direct-splat`),
+//! the default renderer and the packet tracer.
 
 use volwarp_core::renderer::{Image, Renderer};
 use volwarp_core::Vec3;
 use volwarp_cpu_tracer::synthetic::{depth_image_frame, random_cloud};
-use volwarp_cpu_tracer::{build_scene, AutoSpheres, DirectSplat, PacketTracer, ScalarTracer, TileSplat, NO_HIT};
+use volwarp_cpu_tracer::{build_scene, AutoSpheres, PacketTracer, ScalarTracer, TileSplat, NO_HIT};
 
 #[test]
 fn portable_kernels_equal_the_scalar_reference() {
@@ -26,9 +26,11 @@ fn portable_kernels_equal_the_scalar_reference() {
             assert!(s.iter().any(|&i| i != NO_HIT));
             assert!(TileSplat::new(2).splat_ids(&scene, &cam, &mut t));
             assert!(t == s, "portable splatter");
+            #[cfg(feature = "direct-splat")]
             for (threads, two) in [(1, false), (2, true), (3, false)] {
                 let mut dd = Vec::new();
-                assert!(DirectSplat::new(threads).with_windows(two).splat_ids(&scene, &cam, &mut dd));
+                let mut direct = volwarp_cpu_tracer::DirectSplat::new(threads).with_windows(two);
+                assert!(direct.splat_ids(&scene, &cam, &mut dd));
                 assert!(dd == s, "portable direct splatter, {threads} thread(s)");
             }
             assert!(PacketTracer::new(2).trace_ids(&scene, &cam, &mut p));

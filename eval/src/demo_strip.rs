@@ -23,8 +23,7 @@ use volwarp_cpu_tracer::stale_image::nearest;
 use volwarp_cpu_tracer::LayerSplat;
 use volwarp_server::Marcher;
 
-/// The largest viewport a recorded camera may have.
-const MAX_VIEWPORT: u32 = 4096;
+use crate::session::paths::MAX_RECORDED_VIEWPORT;
 
 /// One row of the strip: the display frame's time and the scores of stale and volwarp.
 #[derive(Clone, Copy, Debug, PartialEq)]
@@ -48,13 +47,16 @@ fn displayed(record: &Path) -> Result<(Vec<Frame>, Vec<Shown>), ErrorBox> {
     let mut r: &[u8] = &bytes;
     let bad = |e: volwarp_core::record::RecordError| format!("{}: {e}", record.display());
     read_magic(&mut r).map_err(bad)?;
-    let limits = Limits::for_frames(MAX_VIEWPORT);
+    let limits = Limits::for_frames(MAX_RECORDED_VIEWPORT);
     let (mut frames, mut shown) = (Vec::new(), Vec::new());
     while let Some(e) = read_entry(&mut r, &limits).map_err(bad)? {
         match e {
             Entry::Frame { frame, .. } => frames.push(frame),
             Entry::Camera { t_us, request } => {
-                request.camera.validate(MAX_VIEWPORT).map_err(|e| format!("{}: camera: {e}", record.display()))?;
+                request
+                    .camera
+                    .validate(MAX_RECORDED_VIEWPORT)
+                    .map_err(|e| format!("{}: camera: {e}", record.display()))?;
                 if let Some(i) = frames.len().checked_sub(1) {
                     shown.push((t_us as f64 * 1e-6, request.camera, i));
                 }

@@ -2,7 +2,9 @@
 //! N = 1, 2, 3, the CPU sphere tracer (and its radius variants ×0.5 and ×2), the GPU sphere
 //! tracer where an adapter opens, the exact sphere splatter and its GPU twin (`splat-gpu`)
 //! where an adapter opens, the hole-filling tracer (`spheres-fill`) with its variants, and
-//! `volwarp`, the one-sample default drawing (hole-filling splatter, warp-sized radii).
+//! `splat-fill+adapt`, the single-frame warp of the hole-filling splatter with warp-sized radii
+//! (the client's drawing before layered frames; a single warp of one frame, so not the
+//! sessions' `volwarp` method, which keeps frames and asks for layered, predicted ones).
 
 use volwarp_core::renderer::Renderer;
 use volwarp_core::wire::Frame;
@@ -62,10 +64,10 @@ pub fn roster(opts: RosterOptions) -> Vec<Entry> {
         v.push(Entry { name: format!("{SpheresCpu}-r{s}"), radius_scale: s, ..entry(SpheresCpu, t) });
     }
     v.push(entry(SpheresFill, t));
-    // The window client's default drawing: the hole-filling splatter with warp-sized radii.
+    // The single-frame warp of the hole-filling splatter with warp-sized radii.
     let mut renderer = volwarp_cpu_tracer::create(SplatFill, t).expect("a CPU renderer");
     renderer.set_adaptive_radius(true);
-    v.push(Entry { name: DEFAULT_NAME.into(), radius_scale: 1.0, gpu: false, renderer });
+    v.push(Entry { name: SPLAT_FILL_ADAPT.into(), radius_scale: 1.0, gpu: false, renderer });
     for (name, opts) in FILL_VARIANTS {
         let renderer = Box::new(HoleFill::new(PacketTracer::new(t), SpheresFill, opts, t));
         v.push(Entry { name: name.into(), radius_scale: 1.0, gpu: false, renderer });
@@ -73,9 +75,11 @@ pub fn roster(opts: RosterOptions) -> Vec<Entry> {
     v
 }
 
-/// The CSV name of the window client's default drawing (`splat-fill` with warp-sized radii,
-/// core's `warp_radius`); in sessions the `volwarp` method adds prediction and the guard band.
-pub const DEFAULT_NAME: &str = "volwarp";
+/// The CSV name of the single-frame warp of the hole-filling splatter with warp-sized radii
+/// (core's `warp_radius`), written as the sessions' method spec of the same drawing. It used
+/// to be called `volwarp`; the sessions' `volwarp` (core's `Method::DEFAULT`) is the layered
+/// method, which a single warp of one frame cannot show.
+pub const SPLAT_FILL_ADAPT: &str = "splat-fill+adapt";
 
 /// The hole-filling variants measured beside `spheres-fill`: the stale frame plus
 /// 3 levels of pull-push, and pull-push alone.
@@ -88,20 +92,12 @@ pub const FILL_VARIANTS: [(&str, FillOptions); 2] = [
 /// adapter opens.
 #[cfg(feature = "gpu")]
 fn gpu_entry(kind: RendererKind) -> Option<Entry> {
-    let made = match kind {
-        RendererKind::SplatGpu => volwarp_gpu_tracer::GpuSplat::new().map(|g| {
-            log::info!("{kind} on {}", g.context().describe());
-            Box::new(g) as Box<dyn Renderer>
-        }),
-        RendererKind::SplatLayersGpu => volwarp_gpu_tracer::GpuLayerSplat::new().map(|g| {
-            log::info!("{kind} on {}", g.context().describe());
-            Box::new(g) as Box<dyn Renderer>
-        }),
-        _ => volwarp_gpu_tracer::GpuTracer::new().map(|g| {
-            log::info!("{kind} on {}", g.context().describe());
-            Box::new(g) as Box<dyn Renderer>
-        }),
-    };
+    let made = volwarp_gpu_tracer::GpuContext::new().and_then(|ctx| {
+        let on = ctx.describe();
+        let r = volwarp_gpu_tracer::create(kind, ctx, volwarp_cpu_tracer::layer_splat::LayerOptions::DEFAULT)?;
+        log::info!("{kind} on {on}");
+        Ok(r)
+    });
     match made {
         Ok(renderer) => Some(Entry { name: kind.name().into(), radius_scale: 1.0, gpu: true, renderer }),
         Err(e) => {

@@ -1,7 +1,7 @@
 //! Samples sized by what is known: single warps of frames whose spheres are
 //! sized by different radius models ([`volwarp_server::radius`]: the footprint default and
-//! `uncertainty` with its constants), drawn with the default client drawing (`volwarp`: the
-//! hole-filling splatter with warp-sized radii) and with the plain splatter (`splat`), scored
+//! `uncertainty` with its constants), drawn with the hole-filling splatter with warp-sized radii
+//! (`splat-fill+adapt`) and with the plain splatter (`splat`), scored
 //! against the marcher's truth.
 //!
 //! For each dataset, the C0 frame (the default camera at `size`²) is rendered once per variant
@@ -56,7 +56,7 @@ pub struct Row {
     pub dataset: String,
     /// Variant spec (`-` for the stale frame).
     pub variant: String,
-    /// Renderer (`stale`, `splat`, `volwarp`).
+    /// Renderer (`stale`, `splat`, `splat-fill+adapt`).
     pub renderer: String,
     /// Orbit angle, degrees.
     pub angle_deg: f32,
@@ -68,12 +68,13 @@ pub struct Row {
     pub bytes_per_sample: f64,
 }
 
-/// The client drawings compared: the plain splatter and the default drawing.
+/// The client drawings compared: the plain splatter and the hole-filling one with warp-sized
+/// radii.
 fn renderers(threads: usize) -> Vec<(&'static str, Box<dyn Renderer + Send>)> {
     let splat = volwarp_cpu_tracer::create(RendererKind::Splat, threads).expect("the splatter");
     let mut fill = volwarp_cpu_tracer::create(RendererKind::SplatFill, threads).expect("the filling splatter");
     fill.set_adaptive_radius(true);
-    vec![("splat", splat), (crate::roster::DEFAULT_NAME, fill)]
+    vec![("splat", splat), (crate::roster::SPLAT_FILL_ADAPT, fill)]
 }
 
 /// Runs the study on one dataset (see the module docs).

@@ -7,7 +7,7 @@ use volwarp_core::record::{write_entry, write_magic, Entry};
 use volwarp_core::wire::{CameraRequest, VecWriter};
 use volwarp_core::{Camera, Heuristic};
 use volwarp_eval::session::methods::{HeldFrame, Method, MethodSpec};
-use volwarp_eval::session::model::{Calibration, ClientModel, LastReceived, NetworkModel, RequestPolicy};
+use volwarp_eval::session::model::{Calibration, ClientModel, LastReceived, NetworkModel, SessionRequest};
 use volwarp_eval::session::paths::CameraPath;
 use volwarp_eval::session::report::{session_table, Run};
 use volwarp_eval::session::simulate::{run_session, SessionConfig, TruthCache};
@@ -406,7 +406,7 @@ impl Method for TurnedWarp {
     fn name(&self) -> &str {
         &self.name
     }
-    fn request(&self) -> RequestPolicy {
+    fn request(&self) -> SessionRequest {
         self.inner.request()
     }
     fn frames_kept(&self) -> usize {

@@ -35,16 +35,15 @@
 //! prefixes written in place).
 
 use crate::buffers::{grid, read_mapped, GrowBuffer};
-use crate::tracer::{SceneKey, MAX_VIEWPORT};
+use crate::tracer::{SceneKey, MAX_GPU_VIEWPORT};
 use crate::{GpuContext, GpuError};
 use bytemuck::{Pod, Zeroable};
 use std::time::{Duration, Instant};
 use volwarp_core::renderer::{Image, Renderer, BACKGROUND};
 use volwarp_core::warp_radius::warp_angle_deg;
 use volwarp_core::{Camera, RayBasis, RendererKind, Scene, Vec3};
-use volwarp_cpu_tracer::hole_fill::MAX_FRAMES;
-pub use volwarp_cpu_tracer::layer_splat::{LayerOptions, LIST, OPAQUE};
-use volwarp_cpu_tracer::layer_splat::{OlderSets, Setup, SlabCorners};
+pub use volwarp_cpu_tracer::layered::{LayerOptions, LIST, OPAQUE};
+use volwarp_cpu_tracer::layered::{OlderSets, Setup, SlabCorners, MAX_FRAMES};
 
 /// Words at the start of the work buffer before the pixels' counts (`COUNTS` in the shader).
 const COUNTS: u32 = 16;
@@ -140,7 +139,7 @@ fn check_scene(scene: &Scene) -> Result<u32, GpuError> {
 
 /// The uniform of one draw of `scene` for `camera` (its frame camera `fc`) with footprints of
 /// half side `own`, `grown` for the opaque samples: the CPU's footprint constants
-/// (`layer_splat::Setup`) and the stale lookup's projection.
+/// (`layered::Setup`) and the stale lookup's projection.
 fn params(
     scene: &Scene,
     camera: &Camera,
@@ -150,7 +149,7 @@ fn params(
     cap: u32,
     shared: bool,
 ) -> LayerParams {
-    // The footprint constants are the CPU's own (`layer_splat::Setup`), so both sides set up
+    // The footprint constants are the CPU's own (`layered::Setup`), so both sides set up
     // the same footprints.
     let s = Setup::new(camera, fc, &scene.deq, opts.own, grown, opts.grow_min_alpha);
     let view = &s.view;
@@ -420,7 +419,7 @@ impl GpuLayerSplat {
     /// Uploads the scene, sizes the buffers (the footprints for at least `quads_for` samples:
     /// the older frames'), writes the uniforms; what to draw.
     fn prepare(&mut self, scene: &Scene, camera: &Camera, quads_for: u64) -> Result<Plan, GpuError> {
-        camera.validate(MAX_VIEWPORT).map_err(GpuError::BadCamera)?;
+        camera.validate(MAX_GPU_VIEWPORT).map_err(GpuError::BadCamera)?;
         let n = check_scene(scene)?;
         let key = SceneKey::of(scene);
         let len = scene.samples.len() as u64;
@@ -649,8 +648,8 @@ impl GpuLayerSplat {
             out.reset_for_unusable(camera, 0);
             return Ok(());
         };
-        if let Err(e) = camera.validate(MAX_VIEWPORT) {
-            out.reset_for_unusable(camera, MAX_VIEWPORT);
+        if let Err(e) = camera.validate(MAX_GPU_VIEWPORT) {
+            out.reset_for_unusable(camera, MAX_GPU_VIEWPORT);
             return Err(GpuError::BadCamera(e));
         }
         out.reset_for(camera);

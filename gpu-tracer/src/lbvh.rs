@@ -25,7 +25,6 @@
 //! not promise.
 
 use crate::buffers::{grid, read_mapped, GrowBuffer};
-use crate::tracer::BuildTiming;
 use crate::{GpuContext, GpuError};
 use bytemuck::{Pod, Zeroable};
 use std::num::NonZeroU64;
@@ -75,6 +74,17 @@ pub(crate) struct Outputs<'a> {
     pub colors: &'a wgpu::Buffer,
     /// Internal nodes (`(n − 1) × 32` bytes).
     pub nodes: &'a wgpu::Buffer,
+}
+
+/// Timings of the last GPU LBVH build.
+#[derive(Clone, Copy, Debug, Default, PartialEq)]
+pub struct BuildTiming {
+    /// Uploading the unsorted samples and colors.
+    pub upload: Duration,
+    /// The compute passes (keys, sort, reorder, hierarchy, fit), submit to completion.
+    pub build: Duration,
+    /// Reading the sorted samples, colors and nodes back into a [`Scene`].
+    pub readback: Duration,
 }
 
 /// The GPU LBVH builder: pipelines and scratch buffers, reused across frames.

@@ -41,6 +41,23 @@ pub use scan::WgScanKind;
 pub use splat::GpuSplat;
 pub use tracer::{BuildTiming, GpuTracer};
 
+/// The one factory of the GPU renderers of the registry (`spheres-gpu`, `splat-gpu`,
+/// `splat-layers-gpu`) on an opened device, the layered one drawing with `layers` (the CPU
+/// renderers: `volwarp_cpu_tracer::create_with`). A CPU kind is [`GpuError::Internal`].
+pub fn create(
+    kind: volwarp_core::RendererKind,
+    ctx: GpuContext,
+    layers: volwarp_cpu_tracer::layer_splat::LayerOptions,
+) -> Result<Box<dyn volwarp_core::Renderer>, GpuError> {
+    use volwarp_core::RendererKind;
+    Ok(match kind {
+        RendererKind::SpheresGpu => Box::new(GpuTracer::with_context(ctx)?),
+        RendererKind::SplatGpu => Box::new(GpuSplat::with_context(ctx)?),
+        RendererKind::SplatLayersGpu => Box::new(GpuLayerSplat::with_context(ctx, layers)?),
+        _ => return Err(GpuError::Internal("not a GPU renderer of the registry")),
+    })
+}
+
 /// Why the GPU tracer could not do its work.
 #[derive(Clone, Debug, PartialEq, Eq)]
 pub enum GpuError {

@@ -9,7 +9,7 @@
 //! once per scene (the same scene cache as [`crate::GpuTracer`]).
 
 use crate::buffers::{grid, read_mapped, GrowBuffer};
-use crate::tracer::{SceneKey, TraceParams, MAX_VIEWPORT};
+use crate::tracer::{SceneKey, TraceParams, MAX_GPU_VIEWPORT};
 use crate::{GpuContext, GpuError};
 use bytemuck::{Pod, Zeroable};
 use std::time::{Duration, Instant};
@@ -157,7 +157,7 @@ impl GpuSplat {
     }
 
     fn prepare(&mut self, scene: &Scene, camera: &Camera) -> Result<(u32, u32, u32), GpuError> {
-        camera.validate(MAX_VIEWPORT).map_err(GpuError::BadCamera)?;
+        camera.validate(MAX_GPU_VIEWPORT).map_err(GpuError::BadCamera)?;
         let n = crate::tracer::GpuTracer::check_scene(scene)?;
         let key = SceneKey::of(scene);
         let len = scene.samples.len() as u64;
@@ -254,8 +254,8 @@ impl GpuSplat {
     /// Renders `scene` for `camera` into `out` (resized to the viewport), reading the image
     /// back. Errors as [`crate::GpuTracer::try_render`]: a background image and a typed error.
     pub fn try_render(&mut self, scene: &Scene, camera: &Camera, out: &mut Image) -> Result<(), GpuError> {
-        if let Err(e) = camera.validate(MAX_VIEWPORT) {
-            out.reset_for_unusable(camera, MAX_VIEWPORT);
+        if let Err(e) = camera.validate(MAX_GPU_VIEWPORT) {
+            out.reset_for_unusable(camera, MAX_GPU_VIEWPORT);
             return Err(GpuError::BadCamera(e));
         }
         out.reset_for(camera);

@@ -11,8 +11,9 @@ use volwarp_core::wire::Frame;
 use volwarp_core::RendererKind;
 use volwarp_core::{Camera, RayBasis, Scene, SceneError};
 
-/// Largest viewport side the tracer accepts.
-pub const MAX_VIEWPORT: u32 = 16384;
+/// Largest viewport side the GPU renderers accept (the CPU renderers':
+/// `volwarp_cpu_tracer::MAX_VIEWPORT`, which bounds what they allocate).
+pub const MAX_GPU_VIEWPORT: u32 = 16384;
 
 /// The trace shader's uniform block: the core [`RayBasis`] bytes as they are, then the
 /// dequantizer and the sizes.
@@ -77,16 +78,7 @@ impl SceneKey {
     }
 }
 
-/// Timings of the last GPU LBVH build.
-#[derive(Clone, Copy, Debug, Default, PartialEq)]
-pub struct BuildTiming {
-    /// Uploading the unsorted samples and colors.
-    pub upload: Duration,
-    /// The compute passes (keys, sort, reorder, hierarchy, fit), submit to completion.
-    pub build: Duration,
-    /// Reading the sorted samples, colors and nodes back into a [`Scene`].
-    pub readback: Duration,
-}
+pub use crate::lbvh::BuildTiming;
 
 /// The wgpu compute tracer. Implements [`Renderer`] as `spheres-gpu`.
 ///
@@ -241,7 +233,7 @@ impl GpuTracer {
     }
 
     fn prepare(&mut self, scene: &Scene, camera: &Camera) -> Result<(u32, u32), GpuError> {
-        camera.validate(MAX_VIEWPORT).map_err(GpuError::BadCamera)?;
+        camera.validate(MAX_GPU_VIEWPORT).map_err(GpuError::BadCamera)?;
         let n = Self::check_scene(scene)?;
         self.upload(scene)?;
         let (w, h) = (camera.width, camera.height);
@@ -296,11 +288,11 @@ impl GpuTracer {
     /// Renders `scene` for `camera` into `out` (resized to the viewport), reading the image back.
     ///
     /// Like the CPU renderers, an unusable camera whose viewport is still within
-    /// [`MAX_VIEWPORT`] leaves a background image of that size, one with an unusable viewport an
+    /// [`MAX_GPU_VIEWPORT`] leaves a background image of that size, one with an unusable viewport an
     /// empty (0×0) image: a bad camera never makes it allocate.
     pub fn try_render(&mut self, scene: &Scene, camera: &Camera, out: &mut Image) -> Result<(), GpuError> {
-        if let Err(e) = camera.validate(MAX_VIEWPORT) {
-            out.reset_for_unusable(camera, MAX_VIEWPORT);
+        if let Err(e) = camera.validate(MAX_GPU_VIEWPORT) {
+            out.reset_for_unusable(camera, MAX_GPU_VIEWPORT);
             return Err(GpuError::BadCamera(e));
         }
         out.reset_for(camera);

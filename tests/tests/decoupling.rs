@@ -29,8 +29,7 @@ fn display_keeps_running_while_a_slow_server_and_latency_delay_frames() {
         timeout: Duration::from_secs(20),
         lazy_build: false,
         bandwidth_mbps: None,
-        predict: false,
-        guard: 0.0,
+        request: volwarp_core::method::RequestPolicy::NONE,
     };
     let net = Network::start(conn, cfg, None).unwrap();
     let mut d = Display::new(net, Renderers::new(volwarp_core::RendererKind::SpheresCpu, 1).unwrap(), None);

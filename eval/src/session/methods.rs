@@ -20,18 +20,43 @@
 //! - `+layers=K`: it asks for frames of `K` segments per pixel (drawn by
 //!   `splat-layers`), whatever the session's `--layers`.
 //!
-//! [`DEFAULT_METHOD`] (alias `volwarp`) is the method the window client runs by default.
+//! [`default_method`] (alias `volwarp`, core's `Method::DEFAULT`) is the method the window
+//! client runs by default.
 //! The `stale` method never predicts nor widens: it is what a send-image system shows.
 
-use super::model::RequestPolicy;
 use crate::ErrorBox;
 use volwarp_core::guard::MAX_GUARD;
+use volwarp_core::method::Method as CoreMethod;
 use volwarp_core::renderer::Renderer;
 use volwarp_core::segments::MAX_LAYERS;
 use volwarp_core::wire::Frame;
 use volwarp_core::{Camera, Image, RendererKind, Scene};
 use volwarp_cpu_tracer::hole_fill::{FillOptions, HoleFill, SampleIds, MAX_FRAMES};
 use volwarp_cpu_tracer::{PacketTracer, SphereSplat};
+
+/// What a session's client asks the server for: core's request policy (the camera it shows, or
+/// the one it expects to show when the frame is on screen, widened by a guard band) and the
+/// segments per pixel. The request of each method of a session; the frames of each distinct
+/// request are served separately.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct SessionRequest {
+    /// Ask for the predicted camera.
+    pub predict: bool,
+    /// Guard band fraction (0: none).
+    pub guard: f32,
+    /// Segments per pixel it asks for (0: the session's `--layers`).
+    pub layers: u32,
+}
+
+impl SessionRequest {
+    /// Asks for the camera shown (what a send-image system does).
+    pub const NONE: SessionRequest = SessionRequest { predict: false, guard: 0.0, layers: 0 };
+
+    /// Its request policy (core's `method::RequestPolicy`).
+    pub const fn policy(&self) -> volwarp_core::method::RequestPolicy {
+        volwarp_core::method::RequestPolicy { predict: self.predict, guard: self.guard }
+    }
+}
 
 /// A frame the client holds, with its scene built once for every method.
 pub struct HeldFrame {
@@ -54,8 +79,8 @@ pub trait Method {
     /// The method's name (CSV, charts): its spec.
     fn name(&self) -> &str;
     /// What the client asks the server for.
-    fn request(&self) -> RequestPolicy {
-        RequestPolicy::NONE
+    fn request(&self) -> SessionRequest {
+        SessionRequest::NONE
     }
     /// How many of the newest frames it keeps (at least 1).
     fn frames_kept(&self) -> usize {
@@ -70,7 +95,7 @@ pub trait Method {
 /// `splat-layers` does).
 pub struct RendererMethod {
     name: String,
-    request: RequestPolicy,
+    request: SessionRequest,
     frames: usize,
     renderer: Box<dyn Renderer + Send>,
 }
@@ -79,7 +104,7 @@ impl Method for RendererMethod {
     fn name(&self) -> &str {
         &self.name
     }
-    fn request(&self) -> RequestPolicy {
+    fn request(&self) -> SessionRequest {
         self.request
     }
     fn frames_kept(&self) -> usize {
@@ -98,7 +123,7 @@ impl Method for RendererMethod {
 /// none (`FillOptions` all off), and warp-sized radii (`+adapt`).
 pub struct FillMethod<R: SampleIds + Renderer> {
     name: String,
-    request: RequestPolicy,
+    request: SessionRequest,
     frames: usize,
     fill: HoleFill<R>,
 }
@@ -107,7 +132,7 @@ impl<R: SampleIds + Renderer> Method for FillMethod<R> {
     fn name(&self) -> &str {
         &self.name
     }
-    fn request(&self) -> RequestPolicy {
+    fn request(&self) -> SessionRequest {
         self.request
     }
     fn frames_kept(&self) -> usize {
@@ -125,7 +150,7 @@ pub struct MethodSpec {
     /// The renderer.
     pub renderer: RendererKind,
     /// What the client asks for.
-    pub request: RequestPolicy,
+    pub request: SessionRequest,
     /// Frames kept (1 unless a `*-fill` renderer or `splat-layers`).
     pub frames: usize,
     /// Warp-sized radii (core's `warp_radius`; the splatters only).
@@ -134,9 +159,11 @@ pub struct MethodSpec {
     pub pull_push: u32,
 }
 
-/// The method the window client runs by default and the sessions' `volwarp` alias, chosen on
-/// the session results (`docs/results.md`, "The default method").
-pub const DEFAULT_METHOD: &str = "splat-layers+predict+frames=4+adapt+layers=4";
+/// The method the window client runs by default and the sessions' `volwarp` alias (core's
+/// `Method::DEFAULT`), as a spec: `splat-layers+predict+frames=4+adapt+layers=4`.
+pub fn default_method() -> String {
+    MethodSpec::of(&CoreMethod::DEFAULT).name()
+}
 
 /// The methods of `all`: what a send-image system shows, the 2.5D points of ZAL12, the exact
 /// sphere renderers, and volwarp's default.
@@ -147,13 +174,15 @@ impl MethodSpec {
     /// `volwarp`.
     pub fn parse(spec: &str) -> Result<MethodSpec, ErrorBox> {
         let spec = spec.trim();
-        let spec = if spec == "volwarp" { DEFAULT_METHOD } else { spec };
+        if spec == "volwarp" {
+            return Ok(MethodSpec::of(&CoreMethod::DEFAULT));
+        }
         let mut parts = spec.split('+');
         let base = parts.next().unwrap_or_default();
         let renderer = RendererKind::from_name(base)
             .filter(|k| !k.info().caps.gpu)
             .ok_or_else(|| format!("unknown method {base:?}: not a CPU renderer of the registry"))?;
-        let mut m = MethodSpec { renderer, request: RequestPolicy::NONE, frames: 1, adapt: false, pull_push: 0 };
+        let mut m = MethodSpec { renderer, request: SessionRequest::NONE, frames: 1, adapt: false, pull_push: 0 };
         for p in parts {
             match p.split_once('=') {
                 None if p == "predict" => m.request.predict = true,
@@ -206,12 +235,40 @@ impl MethodSpec {
                 format!("{spec}: adapt (warp-sized radii) needs a splatter (splat, splat-fill, splat-layers)").into()
             );
         }
-        if renderer == RendererKind::Stale && m.request != RequestPolicy::NONE {
+        if renderer == RendererKind::Stale && m.request != SessionRequest::NONE {
             return Err(
                 format!("{spec}: the stale frame shows the frame as rendered; it cannot predict or widen").into()
             );
         }
         Ok(m)
+    }
+
+    /// The spec of core's method `m` (a spec has no watertight lever: sessions draw the
+    /// layered frames with the renderer's default, core's `method::WATERTIGHT`; segments per
+    /// pixel are written for the layered renderers only).
+    pub fn of(m: &CoreMethod) -> MethodSpec {
+        let layers = if m.renderer.draws_layers() { u32::from(m.layers) } else { 0 };
+        MethodSpec {
+            renderer: m.renderer,
+            request: SessionRequest { predict: m.predict, guard: m.guard, layers },
+            frames: m.frames,
+            adapt: m.adapt,
+            pull_push: 0,
+        }
+    }
+
+    /// Core's method of the spec, for a session that asks for `session_layers` segments per
+    /// pixel unless the spec says `+layers=K`.
+    pub fn method(&self, session_layers: u8) -> CoreMethod {
+        CoreMethod {
+            renderer: self.renderer,
+            layers: if self.request.layers > 0 { self.request.layers as u8 } else { session_layers },
+            frames: self.frames,
+            predict: self.request.predict,
+            adapt: self.adapt,
+            watertight: volwarp_core::method::WATERTIGHT,
+            guard: self.request.guard,
+        }
     }
 
     /// The spec's canonical text.
@@ -291,23 +348,25 @@ mod tests {
     fn specs_parse_and_name_canonically() {
         let m = MethodSpec::parse("splat-fill+frames=3+guard=0.2+predict").unwrap();
         assert_eq!(m.renderer, RendererKind::SplatFill);
-        assert_eq!(m.request, RequestPolicy { predict: true, guard: 0.2, layers: 0 });
+        assert_eq!(m.request, SessionRequest { predict: true, guard: 0.2, layers: 0 });
         assert_eq!(m.frames, 3);
         assert_eq!(m.name(), "splat-fill+predict+guard=0.2+frames=3");
         let a = MethodSpec::parse("splat+adapt+predict").unwrap();
         assert!(a.adapt && a.request.predict);
         assert_eq!(a.name(), "splat+predict+adapt");
         assert_eq!(MethodSpec::parse(&m.name()).unwrap(), m);
-        assert_eq!(MethodSpec::parse("volwarp").unwrap(), MethodSpec::parse(DEFAULT_METHOD).unwrap());
-        assert_eq!(MethodSpec::parse("points2").unwrap().request, RequestPolicy::NONE);
+        assert_eq!(MethodSpec::parse("volwarp").unwrap(), MethodSpec::parse(&default_method()).unwrap());
+        assert_eq!(MethodSpec::parse("points2").unwrap().request, SessionRequest::NONE);
         let l = MethodSpec::parse("splat-layers+layers=4+adapt+predict").unwrap();
-        assert_eq!(l.request, RequestPolicy { predict: true, guard: 0.0, layers: 4 });
+        assert_eq!(l.request, SessionRequest { predict: true, guard: 0.0, layers: 4 });
         assert_eq!(l.name(), "splat-layers+predict+adapt+layers=4");
         assert_eq!(MethodSpec::parse(&l.name()).unwrap(), l);
         let d = MethodSpec::parse("volwarp").unwrap();
         assert_eq!((d.renderer, d.frames, d.adapt), (RendererKind::SplatLayers, 4, true));
         assert_eq!(MethodSpec::parse(&d.name()).unwrap(), d);
-        assert_eq!(d.name(), DEFAULT_METHOD, "the default is written canonically");
+        assert_eq!(d.name(), default_method(), "the default is written canonically");
+        assert_eq!(default_method(), "splat-layers+predict+frames=4+adapt+layers=4", "the sessions' CSV name");
+        assert_eq!(d.method(1), CoreMethod::DEFAULT);
     }
 
     #[test]

@@ -55,24 +55,8 @@ pub fn server_policy(name: &str) -> Result<Box<dyn ServerPolicy>, ErrorBox> {
     }
 }
 
-/// What the client asks the server for (prediction and the guard band): the camera it shows, or
-/// the camera it expects to show when the frame is on screen (`predict`), widened by a guard
-/// band of `guard` of its size on every side. The policy of each method of a session; the
-/// frames of each distinct policy are served separately.
-#[derive(Clone, Copy, Debug, PartialEq)]
-pub struct RequestPolicy {
-    /// Ask for the predicted camera.
-    pub predict: bool,
-    /// Guard band fraction (0: none).
-    pub guard: f32,
-    /// Segments per pixel it asks for (0: the session's `--layers`).
-    pub layers: u32,
-}
-
-impl RequestPolicy {
-    /// Asks for the camera shown (what a send-image system does).
-    pub const NONE: RequestPolicy = RequestPolicy { predict: false, guard: 0.0, layers: 0 };
-}
+/// What a session's client asks the server for (defined with the methods that ask it).
+pub use super::methods::SessionRequest;
 
 /// The server and the network.
 #[derive(Clone, Copy, Debug, PartialEq)]
@@ -215,7 +199,8 @@ impl Calibration {
         if let Some(ms) = self.ms.get(&("client".into(), method.into(), size)) {
             return *ms;
         }
-        let spec = if method == "volwarp" { super::methods::DEFAULT_METHOD } else { method };
+        let default = super::methods::default_method();
+        let spec = if method == "volwarp" { default.as_str() } else { method };
         let renderer = spec.split('+').next().unwrap_or(spec);
         if renderer != method {
             // The layered splatter draws what the newest frame did not see of each older frame

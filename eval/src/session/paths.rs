@@ -18,7 +18,7 @@ pub const DEFAULT_SPEED: f32 = 30.0;
 pub const DEFAULT_SCENARIOS: [&str; 4] = ["orbit", "stop-and-go", "dolly", "look-around"];
 
 /// The largest viewport side a recorded camera may have (and the session size).
-pub const MAX_VIEWPORT: u32 = 4096;
+pub const MAX_RECORDED_VIEWPORT: u32 = 4096;
 
 /// What the camera does.
 #[derive(Clone, Debug, PartialEq)]
@@ -172,13 +172,13 @@ fn read_recorded(path: &Path) -> Result<PathKind, PathError> {
     let mut r: &[u8] = &bytes;
     let rec = |e: volwarp_core::record::RecordError| PathError::Record(path.into(), e.to_string());
     read_magic(&mut r).map_err(rec)?;
-    let limits = Limits::for_frames(MAX_VIEWPORT);
+    let limits = Limits::for_frames(MAX_RECORDED_VIEWPORT);
     let mut cams: Vec<(f64, Camera)> = Vec::new();
     while let Some(e) = read_entry(&mut r, &limits).map_err(rec)? {
         if let Entry::Camera { t_us, request } = e {
             request
                 .camera
-                .validate(MAX_VIEWPORT)
+                .validate(MAX_RECORDED_VIEWPORT)
                 .map_err(|e| PathError::BadCamera(path.into(), cams.len(), e.to_string()))?;
             cams.push((t_us as f64 * 1e-6, request.camera));
         }

@@ -21,14 +21,14 @@
 //! 4. **Scoring** every `score_every`-th tick: the truth (the marcher's image for that tick's
 //!    camera, cached between methods and runs) against what each method shows.
 
-use super::methods::{HeldFrame, Method};
-use super::model::{ClientModel, NetworkModel, Request, RequestPolicy, ServerPolicy};
-use super::paths::{CameraPath, MAX_VIEWPORT};
+use super::methods::{HeldFrame, Method, SessionRequest};
+use super::model::{ClientModel, NetworkModel, Request, ServerPolicy};
+use super::paths::{CameraPath, MAX_RECORDED_VIEWPORT};
 use crate::{ErrorBox, Metrics};
 use rayon::prelude::*;
 use std::collections::HashMap;
 use volwarp_core::compact_frame::Encoding;
-use volwarp_core::guard::GuardBand;
+use volwarp_core::method::{Cadence, ViewEvents};
 use volwarp_core::prediction::{Horizon, Predictor};
 use volwarp_core::renderer::Renderer;
 use volwarp_core::wire::CameraRequest;
@@ -63,8 +63,8 @@ impl SessionConfig {
     /// Checks the figures (a clear error for each bad one).
     pub fn check(&self) -> Result<(), ErrorBox> {
         self.net.check()?;
-        if self.size == 0 || self.size > MAX_VIEWPORT {
-            return Err(format!("size must be 1..={MAX_VIEWPORT} (got {})", self.size).into());
+        if self.size == 0 || self.size > MAX_RECORDED_VIEWPORT {
+            return Err(format!("size must be 1..={MAX_RECORDED_VIEWPORT} (got {})", self.size).into());
         }
         if !self.duration_s.is_finite() || self.duration_s <= 0.0 || self.duration_s > 3600.0 {
             return Err(format!("duration must be in (0, 3600] s (got {})", self.duration_s).into());
@@ -196,22 +196,38 @@ pub fn tick_cameras(marcher: &Marcher, path: &CameraPath, cfg: &SessionConfig) -
     (0..n)
         .map(|k| {
             let c = path.camera(&c0, k as f64 / cfg.client.display_hz);
-            c.validate(MAX_VIEWPORT).map_err(|e| format!("scenario {}: camera at tick {k}: {e}", path.name))?;
+            c.validate(MAX_RECORDED_VIEWPORT)
+                .map_err(|e| format!("scenario {}: camera at tick {k}: {e}", path.name))?;
             Ok(c)
         })
         .collect()
 }
 
-/// The requests a client with `policy` sends over the ticks' cameras: one at every tick whose
-/// camera differs from the previous tick's, and, when it predicts, one more at the first tick
-/// the camera holds still (so the server renders the still view, not the overshoot of the last
-/// prediction). Their cameras are the ticks' own; [`serve`] predicts and widens them.
-fn requests(cams: &[Camera], tick_ms: f64, policy: RequestPolicy) -> Vec<Request> {
+/// The simulated client's side of core's request policy for a display ticking every
+/// `tick_ms`: the horizon takes off that tick, a frame's arrival alone asks for nothing (the
+/// client asks when its view moves), and a predicting client asks once more at the first tick
+/// the view holds still (so the server renders the still view, not the overshoot of the last
+/// prediction); guard bands widen to at most [`MAX_RECORDED_VIEWPORT`].
+pub fn cadence(tick_ms: f64) -> Cadence {
+    Cadence {
+        display_tick_s: (tick_ms * 1e-3) as f32,
+        on_frame_arrival: false,
+        on_first_still: true,
+        max_viewport: MAX_RECORDED_VIEWPORT,
+    }
+}
+
+/// The requests a client with `policy` sends over the ticks' cameras: one at every tick the
+/// request policy finds due on the simulator's [`cadence`] (the tick's camera differs from the
+/// previous tick's, or it is the first still tick of a predicting client). Their cameras are
+/// the ticks' own; [`serve`] predicts and widens them.
+fn requests(cams: &[Camera], tick_ms: f64, policy: SessionRequest) -> Vec<Request> {
+    let cadence = cadence(tick_ms);
     let mut out = Vec::new();
     for k in 1..cams.len() {
         let moved = cams[k] != cams[k - 1];
-        let stopped = policy.predict && !moved && (k < 2 || cams[k - 1] != cams[k - 2]);
-        if moved || stopped {
+        let first_still = !moved && (k < 2 || cams[k - 1] != cams[k - 2]);
+        if policy.policy().due(&cadence, ViewEvents { moved, first_still, frame_arrived: false }) {
             out.push(Request { tick: k, sent_ms: k as f64 * tick_ms, camera: cams[k] });
         }
     }
@@ -227,13 +243,13 @@ fn requests(cams: &[Camera], tick_ms: f64, policy: RequestPolicy) -> Vec<Request
 /// [`Predictor`] expects after the [`Horizon`] the client has measured from the frames that
 /// arrived before it was sent (the predictor has observed the camera of every tick up to it,
 /// as the window client's display does); with a guard band, that camera widened
-/// ([`GuardBand`]).
+/// (core's `guard::GuardBand`), all by core's request policy ([`cadence`]).
 pub fn serve(
     marcher: &Marcher,
     cams: &[Camera],
     cfg: &SessionConfig,
     policy: &mut dyn ServerPolicy,
-    request: RequestPolicy,
+    request: SessionRequest,
 ) -> Vec<(FrameEvent, volwarp_core::wire::Frame)> {
     let tick_ms = 1e3 / cfg.client.display_hz;
     let end_ms = (cams.len() - 1) as f64 * tick_ms;
@@ -263,6 +279,7 @@ pub fn serve(
     )];
     let first_ms = 2.0 * net.latency_ms + net.server_ms + net.transfer_ms(out[0].0.bytes);
     let mut requests = requests(cams, tick_ms, request);
+    let cadence = cadence(tick_ms);
     // The client side: what each request asks for, in the order they are sent.
     let mut predictor = Predictor::new();
     let mut observed = 0usize; // ticks the predictor has seen
@@ -274,7 +291,8 @@ pub fn serve(
         let first_unasked = asked.iter().position(Option::is_none).unwrap_or(asked.len());
         for r in first_unasked..=i {
             let sent = requests[r].sent_ms;
-            let mut view = requests[r].camera;
+            let shown = requests[r].camera;
+            let mut horizon = Horizon::new();
             if request.predict {
                 // The display's predictor sees every camera shown, up to the request's tick.
                 for (k, c) in cams.iter().enumerate().take(requests[r].tick + 1).skip(observed) {
@@ -282,19 +300,14 @@ pub fn serve(
                 }
                 observed = observed.max(requests[r].tick + 1);
                 // The first frame: requested one round trip, render and transfer before 0.
-                let mut h = Horizon::new();
-                h.observe(-first_ms * 1e-3, 0.0);
+                horizon.observe(-first_ms * 1e-3, 0.0);
                 for (f, _) in out.iter().skip(1).filter(|(f, _)| f.arrive_ms <= sent) {
-                    h.observe(f.request_ms * 1e-3, f.arrive_ms * 1e-3);
+                    horizon.observe(f.request_ms * 1e-3, f.arrive_ms * 1e-3);
                 }
-                view = predictor.predict(h.seconds((tick_ms * 1e-3) as f32)).unwrap_or(view);
             }
-            let (camera, offset) = match GuardBand::new(&view, request.guard, MAX_VIEWPORT) {
-                Ok(g) if request.guard > 0.0 => (g.camera, (g.x0, g.y0)),
-                _ => (view, (0, 0)),
-            };
-            asked[r] = Some((camera, view, offset));
-            requests[r].camera = camera;
+            let asks = request.policy().camera(shown, &predictor, &horizon, &cadence);
+            asked[r] = Some((asks.camera, asks.view, asks.guard_offset));
+            requests[r].camera = asks.camera;
         }
         asked[i].expect("asked above")
     };
@@ -341,7 +354,7 @@ pub fn serve(
 }
 
 /// Segments per pixel of the frames served to a client asking with `request`.
-fn stream_layers(cfg: &SessionConfig, request: RequestPolicy) -> u32 {
+fn stream_layers(cfg: &SessionConfig, request: SessionRequest) -> u32 {
     if request.layers > 0 {
         request.layers
     } else {
@@ -368,7 +381,7 @@ fn exact_view(exact: &mut dyn Renderer, held: &HeldFrame, f: &FrameEvent, out: &
 
 /// The frames served to the clients of one request policy, built once for every method of it.
 struct Stream {
-    request: RequestPolicy,
+    request: SessionRequest,
     frames: Vec<FrameEvent>,
     held: Vec<HeldFrame>,
 }

@@ -1,0 +1,206 @@
+//! The method: how a client draws what it receives and what it asks the server for, defined
+//! once. The window client's options, its writer thread and the evaluation's session simulator
+//! all start from [`Method::DEFAULT`] and ask through one [`RequestPolicy`].
+//!
+//! A method is a renderer of the registry plus the levers around it: the segments per pixel it
+//! asks for (`layers`), how many of the newest frames it keeps (`frames`), whether it asks for
+//! the camera predicted for when the frame is shown (`predict`, [`crate::prediction`]), whether
+//! it sizes footprints by how far the view moved (`adapt`, [`crate::warp_radius`]), the
+//! watertight tolerance of the layered renderers (`watertight`) and the guard band it asks for
+//! (`guard`, [`crate::guard`]).
+//!
+//! The request policy says **when** a client sends a camera request ([`RequestPolicy::due`])
+//! and **which** camera it asks for ([`RequestPolicy::camera`]). What differs between callers
+//! (the window client and the simulator) is explicit in a [`Cadence`]: the display tick the
+//! horizon assumes, whether a frame's arrival alone triggers a request, whether the first still
+//! display tick after motion does, and the largest viewport a guard band may widen to.
+
+use crate::camera::Camera;
+use crate::guard::GuardBand;
+use crate::prediction::{Horizon, Predictor};
+use crate::renderer_kind::RendererKind;
+use crate::segments::DEFAULT_LAYERS;
+
+/// The default watertight tolerance of the layered renderers, in source pixels: where the
+/// depths of neighbouring segments of one slab lie within it, they share their footprints'
+/// corners (0: off).
+pub const WATERTIGHT: f32 = 1.5;
+
+/// The most frames a method keeps (the newest included); renderers given more use the newest
+/// this many.
+pub const MAX_FRAMES: usize = 8;
+
+/// A method: a renderer and the levers of the client around it.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct Method {
+    /// The renderer of the registry that draws.
+    pub renderer: RendererKind,
+    /// Segments per pixel the client asks the server for (1 to `segments::MAX_LAYERS`).
+    pub layers: u8,
+    /// How many of the newest frames it keeps (at least 1; renderers that do not keep frames
+    /// draw the newest alone).
+    pub frames: usize,
+    /// Ask for the camera predicted for when the frame is shown.
+    pub predict: bool,
+    /// Size footprints by how far the view moved from the frame's camera.
+    pub adapt: bool,
+    /// Watertight tolerance of the layered renderers, in source pixels (0: off).
+    pub watertight: f32,
+    /// Guard band: the fraction of the view added on every side of the camera asked for.
+    pub guard: f32,
+}
+
+impl Method {
+    /// The method a client runs by default, chosen on the session results (`docs/results.md`,
+    /// "Layered frames as the default"): the layered splatter on 4 segments per pixel, the 4
+    /// newest frames kept, prediction and warp-grown footprints on, watertight slabs, no guard
+    /// band.
+    pub const DEFAULT: Method = Method {
+        renderer: RendererKind::DEFAULT,
+        layers: Method::layers_for(RendererKind::DEFAULT),
+        frames: 4,
+        predict: true,
+        adapt: true,
+        watertight: WATERTIGHT,
+        guard: 0.0,
+    };
+
+    /// The segments per pixel a renderer asks for unless told otherwise: the layered renderers
+    /// `segments::DEFAULT_LAYERS`, the others one.
+    pub const fn layers_for(renderer: RendererKind) -> u8 {
+        if renderer.draws_layers() {
+            DEFAULT_LAYERS as u8
+        } else {
+            1
+        }
+    }
+
+    /// What it asks the server for.
+    pub const fn request(&self) -> RequestPolicy {
+        RequestPolicy { predict: self.predict, guard: self.guard }
+    }
+}
+
+/// What a client asks the server for: the camera it shows or the one it expects to show when
+/// the frame is on screen (`predict`), widened by a guard band of `guard` of its size on every
+/// side.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct RequestPolicy {
+    /// Ask for the predicted camera.
+    pub predict: bool,
+    /// Guard band fraction (0: none).
+    pub guard: f32,
+}
+
+/// The caller's side of the request policy: what the policy assumes about the display and
+/// which events trigger a request.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct Cadence {
+    /// The display tick, in seconds, that the prediction horizon takes off (`Horizon::seconds`).
+    pub display_tick_s: f32,
+    /// A frame's arrival alone triggers a request (so the server always has work).
+    pub on_frame_arrival: bool,
+    /// A predicting client sends one more request at the first still display tick after
+    /// motion (so the server renders the still view, not the overshoot of the last prediction).
+    pub on_first_still: bool,
+    /// The largest viewport a guard band may widen the camera to.
+    pub max_viewport: u32,
+}
+
+/// What happened since the client's last request.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
+pub struct ViewEvents {
+    /// The view shown changed.
+    pub moved: bool,
+    /// The view holds still for the first display tick after it moved.
+    pub first_still: bool,
+    /// A frame arrived.
+    pub frame_arrived: bool,
+}
+
+/// The camera a request carries, with the view it shows exactly.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct Requested {
+    /// The camera sent (guard band included).
+    pub camera: Camera,
+    /// The (predicted) view asked for, before the guard band.
+    pub view: Camera,
+    /// Where `view`'s pixels start in `camera`'s (`(0, 0)` without a guard band).
+    pub guard_offset: (u32, u32),
+}
+
+impl RequestPolicy {
+    /// Asks for the camera shown, as it is (what a send-image system does).
+    pub const NONE: RequestPolicy = RequestPolicy { predict: false, guard: 0.0 };
+
+    /// Whether the client sends a request now: when the view moved; when a frame arrived, if
+    /// the cadence says so; and when the view holds still for the first tick after motion, if
+    /// the cadence says so and the client predicts.
+    pub fn due(&self, cadence: &Cadence, events: ViewEvents) -> bool {
+        events.moved
+            || (cadence.on_frame_arrival && events.frame_arrived)
+            || (cadence.on_first_still && self.predict && events.first_still)
+    }
+
+    /// The camera to ask for when the view shown is `shown`: with `predict`, what the
+    /// `predictor` (which has seen every camera shown) expects after the measured `horizon`
+    /// (less the cadence's display tick); with a guard band, that camera widened (where it
+    /// fits the cadence's largest viewport).
+    pub fn camera(&self, shown: Camera, predictor: &Predictor, horizon: &Horizon, cadence: &Cadence) -> Requested {
+        let mut view = shown;
+        if self.predict {
+            view = predictor.predict(horizon.seconds(cadence.display_tick_s)).unwrap_or(shown);
+        }
+        match GuardBand::new(&view, self.guard, cadence.max_viewport) {
+            Ok(g) if self.guard > 0.0 => Requested { camera: g.camera, view, guard_offset: (g.x0, g.y0) },
+            _ => Requested { camera: view, view, guard_offset: (0, 0) },
+        }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    const CLIENT: Cadence =
+        Cadence { display_tick_s: 1.0 / 60.0, on_frame_arrival: true, on_first_still: false, max_viewport: 4096 };
+    const SIMULATOR: Cadence =
+        Cadence { display_tick_s: 1.0 / 30.0, on_frame_arrival: false, on_first_still: true, max_viewport: 4096 };
+
+    #[test]
+    fn the_default_is_the_layered_method() {
+        let d = Method::DEFAULT;
+        assert_eq!(d.renderer, RendererKind::SplatLayers);
+        assert_eq!(d.layers as usize, DEFAULT_LAYERS);
+        assert_eq!((d.frames, d.predict, d.adapt, d.guard), (4, true, true, 0.0));
+        assert_eq!(d.request(), RequestPolicy { predict: true, guard: 0.0 });
+        assert_eq!(Method::layers_for(RendererKind::Splat), 1);
+    }
+
+    #[test]
+    fn requests_are_due_on_the_cadences_events() {
+        let p = Method::DEFAULT.request();
+        let moved = ViewEvents { moved: true, ..ViewEvents::default() };
+        let arrived = ViewEvents { frame_arrived: true, ..ViewEvents::default() };
+        let still = ViewEvents { first_still: true, ..ViewEvents::default() };
+        for c in [CLIENT, SIMULATOR] {
+            assert!(p.due(&c, moved));
+            assert!(!p.due(&c, ViewEvents::default()));
+        }
+        assert!(p.due(&CLIENT, arrived) && !p.due(&SIMULATOR, arrived));
+        assert!(!p.due(&CLIENT, still) && p.due(&SIMULATOR, still));
+        assert!(!RequestPolicy::NONE.due(&SIMULATOR, still), "only a predicting client asks again when still");
+    }
+
+    #[test]
+    fn without_prediction_or_guard_the_shown_camera_is_asked_for() {
+        let cam = Camera::look_at(glam::Vec3::new(0.0, 0.0, 3.0), glam::Vec3::ZERO, glam::Vec3::Y, 45.0, 64, 48);
+        let mut predictor = Predictor::new();
+        predictor.observe(cam, 0.0);
+        let r = RequestPolicy::NONE.camera(cam, &predictor, &Horizon::new(), &CLIENT);
+        assert_eq!((r.camera, r.view, r.guard_offset), (cam, cam, (0, 0)));
+        let wide = RequestPolicy { predict: false, guard: 0.25 }.camera(cam, &predictor, &Horizon::new(), &CLIENT);
+        assert_eq!(wide.view, cam);
+        assert!(wide.camera.width > cam.width && wide.guard_offset.0 > 0);
+    }
+}

@@ -1,0 +1,114 @@
+//! The layered model's options, limits and work sizes: what the CPU and GPU layered renderers
+//! share (`LayerOptions`, the list length and opacity at which compositing stops, the frames
+//! kept) and the CPU's band and chunk sizes.
+
+pub use crate::key_list::{LIST, OPAQUE};
+pub use volwarp_core::method::MAX_FRAMES;
+
+/// How far (in source pixels) beyond its own pixel a sample's footprint reaches. 0: a margin
+/// against rounding cracks (0.05 in the first version) counts semi-transparent segments
+/// twice along every footprint edge, a grid of bright lines once the view zooms in; without it
+/// the session ꟻLIP of the iron protein's dolly fell from 0.0187 to 0.0064 and the MRI's orbit
+/// from 0.0262 to 0.0200 (`docs/results.md`, "Layered frames as the default").
+pub const OWN_MARGIN: f32 = 0.0;
+
+/// The default depth tolerance of watertight slabs, source pixels ([`LayerOptions::watertight`]):
+/// the method's (core's `method::WATERTIGHT`).
+pub use volwarp_core::method::WATERTIGHT;
+
+/// The widest footprint adaptive sizing grows to by default (half side, source pixels).
+pub const MAX_OWN: f32 = 2.0;
+
+/// Output rows per rasterization task (the footprints are binned to bands of these rows).
+pub(crate) const RASTER_BAND: usize = 8;
+
+/// The band range of a sample without a footprint (first > last).
+pub(crate) const NO_BANDS: u32 = 1;
+
+/// How far behind the farthest segment of an opaque pixel of the newest frame (in that
+/// frame's pixels at the sample's depth) an older frame's sample must lie to be drawn: the
+/// segments' depths are representative, not exact. Measured insensitive between 1 and 6 (the
+/// MRI's stop-and-go p95 0.0489 at all three).
+pub const RESIDUAL_TOLERANCE: f32 = 3.0;
+
+/// The opacity from which a pixel of the newest frame hides what lies behind its segments
+/// (measured: 0.5 and 0.9 give the same sessions).
+pub const RESIDUAL_OPAQUE: f32 = 0.9;
+
+/// Rows per task of the shared-corner stencil (each task reads a row more above and below, and
+/// keeps its own three rows of slab depths).
+pub(crate) const CORNER_BAND: usize = 32;
+
+/// Samples per footprint set-up task.
+pub(crate) const QUAD_CHUNK: usize = 4096;
+
+/// Rows per task of the per-pixel passes over the fill state (in parallel: at 1024² each pass
+/// reads and writes 8 MB of state).
+pub(crate) const PIXEL_PASS_ROWS: usize = 64;
+
+/// How wide a sample's footprint is (see the module docs).
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct LayerOptions {
+    /// Half the footprint's side, in source pixels: 0.5 is the source pixel itself; the default
+    /// adds [`OWN_MARGIN`]. Measured (`docs/perf.md`, layered samples): 0.7 double-counts more than it
+    /// fills.
+    pub own: f32,
+    /// Fill the pixels no segment covers from the frame's image (see the module docs).
+    pub fill: bool,
+    /// With adaptive sizing on, the half side added per degree of warp (source pixels).
+    pub grow_per_degree: f32,
+    /// Only samples at least this opaque (8-bit alpha) grow: growing a semi-transparent
+    /// segment counts its color twice where footprints overlap.
+    pub grow_min_alpha: u8,
+    /// The widest a grown footprint gets (half side, source pixels).
+    pub max_own: f32,
+    /// Watertight slabs: neighbouring pixels' segments of the same slab share their
+    /// footprints' corners where their depths differ by at most this many source pixels (0:
+    /// every footprint is its own plane). Only with footprints of the source pixel's size.
+    /// Measured (`docs/results.md`, "Watertight slabs"): 1–3 all lower the sessions' ꟻLIP,
+    /// 1.5 the most.
+    pub watertight: f32,
+    /// A segment takes its slab's shared corners only where their footprint covers at least
+    /// this share of the plane footprint's area on screen: a slab seen ever more edge-on
+    /// thins to a sliver where the volume it stands for does not (measured, `docs/results.md`).
+    pub water_ratio: f32,
+}
+
+impl LayerOptions {
+    /// The defaults (chosen by measurement, `docs/results.md`, layered samples).
+    pub const DEFAULT: LayerOptions = LayerOptions {
+        own: 0.5 + OWN_MARGIN,
+        fill: true,
+        grow_per_degree: 0.08,
+        grow_min_alpha: 230,
+        max_own: MAX_OWN,
+        watertight: WATERTIGHT,
+        water_ratio: 1.0,
+    };
+
+    /// Whether at the frame's own camera every footprint is exactly its source pixel (half
+    /// side 0.5, the default): then the frame's own image is its samples grouped by pixel
+    /// (`OwnPass`), with wider or narrower footprints it must be drawn.
+    pub fn own_pixels(&self) -> bool {
+        self.own == 0.5
+    }
+
+    /// Whether the newest frame's slabs are watertight: a tolerance, and footprints of the
+    /// source pixel's size (what the shared corners are corners of).
+    pub fn shares_corners(&self) -> bool {
+        self.watertight > 0.0 && self.own_pixels()
+    }
+
+    /// The half side of the footprint for a warp of `deg` degrees (adaptive sizing on).
+    pub fn own_at(&self, deg: f32) -> f32 {
+        let grow = if self.grow_per_degree.is_finite() { self.grow_per_degree.max(0.0) } else { 0.0 };
+        let cap = if self.max_own.is_finite() { self.max_own.min(4.0) } else { MAX_OWN };
+        (self.own + grow * deg).min(cap.max(self.own))
+    }
+}
+
+impl Default for LayerOptions {
+    fn default() -> Self {
+        LayerOptions::DEFAULT
+    }
+}
