@@ -27,7 +27,9 @@
 //! | [`nrrd`] | NRRD headers and data |
 
 mod error;
+pub mod nifti;
 pub mod nrrd;
+pub mod orient;
 mod raw;
 mod sampling;
 
@@ -71,6 +73,26 @@ pub struct Volume {
     data: Vec<f32>,
     /// For integer-coded volumes, the packet marcher's stencil (see [`CodeStencil`]).
     stencil: Option<CodeStencil>,
+    /// What the loader read.
+    source: SourceInfo,
+}
+
+/// What a loader read: the format, the stored voxel type and the reordering it applied (what
+/// `volwarp-server info` prints besides dims, spacing and value range).
+#[derive(Clone, Debug, Default, PartialEq)]
+pub struct SourceInfo {
+    /// The format (`raw`, `NRRD`, `NIfTI-1`, `NIfTI-2`, `TIFF`, `VTK image data`, `DICOM`);
+    /// empty for a volume made in memory.
+    pub format: String,
+    /// The stored voxel type, where it is one of [`VoxelType`].
+    pub voxel_type: Option<VoxelType>,
+    /// The reordering applied to put the volume in LPS order (see [`orient`]), or what was
+    /// left as stored.
+    pub orientation: String,
+    /// Bytes of voxel data read (decompressed).
+    pub data_bytes: u64,
+    /// Files read.
+    pub files: usize,
 }
 
 /// The voxels of a volume of integer values at most 65,535 apart (every 8- and 16-bit volume),
@@ -205,7 +227,26 @@ impl Volume {
             };
             CodeStencil { squares, scale }
         });
-        Ok(Volume { name: name.to_string(), dims, spacing, value_range: (lo, hi), data: values, stencil })
+        Ok(Volume {
+            name: name.to_string(),
+            dims,
+            spacing,
+            value_range: (lo, hi),
+            data: values,
+            stencil,
+            source: SourceInfo::default(),
+        })
+    }
+
+    /// What the loader read (empty for a volume made in memory).
+    pub fn source(&self) -> &SourceInfo {
+        &self.source
+    }
+
+    /// The volume with `source` as what was read.
+    pub fn with_source(mut self, source: SourceInfo) -> Volume {
+        self.source = source;
+        self
     }
 
     /// A volume from a function of the world position of each voxel centre.
@@ -291,17 +332,81 @@ impl Volume {
     }
 }
 
-/// Loads a raw (`.raw` or any other extension) or NRRD (`.nrrd`, `.nhdr`) volume.
+/// The formats [`load_volume`] reads.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum Format {
+    /// Headerless raw voxels.
+    Raw,
+    /// NRRD (`.nrrd`, `.nhdr`).
+    Nrrd,
+    /// NIfTI-1 or NIfTI-2 (`.nii`, `.nii.gz`).
+    Nifti,
+}
+
+/// The first `n` bytes of a file (fewer where it is shorter).
+pub(crate) fn read_head(path: &Path, n: u64) -> Result<Vec<u8>, VolumeError> {
+    use std::io::Read;
+    let mut head = Vec::new();
+    let f = std::fs::File::open(path).map_err(|e| VolumeError::io(path, e))?;
+    f.take(n).read_to_end(&mut head).map_err(|e| VolumeError::io(path, e))?;
+    Ok(head)
+}
+
+/// The format of `path`, from its content where that is telling (magic numbers) and else its
+/// extension; a file of no known format is raw.
+pub fn detect_format(path: &Path) -> Result<Format, VolumeError> {
+    let name = path.file_name().and_then(|s| s.to_str()).unwrap_or("").to_ascii_lowercase();
+    let ext = path.extension().and_then(|s| s.to_str()).unwrap_or("").to_ascii_lowercase();
+    let head = read_head(path, 548)?;
+    if head.starts_with(b"NRRD000") {
+        return Ok(Format::Nrrd);
+    }
+    // A gzip stream: look at the start of what it holds.
+    let inner = if head.starts_with(&[0x1f, 0x8b]) {
+        use std::io::Read;
+        let f = std::fs::File::open(path).map_err(|e| VolumeError::io(path, e))?;
+        let mut inner = Vec::new();
+        let _ = flate2::read::MultiGzDecoder::new(f).take(548).read_to_end(&mut inner);
+        inner
+    } else {
+        Vec::new()
+    };
+    if nifti::is_nifti(&head) || nifti::is_nifti(&inner) || name.ends_with(".nii") || name.ends_with(".nii.gz") {
+        return Ok(Format::Nifti);
+    }
+    Ok(match ext.as_str() {
+        "nrrd" | "nhdr" => Format::Nrrd,
+        _ => Format::Raw,
+    })
+}
+
+/// Loads a volume: raw (`.raw` or any other extension), NRRD (`.nrrd`, `.nhdr`) or NIfTI
+/// (`.nii`, `.nii.gz`), recognized by content and extension ([`detect_format`]).
 pub fn load_volume(path: impl AsRef<Path>, opts: &LoadOptions) -> Result<Volume, VolumeError> {
     let path = path.as_ref();
-    let ext = path.extension().and_then(|s| s.to_str()).unwrap_or("").to_ascii_lowercase();
-    let vol = match ext.as_str() {
-        "nrrd" | "nhdr" => nrrd::load(path, opts)?,
-        _ => raw::load_raw(path, opts)?,
+    let format = detect_format(path)?;
+    let vol = match format {
+        Format::Nrrd => {
+            let mut v = nrrd::load(path, opts)?;
+            v.source.data_bytes = voxel_bytes(voxel_count(v.dims)?, v.source.voxel_type.unwrap_or(VoxelType::U8))?;
+            v.source.format = "NRRD".into();
+            v.source.files = 1;
+            v
+        }
+        Format::Nifti => nifti::load(path, opts)?,
+        Format::Raw => {
+            let mut v = raw::load_raw(path, opts)?;
+            v.source.data_bytes = voxel_bytes(voxel_count(v.dims)?, v.source.voxel_type.unwrap_or(VoxelType::U8))?;
+            v.source.format = "raw".into();
+            v.source.files = 1;
+            v.source.orientation = "none (stored order)".into();
+            v
+        }
     };
     log::info!(
-        "loaded {} : {}x{}x{} voxels, spacing {}, value range {:?}",
+        "loaded {} ({}): {}x{}x{} voxels, spacing {}, value range {:?}",
         path.display(),
+        vol.source.format,
         vol.dims[0],
         vol.dims[1],
         vol.dims[2],
