@@ -236,3 +236,100 @@ fn broken_nifti_files_are_clear_errors() {
     std::fs::write(&big, &b).unwrap();
     load_err(&big);
 }
+
+fn write_tiff_pages(p: &Path, pages: &[(u32, u32, Vec<u16>)]) {
+    use tiff::encoder::{colortype::Gray16, TiffEncoder};
+    let mut enc = TiffEncoder::new(std::io::BufWriter::new(std::fs::File::create(p).unwrap())).unwrap();
+    for (w, h, data) in pages {
+        enc.write_image::<Gray16>(*w, *h, data).unwrap();
+    }
+}
+
+/// The ramp's slice `z` as 16-bit pixels (offset to unsigned).
+fn ramp_slice_u16(z: usize) -> Vec<u16> {
+    let n = (DIMS[0] * DIMS[1]) as usize;
+    ramp()[z * n..(z + 1) * n].iter().map(|&x| (x as i32 + 1000) as u16).collect()
+}
+
+fn reference_u16() -> Volume {
+    Volume::from_values("r", DIMS, SPACING, ramp().iter().map(|&x| x as f32 + 1000.0).collect()).unwrap()
+}
+
+#[test]
+fn tiff_stacks_load_as_the_same_volume() {
+    let dir = temp_dir("tiff");
+    let r = reference_u16();
+    let opts = LoadOptions { spacing: Some(SPACING), ..LoadOptions::default() };
+    // One multi-page file.
+    let p = dir.join("stack.tif");
+    let pages: Vec<_> = (0..3).map(|z| (DIMS[0], DIMS[1], ramp_slice_u16(z))).collect();
+    write_tiff_pages(&p, &pages);
+    let v = load_volume(&p, &opts).unwrap();
+    assert_same(&v, &r, "multi-page TIFF");
+    assert_eq!((v.source().format.as_str(), v.source().voxel_type), ("TIFF", Some(VoxelType::U16)));
+    assert_eq!(load(&p).spacing(), Vec3::ONE, "spacing 1 unless the options say otherwise");
+
+    // A folder of slices, named so that plain string order would be wrong (10 before 9).
+    let slices = dir.join("slices");
+    std::fs::create_dir_all(&slices).unwrap();
+    for (z, num) in [(0, 8), (1, 9), (2, 10)] {
+        write_tiff_pages(&slices.join(format!("img{num}.tif")), &[(DIMS[0], DIMS[1], ramp_slice_u16(z))]);
+    }
+    std::fs::write(slices.join("notes.txt"), "not a slice").unwrap();
+    let v = load_volume(&slices, &opts).unwrap();
+    assert_same(&v, &r, "TIFF folder");
+    assert_eq!(v.source().files, 3);
+
+    // 8-bit pages.
+    let p8 = dir.join("bytes.tiff");
+    {
+        use tiff::encoder::{colortype::Gray8, TiffEncoder};
+        let mut enc = TiffEncoder::new(std::fs::File::create(&p8).unwrap()).unwrap();
+        for z in 0..2u8 {
+            enc.write_image::<Gray8>(3, 2, &[z, 1, 2, 3, 4, 250]).unwrap();
+        }
+    }
+    let v = load(&p8);
+    assert_eq!(v.dims(), [3, 2, 2]);
+    assert_eq!(v.value_range(), (0.0, 250.0));
+}
+
+#[test]
+fn broken_tiff_stacks_are_clear_errors() {
+    let dir = temp_dir("tiff-errors");
+    // An odd-sized slice in a folder: the error names that file and both sizes.
+    let odd = dir.join("odd");
+    std::fs::create_dir_all(&odd).unwrap();
+    for k in 1..=5u32 {
+        let (w, h) = if k == 4 { (7, 4) } else { (7, 5) };
+        write_tiff_pages(&odd.join(format!("s_{k:03}.tif")), &[(w, h, vec![k as u16; (w * h) as usize])]);
+    }
+    let e = load_volume(&odd, &LoadOptions::default()).unwrap_err();
+    assert!(e.to_string().contains("slice 4 (s_004.tif) is 7×4, the others 7×5"), "{e}");
+    assert_eq!(e.path.as_deref().and_then(|p| p.file_name()), Some("s_004.tif".as_ref()), "{e}");
+
+    // A missing slice: the numbering jumps.
+    std::fs::remove_file(odd.join("s_004.tif")).unwrap();
+    let e = load_volume(&odd, &LoadOptions::default()).unwrap_err();
+    assert!(e.to_string().contains("5 follows 3") && e.to_string().contains("missing"), "{e}");
+    assert_eq!(e.path.as_deref(), Some(odd.as_path()));
+
+    // Odd page in a multi-page file.
+    let p = dir.join("pages.tif");
+    write_tiff_pages(&p, &[(4, 4, vec![0; 16]), (4, 4, vec![0; 16]), (4, 3, vec![0; 12])]);
+    let e = load_err(&p);
+    assert!(e.to_string().contains("page 3 is 4×3, the others 4×4"), "{e}");
+
+    // A truncated file.
+    let p2 = dir.join("cut.tif");
+    write_tiff_pages(&p2, &[(64, 64, vec![7; 4096])]);
+    let b = std::fs::read(&p2).unwrap();
+    std::fs::write(&p2, &b[..b.len() / 3]).unwrap();
+    load_err(&p2);
+
+    // More voxels than the limit: refused before decoding.
+    let p3 = dir.join("three.tif");
+    write_tiff_pages(&p3, &[(4, 4, vec![0; 16]), (4, 4, vec![0; 16]), (4, 4, vec![0; 16])]);
+    let e = load_volume(&p3, &LoadOptions { max_voxels: 40, ..LoadOptions::default() }).unwrap_err();
+    assert!(matches!(e.kind, VolumeErrorKind::TooLarge { voxels: 48, limit: 40 }), "{e}");
+}

@@ -32,6 +32,7 @@ pub mod nrrd;
 pub mod orient;
 mod raw;
 mod sampling;
+pub mod tiff_stack;
 
 pub use error::{VolumeError, VolumeErrorKind};
 pub(crate) use raw::read_exactly;
@@ -341,6 +342,10 @@ pub enum Format {
     Nrrd,
     /// NIfTI-1 or NIfTI-2 (`.nii`, `.nii.gz`).
     Nifti,
+    /// A multi-page TIFF file.
+    Tiff,
+    /// A folder of single-page TIFF slices.
+    TiffFolder,
 }
 
 /// The first `n` bytes of a file (fewer where it is shorter).
@@ -355,6 +360,9 @@ pub(crate) fn read_head(path: &Path, n: u64) -> Result<Vec<u8>, VolumeError> {
 /// The format of `path`, from its content where that is telling (magic numbers) and else its
 /// extension; a file of no known format is raw.
 pub fn detect_format(path: &Path) -> Result<Format, VolumeError> {
+    if path.is_dir() {
+        return detect_folder(path);
+    }
     let name = path.file_name().and_then(|s| s.to_str()).unwrap_or("").to_ascii_lowercase();
     let ext = path.extension().and_then(|s| s.to_str()).unwrap_or("").to_ascii_lowercase();
     let head = read_head(path, 548)?;
@@ -374,14 +382,27 @@ pub fn detect_format(path: &Path) -> Result<Format, VolumeError> {
     if nifti::is_nifti(&head) || nifti::is_nifti(&inner) || name.ends_with(".nii") || name.ends_with(".nii.gz") {
         return Ok(Format::Nifti);
     }
+    if tiff_stack::is_tiff(&head) {
+        return Ok(Format::Tiff);
+    }
     Ok(match ext.as_str() {
         "nrrd" | "nhdr" => Format::Nrrd,
+        "tif" | "tiff" => Format::Tiff,
         _ => Format::Raw,
     })
 }
 
-/// Loads a volume: raw (`.raw` or any other extension), NRRD (`.nrrd`, `.nhdr`) or NIfTI
-/// (`.nii`, `.nii.gz`), recognized by content and extension ([`detect_format`]).
+/// The format of a folder's slices: TIFF where its files are TIFF.
+fn detect_folder(dir: &Path) -> Result<Format, VolumeError> {
+    if !tiff_stack::folder_slices(dir)?.is_empty() {
+        return Ok(Format::TiffFolder);
+    }
+    Err(VolumeError::unsupported("a folder of neither TIFF slices nor DICOM files".to_string()).at(dir))
+}
+
+/// Loads a volume: raw (`.raw` or any other extension), NRRD (`.nrrd`, `.nhdr`), NIfTI
+/// (`.nii`, `.nii.gz`), a multi-page TIFF or a folder of TIFF slices, recognized by content
+/// and extension ([`detect_format`]).
 pub fn load_volume(path: impl AsRef<Path>, opts: &LoadOptions) -> Result<Volume, VolumeError> {
     let path = path.as_ref();
     let format = detect_format(path)?;
@@ -394,6 +415,8 @@ pub fn load_volume(path: impl AsRef<Path>, opts: &LoadOptions) -> Result<Volume,
             v
         }
         Format::Nifti => nifti::load(path, opts)?,
+        Format::Tiff => tiff_stack::load_file(path, opts)?,
+        Format::TiffFolder => tiff_stack::load_folder(path, opts)?,
         Format::Raw => {
             let mut v = raw::load_raw(path, opts)?;
             v.source.data_bytes = voxel_bytes(voxel_count(v.dims)?, v.source.voxel_type.unwrap_or(VoxelType::U8))?;
