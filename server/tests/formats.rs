@@ -333,3 +333,90 @@ fn broken_tiff_stacks_are_clear_errors() {
     let e = load_volume(&p3, &LoadOptions { max_voxels: 40, ..LoadOptions::default() }).unwrap_err();
     assert!(matches!(e.kind, VolumeErrorKind::TooLarge { voxels: 48, limit: 40 }), "{e}");
 }
+
+#[test]
+fn vti_in_every_encoding_loads_the_same() {
+    use volwarp_server::volume::vti::{write, WriteFormat};
+    let dir = temp_dir("vti");
+    let r = reference();
+    let bytes = le(&ramp());
+    for (name, fmt, h64) in [
+        ("ascii.vti", WriteFormat::Ascii, false),
+        ("b64.vti", WriteFormat::Binary { zlib: false }, false),
+        ("b64z.vti", WriteFormat::Binary { zlib: true }, false),
+        ("b64z64.vti", WriteFormat::Binary { zlib: true }, true),
+        ("app.vti", WriteFormat::AppendedRaw { zlib: false }, true),
+        ("appz.vti", WriteFormat::AppendedRaw { zlib: true }, false),
+    ] {
+        let p = dir.join(name);
+        write(&p, &bytes, VoxelType::I16, DIMS, SPACING, fmt, h64).unwrap();
+        let v = load(&p);
+        assert_same(&v, &r, name);
+        assert_eq!(v.source().format, "VTK image data");
+    }
+
+    // Appended base64 data, two arrays (the PointData's Scalars one is read), a flipped
+    // Direction, hand-written as VTK does: header and data base64-encoded separately.
+    use base64::Engine;
+    let b64 = |b: &[u8]| base64::engine::general_purpose::STANDARD.encode(b);
+    let other = b64(&4u32.to_le_bytes()) + &b64(&[9, 9, 9, 9]);
+    let [nx, ny, nz] = DIMS.map(|d| d as usize);
+    let mut yflip = Vec::new();
+    for z in 0..nz {
+        for y in 0..ny {
+            for x in 0..nx {
+                yflip.push(at(&ramp(), x, ny - 1 - y, z));
+            }
+        }
+    }
+    let yb = le(&yflip);
+    let mine = b64(&(yb.len() as u32).to_le_bytes()) + &b64(&yb);
+    let xml = format!(
+        "<?xml version=\"1.0\"?>\n<VTKFile type=\"ImageData\" version=\"1.0\" byte_order=\"LittleEndian\">\n\
+<ImageData WholeExtent=\"2 8 0 4 10 12\" Origin=\"5 5 5\" Spacing=\"0.5 1 2\" Direction=\"1 0 0 0 -1 0 0 0 1\">\n\
+<Piece Extent=\"2 8 0 4 10 12\"><PointData Scalars=\"density\">\n\
+<DataArray type=\"UInt8\" Name=\"mask\" format=\"appended\" offset=\"0\"/>\n\
+<DataArray type=\"Int16\" Name=\"density\" format=\"appended\" offset=\"{}\"/>\n\
+</PointData></Piece></ImageData>\n<AppendedData encoding=\"base64\">\n _{other}{mine}\n</AppendedData>\n</VTKFile>\n",
+        other.len()
+    );
+    let p = dir.join("hand.vti");
+    std::fs::write(&p, xml).unwrap();
+    let v = load(&p);
+    assert_same(&v, &r, "appended base64 with a y-flipping Direction");
+    assert!(v.source().orientation.contains("-j"), "{}", v.source().orientation);
+}
+
+#[test]
+fn broken_vti_files_are_clear_errors() {
+    use volwarp_server::volume::vti::{write, WriteFormat};
+    let dir = temp_dir("vti-errors");
+    let bytes = le(&ramp());
+    let p = dir.join("z.vti");
+    write(&p, &bytes, VoxelType::I16, DIMS, SPACING, WriteFormat::AppendedRaw { zlib: true }, false).unwrap();
+    let full = std::fs::read(&p).unwrap();
+    // Cut inside the compressed blocks.
+    let at = full.windows(1).position(|w| w == b"_").unwrap() + 60;
+    let t = dir.join("cut.vti");
+    std::fs::write(&t, &full[..at]).unwrap();
+    load_err(&t);
+    // A block-size header that claims more than the extent.
+    let mut lie = full.clone();
+    let us = lie.iter().position(|&c| c == b'_').unwrap() + 1;
+    lie[us..us + 4].copy_from_slice(&1000u32.to_le_bytes());
+    let t = dir.join("lie.vti");
+    std::fs::write(&t, &lie).unwrap();
+    load_err(&t);
+    // An extent that overflows: refused before any allocation.
+    let text = String::from_utf8_lossy(&full)
+        .replace("WholeExtent=\"0 6 0 4 0 2\"", "WholeExtent=\"0 4294967295 0 4294967295 0 4294967295\"");
+    let t = dir.join("huge.vti");
+    std::fs::write(&t, text.as_bytes()).unwrap();
+    let e = load_err(&t);
+    assert!(matches!(e.kind, VolumeErrorKind::BadGeometry(_) | VolumeErrorKind::Malformed { .. }), "{e}");
+    // Ascii with too few values.
+    let t = dir.join("few.vti");
+    write(&t, &bytes[..bytes.len() - 2], VoxelType::I16, DIMS, SPACING, WriteFormat::Ascii, false).unwrap();
+    let e = load_err(&t);
+    assert!(e.to_string().contains("104 values"), "{e}");
+}

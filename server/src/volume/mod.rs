@@ -33,6 +33,7 @@ pub mod orient;
 mod raw;
 mod sampling;
 pub mod tiff_stack;
+pub mod vti;
 
 pub use error::{VolumeError, VolumeErrorKind};
 pub(crate) use raw::read_exactly;
@@ -346,6 +347,8 @@ pub enum Format {
     Tiff,
     /// A folder of single-page TIFF slices.
     TiffFolder,
+    /// VTK XML image data (`.vti`).
+    Vti,
 }
 
 /// The first `n` bytes of a file (fewer where it is shorter).
@@ -385,6 +388,9 @@ pub fn detect_format(path: &Path) -> Result<Format, VolumeError> {
     if tiff_stack::is_tiff(&head) {
         return Ok(Format::Tiff);
     }
+    if vti::is_vti(&head) || ext == "vti" {
+        return Ok(Format::Vti);
+    }
     Ok(match ext.as_str() {
         "nrrd" | "nhdr" => Format::Nrrd,
         "tif" | "tiff" => Format::Tiff,
@@ -401,7 +407,8 @@ fn detect_folder(dir: &Path) -> Result<Format, VolumeError> {
 }
 
 /// Loads a volume: raw (`.raw` or any other extension), NRRD (`.nrrd`, `.nhdr`), NIfTI
-/// (`.nii`, `.nii.gz`), a multi-page TIFF or a folder of TIFF slices, recognized by content
+/// (`.nii`, `.nii.gz`), a multi-page TIFF or a folder of TIFF slices, VTK image data (`.vti`),
+/// recognized by content
 /// and extension ([`detect_format`]).
 pub fn load_volume(path: impl AsRef<Path>, opts: &LoadOptions) -> Result<Volume, VolumeError> {
     let path = path.as_ref();
@@ -417,6 +424,7 @@ pub fn load_volume(path: impl AsRef<Path>, opts: &LoadOptions) -> Result<Volume,
         Format::Nifti => nifti::load(path, opts)?,
         Format::Tiff => tiff_stack::load_file(path, opts)?,
         Format::TiffFolder => tiff_stack::load_folder(path, opts)?,
+        Format::Vti => vti::load(path, opts)?,
         Format::Raw => {
             let mut v = raw::load_raw(path, opts)?;
             v.source.data_bytes = voxel_bytes(voxel_count(v.dims)?, v.source.voxel_type.unwrap_or(VoxelType::U8))?;
