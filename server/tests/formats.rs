@@ -420,3 +420,178 @@ fn broken_vti_files_are_clear_errors() {
     let e = load_err(&t);
     assert!(e.to_string().contains("104 values"), "{e}");
 }
+
+/// One DICOM file, built in memory with dicom-object.
+struct Slice<'a> {
+    series: &'a str,
+    position: Option<[f64; 3]>,
+    iop: [f64; 6],
+    /// PixelSpacing: between rows, between columns.
+    ps: [f64; 2],
+    rows: u16,
+    cols: u16,
+    frames: usize,
+    pixels: Vec<u16>,
+    signed: bool,
+    rescale: Option<(f64, f64)>,
+    between: Option<f64>,
+    syntax: &'a str,
+}
+
+const EXPLICIT_LE: &str = "1.2.840.10008.1.2.1";
+const IMPLICIT_LE: &str = "1.2.840.10008.1.2";
+
+fn write_dicom(p: &Path, s: &Slice, uid: u32) {
+    use dicom_core::{DataElement, PrimitiveValue, VR};
+    use dicom_dictionary_std::tags;
+    use dicom_object::{FileMetaTableBuilder, InMemDicomObject};
+    let ds = |v: &[f64]| PrimitiveValue::from(v.iter().map(|x| x.to_string()).collect::<Vec<_>>().join("\\"));
+    let mut o = InMemDicomObject::new_empty();
+    o.put(DataElement::new(tags::SOP_CLASS_UID, VR::UI, PrimitiveValue::from("1.2.840.10008.5.1.4.1.1.2")));
+    o.put(DataElement::new(tags::SOP_INSTANCE_UID, VR::UI, PrimitiveValue::from(format!("2.25.77.{uid}"))));
+    o.put(DataElement::new(tags::SERIES_INSTANCE_UID, VR::UI, PrimitiveValue::from(s.series)));
+    o.put(DataElement::new(tags::MODALITY, VR::CS, PrimitiveValue::from("CT")));
+    if let Some(pos) = s.position {
+        o.put(DataElement::new(tags::IMAGE_POSITION_PATIENT, VR::DS, ds(&pos)));
+    }
+    o.put(DataElement::new(tags::IMAGE_ORIENTATION_PATIENT, VR::DS, ds(&s.iop)));
+    o.put(DataElement::new(tags::PIXEL_SPACING, VR::DS, ds(&s.ps)));
+    if let Some(b) = s.between {
+        o.put(DataElement::new(tags::SPACING_BETWEEN_SLICES, VR::DS, ds(&[b])));
+    }
+    o.put(DataElement::new(tags::SLICE_THICKNESS, VR::DS, ds(&[9.0])));
+    o.put(DataElement::new(tags::SAMPLES_PER_PIXEL, VR::US, PrimitiveValue::from(1u16)));
+    o.put(DataElement::new(tags::PHOTOMETRIC_INTERPRETATION, VR::CS, PrimitiveValue::from("MONOCHROME2")));
+    if s.frames > 1 {
+        o.put(DataElement::new(tags::NUMBER_OF_FRAMES, VR::IS, PrimitiveValue::from(s.frames.to_string())));
+    }
+    o.put(DataElement::new(tags::ROWS, VR::US, PrimitiveValue::from(s.rows)));
+    o.put(DataElement::new(tags::COLUMNS, VR::US, PrimitiveValue::from(s.cols)));
+    o.put(DataElement::new(tags::BITS_ALLOCATED, VR::US, PrimitiveValue::from(16u16)));
+    o.put(DataElement::new(tags::BITS_STORED, VR::US, PrimitiveValue::from(16u16)));
+    o.put(DataElement::new(tags::HIGH_BIT, VR::US, PrimitiveValue::from(15u16)));
+    o.put(DataElement::new(tags::PIXEL_REPRESENTATION, VR::US, PrimitiveValue::from(s.signed as u16)));
+    if let Some((slope, inter)) = s.rescale {
+        o.put(DataElement::new(tags::RESCALE_SLOPE, VR::DS, ds(&[slope])));
+        o.put(DataElement::new(tags::RESCALE_INTERCEPT, VR::DS, ds(&[inter])));
+    }
+    o.put(DataElement::new(tags::PIXEL_DATA, VR::OW, PrimitiveValue::U16(s.pixels.iter().copied().collect())));
+    let f = o.with_meta(FileMetaTableBuilder::new().transfer_syntax(s.syntax)).unwrap();
+    f.write_to_file(p).unwrap();
+}
+
+fn axial(series: &str, z: f64, pixels: Vec<u16>) -> Slice<'_> {
+    Slice {
+        series,
+        position: Some([-10.0, 20.0, z]),
+        iop: [1.0, 0.0, 0.0, 0.0, 1.0, 0.0],
+        ps: [1.0, 0.5],
+        rows: DIMS[1] as u16,
+        cols: DIMS[0] as u16,
+        frames: 1,
+        pixels,
+        signed: true,
+        rescale: None,
+        between: None,
+        syntax: EXPLICIT_LE,
+    }
+}
+
+fn slice_i16(z: usize) -> Vec<u16> {
+    let n = (DIMS[0] * DIMS[1]) as usize;
+    ramp()[z * n..(z + 1) * n].iter().map(|&x| x as u16).collect()
+}
+
+#[test]
+fn dicom_series_load_as_the_same_volume() {
+    let dir = temp_dir("dicom");
+    let r = reference();
+    // Shuffled names; slices 2 mm apart; one file in implicit VR; a smaller second series.
+    let series = dir.join("series");
+    std::fs::create_dir_all(&series).unwrap();
+    for (name, k) in [("IM_b", 2usize), ("IM_c", 0), ("IM_a.dcm", 1)] {
+        let mut s = axial("1.2.3.4", 5.0 + 2.0 * k as f64, slice_i16(k));
+        if k == 1 {
+            s.syntax = IMPLICIT_LE;
+        }
+        write_dicom(&series.join(name), &s, k as u32);
+    }
+    for k in 0..2 {
+        write_dicom(&series.join(format!("scout{k}")), &axial("1.2.3.5", k as f64, slice_i16(0)), 10 + k);
+    }
+    std::fs::write(series.join("README.txt"), "not DICOM").unwrap();
+    let v = load(&series);
+    assert_same(&v, &r, "DICOM folder");
+    assert_eq!((v.source().format.as_str(), v.source().files), ("DICOM", 3));
+
+    // Unsigned pixels with a rescale intercept; coronal slices (rows run down the patient).
+    let coronal = dir.join("coronal");
+    std::fs::create_dir_all(&coronal).unwrap();
+    let [nx, ny, nz] = DIMS.map(|d| d as usize);
+    for k in 0..ny {
+        let mut px = Vec::new();
+        for j in 0..nz {
+            for i in 0..nx {
+                px.push((at(&ramp(), i, k, nz - 1 - j) as i32 + 1024) as u16);
+            }
+        }
+        let s = Slice {
+            iop: [1.0, 0.0, 0.0, 0.0, 0.0, -1.0],
+            ps: [2.0, 0.5],
+            rows: nz as u16,
+            cols: nx as u16,
+            position: Some([0.0, 3.0 + k as f64, 50.0]),
+            signed: false,
+            rescale: Some((1.0, -1024.0)),
+            ..axial("9.9", 0.0, px)
+        };
+        write_dicom(&coronal.join(format!("{}.dcm", 100 - k)), &s, 20 + k as u32);
+    }
+    let v = load(&coronal);
+    assert_same(&v, &r, "coronal DICOM with rescale");
+    assert!(v.source().orientation.contains("+i, +k, -j"), "{}", v.source().orientation);
+
+    // A multi-frame file (SpacingBetweenSlices, no per-frame positions).
+    let mf = dir.join("multi.dcm");
+    let all: Vec<u16> = ramp().iter().map(|&x| x as u16).collect();
+    write_dicom(&mf, &Slice { frames: 3, between: Some(2.0), position: None, ..axial("7.7", 0.0, all) }, 30);
+    assert_same(&load(&mf), &r, "multi-frame DICOM");
+}
+
+#[test]
+fn broken_dicom_series_are_clear_errors() {
+    let dir = temp_dir("dicom-errors");
+    // A missing slice: gaps 2, 4.
+    let gap = dir.join("gap");
+    std::fs::create_dir_all(&gap).unwrap();
+    for (k, z) in [0.0, 2.0, 6.0].iter().enumerate() {
+        write_dicom(&gap.join(format!("s{k}")), &axial("1", *z, slice_i16(k)), k as u32);
+    }
+    let e = load_volume(&gap, &LoadOptions::default()).unwrap_err();
+    assert!(e.to_string().contains("inconsistent slice gaps") && e.to_string().contains("s1 and s2"), "{e}");
+    assert_eq!(e.path.as_deref(), Some(gap.as_path()));
+
+    // A compressed transfer syntax.
+    let jpeg = dir.join("jpeg.dcm");
+    write_dicom(&jpeg, &Slice { syntax: "1.2.840.10008.1.2.4.50", ..axial("2", 0.0, slice_i16(0)) }, 5);
+    let e = load_err(&jpeg);
+    assert!(e.to_string().contains("transfer syntax 1.2.840.10008.1.2.4.50 (JPEG baseline)"), "{e}");
+
+    // Oblique slices.
+    let ob = dir.join("oblique.dcm");
+    write_dicom(&ob, &Slice { iop: [0.8, 0.6, 0.0, -0.6, 0.8, 0.0], ..axial("3", 0.0, slice_i16(0)) }, 6);
+    let e = load_err(&ob);
+    assert!(e.to_string().contains("oblique"), "{e}");
+
+    // Pixel data shorter than rows × columns × frames.
+    let short = dir.join("short.dcm");
+    write_dicom(&short, &Slice { frames: 3, between: Some(1.0), ..axial("4", 0.0, slice_i16(0)) }, 7);
+    let e = load_err(&short);
+    assert!(matches!(e.kind, VolumeErrorKind::SizeMismatch { .. }), "{e}");
+
+    // Rows × columns × frames past the voxel limit: refused before the pixels are read.
+    let huge = dir.join("huge.dcm");
+    write_dicom(&huge, &Slice { rows: 65535, cols: 65535, frames: 9999, ..axial("5", 0.0, vec![0; 4]) }, 8);
+    let e = load_err(&huge);
+    assert!(matches!(e.kind, VolumeErrorKind::TooLarge { .. }), "{e}");
+}

@@ -26,6 +26,7 @@
 //! | `raw.rs` | [`VoxelType`], raw file names ([`parse_raw_name`]), voxel decoding, the raw loader |
 //! | [`nrrd`] | NRRD headers and data |
 
+pub mod dicom;
 mod error;
 pub mod nifti;
 pub mod nrrd;
@@ -349,6 +350,10 @@ pub enum Format {
     TiffFolder,
     /// VTK XML image data (`.vti`).
     Vti,
+    /// One DICOM file (a multi-frame volume or a single slice).
+    Dicom,
+    /// A folder of DICOM files (a series).
+    DicomFolder,
 }
 
 /// The first `n` bytes of a file (fewer where it is shorter).
@@ -388,6 +393,9 @@ pub fn detect_format(path: &Path) -> Result<Format, VolumeError> {
     if tiff_stack::is_tiff(&head) {
         return Ok(Format::Tiff);
     }
+    if dicom::is_dicom(&head) || ext == "dcm" {
+        return Ok(Format::Dicom);
+    }
     if vti::is_vti(&head) || ext == "vti" {
         return Ok(Format::Vti);
     }
@@ -398,8 +406,12 @@ pub fn detect_format(path: &Path) -> Result<Format, VolumeError> {
     })
 }
 
-/// The format of a folder's slices: TIFF where its files are TIFF.
+/// The format of a folder's slices: DICOM where its files are DICOM (`DICM` at byte 128), TIFF
+/// where they are TIFF.
 fn detect_folder(dir: &Path) -> Result<Format, VolumeError> {
+    if !dicom::folder_files(dir)?.is_empty() {
+        return Ok(Format::DicomFolder);
+    }
     if !tiff_stack::folder_slices(dir)?.is_empty() {
         return Ok(Format::TiffFolder);
     }
@@ -408,7 +420,7 @@ fn detect_folder(dir: &Path) -> Result<Format, VolumeError> {
 
 /// Loads a volume: raw (`.raw` or any other extension), NRRD (`.nrrd`, `.nhdr`), NIfTI
 /// (`.nii`, `.nii.gz`), a multi-page TIFF or a folder of TIFF slices, VTK image data (`.vti`),
-/// recognized by content
+/// a DICOM file or a folder holding a DICOM series, recognized by content
 /// and extension ([`detect_format`]).
 pub fn load_volume(path: impl AsRef<Path>, opts: &LoadOptions) -> Result<Volume, VolumeError> {
     let path = path.as_ref();
@@ -425,6 +437,8 @@ pub fn load_volume(path: impl AsRef<Path>, opts: &LoadOptions) -> Result<Volume,
         Format::Tiff => tiff_stack::load_file(path, opts)?,
         Format::TiffFolder => tiff_stack::load_folder(path, opts)?,
         Format::Vti => vti::load(path, opts)?,
+        Format::Dicom => dicom::load_file(path, opts)?,
+        Format::DicomFolder => dicom::load_folder(path, opts)?,
         Format::Raw => {
             let mut v = raw::load_raw(path, opts)?;
             v.source.data_bytes = voxel_bytes(voxel_count(v.dims)?, v.source.voxel_type.unwrap_or(VoxelType::U8))?;
