@@ -595,3 +595,45 @@ fn broken_dicom_series_are_clear_errors() {
     let e = load_err(&huge);
     assert!(matches!(e.kind, VolumeErrorKind::TooLarge { .. }), "{e}");
 }
+
+#[test]
+fn info_prints_what_was_read() {
+    let dir = temp_dir("info");
+    let p = dir.join("scan.nii.gz");
+    let o = nifti::WriteOptions {
+        version: 1,
+        pixdim: SPACING.to_array(),
+        scale: (0.0, 0.0),
+        sform: Some([[0.5, 0.0, 0.0, 0.0], [0.0, 1.0, 0.0, 0.0], [0.0, 0.0, 2.0, 0.0]]),
+        gzip: true,
+    };
+    nifti::write(&p, &le(&ramp()), VoxelType::I16, DIMS, &o).unwrap();
+    let out = std::process::Command::new(env!("CARGO_BIN_EXE_volwarp-server"))
+        .arg("info")
+        .arg(&p)
+        .env("RUST_LOG", "warn")
+        .output()
+        .unwrap();
+    let text = String::from_utf8_lossy(&out.stdout);
+    assert!(out.status.success(), "{text}{}", String::from_utf8_lossy(&out.stderr));
+    for want in [
+        "format       NIfTI-1",
+        "dims         7 x 5 x 3 (105 voxels)",
+        "voxel type   int16",
+        "spacing      0.5, 1, 2",
+        "value range  -300 .. 256",
+        "orientation  file axes (-i, -j, +k) as LPS (x, y, z) (sform, RAS to LPS)",
+        "data         210 bytes in 1 file",
+    ] {
+        assert!(text.contains(want), "{want:?} missing from:\n{text}");
+    }
+    // A broken file: a non-zero exit and the file named.
+    std::fs::write(dir.join("bad.nii"), b"short").unwrap();
+    let out = std::process::Command::new(env!("CARGO_BIN_EXE_volwarp-server"))
+        .arg("info")
+        .arg(dir.join("bad.nii"))
+        .output()
+        .unwrap();
+    assert!(!out.status.success());
+    assert!(String::from_utf8_lossy(&out.stderr).contains("bad.nii"));
+}
