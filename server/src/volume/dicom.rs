@@ -377,7 +377,7 @@ pub fn load_files(name: &Path, files: &[PathBuf], opts: &LoadOptions) -> Result<
         format: "DICOM".into(),
         voxel_type: Some(ty),
         orientation: format!("{} (ImageOrientationPatient; slices ordered by position)", r.describe()),
-        data_bytes: voxel_bytes(voxels, ty)?,
+        data_bytes: voxel_bytes(voxels, ty).map_err(|e| e.at(name))?,
         files: hs.len(),
     };
     Ok(Volume::from_values(vol_name, out_dims, spacing, values).map_err(|e| e.at(name))?.with_source(source))

@@ -164,7 +164,7 @@ fn finish(
         format: "TIFF".into(),
         voxel_type: Some(ty),
         orientation: "none (slice k is z = k, row 0 is y = 0)".into(),
-        data_bytes: voxel_bytes(voxels, ty)?,
+        data_bytes: voxel_bytes(voxels, ty).map_err(|e| e.at(path))?,
         files,
     };
     Ok(Volume::from_values(name, dims, spacing, values).map_err(|e| e.at(path))?.with_source(source))
