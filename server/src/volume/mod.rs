@@ -13,10 +13,14 @@
 //! gathers (`CodeStencil`: bytes where the range is at most 255, else 16-bit codes); other values
 //! (`f32` data, wider integers) are normalized in `f64`.
 //!
-//! Loaders ([`load_volume`]): headerless raw files named `name_XxYxZ_type.raw`
-//! ([`parse_raw_name`]; dims, type and spacing may also come from [`LoadOptions`]) and NRRD
-//! (`.nrrd` attached, `.nhdr` detached; raw or gzip; see [`nrrd`]). Every failure is a
-//! [`VolumeError`] naming the file and the problem, never a panic.
+//! Loaders ([`load_volume`], the format recognized by content and extension:
+//! [`detect_format`]): headerless raw files named `name_XxYxZ_type.raw` ([`parse_raw_name`];
+//! dims, type and spacing may also come from [`LoadOptions`]), NRRD (`.nrrd` attached, `.nhdr`
+//! detached; raw or gzip; see [`nrrd`]), NIfTI-1/2 ([`nifti`]), TIFF stacks ([`tiff_stack`]),
+//! VTK image data ([`vti`]) and DICOM series ([`dicom`]). The volume box's axes are DICOM
+//! patient space LPS; loaders of oriented formats reorder axis-aligned volumes into it
+//! ([`orient`]) and refuse oblique ones. [`Volume::source`] says what was read. Every failure
+//! is a [`VolumeError`] naming the file and the problem, never a panic.
 //!
 //! | file | content |
 //! |---|---|
@@ -25,6 +29,11 @@
 //! | `sampling.rs` | voxel reads and trilinear sampling |
 //! | `raw.rs` | [`VoxelType`], raw file names ([`parse_raw_name`]), voxel decoding, the raw loader |
 //! | [`nrrd`] | NRRD headers and data |
+//! | [`nifti`] | NIfTI-1 and NIfTI-2 headers and data |
+//! | [`tiff_stack`] | multi-page TIFF files and folders of TIFF slices |
+//! | [`vti`] | VTK XML image data |
+//! | [`dicom`] | DICOM series and multi-frame files |
+//! | [`orient`] | axis-aligned orientations: the reordering into LPS |
 
 pub mod dicom;
 mod error;

@@ -17,7 +17,7 @@
 //! **Why a parser of its own.** The `nifti` crate reads NIfTI-1 only (no NIfTI-2 headers),
 //! its writer needs `ndarray`, and its reader allocates what the header says before checking
 //! it against the file; the two headers are fixed layouts of 348 and 540 bytes, read here with
-//! every size checked ([`voxel_count`](super::voxel_count), the voxel limit, the file length)
+//! every size checked (the product of the dims, the voxel limit, the file length)
 //! before anything is allocated. [`parse_header`] never panics (it is fuzzed through
 //! `load_volume`).
 
@@ -391,7 +391,7 @@ pub fn load(path: &Path, opts: &LoadOptions) -> Result<Volume, VolumeError> {
     Ok(Volume::from_values(name, dims, spacing, values).map_err(|e| e.at(path))?.with_source(source))
 }
 
-/// What [`write`] writes besides the voxels.
+/// What [`write()`] writes besides the voxels.
 #[derive(Clone, Debug)]
 pub struct WriteOptions {
     /// 1 or 2.

@@ -465,7 +465,7 @@ fn load_bytes(path: &Path, bytes: &[u8], opts: &LoadOptions) -> Result<Volume, V
     Ok(Volume::from_values(name, out_dims, spacing, values)?.with_source(source))
 }
 
-/// How [`write`] stores the array.
+/// How [`write()`] stores the array.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 pub enum WriteFormat {
     /// Numbers in the XML.
