@@ -589,6 +589,25 @@ fn broken_dicom_series_are_clear_errors() {
     let e = load_err(&short);
     assert!(matches!(e.kind, VolumeErrorKind::SizeMismatch { .. }), "{e}");
 
+    // A truncated file, and a 600-byte file whose pixel data claims 4 GiB: refused before the
+    // DICOM parser allocates what the length says.
+    let ok = dir.join("ok.dcm");
+    write_dicom(&ok, &axial("6", 0.0, slice_i16(0)), 9);
+    let b = std::fs::read(&ok).unwrap();
+    let cut = dir.join("cut.dcm");
+    std::fs::write(&cut, &b[..b.len() - 10]).unwrap();
+    let e = load_err(&cut);
+    assert!(e.to_string().contains("truncated"), "{e}");
+    let px = b.windows(4).rposition(|w| w == [0xE0, 0x7F, 0x10, 0x00]).unwrap();
+    let mut lie = b.clone();
+    lie[px + 8..px + 12].copy_from_slice(&0xFFFF_FFF0u32.to_le_bytes());
+    let lie_p = dir.join("lie.dcm");
+    std::fs::write(&lie_p, &lie).unwrap();
+    let t = std::time::Instant::now();
+    let e = load_err(&lie_p);
+    assert!(e.to_string().contains("claims 4294967280 bytes"), "{e}");
+    assert!(t.elapsed().as_secs_f64() < 1.0);
+
     // Rows × columns × frames past the voxel limit: refused before the pixels are read.
     let huge = dir.join("huge.dcm");
     write_dicom(&huge, &Slice { rows: 65535, cols: 65535, frames: 9999, ..axial("5", 0.0, vec![0; 4]) }, 8);

@@ -121,7 +121,108 @@ fn lookup(obj: &Obj, tag: dicom_object::Tag, frame: usize) -> Option<Vec<f64>> {
         })
 }
 
+/// The VRs with a 4-byte length in explicit VR encodings.
+const LONG_VRS: [&[u8; 2]; 13] =
+    [b"OB", b"OD", b"OF", b"OL", b"OV", b"OW", b"SQ", b"UC", b"UR", b"UT", b"UN", b"SV", b"UV"];
+/// The VRs with a 2-byte length.
+const SHORT_VRS: [&[u8; 2]; 21] = [
+    b"AE", b"AS", b"AT", b"CS", b"DA", b"DS", b"DT", b"FL", b"FD", b"IS", b"LO", b"LT", b"PN", b"SH", b"SL", b"SS",
+    b"ST", b"TM", b"UI", b"UL", b"US",
+];
+
+/// Walks the elements of a DICOM file and checks that every defined length fits in what is
+/// left of the file, before `dicom-object` reads it: its parser allocates what a length says
+/// (a 600-byte file claiming a 4 GiB element cost 4 GiB and seconds). Returns the transfer
+/// syntax; a deflated data set (which this walk cannot see into) is refused here.
+fn check_lengths(b: &[u8]) -> Result<String, VolumeError> {
+    if b.get(128..132) != Some(b"DICM") {
+        return Err(bad("no DICM magic at byte 128"));
+    }
+    let mut at = 132;
+    let meta = walk(b, &mut at, true, false, true)?;
+    let ts = meta.unwrap_or_default();
+    let (explicit, big) = match ts.as_str() {
+        "1.2.840.10008.1.2" => (false, false),
+        "1.2.840.10008.1.2.2" => (true, true),
+        "1.2.840.10008.1.2.1.99" | "1.2.840.10008.1.2.4.95" => {
+            return Err(VolumeError::unsupported(format!("transfer syntax {ts} ({})", syntax_name(&ts))))
+        }
+        _ => (true, false),
+    };
+    walk(b, &mut at, explicit, big, false)?;
+    Ok(ts)
+}
+
+/// Walks elements from `at` (the meta group only where `meta`: it returns its transfer syntax),
+/// descending into sequences and items.
+fn walk(b: &[u8], at: &mut usize, explicit: bool, big: bool, meta: bool) -> Result<Option<String>, VolumeError> {
+    let u16_at = |i: usize| {
+        let a = [b[i], b[i + 1]];
+        if big {
+            u16::from_be_bytes(a)
+        } else {
+            u16::from_le_bytes(a)
+        }
+    };
+    let u32_at = |i: usize| {
+        let a = [b[i], b[i + 1], b[i + 2], b[i + 3]];
+        if big {
+            u32::from_be_bytes(a)
+        } else {
+            u32::from_le_bytes(a)
+        }
+    };
+    let mut ts = None;
+    while *at + 8 <= b.len() {
+        let (group, elem) = (u16_at(*at), u16_at(*at + 2));
+        if meta && group != 0x0002 {
+            break;
+        }
+        let (len, header, seq) = if group == 0xFFFE {
+            (u32_at(*at + 4), 8, true)
+        } else if explicit {
+            let vr = [b[*at + 4], b[*at + 5]];
+            if LONG_VRS.contains(&&vr) {
+                if *at + 12 > b.len() {
+                    return Err(bad("the file ends inside an element header"));
+                }
+                (u32_at(*at + 8), 12, &vr == b"SQ")
+            } else if SHORT_VRS.contains(&&vr) {
+                (u16_at(*at + 6) as u32, 8, false)
+            } else {
+                return Err(bad(format!(
+                    "element ({group:04X},{elem:04X}) has the unknown VR {:?}",
+                    String::from_utf8_lossy(&vr)
+                )));
+            }
+        } else {
+            let len = u32_at(*at + 4);
+            // Implicit VR: a value that starts with an item tag is a sequence.
+            let item = b.get(*at + 8..*at + 12).is_some_and(|t| t == [0xFE, 0xFF, 0x00, 0xE0]);
+            (len, 8, item)
+        };
+        *at += header;
+        if len == u32::MAX || seq {
+            continue; // a sequence or item: its elements follow
+        }
+        let left = b.len() - *at;
+        if len as usize > left {
+            return Err(bad(format!(
+                "element ({group:04X},{elem:04X}) claims {len} bytes, {left} are left in the file (truncated?)"
+            )));
+        }
+        if meta && (group, elem) == (0x0002, 0x0010) {
+            ts = Some(String::from_utf8_lossy(&b[*at..*at + len as usize]).trim_end_matches(['\0', ' ']).to_string());
+        }
+        *at += len as usize;
+    }
+    Ok(ts)
+}
+
 fn read_header(path: &Path, file: usize) -> Result<Header, VolumeError> {
+    let bytes = std::fs::read(path).map_err(|e| VolumeError::io(path, e))?;
+    check_lengths(&bytes).map_err(|e| e.at(path))?;
+    drop(bytes);
     let obj = OpenFileOptions::new()
         .read_until(tags::PIXEL_DATA)
         .open_file(path)
