@@ -656,3 +656,78 @@ fn info_prints_what_was_read() {
     assert!(!out.status.success());
     assert!(String::from_utf8_lossy(&out.stderr).contains("bad.nii"));
 }
+
+#[test]
+fn nifti_qform_pairs_and_4d_files() {
+    let dir = temp_dir("nifti-more");
+    let r = reference();
+    let v = ramp();
+    let [nx, ny, nz] = DIMS.map(|d| d as usize);
+    let set = |b: &mut Vec<u8>, at: usize, bytes: &[u8]| b[at..at + bytes.len()].copy_from_slice(bytes);
+    let plain =
+        nifti::WriteOptions { version: 1, pixdim: SPACING.to_array(), scale: (0.0, 0.0), sform: None, gzip: false };
+
+    // qform: a 180° rotation about z (quaternion d = 1) maps RAS onto LPS; qfac -1 flips k.
+    let mut zflip = Vec::new();
+    for z in 0..nz {
+        for y in 0..ny {
+            for x in 0..nx {
+                zflip.push(at(&v, x, y, nz - 1 - z));
+            }
+        }
+    }
+    let p = dir.join("qform.nii");
+    nifti::write(&p, &le(&zflip), VoxelType::I16, DIMS, &plain).unwrap();
+    let mut b = std::fs::read(&p).unwrap();
+    set(&mut b, 252, &1i16.to_le_bytes()); // qform_code
+    set(&mut b, 264, &1f32.to_le_bytes()); // quatern_d
+    set(&mut b, 76, &(-1f32).to_le_bytes()); // pixdim[0] = qfac
+    std::fs::write(&p, &b).unwrap();
+    let got = load(&p);
+    assert_same(&got, &r, "qform with qfac -1");
+    assert!(got.source().orientation.contains("(+i, +j, -k)") && got.source().orientation.contains("qform"));
+
+    // A .hdr/.img pair (magic ni1, data at offset 0 of the .img).
+    let p = dir.join("pair.nii");
+    nifti::write(&p, &le(&v), VoxelType::I16, DIMS, &plain).unwrap();
+    let b = std::fs::read(&p).unwrap();
+    let mut hdr = b[..348].to_vec();
+    set(&mut hdr, 344, b"ni1\0");
+    set(&mut hdr, 108, &0f32.to_le_bytes());
+    std::fs::write(dir.join("pair.hdr"), &hdr).unwrap();
+    std::fs::write(dir.join("pair.img"), &b[352..]).unwrap();
+    let got = load(&dir.join("pair.hdr"));
+    assert_same(&got, &r, ".hdr/.img pair");
+    assert_eq!(got.source().files, 2);
+    std::fs::remove_file(dir.join("pair.img")).unwrap();
+    let e = load_err(&dir.join("pair.hdr"));
+    assert!(e.to_string().contains("pair.img"), "{e}");
+
+    // 4-D: two volumes, the first is read.
+    let p = dir.join("series.nii");
+    let two: Vec<i16> = v.iter().copied().chain(v.iter().map(|x| x / 2)).collect();
+    nifti::write(&p, &le(&two), VoxelType::I16, DIMS, &plain).unwrap();
+    let mut b = std::fs::read(&p).unwrap();
+    set(&mut b, 40, &4i16.to_le_bytes());
+    set(&mut b, 48, &2i16.to_le_bytes());
+    std::fs::write(&p, &b).unwrap();
+    assert_same(&load(&p), &r, "first volume of a 4-D file");
+
+    // Big-endian: every field and voxel byte-swapped.
+    let p = dir.join("big.nii");
+    let mut b = vec![0u8; 352];
+    set(&mut b, 0, &348i32.to_be_bytes());
+    for (i, d) in [3i16, 7, 5, 3, 1, 1, 1, 1].iter().enumerate() {
+        set(&mut b, 40 + 2 * i, &d.to_be_bytes());
+    }
+    set(&mut b, 70, &4i16.to_be_bytes());
+    set(&mut b, 72, &16i16.to_be_bytes());
+    for (i, d) in [1f32, 0.5, 1.0, 2.0].iter().enumerate() {
+        set(&mut b, 76 + 4 * i, &d.to_be_bytes());
+    }
+    set(&mut b, 108, &352f32.to_be_bytes());
+    set(&mut b, 344, b"n+1\0");
+    b.extend(v.iter().flat_map(|x| x.to_be_bytes()));
+    std::fs::write(&p, &b).unwrap();
+    assert_same(&load(&p), &r, "big-endian NIfTI-1");
+}
