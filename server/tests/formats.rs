@@ -731,3 +731,70 @@ fn nifti_qform_pairs_and_4d_files() {
     std::fs::write(&p, &b).unwrap();
     assert_same(&load(&p), &r, "big-endian NIfTI-1");
 }
+
+#[test]
+fn dicom_enhanced_multiframe_uses_functional_groups() {
+    use dicom_core::value::DataSetSequence;
+    use dicom_core::{DataElement, PrimitiveValue, VR};
+    use dicom_dictionary_std::tags;
+    use dicom_object::{FileMetaTableBuilder, InMemDicomObject};
+    let dir = temp_dir("dicom-enhanced");
+    let ds = |v: &[f64]| PrimitiveValue::from(v.iter().map(|x| x.to_string()).collect::<Vec<_>>().join("\\"));
+    let item = |elems: Vec<DataElement<InMemDicomObject>>| InMemDicomObject::from_element_iter(elems);
+    let seq = |tag, items: Vec<InMemDicomObject>| DataElement::new(tag, VR::SQ, DataSetSequence::from(items));
+    // Frames stored in the order z = 2, 0, 1; unsigned pixels with intercept -1024 in the shared
+    // groups; orientation and pixel spacing only in the shared groups.
+    let order = [2usize, 0, 1];
+    let mut pixels = Vec::new();
+    let mut per_frame = Vec::new();
+    for &z in &order {
+        pixels.extend(slice_i16(z).iter().map(|&x| (x as i16 as i32 + 1024) as u16));
+        per_frame.push(item(vec![seq(
+            tags::PLANE_POSITION_SEQUENCE,
+            vec![item(vec![DataElement::new(
+                tags::IMAGE_POSITION_PATIENT,
+                VR::DS,
+                ds(&[0.0, 0.0, 5.0 + 2.0 * z as f64]),
+            )])],
+        )]));
+    }
+    let shared = item(vec![
+        seq(
+            tags::PIXEL_MEASURES_SEQUENCE,
+            vec![item(vec![DataElement::new(tags::PIXEL_SPACING, VR::DS, ds(&[1.0, 0.5]))])],
+        ),
+        seq(
+            tags::PLANE_ORIENTATION_SEQUENCE,
+            vec![item(vec![DataElement::new(
+                tags::IMAGE_ORIENTATION_PATIENT,
+                VR::DS,
+                ds(&[1.0, 0.0, 0.0, 0.0, 1.0, 0.0]),
+            )])],
+        ),
+        seq(
+            tags::PIXEL_VALUE_TRANSFORMATION_SEQUENCE,
+            vec![item(vec![
+                DataElement::new(tags::RESCALE_INTERCEPT, VR::DS, ds(&[-1024.0])),
+                DataElement::new(tags::RESCALE_SLOPE, VR::DS, ds(&[1.0])),
+            ])],
+        ),
+    ]);
+    let o = InMemDicomObject::from_element_iter([
+        DataElement::new(tags::SOP_CLASS_UID, VR::UI, PrimitiveValue::from("1.2.840.10008.5.1.4.1.1.2.1")),
+        DataElement::new(tags::SOP_INSTANCE_UID, VR::UI, PrimitiveValue::from("2.25.99")),
+        DataElement::new(tags::SERIES_INSTANCE_UID, VR::UI, PrimitiveValue::from("2.25.98")),
+        DataElement::new(tags::SAMPLES_PER_PIXEL, VR::US, PrimitiveValue::from(1u16)),
+        DataElement::new(tags::NUMBER_OF_FRAMES, VR::IS, PrimitiveValue::from("3")),
+        DataElement::new(tags::ROWS, VR::US, PrimitiveValue::from(DIMS[1] as u16)),
+        DataElement::new(tags::COLUMNS, VR::US, PrimitiveValue::from(DIMS[0] as u16)),
+        DataElement::new(tags::BITS_ALLOCATED, VR::US, PrimitiveValue::from(16u16)),
+        DataElement::new(tags::BITS_STORED, VR::US, PrimitiveValue::from(12u16)),
+        DataElement::new(tags::PIXEL_REPRESENTATION, VR::US, PrimitiveValue::from(0u16)),
+        seq(tags::SHARED_FUNCTIONAL_GROUPS_SEQUENCE, vec![shared]),
+        seq(tags::PER_FRAME_FUNCTIONAL_GROUPS_SEQUENCE, per_frame),
+        DataElement::new(tags::PIXEL_DATA, VR::OW, PrimitiveValue::U16(pixels.into())),
+    ]);
+    let p = dir.join("enhanced.dcm");
+    o.with_meta(FileMetaTableBuilder::new().transfer_syntax(EXPLICIT_LE)).unwrap().write_to_file(&p).unwrap();
+    assert_same(&load(&p), &reference(), "enhanced multi-frame DICOM");
+}
