@@ -123,8 +123,9 @@ fn page_values(
     })
 }
 
-/// Names the pages whose size differs from the most common one.
-fn check_sizes(sizes: &[(u32, u32)], label: impl Fn(usize) -> String) -> Result<(u32, u32), VolumeError> {
+/// The most common page size, or the first page of another size and an error naming it and
+/// both sizes.
+fn check_sizes(sizes: &[(u32, u32)], label: impl Fn(usize) -> String) -> Result<(u32, u32), (usize, VolumeError)> {
     let mut counts: Vec<((u32, u32), usize)> = Vec::new();
     for &s in sizes {
         match counts.iter_mut().find(|c| c.0 == s) {
@@ -132,21 +133,21 @@ fn check_sizes(sizes: &[(u32, u32)], label: impl Fn(usize) -> String) -> Result<
             None => counts.push((s, 1)),
         }
     }
-    let common = counts.iter().max_by_key(|c| c.1).map(|c| c.0).unwrap_or((0, 0));
-    if let Some(odd) = sizes.iter().position(|&s| s != common) {
-        let (w, h) = sizes[odd];
-        let others = if counts.len() == 2 && sizes.len() - counts.iter().find(|c| c.0 == common).map_or(0, |c| c.1) == 1
-        {
-            "the others"
-        } else {
-            "most"
-        };
-        return Err(VolumeError::malformed(
-            FORMAT,
-            format!("{} is {w}×{h}, {others} {}×{}: every slice must be the same size", label(odd), common.0, common.1),
-        ));
+    let (common, n_common) = counts.iter().copied().max_by_key(|c| c.1).unwrap_or(((0, 0), 0));
+    match sizes.iter().position(|&s| s != common) {
+        None => Ok(common),
+        Some(odd) => {
+            let (w, h) = sizes[odd];
+            let others = if sizes.len() - n_common == 1 { "the others" } else { "most" };
+            let msg = format!(
+                "{} is {w}×{h}, {others} {}×{}: every slice must be the same size",
+                label(odd),
+                common.0,
+                common.1
+            );
+            Err((odd, VolumeError::malformed(FORMAT, msg)))
+        }
     }
-    Ok(common)
 }
 
 fn finish(
@@ -190,7 +191,7 @@ pub fn load_file(path: &Path, opts: &LoadOptions) -> Result<Volume, VolumeError>
         }
         d.next_image().map_err(|e| tiff_err(path, &what, e))?;
     }
-    let (w, h) = check_sizes(&sizes, |i| format!("page {}", i + 1)).map_err(|e| e.at(path))?;
+    let (w, h) = check_sizes(&sizes, |i| format!("page {}", i + 1)).map_err(|(_, e)| e.at(path))?;
     let dims = [w, h, sizes.len() as u32];
     check_geometry(dims, opts.spacing.unwrap_or(Vec3::ONE), opts.max_voxels).map_err(|e| e.at(path))?;
     let mut d = open(path, opts.max_voxels)?;
@@ -263,16 +264,8 @@ pub fn load_files(dir: &Path, files: &[PathBuf], opts: &LoadOptions) -> Result<V
         let mut d = open(f, opts.max_voxels)?;
         sizes.push(d.dimensions().map_err(|e| tiff_err(f, &format!("slice {}", k + 1), e))?);
     }
-    let (w, h) = match check_sizes(&sizes, |i| {
-        format!("slice {} ({})", i + 1, files[i].file_name().unwrap_or_default().to_string_lossy())
-    }) {
-        Ok(s) => s,
-        Err(e) => {
-            let odd = sizes.iter().position(|&s| s != sizes[0]).filter(|&i| i > 0 || sizes.len() < 3);
-            let odd = odd.or_else(|| sizes.iter().position(|&s| s != sizes[sizes.len() - 1]));
-            return Err(e.at(odd.map_or(dir, |i| &files[i])));
-        }
-    };
+    let label = |i: usize| format!("slice {} ({})", i + 1, files[i].file_name().unwrap_or_default().to_string_lossy());
+    let (w, h) = check_sizes(&sizes, label).map_err(|(odd, e)| e.at(&files[odd]))?;
     let dims = [w, h, files.len() as u32];
     check_geometry(dims, opts.spacing.unwrap_or(Vec3::ONE), opts.max_voxels).map_err(|e| e.at(dir))?;
     let mut values = Vec::with_capacity((w as usize) * (h as usize) * files.len());
