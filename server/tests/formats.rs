@@ -520,6 +520,17 @@ fn dicom_series_load_as_the_same_volume() {
         write_dicom(&series.join(format!("scout{k}")), &axial("1.2.3.5", k as f64, slice_i16(0)), 10 + k);
     }
     std::fs::write(series.join("README.txt"), "not DICOM").unwrap();
+    // A DICOMDIR-like object without an image: skipped.
+    {
+        use dicom_core::{DataElement, PrimitiveValue, VR};
+        use dicom_dictionary_std::tags;
+        let o = dicom_object::InMemDicomObject::from_element_iter([
+            DataElement::new(tags::SOP_CLASS_UID, VR::UI, PrimitiveValue::from("1.2.840.10008.1.3.10")),
+            DataElement::new(tags::SOP_INSTANCE_UID, VR::UI, PrimitiveValue::from("2.25.5")),
+        ]);
+        let f = o.with_meta(dicom_object::FileMetaTableBuilder::new().transfer_syntax(EXPLICIT_LE)).unwrap();
+        f.write_to_file(series.join("DICOMDIR")).unwrap();
+    }
     let v = load(&series);
     assert_same(&v, &r, "DICOM folder");
     assert_eq!((v.source().format.as_str(), v.source().files), ("DICOM", 3));

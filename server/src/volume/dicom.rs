@@ -1,7 +1,8 @@
 //! DICOM series: a folder of DICOM files (or a list of files, or one multi-frame file), as
 //! CT and MR scanners and PACS exports write them.
 //!
-//! **What is read.** Files are grouped by SeriesInstanceUID; where a folder holds several
+//! **What is read.** DICOM objects without an image (a DICOMDIR, reports) are skipped; the
+//! images are grouped by SeriesInstanceUID; where a folder holds several
 //! series the one with the most slices is read and the others are logged. Slices (or the frames
 //! of multi-frame files) are ordered by ImagePositionPatient projected on the normal of
 //! ImageOrientationPatient; the slice spacing is the distance between consecutive positions
@@ -219,7 +220,9 @@ fn walk(b: &[u8], at: &mut usize, explicit: bool, big: bool, meta: bool) -> Resu
     Ok(ts)
 }
 
-fn read_header(path: &Path, file: usize) -> Result<Header, VolumeError> {
+/// The header of an image file, `None` for a DICOM object that is no image (a DICOMDIR, a
+/// report, a presentation state: no Rows).
+fn read_header(path: &Path, file: usize) -> Result<Option<Header>, VolumeError> {
     let bytes = std::fs::read(path).map_err(|e| VolumeError::io(path, e))?;
     check_lengths(&bytes).map_err(|e| e.at(path))?;
     drop(bytes);
@@ -227,7 +230,10 @@ fn read_header(path: &Path, file: usize) -> Result<Header, VolumeError> {
         .read_until(tags::PIXEL_DATA)
         .open_file(path)
         .map_err(|e| bad(format!("cannot parse: {e}")).at(path))?;
-    header_of(path, file, &obj).map_err(|e| e.at(path))
+    if obj.get(tags::ROWS).is_none() && obj.get(tags::PIXEL_DATA).is_none() {
+        return Ok(None);
+    }
+    header_of(path, file, &obj).map(Some).map_err(|e| e.at(path))
 }
 
 fn header_of(path: &Path, file: usize, obj: &DefaultDicomObject) -> Result<Header, VolumeError> {
@@ -312,7 +318,13 @@ pub fn load_folder(dir: &Path, opts: &LoadOptions) -> Result<Volume, VolumeError
 pub fn load_files(name: &Path, files: &[PathBuf], opts: &LoadOptions) -> Result<Volume, VolumeError> {
     let mut headers = Vec::with_capacity(files.len());
     for (i, f) in files.iter().enumerate() {
-        headers.push(read_header(f, i)?);
+        match read_header(f, i)? {
+            Some(h) => headers.push(h),
+            None => log::info!("{}: not an image (no Rows); skipped", f.display()),
+        }
+    }
+    if headers.is_empty() {
+        return Err(bad("no image among the DICOM files (none has Rows)").at(name));
     }
     // Group by series; read the largest.
     let mut series: Vec<(String, Vec<usize>)> = Vec::new();
