@@ -588,6 +588,30 @@ fn broken_dicom_series_are_clear_errors() {
     let e = load_err(&jpeg);
     assert!(e.to_string().contains("transfer syntax 1.2.840.10008.1.2.4.50 (JPEG baseline)"), "{e}");
 
+    // Real encapsulated pixel data (fragments) in a compressed syntax: the syntax is named.
+    {
+        use dicom_core::header::Header as _;
+        use dicom_core::value::PixelFragmentSequence;
+        use dicom_core::{DataElement, VR};
+        use dicom_dictionary_std::tags;
+        let mut o = dicom_object::InMemDicomObject::new_empty();
+        let plain = dir.join("plain.dcm");
+        write_dicom(&plain, &axial("2", 0.0, slice_i16(0)), 11);
+        for e in dicom_object::open_file(&plain).unwrap().into_inner() {
+            if e.tag() != tags::PIXEL_DATA {
+                o.put(e);
+            }
+        }
+        let frags = PixelFragmentSequence::new(Vec::<u32>::new(), vec![vec![0xFFu8, 0xD8, 0xFF, 0xD9, 1, 2, 3, 4]]);
+        o.put(DataElement::new(tags::PIXEL_DATA, VR::OB, frags));
+        let p = dir.join("encapsulated.dcm");
+        let syntax = "1.2.840.10008.1.2.4.90";
+        let f = o.with_meta(dicom_object::FileMetaTableBuilder::new().transfer_syntax(syntax)).unwrap();
+        f.write_to_file(&p).unwrap();
+        let e = load_err(&p);
+        assert!(e.to_string().contains("transfer syntax 1.2.840.10008.1.2.4.90 (JPEG 2000)"), "{e}");
+    }
+
     // Oblique slices.
     let ob = dir.join("oblique.dcm");
     write_dicom(&ob, &Slice { iop: [0.8, 0.6, 0.0, -0.6, 0.8, 0.0], ..axial("3", 0.0, slice_i16(0)) }, 6);

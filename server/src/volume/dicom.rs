@@ -174,13 +174,20 @@ fn walk(b: &[u8], at: &mut usize, explicit: bool, big: bool, meta: bool) -> Resu
         }
     };
     let mut ts = None;
+    // Inside encapsulated pixel data: items are fragments (bytes, not elements).
+    let mut fragments = false;
     while *at + 8 <= b.len() {
         let (group, elem) = (u16_at(*at), u16_at(*at + 2));
         if meta && group != 0x0002 {
             break;
         }
         let (len, header, seq) = if group == 0xFFFE {
-            (u32_at(*at + 4), 8, true)
+            let len = u32_at(*at + 4);
+            if elem == 0xE0DD {
+                fragments = false;
+            }
+            // A fragment's bytes are skipped like a value; an item's elements are walked.
+            (len, 8, !(fragments && elem == 0xE000))
         } else if explicit {
             let vr = [b[*at + 4], b[*at + 5]];
             if LONG_VRS.contains(&&vr) {
@@ -203,6 +210,9 @@ fn walk(b: &[u8], at: &mut usize, explicit: bool, big: bool, meta: bool) -> Resu
             (len, 8, item)
         };
         *at += header;
+        if (group, elem) == (0x7FE0, 0x0010) && len == u32::MAX {
+            fragments = true;
+        }
         if len == u32::MAX || seq {
             continue; // a sequence or item: its elements follow
         }
