@@ -833,3 +833,76 @@ fn dicom_enhanced_multiframe_uses_functional_groups() {
     o.with_meta(FileMetaTableBuilder::new().transfer_syntax(EXPLICIT_LE)).unwrap().write_to_file(&p).unwrap();
     assert_same(&load(&p), &reference(), "enhanced multi-frame DICOM");
 }
+
+/// Load times of one 256³ int16 volume in every format (`cargo test --release -p volwarp-server
+/// --test formats -- --ignored --nocapture load_speed`); prints, checks nothing but equality.
+#[test]
+#[ignore]
+fn load_speed() {
+    use volwarp_server::volume::vti::{write, WriteFormat};
+    let dir = temp_dir("speed");
+    let n = 256u32;
+    let dims = [n; 3];
+    let vals: Vec<i16> = (0..n * n * n).map(|i| ((i % 4093) as i32 - 2000) as i16).collect();
+    let bytes = le(&vals);
+    let sp = Vec3::ONE;
+    let raw = dir.join("v_256x256x256_int16.raw");
+    std::fs::write(&raw, &bytes).unwrap();
+    let nii = dir.join("v.nii");
+    let lps = Some([[-1.0, 0.0, 0.0, 0.0], [0.0, -1.0, 0.0, 0.0], [0.0, 0.0, 1.0, 0.0]]);
+    let o = nifti::WriteOptions { version: 1, pixdim: [1.0; 3], scale: (0.0, 0.0), sform: lps, gzip: false };
+    nifti::write(&nii, &bytes, VoxelType::I16, dims, &o).unwrap();
+    let niigz = dir.join("v.nii.gz");
+    nifti::write(&niigz, &bytes, VoxelType::I16, dims, &nifti::WriteOptions { gzip: true, ..o.clone() }).unwrap();
+    let ras = dir.join("ras.nii");
+    nifti::write(
+        &ras,
+        &bytes,
+        VoxelType::I16,
+        dims,
+        &nifti::WriteOptions { sform: None, pixdim: [-1.0, -1.0, 1.0], ..o },
+    )
+    .unwrap();
+    let vti = dir.join("v.vti");
+    write(&vti, &bytes, VoxelType::I16, dims, sp, WriteFormat::AppendedRaw { zlib: false }, true).unwrap();
+    let tif = dir.join("v.tif");
+    let plane = (n * n) as usize;
+    let pages: Vec<_> = (0..n as usize)
+        .map(|z| (n, n, vals[z * plane..(z + 1) * plane].iter().map(|&x| (x as i32 + 2048) as u16).collect::<Vec<_>>()))
+        .collect();
+    write_tiff_pages(&tif, &pages);
+    let dcm = dir.join("dicom");
+    std::fs::create_dir_all(&dcm).unwrap();
+    for z in 0..n as usize {
+        let px: Vec<u16> = vals[z * plane..(z + 1) * plane].iter().map(|&x| x as u16).collect();
+        let s = Slice {
+            rows: n as u16,
+            cols: n as u16,
+            ps: [1.0, 1.0],
+            position: Some([0.0, 0.0, z as f64]),
+            ..axial("1", 0.0, px)
+        };
+        write_dicom(&dcm.join(format!("{z}.dcm")), &s, z as u32);
+    }
+    let opts = LoadOptions::default();
+    let mut first: Option<Volume> = None;
+    for (what, p) in [
+        ("raw", &raw),
+        ("NIfTI", &nii),
+        ("NIfTI gzip", &niigz),
+        ("NIfTI, x and y flipped", &ras),
+        (".vti appended raw", &vti),
+        ("TIFF, 256 pages", &tif),
+        ("DICOM, 256 files", &dcm),
+    ] {
+        let t = std::time::Instant::now();
+        let v = load_volume(p, &opts).unwrap();
+        eprintln!("{what:24} {:7.1} ms", t.elapsed().as_secs_f64() * 1e3);
+        if what == "raw" {
+            first = Some(v);
+        } else if !what.contains("flipped") {
+            assert!(first.as_ref().is_some_and(|f| f.data() == v.data()), "{what}");
+        }
+    }
+    std::fs::remove_dir_all(&dir).ok();
+}
