@@ -235,10 +235,10 @@ fn walk(b: &[u8], at: &mut usize, explicit: bool, big: bool, meta: bool) -> Resu
 fn read_header(path: &Path, file: usize) -> Result<Option<Header>, VolumeError> {
     let bytes = std::fs::read(path).map_err(|e| VolumeError::io(path, e))?;
     check_lengths(&bytes).map_err(|e| e.at(path))?;
-    drop(bytes);
+    // The part 10 stream after the preamble, from memory.
     let obj = OpenFileOptions::new()
         .read_until(tags::PIXEL_DATA)
-        .open_file(path)
+        .from_reader(&bytes[128..])
         .map_err(|e| bad(format!("cannot parse: {e}")).at(path))?;
     if obj.get(tags::ROWS).is_none() && obj.get(tags::PIXEL_DATA).is_none() {
         return Ok(None);
@@ -471,8 +471,12 @@ pub fn load_files(name: &Path, files: &[PathBuf], opts: &LoadOptions) -> Result<
     let mut values = vec![0f32; voxels as usize];
     let plane = first.rows as usize * first.cols as usize;
     for h in &hs {
-        let obj =
-            OpenFileOptions::new().open_file(&h.path).map_err(|e| bad(format!("cannot parse: {e}")).at(&h.path))?;
+        let bytes = std::fs::read(&h.path).map_err(|e| VolumeError::io(&h.path, e))?;
+        check_lengths(&bytes).map_err(|e| e.at(&h.path))?;
+        let obj = OpenFileOptions::new()
+            .from_reader(&bytes[128..])
+            .map_err(|e| bad(format!("cannot parse: {e}")).at(&h.path))?;
+        drop(bytes);
         let px = obj.get(tags::PIXEL_DATA).ok_or_else(|| bad("no PixelData").at(&h.path))?;
         let bytes = native_bytes(px.value()).map_err(|e| e.at(&h.path))?;
         let need = h.frames * frame_bytes;
