@@ -58,7 +58,8 @@ pub const LOAD_MAX_VOXELS: u64 = 1 << 16;
 /// even: the rest is a NRRD file (`v.nrrd`; the same bytes also lie in `d.raw` and `d.raw.gz`
 /// beside it, for headers naming a detached data file); odd: the rest up to its first newline is
 /// a raw file's name (letters, digits, `_`, `.` and `-` kept, at most 100) and what follows is the
-/// file's content. No panic, no allocation past the limit; an accepted volume has at most
+/// file's content, in whichever format `load_volume` recognizes by name and content (the seeds
+/// hold raw, NRRD, NIfTI, `.vti`, TIFF and DICOM files). No panic, no allocation past the limit; an accepted volume has at most
 /// [`LOAD_MAX_VOXELS`] voxels, positive dims and finite normalized values in `0..=1`; errors name
 /// the file.
 pub fn volume_load(data: &[u8]) {

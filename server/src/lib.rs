@@ -8,7 +8,7 @@
 //!
 //! | module | concept |
 //! |---|---|
-//! | [`volume`] | scalar volumes, raw loader, world-space placement, Marschner–Lobb |
+//! | [`volume`] | scalar volumes, world-space placement (LPS), Marschner–Lobb; loaders of raw, NRRD, NIfTI, TIFF stacks, VTK image data and DICOM series |
 //! | [`nrrd`] | NRRD headers and data (raw, gzip; attached and detached) |
 //! | [`transfer_function`] | 1-D RGBA lookup tables, presets, ParaView JSON and text files |
 //! | [`dataset`] | a volume with its transfer function; the bundled default |

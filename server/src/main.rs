@@ -5,6 +5,7 @@
 //! volwarp-server --volume head.nrrd --tf tf.json --listen 0.0.0.0:7878 --token SECRET
 //! volwarp-server render --volume FILE [--tf FILE] [--orbit 30,10] [--size 1024x1024] --out img.png
 //! volwarp-server dump [--orbit 30,10] [--heuristic threshold] [--encoding compact|raw12] --out frame.vwf
+//! volwarp-server info scan.nii.gz                  # what a volume file holds, without rendering
 //! ```
 
 use clap::{Args, Parser, Subcommand};
@@ -57,12 +58,19 @@ enum Cmd {
         #[arg(long, default_value = "raw12", value_parser = parse_encoding)]
         encoding: Encoding,
     },
+    /// Print what a volume file (or folder of slices) holds: format, dims, voxel type,
+    /// spacing, value range, the orientation applied, bytes. Nothing is rendered.
+    Info {
+        /// The volume: any file or folder `--volume` takes.
+        path: PathBuf,
+    },
 }
 
 #[derive(Args, Debug)]
 struct DataArgs {
-    /// Volume file (.raw named name_XxYxZ_type.raw, .nrrd, .nhdr), or `marschner-lobb[:N]`.
-    /// Default: the bundled CT head in data/.
+    /// Volume: a file (.raw named name_XxYxZ_type.raw, .nrrd, .nhdr, .nii, .nii.gz, .vti,
+    /// .tif, .dcm) or a folder of DICOM or TIFF slices (recognized by content), or
+    /// `marschner-lobb[:N]`. Default: the bundled CT head in data/.
     #[arg(long, global = true)]
     volume: Option<String>,
     /// Transfer function (.json from ParaView, or the text format of docs/server.md). Default:
@@ -201,6 +209,12 @@ fn load(d: &DataArgs) -> Result<Dataset, String> {
         }
         return Ok(ds);
     }
+    let opts = load_options(d)?;
+    Dataset::load_with(v, &opts, d.tf.as_deref()).map_err(|e| e.to_string())
+}
+
+/// The loader options of `--dims`, `--type` and `--spacing`.
+fn load_options(d: &DataArgs) -> Result<LoadOptions, String> {
     let mut opts = LoadOptions::default();
     if let Some(s) = &d.dims {
         opts.dims = Some(parse_dims(s).ok_or_else(|| format!("--dims {s:?} is not XxYxZ"))?);
@@ -215,10 +229,32 @@ fn load(d: &DataArgs) -> Result<Dataset, String> {
         }
         opts.spacing = Some(volwarp_core::Vec3::new(v[0], v[1], v[2]));
     }
-    Dataset::load_with(v, &opts, d.tf.as_deref()).map_err(|e| e.to_string())
+    Ok(opts)
+}
+
+/// `info PATH`: what the loader read.
+fn info(path: &std::path::Path, d: &DataArgs) -> Result<(), String> {
+    let v = volwarp_server::load_volume(path, &load_options(d)?).map_err(|e| e.to_string())?;
+    let src = v.source();
+    let [nx, ny, nz] = v.dims();
+    let (s, e) = (v.spacing(), v.extent());
+    let (lo, hi) = v.value_range();
+    println!("file         {}", path.display());
+    println!("format       {}", src.format);
+    println!("dims         {nx} x {ny} x {nz} ({} voxels)", nx as u64 * ny as u64 * nz as u64);
+    println!("voxel type   {}", src.voxel_type.map_or("?", |t| t.name()));
+    println!("spacing      {}, {}, {}", s.x, s.y, s.z);
+    println!("extent       {}, {}, {}", e.x, e.y, e.z);
+    println!("value range  {lo} .. {hi}");
+    println!("orientation  {}", src.orientation);
+    println!("data         {} bytes in {} file{}", src.data_bytes, src.files, if src.files == 1 { "" } else { "s" });
+    Ok(())
 }
 
 fn run(cli: Cli) -> Result<(), String> {
+    if let Some(Cmd::Info { path }) = &cli.cmd {
+        return info(path, &cli.data);
+    }
     let ds = load(&cli.data)?;
     let heuristic = Heuristic::from_name(&cli.data.heuristic)
         .ok_or_else(|| format!("unknown heuristic {:?}", cli.data.heuristic))?;
@@ -303,6 +339,7 @@ fn run(cli: Cli) -> Result<(), String> {
             );
             Ok(())
         }
+        Cmd::Info { path } => info(&path, &cli.data),
     }
 }
 

@@ -34,6 +34,14 @@ pub enum VolumeErrorKind {
     Decompress(String),
     /// A dimension or spacing is zero, negative or not finite.
     BadGeometry(String),
+    /// A file of one of the other formats (NIfTI, TIFF, VTK image data, DICOM) that is not
+    /// well formed, or a set of files that do not make one volume.
+    Malformed {
+        /// The format ("NIfTI", "TIFF", "VTK image data", "DICOM").
+        format: &'static str,
+        /// What is wrong.
+        detail: String,
+    },
 }
 
 /// A loader error: the file (if known) and what is wrong with it.
@@ -49,6 +57,21 @@ impl VolumeError {
     /// An error without a path (yet).
     pub fn new(kind: VolumeErrorKind) -> Self {
         VolumeError { path: None, kind }
+    }
+
+    /// A [`VolumeErrorKind::Malformed`] error.
+    pub fn malformed(format: &'static str, detail: impl Into<String>) -> Self {
+        VolumeError::new(VolumeErrorKind::Malformed { format, detail: detail.into() })
+    }
+
+    /// A [`VolumeErrorKind::Unsupported`] error.
+    pub fn unsupported(what: impl Into<String>) -> Self {
+        VolumeError::new(VolumeErrorKind::Unsupported(what.into()))
+    }
+
+    /// An I/O error about `path`.
+    pub fn io(path: &Path, e: std::io::Error) -> Self {
+        VolumeError::new(VolumeErrorKind::Io(e)).at(path)
     }
 
     /// The same error about `path` (keeps an existing path).
@@ -76,6 +99,7 @@ impl fmt::Display for VolumeErrorKind {
             }
             VolumeErrorKind::Decompress(s) => write!(f, "gzip data does not decompress: {s}"),
             VolumeErrorKind::BadGeometry(s) => write!(f, "{s}"),
+            VolumeErrorKind::Malformed { format, detail } => write!(f, "bad {format} data: {detail}"),
         }
     }
 }

@@ -13,10 +13,14 @@
 //! gathers (`CodeStencil`: bytes where the range is at most 255, else 16-bit codes); other values
 //! (`f32` data, wider integers) are normalized in `f64`.
 //!
-//! Loaders ([`load_volume`]): headerless raw files named `name_XxYxZ_type.raw`
-//! ([`parse_raw_name`]; dims, type and spacing may also come from [`LoadOptions`]) and NRRD
-//! (`.nrrd` attached, `.nhdr` detached; raw or gzip; see [`nrrd`]). Every failure is a
-//! [`VolumeError`] naming the file and the problem, never a panic.
+//! Loaders ([`load_volume`], the format recognized by content and extension:
+//! [`detect_format`]): headerless raw files named `name_XxYxZ_type.raw` ([`parse_raw_name`];
+//! dims, type and spacing may also come from [`LoadOptions`]), NRRD (`.nrrd` attached, `.nhdr`
+//! detached; raw or gzip; see [`nrrd`]), NIfTI-1/2 ([`nifti`]), TIFF stacks ([`tiff_stack`]),
+//! VTK image data ([`vti`]) and DICOM series ([`dicom`]). The volume box's axes are DICOM
+//! patient space LPS; loaders of oriented formats reorder axis-aligned volumes into it
+//! ([`orient`]) and refuse oblique ones. [`Volume::source`] says what was read. Every failure
+//! is a [`VolumeError`] naming the file and the problem, never a panic.
 //!
 //! | file | content |
 //! |---|---|
@@ -25,11 +29,21 @@
 //! | `sampling.rs` | voxel reads and trilinear sampling |
 //! | `raw.rs` | [`VoxelType`], raw file names ([`parse_raw_name`]), voxel decoding, the raw loader |
 //! | [`nrrd`] | NRRD headers and data |
+//! | [`nifti`] | NIfTI-1 and NIfTI-2 headers and data |
+//! | [`tiff_stack`] | multi-page TIFF files and folders of TIFF slices |
+//! | [`vti`] | VTK XML image data |
+//! | [`dicom`] | DICOM series and multi-frame files |
+//! | [`orient`] | axis-aligned orientations: the reordering into LPS |
 
+pub mod dicom;
 mod error;
+pub mod nifti;
 pub mod nrrd;
+pub mod orient;
 mod raw;
 mod sampling;
+pub mod tiff_stack;
+pub mod vti;
 
 pub use error::{VolumeError, VolumeErrorKind};
 pub(crate) use raw::read_exactly;
@@ -71,6 +85,26 @@ pub struct Volume {
     data: Vec<f32>,
     /// For integer-coded volumes, the packet marcher's stencil (see [`CodeStencil`]).
     stencil: Option<CodeStencil>,
+    /// What the loader read.
+    source: SourceInfo,
+}
+
+/// What a loader read: the format, the stored voxel type and the reordering it applied (what
+/// `volwarp-server info` prints besides dims, spacing and value range).
+#[derive(Clone, Debug, Default, PartialEq)]
+pub struct SourceInfo {
+    /// The format (`raw`, `NRRD`, `NIfTI-1`, `NIfTI-2`, `TIFF`, `VTK image data`, `DICOM`);
+    /// empty for a volume made in memory.
+    pub format: String,
+    /// The stored voxel type, where it is one of [`VoxelType`].
+    pub voxel_type: Option<VoxelType>,
+    /// The reordering applied to put the volume in LPS order (see [`orient`]), or what was
+    /// left as stored.
+    pub orientation: String,
+    /// Bytes of voxel data read (decompressed).
+    pub data_bytes: u64,
+    /// Files read.
+    pub files: usize,
 }
 
 /// The voxels of a volume of integer values at most 65,535 apart (every 8- and 16-bit volume),
@@ -205,7 +239,26 @@ impl Volume {
             };
             CodeStencil { squares, scale }
         });
-        Ok(Volume { name: name.to_string(), dims, spacing, value_range: (lo, hi), data: values, stencil })
+        Ok(Volume {
+            name: name.to_string(),
+            dims,
+            spacing,
+            value_range: (lo, hi),
+            data: values,
+            stencil,
+            source: SourceInfo::default(),
+        })
+    }
+
+    /// What the loader read (empty for a volume made in memory).
+    pub fn source(&self) -> &SourceInfo {
+        &self.source
+    }
+
+    /// The volume with `source` as what was read.
+    pub fn with_source(mut self, source: SourceInfo) -> Volume {
+        self.source = source;
+        self
     }
 
     /// A volume from a function of the world position of each voxel centre.
@@ -291,17 +344,123 @@ impl Volume {
     }
 }
 
-/// Loads a raw (`.raw` or any other extension) or NRRD (`.nrrd`, `.nhdr`) volume.
+/// The formats [`load_volume`] reads.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum Format {
+    /// Headerless raw voxels.
+    Raw,
+    /// NRRD (`.nrrd`, `.nhdr`).
+    Nrrd,
+    /// NIfTI-1 or NIfTI-2 (`.nii`, `.nii.gz`).
+    Nifti,
+    /// A multi-page TIFF file.
+    Tiff,
+    /// A folder of single-page TIFF slices.
+    TiffFolder,
+    /// VTK XML image data (`.vti`).
+    Vti,
+    /// One DICOM file (a multi-frame volume or a single slice).
+    Dicom,
+    /// A folder of DICOM files (a series).
+    DicomFolder,
+}
+
+/// The first `n` bytes of a file (fewer where it is shorter).
+pub(crate) fn read_head(path: &Path, n: u64) -> Result<Vec<u8>, VolumeError> {
+    use std::io::Read;
+    let mut head = Vec::new();
+    let f = std::fs::File::open(path).map_err(|e| VolumeError::io(path, e))?;
+    f.take(n).read_to_end(&mut head).map_err(|e| VolumeError::io(path, e))?;
+    Ok(head)
+}
+
+/// The format of `path`, from its content where that is telling (magic numbers) and else its
+/// extension; a file of no known format is raw.
+pub fn detect_format(path: &Path) -> Result<Format, VolumeError> {
+    if path.is_dir() {
+        return detect_folder(path);
+    }
+    let name = path.file_name().and_then(|s| s.to_str()).unwrap_or("").to_ascii_lowercase();
+    let ext = path.extension().and_then(|s| s.to_str()).unwrap_or("").to_ascii_lowercase();
+    let head = read_head(path, 548)?;
+    if head.starts_with(b"NRRD000") {
+        return Ok(Format::Nrrd);
+    }
+    // A gzip stream: look at the start of what it holds.
+    let inner = if head.starts_with(&[0x1f, 0x8b]) {
+        use std::io::Read;
+        let f = std::fs::File::open(path).map_err(|e| VolumeError::io(path, e))?;
+        let mut inner = Vec::new();
+        let _ = flate2::read::MultiGzDecoder::new(f).take(548).read_to_end(&mut inner);
+        inner
+    } else {
+        Vec::new()
+    };
+    if nifti::is_nifti(&head) || nifti::is_nifti(&inner) || name.ends_with(".nii") || name.ends_with(".nii.gz") {
+        return Ok(Format::Nifti);
+    }
+    if tiff_stack::is_tiff(&head) {
+        return Ok(Format::Tiff);
+    }
+    if dicom::is_dicom(&head) || ext == "dcm" {
+        return Ok(Format::Dicom);
+    }
+    if vti::is_vti(&head) || ext == "vti" {
+        return Ok(Format::Vti);
+    }
+    Ok(match ext.as_str() {
+        "nrrd" | "nhdr" => Format::Nrrd,
+        "tif" | "tiff" => Format::Tiff,
+        _ => Format::Raw,
+    })
+}
+
+/// The format of a folder's slices: DICOM where its files are DICOM (`DICM` at byte 128), TIFF
+/// where they are TIFF.
+fn detect_folder(dir: &Path) -> Result<Format, VolumeError> {
+    if !dicom::folder_files(dir)?.is_empty() {
+        return Ok(Format::DicomFolder);
+    }
+    if !tiff_stack::folder_slices(dir)?.is_empty() {
+        return Ok(Format::TiffFolder);
+    }
+    Err(VolumeError::unsupported("a folder of neither TIFF slices nor DICOM files".to_string()).at(dir))
+}
+
+/// Loads a volume: raw (`.raw` or any other extension), NRRD (`.nrrd`, `.nhdr`), NIfTI
+/// (`.nii`, `.nii.gz`), a multi-page TIFF or a folder of TIFF slices, VTK image data (`.vti`),
+/// a DICOM file or a folder holding a DICOM series, recognized by content
+/// and extension ([`detect_format`]).
 pub fn load_volume(path: impl AsRef<Path>, opts: &LoadOptions) -> Result<Volume, VolumeError> {
     let path = path.as_ref();
-    let ext = path.extension().and_then(|s| s.to_str()).unwrap_or("").to_ascii_lowercase();
-    let vol = match ext.as_str() {
-        "nrrd" | "nhdr" => nrrd::load(path, opts)?,
-        _ => raw::load_raw(path, opts)?,
+    let format = detect_format(path)?;
+    let vol = match format {
+        Format::Nrrd => {
+            let mut v = nrrd::load(path, opts)?;
+            v.source.data_bytes = voxel_bytes(voxel_count(v.dims)?, v.source.voxel_type.unwrap_or(VoxelType::U8))?;
+            v.source.format = "NRRD".into();
+            v.source.files = 1;
+            v
+        }
+        Format::Nifti => nifti::load(path, opts)?,
+        Format::Tiff => tiff_stack::load_file(path, opts)?,
+        Format::TiffFolder => tiff_stack::load_folder(path, opts)?,
+        Format::Vti => vti::load(path, opts)?,
+        Format::Dicom => dicom::load_file(path, opts)?,
+        Format::DicomFolder => dicom::load_folder(path, opts)?,
+        Format::Raw => {
+            let mut v = raw::load_raw(path, opts)?;
+            v.source.data_bytes = voxel_bytes(voxel_count(v.dims)?, v.source.voxel_type.unwrap_or(VoxelType::U8))?;
+            v.source.format = "raw".into();
+            v.source.files = 1;
+            v.source.orientation = "none (stored order)".into();
+            v
+        }
     };
     log::info!(
-        "loaded {} : {}x{}x{} voxels, spacing {}, value range {:?}",
+        "loaded {} ({}): {}x{}x{} voxels, spacing {}, value range {:?}",
         path.display(),
+        vol.source.format,
         vol.dims[0],
         vol.dims[1],
         vol.dims[2],

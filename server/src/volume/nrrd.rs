@@ -274,11 +274,15 @@ pub fn load(path: &Path, opts: &LoadOptions) -> Result<Volume, VolumeError> {
         }
     };
     let mut values = decode_voxels(&bytes, ty, h.big_endian);
+    let mut orientation = "none (stored order)".to_string();
     if h.flip.contains(&true) && opts.dims.is_none() {
         values = flip_axes(&values, dims, h.flip);
+        let axes: Vec<&str> = (0..3).filter(|&a| h.flip[a]).map(|a| ["x", "y", "z"][a]).collect();
+        orientation = format!("{} flipped (negative space directions)", axes.join(", "));
     }
     let name = path.file_stem().and_then(|s| s.to_str()).unwrap_or("volume");
-    Volume::from_values(name, dims, spacing, values).map_err(|e| e.at(path))
+    let source = super::SourceInfo { voxel_type: Some(ty), orientation, ..Default::default() };
+    Ok(Volume::from_values(name, dims, spacing, values).map_err(|e| e.at(path))?.with_source(source))
 }
 
 /// Mirrors the chosen axes of an x-fastest array.

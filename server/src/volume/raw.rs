@@ -178,7 +178,8 @@ pub(super) fn load_raw(path: &Path, opts: &LoadOptions) -> Result<Volume, Volume
     let file = std::fs::File::open(path).map_err(|e| io_err(path, e))?;
     let bytes = read_exactly(std::io::BufReader::new(file), expected, path)?;
     let values = decode_voxels(&bytes, ty, false);
-    Volume::from_values(&name, dims, spacing, values).map_err(|e| e.at(path))
+    let source = super::SourceInfo { voxel_type: Some(ty), ..Default::default() };
+    Ok(Volume::from_values(&name, dims, spacing, values).map_err(|e| e.at(path))?.with_source(source))
 }
 
 #[cfg(test)]
