@@ -25,17 +25,17 @@ use wide::{f32x8, u32x8};
 /// (sixteen), taken where the level is AVX-512 (for kernels generic over [`BoundLanes`]). All
 /// compute the same values (see the module docs), so the choice only changes the speed.
 macro_rules! dispatch {
-    ($(#[$doc:meta])* fn $name:ident / $avx2:ident / $avx512:ident => $($kernel:tt)*) => {
+    ($(#[$doc:meta])* $vis:vis fn $name:ident / $avx2:ident / $avx512:ident => $($kernel:tt)*) => {
         volwarp_lanes::dispatch! {
             $(#[$doc])*
-            fn $name / $avx2 / $avx512 => $($kernel)*;
+            $vis fn $name / $avx2 / $avx512 => $($kernel)*;
             portable = [wide::f32x8], avx2 = [$crate::lanes::Avx2], avx512 = [$crate::lanes::Avx512]
         }
     };
-    ($(#[$doc:meta])* fn $name:ident / $avx2:ident => $($kernel:tt)*) => {
+    ($(#[$doc:meta])* $vis:vis fn $name:ident / $avx2:ident => $($kernel:tt)*) => {
         volwarp_lanes::dispatch! {
             $(#[$doc])*
-            fn $name / $avx2 => $($kernel)*;
+            $vis fn $name / $avx2 => $($kernel)*;
             portable = [wide::f32x8], avx2 = [$crate::lanes::Avx2]
         }
     };

@@ -14,6 +14,7 @@
 //! | [`dataset`] | a volume with its transfer function; the bundled default |
 //! | [`encoding`] | the wire encoding of a frame: 12-byte or compact, negotiated per client |
 //! | [`empty_space`] | the min/max brick grid for empty-space skipping |
+//! | [`march_settings`] | what both marching kernels march with: options, a ray's samples in the box |
 //! | [`marcher`] | the CPU ray marcher: frames for clients and ground-truth images |
 //! | [`packet_march`] | the marcher's fast kernel: 8, 16 or 32 rays at once in SIMD lanes ([`LaneKind`]) |
 //! | [`radius`] | the sphere radius models: pixel footprint or half a voxel diagonal |
@@ -37,6 +38,7 @@ pub mod dataset;
 pub mod empty_space;
 pub mod encoding;
 mod lanes;
+pub mod march_settings;
 pub mod marcher;
 pub mod packet_march;
 pub use volume::nrrd;

@@ -18,7 +18,11 @@
 
 use crate::compaction;
 use crate::empty_space::{MinMaxGrid, Occupancy};
-use crate::radius::{FrameRadius, RadiusModel, RaySpread, Uncertainty, UncertaintyParams};
+use crate::march_settings::{ray_samples, MarchSetup};
+pub use crate::march_settings::{MarchKernel, MarchOptions, RADIUS_CODE};
+#[cfg(doc)]
+use crate::radius::RadiusModel;
+use crate::radius::{FrameRadius, RaySpread, Uncertainty};
 use crate::transfer_function::{TransferFunction, LUT_SIZE};
 use crate::volume::Volume;
 use rayon::prelude::*;
@@ -31,52 +35,6 @@ use volwarp_core::{Camera, DepthPicker, FirstPassAccumulator, Heuristic, Image, 
 
 /// Rows per parallel task (a multiple of the packet marcher's packet height).
 const BAND_ROWS: usize = 8;
-
-/// Which implementation marches the rays; both give the same colors and depths bit for bit.
-#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
-pub enum MarchKernel {
-    /// A block of 16 to 64 pixels' rays at once in SIMD lanes ([`crate::packet_march`]); the
-    /// default.
-    #[default]
-    Packet,
-    /// One ray at a time ([`Marcher::march_ray`]): the reference the packet marcher is
-    /// tested against.
-    Scalar,
-}
-
-/// Radius code every sample of a frame gets under [`RadiusModel::Voxel`] (the frame's
-/// `radius_unit` is `radius / this`).
-pub const RADIUS_CODE: f32 = 512.0;
-
-/// Marcher settings.
-#[derive(Clone, Copy, Debug, PartialEq)]
-pub struct MarchOptions {
-    /// Step in voxels (of the smallest spacing); default 0.5.
-    pub step_voxels: f32,
-    /// Accumulated opacity at which a ray stops; default 0.99 (1 or more disables it).
-    pub early_termination: f32,
-    /// Skip bricks the transfer function makes invisible; default true.
-    pub skip_empty: bool,
-    /// How each sample's sphere radius is chosen; default the pixel footprint.
-    pub radius: RadiusModel,
-    /// The constants of [`RadiusModel::Uncertainty`] (ignored by the other models).
-    pub uncertainty: UncertaintyParams,
-    /// Packet (SIMD) or scalar marching; default [`MarchKernel::Packet`].
-    pub kernel: MarchKernel,
-}
-
-impl Default for MarchOptions {
-    fn default() -> Self {
-        MarchOptions {
-            step_voxels: 0.5,
-            early_termination: 0.99,
-            skip_empty: true,
-            radius: RadiusModel::Footprint,
-            uncertainty: UncertaintyParams::DEFAULT,
-            kernel: MarchKernel::Packet,
-        }
-    }
-}
 
 /// The uncompacted result of marching every pixel.
 #[derive(Clone, Debug, PartialEq)]
@@ -157,19 +115,6 @@ pub struct Marcher {
     inv_spacing: Vec3,
 }
 
-/// The ray's parameter interval inside the box `[0, ext]`, or `None` if it misses.
-#[inline]
-fn clip(o: Vec3, inv_d: Vec3, ext: Vec3) -> Option<(f32, f32)> {
-    let t0 = (Vec3::ZERO - o) * inv_d;
-    let t1 = (ext - o) * inv_d;
-    let tmin = t0.min(t1);
-    let tmax = t0.max(t1);
-    // NaN (0 · inf on a face) is ignored by max/min of f32.
-    let enter = tmin.x.max(tmin.y).max(tmin.z).max(0.0);
-    let exit = tmax.x.min(tmax.y).min(tmax.z);
-    (enter < exit && exit.is_finite()).then_some((enter, exit))
-}
-
 impl Marcher {
     /// A marcher with default options.
     pub fn new(volume: Arc<Volume>, tf: &TransferFunction) -> Marcher {
@@ -236,26 +181,27 @@ impl Marcher {
         &self.occupancy
     }
 
-    /// `1 / spacing`: world to voxel units.
-    pub(crate) fn inv_spacing(&self) -> Vec3 {
-        self.inv_spacing
-    }
-
     /// A ray's samples: their count `n`, the box entry and exit (`None` if the ray misses the
     /// box); sample `k` lies at `t_enter + (k + ½)·Δt`.
     #[inline(always)]
     pub(crate) fn ray_setup(&self, o: Vec3, d: Vec3) -> (u32, f32, Option<f32>) {
-        let Some((t_enter, t_exit)) = clip(o, 1.0 / d, self.volume.extent()) else {
-            return (0, 0.0, None);
-        };
-        let n = ((t_exit - t_enter) / self.dt - 0.5).ceil().max(0.0);
-        let n = if n < 1e7 { n as u32 } else { 10_000_000 };
-        (n, t_enter, Some(t_exit))
+        ray_samples(self.volume.extent(), self.dt, o, d)
+    }
+
+    /// What the packet kernel reads of this marcher.
+    fn setup(&self) -> MarchSetup<'_> {
+        MarchSetup {
+            volume: &self.volume,
+            occupancy: &self.occupancy,
+            opts: self.opts,
+            dt: self.dt,
+            inv_spacing: self.inv_spacing,
+        }
     }
 
     fn kernel(&self) -> crate::packet_march::Kernel<'_> {
         crate::packet_march::Kernel {
-            m: self,
+            m: self.setup(),
             data: self.volume.padded_data(),
             stencil: self.volume.code_stencil(),
             lut: &self.lut_argb,

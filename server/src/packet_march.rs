@@ -29,7 +29,7 @@
 //! bundled dataset and heuristic.
 
 use crate::lanes::{dispatch, Lanes, Mask};
-use crate::marcher::Marcher;
+use crate::march_settings::MarchSetup;
 use crate::radius::{FrameRadius, RaySpread, Uncertainty};
 use crate::volume::Squares;
 use volwarp_core::sample::{over_background, pack_color_f32, Quantizer};
@@ -259,9 +259,10 @@ impl<L: Lanes> Axis<L> {
     }
 }
 
-/// The march settings the kernel reads, borrowed from a [`Marcher`].
+/// The march settings the kernel reads, borrowed from a [`crate::marcher::Marcher`].
 pub(crate) struct Kernel<'a> {
-    pub(crate) m: &'a Marcher,
+    /// The options, step and volume box.
+    pub(crate) m: MarchSetup<'a>,
     /// The volume's values with their padding ([`crate::volume::Volume`]'s `padded_data`).
     pub(crate) data: &'a [f32],
     /// An integer-coded volume's codes, read instead of `data` (the same values).
@@ -313,12 +314,12 @@ impl Kernel<'_> {
     #[inline(always)]
     fn march<L: Lanes, F: Feed<M>, const M: usize>(&self, o: Vec3, rays: &Rays<M>, feed: &mut F) -> [[f32; 4]; M] {
         let m = self.m;
-        let vol = m.volume();
+        let vol = m.volume;
         let [nx, ny, nz] = vol.dims();
-        let dt = m.step();
-        let opts = m.options();
-        let occ = m.occupancy();
-        let inv_spacing = m.inv_spacing();
+        let dt = m.dt;
+        let opts = m.opts;
+        let occ = m.occupancy;
+        let inv_spacing = m.inv_spacing;
         let og = o * inv_spacing - 0.5;
         let dg: [Vec3; M] = core::array::from_fn(|l| rays.d[l] * inv_spacing);
         let dgx = L::new(&core::array::from_fn::<f32, M, _>(|l| dg[l].x));
@@ -618,7 +619,7 @@ impl Kernel<'_> {
         let (w, h) = (basis.eye[3] as u32, basis.corner[3] as u32);
         let k = out.layers;
         let rows = (out.count.len() / (w as usize).max(1)) as u32;
-        let step = self.m.step();
+        let step = self.m.dt;
         for py in (y0..y0 + rows).step_by(L::N / pw(L::N)) {
             for px in (0..w).step_by(pw(L::N)) {
                 let rays = self.rays(L::N, basis, o, px, py, w, h);
