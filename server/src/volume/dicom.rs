@@ -496,7 +496,7 @@ pub fn load_files(name: &Path, files: &[PathBuf], opts: &LoadOptions) -> Result<
             }
         }
     }
-    let values = r.apply(&values, dims);
+    let values = r.apply(values, dims);
     let out_dims = r.dims(dims);
     let spacing = opts.spacing.unwrap_or(r.spacing);
     let vol_name = name.file_stem().and_then(|s| s.to_str()).unwrap_or("dicom");

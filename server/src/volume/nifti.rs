@@ -289,14 +289,14 @@ impl NiftiHeader {
     }
 }
 
-/// Opens `path`, gunzipping where it starts with the gzip magic.
-fn open_maybe_gz(path: &Path) -> Result<Box<dyn Read>, VolumeError> {
+/// Opens `path`, gunzipping where it starts with the gzip magic (and says whether it did).
+fn open_maybe_gz(path: &Path) -> Result<(Box<dyn Read>, bool), VolumeError> {
     let mut f = std::io::BufReader::new(std::fs::File::open(path).map_err(|e| VolumeError::io(path, e))?);
     let gz = {
         use std::io::BufRead;
         f.fill_buf().map_err(|e| VolumeError::io(path, e))?.starts_with(&[0x1f, 0x8b])
     };
-    Ok(if gz { Box::new(flate2::bufread::MultiGzDecoder::new(f)) } else { Box::new(f) })
+    Ok((if gz { Box::new(flate2::bufread::MultiGzDecoder::new(f)) } else { Box::new(f) }, gz))
 }
 
 /// Reads up to `n` bytes (fewer at the end of the stream).
@@ -316,7 +316,7 @@ fn decompress_or_io(path: &Path, e: std::io::Error) -> VolumeError {
 
 /// Loads a `.nii` or `.nii.gz` file (or a `.hdr` whose data is in the `.img` beside it).
 pub fn load(path: &Path, opts: &LoadOptions) -> Result<Volume, VolumeError> {
-    let mut r = open_maybe_gz(path)?;
+    let (mut r, gz) = open_maybe_gz(path)?;
     let head = read_up_to(&mut r, 540, path)?;
     let h = parse_header(&head).map_err(|e| e.at(path))?;
     if h.volumes > 1 {
@@ -327,7 +327,7 @@ pub fn load(path: &Path, opts: &LoadOptions) -> Result<Volume, VolumeError> {
     let voxels = super::check_geometry(h.dims, reorient.spacing, opts.max_voxels).map_err(|e| e.at(path))?;
     let expected = super::voxel_bytes(voxels, h.voxel_type).map_err(|e| e.at(path))?;
     // The data: in this file after the header, or in the `.img` beside a `.hdr`.
-    let (data_path, mut data, consumed) = if h.pair {
+    let (data_path, (mut data, is_gz), consumed) = if h.pair {
         let stem = path.to_string_lossy();
         let stem = stem.strip_suffix(".gz").unwrap_or(&stem);
         let stem = stem.strip_suffix(".hdr").unwrap_or(stem);
@@ -337,14 +337,10 @@ pub fn load(path: &Path, opts: &LoadOptions) -> Result<Volume, VolumeError> {
         })?;
         (img.to_path_buf(), open_maybe_gz(img)?, 0u64)
     } else {
-        (path.to_path_buf(), r, head.len() as u64)
+        (path.to_path_buf(), (r, gz), head.len() as u64)
     };
     // A plain file's length says whether the data is all there before anything is read.
     let file_len = std::fs::metadata(&data_path).map_err(|e| VolumeError::io(&data_path, e))?.len();
-    let is_gz = {
-        let mut m = [0u8; 2];
-        std::fs::File::open(&data_path).and_then(|mut f| f.read_exact(&mut m)).is_ok() && m == [0x1f, 0x8b]
-    };
     let truncated = |found: u64| VolumeError::new(VolumeErrorKind::SizeMismatch { expected, actual: found });
     if !is_gz && file_len < h.vox_offset.saturating_add(expected) {
         return Err(truncated(file_len.saturating_sub(h.vox_offset)).at(&data_path));
@@ -374,7 +370,7 @@ pub fn load(path: &Path, opts: &LoadOptions) -> Result<Volume, VolumeError> {
             *v = (*v as f64 * slope + inter) as f32;
         }
     }
-    let values = reorient.apply(&values, h.dims);
+    let values = reorient.apply(values, h.dims);
     let dims = reorient.dims(h.dims);
     let file_name = path.file_name().and_then(|s| s.to_str()).unwrap_or("volume");
     let name = file_name.split('.').next().filter(|s| !s.is_empty()).unwrap_or("volume");

@@ -5,6 +5,7 @@
 //! [`parse_header`] takes the file's bytes and never panics (it is fuzzed); [`load`] reads the
 //! voxels.
 
+use super::orient::Reorient;
 use super::{decode_voxels, read_exactly, LoadOptions, Volume, VolumeError, VolumeErrorKind, VoxelType};
 use std::path::{Path, PathBuf};
 use volwarp_core::Vec3;
@@ -276,32 +277,13 @@ pub fn load(path: &Path, opts: &LoadOptions) -> Result<Volume, VolumeError> {
     let mut values = decode_voxels(&bytes, ty, h.big_endian);
     let mut orientation = "none (stored order)".to_string();
     if h.flip.contains(&true) && opts.dims.is_none() {
-        values = flip_axes(&values, dims, h.flip);
+        values = Reorient { perm: [0, 1, 2], flip: h.flip, spacing }.apply(values, dims);
         let axes: Vec<&str> = (0..3).filter(|&a| h.flip[a]).map(|a| ["x", "y", "z"][a]).collect();
         orientation = format!("{} flipped (negative space directions)", axes.join(", "));
     }
     let name = path.file_stem().and_then(|s| s.to_str()).unwrap_or("volume");
     let source = super::SourceInfo { voxel_type: Some(ty), orientation, ..Default::default() };
     Ok(Volume::from_values(name, dims, spacing, values).map_err(|e| e.at(path))?.with_source(source))
-}
-
-/// Mirrors the chosen axes of an x-fastest array.
-pub fn flip_axes<T: Copy>(values: &[T], dims: [u32; 3], flip: [bool; 3]) -> Vec<T> {
-    let [nx, ny, nz] = dims.map(|d| d as usize);
-    let mut out = Vec::with_capacity(values.len());
-    for k in 0..nz {
-        let sk = if flip[2] { nz - 1 - k } else { k };
-        for j in 0..ny {
-            let sj = if flip[1] { ny - 1 - j } else { j };
-            let row = (sk * ny + sj) * nx;
-            if flip[0] {
-                out.extend((0..nx).rev().filter_map(|i| values.get(row + i).copied()));
-            } else {
-                out.extend(values.get(row..row + nx).unwrap_or(&[]).iter().copied());
-            }
-        }
-    }
-    out
 }
 
 /// Writes a 3-D NRRD file with attached data (`gzip` selects the encoding) or, when
@@ -379,7 +361,6 @@ encoding: raw\nspace origin: (0,0,0)\nfoo:=bar\n\nDATA",
         let h2 = parse_header(b"NRRD0005\ntype: uchar\ndimension: 3\nsizes: 2 2 2\nencoding: gzip\nspace directions: (1,0,0) (0,-2,0) (0,0,-3)\n\n").unwrap();
         assert_eq!(h2.flip, [false, true, true]);
         assert_eq!(h2.spacing, Some(Vec3::new(1.0, 2.0, 3.0)));
-        assert_eq!(flip_axes(&[0, 1, 2, 3, 4, 5, 6, 7], [2, 2, 2], [true, false, true]), [5, 4, 7, 6, 1, 0, 3, 2]);
     }
 
     #[test]

@@ -47,10 +47,11 @@ impl Reorient {
         self.perm.map(|p| dims[p])
     }
 
-    /// Reorders x-fastest `values` of a file of `dims` voxels (`values.len()` their product).
-    pub fn apply<T: Copy>(&self, values: &[T], dims: [u32; 3]) -> Vec<T> {
+    /// Reorders x-fastest `values` of a file of `dims` voxels (`values.len()` their product);
+    /// the identity hands `values` back without a copy.
+    pub fn apply<T: Copy>(&self, values: Vec<T>, dims: [u32; 3]) -> Vec<T> {
         if self.is_identity() {
-            return values.to_vec();
+            return values;
         }
         let stride_in = [1, dims[0] as usize, dims[0] as usize * dims[1] as usize];
         let out_dims = self.dims(dims).map(|d| d as usize);
@@ -133,7 +134,7 @@ mod tests {
         assert_eq!(r.spacing, Vec3::new(1.0, 2.0, 3.0));
         let dims = [2, 3, 4];
         let values: Vec<usize> = (0..24).collect();
-        let out = r.apply(&values, dims);
+        let out = r.apply(values, dims);
         let od = r.dims(dims);
         assert_eq!(od, [4, 2, 3]);
         for z in 0..3 {
@@ -145,6 +146,9 @@ mod tests {
                 }
             }
         }
+        // Flips alone (NRRD's negative space directions).
+        let flips = Reorient { perm: [0, 1, 2], flip: [true, false, true], spacing: Vec3::ONE };
+        assert_eq!(flips.apply((0..8).collect(), [2, 2, 2]), [5, 4, 7, 6, 1, 0, 3, 2]);
         assert!(axis_aligned([[1.0, 0.1, 0.0], [0.0, 1.0, 0.0], [0.0, 0.0, 1.0]]).is_err());
         assert!(axis_aligned([[1.0, 0.0, 0.0], [1.0, 0.0, 0.0], [0.0, 0.0, 1.0]]).is_err());
         assert!(axis_aligned([[f64::NAN, 0.0, 0.0], [0.0, 1.0, 0.0], [0.0, 0.0, 1.0]]).is_err());

@@ -447,7 +447,7 @@ fn load_bytes(path: &Path, bytes: &[u8], opts: &LoadOptions) -> Result<Volume, V
     // VTK's Direction is row-major: column i is the direction of axis i.
     let cols = std::array::from_fn(|i| [d[i] * s[i], d[3 + i] * s[i], d[6 + i] * s[i]]);
     let r = axis_aligned(cols)?;
-    let values = r.apply(&values, dims);
+    let values = r.apply(values, dims);
     let out_dims = r.dims(dims);
     let spacing = opts.spacing.unwrap_or(r.spacing);
     let name = path.file_stem().and_then(|s| s.to_str()).unwrap_or("volume");
