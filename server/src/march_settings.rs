@@ -1,7 +1,7 @@
-//! What both marching kernels march with: the options ([`MarchOptions`]), a ray's samples in
-//! the volume box ([`ray_samples`]) and the settings the packet kernel reads of a marcher
-//! ([`MarchSetup`]). The scalar marcher ([`crate::marcher`]) and the packet marcher
-//! ([`crate::packet_march`]) both import this module, so neither imports the other's types.
+//! What both marching kernels march with: the options ([`MarchOptions`]) and the settings a
+//! kernel reads of a marcher, with a ray's samples in the volume box ([`MarchSetup`]). The
+//! scalar marcher ([`crate::marcher`]) and the packet marcher ([`crate::packet_march`]) both
+//! import this module, so neither imports the other's types.
 
 use crate::empty_space::Occupancy;
 use crate::radius::{RadiusModel, UncertaintyParams};
@@ -67,18 +67,6 @@ fn clip(o: Vec3, inv_d: Vec3, ext: Vec3) -> Option<(f32, f32)> {
     (enter < exit && exit.is_finite()).then_some((enter, exit))
 }
 
-/// A ray's samples in the box `[0, extent]` at step `dt`: their count `n`, the box entry and
-/// exit (`None` if the ray misses the box); sample `k` lies at `t_enter + (k + ½)·Δt`.
-#[inline(always)]
-pub(crate) fn ray_samples(extent: Vec3, dt: f32, o: Vec3, d: Vec3) -> (u32, f32, Option<f32>) {
-    let Some((t_enter, t_exit)) = clip(o, 1.0 / d, extent) else {
-        return (0, 0.0, None);
-    };
-    let n = ((t_exit - t_enter) / dt - 0.5).ceil().max(0.0);
-    let n = if n < 1e7 { n as u32 } else { 10_000_000 };
-    (n, t_enter, Some(t_exit))
-}
-
 /// The settings the packet kernel reads of a marcher (borrowed from it).
 #[derive(Clone, Copy)]
 pub(crate) struct MarchSetup<'a> {
@@ -95,9 +83,15 @@ pub(crate) struct MarchSetup<'a> {
 }
 
 impl MarchSetup<'_> {
-    /// [`ray_samples`] in this volume's box at this step.
+    /// A ray's samples in the volume box at this step: their count `n`, the box entry and exit
+    /// (`None` if the ray misses the box); sample `k` lies at `t_enter + (k + ½)·Δt`.
     #[inline(always)]
     pub(crate) fn ray_setup(&self, o: Vec3, d: Vec3) -> (u32, f32, Option<f32>) {
-        ray_samples(self.volume.extent(), self.dt, o, d)
+        let Some((t_enter, t_exit)) = clip(o, 1.0 / d, self.volume.extent()) else {
+            return (0, 0.0, None);
+        };
+        let n = ((t_exit - t_enter) / self.dt - 0.5).ceil().max(0.0);
+        let n = if n < 1e7 { n as u32 } else { 10_000_000 };
+        (n, t_enter, Some(t_exit))
     }
 }

@@ -18,7 +18,7 @@
 
 use crate::compaction;
 use crate::empty_space::{MinMaxGrid, Occupancy};
-use crate::march_settings::{ray_samples, MarchSetup};
+use crate::march_settings::MarchSetup;
 pub use crate::march_settings::{MarchKernel, MarchOptions, RADIUS_CODE};
 #[cfg(doc)]
 use crate::radius::RadiusModel;
@@ -185,7 +185,7 @@ impl Marcher {
     /// box); sample `k` lies at `t_enter + (k + ½)·Δt`.
     #[inline(always)]
     pub(crate) fn ray_setup(&self, o: Vec3, d: Vec3) -> (u32, f32, Option<f32>) {
-        ray_samples(self.volume.extent(), self.dt, o, d)
+        self.setup().ray_setup(o, d)
     }
 
     /// What the packet kernel reads of this marcher.
