@@ -37,9 +37,7 @@ fn main() {
         }
     };
     println!("adapter: {}", gpu.context().describe_driver());
-    let mri =
-        std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("../../shared/data/mri_colin27_181x217x181_uint8.raw");
-    let (name, ds) = match Dataset::load(&mri, None) {
+    let (name, ds) = match Dataset::load(volwarp_server::testdata::MRI_PATH, None) {
         Ok(ds) => ("MRI (colin27)", ds),
         Err(_) => ("CT head (bundled; the MRI is missing)", Dataset::default_bundled()),
     };

@@ -133,9 +133,7 @@ fn main() {
     bench(&mut gpu, &mut splat, "synthetic bumpy surface", &frame, &cam, reps);
 
     // A real frame where the shared data is there: the MRI marched at 1024² by the server.
-    let mri =
-        std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("../../shared/data/mri_colin27_181x217x181_uint8.raw");
-    if let Ok(ds) = volwarp_server::Dataset::load(&mri, None) {
+    if let Ok(ds) = volwarp_server::Dataset::load(volwarp_server::testdata::MRI_PATH, None) {
         let marcher = volwarp_server::Marcher::from_dataset(&ds);
         let cam = marcher.default_camera(1024, 1024);
         let req = volwarp_core::wire::CameraRequest {

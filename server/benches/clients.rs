@@ -14,7 +14,7 @@ use volwarp_core::wire::{self, CameraRequest, Hello, Limits, Message};
 use volwarp_core::Heuristic;
 use volwarp_server::{Dataset, Marcher, Server, ServerConfig};
 
-const MRI: &str = concat!(env!("CARGO_MANIFEST_DIR"), "/../../shared/data/mri_colin27_181x217x181_uint8.raw");
+const MRI: &str = volwarp_server::testdata::MRI_PATH;
 
 fn env_or<T: std::str::FromStr>(name: &str, default: T) -> T {
     std::env::var(name).ok().and_then(|s| s.parse().ok()).unwrap_or(default)

@@ -20,7 +20,7 @@ use volwarp_core::Heuristic;
 use volwarp_server::encoding::{encode_compact, encode_options};
 use volwarp_server::{Dataset, Marcher};
 
-const MRI: &str = concat!(env!("CARGO_MANIFEST_DIR"), "/../../shared/data/mri_colin27_181x217x181_uint8.raw");
+const MRI: &str = volwarp_server::testdata::MRI_PATH;
 
 fn benches(c: &mut Criterion) {
     if !Path::new(MRI).exists() {

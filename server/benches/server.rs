@@ -15,7 +15,7 @@ use volwarp_core::Heuristic;
 use volwarp_server::compaction::{compact, compact_into_vecs};
 use volwarp_server::{Dataset, Marcher};
 
-const MRI: &str = concat!(env!("CARGO_MANIFEST_DIR"), "/../../shared/data/mri_colin27_181x217x181_uint8.raw");
+const MRI: &str = volwarp_server::testdata::MRI_PATH;
 
 /// Dolly factor of the default camera that makes the head fill most of the view (about 620k
 /// samples at 1024², like the seed paper's frames).

@@ -18,7 +18,7 @@ use volwarp_core::wire::CameraRequest;
 use volwarp_core::Heuristic;
 use volwarp_server::{Dataset, MarchKernel, MarchOptions, Marcher};
 
-const DATA: &str = concat!(env!("CARGO_MANIFEST_DIR"), "/../../shared/data");
+const DATA: &str = volwarp_server::testdata::SHARED_DATA;
 
 struct Scene {
     name: String,

@@ -24,7 +24,7 @@ use volwarp_core::{Camera, Heuristic, Image, Scene, BACKGROUND};
 use volwarp_server::encoding::{encode_compact, encode_options};
 use volwarp_server::{Dataset, Marcher};
 
-const DATA: &str = concat!(env!("CARGO_MANIFEST_DIR"), "/../../shared/data");
+const DATA: &str = volwarp_server::testdata::SHARED_DATA;
 
 /// What every renderer draws: the first hit sphere's color over the background.
 fn trace(frame: &Frame, cam: &Camera) -> Image {

@@ -28,8 +28,8 @@ fn main() {
     if sizes.is_empty() {
         sizes = vec![512, 1024];
     }
-    let dir = std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("../../shared/data");
-    let mut names: Vec<_> = std::fs::read_dir(&dir)
+    let dir = std::path::Path::new(volwarp_server::testdata::SHARED_DATA);
+    let mut names: Vec<_> = std::fs::read_dir(dir)
         .map(|d| {
             d.filter_map(|e| e.ok()).map(|e| e.path()).filter(|p| p.extension().is_some_and(|x| x == "raw")).collect()
         })

@@ -21,7 +21,7 @@ use volwarp_core::Heuristic;
 use volwarp_server::encoding::{encode_compact, encode_options, ZSTD_LEVEL};
 use volwarp_server::{Dataset, Marcher};
 
-const MRI: &str = concat!(env!("CARGO_MANIFEST_DIR"), "/../../shared/data/mri_colin27_181x217x181_uint8.raw");
+const MRI: &str = volwarp_server::testdata::MRI_PATH;
 
 /// Nanoseconds this thread has run (`CLOCK_THREAD_CPUTIME_ID`), if the clock exists.
 fn cpu_ns() -> Option<u64> {

@@ -28,9 +28,7 @@ fn main() {
     let args: Vec<String> = std::env::args().collect();
     let n: usize = args.get(1).and_then(|s| s.parse().ok()).unwrap_or(5);
     let size: u32 = args.get(2).and_then(|s| s.parse().ok()).unwrap_or(1024);
-    let path = args.get(3).cloned().unwrap_or_else(|| {
-        concat!(env!("CARGO_MANIFEST_DIR"), "/../../shared/data/mri_colin27_181x217x181_uint8.raw").to_string()
-    });
+    let path = args.get(3).cloned().unwrap_or_else(|| volwarp_server::testdata::MRI_PATH.to_string());
     volwarp_server::limit_lanes_from_env();
     let ds = Dataset::load(&path, None).expect("loading the volume");
     let m = Marcher::from_dataset(&ds);

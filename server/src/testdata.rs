@@ -15,6 +15,10 @@ pub const SHARED_DATA: &str = concat!(env!("CARGO_MANIFEST_DIR"), "/../../shared
 /// The MRI head of the shared datasets (the project's main benchmark volume).
 pub const MRI: &str = "mri_colin27_181x217x181_uint8.raw";
 
+/// [`MRI`]'s path in [`SHARED_DATA`], for benchmarks and examples that fall back to other data
+/// where it is missing.
+pub const MRI_PATH: &str = concat!(env!("CARGO_MANIFEST_DIR"), "/../../shared/data/mri_colin27_181x217x181_uint8.raw");
+
 /// Whether `VOLWARP_NO_SHARED_DATA=1` allows tests to leave out the shared datasets.
 pub fn shared_data_optional() -> bool {
     std::env::var("VOLWARP_NO_SHARED_DATA").is_ok_and(|v| v == "1")

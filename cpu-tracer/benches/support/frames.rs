@@ -10,7 +10,7 @@ use volwarp_core::Heuristic;
 use volwarp_server::{Dataset, MarchOptions, Marcher, RadiusModel};
 
 /// Where the MRI lies beside the checkout.
-pub const MRI: &str = concat!(env!("CARGO_MANIFEST_DIR"), "/../../shared/data/mri_colin27_181x217x181_uint8.raw");
+pub const MRI: &str = volwarp_server::testdata::MRI_PATH;
 
 /// A server render of the MRI at `res`² with the default radius model, with a description;
 /// `None` (and a notice) when the shared data is absent.
