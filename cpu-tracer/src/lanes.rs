@@ -436,9 +436,12 @@ pub(crate) trait Lanes: Arith {
     fn new_u(a: [u32; 8]) -> Self::U;
     /// The lanes, lane 0 first.
     fn to_array(self) -> [f32; 8];
-    /// Lane `l` of the result is lane `idx[l] & 7` of `self` (`vpermps`).
+    /// Lane `l` of the result is lane `idx[l] & 7` of `self` (`vpermps`; only the splatter in
+    /// the samples' own order, feature `direct-splat`, uses the permutes).
+    #[cfg(any(test, feature = "direct-splat"))]
     fn permute(self, idx: Self::U) -> Self;
     /// Lane `l` of the result is lane `idx[l] & 7` of `a` (`vpermd`).
+    #[cfg(any(test, feature = "direct-splat"))]
     fn permute_u(a: Self::U, idx: Self::U) -> Self::U;
     /// [`decode_scalar`] of eight samples (the same values; AVX2 unpacks the eight in lanes).
     #[inline(always)]
@@ -567,11 +570,13 @@ impl Lanes for f32x8 {
     fn to_array(self) -> [f32; 8] {
         f32x8::to_array(self)
     }
+    #[cfg(any(test, feature = "direct-splat"))]
     #[inline(always)]
     fn permute(self, idx: u32x8) -> Self {
         let (a, i) = (f32x8::to_array(self), idx.to_array());
         f32x8::new(core::array::from_fn(|l| a[(i[l] & 7) as usize]))
     }
+    #[cfg(any(test, feature = "direct-splat"))]
     #[inline(always)]
     fn permute_u(a: u32x8, idx: u32x8) -> u32x8 {
         let (a, i) = (a.to_array(), idx.to_array());
@@ -692,12 +697,14 @@ mod avx2 {
         fn to_array(self) -> [f32; 8] {
             Avx2::to_array(self)
         }
+        #[cfg(any(test, feature = "direct-splat"))]
         #[inline(always)]
         fn permute(self, idx: __m256i) -> Self {
             // `vpermps` reads the low three bits of each index.
             // SAFETY: AVX2 is available (`volwarp_lanes`' invariant, see [`super::avx2`]).
             unsafe { Avx2::from_raw(_mm256_permutevar8x32_ps(self.raw(), idx)) }
         }
+        #[cfg(any(test, feature = "direct-splat"))]
         #[inline(always)]
         fn permute_u(a: __m256i, idx: __m256i) -> __m256i {
             // SAFETY: AVX2 is available (`volwarp_lanes`' invariant, see [`super::avx2`]).

@@ -54,8 +54,6 @@ pub mod tile_splat;
 mod depth_buffer;
 mod frame_setup;
 mod key_list;
-// The lanes' permutes serve only `DirectSplat` (feature `direct-splat`).
-#[cfg_attr(not(feature = "direct-splat"), allow(dead_code))]
 mod lanes;
 
 pub(crate) use frame_setup::{begin_frame, begin_frame_overwritten, begin_frame_unbuilt_ok, shade, trace_ids_with};
