@@ -102,8 +102,8 @@ pub fn volume_load(data: &[u8]) {
             assert!(dims.iter().all(|&d| d > 0), "dimension 0 accepted: {dims:?}");
             let n = dims.iter().map(|&d| d as u64).product::<u64>();
             assert!(n <= LOAD_MAX_VOXELS, "{dims:?} accepted past the limit");
-            assert_eq!(v.data().len() as u64, n, "values for {dims:?}");
-            assert!(v.data().iter().all(|x| (0.0..=1.0).contains(x)), "a value outside 0..=1 (or NaN)");
+            assert_eq!(v.values().len() as u64, n, "values for {dims:?}");
+            assert!(v.values().iter().all(|x| (0.0..=1.0).contains(x)), "a value outside 0..=1 (or NaN)");
             let s = v.spacing();
             assert!(s.is_finite() && s.min_element() > 0.0, "spacing {s} accepted");
         }

@@ -117,16 +117,17 @@ pub(crate) trait Lanes: volwarp_lanes::Ops {
     /// Per lane `(data[idx], data[idx + 1])`, each index clamped to `0 ..= data.len() − 2`
     /// first (a slice shorter than 2 gives zeros).
     fn gather_pairs(data: &[f32], idx: Self::I) -> (Self, Self);
-    /// Per lane `data[idx]`, each index clamped to `0 ..= data.len() − 1` first (an empty
-    /// slice gives zeros).
-    fn gather_words(data: &[u32], idx: Self::I) -> Self::I;
-    /// The four bytes of each lane's word, lowest first, as `f32` (exact).
-    fn unpack_bytes(w: Self::I) -> [Self; 4];
-    /// Per lane the low and the high 32 bits of `data[idx]`, each index clamped to
-    /// `0 ..= data.len() − 1` first (an empty slice gives zeros).
-    fn gather_quads(data: &[u64], idx: Self::I) -> (Self::I, Self::I);
-    /// The two 16-bit halves of each lane's word, low first, as `f32` (exact).
-    fn unpack_shorts(w: Self::I) -> [Self; 2];
+    /// Per lane `a & b`.
+    fn and_i(a: Self::I, b: Self::I) -> Self::I;
+    /// Per lane `a >> N` (logical; the kernel shifts non-negative lanes only).
+    fn shr_i<const N: i32>(a: Self::I) -> Self::I;
+    /// Per lane `(data[idx], data[idx + 1])` as `f32` (exact), each index clamped to
+    /// `0 ..= data.len() − 4` first (the gather reads 4 bytes; a slice shorter than 4 gives
+    /// zeros).
+    fn gather_byte_pairs(data: &[u8], idx: Self::I) -> (Self, Self);
+    /// Per lane `(data[idx], data[idx + 1])` as `f32` (exact), each index clamped to
+    /// `0 ..= data.len() − 2` first (a slice shorter than 2 gives zeros).
+    fn gather_short_pairs(data: &[u16], idx: Self::I) -> (Self, Self);
 }
 
 /// The portable lanes: `wide`'s, whatever it was compiled for.
@@ -224,27 +225,36 @@ impl Lanes for f32x8 {
         (f32x8::new(core::array::from_fn(|l| data[i[l]])), f32x8::new(core::array::from_fn(|l| data[i[l] + 1])))
     }
     #[inline(always)]
-    fn gather_words(data: &[u32], idx: i32x8) -> i32x8 {
-        let last = data.len().saturating_sub(1);
-        let i = idx.to_array();
-        i32x8::new(core::array::from_fn(|l| data.get((i[l].max(0) as usize).min(last)).copied().unwrap_or(0) as i32))
+    fn and_i(a: i32x8, b: i32x8) -> i32x8 {
+        a & b
     }
     #[inline(always)]
-    fn unpack_bytes(w: i32x8) -> [Self; 4] {
-        let m = i32x8::splat(255);
-        [w & m, (w >> 8) & m, (w >> 16) & m, (w >> 24) & m].map(|b| b.round_float())
+    fn shr_i<const N: i32>(a: i32x8) -> i32x8 {
+        i32x8::new(a.to_array().map(|v| (v as u32 >> N) as i32))
     }
     #[inline(always)]
-    fn gather_quads(data: &[u64], idx: i32x8) -> (i32x8, i32x8) {
-        let last = data.len().saturating_sub(1);
-        let i = idx.to_array();
-        let q: [u64; 8] = core::array::from_fn(|l| data.get((i[l].max(0) as usize).min(last)).copied().unwrap_or(0));
-        (i32x8::new(q.map(|q| q as u32 as i32)), i32x8::new(q.map(|q| (q >> 32) as u32 as i32)))
+    fn gather_byte_pairs(data: &[u8], idx: i32x8) -> (Self, Self) {
+        if data.len() < 4 {
+            return (f32x8::splat(0.0), f32x8::splat(0.0));
+        }
+        let last = data.len() - 4;
+        let i = idx.to_array().map(|i| (i.max(0) as usize).min(last));
+        (
+            f32x8::new(core::array::from_fn(|l| data[i[l]] as f32)),
+            f32x8::new(core::array::from_fn(|l| data[i[l] + 1] as f32)),
+        )
     }
     #[inline(always)]
-    fn unpack_shorts(w: i32x8) -> [Self; 2] {
-        let m = i32x8::splat(0xffff);
-        [w & m, (w >> 16) & m].map(|b| b.round_float())
+    fn gather_short_pairs(data: &[u16], idx: i32x8) -> (Self, Self) {
+        if data.len() < 2 {
+            return (f32x8::splat(0.0), f32x8::splat(0.0));
+        }
+        let last = data.len() - 2;
+        let i = idx.to_array().map(|i| (i.max(0) as usize).min(last));
+        (
+            f32x8::new(core::array::from_fn(|l| data[i[l]] as f32)),
+            f32x8::new(core::array::from_fn(|l| data[i[l] + 1] as f32)),
+        )
     }
 }
 
@@ -374,23 +384,22 @@ impl<L: Lanes> Lanes for X2<L> {
         (X2(a0, a1), X2(b0, b1))
     }
     #[inline(always)]
-    fn gather_words(data: &[u32], idx: Self::I) -> Self::I {
-        X2I(L::gather_words(data, idx.0), L::gather_words(data, idx.1))
+    fn and_i(a: Self::I, b: Self::I) -> Self::I {
+        X2I(L::and_i(a.0, b.0), L::and_i(a.1, b.1))
     }
     #[inline(always)]
-    fn unpack_bytes(w: Self::I) -> [Self; 4] {
-        let (a, b) = (L::unpack_bytes(w.0), L::unpack_bytes(w.1));
-        [X2(a[0], b[0]), X2(a[1], b[1]), X2(a[2], b[2]), X2(a[3], b[3])]
+    fn shr_i<const N: i32>(a: Self::I) -> Self::I {
+        X2I(L::shr_i::<N>(a.0), L::shr_i::<N>(a.1))
     }
     #[inline(always)]
-    fn gather_quads(data: &[u64], idx: Self::I) -> (Self::I, Self::I) {
-        let ((a0, b0), (a1, b1)) = (L::gather_quads(data, idx.0), L::gather_quads(data, idx.1));
-        (X2I(a0, a1), X2I(b0, b1))
+    fn gather_byte_pairs(data: &[u8], idx: Self::I) -> (Self, Self) {
+        let ((a0, b0), (a1, b1)) = (L::gather_byte_pairs(data, idx.0), L::gather_byte_pairs(data, idx.1));
+        (X2(a0, a1), X2(b0, b1))
     }
     #[inline(always)]
-    fn unpack_shorts(w: Self::I) -> [Self; 2] {
-        let (a, b) = (L::unpack_shorts(w.0), L::unpack_shorts(w.1));
-        [X2(a[0], b[0]), X2(a[1], b[1])]
+    fn gather_short_pairs(data: &[u16], idx: Self::I) -> (Self, Self) {
+        let ((a0, b0), (a1, b1)) = (L::gather_short_pairs(data, idx.0), L::gather_short_pairs(data, idx.1));
+        (X2(a0, a1), X2(b0, b1))
     }
 }
 
@@ -456,25 +465,51 @@ mod x86 {
         };
     }
 
-    /// `Lanes::unpack_bytes` and `unpack_shorts` with one width's intrinsics: each field by an
-    /// `and` and a logical shift right, converted to `f32` exactly.
-    macro_rules! unpack_methods {
-        ($t:ident, $ti:ident: $and:ident $srli:ident $set1:ident $cvt:ident) => {
+    /// `Lanes::and_i`, `shr_i`, `gather_byte_pairs` and `gather_short_pairs` with one width's
+    /// intrinsics: the clamped indices (`$clamp`), one 32-bit gather at byte scale 1 or 2, each
+    /// field by an `and` and a logical shift right, converted to `f32` exactly.
+    macro_rules! int_methods {
+        ($t:ident, $ti:ident, $token:ident, $clamp:ident:
+         $and:ident $srli:ident $srl:ident $set1:ident $cvt:ident |$i:ident, $p:ident, $scale:ident| $gather:expr) => {
             #[inline(always)]
-            fn unpack_bytes(w: $ti) -> [Self; 4] {
-                // SAFETY: `w` proves the type's features (`volwarp_lanes`' invariant).
+            fn and_i(a: $ti, b: $ti) -> $ti {
+                // SAFETY: `a` proves the type's features (`volwarp_lanes`' invariant).
+                unsafe { $ti::from_raw($and(a.raw(), b.raw())) }
+            }
+            #[inline(always)]
+            fn shr_i<const N: i32>(a: $ti) -> $ti {
+                // SAFETY: `a` proves the type's features (`volwarp_lanes`' invariant).
+                unsafe { $ti::from_raw($srl(a.raw(), _mm_cvtsi32_si128(N))) }
+            }
+            #[inline(always)]
+            fn gather_byte_pairs(data: &[u8], idx: $ti) -> (Self, Self) {
+                if data.len() < 4 {
+                    return ($t::splat($token(), 0.0), $t::splat($token(), 0.0));
+                }
+                let $i = $clamp(idx, last_index(data.len(), 4));
+                let $p = data.as_ptr().cast::<i32>();
+                // SAFETY: `idx` proves the features; every index is in 0 ..= len − 4 (just
+                // above), so the 4 bytes read at byte offset `index` (scale 1; gathers need no
+                // alignment) lie inside `data`.
                 unsafe {
-                    let (w, m) = (w.raw(), $set1(255));
-                    [$and(w, m), $and($srli::<8>(w), m), $and($srli::<16>(w), m), $srli::<24>(w)]
-                        .map(|b| $t::from_raw($cvt(b)))
+                    const $scale: i32 = 1;
+                    let (w, m) = ($gather, $set1(255));
+                    ($t::from_raw($cvt($and(w, m))), $t::from_raw($cvt($and($srli::<8>(w), m))))
                 }
             }
             #[inline(always)]
-            fn unpack_shorts(w: $ti) -> [Self; 2] {
-                // SAFETY: `w` proves the type's features (`volwarp_lanes`' invariant).
+            fn gather_short_pairs(data: &[u16], idx: $ti) -> (Self, Self) {
+                if data.len() < 2 {
+                    return ($t::splat($token(), 0.0), $t::splat($token(), 0.0));
+                }
+                let $i = $clamp(idx, last_index(data.len(), 2));
+                let $p = data.as_ptr().cast::<i32>();
+                // SAFETY: `idx` proves the features; every index is in 0 ..= len − 2 (just
+                // above), so the 4 bytes read at byte offset 2·index lie inside `data`.
                 unsafe {
-                    let lo = $and(w.raw(), $set1(0xffff));
-                    [lo, $srli::<16>(w.raw())].map(|b| $t::from_raw($cvt(b)))
+                    const $scale: i32 = 2;
+                    let (w, m) = ($gather, $set1(0xffff));
+                    ($t::from_raw($cvt($and(w, m))), $t::from_raw($cvt($srli::<16>(w))))
                 }
             }
         };
@@ -518,7 +553,7 @@ mod x86 {
     }
 
     /// The last index of a slice of `len` elements less `less` (lengths above `i32::MAX` are
-    /// never passed, as volumes hold at most 2²⁸ voxels).
+    /// never passed: a chunk of bricks holds at most `bricks::CHUNK_LIMIT` values).
     #[inline(always)]
     fn last_index(len: usize, less: usize) -> i32 {
         (len - less).min(i32::MAX as usize) as i32
@@ -581,37 +616,8 @@ mod x86 {
                 (Avx2::from_raw(order(a)), Avx2::from_raw(order(b)))
             }
         }
-        #[inline(always)]
-        fn gather_words(data: &[u32], idx: Avx2I) -> Avx2I {
-            if data.is_empty() {
-                return Avx2I::splat(avx2(), 0);
-            }
-            let i = clamp8(idx, last_index(data.len(), 1));
-            // SAFETY: `idx` proves AVX2; every index is in 0 ..= len − 1 (just above), scale 4
-            // is `u32`'s size.
-            unsafe { Avx2I::from_raw(_mm256_i32gather_epi32::<4>(data.as_ptr().cast(), i)) }
-        }
-        #[inline(always)]
-        fn gather_quads(data: &[u64], idx: Avx2I) -> (Avx2I, Avx2I) {
-            if data.is_empty() {
-                return (Avx2I::splat(avx2(), 0), Avx2I::splat(avx2(), 0));
-            }
-            let i = clamp8(idx, last_index(data.len(), 1));
-            // SAFETY: `idx` proves AVX2; every index is in 0 ..= len − 1 (just above), scale 8
-            // is `u64`'s size.
-            unsafe {
-                let p = data.as_ptr().cast::<i64>();
-                let lo = _mm256_castsi256_ps(_mm256_i32gather_epi64::<8>(p, _mm256_castsi256_si128(i)));
-                let hi = _mm256_castsi256_ps(_mm256_i32gather_epi64::<8>(p, _mm256_extracti128_si256::<1>(i)));
-                // The low and high dwords of the eight elements, in lane order (as `gather_pairs`).
-                let a = _mm256_shuffle_ps::<0b10_00_10_00>(lo, hi);
-                let b = _mm256_shuffle_ps::<0b11_01_11_01>(lo, hi);
-                let order =
-                    |v: __m256| _mm256_castpd_si256(_mm256_permute4x64_pd::<0b11_01_10_00>(_mm256_castps_pd(v)));
-                (Avx2I::from_raw(order(a)), Avx2I::from_raw(order(b)))
-            }
-        }
-        unpack_methods!(Avx2, Avx2I: _mm256_and_si256 _mm256_srli_epi32 _mm256_set1_epi32 _mm256_cvtepi32_ps);
+        int_methods!(Avx2, Avx2I, avx2, clamp8: _mm256_and_si256 _mm256_srli_epi32 _mm256_srl_epi32 _mm256_set1_epi32 _mm256_cvtepi32_ps
+            |i, p, SCALE| _mm256_i32gather_epi32::<SCALE>(p, i));
     }
 
     /// A mask of sixteen lanes: an AVX-512 mask register (`k`), bit `l` lane `l`.
@@ -722,33 +728,8 @@ mod x86 {
                 (Avx512::from_raw(_mm512_castsi512_ps(a)), Avx512::from_raw(_mm512_castsi512_ps(b)))
             }
         }
-        #[inline(always)]
-        fn gather_words(data: &[u32], idx: Avx512I) -> Avx512I {
-            if data.is_empty() {
-                return Avx512I::splat(avx512(), 0);
-            }
-            let i = clamp16(idx, last_index(data.len(), 1));
-            // SAFETY: `idx` proves AVX-512 F; every index is in 0 ..= len − 1 (just above),
-            // scale 4 is `u32`'s size.
-            unsafe { Avx512I::from_raw(_mm512_i32gather_epi32::<4>(i, data.as_ptr().cast())) }
-        }
-        #[inline(always)]
-        fn gather_quads(data: &[u64], idx: Avx512I) -> (Avx512I, Avx512I) {
-            if data.is_empty() {
-                return (Avx512I::splat(avx512(), 0), Avx512I::splat(avx512(), 0));
-            }
-            let i = clamp16(idx, last_index(data.len(), 1));
-            // SAFETY: `idx` proves AVX-512 F; every index is in 0 ..= len − 1 (just above),
-            // scale 8 is `u64`'s size.
-            unsafe {
-                let p = data.as_ptr().cast::<i64>();
-                let lo = _mm512_i32gather_epi64::<8>(_mm512_castsi512_si256(i), p);
-                let hi = _mm512_i32gather_epi64::<8>(_mm512_extracti64x4_epi64::<1>(i), p);
-                let (a, b) = deinterleave(avx512(), lo, hi);
-                (Avx512I::from_raw(a), Avx512I::from_raw(b))
-            }
-        }
-        unpack_methods!(Avx512, Avx512I: _mm512_and_si512 _mm512_srli_epi32 _mm512_set1_epi32 _mm512_cvtepi32_ps);
+        int_methods!(Avx512, Avx512I, avx512, clamp16: _mm512_and_si512 _mm512_srli_epi32 _mm512_srl_epi32 _mm512_set1_epi32 _mm512_cvtepi32_ps
+            |i, p, SCALE| _mm512_i32gather_epi32::<SCALE>(i, p));
     }
 }
 
@@ -818,22 +799,26 @@ mod tests {
             eq("pairs 1", p1, w1);
             let ((p0, _), (w0, _)) = (A::gather_pairs(&data[..1], k), W::gather_pairs(&data[..1], wk));
             eq("pairs short", p0, w0);
-            let words: Vec<u32> = (0..100u32).map(|i| i.wrapping_mul(2_654_435_761)).collect();
-            for data in [&words[..], &[]] {
-                let (bw, ww) = (A::unpack_bytes(A::gather_words(data, k)), W::unpack_bytes(W::gather_words(data, wk)));
-                for j in 0..4 {
-                    eq("words", bw[j], ww[j]);
-                }
+            let bytes: Vec<u8> = (0..100u32).map(|i| i.wrapping_mul(2_654_435_761) as u8).collect();
+            for data in [&bytes[..], &bytes[..3], &[]] {
+                let ((a0, a1), (w0, w1)) = (A::gather_byte_pairs(data, k), W::gather_byte_pairs(data, wk));
+                eq("bytes 0", a0, w0);
+                eq("bytes 1", a1, w1);
             }
-            let quads: Vec<u64> = (0..100u64).map(|i| i.wrapping_mul(0x9e37_79b9_7f4a_7c15)).collect();
-            for data in [&quads[..], &[]] {
-                let ((a0, a1), (w0, w1)) = (A::gather_quads(data, k), W::gather_quads(data, wk));
-                for (x, y) in [(a0, w0), (a1, w1)] {
-                    let (s, t) = (A::unpack_shorts(x), W::unpack_shorts(y));
-                    eq("quads lo", s[0], t[0]);
-                    eq("quads hi", s[1], t[1]);
-                }
+            let shorts: Vec<u16> = (0..100u32).map(|i| i.wrapping_mul(2_654_435_761) as u16).collect();
+            for data in [&shorts[..], &shorts[..1], &[]] {
+                let ((a0, a1), (w0, w1)) = (A::gather_short_pairs(data, k), W::gather_short_pairs(data, wk));
+                eq("shorts 0", a0, w0);
+                eq("shorts 1", a1, w1);
             }
+            let (s, ws) = (A::shr_i::<5>(ti), W::shr_i::<5>(wti));
+            eq("shr", A::int_to_float(s), W::int_to_float(ws));
+            let (m, wm) = (A::and_i(ti, A::splat_i(31)), W::and_i(wti, W::splat_i(31)));
+            eq("and", A::int_to_float(m), W::int_to_float(wm));
+            let t: [f32; MAX_LANES] = A::int_to_float(ti).to_array();
+            let want: [f32; MAX_LANES] = core::array::from_fn(|l| ((t[l] as i32) >> 5) as f32);
+            let got: [f32; MAX_LANES] = A::int_to_float(s).to_array();
+            assert!((0..n).all(|l| got[l] == want[l]), "shr: {t:?} {got:?}");
         }
     }
 

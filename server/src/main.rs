@@ -86,6 +86,11 @@ struct DataArgs {
     /// Voxel spacing X,Y,Z (overrides the file).
     #[arg(long, global = true)]
     spacing: Option<String>,
+    /// The memory a volume may take: `auto` (what the system has available), a size such as
+    /// `20G` or `512M`, or `none` (load whatever it needs). A volume that needs more is
+    /// refused before anything is allocated.
+    #[arg(long, global = true, default_value = "auto", value_parser = volwarp_server::volume::MemoryLimit::parse)]
+    max_memory: volwarp_server::volume::MemoryLimit,
     /// Ray-marching step in voxels.
     #[arg(long, global = true, default_value_t = 0.5)]
     step: f32,
@@ -213,9 +218,9 @@ fn load(d: &DataArgs) -> Result<Dataset, String> {
     Dataset::load_with(v, &opts, d.tf.as_deref()).map_err(|e| e.to_string())
 }
 
-/// The loader options of `--dims`, `--type` and `--spacing`.
+/// The loader options of `--dims`, `--type`, `--spacing` and `--max-memory`.
 fn load_options(d: &DataArgs) -> Result<LoadOptions, String> {
-    let mut opts = LoadOptions::default();
+    let mut opts = LoadOptions { memory: d.max_memory, ..LoadOptions::default() };
     if let Some(s) = &d.dims {
         opts.dims = Some(parse_dims(s).ok_or_else(|| format!("--dims {s:?} is not XxYxZ"))?);
     }
@@ -248,6 +253,14 @@ fn info(path: &std::path::Path, d: &DataArgs) -> Result<(), String> {
     println!("value range  {lo} .. {hi}");
     println!("orientation  {}", src.orientation);
     println!("data         {} bytes in {} file{}", src.data_bytes, src.files, if src.files == 1 { "" } else { "s" });
+    let bricks = v.voxels().layout().bricks();
+    println!(
+        "in memory    {} bytes: {} bricks of {}^3 voxels as {}",
+        v.memory_bytes(),
+        bricks.iter().map(|&b| u64::from(b)).product::<u64>(),
+        volwarp_server::volume::bricks::BRICK_EDGE,
+        v.voxels().type_name()
+    );
     Ok(())
 }
 

@@ -202,8 +202,7 @@ impl Marcher {
     fn kernel(&self) -> crate::packet_march::Kernel<'_> {
         crate::packet_march::Kernel {
             m: self.setup(),
-            data: self.volume.padded_data(),
-            stencil: self.volume.code_stencil(),
+            voxels: self.volume.voxels(),
             lut: &self.lut_argb,
             looks: &self.looks,
         }

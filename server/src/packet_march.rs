@@ -31,7 +31,8 @@
 use crate::lanes::{dispatch, Lanes, Mask};
 use crate::march_settings::MarchSetup;
 use crate::radius::{FrameRadius, RaySpread, Uncertainty};
-use crate::volume::Squares;
+use crate::volume::bricks::{BRICK_EDGE, BRICK_SHIFT, BRICK_SPAN, BRICK_VALUES};
+use crate::volume::Voxels;
 use volwarp_core::sample::{over_background, pack_color_f32, Quantizer};
 use volwarp_core::segments::{Segment, Segmenter, SegmenterLanes};
 use volwarp_core::{DepthPicker, FirstPassAccumulator, Heuristic, RayBasis, Vec3, BACKGROUND};
@@ -190,6 +191,50 @@ impl<const M: usize> Feed<M> for LaneThreshold<M> {
     }
 }
 
+/// [`BRICK_SHIFT`] as a lane shift count.
+const SHIFT: i32 = BRICK_SHIFT as i32;
+
+/// The eight stencil corners `[c000, c100, c010, c110, c001, c101, c011, c111]` whose lowest
+/// corner is value `base` of chunk `chunk` (clamped to the last chunk), as `f32`: four gathers
+/// of x-neighbour pairs, one per row of the stencil ([`crate::volume::bricks::Grid::corners`]
+/// in lanes).
+#[inline(always)]
+fn corners<L: Lanes>(voxels: &Voxels, chunk: usize, base: L::I) -> [L; 8] {
+    let (sy, sz) = (L::splat_i(BRICK_SPAN as i32), L::splat_i((BRICK_SPAN * BRICK_SPAN) as i32));
+    let (r1, r2) = (base + sy, base + sz);
+    let r3 = r2 + sy;
+    let ((a, b), (c, d), (e, f), (g, h)) = match voxels {
+        Voxels::U8(grid) => {
+            let data = &grid.chunks()[chunk.min(grid.chunks().len() - 1)][..];
+            (
+                L::gather_byte_pairs(data, base),
+                L::gather_byte_pairs(data, r1),
+                L::gather_byte_pairs(data, r2),
+                L::gather_byte_pairs(data, r3),
+            )
+        }
+        Voxels::U16(grid) => {
+            let data = &grid.chunks()[chunk.min(grid.chunks().len() - 1)][..];
+            (
+                L::gather_short_pairs(data, base),
+                L::gather_short_pairs(data, r1),
+                L::gather_short_pairs(data, r2),
+                L::gather_short_pairs(data, r3),
+            )
+        }
+        Voxels::F32(grid) => {
+            let data = &grid.chunks()[chunk.min(grid.chunks().len() - 1)][..];
+            (
+                L::gather_pairs(data, base),
+                L::gather_pairs(data, r1),
+                L::gather_pairs(data, r2),
+                L::gather_pairs(data, r3),
+            )
+        }
+    };
+    [a, b, c, d, e, f, g, h]
+}
+
 /// Every picker's [`DepthPicker::threshold_target`], if all have one.
 fn threshold_targets<const M: usize>(pickers: &[DepthPicker; M]) -> Option<[f32; M]> {
     let mut t = [f32::INFINITY; M];
@@ -263,10 +308,8 @@ impl<L: Lanes> Axis<L> {
 pub(crate) struct Kernel<'a> {
     /// The options, step and volume box.
     pub(crate) m: MarchSetup<'a>,
-    /// The volume's values with their padding ([`crate::volume::Volume`]'s `padded_data`).
-    pub(crate) data: &'a [f32],
-    /// An integer-coded volume's codes, read instead of `data` (the same values).
-    pub(crate) stencil: Option<&'a crate::volume::CodeStencil>,
+    /// The volume's bricked voxels.
+    pub(crate) voxels: &'a Voxels,
     /// The opacity-corrected, premultiplied transfer function as (a, r, g, b) entries.
     pub(crate) lut: &'a [f32],
     /// [`crate::empty_space::Occupancy::look_table`].
@@ -330,8 +373,18 @@ impl Kernel<'_> {
         let n = L::new(&rays.n);
         let (dtl, half, one, zero) = (L::splat(dt), L::splat(0.5), L::splat(1.0), L::splat(0.0));
         let (mx, my, mz) = (L::splat((nx - 1) as f32), L::splat((ny - 1) as f32), L::splat((nz - 1) as f32));
-        let (snx, snxy) = (L::splat_i(nx as i32), L::splat_i((nx * ny) as i32));
-        let sny = L::splat_i(ny as i32);
+        // The bricks ([`crate::volume::bricks`]): per axis, and the chunks of brick z-slabs.
+        let layout = *self.voxels.layout();
+        let nbr = layout.bricks();
+        let (sbx, sby) = (L::splat_i(nbr[0] as i32), L::splat_i(nbr[1] as i32));
+        let (span, span2) = (L::splat_i(BRICK_SPAN as i32), L::splat_i((BRICK_SPAN * BRICK_SPAN) as i32));
+        let brick_values = L::splat_i(BRICK_VALUES as i32);
+        let edge_mask = L::splat_i(BRICK_EDGE as i32 - 1);
+        let chunks = layout.chunks();
+        let per_chunk = L::splat((1u32 << layout.slab_shift()) as f32);
+        let per_chunk_inv = L::splat(1.0 / (1u32 << layout.slab_shift()) as f32);
+        let (offset, scale) = vol.normalization();
+        let (offset, scale) = (L::splat(offset), L::splat(scale));
         // TransferFunction::index scales by the last entry's index and clamps to it.
         let lut_max = L::splat((self.lut.len() / 4).max(1) as f32 - 1.0);
         let ert = L::splat(opts.early_termination);
@@ -413,35 +466,43 @@ impl Kernel<'_> {
             let (xi, yi, zi) = (gx.trunc_int(), gy.trunc_int(), gz.trunc_int());
             let (xf, yf, zf) = (L::int_to_float(xi), L::int_to_float(yi), L::int_to_float(zi));
             let (fx, fy, fz) = (gx - xf, gy - yf, gz - zf);
-            // The far neighbours are read at +1, +nx, +nx·ny even at the lattice's last voxel
-            // (the volume's padding keeps the reads inside): there the fraction is exactly 0, so
-            // `c + (far - c) * 0` is `c`, as the scalar marcher's clamped read gives.
-            let base = xi + L::mul_i(snx, yi + L::mul_i(sny, zi));
-            let b2 = base + snxy;
-            let (c000, c100, c010, c110, c001, c101, c011, c111) = if let Some(st) = self.stencil {
-                // Two gathers of the x–y squares of codes, normalized as `Volume` did.
-                let s = L::splat(st.scale);
-                let [a, b, c, d, e, f, g, h] = match &st.squares {
-                    Squares::Bytes(words) => {
-                        let [a, b, c, d] = L::unpack_bytes(L::gather_words(words, base));
-                        let [e, f, g, h] = L::unpack_bytes(L::gather_words(words, b2));
-                        [a, b, c, d, e, f, g, h]
-                    }
-                    Squares::Shorts(words) => {
-                        let ((w0, w1), (w2, w3)) = (L::gather_quads(words, base), L::gather_quads(words, b2));
-                        let ([a, b], [c, d]) = (L::unpack_shorts(w0), L::unpack_shorts(w1));
-                        let ([e, f], [g, h]) = (L::unpack_shorts(w2), L::unpack_shorts(w3));
-                        [a, b, c, d, e, f, g, h]
-                    }
-                };
-                (a * s, b * s, c * s, d * s, e * s, f * s, g * s, h * s)
+            // The stencil's brick and its lowest corner in it: the other corners are at +1,
+            // +BRICK_SPAN and +BRICK_SPAN² (the brick's apron holds the far ones; past the
+            // volume's last voxel it repeats it, where the fraction is exactly 0, so
+            // `c + (far - c) * 0` is `c`, as the scalar marcher's read gives).
+            let (bx, by, bz) = (L::shr_i::<SHIFT>(xi), L::shr_i::<SHIFT>(yi), L::shr_i::<SHIFT>(zi));
+            let (lx, ly, lz) = (L::and_i(xi, edge_mask), L::and_i(yi, edge_mask), L::and_i(zi, edge_mask));
+            let (c000, c100, c010, c110, c001, c101, c011, c111) = if chunks == 1 {
+                let brick = bx + L::mul_i(sbx, by + L::mul_i(sby, bz));
+                let base = L::mul_i(brick, brick_values) + lx + L::mul_i(span, ly) + L::mul_i(span2, lz);
+                let [c0, c1, c2, c3, c4, c5, c6, c7] = corners::<L>(self.voxels, 0, base);
+                (c0, c1, c2, c3, c4, c5, c6, c7)
             } else {
-                let d = self.data;
-                let (c000, c100) = L::gather_pairs(d, base);
-                let (c010, c110) = L::gather_pairs(d, base + snx);
-                let (c001, c101) = L::gather_pairs(d, b2);
-                let (c011, c111) = L::gather_pairs(d, b2 + snx);
-                (c000, c100, c010, c110, c001, c101, c011, c111)
+                // Several chunks of brick z-slabs: each lane's chunk and slab in it.
+                let bzf = L::int_to_float(bz);
+                let czf = L::int_to_float((bzf * per_chunk_inv).trunc_int());
+                let bzl = (bzf - czf * per_chunk).trunc_int();
+                let brick = bx + L::mul_i(sbx, by + L::mul_i(sby, bzl));
+                let base = L::mul_i(brick, brick_values) + lx + L::mul_i(span, ly) + L::mul_i(span2, lz);
+                let cs: [f32; M] = czf.to_array();
+                let (mut first, mut last) = (cs[0], cs[0]);
+                for &c in &cs[1..] {
+                    first = first.min(c);
+                    last = last.max(c);
+                }
+                let mut acc = corners::<L>(self.voxels, first as usize, base);
+                let mut c = first + 1.0;
+                while c <= last {
+                    let cl = L::splat(c);
+                    let here = czf.simd_ge(cl).and_not(czf.simd_gt(cl));
+                    let part = corners::<L>(self.voxels, c as usize, base);
+                    for (a, p) in acc.iter_mut().zip(part) {
+                        *a = here.select(p, *a);
+                    }
+                    c += 1.0;
+                }
+                let [c0, c1, c2, c3, c4, c5, c6, c7] = acc;
+                (c0, c1, c2, c3, c4, c5, c6, c7)
             };
             let c00 = c000 + (c100 - c000) * fx;
             let c10 = c010 + (c110 - c010) * fx;
@@ -449,7 +510,7 @@ impl Kernel<'_> {
             let c11 = c011 + (c111 - c011) * fx;
             let c0 = c00 + (c10 - c00) * fy;
             let c1 = c01 + (c11 - c01) * fy;
-            let v = c0 + (c1 - c0) * fz;
+            let v = (c0 + (c1 - c0) * fz - offset) * scale;
             // TransferFunction::index, in lanes.
             let idx = (v * lut_max + half).max(zero).min(lut_max).trunc_int();
             // The table's entries are (a, r, g, b): opacity and red in one 64-bit gather.

@@ -46,7 +46,7 @@ fn assert_same(v: &Volume, r: &Volume, what: &str) {
     assert_eq!(v.dims(), r.dims(), "{what}: dims");
     assert_eq!(v.spacing(), r.spacing(), "{what}: spacing");
     assert_eq!(v.value_range(), r.value_range(), "{what}: value range");
-    assert!(v.data() == r.data(), "{what}: voxels differ");
+    assert!(v.values() == r.values(), "{what}: voxels differ");
 }
 
 fn load(p: &Path) -> Volume {
@@ -221,7 +221,7 @@ fn broken_nifti_files_are_clear_errors() {
     let t = dir.join("huge.nii");
     std::fs::write(&t, &h).unwrap();
     let e = load_err(&t);
-    assert!(matches!(e.kind, VolumeErrorKind::TooLarge { .. }), "{e}");
+    assert!(matches!(e.kind, VolumeErrorKind::OutOfMemory { .. }), "{e}");
     let big = dir.join("huge2.nii");
     let o = nifti::WriteOptions { version: 2, pixdim: [1.0; 3], scale: (0.0, 0.0), sform: None, gzip: false };
     nifti::write(&big, &[], VoxelType::F64, [1, 1, 1], &o).unwrap();
@@ -643,11 +643,11 @@ fn broken_dicom_series_are_clear_errors() {
     assert!(e.to_string().contains("claims 4294967280 bytes"), "{e}");
     assert!(t.elapsed().as_secs_f64() < 1.0);
 
-    // Rows × columns × frames past the voxel limit: refused before the pixels are read.
+    // Rows × columns × frames past the memory there is: refused before the pixels are read.
     let huge = dir.join("huge.dcm");
     write_dicom(&huge, &Slice { rows: 65535, cols: 65535, frames: 9999, ..axial("5", 0.0, vec![0; 4]) }, 8);
     let e = load_err(&huge);
-    assert!(matches!(e.kind, VolumeErrorKind::TooLarge { .. }), "{e}");
+    assert!(matches!(e.kind, VolumeErrorKind::OutOfMemory { .. }), "{e}");
 }
 
 #[test]
@@ -913,7 +913,7 @@ fn load_speed() {
         if what == "raw" {
             first = Some(v);
         } else if !what.contains("flipped") {
-            assert!(first.as_ref().is_some_and(|f| f.data() == v.data()), "{what}");
+            assert!(first.as_ref().is_some_and(|f| f.values() == v.values()), "{what}");
         }
     }
     std::fs::remove_dir_all(&dir).ok();

@@ -4,7 +4,7 @@ mod common;
 
 use volwarp_core::Vec3;
 use volwarp_server::nrrd;
-use volwarp_server::volume::{load_volume, LoadOptions, VolumeErrorKind, VoxelType};
+use volwarp_server::volume::{load_volume, LoadOptions, MemoryLimit, VolumeErrorKind, VoxelType};
 use volwarp_server::{Dataset, TransferFunction};
 
 fn ramp_i16(n: usize) -> (Vec<i16>, Vec<u8>) {
@@ -17,7 +17,7 @@ fn expect_normalized(vol: &volwarp_server::Volume, raw: &[f32]) {
     let (lo, hi) = vol.value_range();
     assert_eq!(lo, raw.iter().cloned().fold(f32::INFINITY, f32::min));
     assert_eq!(hi, raw.iter().cloned().fold(f32::NEG_INFINITY, f32::max));
-    for (a, &b) in vol.data().iter().zip(raw) {
+    for (a, &b) in vol.values().iter().zip(raw) {
         assert!((a - (b - lo) / (hi - lo)).abs() < 1e-6);
     }
 }
@@ -73,9 +73,25 @@ fn loader_errors_name_the_file_and_the_problem() {
     let e = load_volume(&badtype, &LoadOptions::default()).unwrap_err();
     assert!(matches!(e.kind, VolumeErrorKind::UnknownType(_)), "{e}");
 
+    // 64 GiB of voxels (70 GiB of bricks, 8 GiB of empty-space grids) against a 16 GiB limit: refused before anything is
+    // read or allocated, saying what it needs, what there is and how to force it; forced, the
+    // load goes on to find the file too short (still before allocating).
     let big = dir.join("big_4096x4096x4096_uint8.raw");
     std::fs::write(&big, [0u8; 8]).unwrap();
-    let e = load_volume(&big, &LoadOptions::default()).unwrap_err();
+    let limited = LoadOptions { memory: MemoryLimit::Bytes(16 << 30), ..LoadOptions::default() };
+    let e = load_volume(&big, &limited).unwrap_err();
+    let VolumeErrorKind::OutOfMemory { needed, available } = e.kind else { panic!("{e}") };
+    assert_eq!(available, Some(16 << 30));
+    assert!((78 << 30..79 << 30).contains(&needed), "{needed}");
+    let msg = load_volume(&big, &limited).unwrap_err().to_string();
+    assert!(
+        msg.contains("needs 78.") && msg.contains("16.00 GiB available") && msg.contains("--max-memory none"),
+        "{msg}"
+    );
+    let forced = LoadOptions { memory: MemoryLimit::Unlimited, ..LoadOptions::default() };
+    let e = load_volume(&big, &forced).unwrap_err();
+    assert!(matches!(e.kind, VolumeErrorKind::SizeMismatch { actual: 8, .. }), "{e}");
+    let e = load_volume(&big, &LoadOptions { max_voxels: 1 << 28, ..forced }).unwrap_err();
     assert!(matches!(e.kind, VolumeErrorKind::TooLarge { .. }), "{e}");
 
     let hdr = dir.join("bad.nrrd");
@@ -119,8 +135,8 @@ fn dims_that_overflow_a_voxel_count_are_refused_before_allocating() {
     // 2²¹ cubed is 2⁶³ voxels (a count that fits) of 2 bytes: 2⁶⁴ bytes (a size that does not).
     let bytes = dir.join("y_2097152x2097152x2097152_uint16.raw");
     std::fs::write(&bytes, b"").unwrap();
-    for limit in [LoadOptions::default().max_voxels, u64::MAX] {
-        let opts = LoadOptions { max_voxels: limit, ..LoadOptions::default() };
+    for limit in [1 << 28, u64::MAX] {
+        let opts = LoadOptions { max_voxels: limit, memory: MemoryLimit::Unlimited, ..LoadOptions::default() };
         for p in [&nhdr, &attached, &gz, &raw, &bytes] {
             let e = load_volume(p, &opts).unwrap_err();
             let msg = e.to_string();

@@ -211,3 +211,55 @@ fn packet_marcher_handles_tiny_and_flat_volumes() {
         });
     }
 }
+
+/// Odd and non-cubic dims (1, 2, 33 and 65 voxels per axis, across brick edges), anisotropic
+/// spacing, each stored type (8-bit, 16-bit, f32) and bricks spread over several chunks (the
+/// gathers of volumes beyond 2³¹ values): packet equals scalar on every lane kind.
+#[test]
+fn packet_marcher_equals_scalar_on_odd_dims_types_and_chunks() {
+    let tf = TransferFunction::from_points(
+        "t",
+        &[(0.0, [1.0, 0.2, 0.1]), (0.5, [0.2, 0.9, 0.3]), (1.0, [0.1, 0.3, 1.0])],
+        &[(0.0, 0.0), (0.3, 0.0), (0.6, 0.4), (1.0, 0.9)],
+    );
+    let cases: [([u32; 3], Vec3, u32); 5] = [
+        ([33, 65, 2], Vec3::new(1.0, 0.5, 3.0), 0),
+        ([65, 2, 33], Vec3::new(0.7, 1.0, 1.0), 1),
+        ([1, 65, 33], Vec3::ONE, 2),
+        ([2, 33, 65], Vec3::new(1.0, 1.0, 0.4), 0),
+        ([40, 37, 70], Vec3::new(1.0, 1.2, 0.8), 1),
+    ];
+    for (dims, spacing, kind) in cases {
+        let [nx, ny, nz] = dims;
+        let vol = Volume::from_fn("odd", dims, spacing, |p| {
+            let e = Vec3::new(nx as f32, ny as f32, nz as f32) * spacing;
+            let q = p / e - 0.5;
+            let v = (1.0 - 2.2 * q.length()).max(0.0) + 0.2 * (p.x * 0.9).sin() * (p.y * 0.7).cos();
+            match kind {
+                0 => (v * 200.0).round().clamp(0.0, 255.0),
+                1 => (v * 3000.0).round().clamp(0.0, 4000.0),
+                _ => v,
+            }
+        })
+        .unwrap();
+        assert_eq!(vol.voxels().type_name(), ["u8", "u16", "f32"][kind as usize]);
+        let slab = (nx.div_ceil(32) * ny.div_ceil(32)) as usize * volwarp_server::volume::bricks::BRICK_VALUES;
+        let chunked = vol.rechunked(slab + 4).unwrap();
+        assert_eq!(chunked.voxels().layout().chunks(), nz.div_ceil(32) as usize);
+        for (what, v) in [("one chunk", vol.clone()), ("chunked", chunked)] {
+            let ds = Dataset::new(v, tf.clone());
+            let (fast, slow) = pair(&ds, MarchOptions::default());
+            for_each_lane_kind(|lanes| {
+                for (view, cam) in cameras(&fast) {
+                    for h in [Heuristic::Threshold, Heuristic::Midpoint] {
+                        assert_same(
+                            &format!("{lanes:?} {dims:?} {what} {view} {h:?}"),
+                            &fast.march(&cam, h),
+                            &slow.march(&cam, h),
+                        );
+                    }
+                }
+            });
+        }
+    }
+}

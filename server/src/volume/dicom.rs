@@ -25,7 +25,7 @@
 //! `dicom-pixeldata` and its image codecs stay out of the build.
 
 use super::orient::axis_aligned;
-use super::{check_geometry, decode_voxels, voxel_bytes, LoadOptions, SourceInfo, Volume, VolumeError, VoxelType};
+use super::{check_load, decode_voxels, voxel_bytes, LoadOptions, SourceInfo, Volume, VolumeError, VoxelType};
 use dicom_dictionary_std::tags;
 use dicom_object::mem::InMemDicomObject;
 use dicom_object::{DefaultDicomObject, OpenFileOptions};
@@ -457,7 +457,7 @@ pub fn load_files(name: &Path, files: &[PathBuf], opts: &LoadOptions) -> Result<
     let cols_dir = [row.map(|c| c * ps[1]), col.map(|c| c * ps[0]), normal.map(|c| c * dz)];
     let r = axis_aligned(cols_dir).map_err(|e| e.at(name))?;
     let dims = [first.cols, first.rows, u32::try_from(nz).map_err(|_| bad("too many slices").at(name))?];
-    let voxels = check_geometry(dims, r.spacing, opts.max_voxels).map_err(|e| e.at(name))?;
+    let voxels = check_load(dims, r.spacing, opts, 4, 8).map_err(|e| e.at(name))?;
     let ty = match (first.bits, first.signed) {
         (8, false) => VoxelType::U8,
         (8, true) => VoxelType::I8,

@@ -30,6 +30,14 @@ pub enum VolumeErrorKind {
         /// The limit.
         limit: u64,
     },
+    /// The volume needs more memory than the load may take
+    /// ([`LoadOptions::memory`](super::LoadOptions::memory)).
+    OutOfMemory {
+        /// Bytes the volume needs (its bricks, the grids and any decoding buffer).
+        needed: u64,
+        /// Bytes available (`None`: an allocation failed).
+        available: Option<u64>,
+    },
     /// Gzip data that does not decompress.
     Decompress(String),
     /// A dimension or spacing is zero, negative or not finite.
@@ -96,6 +104,18 @@ impl fmt::Display for VolumeErrorKind {
             VolumeErrorKind::Unsupported(s) => write!(f, "unsupported: {s}"),
             VolumeErrorKind::TooLarge { voxels, limit } => {
                 write!(f, "{voxels} voxels is over the limit of {limit}")
+            }
+            VolumeErrorKind::OutOfMemory { needed, available } => {
+                let gib = |b: u64| b as f64 / (1u64 << 30) as f64;
+                match available {
+                    Some(a) => write!(
+                        f,
+                        "needs {:.2} GiB of memory, {:.2} GiB available (--max-memory SIZE or --max-memory none to load it anyway)",
+                        gib(*needed),
+                        gib(*a)
+                    ),
+                    None => write!(f, "could not allocate {:.2} GiB of memory", gib(*needed)),
+                }
             }
             VolumeErrorKind::Decompress(s) => write!(f, "gzip data does not decompress: {s}"),
             VolumeErrorKind::BadGeometry(s) => write!(f, "{s}"),

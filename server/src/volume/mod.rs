@@ -5,13 +5,16 @@
 //! Sampling is trilinear between voxel centres and clamps to the nearest voxel within half a
 //! voxel of the box faces.
 //!
-//! Values are stored normalized to `0..=1` over the data range of the file
-//! ([`Volume::value_range`]), so a transfer function is a lookup over `0..=1`. Integer values
-//! at most 65,535 apart (every 8- and 16-bit volume) are *integer-coded*: code `value − min`,
-//! normalized value `code as f32 · scale` in `f32` arithmetic (`scale` the largest `f32` with
-//! `range · scale ≤ 1`), which the packet marcher reproduces bit for bit from the codes it
-//! gathers (`CodeStencil`: bytes where the range is at most 255, else 16-bit codes); other values
-//! (`f32` data, wider integers) are normalized in `f64`.
+//! **Storage.** The voxels are bricked in their own type ([`bricks`], [`Voxels`]): 8- and
+//! 16-bit files keep 1 and 2 bytes per voxel (signed 16-bit offset by 32,768), other data is
+//! kept as `f32` normalized to `0..=1`. A stored value, or a trilinear blend of stored values,
+//! `s` normalizes to `(s − offset) · scale` ([`Volume::normalization`]; `scale` the largest
+//! `f32` with `range · scale ≤ 1`, so an 8- or 16-bit value `min + code` normalizes to
+//! `code · scale` exactly), so a transfer function is a lookup over `0..=1`
+//! ([`Volume::value_range`] is the data range in the file's units). The scalar and the packet
+//! marcher both blend the stored values first and normalize the blend, with the same
+//! arithmetic, so they agree bit for bit. A load refuses a volume that would take more memory
+//! than [`LoadOptions::memory`] allows before it allocates anything.
 //!
 //! Loaders ([`load_volume`], the format recognized by content and extension:
 //! [`detect_format`]): headerless raw files named `name_XxYxZ_type.raw` ([`parse_raw_name`];
@@ -26,6 +29,7 @@
 //! |---|---|
 //! | `mod.rs` | the [`Volume`] data model, [`LoadOptions`], [`load_volume`] |
 //! | `error.rs` | [`VolumeError`] and [`VolumeErrorKind`] |
+//! | [`bricks`] | bricked storage in the file's own type, the streaming brick builder |
 //! | `sampling.rs` | voxel reads and trilinear sampling |
 //! | `raw.rs` | [`VoxelType`], raw file names ([`parse_raw_name`]), voxel decoding, the raw loader |
 //! | [`nrrd`] | NRRD headers and data |
@@ -35,6 +39,7 @@
 //! | [`dicom`] | DICOM series and multi-frame files |
 //! | [`orient`] | axis-aligned orientations: the reordering into LPS |
 
+pub mod bricks;
 pub mod dicom;
 mod error;
 pub mod nifti;
@@ -42,9 +47,11 @@ pub mod nrrd;
 pub mod orient;
 mod raw;
 mod sampling;
+mod stream;
 pub mod tiff_stack;
 pub mod vti;
 
+pub use bricks::Voxels;
 pub use error::{VolumeError, VolumeErrorKind};
 pub(crate) use raw::read_exactly;
 pub use raw::{decode_voxels, parse_dims, parse_raw_name, RawName, VoxelType};
@@ -62,17 +69,93 @@ pub struct LoadOptions {
     pub voxel_type: Option<VoxelType>,
     /// Voxel spacing (default: from the NRRD header, else 1, 1, 1).
     pub spacing: Option<Vec3>,
-    /// Most voxels accepted (default 2²⁸, i.e. 1 GiB as f32).
+    /// Most voxels accepted (default: no limit but memory; the fuzzers bound it).
     pub max_voxels: u64,
+    /// The memory a volume may take (see [`MemoryLimit`]; default what the system has
+    /// available).
+    pub memory: MemoryLimit,
 }
 
 impl Default for LoadOptions {
     fn default() -> Self {
-        LoadOptions { dims: None, voxel_type: None, spacing: None, max_voxels: 1 << 28 }
+        LoadOptions {
+            dims: None,
+            voxel_type: None,
+            spacing: None,
+            max_voxels: u64::MAX,
+            memory: MemoryLimit::Available,
+        }
     }
 }
 
-/// A scalar volume, normalized to `0..=1` (see the module docs for its place in world space).
+/// How much memory a load may take; a volume that needs more is refused before anything is
+/// allocated ([`VolumeErrorKind::OutOfMemory`]).
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum MemoryLimit {
+    /// What the system has available now (`MemAvailable` of `/proc/meminfo`; no limit where
+    /// that is unknown).
+    Available,
+    /// At most this many bytes.
+    Bytes(u64),
+    /// No limit: try the allocation whatever it needs (`--max-memory none`).
+    Unlimited,
+}
+
+impl MemoryLimit {
+    /// The limit in bytes (`None`: none known).
+    pub fn bytes(self) -> Option<u64> {
+        match self {
+            MemoryLimit::Available => available_memory(),
+            MemoryLimit::Bytes(b) => Some(b),
+            MemoryLimit::Unlimited => None,
+        }
+    }
+
+    /// Parses `auto` (available memory), `none` (no limit) or a size such as `20G`, `512M`,
+    /// `1.5GiB`, `123456` (bytes).
+    pub fn parse(s: &str) -> Result<MemoryLimit, String> {
+        let t = s.trim().to_ascii_lowercase();
+        match t.as_str() {
+            "auto" | "available" => return Ok(MemoryLimit::Available),
+            "none" | "unlimited" | "force" => return Ok(MemoryLimit::Unlimited),
+            _ => {}
+        }
+        let t = t.trim_end_matches("ib").trim_end_matches('b');
+        let (num, mul) = match t.chars().last() {
+            Some('k') => (&t[..t.len() - 1], 1u64 << 10),
+            Some('m') => (&t[..t.len() - 1], 1 << 20),
+            Some('g') => (&t[..t.len() - 1], 1 << 30),
+            Some('t') => (&t[..t.len() - 1], 1 << 40),
+            _ => (t, 1),
+        };
+        let v: f64 = num.trim().parse().map_err(|_| format!("{s:?} is not a size (e.g. 20G, 512M), auto or none"))?;
+        if !(v.is_finite() && v >= 0.0) {
+            return Err(format!("{s:?} is not a size"));
+        }
+        Ok(MemoryLimit::Bytes((v * mul as f64).min(u64::MAX as f64) as u64))
+    }
+
+    /// Refuses `needed` bytes where they are over the limit.
+    pub(crate) fn check(self, needed: u64) -> Result<(), VolumeError> {
+        match self.bytes() {
+            Some(available) if needed > available => {
+                Err(VolumeError::new(VolumeErrorKind::OutOfMemory { needed, available: Some(available) }))
+            }
+            _ => Ok(()),
+        }
+    }
+}
+
+/// `MemAvailable` of `/proc/meminfo` in bytes (`None` where it cannot be read).
+pub fn available_memory() -> Option<u64> {
+    let info = std::fs::read_to_string("/proc/meminfo").ok()?;
+    let line = info.lines().find(|l| l.starts_with("MemAvailable:"))?;
+    let kib: u64 = line.split_whitespace().nth(1)?.parse().ok()?;
+    kib.checked_mul(1024)
+}
+
+/// A scalar volume (see the module docs for its place in world space): its voxels bricked in
+/// their own type ([`Voxels`]), and how a stored value normalizes to `0..=1`.
 #[derive(Clone, Debug)]
 pub struct Volume {
     /// A short name (file stem).
@@ -80,11 +163,13 @@ pub struct Volume {
     dims: [u32; 3],
     spacing: Vec3,
     value_range: (f32, f32),
-    /// The values, then [`Volume::padding`] zeros (so that reads of a trilinear neighbourhood
-    /// need no clamping of its far corners; see `padded_data`).
-    data: Vec<f32>,
-    /// For integer-coded volumes, the packet marcher's stencil (see [`CodeStencil`]).
-    stencil: Option<CodeStencil>,
+    /// The voxels.
+    voxels: Voxels,
+    /// Normalization: a stored value (or a trilinear blend of stored values) `s` is
+    /// `(s − offset) · scale` normalized.
+    offset: f32,
+    /// See `offset`.
+    scale: f32,
     /// What the loader read.
     source: SourceInfo,
 }
@@ -107,38 +192,9 @@ pub struct SourceInfo {
     pub files: usize,
 }
 
-/// The voxels of a volume of integer values at most 65,535 apart (every 8- and 16-bit volume),
-/// as codes `value − min` with the normalized value `code as f32 * scale` (exactly what
-/// [`Volume::data`] holds for them), arranged for the packet marcher's gathers: element `i`
-/// holds the codes of voxels `i`, `i + 1`, `i + nx` and `i + nx + 1` (the x–y square of a
-/// trilinear stencil), so two gathers (this slice and the next) read all eight corners, where
-/// `f32` values take four gathers of pairs. Reads past the volume's rows or end give codes whose
-/// weight is 0.
-#[derive(Clone, Debug)]
-pub(crate) struct CodeStencil {
-    /// The squares, one per voxel, then [`Volume::padding`] more.
-    pub(crate) squares: Squares,
-    /// The normalized value of code 1.
-    pub(crate) scale: f32,
-}
-
-/// The x–y squares of codes of a [`CodeStencil`].
-#[derive(Clone, Debug)]
-pub(crate) enum Squares {
-    /// Values at most 255 apart: byte codes, voxel `i`, `i + 1`, `i + nx`, `i + nx + 1` in bytes
-    /// 0 to 3 of a word.
-    Bytes(Vec<u32>),
-    /// Values at most 65,535 apart: 16-bit codes, in 16-bit fields 0 to 3 of a 64-bit word.
-    Shorts(Vec<u64>),
-}
-
-/// Most voxels a [`CodeStencil`] is built for (4 bytes per voxel for byte codes, as the values
-/// take; 8 for 16-bit codes).
-const MAX_STENCIL_VOXELS: u64 = 1 << 26;
-
 /// The largest `f32` scale with `range · scale ≤ 1` in `f32` arithmetic (so codes normalize
 /// into `0 ..= 1` without clamping), 0 for an empty range.
-fn code_scale(range: f32) -> f32 {
+pub(crate) fn code_scale(range: f32) -> f32 {
     if range <= 0.0 {
         return 0.0;
     }
@@ -169,6 +225,33 @@ pub(crate) fn check_geometry(dims: [u32; 3], spacing: Vec3, max_voxels: u64) -> 
     Ok(voxels)
 }
 
+/// Checks dims and spacing like [`check_geometry`] and refuses a volume whose loading needs
+/// more memory than `opts.memory` allows: the bricks of `stored_bytes` per value and
+/// `decoded_bytes` per voxel of temporary decoded values (0 for the streaming loaders). Returns
+/// the number of voxels.
+pub(crate) fn check_load(
+    dims: [u32; 3],
+    spacing: Vec3,
+    opts: &LoadOptions,
+    stored_bytes: u64,
+    decoded_bytes: u64,
+) -> Result<u64, VolumeError> {
+    let voxels = check_geometry(dims, spacing, opts.max_voxels)?;
+    // The bricks, any decoding buffer, and the empty-space grids (about 1/8 byte per voxel).
+    let needed = bricks::Layout::stored_bytes(dims, stored_bytes)
+        .and_then(|b| voxels.checked_mul(decoded_bytes)?.checked_add(b))
+        .and_then(|n| n.checked_add(voxels / 8))
+        .ok_or_else(|| {
+            VolumeError::new(VolumeErrorKind::BadGeometry(format!(
+                "dimensions {}x{}x{} give more than 2^64 bytes",
+                dims[0], dims[1], dims[2]
+            )))
+        })?;
+    opts.memory.check(needed)?;
+    bricks::Layout::new(dims)?;
+    Ok(voxels)
+}
+
 /// The number of voxels of `dims`, an error where the product does not fit in 64 bits (a
 /// header's dims must never wrap around to a small count that passes the size checks).
 pub(crate) fn voxel_count(dims: [u32; 3]) -> Result<u64, VolumeError> {
@@ -189,8 +272,9 @@ pub(crate) fn voxel_bytes(voxels: u64, ty: VoxelType) -> Result<u64, VolumeError
 
 impl Volume {
     /// A volume from values in x-fastest order (`dims` product long). Non-finite values become
-    /// the data minimum; the values are normalized over their range (integer-coded where they are
-    /// integers at most 65,535 apart, see the module docs).
+    /// the data minimum; integer values at most 65,535 apart are stored as 8- or 16-bit codes
+    /// `value − min` (normalized `code · scale`, [`code_scale`]), others as `f32` normalized
+    /// over their range in `f64`.
     pub fn from_values(name: &str, dims: [u32; 3], spacing: Vec3, mut values: Vec<f32>) -> Result<Volume, VolumeError> {
         let n = check_geometry(dims, spacing, u64::MAX)?;
         if values.len() as u64 != n {
@@ -207,47 +291,44 @@ impl Volume {
         if lo > hi {
             (lo, hi) = (0.0, 0.0);
         }
-        // Integer values at most 65,535 apart: codes, normalized in f32 arithmetic so that the
-        // packet marcher can normalize the codes it gathers to the same bits.
-        let coded = hi - lo <= 65_535.0
-            && n <= MAX_STENCIL_VOXELS >> u32::from(hi - lo > 255.0)
-            && values.iter().all(|v| v.is_finite() && v.fract() == 0.0 && v.abs() < 16_777_216.0);
-        let mut codes: Vec<u16> = Vec::new();
-        let scale = code_scale(hi - lo);
-        if coded {
-            codes = values.iter().map(|&v| (v - lo) as u16).collect();
-            for (v, &c) in values.iter_mut().zip(&codes) {
-                *v = c as f32 * scale;
-            }
+        let coded =
+            hi - lo <= 65_535.0 && values.iter().all(|v| v.is_finite() && v.fract() == 0.0 && v.abs() < 16_777_216.0);
+        let (voxels, scale) = if coded && hi - lo <= 255.0 {
+            let codes: Vec<u8> = values.iter().map(|&v| (v - lo) as u8).collect();
+            (Voxels::U8(bricks::grid_from_values(dims, &codes)?), code_scale(hi - lo))
+        } else if coded {
+            let codes: Vec<u16> = values.iter().map(|&v| (v - lo) as u16).collect();
+            (Voxels::U16(bricks::grid_from_values(dims, &codes)?), code_scale(hi - lo))
         } else {
             let inv_range = if hi > lo { 1.0 / (hi as f64 - lo as f64) } else { 0.0 };
             for v in values.iter_mut() {
                 *v = if v.is_finite() { ((*v as f64 - lo as f64) * inv_range).clamp(0.0, 1.0) as f32 } else { 0.0 };
             }
-        }
-        values.resize(values.len() + Volume::padding(dims), 0.0);
-        let stencil = coded.then(|| {
-            let nx = dims[0] as usize;
-            let code = |i: usize| codes.get(i).copied().unwrap_or(0) as u64;
-            let square = |i: usize| [code(i), code(i + 1), code(i + nx), code(i + nx + 1)];
-            let squares = if hi - lo <= 255.0 {
-                let word = |c: [u64; 4]| (c[0] | c[1] << 8 | c[2] << 16 | c[3] << 24) as u32;
-                Squares::Bytes((0..values.len()).map(|i| word(square(i))).collect())
-            } else {
-                let word = |c: [u64; 4]| c[0] | c[1] << 16 | c[2] << 32 | c[3] << 48;
-                Squares::Shorts((0..values.len()).map(|i| word(square(i))).collect())
-            };
-            CodeStencil { squares, scale }
-        });
-        Ok(Volume {
+            (Voxels::F32(bricks::grid_from_values(dims, &values)?), 1.0)
+        };
+        Ok(Volume::from_voxels(name, spacing, voxels, (lo, hi), 0.0, scale))
+    }
+
+    /// A volume of bricked `voxels`: a stored value `s` normalizes to `(s − offset) · scale`;
+    /// `value_range` is the data range in the source's units.
+    pub(crate) fn from_voxels(
+        name: &str,
+        spacing: Vec3,
+        voxels: Voxels,
+        value_range: (f32, f32),
+        offset: f32,
+        scale: f32,
+    ) -> Volume {
+        Volume {
             name: name.to_string(),
-            dims,
+            dims: voxels.layout().dims(),
             spacing,
-            value_range: (lo, hi),
-            data: values,
-            stencil,
+            value_range,
+            voxels,
+            offset,
+            scale,
             source: SourceInfo::default(),
-        })
+        }
     }
 
     /// What the loader read (empty for a volume made in memory).
@@ -320,27 +401,40 @@ impl Volume {
         self.spacing.length()
     }
 
-    /// The normalized values, x fastest.
-    pub fn data(&self) -> &[f32] {
-        &self.data[..self.data.len() - Volume::padding(self.dims)]
+    /// The stored voxels.
+    pub fn voxels(&self) -> &Voxels {
+        &self.voxels
     }
 
-    /// Zeros stored after the values: one slice, one row and two values, so that the eight
-    /// neighbours `base + {0, 1} + {0, nx} + {0, nx·ny}` of any voxel `base` can be read
-    /// without bounds (the packet marcher's gathers; a far neighbour past the volume's edge
-    /// is read where its weight is exactly 0, so its value never matters).
-    fn padding(dims: [u32; 3]) -> usize {
-        dims[0] as usize * dims[1] as usize + dims[0] as usize + 2
+    /// The normalization of stored values: `(offset, scale)`, a stored value `s` normalizes to
+    /// `(s − offset) · scale`.
+    pub fn normalization(&self) -> (f32, f32) {
+        (self.offset, self.scale)
     }
 
-    /// [`Volume::data`] followed by the padding zeros.
-    pub(crate) fn padded_data(&self) -> &[f32] {
-        &self.data
+    /// The same volume with its bricks in chunks of at most `limit` values (see
+    /// [`bricks::Layout::with_chunk_limit`]): how tests make a small volume take the chunked
+    /// gathers of volumes beyond 2³¹ values.
+    pub fn rechunked(&self, limit: usize) -> Result<Volume, VolumeError> {
+        Ok(Volume { voxels: self.voxels.rechunked(limit)?, ..self.clone() })
     }
 
-    /// The codes of an integer-coded volume, arranged for the packet marcher.
-    pub(crate) fn code_stencil(&self) -> Option<&CodeStencil> {
-        self.stencil.as_ref()
+    /// Bytes the voxels take in memory.
+    pub fn memory_bytes(&self) -> u64 {
+        self.voxels.bytes()
+    }
+
+    /// The normalized values, x fastest (allocates 4 bytes per voxel: for tests and small
+    /// volumes).
+    pub fn values(&self) -> Vec<f32> {
+        let [nx, ny, nz] = self.dims;
+        let mut out = Vec::with_capacity(nx as usize * ny as usize * nz as usize);
+        for k in 0..nz {
+            for j in 0..ny {
+                out.extend((0..nx).map(|i| self.voxel(i, j, k)));
+            }
+        }
+        out
     }
 }
 
@@ -475,62 +569,60 @@ mod tests {
     use super::*;
 
     #[test]
-    fn integer_coded_volumes_normalize_their_codes_exactly() {
-        // 16-bit values of small range (an unseen-volume case), 8-bit values, a flat volume.
-        for values in [
-            vec![1000.0, 1200.0, 1100.0, 1001.0, 1254.0, 1000.0],
-            (0..24).map(|i| (i * 37 % 256) as f32).chain([0.0, 255.0]).collect(),
-            vec![7.0; 6],
-        ] {
-            let range =
-                values.iter().copied().fold(0.0, f32::max) - values.iter().copied().fold(f32::INFINITY, f32::min);
+    fn integer_values_are_stored_as_codes_that_normalize_exactly() {
+        // 8-bit codes, 16-bit codes (a 16-bit range), a flat volume; fractions and wide ranges
+        // as normalized f32.
+        let cases: [(Vec<f32>, &str); 6] = [
+            (vec![1000.0, 1200.0, 1100.0, 1001.0, 1254.0, 1000.0], "u8"),
+            ((0..24).map(|i| (i * 37 % 256) as f32).chain([0.0, 255.0]).collect(), "u8"),
+            (vec![7.0; 6], "u8"),
+            ((0..30).map(|i| (i * 4099 % 65_536) as f32 - 32_768.0).chain([-32_768.0, 32_767.0]).collect(), "u16"),
+            (vec![0.0, 65_536.0], "f32"),
+            (vec![0.0, 0.5], "f32"),
+        ];
+        for (values, ty) in cases {
             let dims = [values.len() as u32 / 2, 2, 1];
             let v = Volume::from_values("b", dims, Vec3::ONE, values.clone()).unwrap();
-            let st = v.code_stencil().expect("integer-coded");
-            let Squares::Bytes(words) = &st.squares else { panic!("byte codes expected") };
-            assert!(range * st.scale <= 1.0);
-            let lo = values.iter().copied().fold(f32::INFINITY, f32::min);
-            let nx = dims[0] as usize;
-            for (i, (&x, &n)) in values.iter().zip(v.data()).enumerate() {
-                let code = (x - lo) as u32;
-                assert_eq!(n.to_bits(), (code as f32 * st.scale).to_bits());
+            assert_eq!(v.voxels().type_name(), ty, "{values:?}");
+            let (lo, hi) = v.value_range();
+            let (offset, scale) = v.normalization();
+            for (&x, n) in values.iter().zip(v.values()) {
                 assert!((0.0..=1.0).contains(&n));
-                assert_eq!(words[i] & 255, code);
-                if i + nx + 1 < values.len() {
-                    let c = |j: usize| (values[j] - lo) as u32;
-                    assert_eq!(words[i], c(i) | c(i + 1) << 8 | c(i + nx) << 16 | c(i + nx + 1) << 24);
+                if ty != "f32" {
+                    assert_eq!(offset, 0.0);
+                    assert!((hi - lo) * scale <= 1.0);
+                    assert_eq!(n.to_bits(), ((x - lo) * scale).to_bits(), "{x}");
+                } else {
+                    assert_eq!(n, ((x as f64 - lo as f64) / (hi as f64 - lo as f64)) as f32);
                 }
             }
-            if range > 0.0 {
-                assert_eq!(v.data().iter().copied().fold(0.0, f32::max), range * st.scale);
-            }
         }
-        // 16-bit ranges: 16-bit codes.
-        let values: Vec<f32> =
-            (0..30).map(|i| (i * 4099 % 65_536) as f32 - 32_768.0).chain([-32_768.0, 32_767.0]).collect();
-        let v = Volume::from_values("s", [8, 4, 1], Vec3::ONE, values.clone()).unwrap();
-        let st = v.code_stencil().expect("integer-coded");
-        let Squares::Shorts(words) = &st.squares else { panic!("16-bit codes expected") };
-        assert!(65_535.0 * st.scale <= 1.0);
-        for (i, (&x, &n)) in values.iter().zip(v.data()).enumerate() {
-            let c = |j: usize| (values[j] + 32_768.0) as u64;
-            assert_eq!(n.to_bits(), (c(i) as f32 * st.scale).to_bits());
-            if i + 9 < values.len() {
-                assert_eq!(words[i], c(i) | c(i + 1) << 16 | c(i + 8) << 32 | c(i + 9) << 48, "{x}");
-            }
-        }
-        assert_eq!(v.data().iter().copied().fold(0.0, f32::max), 65_535.0 * st.scale);
-        // Wider ranges and fractions keep the f64 normalization and no codes.
-        for values in [vec![0.0, 65_536.0], vec![0.0, 0.5], vec![0.0, f32::NAN]] {
-            let v = Volume::from_values("f", [2, 1, 1], Vec3::ONE, values).unwrap();
-            assert!(v.code_stencil().is_none());
-        }
+        let nan = Volume::from_values("n", [2, 1, 1], Vec3::ONE, vec![3.0, f32::NAN]).unwrap();
+        assert_eq!(nan.voxels().type_name(), "f32");
+        assert_eq!(nan.values(), vec![0.0, 0.0]);
+    }
+
+    #[test]
+    fn memory_limits_parse_and_refuse() {
+        assert_eq!(MemoryLimit::parse("20G"), Ok(MemoryLimit::Bytes(20 << 30)));
+        assert_eq!(MemoryLimit::parse("512MiB"), Ok(MemoryLimit::Bytes(512 << 20)));
+        assert_eq!(MemoryLimit::parse("1.5g"), Ok(MemoryLimit::Bytes(3 << 29)));
+        assert_eq!(MemoryLimit::parse("123"), Ok(MemoryLimit::Bytes(123)));
+        assert_eq!(MemoryLimit::parse("none"), Ok(MemoryLimit::Unlimited));
+        assert_eq!(MemoryLimit::parse("auto"), Ok(MemoryLimit::Available));
+        assert!(MemoryLimit::parse("lots").is_err());
+        assert!(MemoryLimit::parse("-1G").is_err());
+        let e = MemoryLimit::Bytes(1000).check(1001).unwrap_err();
+        assert!(matches!(e.kind, VolumeErrorKind::OutOfMemory { needed: 1001, available: Some(1000) }));
+        assert!(e.to_string().contains("--max-memory"), "{e}");
+        assert!(MemoryLimit::Unlimited.check(u64::MAX).is_ok());
+        assert!(available_memory().is_some_and(|b| b > 0));
     }
 
     #[test]
     fn marschner_lobb_is_in_range() {
         let v = Volume::marschner_lobb(16);
         assert_eq!(v.dims(), [16; 3]);
-        assert!(v.data().iter().all(|x| (0.0..=1.0).contains(x)));
+        assert!(v.values().iter().all(|x| (0.0..=1.0).contains(x)));
     }
 }

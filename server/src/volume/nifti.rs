@@ -324,7 +324,7 @@ pub fn load(path: &Path, opts: &LoadOptions) -> Result<Volume, VolumeError> {
     }
     let (reorient, orientation) = h.reorient().map_err(|e| e.at(path))?;
     let spacing = opts.spacing.unwrap_or(reorient.spacing);
-    let voxels = super::check_geometry(h.dims, reorient.spacing, opts.max_voxels).map_err(|e| e.at(path))?;
+    let voxels = super::check_load(h.dims, reorient.spacing, opts, 4, 8).map_err(|e| e.at(path))?;
     let expected = super::voxel_bytes(voxels, h.voxel_type).map_err(|e| e.at(path))?;
     // The data: in this file after the header, or in the `.img` beside a `.hdr`.
     let (data_path, (mut data, is_gz), consumed) = if h.pair {

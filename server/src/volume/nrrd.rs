@@ -6,6 +6,7 @@
 //! voxels.
 
 use super::orient::Reorient;
+use super::stream::{stream_volume, StreamSpec};
 use super::{decode_voxels, read_exactly, LoadOptions, Volume, VolumeError, VolumeErrorKind, VoxelType};
 use std::path::{Path, PathBuf};
 use volwarp_core::Vec3;
@@ -230,7 +231,11 @@ pub fn load(path: &Path, opts: &LoadOptions) -> Result<Volume, VolumeError> {
     let dims = opts.dims.unwrap_or(h.dims);
     let ty = opts.voxel_type.unwrap_or(h.voxel_type);
     let spacing = opts.spacing.or(h.spacing).unwrap_or(Vec3::ONE);
-    let voxels = super::check_geometry(dims, spacing, opts.max_voxels).map_err(|e| e.at(path))?;
+    // Streamed into bricks unless the z axis is mirrored (then decoded whole and reordered).
+    let mirror_z = h.flip[2] && opts.dims.is_none();
+    let decoded = if mirror_z { 4 + ty.size() as u64 } else { 0 };
+    let voxels =
+        super::check_load(dims, spacing, opts, super::stream::stored_size(ty), decoded).map_err(|e| e.at(path))?;
     let expected = super::voxel_bytes(voxels, ty).map_err(|e| e.at(path))?;
     let (data_path, offset): (PathBuf, u64) = match &h.data_file {
         Some(f) => (path.parent().unwrap_or(Path::new(".")).join(f), 0),
@@ -250,7 +255,26 @@ pub fn load(path: &Path, opts: &LoadOptions) -> Result<Volume, VolumeError> {
         use std::io::Seek;
         reader.seek(std::io::SeekFrom::Start(skip)).map_err(|e| io(&data_path, e))?;
     }
-    let bytes = match h.encoding {
+    let name = path.file_stem().and_then(|s| s.to_str()).unwrap_or("volume");
+    let flip = if opts.dims.is_none() { h.flip } else { [false; 3] };
+    let orientation = if flip.contains(&true) {
+        let axes: Vec<&str> = (0..3).filter(|&a| flip[a]).map(|a| ["x", "y", "z"][a]).collect();
+        format!("{} flipped (negative space directions)", axes.join(", "))
+    } else {
+        "none (stored order)".to_string()
+    };
+    let source = super::SourceInfo { voxel_type: Some(ty), orientation, ..Default::default() };
+    let spec =
+        StreamSpec { name, dims, spacing, ty, big_endian: h.big_endian, flip_xy: [flip[0], flip[1]], path: &data_path };
+    // A volume mirrored in z: its slices arrive last first, so it is decoded whole and
+    // reordered (the one case that is not streamed).
+    let whole = |reader: &mut dyn std::io::Read| -> Result<Volume, VolumeError> {
+        let bytes = read_exactly(reader, expected, &data_path)?;
+        let values = decode_voxels(&bytes, ty, h.big_endian);
+        let values = Reorient { perm: [0, 1, 2], flip, spacing }.apply(values, dims);
+        Volume::from_values(name, dims, spacing, values).map_err(|e| e.at(path))
+    };
+    let vol = match h.encoding {
         Encoding::Raw => {
             if len.saturating_sub(skip) != expected {
                 return Err(VolumeError::new(VolumeErrorKind::SizeMismatch {
@@ -259,7 +283,11 @@ pub fn load(path: &Path, opts: &LoadOptions) -> Result<Volume, VolumeError> {
                 })
                 .at(&data_path));
             }
-            read_exactly(reader, expected, &data_path)?
+            if mirror_z {
+                whole(&mut reader)?
+            } else {
+                stream_volume(&spec, reader)?
+            }
         }
         Encoding::Gzip => {
             use std::io::Read;
@@ -268,22 +296,14 @@ pub fn load(path: &Path, opts: &LoadOptions) -> Result<Volume, VolumeError> {
                 std::io::copy(&mut dec.by_ref().take(h.byte_skip as u64), &mut std::io::sink())
                     .map_err(|e| VolumeError::new(VolumeErrorKind::Decompress(e.to_string())).at(&data_path))?;
             }
-            read_exactly(dec, expected, &data_path).map_err(|e| match e.kind {
+            let r = if mirror_z { whole(&mut dec) } else { stream_volume(&spec, dec) };
+            r.map_err(|e| match e.kind {
                 VolumeErrorKind::Io(io) => VolumeError::new(VolumeErrorKind::Decompress(io.to_string())).at(&data_path),
                 _ => e,
             })?
         }
     };
-    let mut values = decode_voxels(&bytes, ty, h.big_endian);
-    let mut orientation = "none (stored order)".to_string();
-    if h.flip.contains(&true) && opts.dims.is_none() {
-        values = Reorient { perm: [0, 1, 2], flip: h.flip, spacing }.apply(values, dims);
-        let axes: Vec<&str> = (0..3).filter(|&a| h.flip[a]).map(|a| ["x", "y", "z"][a]).collect();
-        orientation = format!("{} flipped (negative space directions)", axes.join(", "));
-    }
-    let name = path.file_stem().and_then(|s| s.to_str()).unwrap_or("volume");
-    let source = super::SourceInfo { voxel_type: Some(ty), orientation, ..Default::default() };
-    Ok(Volume::from_values(name, dims, spacing, values).map_err(|e| e.at(path))?.with_source(source))
+    Ok(vol.with_source(source))
 }
 
 /// Writes a 3-D NRRD file with attached data (`gzip` selects the encoding) or, when

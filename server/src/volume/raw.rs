@@ -1,7 +1,8 @@
 //! Headerless raw files: [`VoxelType`], the `name_XxYxZ_type.raw` naming convention, voxel
 //! decoding (shared with the NRRD loader) and the raw loader.
 
-use super::{check_geometry, LoadOptions, Volume, VolumeError, VolumeErrorKind};
+use super::stream::{stream_volume, StreamSpec};
+use super::{check_load, LoadOptions, Volume, VolumeError, VolumeErrorKind};
 use std::io::Read;
 use std::path::Path;
 use volwarp_core::Vec3;
@@ -169,17 +170,16 @@ pub(super) fn load_raw(path: &Path, opts: &LoadOptions) -> Result<Volume, Volume
         (Err(_), _, _) => return Err(from_name.unwrap_err().at(path)),
     };
     let spacing = opts.spacing.unwrap_or(Vec3::ONE);
-    let voxels = check_geometry(dims, spacing, opts.max_voxels).map_err(|e| e.at(path))?;
+    let voxels = check_load(dims, spacing, opts, super::stream::stored_size(ty), 0).map_err(|e| e.at(path))?;
     let expected = super::voxel_bytes(voxels, ty).map_err(|e| e.at(path))?;
     let meta = std::fs::metadata(path).map_err(|e| io_err(path, e))?;
     if meta.len() != expected {
         return Err(VolumeError::new(VolumeErrorKind::SizeMismatch { expected, actual: meta.len() }).at(path));
     }
     let file = std::fs::File::open(path).map_err(|e| io_err(path, e))?;
-    let bytes = read_exactly(std::io::BufReader::new(file), expected, path)?;
-    let values = decode_voxels(&bytes, ty, false);
+    let spec = StreamSpec { name: &name, dims, spacing, ty, big_endian: false, flip_xy: [false; 2], path };
     let source = super::SourceInfo { voxel_type: Some(ty), ..Default::default() };
-    Ok(Volume::from_values(&name, dims, spacing, values).map_err(|e| e.at(path))?.with_source(source))
+    Ok(stream_volume(&spec, file)?.with_source(source))
 }
 
 #[cfg(test)]

@@ -1,5 +1,5 @@
 //! Reading a [`Volume`]: voxels and trilinear samples between voxel centres, clamped to the
-//! volume (see the [module docs](super) for the volume's place in world space).
+//! volume (see the [module docs](super) for its place in world space and the normalization).
 
 use super::Volume;
 use volwarp_core::Vec3;
@@ -9,63 +9,22 @@ impl Volume {
     #[inline]
     pub fn voxel(&self, i: u32, j: u32, k: u32) -> f32 {
         let [nx, ny, nz] = self.dims;
-        let (i, j, k) = (i.min(nx - 1) as usize, j.min(ny - 1) as usize, k.min(nz - 1) as usize);
-        self.data()[i + nx as usize * (j + ny as usize * k)]
+        (self.voxels.get(i.min(nx - 1), j.min(ny - 1), k.min(nz - 1)) - self.offset) * self.scale
     }
 
     /// Trilinear sample at continuous voxel coordinates `g` (voxel centres at integers),
-    /// clamped to the volume.
+    /// clamped to the volume: the stored values blended, then normalized. The packet marcher
+    /// computes the same bits in lanes.
     #[inline(always)]
     pub fn sample_grid(&self, g: Vec3) -> f32 {
-        let [nx, ny, nz] = self.dims;
-        // Fast path: strictly inside the lattice of voxel centres, all eight neighbours exist.
-        if g.x >= 0.0
-            && g.y >= 0.0
-            && g.z >= 0.0
-            && g.x < (nx - 1) as f32
-            && g.y < (ny - 1) as f32
-            && g.z < (nz - 1) as f32
-        {
-            let (x0, y0, z0) = (g.x as u32 as usize, g.y as u32 as usize, g.z as u32 as usize);
-            let (fx, fy, fz) = (g.x - x0 as f32, g.y - y0 as f32, g.z - z0 as f32);
-            let sy = nx as usize;
-            let sz = nx as usize * ny as usize;
-            let base = x0 + sy * y0 + sz * z0;
-            if let Some(c) = self.data().get(base..base + sz + sy + 2) {
-                let corners = [c[0], c[1], c[sy], c[sy + 1], c[sz], c[sz + 1], c[sz + sy], c[sz + sy + 1]];
-                return trilinear(corners, fx, fy, fz);
-            }
-        }
-        self.sample_grid_clamped(g)
-    }
-
-    /// [`Volume::sample_grid`] without the fast path for points strictly inside the lattice of
-    /// voxel centres (same arithmetic, so the same result; the reference in tests).
-    #[inline]
-    pub fn sample_grid_clamped(&self, g: Vec3) -> f32 {
         let [nx, ny, nz] = self.dims;
         let gx = g.x.max(0.0).min((nx - 1) as f32); // NaN -> 0
         let gy = g.y.max(0.0).min((ny - 1) as f32); // NaN -> 0
         let gz = g.z.max(0.0).min((nz - 1) as f32); // NaN -> 0
-        let (x0, y0, z0) = (gx as usize, gy as usize, gz as usize);
+        let (x0, y0, z0) = (gx as u32, gy as u32, gz as u32);
         let (fx, fy, fz) = (gx - x0 as f32, gy - y0 as f32, gz - z0 as f32);
-        let sx = usize::from(x0 + 1 < nx as usize);
-        let sy = if y0 + 1 < ny as usize { nx as usize } else { 0 };
-        let sz = if z0 + 1 < nz as usize { nx as usize * ny as usize } else { 0 };
-        let base = x0 + nx as usize * (y0 + ny as usize * z0);
-        let d = self.data();
-        let (Some(&c000), Some(&c100), Some(&c010), Some(&c110)) =
-            (d.get(base), d.get(base + sx), d.get(base + sy), d.get(base + sy + sx))
-        else {
-            return 0.0;
-        };
-        let b2 = base + sz;
-        let (Some(&c001), Some(&c101), Some(&c011), Some(&c111)) =
-            (d.get(b2), d.get(b2 + sx), d.get(b2 + sy), d.get(b2 + sy + sx))
-        else {
-            return 0.0;
-        };
-        trilinear([c000, c100, c010, c110, c001, c101, c011, c111], fx, fy, fz)
+        let c = self.voxels.corners(x0, y0, z0);
+        (trilinear(c, fx, fy, fz) - self.offset) * self.scale
     }
 
     /// Trilinear sample at world position `p`.
@@ -78,7 +37,7 @@ impl Volume {
 /// Trilinear blend of the corners `[c000, c100, c010, c110, c001, c101, c011, c111]` (x
 /// fastest) at fractions `(fx, fy, fz)`: along x, then y, then z.
 #[inline(always)]
-fn trilinear(c: [f32; 8], fx: f32, fy: f32, fz: f32) -> f32 {
+pub(crate) fn trilinear(c: [f32; 8], fx: f32, fy: f32, fz: f32) -> f32 {
     let c00 = c[0] + (c[1] - c[0]) * fx;
     let c10 = c[2] + (c[3] - c[2]) * fx;
     let c01 = c[4] + (c[5] - c[4]) * fx;
@@ -103,22 +62,70 @@ mod tests {
         assert_eq!(v.sample(Vec3::new(-5.0, 9.0, f32::NAN)), 0.0);
     }
 
+    /// The flat reference: a trilinear sample read from the x-fastest values with clamped
+    /// corners, blended and normalized as [`Volume::sample_grid`] defines.
+    fn flat_sample(stored: &[f32], dims: [u32; 3], (offset, scale): (f32, f32), g: Vec3) -> f32 {
+        let [nx, ny, nz] = dims;
+        let gx = g.x.max(0.0).min((nx - 1) as f32);
+        let gy = g.y.max(0.0).min((ny - 1) as f32);
+        let gz = g.z.max(0.0).min((nz - 1) as f32);
+        let (x0, y0, z0) = (gx as u32, gy as u32, gz as u32);
+        let at = |x: u32, y: u32, z: u32| {
+            let (x, y, z) = (x.min(nx - 1) as usize, y.min(ny - 1) as usize, z.min(nz - 1) as usize);
+            stored[x + nx as usize * (y + ny as usize * z)]
+        };
+        let c = [
+            at(x0, y0, z0),
+            at(x0 + 1, y0, z0),
+            at(x0, y0 + 1, z0),
+            at(x0 + 1, y0 + 1, z0),
+            at(x0, y0, z0 + 1),
+            at(x0 + 1, y0, z0 + 1),
+            at(x0, y0 + 1, z0 + 1),
+            at(x0 + 1, y0 + 1, z0 + 1),
+        ];
+        (trilinear(c, gx - x0 as f32, gy - y0 as f32, gz - z0 as f32) - offset) * scale
+    }
+
     #[test]
-    fn fast_path_equals_clamped_path() {
-        let v = Volume::from_fn("t", [7, 5, 4], Vec3::new(1.0, 2.0, 0.5), |p| (p.x * 3.1 + p.y * p.z).sin()).unwrap();
+    fn bricked_samples_equal_the_flat_reference() {
         let mut x = 12345u32;
-        let mut r = || {
+        let mut r = move || {
             x ^= x << 13;
             x ^= x >> 17;
             x ^= x << 5;
             x as f32 / u32::MAX as f32
         };
-        for _ in 0..20000 {
-            let g = Vec3::new(r() * 8.0 - 0.5, r() * 6.0 - 0.5, r() * 5.0 - 0.5);
-            assert_eq!(v.sample_grid(g).to_bits(), v.sample_grid_clamped(g).to_bits(), "{g}");
-        }
-        for g in [Vec3::ZERO, Vec3::new(6.0, 4.0, 3.0), Vec3::new(5.999, 3.999, 2.999), Vec3::new(0.0, 4.0, 1.5)] {
-            assert_eq!(v.sample_grid(g).to_bits(), v.sample_grid_clamped(g).to_bits(), "{g}");
+        // Odd dims, brick edges, 8-bit, 16-bit and f32 storage.
+        for (dims, kind) in [([7, 5, 4], 0), ([33, 2, 65], 1), ([65, 33, 1], 2), ([1, 1, 1], 0), ([2, 65, 3], 2)] {
+            let n = dims.iter().product::<u32>() as usize;
+            let values: Vec<f32> = (0..n)
+                .map(|i| match kind {
+                    0 => (i * 37 % 200) as f32,
+                    1 => (i * 4099 % 60_000) as f32,
+                    _ => (i as f32 * 0.37).sin(),
+                })
+                .collect();
+            let v = Volume::from_values("t", dims, Vec3::new(1.0, 2.0, 0.5), values).unwrap();
+            let stored: Vec<f32> = (0..n)
+                .map(|i| {
+                    let (nx, ny) = (dims[0] as usize, dims[1] as usize);
+                    v.voxels().get((i % nx) as u32, (i / nx % ny) as u32, (i / (nx * ny)) as u32)
+                })
+                .collect();
+            for _ in 0..20000 {
+                let g = Vec3::new(
+                    r() * (dims[0] + 2) as f32 - 1.5,
+                    r() * (dims[1] + 2) as f32 - 1.5,
+                    r() * (dims[2] + 2) as f32 - 1.5,
+                );
+                let want = flat_sample(&stored, dims, v.normalization(), g);
+                assert_eq!(v.sample_grid(g).to_bits(), want.to_bits(), "{dims:?} {g}");
+            }
+            for c in [0.0, 31.0, 31.5, 32.0, 32.5, 64.0] {
+                let g = Vec3::splat(c);
+                assert_eq!(v.sample_grid(g).to_bits(), flat_sample(&stored, dims, v.normalization(), g).to_bits());
+            }
         }
     }
 }

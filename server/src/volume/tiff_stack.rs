@@ -9,7 +9,7 @@
 //! `z = k`, row 0 is `y = 0`: the stored order. TIFF carries no slice spacing: the spacing is
 //! 1, 1, 1 unless [`LoadOptions::spacing`] says otherwise.
 
-use super::{check_geometry, voxel_bytes, LoadOptions, SourceInfo, Volume, VolumeError, VoxelType};
+use super::{check_load, voxel_bytes, LoadOptions, SourceInfo, Volume, VolumeError, VoxelType};
 use std::path::{Path, PathBuf};
 use tiff::decoder::{Decoder, DecodingResult, Limits};
 use tiff::ColorType;
@@ -160,7 +160,7 @@ fn finish(
     opts: &LoadOptions,
 ) -> Result<Volume, VolumeError> {
     let spacing = opts.spacing.unwrap_or(Vec3::ONE);
-    let voxels = check_geometry(dims, spacing, opts.max_voxels).map_err(|e| e.at(path))?;
+    let voxels = check_load(dims, spacing, opts, 4, 8).map_err(|e| e.at(path))?;
     let source = SourceInfo {
         format: "TIFF".into(),
         voxel_type: Some(ty),
@@ -193,7 +193,7 @@ pub fn load_file(path: &Path, opts: &LoadOptions) -> Result<Volume, VolumeError>
     }
     let (w, h) = check_sizes(&sizes, |i| format!("page {}", i + 1)).map_err(|(_, e)| e.at(path))?;
     let dims = [w, h, sizes.len() as u32];
-    check_geometry(dims, opts.spacing.unwrap_or(Vec3::ONE), opts.max_voxels).map_err(|e| e.at(path))?;
+    check_load(dims, opts.spacing.unwrap_or(Vec3::ONE), opts, 4, 8).map_err(|e| e.at(path))?;
     let mut d = open(path, opts.max_voxels)?;
     let mut values = Vec::with_capacity((w as usize) * (h as usize) * sizes.len());
     let mut ty = None;
@@ -267,7 +267,7 @@ pub fn load_files(dir: &Path, files: &[PathBuf], opts: &LoadOptions) -> Result<V
     let label = |i: usize| format!("slice {} ({})", i + 1, files[i].file_name().unwrap_or_default().to_string_lossy());
     let (w, h) = check_sizes(&sizes, label).map_err(|(odd, e)| e.at(&files[odd]))?;
     let dims = [w, h, files.len() as u32];
-    check_geometry(dims, opts.spacing.unwrap_or(Vec3::ONE), opts.max_voxels).map_err(|e| e.at(dir))?;
+    check_load(dims, opts.spacing.unwrap_or(Vec3::ONE), opts, 4, 8).map_err(|e| e.at(dir))?;
     let mut values = Vec::with_capacity((w as usize) * (h as usize) * files.len());
     let mut ty = None;
     for (k, f) in files.iter().enumerate() {

@@ -18,7 +18,7 @@
 //! (fuzzed through `load_volume`).
 
 use super::orient::axis_aligned;
-use super::{check_geometry, decode_voxels, voxel_bytes, LoadOptions, SourceInfo, Volume, VolumeError, VoxelType};
+use super::{check_load, decode_voxels, voxel_bytes, LoadOptions, SourceInfo, Volume, VolumeError, VoxelType};
 use base64::Engine;
 use quick_xml::events::{BytesStart, Event};
 use std::io::Read;
@@ -388,7 +388,7 @@ fn load_bytes(path: &Path, bytes: &[u8], opts: &LoadOptions) -> Result<Volume, V
     let ty = arr.ty.unwrap_or(VoxelType::F32);
     let s = h.spacing;
     let sp = Vec3::new(s[0].abs() as f32, s[1].abs() as f32, s[2].abs() as f32);
-    let voxels = check_geometry(dims, sp, opts.max_voxels)?;
+    let voxels = check_load(dims, sp, opts, 4, 8)?;
     let expected = voxel_bytes(voxels, ty)?;
     let values = match arr.format.as_str() {
         "ascii" => {

@@ -1,0 +1,253 @@
+//! Streaming loads: voxel data read slab by slab straight into bricks ([`super::bricks`]) in
+//! the file's own type, so a load takes the bricks and one slab of the file, never the whole
+//! file again as `f32`. The raw and NRRD loaders (raw and gzip encodings) read through here.
+
+use super::bricks::{GridBuilder, Stored, Voxels};
+use super::{code_scale, Volume, VolumeError, VolumeErrorKind, VoxelType};
+use std::io::Read;
+use std::path::Path;
+use std::time::Instant;
+use volwarp_core::Vec3;
+
+/// Bytes read per slab (at least one slice).
+const SLAB_BYTES: usize = 8 << 20;
+
+/// Volumes from this many bytes on log their progress.
+const PROGRESS_BYTES: u64 = 256 << 20;
+
+/// Bytes per stored value for voxels of `ty` (what [`stream_volume`] keeps).
+pub(crate) fn stored_size(ty: VoxelType) -> u64 {
+    match ty {
+        VoxelType::U8 | VoxelType::I8 => 1,
+        VoxelType::U16 | VoxelType::I16 => 2,
+        _ => 4,
+    }
+}
+
+/// What a stream reads.
+pub(crate) struct StreamSpec<'a> {
+    /// The volume's name.
+    pub name: &'a str,
+    /// Dimensions.
+    pub dims: [u32; 3],
+    /// Spacing.
+    pub spacing: Vec3,
+    /// The stored type.
+    pub ty: VoxelType,
+    /// Whether multi-byte values are big-endian.
+    pub big_endian: bool,
+    /// Mirror x and y (a NRRD's negative space directions; z is never streamed mirrored).
+    pub flip_xy: [bool; 2],
+    /// The file, for errors and progress lines.
+    pub path: &'a Path,
+}
+
+/// Reads `spec.dims` voxels of `spec.ty` from `reader` (exactly: fewer or more bytes are a
+/// [`VolumeErrorKind::SizeMismatch`]) into bricks.
+pub(crate) fn stream_volume(spec: &StreamSpec<'_>, reader: impl Read) -> Result<Volume, VolumeError> {
+    match spec.ty {
+        VoxelType::U8 => stream_ints::<u8>(spec, reader, |b| b[0], 0.0),
+        VoxelType::I8 => stream_ints::<u8>(spec, reader, |b| b[0] ^ 0x80, -128.0),
+        VoxelType::U16 => {
+            let be = spec.big_endian;
+            stream_ints::<u16>(
+                spec,
+                reader,
+                move |b| if be { u16::from_be_bytes([b[0], b[1]]) } else { u16::from_le_bytes([b[0], b[1]]) },
+                0.0,
+            )
+        }
+        VoxelType::I16 => {
+            let be = spec.big_endian;
+            let f = move |b: &[u8]| {
+                (if be { u16::from_be_bytes([b[0], b[1]]) } else { u16::from_le_bytes([b[0], b[1]]) }) ^ 0x8000
+            };
+            stream_ints::<u16>(spec, reader, f, -32_768.0)
+        }
+        _ => stream_floats(spec, reader),
+    }
+}
+
+/// Reads the slices of `spec` from `reader` (each `nx·ny·size` bytes) and hands each to `f`
+/// with its index; an error where the data holds fewer or more bytes.
+fn for_each_slice(spec: &StreamSpec<'_>, mut reader: impl Read, mut f: impl FnMut(&[u8])) -> Result<(), VolumeError> {
+    let [nx, ny, nz] = spec.dims;
+    let slice_bytes = nx as usize * ny as usize * spec.ty.size();
+    let per_slab = (SLAB_BYTES / slice_bytes.max(1)).clamp(1, nz as usize);
+    let total = slice_bytes as u64 * u64::from(nz);
+    let mut buf = vec![0u8; per_slab * slice_bytes];
+    let (start, mut next_report) = (Instant::now(), total / 10);
+    let mut done = 0u64;
+    let mut z = 0usize;
+    while z < nz as usize {
+        let n = per_slab.min(nz as usize - z);
+        let part = &mut buf[..n * slice_bytes];
+        let mut got = 0;
+        while got < part.len() {
+            match reader.read(&mut part[got..]) {
+                Ok(0) => break,
+                Ok(k) => got += k,
+                Err(e) if e.kind() == std::io::ErrorKind::Interrupted => {}
+                Err(e) => return Err(VolumeError::io(spec.path, e)),
+            }
+        }
+        if got < part.len() {
+            return Err(VolumeError::new(VolumeErrorKind::SizeMismatch { expected: total, actual: done + got as u64 })
+                .at(spec.path));
+        }
+        for s in part.chunks_exact(slice_bytes) {
+            f(s);
+        }
+        z += n;
+        done += part.len() as u64;
+        if total >= PROGRESS_BYTES && done >= next_report {
+            let secs = start.elapsed().as_secs_f64().max(1e-9);
+            log::info!(
+                "loading {}: {:.0} % ({} of {} MiB, {:.0} MB/s)",
+                spec.path.display(),
+                done as f64 * 100.0 / total as f64,
+                done >> 20,
+                total >> 20,
+                done as f64 / secs / 1e6
+            );
+            next_report += total / 10;
+        }
+    }
+    let mut extra = [0u8; 1];
+    let more = loop {
+        match reader.read(&mut extra) {
+            Err(e) if e.kind() == std::io::ErrorKind::Interrupted => {}
+            r => break r.map_err(|e| VolumeError::io(spec.path, e))?,
+        }
+    };
+    if more != 0 {
+        return Err(
+            VolumeError::new(VolumeErrorKind::SizeMismatch { expected: total, actual: total + 1 }).at(spec.path)
+        );
+    }
+    Ok(())
+}
+
+/// Mirrors a slice of `nx × ny` values in x and/or y in place.
+fn mirror<T>(slice: &mut [T], nx: usize, flip: [bool; 2]) {
+    if flip[0] {
+        slice.chunks_exact_mut(nx).for_each(|row| row.reverse());
+    }
+    if flip[1] {
+        let ny = slice.len() / nx.max(1);
+        for y in 0..ny / 2 {
+            let (a, b) = slice.split_at_mut((ny - 1 - y) * nx);
+            a[y * nx..(y + 1) * nx].swap_with_slice(&mut b[..nx]);
+        }
+    }
+}
+
+/// 8- and 16-bit values: stored as read (`decode` gives the stored value of one voxel's
+/// bytes: signed ones offset to unsigned); `bias` is the source value of stored 0.
+fn stream_ints<T: Stored + Ord + Into<u32>>(
+    spec: &StreamSpec<'_>,
+    reader: impl Read,
+    decode: impl Fn(&[u8]) -> T,
+    bias: f32,
+) -> Result<Volume, VolumeError> {
+    let [nx, ny, _] = spec.dims;
+    let size = spec.ty.size();
+    let mut builder = GridBuilder::<T>::new(spec.dims).map_err(|e| e.at(spec.path))?;
+    let mut slice = vec![T::default(); nx as usize * ny as usize];
+    let (mut lo, mut hi) = (u32::MAX, 0u32);
+    for_each_slice(spec, reader, |bytes| {
+        for (v, b) in slice.iter_mut().zip(bytes.chunks_exact(size)) {
+            *v = decode(b);
+        }
+        let (l, h) = slice.iter().fold((u32::MAX, 0), |(l, h), &v| (l.min(v.into()), h.max(v.into())));
+        (lo, hi) = (lo.min(l), hi.max(h));
+        mirror(&mut slice, nx as usize, spec.flip_xy);
+        builder.push_slice(&slice);
+    })?;
+    let grid = builder.finish().map_err(|e| e.at(spec.path))?;
+    let voxels = into_voxels(grid);
+    let (lo, hi) = (lo as f32, hi as f32);
+    Ok(Volume::from_voxels(spec.name, spec.spacing, voxels, (lo + bias, hi + bias), lo, code_scale(hi - lo)))
+}
+
+/// A grid of `u8` or `u16` as [`Voxels`].
+fn into_voxels<T: Stored>(grid: super::bricks::Grid<T>) -> Voxels {
+    let any: Box<dyn std::any::Any> = Box::new(grid);
+    match any.downcast::<super::bricks::Grid<u8>>() {
+        Ok(g) => Voxels::U8(*g),
+        Err(any) => match any.downcast::<super::bricks::Grid<u16>>() {
+            Ok(g) => Voxels::U16(*g),
+            Err(any) => Voxels::F32(*any.downcast::<super::bricks::Grid<f32>>().expect("bricks of u8, u16 or f32")),
+        },
+    }
+}
+
+/// Other types: read as `f32` (as the loaders always converted them), then normalized over
+/// their finite range in place (non-finite values become 0, the minimum).
+fn stream_floats(spec: &StreamSpec<'_>, reader: impl Read) -> Result<Volume, VolumeError> {
+    let [nx, ny, _] = spec.dims;
+    let mut builder = GridBuilder::<f32>::new(spec.dims).map_err(|e| e.at(spec.path))?;
+    let (mut lo, mut hi) = (f32::INFINITY, f32::NEG_INFINITY);
+    let mut slice = Vec::with_capacity(nx as usize * ny as usize);
+    for_each_slice(spec, reader, |bytes| {
+        slice.clear();
+        slice.extend(super::decode_voxels(bytes, spec.ty, spec.big_endian));
+        for &v in slice.iter().filter(|v| v.is_finite()) {
+            lo = lo.min(v);
+            hi = hi.max(v);
+        }
+        mirror(&mut slice, nx as usize, spec.flip_xy);
+        builder.push_slice(&slice);
+    })?;
+    let mut grid = builder.finish().map_err(|e| e.at(spec.path))?;
+    if lo > hi {
+        (lo, hi) = (0.0, 0.0);
+    }
+    let inv_range = if hi > lo { 1.0 / (hi as f64 - lo as f64) } else { 0.0 };
+    grid.map_in_place(
+        |v| if v.is_finite() { ((v as f64 - lo as f64) * inv_range).clamp(0.0, 1.0) as f32 } else { 0.0 },
+    );
+    Ok(Volume::from_voxels(spec.name, spec.spacing, Voxels::F32(grid), (lo, hi), 0.0, 1.0))
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn streamed_volumes_equal_in_memory_ones() {
+        let dims = [33, 5, 34];
+        let n = dims.iter().product::<u32>() as usize;
+        for ty in [VoxelType::U8, VoxelType::I8, VoxelType::U16, VoxelType::I16, VoxelType::F32, VoxelType::I32] {
+            for big_endian in [false, true] {
+                let bytes: Vec<u8> = (0..n * ty.size()).map(|i| (i * 7919 % 251) as u8).collect();
+                let values = super::super::decode_voxels(&bytes, ty, big_endian);
+                let want = Volume::from_values("m", dims, Vec3::ONE, values).unwrap();
+                let p = Path::new("mem");
+                let spec =
+                    StreamSpec { name: "s", dims, spacing: Vec3::ONE, ty, big_endian, flip_xy: [false; 2], path: p };
+                let got = stream_volume(&spec, &bytes[..]).unwrap();
+                assert_eq!(got.value_range(), want.value_range(), "{ty:?}");
+                assert_eq!(got.values(), want.values(), "{ty:?} {big_endian}");
+                // Short and long data are size mismatches.
+                let e = stream_volume(&spec, &bytes[..bytes.len() - 1]).unwrap_err();
+                assert!(matches!(e.kind, VolumeErrorKind::SizeMismatch { .. }), "{e}");
+                let mut long = bytes.clone();
+                long.push(0);
+                assert!(matches!(
+                    stream_volume(&spec, &long[..]).unwrap_err().kind,
+                    VolumeErrorKind::SizeMismatch { .. }
+                ));
+            }
+        }
+    }
+
+    #[test]
+    fn mirrors_rows_and_columns() {
+        let mut s: Vec<u8> = (0..6).collect();
+        mirror(&mut s, 3, [true, false]);
+        assert_eq!(s, [2, 1, 0, 5, 4, 3]);
+        mirror(&mut s, 3, [false, true]);
+        assert_eq!(s, [5, 4, 3, 2, 1, 0]);
+    }
+}
