@@ -132,7 +132,14 @@ impl Marcher {
         Marcher::with_grid(volume, grid, tf, opts)
     }
 
-    fn with_grid(volume: Arc<Volume>, grid: Arc<MinMaxGrid>, tf: &TransferFunction, mut opts: MarchOptions) -> Marcher {
+    /// A marcher skipping empty space with `grid` (the volume's, e.g. [`MinMaxGrid::with_brick`]
+    /// for another brick edge than [`MinMaxGrid::new`] picks).
+    pub fn with_grid(
+        volume: Arc<Volume>,
+        grid: Arc<MinMaxGrid>,
+        tf: &TransferFunction,
+        mut opts: MarchOptions,
+    ) -> Marcher {
         if opts.step_voxels.is_nan() || opts.step_voxels < 0.01 {
             opts.step_voxels = 0.01;
         }

@@ -394,7 +394,7 @@ impl Kernel<'_> {
         let (nbx_m1, nby_m1, nbz_m1) =
             (L::splat((nb[0] - 1) as f32), L::splat((nb[1] - 1) as f32), L::splat((nb[2] - 1) as f32));
         let (snbx, snby) = (L::splat_i(nb[0] as i32), L::splat_i(nb[1] as i32));
-        let brick = L::splat(crate::empty_space::BRICK as f32);
+        let brick = L::splat(occ.brick() as f32);
         let sp = vol.spacing();
         let axes = [Axis::<L>::new(rays, 0, sp, o), Axis::new(rays, 1, sp, o), Axis::new(rays, 2, sp, o)];
         let skip = opts.skip_empty;
@@ -422,7 +422,7 @@ impl Kernel<'_> {
                 let mut check = alive & running & t.simd_ge(t_check);
                 while check.any() {
                     let (px, py, pz) = (ogx + dgx * t, ogy + dgy * t, ogz + dgz * t);
-                    let per_brick = L::splat(1.0 / crate::empty_space::BRICK as f32);
+                    let per_brick = L::splat(1.0 / occ.brick() as f32);
                     let bx = (px * per_brick).max(zero).min(nbx_m1).trunc_int();
                     let by = (py * per_brick).max(zero).min(nby_m1).trunc_int();
                     let bz = (pz * per_brick).max(zero).min(nbz_m1).trunc_int();

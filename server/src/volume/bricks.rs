@@ -207,6 +207,19 @@ impl<T: Stored> Grid<T> {
         [i, i + 1, i + sy, i + sy + 1, i + sz, i + sz + 1, i + sz + sy, i + sz + sy + 1].map(|j| d[j].to_f32())
     }
 
+    /// Row `y` of slice `z` (each below its dim) as `f32`, into `out` (replacing its content).
+    pub fn read_row(&self, y: u32, z: u32, out: &mut Vec<f32>) {
+        let nx = self.layout.dims[0];
+        out.clear();
+        let mut x = 0;
+        while x < nx {
+            let n = (nx - x).min(BRICK_EDGE) as usize;
+            let (c, i) = self.layout.locate(x, y, z);
+            out.extend(self.chunks[c][i..i + n].iter().map(|v| v.to_f32()));
+            x += BRICK_EDGE;
+        }
+    }
+
     /// Bytes the values take.
     pub fn bytes(&self) -> u64 {
         self.chunks.iter().map(|c| c.len() as u64).sum::<u64>() * std::mem::size_of::<T>() as u64
@@ -265,19 +278,9 @@ impl<T: Stored> GridBuilder<T> {
 
     /// A builder for the voxels of `layout`.
     pub fn with_layout(layout: Layout) -> Result<GridBuilder<T>, VolumeError> {
-        let mut chunks = Vec::new();
-        for c in 0..layout.chunks() {
-            let len = layout.chunk_len(c);
-            let mut v = Vec::new();
-            v.try_reserve_exact(len).map_err(|_| {
-                VolumeError::new(VolumeErrorKind::OutOfMemory {
-                    needed: layout.stored_values() * std::mem::size_of::<T>() as u64,
-                    available: None,
-                })
-            })?;
-            v.resize(len, T::default());
-            chunks.push(v);
-        }
+        // Zeroed allocations (calloc): pages are taken as slices are written, not twice. The
+        // loaders checked the memory before ([`super::check_load`]).
+        let chunks = (0..layout.chunks()).map(|c| vec![T::default(); layout.chunk_len(c)]).collect();
         Ok(GridBuilder { grid: Grid { layout, chunks }, next_z: 0 })
     }
 
@@ -382,6 +385,15 @@ impl Voxels {
         }
     }
 
+    /// [`Grid::read_row`] of the stored grid.
+    pub fn read_row(&self, y: u32, z: u32, out: &mut Vec<f32>) {
+        match self {
+            Voxels::U8(g) => g.read_row(y, z, out),
+            Voxels::U16(g) => g.read_row(y, z, out),
+            Voxels::F32(g) => g.read_row(y, z, out),
+        }
+    }
+
     /// [`Grid::corners`] of the stored grid.
     #[inline(always)]
     pub fn corners(&self, x: u32, y: u32, z: u32) -> [f32; 8] {
@@ -441,6 +453,10 @@ mod tests {
             let values: Vec<u16> = (0..n).map(|i| (i * 7919 % 65_521) as u16).collect();
             let g = grid_from_values(dims, &values).unwrap();
             assert_eq!(g.to_vec(), values, "{dims:?}");
+            let mut row = Vec::new();
+            g.read_row(dims[1] - 1, dims[2] - 1, &mut row);
+            let last = values.len() - dims[0] as usize;
+            assert_eq!(row, values[last..].iter().map(|&v| v as f32).collect::<Vec<_>>());
             let at = |x: u32, y: u32, z: u32| {
                 let [nx, ny, nz] = dims;
                 let (x, y, z) = (x.min(nx - 1) as usize, y.min(ny - 1) as usize, z.min(nz - 1) as usize);
