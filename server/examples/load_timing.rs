@@ -71,7 +71,7 @@ fn main() {
         grid.push(t.elapsed().as_secs_f64());
         mem = rss().saturating_sub(before);
         vol_bytes = v.memory_bytes();
-        grid_bytes = (g.ranges().len() * std::mem::size_of::<(f32, f32)>()) as u64;
+        grid_bytes = std::mem::size_of_val(g.ranges()) as u64;
         let d = v.dims();
         info = format!("{}x{}x{} {} ({} file bytes)", d[0], d[1], d[2], v.voxels().type_name(), v.source().data_bytes);
         drop(g);
