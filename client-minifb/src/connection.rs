@@ -246,6 +246,7 @@ mod tests {
             bounds,
             radius_unit: 0.001,
             render_us: 5,
+            level: 0,
             count: samples.len() as u32,
         };
         Frame { header, samples, colors, segments }

@@ -47,6 +47,7 @@ fn depth_image_frame() -> Frame {
             bounds: b,
             radius_unit,
             render_us: 0,
+            level: 0,
             count: samples.len() as u32,
         },
         samples,

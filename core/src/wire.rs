@@ -317,6 +317,10 @@ pub struct FrameHeader {
     pub radius_unit: f32,
     /// Server time to march and compact, in microseconds.
     pub render_us: u32,
+    /// The level of detail the frame was marched from: 0 the volume itself, `l` the volume
+    /// downsampled `2^l` times per axis (a server keeping its frame time within a budget while
+    /// the camera moves). Clients need nothing of it: the samples are in the same box.
+    pub level: u8,
     /// Number of samples that follow.
     pub count: u32,
 }
@@ -727,7 +731,7 @@ pub fn encode_frame_fixed(fh: &FrameHeader) -> [u8; FRAME_FIXED_LEN] {
     let mut o = Out::<FRAME_FIXED_LEN>::new();
     o.put(&fh.seq.to_le_bytes());
     encode_camera(&mut o, &fh.camera);
-    o.put(&[fh.heuristic.code(), 0, 0, 0]);
+    o.put(&[fh.heuristic.code(), 0, fh.level, 0]);
     for v in fh.bounds.min.iter().chain(fh.bounds.max.iter()) {
         o.put(&v.to_le_bytes());
     }
@@ -745,7 +749,7 @@ pub fn decode_frame_fixed(b: &[u8; FRAME_FIXED_LEN], limits: &Limits) -> Result<
     let camera = decode_camera(&mut c, limits)?;
     let hcode = c.u8();
     let heuristic = Heuristic::from_code(hcode).ok_or(WireError::BadHeuristic(hcode))?;
-    let _ = c.take::<3>();
+    let [_layers, level, _] = c.take::<3>();
     let min = c.vec3();
     let max = c.vec3();
     let bounds = Bounds::new(min, max);
@@ -758,7 +762,7 @@ pub fn decode_frame_fixed(b: &[u8; FRAME_FIXED_LEN], limits: &Limits) -> Result<
     }
     let render_us = c.u32();
     let count = c.u32();
-    Ok(FrameHeader { seq, camera, heuristic, bounds, radius_unit, render_us, count })
+    Ok(FrameHeader { seq, camera, heuristic, bounds, radius_unit, render_us, level, count })
 }
 
 /// Reads a Frame's samples and colors into the first `count` entries of the buffers.

@@ -91,6 +91,7 @@ fn random_frame(seed: u64, w: u32, h: u32, hole: f32) -> (Frame, RadiusPredictio
         bounds,
         radius_unit: unit,
         render_us: 5,
+        level: 0,
         count: samples.len() as u32,
     };
     (Frame { header, samples, colors, segments: Vec::new() }, RadiusPrediction { constant: 0.0, per_depth })
@@ -194,8 +195,16 @@ fn random_body(rng: &mut Rng, w: u32, h: u32, density: f32, count_off: i64) -> (
     let bounds = Bounds::new(Vec3::splat(-1.0), Vec3::splat(1.0));
     let camera = Camera::framing(bounds.min(), bounds.max(), rng.f() * 360.0, 10.0, 40.0, w, h);
     let count = (n as i64 + count_off).max(0) as u32;
-    let header =
-        FrameHeader { seq: 1, camera, heuristic: Heuristic::Threshold, bounds, radius_unit: 1e-3, render_us: 0, count };
+    let header = FrameHeader {
+        seq: 1,
+        camera,
+        heuristic: Heuristic::Threshold,
+        bounds,
+        radius_unit: 1e-3,
+        render_us: 0,
+        level: 0,
+        count,
+    };
     let params = CompactParams {
         depth_min: rng.f() * 5.0,
         depth_step: 1e-5 + rng.f() * 1e-3,

@@ -61,6 +61,7 @@ fn sphere_frame(w: u32, h: u32, yaw: f32, cut: usize) -> (Frame, RadiusPredictio
         bounds,
         radius_unit: unit,
         render_us: 777,
+        level: 0,
         count: samples.len() as u32,
     };
     (Frame { header, samples, colors, segments: Vec::new() }, RadiusPrediction { constant: 0.0, per_depth })

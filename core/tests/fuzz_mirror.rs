@@ -71,6 +71,8 @@ fn frame() -> impl Strategy<Value = Frame> {
                 bounds: Bounds::new(min, max),
                 radius_unit,
                 render_us,
+                // Any level of detail (drawn from the time's bits: the tuple is full).
+                level: (render_us >> 24) as u8,
                 count: samples.len() as u32,
             };
             Frame { header, samples, colors, segments: Vec::new() }
@@ -241,6 +243,7 @@ proptest! {
             bounds: Bounds::new(min, max),
             radius_unit: (2.0f32).powi(unit_exp),
             render_us: 0,
+            level: 0,
             count: samples.len() as u32,
         };
         let frame = Frame { header, samples, colors, segments: Vec::new() };
@@ -359,6 +362,7 @@ fn regression_tiny_sphere_culled_by_rounding_in_the_slab_test() {
             bounds,
             radius_unit,
             render_us: 0,
+            level: 0,
             count: 3,
         },
         samples,
@@ -413,6 +417,7 @@ fn regression_lbvh_domain_excludes_float_extremes() {
             bounds: Bounds::new(Vec3::splat(-1.5e38), Vec3::splat(1.5e38)),
             radius_unit: 3e35,
             render_us: 0,
+            level: 0,
             count: 3,
         },
         samples: vec![0, u64::MAX, 0x3f_ffff_ffff_ffff],
@@ -519,6 +524,7 @@ fn regression_extreme_bounds_decode_to_finite_centers_or_are_rejected() {
             bounds: Bounds::new(Vec3::ZERO, Vec3::splat(m)),
             radius_unit: 1.0,
             render_us: 0,
+            level: 0,
             count: 1,
         },
         samples: vec![0x3f_ffff_ffff_ffff | (1 << 54)],

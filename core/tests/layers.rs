@@ -207,6 +207,7 @@ fn layered_frame(w: u32, h: u32, count: impl Fn(u32, u32) -> u8) -> Frame {
         bounds,
         radius_unit: 0.001,
         render_us: 5,
+        level: 0,
         count: samples.len() as u32,
     };
     Frame { header, samples, colors, segments }

@@ -41,6 +41,7 @@ fn frame_of(points: &[(Vec3, u32)], b: Bounds, radius_unit: f32, cam: Camera) ->
             bounds: b,
             radius_unit,
             render_us: 1234,
+            level: 0,
             count: samples.len() as u32,
         },
         samples,

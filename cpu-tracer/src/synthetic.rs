@@ -62,6 +62,7 @@ pub fn frame_from_points(points: &[Point], camera: Camera) -> Frame {
         bounds,
         radius_unit,
         render_us: 0,
+        level: 0,
         count: samples.len() as u32,
     };
     Frame { header, samples, colors, segments: Vec::new() }

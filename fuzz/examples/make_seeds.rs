@@ -27,6 +27,7 @@ fn frame(n: usize, bounds: Bounds, radius_unit: f32, w: u32, h: u32) -> Message 
         bounds,
         radius_unit,
         render_us: 1234,
+        level: 0,
         count: n as u32,
     };
     Message::Frame(Frame { header, samples, colors, segments: Vec::new() })

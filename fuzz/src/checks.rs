@@ -491,6 +491,7 @@ pub fn lbvh_frame(b: &mut Bytes) -> Option<Frame> {
         bounds,
         radius_unit,
         render_us: 0,
+        level: 0,
         count: n as u32,
     };
     Some(Frame { header, samples, colors, segments: Vec::new() })
@@ -715,6 +716,7 @@ pub fn compact_frame_from(data: &[u8]) -> Option<(Vec<u8>, Vec<u8>)> {
         bounds,
         radius_unit: 1e-3,
         render_us: 0,
+        level: 0,
         count: n as u32,
     };
     // Colors plain, or against green with any scales (0–31 eighths).

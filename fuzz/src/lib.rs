@@ -63,6 +63,7 @@ pub fn arb_message(u: &mut Unstructured) -> Result<Message> {
                 bounds: Bounds::new(vec3(u)?, vec3(u)?),
                 radius_unit: float(u)?,
                 render_us: u.arbitrary()?,
+                level: 0,
                 count: n as u32,
             };
             Message::Frame(Frame { header, samples, colors, segments: Vec::new() })

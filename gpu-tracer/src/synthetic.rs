@@ -43,6 +43,7 @@ pub fn bumpy_surface(size: u32, radius_scale: f32, seq: u64) -> Frame {
             bounds,
             radius_unit,
             render_us: 0,
+            level: 0,
             count: samples.len() as u32,
         },
         samples,

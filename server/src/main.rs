@@ -162,6 +162,11 @@ struct NetArgs {
     /// Never send CompactFrames, even to clients that ask (every frame 12 bytes per sample).
     #[arg(long)]
     no_compact: bool,
+    /// Frame-time budget in milliseconds while a client's camera moves: builds the levels of
+    /// detail at start (about +14 % memory) and marches the finest one predicted to fit; a
+    /// resting camera always gets the volume itself. Default: no budget, no levels.
+    #[arg(long)]
+    frame_budget_ms: Option<f64>,
 }
 
 #[derive(Args, Debug)]
@@ -298,8 +303,16 @@ fn run(cli: Cli) -> Result<(), String> {
                 frame_delay: (n.frame_delay_ms > 0).then(|| Duration::from_millis(n.frame_delay_ms)),
                 compact: !n.no_compact,
                 layers: cli.data.layers.unwrap_or(volwarp_core::segments::MAX_LAYERS as u8),
+                frame_budget: match n.frame_budget_ms {
+                    Some(ms) => Some(secs(ms / 1e3, "frame-budget-ms")?),
+                    None => None,
+                },
             };
-            let server = Server::with_marcher(config, std::sync::Arc::new(marcher)).map_err(|e| e.to_string())?;
+            let levels = match config.frame_budget {
+                Some(_) => marcher.levels(&ds.tf).map_err(|e| e.to_string())?,
+                None => vec![std::sync::Arc::new(marcher)],
+            };
+            let server = Server::with_levels(config, levels).map_err(|e| e.to_string())?;
             println!("listening on {}", server.local_addr());
             use std::io::Write;
             let _ = std::io::stdout().flush();

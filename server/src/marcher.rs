@@ -113,6 +113,9 @@ pub struct Marcher {
     opts: MarchOptions,
     dt: f32,
     inv_spacing: Vec3,
+    /// The level of detail its volume is (0: the volume itself; see
+    /// [`crate::volume::pyramid`]), written into every frame header.
+    level: u8,
 }
 
 impl Marcher {
@@ -159,13 +162,48 @@ impl Marcher {
         log::debug!("empty-space grid: {:.1} % of bricks visible", occupancy.fraction_occupied() * 100.0);
         let lut_argb = Arc::new(lut.iter().flat_map(|&[r, g, b, a]| [a, r, g, b]).collect::<Vec<f32>>());
         let looks = Arc::new(occupancy.look_table());
-        Marcher { volume, grid, occupancy, lut, lut_argb, looks, opts, dt, inv_spacing: 1.0 / sp }
+        Marcher { volume, grid, occupancy, lut, lut_argb, looks, opts, dt, inv_spacing: 1.0 / sp, level: 0 }
+    }
+
+    /// The marcher with its frames marked as coming from level of detail `level` (its volume
+    /// downsampled `2^level` times per axis, [`crate::volume::pyramid`]).
+    pub fn at_level(mut self, level: u8) -> Marcher {
+        self.level = level;
+        self
+    }
+
+    /// The level of detail its frames are marked with.
+    pub fn level(&self) -> u8 {
+        self.level
+    }
+
+    /// Marchers of the levels of detail of this marcher's volume with `tf` and this marcher's
+    /// options: this volume first, then coarser copies ([`crate::volume::pyramid`]) down to 32
+    /// voxels on the largest axis (at most 8 levels). Logs the levels, their memory and the time
+    /// taken.
+    pub fn levels(&self, tf: &TransferFunction) -> Result<Vec<Arc<Marcher>>, crate::volume::VolumeError> {
+        let t = std::time::Instant::now();
+        let volumes = crate::volume::pyramid::pyramid(self.volume.clone(), 32, 8)?;
+        let extra: u64 = volumes[1..].iter().map(|v| v.memory_bytes()).sum();
+        let mut out = vec![Arc::new(self.clone())];
+        for (l, v) in volumes.into_iter().enumerate().skip(1) {
+            out.push(Arc::new(Marcher::with_options(v, tf, self.opts).at_level(l as u8)));
+        }
+        log::info!(
+            "levels of detail: {} ({}), +{:.1} MiB ({:.1} % of the volume), built in {:.2} s",
+            out.len(),
+            out.iter().map(|m| format!("{:?}", m.volume.dims())).collect::<Vec<_>>().join(", "),
+            extra as f64 / (1u64 << 20) as f64,
+            extra as f64 * 100.0 / self.volume.memory_bytes().max(1) as f64,
+            t.elapsed().as_secs_f64()
+        );
+        Ok(out)
     }
 
     /// The same volume and grid with another transfer function or options (no rebuild of the
     /// min/max grid).
     pub fn with_transfer_function(&self, tf: &TransferFunction, opts: MarchOptions) -> Marcher {
-        Marcher::with_grid(self.volume.clone(), self.grid.clone(), tf, opts)
+        Marcher::with_grid(self.volume.clone(), self.grid.clone(), tf, opts).at_level(self.level)
     }
 
     /// The volume.
@@ -631,6 +669,7 @@ impl Marcher {
             bounds: self.volume.bounds(),
             radius_unit: self.default_radius() / RADIUS_CODE,
             render_us: 0,
+            level: self.level,
             count: 0,
         }
     }

@@ -13,20 +13,28 @@
 //! a 1.5 s idle timeout on a loaded test machine).
 //!
 //! A request identical to one being rendered or just rendered (same camera, viewport,
-//! heuristic and radius scale; any sequence number) is answered with a copy of that render
-//! instead of a second one.
+//! heuristic, radius scale and level of detail; any sequence number) is answered with a copy of
+//! that render instead of a second one.
+//!
+//! **Levels of detail.** A queue may hold marchers of ever coarser copies of the volume
+//! ([`crate::volume::pyramid`]) and a frame-time budget ([`LevelPolicy`]): while a client's
+//! camera moves, its frames come from the finest level whose predicted time fits the budget;
+//! when the camera rests, from the volume itself. The prediction is the last measured time per
+//! pixel of that level (or of the nearest measured one, halved or doubled per level: a level
+//! has half the samples per ray of the one before).
 
 use crate::marcher::{FrameStats, Marcher};
 use std::sync::atomic::{AtomicU64, Ordering};
 use std::sync::{Arc, Condvar, Mutex, MutexGuard};
+use std::time::Duration;
 use volwarp_core::wire::{CameraRequest, Frame};
 
 /// What makes two requests render the same frame (everything but the sequence number).
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
-struct Key([u32; 15]);
+struct Key([u32; 16]);
 
 impl Key {
-    fn of(req: &CameraRequest, layers: u32) -> Key {
+    fn of(req: &CameraRequest, layers: u32, level: u8) -> Key {
         let c = &req.camera;
         Key([
             c.eye.x.to_bits(),
@@ -44,6 +52,7 @@ impl Key {
             req.heuristic.code() as u32,
             req.radius_scale.to_bits(),
             layers.max(1),
+            level as u32,
         ])
     }
 }
@@ -110,9 +119,46 @@ impl Drop for Turn<'_> {
     }
 }
 
-/// The shared render queue in front of one marcher and its thread pool.
+/// How a queue picks the level of detail of a frame (see the module docs).
+#[derive(Clone, Copy, Debug, Default, PartialEq)]
+pub struct LevelPolicy {
+    /// The frame time to keep within while the camera moves (`None`: always the volume itself).
+    pub budget: Option<Duration>,
+}
+
+impl LevelPolicy {
+    /// The level for a frame of `pixels` pixels: 0 unless `moving` under a budget, else the
+    /// finest level predicted to fit it (the coarsest if none is), from `cost`, each level's
+    /// last measured nanoseconds per pixel (`None`: not measured yet).
+    pub fn pick(&self, moving: bool, pixels: u64, cost: &[Option<f64>]) -> u8 {
+        let Some(budget) = self.budget.filter(|_| moving && cost.len() > 1) else {
+            return 0;
+        };
+        let budget_ns = budget.as_nanos() as f64;
+        for l in 0..cost.len() {
+            // The nearest measured level, scaled by 2 per level between them.
+            let predicted = (0..cost.len())
+                .filter_map(|m| cost[m].map(|c| (m, c)))
+                .min_by_key(|&(m, _)| m.abs_diff(l))
+                .map(|(m, c)| c * pixels as f64 * 2f64.powi(m as i32 - l as i32));
+            match predicted {
+                Some(t) if t <= budget_ns => return l as u8,
+                None => return 0,
+                _ => {}
+            }
+        }
+        (cost.len() - 1) as u8
+    }
+}
+
+/// The shared render queue in front of one marcher (or one per level of detail) and its
+/// thread pool.
 pub struct RenderQueue {
-    marcher: Arc<Marcher>,
+    /// The marchers, level 0 (the volume itself) first.
+    levels: Vec<Arc<Marcher>>,
+    policy: LevelPolicy,
+    /// Per level, the last measured render nanoseconds per pixel.
+    cost: Mutex<Vec<Option<f64>>>,
     pool: rayon::ThreadPool,
     state: Mutex<State>,
     /// Large frames' turns.
@@ -137,8 +183,17 @@ impl Drop for Flight<'_> {
 impl RenderQueue {
     /// A queue rendering with `marcher` on `pool`.
     pub fn new(marcher: Arc<Marcher>, pool: rayon::ThreadPool) -> RenderQueue {
+        RenderQueue::with_levels(vec![marcher], LevelPolicy::default(), pool)
+    }
+
+    /// A queue rendering with the marchers of `levels` (level 0, the volume itself, first; at
+    /// least one) as `policy` picks, on `pool`.
+    pub fn with_levels(levels: Vec<Arc<Marcher>>, policy: LevelPolicy, pool: rayon::ThreadPool) -> RenderQueue {
+        assert!(!levels.is_empty(), "a render queue needs a marcher");
         RenderQueue {
-            marcher,
+            cost: Mutex::new(vec![None; levels.len()]),
+            levels,
+            policy,
             pool,
             state: Mutex::new(State::default()),
             gate: Gate::default(),
@@ -148,9 +203,14 @@ impl RenderQueue {
         }
     }
 
-    /// The marcher.
+    /// The marcher of the volume itself (level 0).
     pub fn marcher(&self) -> &Arc<Marcher> {
-        &self.marcher
+        &self.levels[0]
+    }
+
+    /// The marchers, one per level of detail.
+    pub fn levels(&self) -> &[Arc<Marcher>] {
+        &self.levels
     }
 
     /// Renders `req` into `frame` (its vectors reused) on the shared pool, or copies the frame
@@ -163,7 +223,19 @@ impl RenderQueue {
     /// [`RenderQueue::render`] of a layered frame with at most `layers` segments per pixel
     /// ([`Marcher::render_frame_layers_into`]; 1 is [`RenderQueue::render`]).
     pub fn render_layers(&self, req: &CameraRequest, layers: u32, frame: &mut Frame) -> FrameStats {
-        let key = Key::of(req, layers);
+        self.render_view(req, layers, false, frame)
+    }
+
+    /// [`RenderQueue::render_layers`] for a camera that is `moving` (it differs from the
+    /// client's last request): under a [`LevelPolicy`] budget, from a coarser level of detail.
+    pub fn render_view(&self, req: &CameraRequest, layers: u32, moving: bool, frame: &mut Frame) -> FrameStats {
+        let pixels = req.camera.width as u64 * req.camera.height as u64;
+        let level = {
+            let cost = self.cost.lock().unwrap_or_else(|e| e.into_inner());
+            self.policy.pick(moving, pixels, &cost)
+        };
+        let marcher = &self.levels[usize::from(level).min(self.levels.len() - 1)];
+        let key = Key::of(req, layers, level);
         let mut s = self.lock();
         loop {
             if let Some((k, f)) = &s.last {
@@ -195,10 +267,13 @@ impl RenderQueue {
         s.in_flight.push(key);
         drop(s);
         let flight = Flight(self, key);
-        let pixels = req.camera.width as u64 * req.camera.height as u64;
         let turn = (pixels > SMALL_FRAME).then(|| self.gate.enter(self.gate.ticket()));
-        let stats = self.pool.install(|| self.marcher.render_frame_layers_into(req, layers, frame));
+        let stats = self.pool.install(|| marcher.render_frame_layers_into(req, layers, frame));
         drop(turn);
+        if self.levels.len() > 1 {
+            let ns = (stats.march_us + stats.compact_us) as f64 * 1e3 / pixels.max(1) as f64;
+            self.cost.lock().unwrap_or_else(|e| e.into_inner())[usize::from(level)] = Some(ns);
+        }
         self.rendered.fetch_add(1, Ordering::Relaxed);
         // Keep a copy for identical requests (published before the flight ends), reusing the
         // previous copy's memory when no client holds it any more.
@@ -234,6 +309,23 @@ impl RenderQueue {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn the_policy_picks_the_finest_level_within_the_budget_while_moving() {
+        let p = LevelPolicy { budget: Some(Duration::from_millis(50)) };
+        let px = 1_000_000;
+        // 200 ns per pixel at level 0: 200 ms; level 2 predicted at 50 ms.
+        let cost = [Some(200.0), None, None, None];
+        assert_eq!(p.pick(true, px, &cost), 2);
+        assert_eq!(p.pick(false, px, &cost), 0, "a resting camera gets the volume itself");
+        // Measured levels win over predictions; nothing fits: the coarsest.
+        assert_eq!(p.pick(true, px, &[Some(200.0), Some(40.0), None, None]), 1);
+        assert_eq!(p.pick(true, px, &[Some(9e3), None, None, Some(900.0)]), 3);
+        // Nothing measured yet: the volume itself (measured then); no budget: always 0.
+        assert_eq!(p.pick(true, px, &[None, None]), 0);
+        assert_eq!(LevelPolicy::default().pick(true, px, &cost), 0);
+        assert_eq!(p.pick(true, px, &[Some(9e3)]), 0, "one level only");
+    }
 
     /// Tickets are served in the order they were handed out, whatever order their holders
     /// arrive at the gate in.

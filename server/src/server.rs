@@ -21,7 +21,7 @@
 
 use crate::dataset::Dataset;
 use crate::marcher::Marcher;
-use crate::render_queue::{RenderCounts, RenderQueue};
+use crate::render_queue::{LevelPolicy, RenderCounts, RenderQueue};
 use std::collections::HashMap;
 use std::io::{self, BufWriter, Read};
 use std::net::{Shutdown, SocketAddr, TcpListener, TcpStream};
@@ -62,6 +62,10 @@ pub struct ServerConfig {
     /// in its Hello (1: one sample per pixel for everyone). Default
     /// [`volwarp_core::segments::MAX_LAYERS`]: the client chooses.
     pub layers: u8,
+    /// The frame time to keep within while a client's camera moves, by marching a coarser level
+    /// of detail ([`crate::render_queue::LevelPolicy`]; used where the server has levels,
+    /// [`Server::with_levels`]). Default `None`: always the volume itself.
+    pub frame_budget: Option<Duration>,
 }
 
 impl Default for ServerConfig {
@@ -79,6 +83,7 @@ impl Default for ServerConfig {
             frame_delay: None,
             compact: true,
             layers: volwarp_core::segments::MAX_LAYERS as u8,
+            frame_budget: None,
         }
     }
 }
@@ -127,6 +132,12 @@ impl Server {
 
     /// Like [`Server::bind`] with a ready marcher.
     pub fn with_marcher(config: ServerConfig, marcher: Arc<Marcher>) -> io::Result<Server> {
+        Server::with_levels(config, vec![marcher])
+    }
+
+    /// Like [`Server::with_marcher`] with a marcher per level of detail, the volume itself
+    /// first ([`Marcher::levels`]); `config.frame_budget` says when a coarser one is marched.
+    pub fn with_levels(config: ServerConfig, levels: Vec<Arc<Marcher>>) -> io::Result<Server> {
         let invalid = |m: &str| io::Error::new(io::ErrorKind::InvalidInput, m.to_string());
         if config.token.is_none() && !config.listen.ip().is_loopback() {
             return Err(invalid("a token (--token) is required to listen on a non-loopback address"));
@@ -136,6 +147,9 @@ impl Server {
                 return Err(invalid("the token must be 1 to 64 bytes"));
             }
         }
+        let Some(marcher) = levels.first().cloned() else {
+            return Err(invalid("a server needs a marcher"));
+        };
         if config.max_viewport == 0 || config.max_clients == 0 {
             return Err(invalid("max viewport and max clients must be at least 1"));
         }
@@ -146,9 +160,10 @@ impl Server {
             .map_err(|e| io::Error::other(e.to_string()))?;
         let listener = TcpListener::bind(config.listen)?;
         let addr = listener.local_addr()?;
+        let policy = LevelPolicy { budget: config.frame_budget };
         let shared = Arc::new(Shared {
             config,
-            queue: RenderQueue::new(marcher.clone(), pool),
+            queue: RenderQueue::with_levels(levels, policy, pool),
             marcher,
             stop: AtomicBool::new(false),
             active: AtomicUsize::new(0),
@@ -444,6 +459,8 @@ fn serve(sh: &Shared, stream: &TcpStream, id: u64) -> String {
     let mut out = BufWriter::with_capacity(64 * 1024, stream);
     // One frame per client, its vectors reused from frame to frame.
     let mut frame = sh.marcher.empty_frame();
+    // The camera of the client's last request: a different one is a moving camera.
+    let mut last_camera = None;
     let reason = loop {
         let req = {
             let (lock, cv) = &*slot;
@@ -459,7 +476,9 @@ fn serve(sh: &Shared, stream: &TcpStream, id: u64) -> String {
         if let Some(d) = cfg.frame_delay {
             std::thread::sleep(d);
         }
-        let stats = sh.queue.render_layers(&req, layers as u32, &mut frame);
+        let moving = last_camera.is_some_and(|c| c != req.camera);
+        last_camera = Some(req.camera);
+        let stats = sh.queue.render_view(&req, layers as u32, moving, &mut frame);
         let t_send = Instant::now();
         let sent = if encoding == Encoding::Compact {
             let (bytes, _) = crate::encoding::encode_frame_for(&sh.marcher, &req, &frame, encoding, green);

@@ -209,3 +209,45 @@ fn token_limits_and_timeouts() {
     expect_error(&mut a, error_code::TIMEOUT);
     server.shutdown();
 }
+
+/// With levels of detail and a frame budget no frame can meet, a moving camera gets frames of
+/// the coarsest level (each equal to that level's own render, in the same box) and a resting
+/// camera the volume itself; without a budget every frame is the volume's.
+#[test]
+fn a_moving_camera_gets_coarser_levels_within_the_budget_and_a_resting_one_the_volume() {
+    let ds = Dataset::default_bundled();
+    let m = Marcher::from_dataset(&ds);
+    let levels = m.levels(&ds.tf).unwrap();
+    assert!(levels.len() >= 2, "{} levels", levels.len());
+    for (l, lm) in levels.iter().enumerate() {
+        assert_eq!(lm.level() as usize, l);
+        assert_eq!(lm.volume().bounds(), m.volume().bounds(), "every level is in the same box");
+        let d = m.volume().dims().map(|n| n.div_ceil(1 << l));
+        assert_eq!(lm.volume().dims(), d);
+    }
+    let coarsest = levels.len() - 1;
+    for budget in [Some(Duration::from_nanos(1)), None] {
+        let server =
+            Server::with_levels(ServerConfig { frame_budget: budget, ..config() }, levels.clone()).unwrap().spawn();
+        let mut c = Client::hello(server.local_addr(), None);
+        let mut ask = |seq: u64, yaw: f32| {
+            let req = request(&m, seq, Heuristic::Threshold, yaw);
+            c.send(&Message::CameraRequest(req));
+            (req, expect_frame(&mut c))
+        };
+        let (_, first) = ask(1, 10.0);
+        assert_eq!(first.header.level, 0, "the first view is not a moving one");
+        for (seq, yaw) in [(2, 14.0), (3, 18.0)] {
+            let (req, f) = ask(seq, yaw);
+            let want = if budget.is_some() { coarsest } else { 0 };
+            assert_eq!(f.header.level as usize, want, "moving, budget {budget:?}");
+            let own = levels[want].render_frame(&req).0;
+            assert_eq!((f.samples.clone(), f.colors.clone()), (own.samples, own.colors));
+            assert_eq!(f.header.bounds, first.header.bounds);
+        }
+        let (req, rest) = ask(4, 18.0);
+        assert_eq!(rest.header.level, 0, "a resting camera gets the volume itself");
+        assert_eq!(rest.samples, m.render_frame(&req).0.samples);
+        server.shutdown();
+    }
+}

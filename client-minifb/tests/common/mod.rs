@@ -144,6 +144,7 @@ pub fn empty_frame(seq: u64) -> Message {
             bounds: Bounds::new(Vec3::ZERO, Vec3::ONE),
             radius_unit: 0.01,
             render_us: 1,
+            level: 0,
             count: 0,
         },
         samples: vec![],

@@ -38,12 +38,18 @@ const CHUNK_PAD: usize = 4;
 pub trait Stored: Copy + Default + PartialOrd + Send + Sync + std::fmt::Debug + 'static {
     /// The value as `f32` (exact for `u8` and `u16`).
     fn to_f32(self) -> f32;
+    /// The stored value nearest `v` (rounded to nearest for integers, saturating).
+    fn from_f32(v: f32) -> Self;
 }
 
 impl Stored for u8 {
     #[inline(always)]
     fn to_f32(self) -> f32 {
         self as f32
+    }
+    #[inline(always)]
+    fn from_f32(v: f32) -> u8 {
+        v.round() as u8
     }
 }
 
@@ -52,12 +58,20 @@ impl Stored for u16 {
     fn to_f32(self) -> f32 {
         self as f32
     }
+    #[inline(always)]
+    fn from_f32(v: f32) -> u16 {
+        v.round() as u16
+    }
 }
 
 impl Stored for f32 {
     #[inline(always)]
     fn to_f32(self) -> f32 {
         self
+    }
+    #[inline(always)]
+    fn from_f32(v: f32) -> f32 {
+        v
     }
 }
 

@@ -38,6 +38,8 @@
 //! | [`vti`] | VTK XML image data |
 //! | [`dicom`] | DICOM series and multi-frame files |
 //! | [`orient`] | axis-aligned orientations: the reordering into LPS |
+//! | [`pyramid`] | levels of detail: ever coarser copies in the same box |
+//! | `stream.rs` | streaming loads: slab by slab into bricks (raw, NRRD) |
 
 pub mod bricks;
 pub mod dicom;
@@ -45,6 +47,7 @@ mod error;
 pub mod nifti;
 pub mod nrrd;
 pub mod orient;
+pub mod pyramid;
 mod raw;
 mod sampling;
 mod stream;
