@@ -253,6 +253,19 @@ impl Marcher {
         }
     }
 
+    /// The samples the rays of `cam` have in the volume box (what a march without skipping or
+    /// early termination takes).
+    pub fn box_samples(&self, cam: &Camera) -> u64 {
+        let basis = cam.ray_basis();
+        let mut n = 0u64;
+        for y in 0..cam.height {
+            for x in 0..cam.width {
+                n += u64::from(self.ray_setup(cam.eye, basis.dir(x, y)).0);
+            }
+        }
+        n
+    }
+
     /// Radius of a sample at `radius_scale` 1 under [`RadiusModel::Voxel`]: half a voxel
     /// diagonal.
     pub fn default_radius(&self) -> f32 {

@@ -12,8 +12,8 @@
 //! (rays, pickers, results) are sized for the instance's lanes by the const parameter `M`.
 //!
 //! Per step, every active lane computes its sample position, clamps it to the voxel lattice,
-//! gathers the eight neighbours (as integer codes where the volume has them,
-//! `crate::volume::CodeStencil`) and blends them trilinearly, gathers the transfer function's
+//! gathers the eight neighbours from the volume's bricks in its own type (four gathers of
+//! x-neighbour pairs, `crate::volume::bricks`), blends them trilinearly and normalizes the blend, gathers the transfer function's
 //! opacity and red (and, where any lane is visible, its green and blue) and composites front to
 //! back, all in lanes. Each lane keeps its own sample index, so rays of different lengths, early
 //! ray termination and empty-space leaps (done per lane when a lane reaches the face its last
