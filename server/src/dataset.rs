@@ -46,14 +46,15 @@ impl Dataset {
         Dataset { name: volume.name.clone(), volume: Arc::new(volume), tf }
     }
 
-    /// A volume with its preset transfer function ([`TransferFunction::preset`] of its name).
+    /// A volume with its preset transfer function ([`TransferFunction::preset_for`] of its name
+    /// and dims).
     pub fn with_preset(volume: Volume) -> Dataset {
-        let tf = TransferFunction::preset(&volume.name);
+        let tf = TransferFunction::preset_for(&volume.name, volume.dims());
         Dataset::new(volume, tf)
     }
 
     /// Loads a volume (raw or NRRD) and a transfer function file, or the preset for the
-    /// volume's name when `tf` is `None`.
+    /// volume's name and dims ([`TransferFunction::preset_for`]) when `tf` is `None`.
     pub fn load(path: impl AsRef<Path>, tf: Option<&Path>) -> Result<Dataset, DatasetError> {
         Dataset::load_with(path, &LoadOptions::default(), tf)
     }
@@ -63,7 +64,7 @@ impl Dataset {
         let volume = load_volume(path, opts).map_err(DatasetError::Volume)?;
         let tf = match tf {
             Some(p) => TransferFunction::load(p, volume.value_range()).map_err(DatasetError::TransferFunction)?,
-            None => TransferFunction::preset(&volume.name),
+            None => TransferFunction::preset_for(&volume.name, volume.dims()),
         };
         Ok(Dataset::new(volume, tf))
     }

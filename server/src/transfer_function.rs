@@ -141,7 +141,9 @@ impl TransferFunction {
     }
 
     /// The preset for a dataset name (`mri_colin27`, `ct_head_quarter`, `neghip`,
-    /// `iron_protein`, `tooth`, `marschner-lobb`; a name is matched by prefix), or the grey ramp.
+    /// `iron_protein`, `tooth`, `marschner-lobb`, `synth`; a name is matched by prefix), or the
+    /// grey ramp. The `synth` preset's opacities are those of a 1024³ volume; see
+    /// [`TransferFunction::preset_for`].
     pub fn preset(dataset: &str) -> TransferFunction {
         let n = dataset.to_ascii_lowercase();
         let tf = |c: &[(f32, [f32; 3])], o: &[(f32, f32)]| TransferFunction::from_points(&n, c, o);
@@ -195,9 +197,57 @@ impl TransferFunction {
                 &[(0.0, [0.2, 0.4, 1.0]), (0.5, [0.9, 0.9, 0.9]), (1.0, [1.0, 0.4, 0.2])],
                 &[(0.45, 0.0), (0.5, 0.6), (0.55, 0.0)],
             )
+        } else if n.starts_with("synth") {
+            // The synthetic volumes of `crate::synth`: background noise < 0.03, fog 0.2..0.47
+            // (faint), ball interiors 0.58 (semi-transparent), the gyroid band 0.70 (a
+            // semi-transparent surface), ball shells 0.95 and the outer shell 1 (opaque, one
+            // color, so the depth a ray enters them at does not show). Nearly transparent in
+            // between, where only the edges of features pass. Opacities for a volume 1024 voxels
+            // wide.
+            tf(
+                &[
+                    (0.10, [0.10, 0.20, 0.60]),
+                    (0.30, [0.20, 0.50, 0.90]),
+                    (0.45, [0.30, 0.85, 0.80]),
+                    (0.58, [1.00, 0.55, 0.20]),
+                    (0.66, [0.55, 0.90, 0.30]),
+                    (0.76, [0.55, 0.90, 0.30]),
+                    (0.88, [0.95, 0.92, 0.85]),
+                ],
+                &[
+                    (0.10, 0.0),
+                    (0.20, 0.0008),
+                    (0.47, 0.003),
+                    (0.52, 0.004),
+                    (0.55, 0.012),
+                    (0.62, 0.012),
+                    (0.66, 0.08),
+                    (0.74, 0.08),
+                    (0.77, 0.005),
+                    (0.87, 0.005),
+                    (0.92, 0.85),
+                    (1.0, 0.9),
+                ],
+            )
         } else {
             TransferFunction::grey_ramp()
         }
+    }
+
+    /// The preset of `dataset` ([`TransferFunction::preset`]) for a volume of `dims` voxels.
+    /// The same as the preset except for synthetic volumes (`synth`), whose content scales with
+    /// the volume: their opacities (per voxel) are converted from 1024 voxels to the volume's
+    /// geometric mean size, `1 − (1 − α)^(1024 / n)`, so that every size looks alike.
+    pub fn preset_for(dataset: &str, dims: [u32; 3]) -> TransferFunction {
+        let mut tf = TransferFunction::preset(dataset);
+        if dataset.to_ascii_lowercase().starts_with("synth") {
+            let n = dims.iter().map(|&d| f64::from(d.max(1))).product::<f64>().cbrt();
+            let e = (1024.0 / n) as f32;
+            for entry in &mut tf.lut {
+                entry[3] = 1.0 - (1.0 - entry[3]).powf(e);
+            }
+        }
+        tf
     }
 
     /// Loads a ParaView JSON (`.json`) or text transfer function; `value_range` is the volume's
@@ -320,6 +370,26 @@ mod tests {
         assert_eq!(tf.lookup(f32::NAN)[3], 0.0);
         assert_eq!(tf.max_opacity(0.0, 0.49), 0.0);
         assert!(tf.max_opacity(0.0, 0.6) > 0.0);
+    }
+
+    #[test]
+    fn the_synth_preset_keeps_its_look_at_every_size() {
+        let at = |n: u32| TransferFunction::preset_for("synth", [n; 3]);
+        let same = |a: &TransferFunction, b: &TransferFunction| {
+            a.table().iter().zip(b.table()).all(|(x, y)| x.iter().zip(y).all(|(u, v)| (u - v).abs() < 1e-6))
+        };
+        assert!(same(&at(1024), &TransferFunction::preset("synth")));
+        assert_eq!(TransferFunction::preset_for("mri_colin27", [64; 3]), TransferFunction::preset("mri_colin27"));
+        let (small, big) = (at(128), at(2048));
+        // Transparent stays transparent (empty-space skipping); elsewhere the transmittance of
+        // a path through the whole volume is the same.
+        assert_eq!(small.max_opacity(0.0, 0.1), 0.0);
+        assert_eq!(big.max_opacity(0.0, 0.1), 0.0);
+        for x in [0.3f32, 0.5, 0.6, 0.7] {
+            let t = |tf: &TransferFunction, n: f32| (1.0 - tf.lookup(x)[3]).powf(n);
+            assert!(small.lookup(x)[3] > big.lookup(x)[3], "{x}");
+            assert!((t(&small, 128.0) - t(&big, 2048.0)).abs() < 1e-3, "{x}");
+        }
     }
 
     #[test]
