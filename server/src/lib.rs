@@ -21,6 +21,7 @@
 //! | [`compaction`] | the parallel compaction of a frame's samples |
 //! | [`render_queue`] | one marcher pool shared by all clients; identical requests rendered once |
 //! | [`server`] | the TCP server: handshake, latest-wins requests, limits |
+//! | [`synth`] | synthetic volumes of any size, streamed to raw files (`volwarp-server synth`) |
 //! | [`testdata`] | the shared datasets beside the project, for tests and benchmarks |
 //!
 //! ```no_run
@@ -45,6 +46,7 @@ pub use volume::nrrd;
 pub mod radius;
 pub mod render_queue;
 pub mod server;
+pub mod synth;
 pub mod testdata;
 pub mod transfer_function;
 pub mod volume;
