@@ -6,6 +6,7 @@
 //! volwarp-server render --volume FILE [--tf FILE] [--orbit 30,10] [--size 1024x1024] --out img.png
 //! volwarp-server dump [--orbit 30,10] [--heuristic threshold] [--encoding compact|raw12] --out frame.vwf
 //! volwarp-server info scan.nii.gz                  # what a volume file holds, without rendering
+//! volwarp-server synth --dims 1024,1024,1024 --type u8 --out /tmp/big   # a synthetic volume
 //! ```
 
 use clap::{Args, Parser, Subcommand};
@@ -64,6 +65,14 @@ enum Cmd {
         /// The volume: any file or folder `--volume` takes.
         path: PathBuf,
     },
+    /// Write a synthetic volume of any size (`--dims X,Y,Z`, `--type u8|u16`, default u8) into
+    /// a folder as `synth_XxYxZ_uint8.raw` (or `_uint16`), which `--volume` then opens by path;
+    /// prints the path and the time taken.
+    Synth {
+        /// Output folder (must exist).
+        #[arg(long)]
+        out: PathBuf,
+    },
 }
 
 #[derive(Args, Debug)]
@@ -77,10 +86,11 @@ struct DataArgs {
     /// the preset for the volume.
     #[arg(long, global = true)]
     tf: Option<PathBuf>,
-    /// Dimensions XxYxZ of a raw file whose name does not carry them.
+    /// Dimensions XxYxZ of a raw file whose name does not carry them; for `synth`, those of the
+    /// volume to write (X,Y,Z or XxYxZ).
     #[arg(long, global = true)]
     dims: Option<String>,
-    /// Voxel type of a raw file (uint8, uint16, int16, float32, ...).
+    /// Voxel type of a raw file (uint8, uint16, int16, float32, ...); for `synth`, u8 or u16.
     #[arg(long = "type", global = true)]
     voxel_type: Option<String>,
     /// Voxel spacing X,Y,Z (overrides the file).
@@ -269,9 +279,29 @@ fn info(path: &std::path::Path, d: &DataArgs) -> Result<(), String> {
     Ok(())
 }
 
+/// `synth --dims X,Y,Z --type u8|u16 --out DIR`: writes the volume, prints its path and time.
+fn synth(d: &DataArgs, out: &std::path::Path) -> Result<(), String> {
+    use volwarp_server::synth::{write_synth, SynthType};
+    let s = d.dims.as_deref().ok_or("synth needs --dims X,Y,Z")?;
+    let v: Vec<u32> = s.split([',', 'x', 'X']).filter_map(|x| x.trim().parse().ok()).collect();
+    let dims: [u32; 3] = v
+        .try_into()
+        .ok()
+        .filter(|d: &[u32; 3]| !d.contains(&0))
+        .ok_or_else(|| format!("--dims {s:?} is not three positive integers X,Y,Z"))?;
+    let t = d.voxel_type.as_deref().unwrap_or("u8");
+    let ty = SynthType::parse(t).ok_or_else(|| format!("--type {t:?}: synth writes u8 or u16"))?;
+    let t0 = Instant::now();
+    let path = write_synth(dims, ty, out).map_err(|e| e.to_string())?;
+    println!("wrote {} in {:.2} s", path.display(), t0.elapsed().as_secs_f64());
+    Ok(())
+}
+
 fn run(cli: Cli) -> Result<(), String> {
-    if let Some(Cmd::Info { path }) = &cli.cmd {
-        return info(path, &cli.data);
+    match &cli.cmd {
+        Some(Cmd::Info { path }) => return info(path, &cli.data),
+        Some(Cmd::Synth { out }) => return synth(&cli.data, out),
+        _ => {}
     }
     let ds = load(&cli.data)?;
     let heuristic = Heuristic::from_name(&cli.data.heuristic)
@@ -366,6 +396,7 @@ fn run(cli: Cli) -> Result<(), String> {
             Ok(())
         }
         Cmd::Info { path } => info(&path, &cli.data),
+        Cmd::Synth { out } => synth(&cli.data, &out),
     }
 }
 
