@@ -10,12 +10,16 @@
 //! `tools/vtk-bench/run.sh` creates). Without that Python only our figures are printed.
 //! Camera: the server's default camera orbited 20°/10° and moved to 0.68 of its distance
 //! (`volwarp-server dump --zoom 0.68 --orbit 20,10`), the MRI benchmark view.
+//!
+//! `VTK_BENCH_VOLUME=/path/to/name_XxYxZ_type.raw` benches that one file instead (at 1024², with
+//! its preset transfer function), e.g. a synthetic volume of `volwarp-server synth`.
 
 use std::io::Write;
 use std::path::{Path, PathBuf};
 use std::time::Instant;
 use volwarp_core::wire::CameraRequest;
 use volwarp_core::Heuristic;
+use volwarp_server::volume::parse_raw_name;
 use volwarp_server::{Dataset, MarchKernel, MarchOptions, Marcher};
 
 const DATA: &str = volwarp_server::testdata::SHARED_DATA;
@@ -89,15 +93,22 @@ fn scene_json(s: &Scene, m: &Marcher, threads: usize, runs: usize) -> serde_json
     })
 }
 
-fn main() {
-    // `cargo bench` passes `--bench`; a filter argument picks volumes by name.
-    let filter: Vec<String> = std::env::args().skip(1).filter(|a| !a.starts_with("--")).collect();
-    let threads = env_usize("VTK_BENCH_THREADS", 2);
-    volwarp_server::limit_lanes_from_env();
-    let runs = env_usize("VTK_BENCH_RUNS", 5).max(1);
+/// The scene of `VTK_BENCH_VOLUME`: that raw file at 1024², with its preset.
+fn volume_scene(path: PathBuf) -> Result<Scene, String> {
+    let file = path.file_name().and_then(|f| f.to_str()).unwrap_or("");
+    parse_raw_name(file)
+        .map_err(|_| format!("VTK_BENCH_VOLUME {}: not a raw file named name_XxYxZ_type.raw", path.display()))?;
+    let ds = Dataset::load(&path, None).map_err(|e| format!("VTK_BENCH_VOLUME {e}"))?;
+    let stem = file.strip_suffix(".raw").unwrap_or(file);
+    Ok(Scene { name: format!("{stem} 1024²"), path, ds, size: 1024 })
+}
+
+/// The scenes of every raw volume of [`DATA`] whose name contains one of `filter` (all where
+/// it is empty); `None` where the folder is missing.
+fn shared_scenes(filter: &[String]) -> Option<Vec<Scene>> {
     let Ok(dir) = std::fs::read_dir(DATA) else {
         eprintln!("vs_vtk skipped: {DATA} not found");
-        return;
+        return None;
     };
     let mut files: Vec<PathBuf> =
         dir.filter_map(|e| e.ok().map(|e| e.path())).filter(|p| p.extension().is_some_and(|x| x == "raw")).collect();
@@ -113,6 +124,28 @@ fn main() {
             scenes.push(Scene { name: format!("{} {size}²", ds.name), path: path.clone(), ds: ds.clone(), size });
         }
     }
+    Some(scenes)
+}
+
+fn main() {
+    // `cargo bench` passes `--bench`; a filter argument picks volumes by name.
+    let filter: Vec<String> = std::env::args().skip(1).filter(|a| !a.starts_with("--")).collect();
+    let threads = env_usize("VTK_BENCH_THREADS", 2);
+    volwarp_server::limit_lanes_from_env();
+    let runs = env_usize("VTK_BENCH_RUNS", 5).max(1);
+    let scenes = match std::env::var_os("VTK_BENCH_VOLUME").filter(|v| !v.is_empty()) {
+        Some(path) => match volume_scene(PathBuf::from(path)) {
+            Ok(s) => vec![s],
+            Err(e) => {
+                eprintln!("vs_vtk: {e}");
+                std::process::exit(1);
+            }
+        },
+        None => match shared_scenes(&filter) {
+            Some(s) => s,
+            None => return,
+        },
+    };
     let load = std::fs::read_to_string("/proc/loadavg").unwrap_or_default();
     eprintln!(
         "vs_vtk: {threads} threads, {:?} lanes, median of {runs} runs; load {}",
