@@ -25,9 +25,10 @@
 //! calls, no random-number state), so the bytes are the same on every platform and any range
 //! of voxels can be produced on its own ([`synth_fill`], [`synth_slice`]).
 //!
-//! **Writing.** [`write_synth`] streams the file in slabs of whole z-slices of at most
-//! [`SLAB_BYTES`] (memory bounded independently of the volume's size), each filled in parallel
-//! with rayon, and logs its progress every 10 % for volumes of 64 MiB or more.
+//! **Writing.** [`write_synth`] streams the file in slabs of at most [`SLAB_BYTES`] (whole
+//! z-slices where a slice fits), so its memory is bounded whatever the volume's size; each slab
+//! is filled in parallel with rayon. It logs its progress every 10 % for volumes of 64 MiB or
+//! more.
 
 use crate::volume::VoxelType;
 use rayon::prelude::*;
@@ -78,8 +79,8 @@ impl SynthType {
     }
 }
 
-/// Most bytes of one slab [`write_synth`] fills and writes at a time (one z-slice where a
-/// slice is larger).
+/// Most bytes of one slab [`write_synth`] fills and writes at a time (whole z-slices where a
+/// slice fits, else part of one).
 pub const SLAB_BYTES: usize = 32 << 20;
 
 /// Voxels one rayon task fills.
@@ -91,7 +92,7 @@ const MAX_X_TABLE: u64 = 1 << 16;
 /// Why a synthetic volume could not be written.
 #[derive(Debug)]
 pub enum SynthError {
-    /// Dimensions with a zero, or whose bytes do not fit in 64 bits (or in memory addresses).
+    /// Dimensions with a zero, or whose bytes do not fit in 64 bits.
     Dims(String),
     /// The output folder is missing or not a folder.
     OutDir {
@@ -340,13 +341,18 @@ pub fn synth_slice(dims: [u32; 3], ty: SynthType, k: u32, out: &mut [u8]) {
 }
 
 /// Writes the synthetic volume of `dims` and `ty` into the folder `out_dir` as
-/// [`synth_file_name`] and returns its path. Streams slabs of whole z-slices (at most
-/// [`SLAB_BYTES`], or one slice) through a buffered writer, filling each in parallel; the file
+/// [`synth_file_name`] and returns its path. Streams slabs of at most [`SLAB_BYTES`] (whole
+/// z-slices where a slice fits) through a buffered writer, filling each in parallel; the file
 /// appears under its name only once complete (it is written as `NAME.part` and renamed).
 ///
 /// Errors: a zero dimension or a size past 64 bits, a missing or non-folder `out_dir`, and any
 /// failure to create, write or rename the file (the partial file is removed).
 pub fn write_synth(dims: [u32; 3], ty: SynthType, out_dir: &Path) -> Result<PathBuf, SynthError> {
+    write_in_slabs(dims, ty, out_dir, SLAB_BYTES as u64)
+}
+
+/// [`write_synth`] with slabs of at most `slab` bytes (rounded down to whole voxels).
+fn write_in_slabs(dims: [u32; 3], ty: SynthType, out_dir: &Path, slab: u64) -> Result<PathBuf, SynthError> {
     let total = synth_bytes(dims, ty)?;
     match std::fs::metadata(out_dir) {
         Ok(m) if m.is_dir() => {}
@@ -355,13 +361,9 @@ pub fn write_synth(dims: [u32; 3], ty: SynthType, out_dir: &Path) -> Result<Path
     }
     let size = ty.size() as u64;
     let slice_bytes = u64::from(dims[0]) * u64::from(dims[1]) * size;
-    let slab_bytes = if slice_bytes >= SLAB_BYTES as u64 {
-        slice_bytes
-    } else {
-        (SLAB_BYTES as u64 / slice_bytes * slice_bytes).min(total)
-    };
-    let slab_bytes = usize::try_from(slab_bytes)
-        .map_err(|_| SynthError::Dims(format!("a slice of {slice_bytes} bytes does not fit in memory")))?;
+    // Whole slices where they fit.
+    let slab = (slab / size * size).max(size);
+    let slab_bytes = if slice_bytes >= slab { slab } else { slab / slice_bytes * slice_bytes }.min(total) as usize;
     let path = out_dir.join(synth_file_name(dims, ty));
     let part = out_dir.join(format!("{}.part", synth_file_name(dims, ty)));
     let io = |p: &Path| {
@@ -431,6 +433,23 @@ mod tests {
         assert_eq!(SynthType::parse("u8"), Some(SynthType::U8));
         assert_eq!(SynthType::parse("uint16"), Some(SynthType::U16));
         assert_eq!(SynthType::parse("float32"), None);
+    }
+
+    #[test]
+    fn slabs_of_any_size_write_the_same_file() {
+        let dir = std::env::temp_dir().join(format!("volwarp-synth-slabs-{}", std::process::id()));
+        let dims = [13, 7, 5];
+        for ty in [SynthType::U8, SynthType::U16] {
+            let mut files = Vec::new();
+            for slab in [1, 2, 30, 91 * 2, 1000, SLAB_BYTES as u64] {
+                let d = dir.join(format!("{slab}"));
+                std::fs::create_dir_all(&d).unwrap();
+                files.push(std::fs::read(write_in_slabs(dims, ty, &d, slab).unwrap()).unwrap());
+            }
+            assert_eq!(files[0].len(), 13 * 7 * 5 * ty.size());
+            assert!(files.iter().all(|f| *f == files[0]), "{ty:?}");
+        }
+        let _ = std::fs::remove_dir_all(&dir);
     }
 
     #[test]
