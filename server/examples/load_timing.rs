@@ -6,6 +6,8 @@
 //! - `read`: the file read into a 1 MiB buffer and dropped (what `cat > /dev/null` does);
 //! - `bricks`: `load_volume` (the streaming loaders for raw and NRRD);
 //! - `grids`: `MinMaxGrid::new` (the empty-space grid);
+//! - the floor of any load into new memory: writing one byte per 4 KiB page of as many fresh
+//!   bytes as the bricks take (the kernel zeroes each page on its first touch);
 //! - the resident memory the volume and its grids add (`VmRSS`), against the file's voxel
 //!   bytes.
 //!
@@ -77,11 +79,24 @@ fn main() {
         drop(g);
         drop(v);
     }
+    // The floor of any load into new memory: touching as many fresh bytes as the bricks take
+    // (the kernel zeroes each page on its first write), in parallel on the threads.
+    let mut touch = Vec::new();
+    for _ in 0..runs {
+        use rayon::prelude::*;
+        let t = Instant::now();
+        let mut fresh = vec![0u8; vol_bytes as usize];
+        fresh.par_chunks_mut(1 << 21).for_each(|c| c.iter_mut().step_by(4096).for_each(|b| *b = 1));
+        touch.push(t.elapsed().as_secs_f64());
+        std::hint::black_box(&fresh);
+    }
     let (r, l, g) = (median(read), median(load), median(grid));
+    let touch = median(touch);
     let gib = |b: u64| b as f64 / (1u64 << 30) as f64;
     let data = bytes as f64;
     println!("{path}: {info}, threads {}", rayon::current_num_threads());
     println!("read (cat > /dev/null)  {:8.3} s  {:6.2} GB/s", r, data / r / 1e9);
+    println!("first touch of as many new bytes as the bricks {:8.3} s  {:5.2}x read", touch, touch / r);
     println!("bricks (load_volume)    {:8.3} s  {:6.2} GB/s  {:5.2}x read", l, data / l / 1e9, l / r);
     println!("grids (MinMaxGrid)      {:8.3} s", g);
     println!("bricks + grids          {:8.3} s  {:5.2}x read", l + g, (l + g) / r);

@@ -14,7 +14,8 @@
 //! then resumes on its regular sample lattice, so skipping changes no result.
 
 use crate::transfer_function::TransferFunction;
-use crate::volume::Volume;
+use crate::volume::bricks::{Grid, Stored};
+use crate::volume::{Volume, Voxels};
 use volwarp_core::Vec3;
 
 /// Brick edge in voxels of volumes up to [`BIG_VOXELS`] voxels.
@@ -45,6 +46,50 @@ fn brick_span(b: u32, e: u32, n: u32) -> (u32, u32) {
     ((b * e).saturating_sub(1), ((b + 1) * e + 1).min(n - 1))
 }
 
+/// The normalized range of every brick of edge `brick` of `grid` (see
+/// [`MinMaxGrid::with_brick`]).
+fn ranges_of<T: Stored>(grid: &Grid<T>, brick: u32, bricks: [u32; 3], (offset, scale): (f32, f32)) -> Vec<(f32, f32)> {
+    use rayon::prelude::*;
+    let [nx, ny, nz] = grid.layout().dims();
+    let per_slab = (bricks[0] * bricks[1]) as usize;
+    let mut ranges = vec![(0.0, 0.0); per_slab * bricks[2] as usize];
+    ranges.par_chunks_mut(per_slab.max(1)).enumerate().for_each(|(bz, slab)| {
+        let (z0, z1) = brick_span(bz as u32, brick, nz);
+        let (mut lo, mut hi) = (vec![T::default(); nx as usize], vec![T::default(); nx as usize]);
+        for by in 0..bricks[1] {
+            let (y0, y1) = brick_span(by, brick, ny);
+            let mut first = true;
+            for z in z0..=z1 {
+                for y in y0..=y1 {
+                    grid.for_each_run(y, z, |x0, run| {
+                        let (l, h) = (&mut lo[x0..x0 + run.len()], &mut hi[x0..x0 + run.len()]);
+                        if first {
+                            l.copy_from_slice(run);
+                            h.copy_from_slice(run);
+                        } else {
+                            for ((l, h), &v) in l.iter_mut().zip(h.iter_mut()).zip(run) {
+                                *l = if v < *l { v } else { *l };
+                                *h = if v > *h { v } else { *h };
+                            }
+                        }
+                    });
+                    first = false;
+                }
+            }
+            let out = &mut slab[(by * bricks[0]) as usize..((by + 1) * bricks[0]) as usize];
+            for (bx, o) in out.iter_mut().enumerate() {
+                let (x0, x1) = brick_span(bx as u32, brick, nx);
+                let (x0, x1) = (x0 as usize, x1 as usize);
+                let l = lo[x0..=x1].iter().fold(f32::INFINITY, |m, &v| m.min(v.to_f32()));
+                let h = hi[x0..=x1].iter().fold(f32::NEG_INFINITY, |m, &v| m.max(v.to_f32()));
+                // Stored values to normalized ones (a monotonic map: the range maps to the range).
+                *o = ((l - offset) * scale, (h - offset) * scale);
+            }
+        }
+    });
+    ranges
+}
+
 impl MinMaxGrid {
     /// Builds the grid of a volume with the brick edge for its size ([`BRICK`] or
     /// [`BRICK_BIG`]).
@@ -54,47 +99,17 @@ impl MinMaxGrid {
     }
 
     /// Builds the grid of a volume with bricks of `brick` voxels (a power of two), in parallel
-    /// over z slabs of bricks: each slab reads its voxel rows once from the storage bricks,
-    /// reduces each row to per-brick ranges along x, and merges them into the bricks whose
-    /// span holds the row.
+    /// over z slabs of bricks: for each row of bricks, the voxel rows of its span are reduced
+    /// element by element in the stored type (runs of the storage bricks, vectorized), then the
+    /// reduced row to each brick's x span.
     pub fn with_brick(volume: &Volume, brick: u32) -> MinMaxGrid {
-        use rayon::prelude::*;
         let brick = brick.max(1).next_power_of_two();
-        let dims = volume.dims();
-        let [nx, ny, nz] = dims;
-        let bricks = dims.map(|d| d.div_ceil(brick));
-        let per_slab = (bricks[0] * bricks[1]) as usize;
-        let mut ranges = vec![(f32::INFINITY, f32::NEG_INFINITY); per_slab * bricks[2] as usize];
-        let (offset, scale) = volume.normalization();
-        let voxels = volume.voxels();
-        ranges.par_chunks_mut(per_slab.max(1)).enumerate().for_each(|(bz, slab)| {
-            let mut row = Vec::with_capacity(nx as usize);
-            let mut xr = vec![(f32::INFINITY, f32::NEG_INFINITY); bricks[0] as usize];
-            let (z0, z1) = brick_span(bz as u32, brick, nz);
-            for z in z0..=z1 {
-                for y in 0..ny {
-                    voxels.read_row(y, z, &mut row);
-                    for (bx, r) in xr.iter_mut().enumerate() {
-                        let (x0, x1) = brick_span(bx as u32, brick, nx);
-                        let run = &row[x0 as usize..=x1 as usize];
-                        *r = run.iter().fold((f32::INFINITY, f32::NEG_INFINITY), |(lo, hi), &v| (lo.min(v), hi.max(v)));
-                    }
-                    // The bricks whose y span holds y: b·B − 1 ≤ y ≤ (b + 1)·B + 1.
-                    let by0 = (y + 1).saturating_sub(brick + 2).div_ceil(brick).min(bricks[1] - 1);
-                    let by1 = ((y + 1) / brick).min(bricks[1] - 1);
-                    for by in by0..=by1 {
-                        let out = &mut slab[(by * bricks[0]) as usize..((by + 1) * bricks[0]) as usize];
-                        for (o, r) in out.iter_mut().zip(&xr) {
-                            *o = (o.0.min(r.0), o.1.max(r.1));
-                        }
-                    }
-                }
-            }
-            // Stored values to normalized ones (a monotonic map: the range maps to the range).
-            for r in slab.iter_mut() {
-                *r = ((r.0 - offset) * scale, (r.1 - offset) * scale);
-            }
-        });
+        let bricks = volume.dims().map(|d| d.div_ceil(brick));
+        let ranges = match volume.voxels() {
+            Voxels::U8(g) => ranges_of(g, brick, bricks, volume.normalization()),
+            Voxels::U16(g) => ranges_of(g, brick, bricks, volume.normalization()),
+            Voxels::F32(g) => ranges_of(g, brick, bricks, volume.normalization()),
+        };
         MinMaxGrid { brick, bricks, ranges }
     }
 

@@ -185,6 +185,25 @@ impl Layout {
     }
 }
 
+/// Asks the kernel to back the whole 2 MiB pages inside `v` with transparent huge pages (Linux,
+/// where they are enabled as `madvise`; a hint, ignored elsewhere): a streaming load then takes
+/// one page fault per 2 MiB instead of per 4 KiB, and the marcher's gathers miss the TLB less.
+fn advise_huge_pages<T>(v: &mut [T]) {
+    #[cfg(target_os = "linux")]
+    {
+        const HUGE: usize = 2 << 20;
+        let start = v.as_mut_ptr() as usize;
+        let (first, end) = (start.next_multiple_of(HUGE), (start + std::mem::size_of_val(v)) / HUGE * HUGE);
+        if end > first {
+            // SAFETY: the range lies inside `v`'s allocation, which this function borrows
+            // mutably; MADV_HUGEPAGE only advises the kernel and changes no content.
+            unsafe {
+                libc::madvise(first as *mut libc::c_void, end - first, libc::MADV_HUGEPAGE);
+            }
+        }
+    }
+}
+
 /// Bricked values of one type.
 #[derive(Clone, Debug)]
 pub struct Grid<T> {
@@ -219,6 +238,20 @@ impl<T: Stored> Grid<T> {
         let (sy, sz) = (BRICK_SPAN as usize, (BRICK_SPAN * BRICK_SPAN) as usize);
         let d = &self.chunks[c];
         [i, i + 1, i + sy, i + sy + 1, i + sz, i + sz + 1, i + sz + sy, i + sz + sy + 1].map(|j| d[j].to_f32())
+    }
+
+    /// Calls `f(x0, run)` for the runs of row `y` of slice `z` (each below its dim) that lie in
+    /// one storage brick each, `x0` the first voxel of the run, in x order.
+    #[inline]
+    pub fn for_each_run(&self, y: u32, z: u32, mut f: impl FnMut(usize, &[T])) {
+        let nx = self.layout.dims[0];
+        let mut x = 0;
+        while x < nx {
+            let n = (nx - x).min(BRICK_EDGE) as usize;
+            let (c, i) = self.layout.locate(x, y, z);
+            f(x as usize, &self.chunks[c][i..i + n]);
+            x += BRICK_EDGE;
+        }
     }
 
     /// Row `y` of slice `z` (each below its dim) as `f32`, into `out` (replacing its content).
@@ -294,7 +327,13 @@ impl<T: Stored> GridBuilder<T> {
     pub fn with_layout(layout: Layout) -> Result<GridBuilder<T>, VolumeError> {
         // Zeroed allocations (calloc): pages are taken as slices are written, not twice. The
         // loaders checked the memory before ([`super::check_load`]).
-        let chunks = (0..layout.chunks()).map(|c| vec![T::default(); layout.chunk_len(c)]).collect();
+        let chunks = (0..layout.chunks())
+            .map(|c| {
+                let mut v = vec![T::default(); layout.chunk_len(c)];
+                advise_huge_pages(&mut v);
+                v
+            })
+            .collect();
         Ok(GridBuilder { grid: Grid { layout, chunks }, next_z: 0 })
     }
 
