@@ -484,22 +484,26 @@ impl Kernel<'_> {
                 let bzl = (bzf - czf * per_chunk).trunc_int();
                 let brick = bx + L::mul_i(sbx, by + L::mul_i(sby, bzl));
                 let base = L::mul_i(brick, brick_values) + lx + L::mul_i(span, ly) + L::mul_i(span2, lz);
+                // Usually every lane is in the first lane's chunk: one set of gathers.
                 let cs: [f32; M] = czf.to_array();
-                let (mut first, mut last) = (cs[0], cs[0]);
-                for &c in &cs[1..] {
-                    first = first.min(c);
-                    last = last.max(c);
-                }
-                let mut acc = corners::<L>(self.voxels, first as usize, base);
-                let mut c = first + 1.0;
-                while c <= last {
-                    let cl = L::splat(c);
-                    let here = czf.simd_ge(cl).and_not(czf.simd_gt(cl));
-                    let part = corners::<L>(self.voxels, c as usize, base);
-                    for (a, p) in acc.iter_mut().zip(part) {
-                        *a = here.select(p, *a);
+                let c0 = L::splat(cs[0]);
+                let mut acc = corners::<L>(self.voxels, cs[0] as usize, base);
+                if (czf.simd_gt(c0) | czf.simd_lt(c0)).any() {
+                    let (mut first, mut last) = (cs[0], cs[0]);
+                    for &c in &cs[1..] {
+                        first = first.min(c);
+                        last = last.max(c);
                     }
-                    c += 1.0;
+                    let mut c = first;
+                    while c <= last {
+                        let cl = L::splat(c);
+                        let here = czf.simd_ge(cl).and_not(czf.simd_gt(cl));
+                        let part = corners::<L>(self.voxels, c as usize, base);
+                        for (a, p) in acc.iter_mut().zip(part) {
+                            *a = here.select(p, *a);
+                        }
+                        c += 1.0;
+                    }
                 }
                 let [c0, c1, c2, c3, c4, c5, c6, c7] = acc;
                 (c0, c1, c2, c3, c4, c5, c6, c7)

@@ -25,6 +25,7 @@ pub const BRICK_EDGE: u32 = 32;
 pub const BRICK_SHIFT: u32 = 5;
 /// Values per brick edge: the brick's voxels and the apron.
 pub const BRICK_SPAN: u32 = BRICK_EDGE + 1;
+const _: () = assert!(BRICK_SPAN == 33, "GridBuilder::write_slab copies runs of 33 values");
 /// Values per brick.
 pub const BRICK_VALUES: usize = (BRICK_SPAN * BRICK_SPAN * BRICK_SPAN) as usize;
 /// Most values in one chunk (the packet marcher's gathers index a chunk with `i32` lanes; a
@@ -185,13 +186,18 @@ impl Layout {
     }
 }
 
-/// Asks the kernel to back the whole 2 MiB pages inside `v` with transparent huge pages (Linux,
-/// where they are enabled as `madvise`; a hint, ignored elsewhere): a streaming load then takes
-/// one page fault per 2 MiB instead of per 4 KiB, and the marcher's gathers miss the TLB less.
+/// With `VOLWARP_HUGE_PAGES=1`, asks the kernel to back the whole 2 MiB pages inside `v` with
+/// transparent huge pages (Linux, where they are enabled as `madvise`; a hint, ignored
+/// elsewhere). Off by default: measured on this machine, huge pages load 1024³ u8 in 0.43
+/// instead of 0.52 s, but 2048²×1024 in 5.8 instead of 2.3 s (with most memory in the page
+/// cache the kernel compacts memory for every 2 MiB fault), and the march is no faster.
 fn advise_huge_pages<T>(v: &mut [T]) {
     #[cfg(target_os = "linux")]
     {
         const HUGE: usize = 2 << 20;
+        if std::env::var_os("VOLWARP_HUGE_PAGES").is_none_or(|v| v != "1") {
+            return;
+        }
         let start = v.as_mut_ptr() as usize;
         let (first, end) = (start.next_multiple_of(HUGE), (start + std::mem::size_of_val(v)) / HUGE * HUGE);
         if end > first {
@@ -310,10 +316,15 @@ impl<T: Stored> Grid<T> {
 }
 
 /// Fills a [`Grid`] slice by slice (z ascending, each slice x fastest): what the streaming
-/// loaders feed. Memory: the grid and one slice.
+/// loaders feed. Memory: the grid and the slices of one z-slab of bricks ([`BRICK_SPAN`]
+/// slices, its own and the apron's), kept until the slab is whole and then written brick row
+/// by brick row (each row of bricks, a few MiB, filled completely while it is in cache).
 pub struct GridBuilder<T> {
     grid: Grid<T>,
     next_z: u32,
+    /// The slices of the slab being gathered, from `slab_z`.
+    slab: Vec<T>,
+    slab_z: u32,
 }
 
 impl<T: Stored> GridBuilder<T> {
@@ -334,7 +345,7 @@ impl<T: Stored> GridBuilder<T> {
                 v
             })
             .collect();
-        Ok(GridBuilder { grid: Grid { layout, chunks }, next_z: 0 })
+        Ok(GridBuilder { grid: Grid { layout, chunks }, next_z: 0, slab: Vec::new(), slab_z: 0 })
     }
 
     /// Slices received so far.
@@ -346,53 +357,74 @@ impl<T: Stored> GridBuilder<T> {
     pub fn push_slice(&mut self, slice: &[T]) {
         let [nx, ny, nz] = self.grid.layout.dims;
         let z = self.next_z;
-        if z >= nz || slice.len() != nx as usize * ny as usize {
+        let n = nx as usize * ny as usize;
+        if z >= nz || slice.len() != n {
             return;
         }
-        let (bz, lz) = (z >> BRICK_SHIFT, z & (BRICK_EDGE - 1));
-        self.write_slice(bz, lz, slice);
-        if lz == 0 && bz > 0 {
-            // The apron of the slab below.
-            self.write_slice(bz - 1, BRICK_EDGE, slice);
+        self.slab.extend_from_slice(slice);
+        self.next_z += 1;
+        if z == self.slab_z + BRICK_EDGE {
+            // The slab's own slices and its apron (the next slab's first slice): write it, and
+            // keep that slice for the next slab.
+            write_slab(&mut self.grid, self.slab_z >> BRICK_SHIFT, &self.slab);
+            // The buffer is kept (no new pages to fault in for the next slab).
+            let keep = self.slab.len() - n;
+            self.slab.drain(..keep);
+            self.slab_z = z;
         }
         if z == nz - 1 {
-            // The last slice also stands for every position past it in its slab.
-            for l in lz + 1..=BRICK_EDGE {
-                self.write_slice(bz, l, slice);
-            }
+            // The last slab: its missing slices repeat the last one.
+            write_slab(&mut self.grid, self.slab_z >> BRICK_SHIFT, &self.slab);
+            self.slab = Vec::new();
         }
-        self.next_z += 1;
     }
+}
 
-    /// Writes `slice` as local z `lz` of the bricks of slab `bz` (in parallel over brick rows).
-    fn write_slice(&mut self, bz: u32, lz: u32, slice: &[T]) {
-        use rayon::prelude::*;
-        let layout = self.grid.layout;
-        let [nx, ny, _] = layout.dims;
-        let [nbx, nby, _] = layout.bricks;
-        let chunk = (bz >> layout.slab_shift) as usize;
-        let bzl = (bz & ((1 << layout.slab_shift) - 1)) as usize;
-        let row_bricks = nbx as usize * BRICK_VALUES;
-        let slab_start = bzl * layout.slab_bricks() * BRICK_VALUES;
-        let slab = &mut self.grid.chunks[chunk][slab_start..slab_start + nby as usize * row_bricks];
-        let span = BRICK_SPAN as usize;
-        slab.par_chunks_mut(row_bricks).enumerate().for_each(|(by, row)| {
-            for ly in 0..BRICK_SPAN {
-                let y = (by as u32 * BRICK_EDGE + ly).min(ny - 1) as usize;
-                let src = &slice[y * nx as usize..(y + 1) * nx as usize];
+/// Writes the bricks of slab `bz` of `grid` from its slices (x fastest, `BRICK_SPAN` of them or
+/// fewer: the missing ones repeat the last), in parallel over rows of bricks.
+fn write_slab<T: Stored>(grid: &mut Grid<T>, bz: u32, slices: &[T]) {
+    use rayon::prelude::*;
+    let layout = grid.layout;
+    let [nx, ny, _] = layout.dims;
+    let [nbx, nby, _] = layout.bricks;
+    let n = nx as usize * ny as usize;
+    let count = slices.len() / n.max(1);
+    if count == 0 {
+        return;
+    }
+    let chunk = (bz >> layout.slab_shift) as usize;
+    let bzl = (bz & ((1 << layout.slab_shift) - 1)) as usize;
+    let row_bricks = nbx as usize * BRICK_VALUES;
+    let slab_start = bzl * layout.slab_bricks() * BRICK_VALUES;
+    let dst = &mut grid.chunks[chunk][slab_start..slab_start + nby as usize * row_bricks];
+    let span = BRICK_SPAN as usize;
+    let nx = nx as usize;
+    dst.par_chunks_mut(row_bricks).enumerate().for_each(|(by, row)| {
+        for lz in 0..span {
+            let slice = &slices[lz.min(count - 1) * n..][..n];
+            for ly in 0..span {
+                let y = (by * BRICK_EDGE as usize + ly).min(ny as usize - 1);
+                let src = &slice[y * nx..(y + 1) * nx];
+                let last = src[nx - 1];
                 for bx in 0..nbx as usize {
                     let x0 = bx * BRICK_EDGE as usize;
-                    let off = bx * BRICK_VALUES + span * (ly as usize + span * lz as usize);
-                    let dst = &mut row[off..off + span];
-                    let n = (nx as usize - x0).min(span);
-                    dst[..n].copy_from_slice(&src[x0..x0 + n]);
-                    let last = src[nx as usize - 1];
-                    dst[n..].iter_mut().for_each(|v| *v = last);
+                    let off = bx * BRICK_VALUES + span * (ly + span * lz);
+                    let d = &mut row[off..off + span];
+                    if let (Some(d), Some(s)) = (d.first_chunk_mut::<33>(), src.get(x0..x0 + span)) {
+                        // A whole run (a copy of constant length, inlined).
+                        d.copy_from_slice(s.first_chunk::<33>().expect("33 values"));
+                    } else {
+                        let k = (nx - x0).min(span);
+                        d[..k].copy_from_slice(&src[x0..x0 + k]);
+                        d[k..].iter_mut().for_each(|v| *v = last);
+                    }
                 }
             }
-        });
-    }
+        }
+    });
+}
 
+impl<T: Stored> GridBuilder<T> {
     /// The grid, once every slice is in (an error naming how many arrived otherwise).
     pub fn finish(self) -> Result<Grid<T>, VolumeError> {
         let nz = self.grid.layout.dims[2];

@@ -240,8 +240,11 @@ pub(crate) fn check_load(
     decoded_bytes: u64,
 ) -> Result<u64, VolumeError> {
     let voxels = check_geometry(dims, spacing, opts.max_voxels)?;
-    // The bricks, any decoding buffer, and the empty-space grids (about 1/8 byte per voxel).
+    // The bricks, one slab of slices while they are built, any decoding buffer, and the
+    // empty-space grids (at most 1/8 byte per voxel).
+    let slab = u64::from(dims[0]) * u64::from(dims[1]) * u64::from(bricks::BRICK_SPAN) * stored_bytes;
     let needed = bricks::Layout::stored_bytes(dims, stored_bytes)
+        .and_then(|b| b.checked_add(slab))
         .and_then(|b| voxels.checked_mul(decoded_bytes)?.checked_add(b))
         .and_then(|n| n.checked_add(voxels / 8))
         .ok_or_else(|| {
