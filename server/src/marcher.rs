@@ -178,12 +178,12 @@ impl Marcher {
     }
 
     /// Marchers of the levels of detail of this marcher's volume with `tf` and this marcher's
-    /// options: this volume first, then coarser copies ([`crate::volume::pyramid`]) down to 32
-    /// voxels on the largest axis (at most 8 levels). Logs the levels, their memory and the time
+    /// options: this volume first, then coarser copies ([`crate::volume::pyramid`]) down to 16
+    /// voxels on the largest axis (at most 9 levels). Logs the levels, their memory and the time
     /// taken.
     pub fn levels(&self, tf: &TransferFunction) -> Result<Vec<Arc<Marcher>>, crate::volume::VolumeError> {
         let t = std::time::Instant::now();
-        let volumes = crate::volume::pyramid::pyramid(self.volume.clone(), 32, 8)?;
+        let volumes = crate::volume::pyramid::pyramid(self.volume.clone(), 16, 9)?;
         let extra: u64 = volumes[1..].iter().map(|v| v.memory_bytes()).sum();
         let mut out = vec![Arc::new(self.clone())];
         for (l, v) in volumes.into_iter().enumerate().skip(1) {

@@ -20,8 +20,10 @@
 //! ([`crate::volume::pyramid`]) and a frame-time budget ([`LevelPolicy`]): while a client's
 //! camera moves, its frames come from the finest level whose predicted time fits the budget;
 //! when the camera rests, from the volume itself. The prediction is the last measured time per
-//! pixel of that level (or of the nearest measured one, halved or doubled per level: a level
-//! has half the samples per ray of the one before).
+//! pixel of that level, or of the nearest measured one scaled by [`LEVEL_RATIO`] per level (a
+//! level has half the samples per ray of the one before, but the per-pixel work does not
+//! shrink, so a level measures 0.5–0.8 of the one before: 0.7 errs towards the coarser level,
+//! and the next frame's measurement corrects it both ways).
 
 use crate::marcher::{FrameStats, Marcher};
 use std::sync::atomic::{AtomicU64, Ordering};
@@ -119,6 +121,9 @@ impl Drop for Turn<'_> {
     }
 }
 
+/// The predicted time of a level against the next finer one (see the module docs).
+pub const LEVEL_RATIO: f64 = 0.7;
+
 /// How a queue picks the level of detail of a frame (see the module docs).
 #[derive(Clone, Copy, Debug, Default, PartialEq)]
 pub struct LevelPolicy {
@@ -136,11 +141,11 @@ impl LevelPolicy {
         };
         let budget_ns = budget.as_nanos() as f64;
         for l in 0..cost.len() {
-            // The nearest measured level, scaled by 2 per level between them.
+            // The nearest measured level, scaled by LEVEL_RATIO per level between them.
             let predicted = (0..cost.len())
                 .filter_map(|m| cost[m].map(|c| (m, c)))
                 .min_by_key(|&(m, _)| m.abs_diff(l))
-                .map(|(m, c)| c * pixels as f64 * 2f64.powi(m as i32 - l as i32));
+                .map(|(m, c)| c * pixels as f64 * LEVEL_RATIO.powi(l as i32 - m as i32));
             match predicted {
                 Some(t) if t <= budget_ns => return l as u8,
                 None => return 0,
@@ -314,12 +319,14 @@ mod tests {
     fn the_policy_picks_the_finest_level_within_the_budget_while_moving() {
         let p = LevelPolicy { budget: Some(Duration::from_millis(50)) };
         let px = 1_000_000;
-        // 200 ns per pixel at level 0: 200 ms; level 2 predicted at 50 ms.
-        let cost = [Some(200.0), None, None, None];
+        // 100 ns per pixel at level 0: 100 ms; level 2 predicted at 49 ms.
+        let cost = [Some(100.0), None, None, None];
         assert_eq!(p.pick(true, px, &cost), 2);
         assert_eq!(p.pick(false, px, &cost), 0, "a resting camera gets the volume itself");
-        // Measured levels win over predictions; nothing fits: the coarsest.
-        assert_eq!(p.pick(true, px, &[Some(200.0), Some(40.0), None, None]), 1);
+        // Measured levels win over predictions (level 1 at 40 ms; a measured coarse level
+        // predicts the finer ones: 30 / 0.7 = 43 ms fits); nothing fits: the coarsest.
+        assert_eq!(p.pick(true, px, &[Some(100.0), Some(40.0), None, None]), 1);
+        assert_eq!(p.pick(true, px, &[Some(900.0), None, None, Some(30.0)]), 2);
         assert_eq!(p.pick(true, px, &[Some(9e3), None, None, Some(900.0)]), 3);
         // Nothing measured yet: the volume itself (measured then); no budget: always 0.
         assert_eq!(p.pick(true, px, &[None, None]), 0);
