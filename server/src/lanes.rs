@@ -239,10 +239,10 @@ impl Lanes for f32x8 {
         }
         let last = data.len() - 4;
         let i = idx.to_array().map(|i| (i.max(0) as usize).min(last));
-        (
-            f32x8::new(core::array::from_fn(|l| data[i[l]] as f32)),
-            f32x8::new(core::array::from_fn(|l| data[i[l] + 1] as f32)),
-        )
+        // One 16-bit load per lane, split in lanes (as the AVX kinds split their 32-bit gather).
+        let w = i32x8::new(i.map(|i| u16::from_le_bytes([data[i], data[i + 1]]) as i32));
+        let m = i32x8::splat(255);
+        ((w & m).round_float(), (w >> 8i32).round_float())
     }
     #[inline(always)]
     fn gather_short_pairs(data: &[u16], idx: i32x8) -> (Self, Self) {
