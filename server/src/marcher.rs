@@ -183,6 +183,9 @@ impl Marcher {
     /// taken.
     pub fn levels(&self, tf: &TransferFunction) -> Result<Vec<Arc<Marcher>>, crate::volume::VolumeError> {
         let t = std::time::Instant::now();
+        // The levels take about a seventh of the volume's bricks: refused before building where
+        // the memory there is cannot hold them.
+        crate::volume::MemoryLimit::Available.check(self.volume.memory_bytes() / 7)?;
         let volumes = crate::volume::pyramid::pyramid(self.volume.clone(), 16, 9)?;
         let extra: u64 = volumes[1..].iter().map(|v| v.memory_bytes()).sum();
         let mut out = vec![Arc::new(self.clone())];

@@ -241,12 +241,18 @@ pub(crate) fn check_load(
 ) -> Result<u64, VolumeError> {
     let voxels = check_geometry(dims, spacing, opts.max_voxels)?;
     // The bricks, one slab of slices while they are built, any decoding buffer, and the
-    // empty-space grids (at most 1/8 byte per voxel).
+    // empty-space grids (15 bytes per skipping brick: its range, flags, distances and look).
     let slab = u64::from(dims[0]) * u64::from(dims[1]) * u64::from(bricks::BRICK_SPAN) * stored_bytes;
+    let cell = u64::from(if voxels > crate::empty_space::BIG_VOXELS {
+        crate::empty_space::BRICK_BIG
+    } else {
+        crate::empty_space::BRICK
+    });
+    let grids = dims.iter().map(|&d| u64::from(d).div_ceil(cell)).product::<u64>() * 15;
     let needed = bricks::Layout::stored_bytes(dims, stored_bytes)
         .and_then(|b| b.checked_add(slab))
         .and_then(|b| voxels.checked_mul(decoded_bytes)?.checked_add(b))
-        .and_then(|n| n.checked_add(voxels / 8))
+        .and_then(|n| n.checked_add(grids))
         .ok_or_else(|| {
             VolumeError::new(VolumeErrorKind::BadGeometry(format!(
                 "dimensions {}x{}x{} give more than 2^64 bytes",
