@@ -324,7 +324,11 @@ pub fn load(path: &Path, opts: &LoadOptions) -> Result<Volume, VolumeError> {
     }
     let (reorient, orientation) = h.reorient().map_err(|e| e.at(path))?;
     let spacing = opts.spacing.unwrap_or(reorient.spacing);
-    let voxels = super::check_load(h.dims, reorient.spacing, opts, 4, 8).map_err(|e| e.at(path))?;
+    // Streamed into bricks where the stored order is LPS's but for mirrored x and y and the
+    // values are not scaled; else decoded whole (8 bytes per voxel while loading).
+    let stream = reorient.perm == [0, 1, 2] && !reorient.flip[2] && h.scale.is_none();
+    let (stored, decoded) = if stream { (super::stream::stored_size(h.voxel_type), 0) } else { (4, 8) };
+    let voxels = super::check_load(h.dims, reorient.spacing, opts, stored, decoded).map_err(|e| e.at(path))?;
     let expected = super::voxel_bytes(voxels, h.voxel_type).map_err(|e| e.at(path))?;
     // The data: in this file after the header, or in the `.img` beside a `.hdr`.
     let (data_path, (mut data, is_gz), consumed) = if h.pair {
@@ -346,6 +350,44 @@ pub fn load(path: &Path, opts: &LoadOptions) -> Result<Volume, VolumeError> {
         return Err(truncated(file_len.saturating_sub(h.vox_offset)).at(&data_path));
     }
     let prefix: &[u8] = if h.pair { &[] } else { &head };
+    let file_name = path.file_name().and_then(|s| s.to_str()).unwrap_or("volume");
+    let name = file_name.split('.').next().filter(|s| !s.is_empty()).unwrap_or("volume");
+    let source = SourceInfo {
+        format: format!("NIfTI-{}", h.version),
+        voxel_type: Some(h.voxel_type),
+        orientation: match h.scale {
+            Some((s, i)) => format!("{orientation}; values scaled by {s} and offset by {i}"),
+            None => orientation,
+        },
+        data_bytes: expected,
+        files: 1 + h.pair as usize,
+    };
+    if stream {
+        // The data from the header's bytes already read, then the rest of the stream, exactly
+        // the first volume's bytes (later volumes of a 4-D file are not read).
+        let from_head = prefix.get(h.vox_offset.min(consumed) as usize..).unwrap_or(&[]);
+        let skip = h.vox_offset.saturating_sub(consumed);
+        let skipped = std::io::copy(&mut data.by_ref().take(skip), &mut std::io::sink())
+            .map_err(|e| decompress_or_io(&data_path, e))?;
+        if skipped < skip {
+            return Err(truncated(0).at(&data_path));
+        }
+        let reader = from_head.chain(data).take(expected);
+        let spec = super::stream::StreamSpec {
+            name,
+            dims: h.dims,
+            spacing,
+            ty: h.voxel_type,
+            big_endian: h.big_endian,
+            flip_xy: [reorient.flip[0], reorient.flip[1]],
+            path: &data_path,
+        };
+        let vol = super::stream::stream_volume(&spec, reader).map_err(|e| match e.kind {
+            VolumeErrorKind::Io(io) => decompress_or_io(&data_path, io),
+            _ => e,
+        })?;
+        return Ok(vol.with_source(source));
+    }
     let bytes = if h.vox_offset < consumed {
         let from_head = &prefix[h.vox_offset as usize..];
         let mut buf = from_head[..from_head.len().min(expected as usize)].to_vec();
@@ -372,18 +414,6 @@ pub fn load(path: &Path, opts: &LoadOptions) -> Result<Volume, VolumeError> {
     }
     let values = reorient.apply(values, h.dims);
     let dims = reorient.dims(h.dims);
-    let file_name = path.file_name().and_then(|s| s.to_str()).unwrap_or("volume");
-    let name = file_name.split('.').next().filter(|s| !s.is_empty()).unwrap_or("volume");
-    let source = SourceInfo {
-        format: format!("NIfTI-{}", h.version),
-        voxel_type: Some(h.voxel_type),
-        orientation: match h.scale {
-            Some((s, i)) => format!("{orientation}; values scaled by {s} and offset by {i}"),
-            None => orientation,
-        },
-        data_bytes: expected,
-        files: 1 + h.pair as usize,
-    };
     Ok(Volume::from_values(name, dims, spacing, values).map_err(|e| e.at(path))?.with_source(source))
 }
 

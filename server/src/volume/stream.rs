@@ -1,6 +1,7 @@
 //! Streaming loads: voxel data read slab by slab straight into bricks ([`super::bricks`]) in
 //! the file's own type, so a load takes the bricks and one slab of the file, never the whole
-//! file again as `f32`. The raw and NRRD loaders (raw and gzip encodings) read through here.
+//! file again as `f32`. The raw and NRRD loaders (raw and gzip encodings) and the NIfTI loader
+//! (volumes in LPS order or mirrored in x and y, unscaled) read through here.
 
 use super::bricks::{GridBuilder, Stored, Voxels};
 use super::{code_scale, Volume, VolumeError, VolumeErrorKind, VoxelType};
