@@ -8,6 +8,8 @@ use volwarp_core::{Camera, Heuristic, Vec3, BACKGROUND};
 use volwarp_server::transfer_function::TransferFunction;
 use volwarp_server::{Dataset, MarchOptions, Marcher, RadiusModel, Volume};
 
+mod common;
+
 /// A 16³ volume of one value, unit spacing: the box [0, 16]³.
 fn constant_box(alpha: f32) -> Marcher {
     let vol = Volume::from_values("box", [16; 3], Vec3::ONE, vec![7.0; 16 * 16 * 16]).unwrap();
@@ -217,17 +219,7 @@ fn ground_truth_equals_marched_colors_over_the_background() {
 /// bundled and shared dataset (the packet marcher equals the scalar one: `packet_march.rs`).
 #[test]
 fn bricked_samples_equal_the_flat_reference_on_every_dataset() {
-    let dir = volwarp_server::dataset::data_dir().unwrap();
-    let mut sets =
-        vec![Dataset::default_bundled(), Dataset::load(dir.join("neghip_64x64x64_uint8.raw"), None).unwrap()];
-    for f in [
-        "iron_protein_68x68x68_uint8.raw",
-        "tooth_103x94x161_uint8.raw",
-        "mri_colin27_181x217x181_uint8.raw",
-        "ct_head_quarter_64x64x93_int16.raw",
-    ] {
-        sets.extend(volwarp_server::testdata::shared_dataset(f));
-    }
+    let sets = common::datasets();
     let mut seed = 0x2545_f491u32;
     let mut r = move || {
         seed ^= seed << 13;
@@ -244,21 +236,9 @@ fn bricked_samples_equal_the_flat_reference_on_every_dataset() {
                 flat.extend((0..nx).map(|x| v.voxels().get(x, y, z)));
             }
         }
-        let at = |x: u32, y: u32, z: u32| flat[(x.min(nx - 1) + nx * (y.min(ny - 1) + ny * z.min(nz - 1))) as usize];
-        let (off, sc) = v.normalization();
         for _ in 0..50_000 {
             let g = Vec3::new(r() * (nx + 2) as f32 - 1.5, r() * (ny + 2) as f32 - 1.5, r() * (nz + 2) as f32 - 1.5);
-            let c = g.max(Vec3::ZERO).min(Vec3::new((nx - 1) as f32, (ny - 1) as f32, (nz - 1) as f32));
-            let (x, y, z) = (c.x as u32, c.y as u32, c.z as u32);
-            let (fx, fy, fz) = (c.x - x as f32, c.y - y as f32, c.z - z as f32);
-            let lerp = |a: f32, b: f32, t: f32| a + (b - a) * t;
-            let c0 = lerp(lerp(at(x, y, z), at(x + 1, y, z), fx), lerp(at(x, y + 1, z), at(x + 1, y + 1, z), fx), fy);
-            let c1 = lerp(
-                lerp(at(x, y, z + 1), at(x + 1, y, z + 1), fx),
-                lerp(at(x, y + 1, z + 1), at(x + 1, y + 1, z + 1), fx),
-                fy,
-            );
-            let want = (lerp(c0, c1, fz) - off) * sc;
+            let want = volwarp_server::volume::flat_sample(&flat, v.dims(), v.normalization(), g);
             assert_eq!(v.sample_grid(g).to_bits(), want.to_bits(), "{} at {g}", ds.name);
         }
     }

@@ -15,28 +15,10 @@ use volwarp_server::{Dataset, MarchKernel, MarchOptions, Marcher, PixelBuffer, V
 
 mod common;
 
-use common::for_each_lane_kind;
+use common::{datasets, for_each_lane_kind};
 
 fn data(name: &str) -> std::path::PathBuf {
     Path::new(env!("CARGO_MANIFEST_DIR")).join("..").join(name)
-}
-
-/// The bundled datasets, the shared ones (see `volwarp_server::testdata`), and a procedural one.
-fn datasets() -> Vec<Dataset> {
-    let mut out = vec![
-        Dataset::load(data("data/ct_head_quarter.nhdr"), None).unwrap(),
-        Dataset::load(data("data/neghip_64x64x64_uint8.raw"), None).unwrap(),
-        Dataset::marschner_lobb(41),
-    ];
-    for f in [
-        "iron_protein_68x68x68_uint8.raw",
-        "tooth_103x94x161_uint8.raw",
-        "mri_colin27_181x217x181_uint8.raw",
-        "ct_head_quarter_64x64x93_int16.raw",
-    ] {
-        out.extend(volwarp_server::testdata::shared_dataset(f));
-    }
-    out
 }
 
 fn pair(ds: &Dataset, opts: MarchOptions) -> (Marcher, Marcher) {

@@ -58,6 +58,7 @@ pub use bricks::Voxels;
 pub use error::{VolumeError, VolumeErrorKind};
 pub(crate) use raw::read_exactly;
 pub use raw::{decode_voxels, parse_dims, parse_raw_name, RawName, VoxelType};
+pub use sampling::flat_sample;
 
 use std::path::Path;
 use volwarp_core::sample::Bounds;

@@ -47,6 +47,33 @@ pub(crate) fn trilinear(c: [f32; 8], fx: f32, fy: f32, fz: f32) -> f32 {
     c0 + (c1 - c0) * fz
 }
 
+/// The definition of a sample without bricks: a trilinear sample at continuous voxel coordinates
+/// `g` read from `stored` (the stored values of a volume of `dims`, x fastest; see
+/// [`super::Voxels::get`]) with clamped corners, blended and normalized with `(offset, scale)`
+/// as [`Volume::sample_grid`] defines. The reference the bricked reads are tested against.
+pub fn flat_sample(stored: &[f32], dims: [u32; 3], (offset, scale): (f32, f32), g: Vec3) -> f32 {
+    let [nx, ny, nz] = dims;
+    let gx = g.x.max(0.0).min((nx - 1) as f32);
+    let gy = g.y.max(0.0).min((ny - 1) as f32);
+    let gz = g.z.max(0.0).min((nz - 1) as f32);
+    let (x0, y0, z0) = (gx as u32, gy as u32, gz as u32);
+    let at = |x: u32, y: u32, z: u32| {
+        let (x, y, z) = (x.min(nx - 1) as usize, y.min(ny - 1) as usize, z.min(nz - 1) as usize);
+        stored[x + nx as usize * (y + ny as usize * z)]
+    };
+    let c = [
+        at(x0, y0, z0),
+        at(x0 + 1, y0, z0),
+        at(x0, y0 + 1, z0),
+        at(x0 + 1, y0 + 1, z0),
+        at(x0, y0, z0 + 1),
+        at(x0 + 1, y0, z0 + 1),
+        at(x0, y0 + 1, z0 + 1),
+        at(x0 + 1, y0 + 1, z0 + 1),
+    ];
+    (trilinear(c, gx - x0 as f32, gy - y0 as f32, gz - z0 as f32) - offset) * scale
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -60,31 +87,6 @@ mod tests {
         assert_eq!(v.sample(Vec3::new(1.5, 0.5, 0.5)), 1.0);
         assert_eq!(v.sample(Vec3::new(2.0, 0.0, 0.0)), 1.0);
         assert_eq!(v.sample(Vec3::new(-5.0, 9.0, f32::NAN)), 0.0);
-    }
-
-    /// The flat reference: a trilinear sample read from the x-fastest values with clamped
-    /// corners, blended and normalized as [`Volume::sample_grid`] defines.
-    fn flat_sample(stored: &[f32], dims: [u32; 3], (offset, scale): (f32, f32), g: Vec3) -> f32 {
-        let [nx, ny, nz] = dims;
-        let gx = g.x.max(0.0).min((nx - 1) as f32);
-        let gy = g.y.max(0.0).min((ny - 1) as f32);
-        let gz = g.z.max(0.0).min((nz - 1) as f32);
-        let (x0, y0, z0) = (gx as u32, gy as u32, gz as u32);
-        let at = |x: u32, y: u32, z: u32| {
-            let (x, y, z) = (x.min(nx - 1) as usize, y.min(ny - 1) as usize, z.min(nz - 1) as usize);
-            stored[x + nx as usize * (y + ny as usize * z)]
-        };
-        let c = [
-            at(x0, y0, z0),
-            at(x0 + 1, y0, z0),
-            at(x0, y0 + 1, z0),
-            at(x0 + 1, y0 + 1, z0),
-            at(x0, y0, z0 + 1),
-            at(x0 + 1, y0, z0 + 1),
-            at(x0, y0 + 1, z0 + 1),
-            at(x0 + 1, y0 + 1, z0 + 1),
-        ];
-        (trilinear(c, gx - x0 as f32, gy - y0 as f32, gz - z0 as f32) - offset) * scale
     }
 
     #[test]

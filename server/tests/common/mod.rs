@@ -86,3 +86,25 @@ pub fn widest_lanes() -> std::sync::MutexGuard<'static, ()> {
     volwarp_server::limit_lanes(volwarp_server::LaneKind::Avx512);
     guard
 }
+
+/// Every dataset the marcher tests run on: the bundled ones (`data/`), the shared ones (see
+/// `volwarp_server::testdata`: missing ones fail unless `VOLWARP_NO_SHARED_DATA=1`) and a
+/// procedural one.
+pub fn datasets() -> Vec<volwarp_server::Dataset> {
+    use volwarp_server::Dataset;
+    let data = |name: &str| std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("..").join(name);
+    let mut out = vec![
+        Dataset::load(data("data/ct_head_quarter.nhdr"), None).unwrap(),
+        Dataset::load(data("data/neghip_64x64x64_uint8.raw"), None).unwrap(),
+        Dataset::marschner_lobb(41),
+    ];
+    for f in [
+        "iron_protein_68x68x68_uint8.raw",
+        "tooth_103x94x161_uint8.raw",
+        "mri_colin27_181x217x181_uint8.raw",
+        "ct_head_quarter_64x64x93_int16.raw",
+    ] {
+        out.extend(volwarp_server::testdata::shared_dataset(f));
+    }
+    out
+}
