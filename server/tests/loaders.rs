@@ -285,3 +285,39 @@ fn code(range: f32) -> f32 {
     }
     s
 }
+
+/// `space directions` that permute the axes reorder the volume into LPS with each world axis's
+/// spacing; a right-anterior-superior `space` mirrors x and y; oblique directions are refused.
+#[test]
+fn nrrd_permuted_and_ras_directions_reorder_into_lps() {
+    let dir = common::temp_dir("nrrd-perm");
+    let dims = [4u32, 3, 5];
+    let n = dims.iter().product::<u32>() as usize;
+    let v: Vec<u8> = (0..n).map(|i| (i * 37 % 251) as u8).collect();
+    let write = |name: &str, extra: &str| {
+        let p = dir.join(name);
+        let mut f = format!("NRRD0004\ntype: uint8\ndimension: 3\nsizes: 4 3 5\n{extra}encoding: raw\n\n").into_bytes();
+        f.extend_from_slice(&v);
+        std::fs::write(&p, f).unwrap();
+        load_volume(&p, &LoadOptions::default())
+    };
+    // File i runs along +y (spacing 2), j along +x (spacing 1), k along -z (spacing 1.5).
+    let vol = write("perm.nrrd", "space directions: (0,2,0) (1,0,0) (0,0,-1.5)\n").unwrap();
+    assert_eq!(vol.dims(), [3, 4, 5]);
+    assert_eq!(vol.spacing(), Vec3::new(1.0, 2.0, 1.5));
+    assert!(vol.source().orientation.contains("(+j, +i, -k)"), "{}", vol.source().orientation);
+    let raw = write("plain.nrrd", "").unwrap();
+    for (x, y, z) in [(0, 0, 0), (2, 3, 4), (1, 2, 0), (0, 3, 2)] {
+        // World (x, y, z) is file (i = y, j = x, k = 4 - z).
+        assert_eq!(vol.voxel(x, y, z), raw.voxel(y, x, 4 - z), "{x},{y},{z}");
+    }
+    // RAS: +i is +R, i.e. -x in LPS; +j is +A, -y.
+    let ras = write("ras.nrrd", "space: right-anterior-superior\nspace directions: (1,0,0) (0,1,0) (0,0,1)\n").unwrap();
+    assert_eq!(ras.dims(), dims);
+    for (x, y, z) in [(0, 0, 0), (3, 2, 4), (1, 0, 2)] {
+        assert_eq!(ras.voxel(x, y, z), raw.voxel(3 - x, 2 - y, z), "{x},{y},{z}");
+    }
+    // Oblique: a clear error naming the file.
+    let e = write("oblique.nrrd", "space directions: (0.7,0.7,0) (-0.7,0.7,0) (0,0,1)\n").unwrap_err();
+    assert!(e.to_string().contains("oblique") && e.to_string().contains("oblique.nrrd"), "{e}");
+}

@@ -37,8 +37,13 @@ pub struct NrrdHeader {
     /// Spacing, if the header gives one.
     pub spacing: Option<Vec3>,
     /// Axes to mirror so that the volume box is `[0, dims · spacing]` in the orientation of
-    /// `space directions` (an axis-aligned direction pointing the negative way flips its axis).
+    /// `space directions` (world axis `a` runs against its file axis `perm[a]`), in LPS
+    /// (`space: right-anterior-superior` and the like are converted).
     pub flip: [bool; 3],
+    /// `perm[a]`: the file axis that becomes world axis `a` (the axis-aligned `space
+    /// directions` of a permuted volume; `[0, 1, 2]` without directions). Oblique directions are
+    /// an error.
+    pub perm: [usize; 3],
     /// The detached data file, if any (relative to the header's folder).
     pub data_file: Option<String>,
     /// Bytes to skip before the data (`byte skip:`; −1 = data is at the end of a raw file).
@@ -99,8 +104,9 @@ pub fn parse_header(bytes: &[u8]) -> Result<NrrdHeader, VolumeError> {
     }
     let (mut ty, mut dimension, mut sizes, mut encoding) = (None, None, None, None);
     let (mut big_endian, mut spacing, mut data_file, mut byte_skip) = (false, None, None, 0i64);
-    let mut directions = None;
-    let mut flip = [false; 3];
+    let mut directions: Option<[[f64; 3]; 3]> = None;
+    // The sign of x and y to put `space` into LPS.
+    let mut to_lps = [1.0f64, 1.0, 1.0];
     for line in lines {
         let line = line.trim_end_matches('\r');
         if line.is_empty() || line.starts_with('#') {
@@ -152,19 +158,24 @@ pub fn parse_header(bytes: &[u8]) -> Result<NrrdHeader, VolumeError> {
                     return Err(bad(format!("spacings {value:?}")));
                 }
             }
+            "space" => {
+                to_lps = match value.to_ascii_lowercase().as_str() {
+                    "right-anterior-superior" | "ras" => [-1.0, -1.0, 1.0],
+                    "left-anterior-superior" | "las" => [1.0, -1.0, 1.0],
+                    _ => [1.0, 1.0, 1.0], // LPS, scanner and 3-D spaces: taken as they are
+                }
+            }
             "space directions" => {
                 let v: Vec<&str> = value.split_whitespace().take(17).collect();
                 if v.len() != 3 {
                     return Err(bad(format!("space directions {value:?}")));
                 }
-                let mut s = [0f32; 3];
-                for (a, (d, t)) in s.iter_mut().zip(&v).enumerate() {
+                let mut cols = [[0f64; 3]; 3];
+                for (c, t) in cols.iter_mut().zip(&v) {
                     let dir = parse_f32_vec(t).ok_or_else(|| bad(format!("space direction {t:?}")))?;
-                    *d = dir.length();
-                    let off_axis = (0..3).any(|b| b != a && dir[b] != 0.0);
-                    flip[a] = !off_axis && dir[a] < 0.0;
+                    *c = [dir.x as f64, dir.y as f64, dir.z as f64];
                 }
-                directions = Some(Vec3::from(s));
+                directions = Some(cols);
             }
             "data file" | "datafile" => {
                 if value.split_whitespace().count() > 1 || value.eq_ignore_ascii_case("list") {
@@ -196,7 +207,16 @@ pub fn parse_header(bytes: &[u8]) -> Result<NrrdHeader, VolumeError> {
         return Err(bad("a size is 0"));
     }
     let encoding = encoding.ok_or_else(|| bad("missing `encoding`"))?;
-    let spacing = spacing.or(directions);
+    // Axis-aligned directions (in LPS) reorder the volume; oblique ones are refused.
+    let (mut flip, mut perm) = ([false; 3], [0, 1, 2]);
+    if let Some(cols) = directions {
+        let lps = cols.map(|c| [c[0] * to_lps[0], c[1] * to_lps[1], c[2] * to_lps[2]]);
+        let r = super::orient::axis_aligned(lps)?;
+        (flip, perm) = (r.flip, r.perm);
+        // Spacing along the file axes: the directions' lengths.
+        let len = |c: [f64; 3]| (c[0] * c[0] + c[1] * c[1] + c[2] * c[2]).sqrt() as f32;
+        spacing = spacing.or(Some(Vec3::new(len(cols[0]), len(cols[1]), len(cols[2]))));
+    }
     if let Some(s) = spacing {
         if !s.is_finite() || s.min_element() <= 0.0 {
             return Err(bad(format!("spacing {s} is not positive and finite")));
@@ -212,6 +232,7 @@ pub fn parse_header(bytes: &[u8]) -> Result<NrrdHeader, VolumeError> {
         big_endian,
         spacing,
         flip,
+        perm,
         data_file,
         byte_skip,
         data_offset,
@@ -230,10 +251,15 @@ pub fn load(path: &Path, opts: &LoadOptions) -> Result<Volume, VolumeError> {
     let h = parse_header(&head).map_err(|e| e.at(path))?;
     let dims = opts.dims.unwrap_or(h.dims);
     let ty = opts.voxel_type.unwrap_or(h.voxel_type);
-    let spacing = opts.spacing.or(h.spacing).unwrap_or(Vec3::ONE);
-    // Streamed into bricks unless the z axis is mirrored (then decoded whole and reordered).
-    let mirror_z = h.flip[2] && opts.dims.is_none();
-    let decoded = if mirror_z { 4 + ty.size() as u64 } else { 0 };
+    // The header's orientation, unless the options override the dims.
+    let (flip, perm) = if opts.dims.is_none() { (h.flip, h.perm) } else { ([false; 3], [0, 1, 2]) };
+    // Spacing along the world axes (the header's is along the file axes).
+    let spacing = opts.spacing.or(h.spacing.map(|s| Vec3::from(perm.map(|p| s[p])))).unwrap_or(Vec3::ONE);
+    let reorient = Reorient { perm, flip, spacing };
+    // Streamed into bricks unless the z axis is mirrored or the axes permuted (then decoded
+    // whole and reordered).
+    let whole_volume = flip[2] || perm != [0, 1, 2];
+    let decoded = if whole_volume { 4 + ty.size() as u64 } else { 0 };
     let voxels =
         super::check_load(dims, spacing, opts, super::stream::stored_size(ty), decoded).map_err(|e| e.at(path))?;
     let expected = super::voxel_bytes(voxels, ty).map_err(|e| e.at(path))?;
@@ -256,23 +282,17 @@ pub fn load(path: &Path, opts: &LoadOptions) -> Result<Volume, VolumeError> {
         reader.seek(std::io::SeekFrom::Start(skip)).map_err(|e| io(&data_path, e))?;
     }
     let name = path.file_stem().and_then(|s| s.to_str()).unwrap_or("volume");
-    let flip = if opts.dims.is_none() { h.flip } else { [false; 3] };
-    let orientation = if flip.contains(&true) {
-        let axes: Vec<&str> = (0..3).filter(|&a| flip[a]).map(|a| ["x", "y", "z"][a]).collect();
-        format!("{} flipped (negative space directions)", axes.join(", "))
-    } else {
-        "none (stored order)".to_string()
-    };
+    let orientation = if reorient.is_identity() { "none (stored order)".to_string() } else { reorient.describe() };
     let source = super::SourceInfo { voxel_type: Some(ty), orientation, ..Default::default() };
     let spec =
         StreamSpec { name, dims, spacing, ty, big_endian: h.big_endian, flip_xy: [flip[0], flip[1]], path: &data_path };
-    // A volume mirrored in z: its slices arrive last first, so it is decoded whole and
-    // reordered (the one case that is not streamed).
+    // A volume mirrored in z (its slices arrive last first) or permuted is decoded whole and
+    // reordered.
     let whole = |reader: &mut dyn std::io::Read| -> Result<Volume, VolumeError> {
         let bytes = read_exactly(reader, expected, &data_path)?;
         let values = decode_voxels(&bytes, ty, h.big_endian);
-        let values = Reorient { perm: [0, 1, 2], flip, spacing }.apply(values, dims);
-        Volume::from_values(name, dims, spacing, values).map_err(|e| e.at(path))
+        let values = reorient.apply(values, dims);
+        Volume::from_values(name, reorient.dims(dims), spacing, values).map_err(|e| e.at(path))
     };
     let vol = match h.encoding {
         Encoding::Raw => {
@@ -283,7 +303,7 @@ pub fn load(path: &Path, opts: &LoadOptions) -> Result<Volume, VolumeError> {
                 })
                 .at(&data_path));
             }
-            if mirror_z {
+            if whole_volume {
                 whole(&mut reader)?
             } else {
                 stream_volume(&spec, reader)?
@@ -296,7 +316,7 @@ pub fn load(path: &Path, opts: &LoadOptions) -> Result<Volume, VolumeError> {
                 std::io::copy(&mut dec.by_ref().take(h.byte_skip as u64), &mut std::io::sink())
                     .map_err(|e| VolumeError::new(VolumeErrorKind::Decompress(e.to_string())).at(&data_path))?;
             }
-            let r = if mirror_z { whole(&mut dec) } else { stream_volume(&spec, dec) };
+            let r = if whole_volume { whole(&mut dec) } else { stream_volume(&spec, dec) };
             r.map_err(|e| match e.kind {
                 VolumeErrorKind::Io(io) => VolumeError::new(VolumeErrorKind::Decompress(io.to_string())).at(&data_path),
                 _ => e,
