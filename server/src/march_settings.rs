@@ -1,5 +1,5 @@
 //! What both marching kernels march with: the options ([`MarchOptions`]) and the settings a
-//! kernel reads of a marcher, with a ray's samples in the volume box ([`MarchSetup`]). The
+//! kernel reads of a marcher, with a ray's samples in the volume box (`MarchSetup`). The
 //! scalar marcher ([`crate::marcher`]) and the packet marcher ([`crate::packet_march`]) both
 //! import this module, so neither imports the other's types.
 

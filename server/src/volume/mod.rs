@@ -286,7 +286,7 @@ pub(crate) fn voxel_bytes(voxels: u64, ty: VoxelType) -> Result<u64, VolumeError
 impl Volume {
     /// A volume from values in x-fastest order (`dims` product long). Non-finite values become
     /// the data minimum; integer values at most 65,535 apart are stored as 8- or 16-bit codes
-    /// `value − min` (normalized `code · scale`, [`code_scale`]), others as `f32` normalized
+    /// `value − min` (normalized `code · scale`, `scale` the largest `f32` with `range · scale ≤ 1`), others as `f32` normalized
     /// over their range in `f64`.
     pub fn from_values(name: &str, dims: [u32; 3], spacing: Vec3, mut values: Vec<f32>) -> Result<Volume, VolumeError> {
         let n = check_geometry(dims, spacing, u64::MAX)?;
