@@ -46,6 +46,10 @@ enum Cmd {
         /// Output PNG file.
         #[arg(long)]
         out: PathBuf,
+        /// Render level of detail N (0: the volume itself; N: downsampled 2^N times per axis,
+        /// what a moving camera gets under `--frame-budget-ms`).
+        #[arg(long, default_value_t = 0)]
+        level: u8,
     },
     /// Write one Frame (wire format, header included) to a file; prints its sample count and
     /// bytes.
@@ -356,8 +360,18 @@ fn run(cli: Cli) -> Result<(), String> {
             server.run();
             Ok(())
         }
-        Cmd::Render { cam, out } => {
+        Cmd::Render { cam, out, level } => {
             let cam = camera(&ds, &cam)?;
+            let levels;
+            let marcher = if level > 0 {
+                levels = marcher.levels(&ds.tf).map_err(|e| e.to_string())?;
+                let m = levels
+                    .get(usize::from(level))
+                    .ok_or_else(|| format!("--level {level}: the volume has {} levels", levels.len()))?;
+                &**m
+            } else {
+                &marcher
+            };
             let t = Instant::now();
             let img = marcher.render_image(&cam);
             log::info!("rendered {}x{} in {:.1} ms", cam.width, cam.height, t.elapsed().as_secs_f64() * 1e3);

@@ -116,6 +116,10 @@ pub struct Marcher {
     /// The level of detail its volume is (0: the volume itself; see
     /// [`crate::volume::pyramid`]), written into every frame header.
     level: u8,
+    /// The thickness (world units) whose opacity the transfer function gives: a voxel of the
+    /// smallest spacing of the volume itself, at every level of detail (so a coarser level is
+    /// as opaque as the volume, not 2^level times as transparent).
+    opacity_unit: f32,
 }
 
 impl Marcher {
@@ -137,11 +141,19 @@ impl Marcher {
 
     /// A marcher skipping empty space with `grid` (the volume's, e.g. [`MinMaxGrid::with_brick`]
     /// for another brick edge than [`MinMaxGrid::new`] picks).
-    pub fn with_grid(
+    pub fn with_grid(volume: Arc<Volume>, grid: Arc<MinMaxGrid>, tf: &TransferFunction, opts: MarchOptions) -> Marcher {
+        Marcher::with_grid_unit(volume, grid, tf, opts, None)
+    }
+
+    /// [`Marcher::with_grid`] whose transfer function's opacities are those of a slab
+    /// `opacity_unit` world units thick (`None`: one voxel of the smallest spacing, the
+    /// convention of the transfer functions; a coarser level of detail keeps its volume's).
+    fn with_grid_unit(
         volume: Arc<Volume>,
         grid: Arc<MinMaxGrid>,
         tf: &TransferFunction,
         mut opts: MarchOptions,
+        opacity_unit: Option<f32>,
     ) -> Marcher {
         if opts.step_voxels.is_nan() || opts.step_voxels < 0.01 {
             opts.step_voxels = 0.01;
@@ -149,11 +161,14 @@ impl Marcher {
         opts.step_voxels = opts.step_voxels.min(16.0);
         let sp = volume.spacing();
         let dt = opts.step_voxels * sp.min_element();
+        let opacity_unit = opacity_unit.unwrap_or(sp.min_element());
+        // The step in opacity units (`opts.step_voxels` itself for the volume's own voxels).
+        let steps = if opacity_unit == sp.min_element() { opts.step_voxels } else { dt / opacity_unit };
         let lut = tf
             .table()
             .iter()
             .map(|&[r, g, b, a]| {
-                let a = 1.0 - (1.0 - a.clamp(0.0, 1.0)).powf(opts.step_voxels);
+                let a = 1.0 - (1.0 - a.clamp(0.0, 1.0)).powf(steps);
                 [r * a, g * a, b * a, a]
             })
             .collect::<Vec<_>>();
@@ -162,7 +177,19 @@ impl Marcher {
         log::debug!("empty-space grid: {:.1} % of bricks visible", occupancy.fraction_occupied() * 100.0);
         let lut_argb = Arc::new(lut.iter().flat_map(|&[r, g, b, a]| [a, r, g, b]).collect::<Vec<f32>>());
         let looks = Arc::new(occupancy.look_table());
-        Marcher { volume, grid, occupancy, lut, lut_argb, looks, opts, dt, inv_spacing: 1.0 / sp, level: 0 }
+        Marcher {
+            volume,
+            grid,
+            occupancy,
+            lut,
+            lut_argb,
+            looks,
+            opts,
+            dt,
+            inv_spacing: 1.0 / sp,
+            level: 0,
+            opacity_unit,
+        }
     }
 
     /// The marcher with its frames marked as coming from level of detail `level` (its volume
@@ -190,7 +217,9 @@ impl Marcher {
         let extra: u64 = volumes[1..].iter().map(|v| v.memory_bytes()).sum();
         let mut out = vec![Arc::new(self.clone())];
         for (l, v) in volumes.into_iter().enumerate().skip(1) {
-            out.push(Arc::new(Marcher::with_options(v, tf, self.opts).at_level(l as u8)));
+            let grid = Arc::new(MinMaxGrid::new(&v));
+            let m = Marcher::with_grid_unit(v, grid, tf, self.opts, Some(self.opacity_unit));
+            out.push(Arc::new(m.at_level(l as u8)));
         }
         log::info!(
             "levels of detail: {} ({}), +{:.1} MiB ({:.1} % of the volume), built in {:.2} s",
@@ -206,7 +235,8 @@ impl Marcher {
     /// The same volume and grid with another transfer function or options (no rebuild of the
     /// min/max grid).
     pub fn with_transfer_function(&self, tf: &TransferFunction, opts: MarchOptions) -> Marcher {
-        Marcher::with_grid(self.volume.clone(), self.grid.clone(), tf, opts).at_level(self.level)
+        Marcher::with_grid_unit(self.volume.clone(), self.grid.clone(), tf, opts, Some(self.opacity_unit))
+            .at_level(self.level)
     }
 
     /// The volume.

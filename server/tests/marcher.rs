@@ -244,3 +244,22 @@ fn bricked_samples_equal_the_flat_reference_on_every_dataset() {
     }
     assert!(sets.len() >= 2);
 }
+
+/// A coarser level of detail is as opaque as the volume: its transfer function's opacities
+/// stay those of the volume's voxel thickness (not of its own, 2^level times thicker, voxel),
+/// so the constant box's centre ray composites the same opacity at every level.
+#[test]
+fn levels_of_detail_keep_the_volumes_opacity() {
+    let vol = Volume::from_values("box", [64; 3], Vec3::ONE, vec![7.0; 64 * 64 * 64]).unwrap();
+    let tf = TransferFunction::from_points("c", &[(0.0, [1.0, 0.5, 0.25])], &[(0.0, 0.01)]);
+    let m = Marcher::new(Arc::new(vol), &tf);
+    let levels = m.levels(&tf).unwrap();
+    assert_eq!(levels.len(), 3, "64, 32 and 16 voxels");
+    let cam = Camera::look_at(Vec3::new(32.0, 32.0, 150.0), Vec3::new(32.0, 32.0, 0.0), Vec3::Y, 30.0, 33, 33);
+    let alpha = |m: &Marcher| (m.march(&cam, Heuristic::Midpoint).color[16 * 33 + 16] >> 24) as f32 / 255.0;
+    // 64 voxels of opacity 0.01 each: 1 - 0.99^64 = 0.474 at every level.
+    let want = 1.0 - 0.99f32.powi(64);
+    for (l, lm) in levels.iter().enumerate() {
+        assert!((alpha(lm) - want).abs() <= 2.0 / 255.0, "level {l}: {} against {want}", alpha(lm));
+    }
+}
