@@ -666,3 +666,30 @@ fn read_loop(stream: TcpStream, limits: Limits, idle: Duration, slot: Arc<(Mutex
     s.end = Some(end);
     slot.1.notify_one();
 }
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn the_guessing_limiter_keys_hosts_and_refills() {
+        let v4: IpAddr = "192.0.2.7".parse().unwrap();
+        let mapped: IpAddr = "::ffff:192.0.2.7".parse().unwrap();
+        assert_eq!(AuthLimiter::key(mapped), v4, "an IPv4-mapped address is its IPv4 host");
+        let a: IpAddr = "2001:db8:1:2:aaaa::1".parse().unwrap();
+        let b: IpAddr = "2001:db8:1:2:bbbb::9".parse().unwrap();
+        let c: IpAddr = "2001:db8:1:3::1".parse().unwrap();
+        assert_eq!(AuthLimiter::key(a), AuthLimiter::key(b), "one /64, one bucket");
+        assert_ne!(AuthLimiter::key(a), AuthLimiter::key(c));
+
+        let l = AuthLimiter::new(3);
+        assert!((0..3).all(|_| l.charge(v4)), "a burst as deep as the rate");
+        assert!(!l.charge(mapped), "the same host, out of attempts");
+        assert!(l.charge(a), "another host has its own bucket");
+        l.refund(v4);
+        assert!(l.charge(v4), "a refunded attempt can be used again");
+        assert!(!l.charge(v4));
+        std::thread::sleep(Duration::from_millis(400));
+        assert!(l.charge(v4), "refilled at 3 per second");
+    }
+}
