@@ -25,9 +25,7 @@
 //! The display loop only ever `try_lock`s the slot ([`Network::take_scene`]); every lock the
 //! display takes is held for a few instructions.
 
-use crate::connection::{
-    connect_layers, read_message_bytes_marked, send_bye, send_request, server_error, Connection,
-};
+use crate::connection::{connect_layers, read_message_bytes_marked, send_bye, send_request, server_error, Connection};
 use crate::error::ClientError;
 use crate::link::{Throttled, TokenBucket};
 use crate::record::RecordSink;
@@ -175,7 +173,10 @@ pub fn is_permanent(e: &ClientError) -> bool {
         ClientError::Version(_) | ClientError::Usage(_) | ClientError::BadAddress(_) => true,
         ClientError::Server { code, .. } => matches!(
             *code,
-            error_code::UNAUTHORIZED | error_code::UNSUPPORTED_VERSION | error_code::BAD_REQUEST | error_code::TOO_LARGE
+            error_code::UNAUTHORIZED
+                | error_code::UNSUPPORTED_VERSION
+                | error_code::BAD_REQUEST
+                | error_code::TOO_LARGE
         ),
         _ => false,
     }
@@ -207,10 +208,9 @@ impl ConnectionState {
             ConnectionState::Reconnecting { attempt, next_in, reason } if next_in.is_zero() => {
                 Some(format!("reconnecting… (attempt {attempt}; {reason})"))
             }
-            ConnectionState::Reconnecting { attempt, next_in, reason } => Some(format!(
-                "reconnecting in {:.1} s… (attempt {attempt}; {reason})",
-                next_in.as_secs_f64()
-            )),
+            ConnectionState::Reconnecting { attempt, next_in, reason } => {
+                Some(format!("reconnecting in {:.1} s… (attempt {attempt}; {reason})", next_in.as_secs_f64()))
+            }
             ConnectionState::Failed(e) => Some(format!("disconnected: {e}")),
         }
     }
@@ -564,9 +564,8 @@ impl Session {
             })
             .map_err(spawn_err)?;
         let (sh_w, request, write_mbps) = (sh.clone(), cfg.request, cfg.bandwidth_mbps);
-        let writer = std::thread::Builder::new()
-            .name("volwarp-net-write".into())
-            .spawn(move || match link(write_mbps) {
+        let writer =
+            std::thread::Builder::new().name("volwarp-net-write".into()).spawn(move || match link(write_mbps) {
                 Some(b) => write_loop(&sh_w, Throttled::new(ws, b), request),
                 None => write_loop(&sh_w, ws, request),
             });
@@ -604,13 +603,7 @@ impl Session {
 
 /// Runs connections one after the other: the first, then (with `redial`) a new one after each
 /// drop, until the network is stopped or fails for good.
-fn link_loop(
-    sh: &Arc<Shared>,
-    first: Session,
-    cfg: &NetConfig,
-    recorder: Option<RecordSink>,
-    redial: Option<Redial>,
-) {
+fn link_loop(sh: &Arc<Shared>, first: Session, cfg: &NetConfig, recorder: Option<RecordSink>, redial: Option<Redial>) {
     let mut session = first;
     let mut attempt = 0u32;
     loop {
@@ -836,7 +829,8 @@ mod tests {
     fn backoff_doubles_to_its_cap_with_bounded_deterministic_jitter() {
         let b = Backoff::default();
         for attempt in 1..40 {
-            let full = Duration::from_millis(100).saturating_mul(1 << (attempt - 1).min(20)).min(Duration::from_secs(2));
+            let full =
+                Duration::from_millis(100).saturating_mul(1 << (attempt - 1).min(20)).min(Duration::from_secs(2));
             let d = b.delay(attempt);
             assert!(d >= full / 2 && d <= full, "attempt {attempt}: {d:?} outside [{:?}, {full:?}]", full / 2);
             assert_eq!(d, b.delay(attempt), "the same seed gives the same wait");
