@@ -125,7 +125,7 @@ pub struct Backoff {
 impl Default for Backoff {
     /// 100 ms doubling to a 2 s cap.
     fn default() -> Self {
-        Backoff { first: Duration::from_millis(100), cap: Duration::from_secs(2), seed: 0x766f_6c77_6172_70 }
+        Backoff { first: Duration::from_millis(100), cap: Duration::from_secs(2), seed: 0x0076_6f6c_7761_7270 }
     }
 }
 
