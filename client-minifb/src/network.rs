@@ -644,11 +644,15 @@ fn link_loop(sh: &Arc<Shared>, first: Session, cfg: &NetConfig, recorder: Option
                 }
                 return;
             }
-            match got.and_then(|c| Session::start(sh, c, cfg, recorder.clone())) {
+            let started = got.and_then(|c| {
+                // Connected before the first frame of the new connection can arrive.
+                lock(&sh.link).status = LinkStatus::Connected;
+                sh.reconnects.fetch_add(1, Ordering::Relaxed);
+                Session::start(sh, c, cfg, recorder.clone())
+            });
+            match started {
                 Ok(s) => {
                     log::info!("reconnected to {} (attempt {attempt})", r.addr);
-                    lock(&sh.link).status = LinkStatus::Connected;
-                    sh.reconnects.fetch_add(1, Ordering::Relaxed);
                     break s;
                 }
                 Err(e) if is_permanent(&e) => return sh.fail(e),
