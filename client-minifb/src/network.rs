@@ -12,8 +12,7 @@
 //!   `--predict` it sends the camera core's `prediction` expects for when the frame will be
 //!   shown (horizon: core's `prediction::Horizon`, the smoothed request-to-ready time the
 //!   builder measures plus half the smoothed interval between frames); with `--guard G`
-//!   the camera widened by a guard band (core's `guard`).
-//!
+//!   the camera widened by a guard band (core's `guard`);
 //! * **link** — owns the connection: starts the reader and writer on it, and when either ends
 //!   (read or write error, end of stream, the server's Bye or Error) closes it and, with a
 //!   [`Redial`], connects again after a capped, jittered exponential [`Backoff`] (Hello with
