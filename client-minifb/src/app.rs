@@ -6,7 +6,7 @@ use crate::controls::home_camera;
 use crate::display::Display;
 use crate::error::ClientError;
 use crate::feed_server::{FeedServer, PrerenderOptions};
-use crate::network::{NetConfig, Network};
+use crate::network::{Backoff, NetConfig, Network, Redial};
 use crate::options::Options;
 use crate::record::Recorder;
 use crate::renderers::Renderers;
@@ -26,7 +26,8 @@ pub fn run(opts: &Options) -> Result<(), ClientError> {
         crate::window::check_display()?;
     }
     if let Some(addr) = &opts.connect {
-        return run_connected(opts, addr);
+        // An external server may restart: connect again unless told not to.
+        return run_connected(opts, addr, !opts.no_reconnect);
     }
     if opts.prerender {
         let interval = Duration::from_millis(if opts.server_delay_ms > 0 { opts.server_delay_ms } else { 500 });
@@ -44,7 +45,7 @@ pub fn run(opts: &Options) -> Result<(), ClientError> {
             timeout: Duration::from_secs(opts.timeout_s.max(1)),
         })?;
         let feed = FeedServer::start(pre.frames, interval)?;
-        return run_connected(opts, &feed.addr().to_string());
+        return run_connected(opts, &feed.addr().to_string(), false);
     }
     let server = ServerProcess::spawn(&ServerSpawn {
         frame_delay: (opts.server_delay_ms > 0).then(|| Duration::from_millis(opts.server_delay_ms)),
@@ -52,12 +53,13 @@ pub fn run(opts: &Options) -> Result<(), ClientError> {
         extra_args: opts.server_args(),
         startup_timeout: Duration::from_secs(opts.timeout_s.max(1)),
     })?;
-    let result = run_connected(opts, &server.addr().to_string());
+    // The child lives and dies with this client: no reconnecting to it.
+    let result = run_connected(opts, &server.addr().to_string(), false);
     drop(server);
     result
 }
 
-fn run_connected(opts: &Options, addr: &str) -> Result<(), ClientError> {
+fn run_connected(opts: &Options, addr: &str, reconnect: bool) -> Result<(), ClientError> {
     let timeout = Duration::from_secs(opts.timeout_s.max(1));
     crate::renderers::set_layer_options(opts.layer_options());
     let mut renderers = Renderers::new(opts.renderer, opts.tracer_threads()).map_err(ClientError::Renderer)?;
@@ -84,7 +86,19 @@ fn run_connected(opts: &Options, addr: &str) -> Result<(), ClientError> {
         bandwidth_mbps: (opts.bandwidth_mbps > 0.0).then_some(opts.bandwidth_mbps),
         request: opts.method().request(),
     };
-    let net = Network::start(conn, cfg, recorder.as_ref().map(Recorder::sink))?;
+    let sink = recorder.as_ref().map(Recorder::sink);
+    let net = if reconnect {
+        let redial = Redial {
+            addr: addr.to_string(),
+            token: opts.token.clone(),
+            layers: opts.layers(),
+            // Clients started together do not retry in lockstep.
+            backoff: Backoff { seed: u64::from(std::process::id()), ..Backoff::default() },
+        };
+        Network::start_reconnecting(conn, cfg, sink, redial)?
+    } else {
+        Network::start(conn, cfg, sink)?
+    };
     let mut display = Display::new(net, renderers, recorder.as_ref().map(Recorder::sink));
     display.set_keep_frames(opts.keep_frames);
     let result = if opts.bench {

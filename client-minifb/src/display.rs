@@ -153,8 +153,9 @@ impl Display {
             self.check()?;
             if !self.poll_scene() {
                 if t0.elapsed() > timeout {
+                    let state = self.net.state().label().map(|l| format!(" ({l})")).unwrap_or_default();
                     return Err(crate::ClientError::Gone(format!(
-                        "no frame from the server within {} s",
+                        "no frame from the server within {} s{state}",
                         timeout.as_secs_f64()
                     )));
                 }

@@ -12,12 +12,19 @@
 //!   `--predict` it sends the camera core's `prediction` expects for when the frame will be
 //!   shown (horizon: core's `prediction::Horizon`, the smoothed request-to-ready time the
 //!   builder measures plus half the smoothed interval between frames); with `--guard G`
-//!   the camera widened by a guard band (core's `guard`).
+//!   the camera widened by a guard band (core's `guard`);
+//! * **link** — owns the connection: starts the reader and writer on it, and when either ends
+//!   (read or write error, end of stream, the server's Bye or Error) closes it and, with a
+//!   [`Redial`], connects again after a capped, jittered exponential [`Backoff`] (Hello with
+//!   the same capabilities, token and layers, then the current camera). Meanwhile the display
+//!   keeps warping the frames it has (each carries its camera); [`Network::state`] says what
+//!   the link is doing. Permanent refusals ([`is_permanent`]: wrong token, another protocol
+//!   version, a request the server will never accept) end the network instead of looping.
 //!
 //! The display loop only ever `try_lock`s the slot ([`Network::take_scene`]); every lock the
 //! display takes is held for a few instructions.
 
-use crate::connection::{read_message_bytes_marked, send_bye, send_request, server_error, Connection};
+use crate::connection::{connect_layers, read_message_bytes_marked, send_bye, send_request, server_error, Connection};
 use crate::error::ClientError;
 use crate::link::{Throttled, TokenBucket};
 use crate::record::RecordSink;
@@ -30,7 +37,7 @@ use std::thread::JoinHandle;
 use std::time::{Duration, Instant};
 use volwarp_core::method::{Cadence, RequestPolicy, ViewEvents};
 use volwarp_core::prediction::{Horizon, Predictor};
-use volwarp_core::wire::{CameraRequest, Frame, Limits, Message};
+use volwarp_core::wire::{error_code, CameraRequest, Frame, Limits, Message};
 use volwarp_core::{Camera, Heuristic, Scene};
 use volwarp_cpu_tracer::ParallelBuilder;
 use volwarp_cpu_tracer::MAX_VIEWPORT;
@@ -97,6 +104,132 @@ pub struct NetConfig {
 pub const CADENCE: Cadence =
     Cadence { display_tick_s: 1.0 / 60.0, on_frame_arrival: true, on_first_still: false, max_viewport: MAX_VIEWPORT };
 
+/// How long one redial may take at most (connect, Hello, probe frame), whatever `--timeout-s`
+/// says: a server that is down answers at once, one that does not answer is tried again.
+pub const REDIAL_TIMEOUT: Duration = Duration::from_secs(5);
+
+/// Waits between redials: `first`, doubling per failed attempt up to `cap`, each scaled by a
+/// jitter factor in [0.5, 1] drawn from a deterministic sequence of `seed` (clients with
+/// different seeds do not retry in lockstep after a server restart).
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub struct Backoff {
+    /// Wait before the first attempt.
+    pub first: Duration,
+    /// Longest wait.
+    pub cap: Duration,
+    /// Seed of the jitter.
+    pub seed: u64,
+}
+
+impl Default for Backoff {
+    /// 100 ms doubling to a 2 s cap.
+    fn default() -> Self {
+        Backoff { first: Duration::from_millis(100), cap: Duration::from_secs(2), seed: 0x0076_6f6c_7761_7270 }
+    }
+}
+
+impl Backoff {
+    /// The wait before attempt `attempt` (1: the first after a drop).
+    pub fn delay(&self, attempt: u32) -> Duration {
+        let doublings = attempt.saturating_sub(1).min(30);
+        let full = self.first.saturating_mul(1u32 << doublings).min(self.cap);
+        full.mul_f64(0.5 + 0.5 * unit(splitmix64(self.seed ^ u64::from(attempt))))
+    }
+}
+
+/// SplitMix64: a well-mixed 64-bit value of `x`.
+fn splitmix64(x: u64) -> u64 {
+    let mut z = x.wrapping_add(0x9e37_79b9_7f4a_7c15);
+    z = (z ^ (z >> 30)).wrapping_mul(0xbf58_476d_1ce4_e5b9);
+    z = (z ^ (z >> 27)).wrapping_mul(0x94d0_49bb_1331_11eb);
+    z ^ (z >> 31)
+}
+
+/// The top 53 bits of `x` as a number in [0, 1).
+fn unit(x: u64) -> f64 {
+    (x >> 11) as f64 / (1u64 << 53) as f64
+}
+
+/// Where and how to connect again when the connection drops.
+#[derive(Clone, Debug)]
+pub struct Redial {
+    /// The server address (`host:port`, resolved again on every attempt).
+    pub addr: String,
+    /// The access token sent in Hello.
+    pub token: Option<String>,
+    /// Segments per pixel asked for in Hello.
+    pub layers: u8,
+    /// Waits between attempts.
+    pub backoff: Backoff,
+}
+
+/// Whether a connection error will not go away by trying again: a wrong or missing token,
+/// another protocol version, a request the server refuses as malformed or too large, a bad
+/// address or command line. Everything else (refused or reset connections, timeouts, a busy
+/// or rate-limiting server, a server that went away) is worth another attempt.
+pub fn is_permanent(e: &ClientError) -> bool {
+    match e {
+        ClientError::Version(_) | ClientError::Usage(_) | ClientError::BadAddress(_) => true,
+        ClientError::Server { code, .. } => matches!(
+            *code,
+            error_code::UNAUTHORIZED
+                | error_code::UNSUPPORTED_VERSION
+                | error_code::BAD_REQUEST
+                | error_code::TOO_LARGE
+        ),
+        _ => false,
+    }
+}
+
+/// What the network's link to the server is doing.
+#[derive(Clone, Debug, PartialEq)]
+pub enum ConnectionState {
+    /// Connected: frames arrive.
+    Connected,
+    /// The connection dropped; the next attempt starts in `next_in` (zero: under way).
+    Reconnecting {
+        /// Attempts since the drop, counting the next one.
+        attempt: u32,
+        /// Time until that attempt.
+        next_in: Duration,
+        /// Why the connection (or the last attempt) failed.
+        reason: String,
+    },
+    /// The network stopped for good (a permanent error, or a drop without a [`Redial`]).
+    Failed(ClientError),
+}
+
+impl ConnectionState {
+    /// A short line for a title or HUD; `None` while connected.
+    pub fn label(&self) -> Option<String> {
+        match self {
+            ConnectionState::Connected => None,
+            ConnectionState::Reconnecting { attempt, next_in, reason } if next_in.is_zero() => {
+                Some(format!("reconnecting… (attempt {attempt}; {reason})"))
+            }
+            ConnectionState::Reconnecting { attempt, next_in, reason } => {
+                Some(format!("reconnecting in {:.1} s… (attempt {attempt}; {reason})", next_in.as_secs_f64()))
+            }
+            ConnectionState::Failed(e) => Some(format!("disconnected: {e}")),
+        }
+    }
+}
+
+/// The link's state as the link thread keeps it.
+#[derive(Clone, Debug)]
+enum LinkStatus {
+    Connected,
+    Reconnecting { attempt: u32, at: Instant, reason: String },
+    Failed(ClientError),
+}
+
+#[derive(Debug)]
+struct LinkSlot {
+    status: LinkStatus,
+    /// Why the current connection ended (set by its reader or writer).
+    down: Option<ClientError>,
+}
+
 struct Pending {
     frame: Frame,
     requested_at: Option<Instant>,
@@ -125,6 +258,15 @@ struct Shared {
     recycle: Mutex<Option<Scene>>,
     sent: Mutex<VecDeque<(u64, Instant)>>,
     error: Mutex<Option<ClientError>>,
+    /// The link's state and the current connection's end, and its wake-ups.
+    link: Mutex<LinkSlot>,
+    link_cv: Condvar,
+    /// Set when the current connection ended: its reader and writer stop.
+    down: AtomicBool,
+    /// The last request sequence number sent (over all connections).
+    seq: AtomicU64,
+    /// Connections made again after a drop.
+    reconnects: AtomicU64,
     frames: AtomicU64,
     built: AtomicU64,
     /// Odd while a frame is being decoded or built.
@@ -139,6 +281,7 @@ fn lock<T>(m: &Mutex<T>) -> MutexGuard<'_, T> {
 }
 
 impl Shared {
+    /// Stops the network for good with `e`.
     fn fail(&self, e: ClientError) {
         if self.stop.load(Ordering::SeqCst) {
             return;
@@ -146,11 +289,40 @@ impl Shared {
         log::debug!("network: {e}");
         let mut g = lock(&self.error);
         if g.is_none() {
-            *g = Some(e);
+            *g = Some(e.clone());
         }
         drop(g);
+        lock(&self.link).status = LinkStatus::Failed(e);
         self.stop.store(true, Ordering::SeqCst);
+        self.wake_all();
+    }
+
+    /// Ends the current connection with `e` (the first reason wins); the link thread decides
+    /// whether to connect again.
+    fn drop_link(&self, e: ClientError) {
+        let mut g = lock(&self.link);
+        if g.down.is_none() {
+            log::debug!("network: connection ended: {e}");
+            g.down = Some(e);
+        }
+        self.down.store(true, Ordering::SeqCst);
+        drop(g);
+        self.link_cv.notify_all();
         self.view_cv.notify_all();
+    }
+
+    /// Whether the current connection's reader and writer should stop.
+    fn ended(&self) -> bool {
+        self.stop.load(Ordering::SeqCst) || self.down.load(Ordering::SeqCst)
+    }
+
+    fn wake_all(&self) {
+        // Taking each lock once orders this wake-up after any check-then-wait in progress.
+        drop(lock(&self.link));
+        self.link_cv.notify_all();
+        drop(lock(&self.view));
+        self.view_cv.notify_all();
+        drop(lock(&self.pending));
         self.pending_cv.notify_all();
     }
 }
@@ -174,13 +346,33 @@ impl Drop for Busy<'_> {
 /// The running network side of a client.
 pub struct Network {
     shared: Arc<Shared>,
-    stream: TcpStream,
     threads: Vec<JoinHandle<()>>,
 }
 
 impl Network {
-    /// Starts the reader, builder and writer threads on an open connection.
+    /// Starts the link, reader, builder and writer threads on an open connection; when it
+    /// drops the network stops with the reason ([`Network::error`]).
     pub fn start(conn: Connection, cfg: NetConfig, recorder: Option<RecordSink>) -> Result<Network, ClientError> {
+        Network::start_with(conn, cfg, recorder, None)
+    }
+
+    /// [`Network::start`] that connects again as `redial` says when the connection drops
+    /// (until a permanent error, [`is_permanent`]).
+    pub fn start_reconnecting(
+        conn: Connection,
+        cfg: NetConfig,
+        recorder: Option<RecordSink>,
+        redial: Redial,
+    ) -> Result<Network, ClientError> {
+        Network::start_with(conn, cfg, recorder, Some(redial))
+    }
+
+    fn start_with(
+        conn: Connection,
+        cfg: NetConfig,
+        recorder: Option<RecordSink>,
+        redial: Option<Redial>,
+    ) -> Result<Network, ClientError> {
         let shared = Arc::new(Shared {
             stop: AtomicBool::new(false),
             view: Mutex::new(ViewSlot::default()),
@@ -191,28 +383,18 @@ impl Network {
             recycle: Mutex::new(None),
             sent: Mutex::new(VecDeque::new()),
             error: Mutex::new(None),
+            link: Mutex::new(LinkSlot { status: LinkStatus::Connected, down: None }),
+            link_cv: Condvar::new(),
+            down: AtomicBool::new(false),
+            seq: AtomicU64::new(0),
+            reconnects: AtomicU64::new(0),
             frames: AtomicU64::new(0),
             built: AtomicU64::new(0),
             work_gen: AtomicU64::new(0),
             horizon: Mutex::new((Horizon::new(), Instant::now())),
         });
-        let stream = conn.stream;
-        let _ = stream.set_read_timeout(Some(cfg.timeout.max(Duration::from_millis(10))));
-        let clone = || stream.try_clone().map_err(|e| ClientError::Connect(format!("cannot share the socket: {e}")));
-        let (rs, ws) = (clone()?, clone()?);
         let spawn_err = |e: std::io::Error| ClientError::Io(format!("cannot start a network thread: {e}"));
         let mut threads = Vec::new();
-        let (sh, limits) = (shared.clone(), conn.limits);
-        let (read_mbps, write_mbps) = (cfg.bandwidth_mbps, cfg.bandwidth_mbps);
-        threads.push(
-            std::thread::Builder::new()
-                .name("volwarp-net-read".into())
-                .spawn(move || match link(read_mbps) {
-                    Some(b) => read_loop(&sh, Throttled::new(rs, b), limits, recorder),
-                    None => read_loop(&sh, rs, limits, recorder),
-                })
-                .map_err(spawn_err)?,
-        );
         let sh = shared.clone();
         let build_cfg = cfg.clone();
         threads.push(
@@ -221,18 +403,40 @@ impl Network {
                 .spawn(move || build_loop(&sh, &build_cfg))
                 .map_err(spawn_err)?,
         );
+        // The first connection's threads start here, so that failing to start them is an error
+        // of `start`.
+        let session = Session::start(&shared, conn, &cfg, recorder.clone())?;
         let sh = shared.clone();
-        let request = cfg.request;
-        threads.push(
-            std::thread::Builder::new()
-                .name("volwarp-net-write".into())
-                .spawn(move || match link(write_mbps) {
-                    Some(b) => write_loop(&sh, Throttled::new(ws, b), request),
-                    None => write_loop(&sh, ws, request),
-                })
-                .map_err(spawn_err)?,
-        );
-        Ok(Network { shared, stream, threads })
+        let started = std::thread::Builder::new()
+            .name("volwarp-net-link".into())
+            .spawn(move || link_loop(&sh, session, &cfg, recorder, redial));
+        match started {
+            Ok(t) => threads.push(t),
+            Err(e) => {
+                let mut net = Network { shared, threads };
+                net.stop();
+                return Err(spawn_err(e));
+            }
+        }
+        Ok(Network { shared, threads })
+    }
+
+    /// What the link to the server is doing now.
+    pub fn state(&self) -> ConnectionState {
+        match &lock(&self.shared.link).status {
+            LinkStatus::Connected => ConnectionState::Connected,
+            LinkStatus::Reconnecting { attempt, at, reason } => ConnectionState::Reconnecting {
+                attempt: *attempt,
+                next_in: at.saturating_duration_since(Instant::now()),
+                reason: reason.clone(),
+            },
+            LinkStatus::Failed(e) => ConnectionState::Failed(e.clone()),
+        }
+    }
+
+    /// Connections made again after a drop so far.
+    pub fn reconnects(&self) -> u64 {
+        self.shared.reconnects.load(Ordering::Relaxed)
     }
 
     /// Publishes the view the display shows now; the writer sends it (throttled) if it
@@ -296,14 +500,17 @@ impl Network {
             return;
         }
         self.shared.stop.store(true, Ordering::SeqCst);
-        self.shared.view_cv.notify_all();
-        self.shared.pending_cv.notify_all();
-        // The writer sends Bye on its way out; then the socket is closed to wake the reader.
-        let writer = self.threads.pop();
-        if let Some(w) = writer {
-            let _ = w.join();
+        self.shared.wake_all();
+        // The link thread lets the writer send Bye, closes the socket and joins the reader.
+        // One in the middle of a redial is left to finish it on its own (at most
+        // [`REDIAL_TIMEOUT`]) and drop what it got.
+        let redialing = matches!(lock(&self.shared.link).status, LinkStatus::Reconnecting { .. });
+        let link = self.threads.pop();
+        if let Some(l) = link {
+            if !redialing {
+                let _ = l.join();
+            }
         }
-        let _ = self.stream.shutdown(Shutdown::Both);
         for t in self.threads.drain(..) {
             let _ = t.join();
         }
@@ -321,21 +528,157 @@ fn link(mbps: Option<f64>) -> Option<TokenBucket> {
     mbps.and_then(TokenBucket::from_mbps)
 }
 
-fn read_loop(sh: &Shared, mut stream: impl Read, limits: Limits, recorder: Option<RecordSink>) {
+/// One connection's reader and writer threads.
+struct Session {
+    stream: TcpStream,
+    reader: JoinHandle<()>,
+    writer: JoinHandle<()>,
+    /// Frames received when it started.
+    frames0: u64,
+}
+
+impl Session {
+    /// Starts the reader and writer on `conn`; the writer sends the current view at once.
+    fn start(
+        sh: &Arc<Shared>,
+        conn: Connection,
+        cfg: &NetConfig,
+        recorder: Option<RecordSink>,
+    ) -> Result<Session, ClientError> {
+        let stream = conn.stream;
+        let _ = stream.set_read_timeout(Some(cfg.timeout.max(Duration::from_millis(10))));
+        let clone = || stream.try_clone().map_err(|e| ClientError::Connect(format!("cannot share the socket: {e}")));
+        let (rs, ws) = (clone()?, clone()?);
+        sh.down.store(false, Ordering::SeqCst);
+        lock(&sh.link).down = None;
+        // A new connection has no request of ours yet: ask for the current view at once.
+        lock(&sh.view).changed = true;
+        let spawn_err = |e: std::io::Error| ClientError::Io(format!("cannot start a network thread: {e}"));
+        let (sh_r, limits, read_mbps) = (sh.clone(), conn.limits, cfg.bandwidth_mbps);
+        let reader = std::thread::Builder::new()
+            .name("volwarp-net-read".into())
+            .spawn(move || match link(read_mbps) {
+                Some(b) => read_loop(&sh_r, Throttled::new(rs, b), limits, recorder.as_ref()),
+                None => read_loop(&sh_r, rs, limits, recorder.as_ref()),
+            })
+            .map_err(spawn_err)?;
+        let (sh_w, request, write_mbps) = (sh.clone(), cfg.request, cfg.bandwidth_mbps);
+        let writer =
+            std::thread::Builder::new().name("volwarp-net-write".into()).spawn(move || match link(write_mbps) {
+                Some(b) => write_loop(&sh_w, Throttled::new(ws, b), request),
+                None => write_loop(&sh_w, ws, request),
+            });
+        let writer = match writer {
+            Ok(w) => w,
+            Err(e) => {
+                sh.drop_link(ClientError::Io(format!("cannot start a network thread: {e}")));
+                let _ = stream.shutdown(Shutdown::Both);
+                let _ = reader.join();
+                return Err(spawn_err(e));
+            }
+        };
+        Ok(Session { stream, reader, writer, frames0: sh.frames.load(Ordering::Relaxed) })
+    }
+
+    /// Waits until the connection ends or the network stops; then lets the writer finish
+    /// (it sends Bye when stopping), closes the socket and joins the reader. Returns why the
+    /// connection ended (`None`: the network was stopped) and whether it delivered a frame.
+    fn finish(self, sh: &Shared) -> (Option<ClientError>, bool) {
+        let mut g = lock(&sh.link);
+        while g.down.is_none() && !sh.stop.load(Ordering::SeqCst) {
+            g = sh.link_cv.wait_timeout(g, Duration::from_millis(200)).unwrap_or_else(|e| e.into_inner()).0;
+        }
+        let why = if sh.stop.load(Ordering::SeqCst) { None } else { g.down.clone() };
+        drop(g);
+        sh.down.store(true, Ordering::SeqCst);
+        drop(lock(&sh.view));
+        sh.view_cv.notify_all();
+        let _ = self.writer.join();
+        let _ = self.stream.shutdown(Shutdown::Both);
+        let _ = self.reader.join();
+        (why, sh.frames.load(Ordering::Relaxed) > self.frames0)
+    }
+}
+
+/// Runs connections one after the other: the first, then (with `redial`) a new one after each
+/// drop, until the network is stopped or fails for good.
+fn link_loop(sh: &Arc<Shared>, first: Session, cfg: &NetConfig, recorder: Option<RecordSink>, redial: Option<Redial>) {
+    let mut session = first;
+    let mut attempt = 0u32;
+    loop {
+        let (why, delivered) = session.finish(sh);
+        let Some(why) = why else { return };
+        let Some(r) = &redial else { return sh.fail(why) };
+        if is_permanent(&why) {
+            return sh.fail(why);
+        }
+        if delivered {
+            attempt = 0;
+        }
+        log::warn!("connection to {} lost: {why}; reconnecting", r.addr);
+        let mut reason = why.to_string();
+        session = loop {
+            attempt = attempt.saturating_add(1);
+            let wait = r.backoff.delay(attempt);
+            let at = Instant::now() + wait;
+            {
+                let mut g = lock(&sh.link);
+                g.status = LinkStatus::Reconnecting { attempt, at, reason: reason.clone() };
+                while !sh.stop.load(Ordering::SeqCst) {
+                    let left = at.saturating_duration_since(Instant::now());
+                    if left.is_zero() {
+                        break;
+                    }
+                    g = sh.link_cv.wait_timeout(g, left).unwrap_or_else(|e| e.into_inner()).0;
+                }
+            }
+            if sh.stop.load(Ordering::SeqCst) {
+                return;
+            }
+            let timeout = cfg.timeout.clamp(Duration::from_millis(10), REDIAL_TIMEOUT);
+            let got = connect_layers(&r.addr, r.token.as_deref(), timeout, r.layers);
+            if sh.stop.load(Ordering::SeqCst) {
+                if let Ok(mut c) = got {
+                    send_bye(&mut c.stream);
+                }
+                return;
+            }
+            let started = got.and_then(|c| {
+                // Connected before the first frame of the new connection can arrive.
+                lock(&sh.link).status = LinkStatus::Connected;
+                sh.reconnects.fetch_add(1, Ordering::Relaxed);
+                Session::start(sh, c, cfg, recorder.clone())
+            });
+            match started {
+                Ok(s) => {
+                    log::info!("reconnected to {} (attempt {attempt})", r.addr);
+                    break s;
+                }
+                Err(e) if is_permanent(&e) => return sh.fail(e),
+                Err(e) => {
+                    log::debug!("reconnect attempt {attempt} to {}: {e}", r.addr);
+                    reason = e.to_string();
+                }
+            }
+        };
+    }
+}
+
+fn read_loop(sh: &Shared, mut stream: impl Read, limits: Limits, recorder: Option<&RecordSink>) {
     loop {
         let got = read_message_bytes_marked(&mut stream, &limits, "waiting for a frame", || Busy::new(&sh.work_gen));
-        if sh.stop.load(Ordering::SeqCst) {
+        if sh.ended() {
             return;
         }
         let (bytes, msg) = match got {
             Ok(m) => m,
-            Err(e) => return sh.fail(e),
+            Err(e) => return sh.drop_link(e),
         };
         match msg {
             Message::Frame(frame) => {
                 let received_at = Instant::now();
                 let requested_at = lock(&sh.sent).iter().rev().find(|(s, _)| *s == frame.header.seq).map(|(_, t)| *t);
-                if let Some(r) = &recorder {
+                if let Some(r) = recorder {
                     r.frame(bytes);
                 }
                 sh.frames.fetch_add(1, Ordering::Relaxed);
@@ -350,10 +693,10 @@ fn read_loop(sh: &Shared, mut stream: impl Read, limits: Limits, recorder: Optio
                 lock(&sh.view).frame_arrived = true;
                 sh.view_cv.notify_one();
             }
-            Message::Error(e) => return sh.fail(server_error(&e)),
-            Message::Bye => return sh.fail(ClientError::Gone("the server said goodbye".into())),
+            Message::Error(e) => return sh.drop_link(server_error(&e)),
+            Message::Bye => return sh.drop_link(ClientError::Gone("the server said goodbye".into())),
             Message::Hello(_) | Message::CameraRequest(_) => {
-                return sh.fail(ClientError::Protocol("the server sent an unexpected message".into()))
+                return sh.drop_link(ClientError::Protocol("the server sent an unexpected message".into()))
             }
         }
     }
@@ -431,7 +774,6 @@ fn build_loop(sh: &Shared, cfg: &NetConfig) {
 /// every [`THROTTLE`]), for the camera it picks: predicted for the measured horizon by the
 /// display's own predictor (which has seen every camera shown), widened by a guard band.
 fn write_loop(sh: &Shared, mut stream: impl Write, request: RequestPolicy) {
-    let mut seq = 0u64;
     let mut last_send: Option<Instant> = None;
     loop {
         let (view, predictor) = {
@@ -440,6 +782,9 @@ fn write_loop(sh: &Shared, mut stream: impl Write, request: RequestPolicy) {
                 if sh.stop.load(Ordering::SeqCst) {
                     drop(g);
                     send_bye(&mut stream);
+                    return;
+                }
+                if sh.down.load(Ordering::SeqCst) {
                     return;
                 }
                 let events = ViewEvents { moved: g.changed, first_still: false, frame_arrived: g.frame_arrived };
@@ -460,7 +805,7 @@ fn write_loop(sh: &Shared, mut stream: impl Write, request: RequestPolicy) {
                 g = sh.view_cv.wait(g).unwrap_or_else(|e| e.into_inner());
             }
         };
-        seq += 1;
+        let seq = sh.seq.fetch_add(1, Ordering::SeqCst) + 1;
         let horizon = lock(&sh.horizon).0;
         let camera = request.camera(view.camera, &predictor, &horizon, &CADENCE).camera;
         let req = CameraRequest { seq, camera, heuristic: view.heuristic, radius_scale: view.radius_scale };
@@ -474,7 +819,65 @@ fn write_loop(sh: &Shared, mut stream: impl Write, request: RequestPolicy) {
         }
         last_send = Some(now);
         if let Err(e) = send_request(&mut stream, &req) {
-            return sh.fail(ClientError::Gone(format!("cannot send the camera: {e}")));
+            return sh.drop_link(ClientError::Gone(format!("cannot send the camera: {e}")));
         }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn backoff_doubles_to_its_cap_with_bounded_deterministic_jitter() {
+        let b = Backoff::default();
+        for attempt in 1..40 {
+            let full =
+                Duration::from_millis(100).saturating_mul(1 << (attempt - 1).min(20)).min(Duration::from_secs(2));
+            let d = b.delay(attempt);
+            assert!(d >= full / 2 && d <= full, "attempt {attempt}: {d:?} outside [{:?}, {full:?}]", full / 2);
+            assert_eq!(d, b.delay(attempt), "the same seed gives the same wait");
+        }
+        assert!(b.delay(u32::MAX) <= Duration::from_secs(2));
+        let other = Backoff { seed: 7, ..b };
+        assert!((1..10).any(|a| other.delay(a) != b.delay(a)), "another seed, other waits");
+    }
+
+    #[test]
+    fn only_refusals_that_cannot_change_are_permanent() {
+        let server = |code| ClientError::Server { code, text: String::new() };
+        for e in [
+            server(error_code::UNAUTHORIZED),
+            server(error_code::UNSUPPORTED_VERSION),
+            server(error_code::BAD_REQUEST),
+            server(error_code::TOO_LARGE),
+            ClientError::Version("v".into()),
+        ] {
+            assert!(is_permanent(&e), "{e}");
+        }
+        for e in [
+            server(error_code::BUSY),
+            server(error_code::TIMEOUT),
+            server(error_code::INTERNAL),
+            server(error_code::RATE_LIMITED),
+            ClientError::Connect("refused".into()),
+            ClientError::Gone("bye".into()),
+            ClientError::Protocol("junk".into()),
+        ] {
+            assert!(!is_permanent(&e), "{e}");
+        }
+    }
+
+    #[test]
+    fn the_state_reads_as_a_title_line() {
+        assert_eq!(ConnectionState::Connected.label(), None);
+        let r = ConnectionState::Reconnecting {
+            attempt: 3,
+            next_in: Duration::from_millis(1500),
+            reason: "cannot connect: refused".into(),
+        };
+        assert_eq!(r.label().unwrap(), "reconnecting in 1.5 s… (attempt 3; cannot connect: refused)");
+        let f = ConnectionState::Failed(ClientError::Server { code: 3, text: "missing or wrong token".into() });
+        assert!(f.label().unwrap().contains("missing or wrong token"));
     }
 }

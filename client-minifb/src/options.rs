@@ -25,8 +25,13 @@ that are on (predict, guard, adapt, frames kept).
 
 Without --connect the client starts the real volwarp-server program (found beside this client,
 on PATH or in $VOLWARP_SERVER) on 127.0.0.1 (random port); it serves the bundled dataset, or
---volume FILE, over real TCP and stops with the client. With no display (DISPLAY and WAYLAND_DISPLAY unset, or the window cannot be
-opened) the client exits with an error: use --headless.";
+--volume FILE, over real TCP and stops with the client. With --connect, a dropped connection
+(server restarted, network gone) is retried with backoff while the window keeps warping the
+last frames and its title says 'reconnecting in N s…'; a wrong token or another protocol version
+stops the client with that error instead (--no-reconnect: stop on any drop).
+
+With no display (DISPLAY and WAYLAND_DISPLAY unset, or the window cannot be opened) the client
+exits with an error: use --headless.";
 
 /// Command-line options.
 #[derive(Parser, Debug, Clone)]
@@ -43,6 +48,10 @@ pub struct Options {
     /// Access token for the server.
     #[arg(long)]
     pub token: Option<String>,
+    /// With --connect: stop when the connection drops instead of connecting again (by default
+    /// the client keeps warping the frames it has and retries, 100 ms doubling to 2 s apart).
+    #[arg(long, requires = "connect")]
+    pub no_reconnect: bool,
     /// Render to PNG files instead of a window (needs --out unless --bench).
     #[arg(long)]
     pub headless: bool,

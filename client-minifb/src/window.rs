@@ -246,7 +246,11 @@ pub fn run_live(opts: &Options, display: &mut Display, home: Camera) -> Result<(
             );
             let (frames_used, watertight) = (display.frames_used(), display.renderers.watertight());
             let l = levers(opts.predict, opts.guard, display.renderers.adaptive_radius(), frames_used, watertight);
-            screen.window.set_title(&format!("{t} | {l}"));
+            let title = match display.network().state().label() {
+                Some(link) => format!("{} | {l}", t.replacen("volwarp | ", &format!("volwarp | {link} | "), 1)),
+                None => format!("{t} | {l}"),
+            };
+            screen.window.set_title(&title);
         }
     }
     log::info!("window closed after {frames} display frames");

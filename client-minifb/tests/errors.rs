@@ -51,9 +51,9 @@ fn bad_address_and_nothing_listening() {
     assert_clean_failure(&out, "cannot connect");
 }
 
-#[test]
-fn server_gone_after_the_handshake() {
-    let addr = fake_server(|mut s| {
+/// A server that dies after the first real request (and never listens again).
+fn dying_server() -> String {
+    fake_server(|mut s| {
         use std::io::Write;
         assert!(matches!(read_msg(&mut s), Some(Message::Hello(_))));
         s.write_all(&encode(&Message::Hello(Hello::new(0)))).unwrap();
@@ -61,9 +61,22 @@ fn server_gone_after_the_handshake() {
         s.write_all(&encode(&empty_frame(0))).unwrap();
         // The first real request arrives, then the server dies.
         let _ = read_msg(&mut s);
-    });
-    let out = run_headless(&addr);
+    })
+}
+
+#[test]
+fn server_gone_after_the_handshake() {
+    // --no-reconnect: the drop ends the client at once.
+    let mut args = headless(&dying_server());
+    args.push("--no-reconnect".into());
+    let args: Vec<&str> = args.iter().map(|s| s.as_str()).collect();
+    let out = run(&args, LIMIT);
     assert_clean_failure(&out, "server gone");
+    // By default the client keeps trying until its first frame is overdue, and says so.
+    let out = run_headless(&dying_server());
+    assert_clean_failure(&out, "server gone");
+    let line = error_line(&out);
+    assert!(line.contains("reconnecting") && line.contains("cannot connect"), "{line}");
 }
 
 #[test]

@@ -357,6 +357,9 @@ pub mod error_code {
     pub const TOO_LARGE: u16 = 6;
     /// The server failed.
     pub const INTERNAL: u16 = 7;
+    /// Too many failed Hellos (wrong tokens) from this address lately: refused before the
+    /// handshake; try again later.
+    pub const RATE_LIMITED: u16 = 8;
 }
 
 impl ErrorMsg {

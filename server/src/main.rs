@@ -2,7 +2,7 @@
 //!
 //! ```text
 //! volwarp-server                                   # serve the bundled CT head on 127.0.0.1:7878
-//! volwarp-server --volume head.nrrd --tf tf.json --listen 0.0.0.0:7878 --token SECRET
+//! volwarp-server --volume head.nrrd --tf tf.json --listen 0.0.0.0:7878 --token-file ~/.volwarp-token
 //! volwarp-server render --volume FILE [--tf FILE] [--orbit 30,10] [--size 1024x1024] --out img.png
 //! volwarp-server dump [--orbit 30,10] [--heuristic threshold] [--encoding compact|raw12] --out frame.vwf
 //! volwarp-server info scan.nii.gz                  # what a volume file holds, without rendering
@@ -143,8 +143,16 @@ struct NetArgs {
     #[arg(long, default_value = "127.0.0.1:7878")]
     listen: SocketAddr,
     /// Access token clients must send (required on non-loopback addresses; also $VOLWARP_TOKEN).
-    #[arg(long)]
+    #[arg(long, conflicts_with = "token_file")]
     token: Option<String>,
+    /// Read the access token from FILE (surrounding whitespace trimmed), so it does not show in
+    /// `ps` output.
+    #[arg(long, value_name = "FILE")]
+    token_file: Option<PathBuf>,
+    /// Wrong tokens accepted per second from one address (IPv6: one /64), in bursts of as
+    /// many; then its connections get Error RATE_LIMITED before the handshake (0: no limit).
+    #[arg(long, value_name = "N", default_value_t = 10)]
+    max_auth_failures: u32,
     /// Marcher threads (0 = one per core).
     #[arg(long, default_value_t = 0)]
     threads: usize,
@@ -301,10 +309,30 @@ fn synth(d: &DataArgs, out: &std::path::Path) -> Result<(), String> {
     Ok(())
 }
 
+/// The access token: `--token`, else `--token-file` (trimmed), else `$VOLWARP_TOKEN`.
+fn token(n: &NetArgs) -> Result<Option<String>, String> {
+    if let Some(t) = &n.token {
+        return Ok(Some(t.clone()));
+    }
+    if let Some(path) = &n.token_file {
+        let text = std::fs::read_to_string(path).map_err(|e| format!("--token-file {}: {e}", path.display()))?;
+        let t = text.trim();
+        if t.is_empty() {
+            return Err(format!("--token-file {}: the file holds no token", path.display()));
+        }
+        return Ok(Some(t.to_string()));
+    }
+    Ok(std::env::var("VOLWARP_TOKEN").ok().filter(|t| !t.is_empty()))
+}
+
 fn run(cli: Cli) -> Result<(), String> {
     match &cli.cmd {
         Some(Cmd::Info { path }) => return info(path, &cli.data),
         Some(Cmd::Synth { out }) => return synth(&cli.data, out),
+        None | Some(Cmd::Serve) => {
+            // A bad token file is reported before the volume is loaded.
+            token(&cli.net)?;
+        }
         _ => {}
     }
     let ds = load(&cli.data)?;
@@ -323,7 +351,7 @@ fn run(cli: Cli) -> Result<(), String> {
     match cli.cmd.unwrap_or(Cmd::Serve) {
         Cmd::Serve => {
             let n = &cli.net;
-            let token = n.token.clone().or_else(|| std::env::var("VOLWARP_TOKEN").ok().filter(|t| !t.is_empty()));
+            let token = token(n)?;
             let config = ServerConfig {
                 listen: n.listen,
                 threads: n.threads,
@@ -334,6 +362,7 @@ fn run(cli: Cli) -> Result<(), String> {
                 send_timeout: secs(n.send_timeout, "send-timeout")?,
                 max_viewport: n.max_viewport,
                 token,
+                max_auth_failures: n.max_auth_failures,
                 frame_delay: (n.frame_delay_ms > 0).then(|| Duration::from_millis(n.frame_delay_ms)),
                 compact: !n.no_compact,
                 layers: cli.data.layers.unwrap_or(volwarp_core::segments::MAX_LAYERS as u8),

@@ -18,13 +18,18 @@
 //! message where the socket still allows, logs the reason and closes. Other clients carry on.
 //! Over `max_clients` a new client gets Error `BUSY`. Bound to a non-loopback address the
 //! server refuses to start without a token; the token is compared in constant time.
+//!
+//! **Token guessing** is rate-limited per source address (IPv6: per /64): each handshake takes
+//! one attempt from the address's bucket of `max_auth_failures` per second (as deep as its rate)
+//! and gets it back unless its token was wrong. An address whose bucket is empty gets Error
+//! `RATE_LIMITED` and a close at once, before any byte of its Hello is read.
 
 use crate::dataset::Dataset;
 use crate::marcher::Marcher;
 use crate::render_queue::{LevelPolicy, RenderCounts, RenderQueue};
 use std::collections::HashMap;
 use std::io::{self, BufWriter, Read};
-use std::net::{Shutdown, SocketAddr, TcpListener, TcpStream};
+use std::net::{IpAddr, Ipv6Addr, Shutdown, SocketAddr, TcpListener, TcpStream};
 use std::sync::atomic::{AtomicBool, AtomicU64, AtomicUsize, Ordering};
 use std::sync::{Arc, Condvar, Mutex};
 use std::thread::JoinHandle;
@@ -53,6 +58,10 @@ pub struct ServerConfig {
     pub max_viewport: u32,
     /// Access token; required when `listen` is not a loopback address.
     pub token: Option<String>,
+    /// Wrong tokens accepted per second from one source address (IPv6: one /64), in bursts of
+    /// as many; beyond that the address's connections get Error `RATE_LIMITED` before the
+    /// handshake. 0: no limit. Used only with a token. Default 10.
+    pub max_auth_failures: u32,
     /// Artificial delay before each frame (latency demos and benchmarks).
     pub frame_delay: Option<Duration>,
     /// Send CompactFrames to clients that ask for them (`CAP_COMPACT` in their Hello);
@@ -80,6 +89,7 @@ impl Default for ServerConfig {
             send_timeout: Duration::from_secs(30),
             max_viewport: 4096,
             token: None,
+            max_auth_failures: 10,
             frame_delay: None,
             compact: true,
             layers: volwarp_core::segments::MAX_LAYERS as u8,
@@ -98,8 +108,80 @@ pub fn constant_time_eq(a: &[u8], b: &[u8]) -> bool {
     std::hint::black_box(diff) == 0
 }
 
+/// Most source addresses the token-guessing limiter remembers; beyond that, the ones whose
+/// bucket has refilled are forgotten.
+const MAX_TRACKED_ADDRESSES: usize = 4096;
+
+/// The token-guessing limiter: a token bucket of wrong-token attempts per source address.
+struct AuthLimiter {
+    rate: f64,
+    buckets: Mutex<HashMap<IpAddr, (f64, Instant)>>,
+}
+
+impl AuthLimiter {
+    fn new(per_second: u32) -> Self {
+        AuthLimiter { rate: f64::from(per_second), buckets: Mutex::new(HashMap::new()) }
+    }
+
+    /// The bucket an address uses: IPv4 (also IPv4-mapped IPv6) as is, IPv6 by its /64 (one
+    /// host usually owns a whole /64).
+    fn key(ip: IpAddr) -> IpAddr {
+        match ip.to_canonical() {
+            IpAddr::V6(v6) => {
+                let s = v6.segments();
+                IpAddr::V6(Ipv6Addr::new(s[0], s[1], s[2], s[3], 0, 0, 0, 0))
+            }
+            v4 => v4,
+        }
+    }
+
+    /// Takes one attempt from `ip`'s bucket; false (nothing taken) when it is empty.
+    fn charge(&self, ip: IpAddr) -> bool {
+        let now = Instant::now();
+        let mut b = self.buckets.lock().unwrap_or_else(|e| e.into_inner());
+        if b.len() >= MAX_TRACKED_ADDRESSES {
+            let rate = self.rate;
+            b.retain(|_, (tokens, last)| *tokens + now.duration_since(*last).as_secs_f64() * rate < rate);
+        }
+        let (tokens, last) = b.entry(Self::key(ip)).or_insert((self.rate, now));
+        *tokens = (*tokens + now.duration_since(*last).as_secs_f64() * self.rate).min(self.rate);
+        *last = now;
+        if *tokens < 1.0 {
+            return false;
+        }
+        *tokens -= 1.0;
+        true
+    }
+
+    /// Gives back the attempt a handshake took (its token was right, or never compared).
+    fn refund(&self, ip: IpAddr) {
+        let mut b = self.buckets.lock().unwrap_or_else(|e| e.into_inner());
+        if let Some((tokens, _)) = b.get_mut(&Self::key(ip)) {
+            *tokens = (*tokens + 1.0).min(self.rate);
+        }
+    }
+}
+
+/// One handshake's attempt from its address's bucket: given back when dropped, unless the
+/// token turned out wrong.
+struct AuthCharge<'a> {
+    limiter: &'a AuthLimiter,
+    ip: IpAddr,
+    spent: bool,
+}
+
+impl Drop for AuthCharge<'_> {
+    fn drop(&mut self) {
+        if !self.spent {
+            self.limiter.refund(self.ip);
+        }
+    }
+}
+
 struct Shared {
     config: ServerConfig,
+    /// The token-guessing limiter (with a token and a nonzero `max_auth_failures` only).
+    auth: Option<AuthLimiter>,
     marcher: Arc<Marcher>,
     queue: RenderQueue,
     stop: AtomicBool,
@@ -161,8 +243,11 @@ impl Server {
         let listener = TcpListener::bind(config.listen)?;
         let addr = listener.local_addr()?;
         let policy = LevelPolicy { budget: config.frame_budget };
+        let auth = (config.token.is_some() && config.max_auth_failures > 0)
+            .then(|| AuthLimiter::new(config.max_auth_failures));
         let shared = Arc::new(Shared {
             config,
+            auth,
             queue: RenderQueue::with_levels(levels, policy, pool),
             marcher,
             stop: AtomicBool::new(false),
@@ -263,11 +348,31 @@ fn accept(shared: &Arc<Shared>, stream: TcpStream) {
     if shared.stop.load(Ordering::SeqCst) {
         return;
     }
+    // Token guessing: an address out of attempts is refused before its Hello is read.
+    let charged = match (&shared.auth, stream.peer_addr()) {
+        (Some(limiter), Ok(a)) => {
+            if !limiter.charge(a.ip()) {
+                log::warn!("client {id} ({peer}) refused: too many wrong tokens from {}", a.ip());
+                let _ = stream.set_write_timeout(Some(Duration::from_secs(1)));
+                send_error(&stream, error_code::RATE_LIMITED, "too many wrong tokens from this address; try later");
+                let _ = stream.shutdown(Shutdown::Both);
+                return;
+            }
+            Some(a.ip())
+        }
+        _ => None,
+    };
+    let refund = || {
+        if let (Some(limiter), Some(ip)) = (&shared.auth, charged) {
+            limiter.refund(ip);
+        }
+    };
     if shared.active.load(Ordering::SeqCst) >= shared.config.max_clients {
         log::warn!("client {id} ({peer}) refused: {} clients already", shared.config.max_clients);
         let _ = stream.set_write_timeout(Some(Duration::from_secs(1)));
         send_error(&stream, error_code::BUSY, "server busy: too many clients");
         let _ = stream.shutdown(Shutdown::Both);
+        refund();
         return;
     }
     log::info!("client {id} ({peer}) connected");
@@ -277,7 +382,7 @@ fn accept(shared: &Arc<Shared>, stream: TcpStream) {
     }
     let sh = shared.clone();
     let spawned = std::thread::Builder::new().name(format!("volwarp-client-{id}")).spawn(move || {
-        let reason = serve(&sh, &stream, id);
+        let reason = serve(&sh, &stream, id, charged);
         log::info!("client {id} ({peer}) closed: {reason}");
         let _ = stream.shutdown(Shutdown::Both);
         sh.conns.lock().unwrap_or_else(|e| e.into_inner()).remove(&id);
@@ -286,6 +391,7 @@ fn accept(shared: &Arc<Shared>, stream: TcpStream) {
     match spawned {
         Ok(h) => shared.threads.lock().unwrap_or_else(|e| e.into_inner()).push(h),
         Err(e) => {
+            refund();
             log::error!("client {id}: cannot spawn a thread: {e}");
             shared.conns.lock().unwrap_or_else(|e| e.into_inner()).remove(&id);
             shared.active.fetch_sub(1, Ordering::SeqCst);
@@ -390,9 +496,12 @@ struct Slot {
     end: Option<End>,
 }
 
-/// Serves one connection; returns the reason it ended.
-fn serve(sh: &Shared, stream: &TcpStream, id: u64) -> String {
+/// Serves one connection (`charged`: the address whose token-guessing bucket paid for this
+/// handshake); returns the reason it ended.
+fn serve(sh: &Shared, stream: &TcpStream, id: u64, charged: Option<IpAddr>) -> String {
     let cfg = &sh.config;
+    // Given back on every way out but a wrong token.
+    let mut charge = charged.and_then(|ip| sh.auth.as_ref().map(|limiter| AuthCharge { limiter, ip, spent: false }));
     let _ = stream.set_nodelay(true);
     let _ = stream.set_read_timeout(Some(cfg.handshake_timeout.max(Duration::from_millis(1))));
     let _ = stream.set_write_timeout(Some(cfg.send_timeout.max(Duration::from_millis(1))));
@@ -421,10 +530,14 @@ fn serve(sh: &Shared, stream: &TcpStream, id: u64) -> String {
     };
     if let Some(token) = &cfg.token {
         if !constant_time_eq(token.as_bytes(), &hello.token) {
+            if let Some(c) = &mut charge {
+                c.spent = true;
+            }
             send_error(stream, error_code::UNAUTHORIZED, "missing or wrong token");
             return "missing or wrong token".into();
         }
     }
+    drop(charge);
     // The encoding: compact if the client asks and the server allows it.
     let compact = cfg.compact && hello.capabilities & wire::CAP_COMPACT != 0;
     let encoding = if compact { Encoding::Compact } else { Encoding::Raw12 };
@@ -552,4 +665,31 @@ fn read_loop(stream: TcpStream, limits: Limits, idle: Duration, slot: Arc<(Mutex
     let mut s = slot.0.lock().unwrap_or_else(|e| e.into_inner());
     s.end = Some(end);
     slot.1.notify_one();
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn the_guessing_limiter_keys_hosts_and_refills() {
+        let v4: IpAddr = "192.0.2.7".parse().unwrap();
+        let mapped: IpAddr = "::ffff:192.0.2.7".parse().unwrap();
+        assert_eq!(AuthLimiter::key(mapped), v4, "an IPv4-mapped address is its IPv4 host");
+        let a: IpAddr = "2001:db8:1:2:aaaa::1".parse().unwrap();
+        let b: IpAddr = "2001:db8:1:2:bbbb::9".parse().unwrap();
+        let c: IpAddr = "2001:db8:1:3::1".parse().unwrap();
+        assert_eq!(AuthLimiter::key(a), AuthLimiter::key(b), "one /64, one bucket");
+        assert_ne!(AuthLimiter::key(a), AuthLimiter::key(c));
+
+        let l = AuthLimiter::new(3);
+        assert!((0..3).all(|_| l.charge(v4)), "a burst as deep as the rate");
+        assert!(!l.charge(mapped), "the same host, out of attempts");
+        assert!(l.charge(a), "another host has its own bucket");
+        l.refund(v4);
+        assert!(l.charge(v4), "a refunded attempt can be used again");
+        assert!(!l.charge(v4));
+        std::thread::sleep(Duration::from_millis(400));
+        assert!(l.charge(v4), "refilled at 3 per second");
+    }
 }

@@ -65,3 +65,37 @@ fn serve_prints_the_bound_address() {
     child.kill().unwrap();
     child.wait().unwrap();
 }
+
+#[test]
+fn serve_reads_the_token_from_a_file() {
+    let dir = common::temp_dir("token-file");
+    let path = dir.join("token");
+    std::fs::write(&path, "  s3cret file token\n").unwrap();
+    // A missing or empty file is an error before anything is loaded.
+    let missing = dir.join("missing");
+    let empty = dir.join("empty");
+    std::fs::write(&empty, " \n").unwrap();
+    for (file, says) in [(&missing, "--token-file"), (&empty, "holds no token")] {
+        let out = Command::new(BIN).args(["--listen", "127.0.0.1:0"]).arg("--token-file").arg(file).output().unwrap();
+        assert!(!out.status.success());
+        let err = String::from_utf8_lossy(&out.stderr);
+        assert!(err.contains(says), "{err}");
+    }
+    let mut child = Command::new(BIN)
+        .args(["--listen", "127.0.0.1:0", "--volume", "marschner-lobb:16", "--token-file"])
+        .arg(&path)
+        .stdout(Stdio::piped())
+        .stderr(Stdio::null())
+        .spawn()
+        .unwrap();
+    let mut line = String::new();
+    BufReader::new(child.stdout.take().unwrap()).read_line(&mut line).unwrap();
+    let addr = line.trim().strip_prefix("listening on ").unwrap_or_else(|| panic!("{line:?}")).parse().unwrap();
+    // The trimmed file content is the token.
+    let mut wrong = common::Client::connect(addr);
+    wrong.send(&Message::Hello(wire::Hello::new(0).with_token(b"  s3cret file token\n").unwrap()));
+    assert!(matches!(wrong.recv(), Ok(Message::Error(e)) if e.code == wire::error_code::UNAUTHORIZED));
+    let _c = common::Client::hello(addr, Some(b"s3cret file token"));
+    child.kill().unwrap();
+    child.wait().unwrap();
+}

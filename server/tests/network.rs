@@ -251,3 +251,82 @@ fn a_moving_camera_gets_coarser_levels_within_the_budget_and_a_resting_one_the_v
         server.shutdown();
     }
 }
+
+/// One token guess on a new connection: `Some(code)` of the Error it got (`None`: the server
+/// answered Hello, or the connection failed before an Error arrived).
+fn guess(addr: SocketAddr, token: &[u8]) -> Option<u16> {
+    let stream = std::net::TcpStream::connect(addr).ok()?;
+    stream.set_read_timeout(Some(Duration::from_secs(5))).ok()?;
+    let mut c = Client { stream };
+    let mut bytes = Vec::new();
+    volwarp_core::wire::write_message(
+        &mut volwarp_core::wire::VecWriter(&mut bytes),
+        &Message::Hello(Hello::new(0).with_token(token).unwrap()),
+    )
+    .unwrap();
+    c.send_raw(&bytes);
+    match c.recv() {
+        Ok(Message::Error(e)) => Some(e.code),
+        _ => None,
+    }
+}
+
+#[test]
+fn token_guessing_is_rate_limited_per_address_and_others_are_served() {
+    let cfg = ServerConfig { token: Some("s3cret".into()), max_auth_failures: 10, ..config() };
+    let (server, m) = start(cfg);
+    let addr = server.local_addr();
+    // A client with the right token, connected before the guessing, keeps getting frames.
+    let mut good = Client::hello(addr, Some(b"s3cret"));
+    let stop = Arc::new(std::sync::atomic::AtomicBool::new(false));
+    let served = {
+        let (stop, m) = (stop.clone(), m.clone());
+        std::thread::spawn(move || {
+            let mut frames = 0u32;
+            let mut seq = 0;
+            while !stop.load(std::sync::atomic::Ordering::SeqCst) {
+                seq += 1;
+                good.send(&Message::CameraRequest(request(&m, seq, Heuristic::Threshold, seq as f32)));
+                assert_eq!(expect_frame(&mut good).header.seq, seq);
+                frames += 1;
+            }
+            frames
+        })
+    };
+    // The guesser: one wrong token per connection, about a thousand a second (faster would
+    // only spend the machine's ephemeral ports).
+    let t0 = Instant::now();
+    let (mut checked, mut limited, mut other) = (0u32, 0u32, 0u32);
+    while t0.elapsed() < Duration::from_secs(2) {
+        match guess(addr, b"guess") {
+            Some(error_code::UNAUTHORIZED) => checked += 1,
+            Some(error_code::RATE_LIMITED) => limited += 1,
+            _ => other += 1,
+        }
+        std::thread::sleep(Duration::from_millis(1));
+    }
+    let secs = t0.elapsed().as_secs_f64();
+    stop.store(true, std::sync::atomic::Ordering::SeqCst);
+    let frames = served.join().expect("the good client was served throughout");
+    eprintln!(
+        "{checked} tokens checked, {limited} refused as rate-limited, {other} other in {secs:.2} s; \
+         {frames} frames to the good client meanwhile"
+    );
+    // A burst of 10, then 10 per second.
+    assert!(f64::from(checked) <= 10.0 + 10.0 * secs + 2.0, "{checked} tokens checked in {secs:.2} s");
+    assert!(checked >= 10, "the first guesses are answered normally ({checked})");
+    assert!(limited > checked, "most guesses are refused before the handshake ({limited} vs {checked})");
+    assert!(frames >= 5, "the good client got {frames} frames while the guessing went on");
+    // The address's bucket refills: a right token connects again shortly after.
+    std::thread::sleep(Duration::from_millis(250));
+    let mut again = Client::hello(addr, Some(b"s3cret"));
+    again.send(&Message::CameraRequest(request(&m, 1, Heuristic::Threshold, 0.0)));
+    assert_eq!(expect_frame(&mut again).header.seq, 1);
+    // Right tokens never use up the budget.
+    for _ in 0..30 {
+        let _ = Client::hello(addr, Some(b"s3cret"));
+    }
+    assert_eq!(guess(addr, b"guess"), Some(error_code::UNAUTHORIZED));
+    drop(again);
+    server.shutdown();
+}
