@@ -2,14 +2,16 @@
 //! new one started on the same port, and the client gets whole frames again without being
 //! told; a wrong token is a permanent failure, not an endless retry.
 
+mod common;
+
+use common::net_config;
 use std::net::SocketAddr;
 use std::sync::Arc;
 use std::time::{Duration, Instant};
 use volwarp_client::connection::connect_layers;
 use volwarp_client::controls::home_camera;
-use volwarp_client::network::{Backoff, ConnectionState, NetConfig, Network, Redial, View};
+use volwarp_client::network::{Backoff, ConnectionState, Network, Redial, View};
 use volwarp_client::ClientError;
-use volwarp_core::method::RequestPolicy;
 use volwarp_core::wire::error_code;
 use volwarp_core::{Camera, Heuristic};
 use volwarp_server::{Dataset, Marcher, Server, ServerConfig, ServerHandle};
@@ -41,17 +43,6 @@ fn bind_on(port: u16, m: &Arc<Marcher>) -> ServerHandle {
             }
             Err(e) => panic!("cannot bind 127.0.0.1:{port} again: {e}"),
         }
-    }
-}
-
-fn net_config() -> NetConfig {
-    NetConfig {
-        latency: Duration::ZERO,
-        build_threads: 1,
-        timeout: Duration::from_secs(10),
-        lazy_build: false,
-        bandwidth_mbps: None,
-        request: RequestPolicy::NONE,
     }
 }
 

@@ -8,7 +8,7 @@ use std::sync::mpsc;
 use std::time::{Duration, Instant};
 use volwarp_client::connection::connect;
 use volwarp_client::controls::home_camera;
-use volwarp_client::network::{NetConfig, Network, View, THROTTLE};
+use volwarp_client::network::{Network, View, THROTTLE};
 use volwarp_core::wire::{Hello, Message};
 use volwarp_core::Heuristic;
 
@@ -34,19 +34,7 @@ fn writer_sends_only_the_newest_camera_throttled() {
     });
     let conn = connect(&addr, None, Duration::from_secs(10)).unwrap();
     let home = home_camera(&conn.bounds, 32, 32);
-    let net = Network::start(
-        conn,
-        NetConfig {
-            latency: Duration::ZERO,
-            build_threads: 1,
-            timeout: Duration::from_secs(10),
-            lazy_build: false,
-            bandwidth_mbps: None,
-            request: volwarp_core::method::RequestPolicy::NONE,
-        },
-        None,
-    )
-    .unwrap();
+    let net = Network::start(conn, net_config(), None).unwrap();
     let t0 = Instant::now();
     let mut last = home;
     let mut i = 0;

@@ -50,10 +50,12 @@ fn bad_arguments_fail_with_a_message() {
     }
 }
 
-#[test]
-fn serve_prints_the_bound_address() {
+/// Starts the server on a free loopback port with the small procedural volume and `extra`
+/// arguments; returns it and the address it printed.
+fn serve(extra: &[&std::ffi::OsStr]) -> (std::process::Child, std::net::SocketAddr) {
     let mut child = Command::new(BIN)
         .args(["--listen", "127.0.0.1:0", "--volume", "marschner-lobb:16"])
+        .args(extra)
         .stdout(Stdio::piped())
         .stderr(Stdio::null())
         .spawn()
@@ -61,6 +63,12 @@ fn serve_prints_the_bound_address() {
     let mut line = String::new();
     BufReader::new(child.stdout.take().unwrap()).read_line(&mut line).unwrap();
     let addr = line.trim().strip_prefix("listening on ").unwrap_or_else(|| panic!("{line:?}")).parse().unwrap();
+    (child, addr)
+}
+
+#[test]
+fn serve_prints_the_bound_address() {
+    let (mut child, addr) = serve(&[]);
     let _c = common::Client::hello(addr, None);
     child.kill().unwrap();
     child.wait().unwrap();
@@ -81,16 +89,7 @@ fn serve_reads_the_token_from_a_file() {
         let err = String::from_utf8_lossy(&out.stderr);
         assert!(err.contains(says), "{err}");
     }
-    let mut child = Command::new(BIN)
-        .args(["--listen", "127.0.0.1:0", "--volume", "marschner-lobb:16", "--token-file"])
-        .arg(&path)
-        .stdout(Stdio::piped())
-        .stderr(Stdio::null())
-        .spawn()
-        .unwrap();
-    let mut line = String::new();
-    BufReader::new(child.stdout.take().unwrap()).read_line(&mut line).unwrap();
-    let addr = line.trim().strip_prefix("listening on ").unwrap_or_else(|| panic!("{line:?}")).parse().unwrap();
+    let (mut child, addr) = serve(&["--token-file".as_ref(), path.as_os_str()]);
     // The trimmed file content is the token.
     let mut wrong = common::Client::connect(addr);
     wrong.send(&Message::Hello(wire::Hello::new(0).with_token(b"  s3cret file token\n").unwrap()));

@@ -152,3 +152,16 @@ pub fn empty_frame(seq: u64) -> Message {
         segments: Vec::new(),
     })
 }
+
+/// The network settings of the tests: no added latency, one build thread, a 10 s timeout,
+/// eager builds, no bandwidth limit, no extra requests.
+pub fn net_config() -> volwarp_client::network::NetConfig {
+    volwarp_client::network::NetConfig {
+        latency: Duration::ZERO,
+        build_threads: 1,
+        timeout: Duration::from_secs(10),
+        lazy_build: false,
+        bandwidth_mbps: None,
+        request: volwarp_core::method::RequestPolicy::NONE,
+    }
+}
