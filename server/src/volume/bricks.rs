@@ -517,6 +517,20 @@ impl Voxels {
     }
 }
 
+/// Bricks a grid of `f(value)` for `values` in x-fastest order (`dims` product long), a slice
+/// at a time (no second copy of the volume).
+pub fn grid_from_fn<T: Stored>(dims: [u32; 3], values: &[f32], f: impl Fn(f32) -> T) -> Result<Grid<T>, VolumeError> {
+    let mut b = GridBuilder::new(dims)?;
+    let n = (dims[0] as usize * dims[1] as usize).max(1);
+    let mut slice = Vec::with_capacity(n);
+    for s in values.chunks(n) {
+        slice.clear();
+        slice.extend(s.iter().map(|&v| f(v)));
+        b.push_slice(&slice);
+    }
+    b.finish()
+}
+
 /// Bricks a grid from values in x-fastest order (`dims` product long).
 pub fn grid_from_values<T: Stored>(dims: [u32; 3], values: &[T]) -> Result<Grid<T>, VolumeError> {
     let mut b = GridBuilder::new(dims)?;

@@ -307,11 +307,9 @@ impl Volume {
         let coded =
             hi - lo <= 65_535.0 && values.iter().all(|v| v.is_finite() && v.fract() == 0.0 && v.abs() < 16_777_216.0);
         let (voxels, scale) = if coded && hi - lo <= 255.0 {
-            let codes: Vec<u8> = values.iter().map(|&v| (v - lo) as u8).collect();
-            (Voxels::U8(bricks::grid_from_values(dims, &codes)?), code_scale(hi - lo))
+            (Voxels::U8(bricks::grid_from_fn(dims, &values, |v| (v - lo) as u8)?), code_scale(hi - lo))
         } else if coded {
-            let codes: Vec<u16> = values.iter().map(|&v| (v - lo) as u16).collect();
-            (Voxels::U16(bricks::grid_from_values(dims, &codes)?), code_scale(hi - lo))
+            (Voxels::U16(bricks::grid_from_fn(dims, &values, |v| (v - lo) as u16)?), code_scale(hi - lo))
         } else {
             let inv_range = if hi > lo { 1.0 / (hi as f64 - lo as f64) } else { 0.0 };
             for v in values.iter_mut() {
