@@ -28,6 +28,16 @@ pub const BRICK_BIG: u32 = 8;
 /// Volumes of more voxels than this get [`BRICK_BIG`] bricks.
 pub const BIG_VOXELS: u64 = 1 << 27;
 
+/// The brick edge of the grid of a volume of `voxels` voxels: [`BRICK`], or [`BRICK_BIG`]
+/// above [`BIG_VOXELS`].
+pub fn brick_for(voxels: u64) -> u32 {
+    if voxels > BIG_VOXELS {
+        BRICK_BIG
+    } else {
+        BRICK
+    }
+}
+
 /// Bricks a look in a visible brick reaches past the cube of visible bricks around it (see
 /// [`Occupancy::look`]).
 pub const VISIBLE_SLACK: u8 = 2;
@@ -95,7 +105,7 @@ impl MinMaxGrid {
     /// [`BRICK_BIG`]).
     pub fn new(volume: &Volume) -> MinMaxGrid {
         let voxels = volume.dims().iter().map(|&d| u64::from(d)).product::<u64>();
-        MinMaxGrid::with_brick(volume, if voxels > BIG_VOXELS { BRICK_BIG } else { BRICK })
+        MinMaxGrid::with_brick(volume, brick_for(voxels))
     }
 
     /// Builds the grid of a volume with bricks of `brick` voxels (a power of two), in parallel

@@ -371,11 +371,7 @@ fn run(cli: Cli) -> Result<(), String> {
                     None => None,
                 },
             };
-            let levels = match config.frame_budget {
-                Some(_) => marcher.levels(&ds.tf).map_err(|e| e.to_string())?,
-                None => vec![std::sync::Arc::new(marcher)],
-            };
-            let server = Server::with_levels(config, levels).map_err(|e| e.to_string())?;
+            let server = Server::with_transfer_function(config, marcher, &ds.tf).map_err(|e| e.to_string())?;
             println!("listening on {}", server.local_addr());
             use std::io::Write;
             let _ = std::io::stdout().flush();

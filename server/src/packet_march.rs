@@ -496,11 +496,14 @@ impl Kernel<'_> {
                     }
                     let mut c = first;
                     while c <= last {
-                        let cl = L::splat(c);
-                        let here = czf.simd_ge(cl).and_not(czf.simd_gt(cl));
-                        let part = corners::<L>(self.voxels, c as usize, base);
-                        for (a, p) in acc.iter_mut().zip(part) {
-                            *a = here.select(p, *a);
+                        // The first lane's chunk is gathered already.
+                        if c != cs[0] {
+                            let cl = L::splat(c);
+                            let here = czf.simd_ge(cl).and_not(czf.simd_gt(cl));
+                            let part = corners::<L>(self.voxels, c as usize, base);
+                            for (a, p) in acc.iter_mut().zip(part) {
+                                *a = here.select(p, *a);
+                            }
                         }
                         c += 1.0;
                     }

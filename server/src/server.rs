@@ -206,10 +206,25 @@ pub struct ServerHandle {
 }
 
 impl Server {
-    /// Checks the config, builds the marcher of `dataset` and binds the listener.
+    /// Checks the config, builds the marcher of `dataset` (and its levels of detail where
+    /// `config.frame_budget` is set) and binds the listener.
     pub fn bind(config: ServerConfig, dataset: Dataset) -> io::Result<Server> {
-        let marcher = Arc::new(Marcher::from_dataset(&dataset));
-        Server::with_marcher(config, marcher)
+        Server::with_transfer_function(config, Marcher::from_dataset(&dataset), &dataset.tf)
+    }
+
+    /// Like [`Server::bind`] with a ready marcher of transfer function `tf`: its levels of
+    /// detail are built where `config.frame_budget` asks for them.
+    pub fn with_transfer_function(
+        config: ServerConfig,
+        marcher: Marcher,
+        tf: &crate::transfer_function::TransferFunction,
+    ) -> io::Result<Server> {
+        // A frame budget needs the levels of detail to choose from.
+        let levels = match config.frame_budget {
+            Some(_) => marcher.levels(tf).map_err(|e| io::Error::other(e.to_string()))?,
+            None => vec![Arc::new(marcher)],
+        };
+        Server::with_levels(config, levels)
     }
 
     /// Like [`Server::bind`] with a ready marcher.

@@ -330,3 +330,18 @@ fn token_guessing_is_rate_limited_per_address_and_others_are_served() {
     drop(again);
     server.shutdown();
 }
+
+/// `Server::bind` builds the levels of detail where the config sets a frame budget: a moving
+/// camera then gets a coarser level than the volume.
+#[test]
+fn bind_with_a_frame_budget_serves_levels_of_detail() {
+    let cfg = ServerConfig { frame_budget: Some(Duration::from_nanos(1)), ..config() };
+    let server = Server::bind(cfg, Dataset::default_bundled()).unwrap().spawn();
+    let m = Marcher::from_dataset(&Dataset::default_bundled());
+    let mut c = Client::hello(server.local_addr(), None);
+    c.send(&Message::CameraRequest(request(&m, 1, Heuristic::Threshold, 10.0)));
+    assert_eq!(expect_frame(&mut c).header.level, 0);
+    c.send(&Message::CameraRequest(request(&m, 2, Heuristic::Threshold, 14.0)));
+    assert!(expect_frame(&mut c).header.level > 0, "a moving camera under a budget");
+    server.shutdown();
+}

@@ -262,15 +262,8 @@ impl<T: Stored> Grid<T> {
 
     /// Row `y` of slice `z` (each below its dim) as `f32`, into `out` (replacing its content).
     pub fn read_row(&self, y: u32, z: u32, out: &mut Vec<f32>) {
-        let nx = self.layout.dims[0];
         out.clear();
-        let mut x = 0;
-        while x < nx {
-            let n = (nx - x).min(BRICK_EDGE) as usize;
-            let (c, i) = self.layout.locate(x, y, z);
-            out.extend(self.chunks[c][i..i + n].iter().map(|v| v.to_f32()));
-            x += BRICK_EDGE;
-        }
+        self.for_each_run(y, z, |_, run| out.extend(run.iter().map(|v| v.to_f32())));
     }
 
     /// Bytes the values take.
@@ -470,15 +463,6 @@ impl Voxels {
         }
     }
 
-    /// [`Grid::read_row`] of the stored grid.
-    pub fn read_row(&self, y: u32, z: u32, out: &mut Vec<f32>) {
-        match self {
-            Voxels::U8(g) => g.read_row(y, z, out),
-            Voxels::U16(g) => g.read_row(y, z, out),
-            Voxels::F32(g) => g.read_row(y, z, out),
-        }
-    }
-
     /// [`Grid::corners`] of the stored grid.
     #[inline(always)]
     pub fn corners(&self, x: u32, y: u32, z: u32) -> [f32; 8] {
@@ -564,18 +548,8 @@ mod tests {
             for z in 0..dims[2] {
                 for y in 0..dims[1] {
                     for x in 0..dims[0] {
-                        let c = g.corners(x, y, z);
-                        let want = [
-                            at(x, y, z),
-                            at(x + 1, y, z),
-                            at(x, y + 1, z),
-                            at(x + 1, y + 1, z),
-                            at(x, y, z + 1),
-                            at(x + 1, y, z + 1),
-                            at(x, y + 1, z + 1),
-                            at(x + 1, y + 1, z + 1),
-                        ];
-                        assert_eq!(c, want, "{dims:?} at {x},{y},{z}");
+                        let want = super::super::sampling::stencil(at, x, y, z);
+                        assert_eq!(g.corners(x, y, z), want, "{dims:?} at {x},{y},{z}");
                     }
                 }
             }

@@ -244,11 +244,7 @@ pub(crate) fn check_load(
     // The bricks, one slab of slices while they are built, any decoding buffer, and the
     // empty-space grids (15 bytes per skipping brick: its range, flags, distances and look).
     let slab = u64::from(dims[0]) * u64::from(dims[1]) * u64::from(bricks::BRICK_SPAN) * stored_bytes;
-    let cell = u64::from(if voxels > crate::empty_space::BIG_VOXELS {
-        crate::empty_space::BRICK_BIG
-    } else {
-        crate::empty_space::BRICK
-    });
+    let cell = u64::from(crate::empty_space::brick_for(voxels));
     let grids = dims.iter().map(|&d| u64::from(d).div_ceil(cell)).product::<u64>() * 15;
     let needed = bricks::Layout::stored_bytes(dims, stored_bytes)
         .and_then(|b| b.checked_add(slab))

@@ -34,6 +34,21 @@ impl Volume {
     }
 }
 
+/// The eight corners `[c000, c100, c010, c110, c001, c101, c011, c111]` (x fastest) of the
+/// trilinear stencil whose lowest corner is voxel `(x, y, z)`, each read with `at`.
+pub(crate) fn stencil(at: impl Fn(u32, u32, u32) -> f32, x: u32, y: u32, z: u32) -> [f32; 8] {
+    [
+        at(x, y, z),
+        at(x + 1, y, z),
+        at(x, y + 1, z),
+        at(x + 1, y + 1, z),
+        at(x, y, z + 1),
+        at(x + 1, y, z + 1),
+        at(x, y + 1, z + 1),
+        at(x + 1, y + 1, z + 1),
+    ]
+}
+
 /// Trilinear blend of the corners `[c000, c100, c010, c110, c001, c101, c011, c111]` (x
 /// fastest) at fractions `(fx, fy, fz)`: along x, then y, then z.
 #[inline(always)]
@@ -61,16 +76,7 @@ pub fn flat_sample(stored: &[f32], dims: [u32; 3], (offset, scale): (f32, f32), 
         let (x, y, z) = (x.min(nx - 1) as usize, y.min(ny - 1) as usize, z.min(nz - 1) as usize);
         stored[x + nx as usize * (y + ny as usize * z)]
     };
-    let c = [
-        at(x0, y0, z0),
-        at(x0 + 1, y0, z0),
-        at(x0, y0 + 1, z0),
-        at(x0 + 1, y0 + 1, z0),
-        at(x0, y0, z0 + 1),
-        at(x0 + 1, y0, z0 + 1),
-        at(x0, y0 + 1, z0 + 1),
-        at(x0 + 1, y0 + 1, z0 + 1),
-    ];
+    let c = stencil(at, x0, y0, z0);
     (trilinear(c, gx - x0 as f32, gy - y0 as f32, gz - z0 as f32) - offset) * scale
 }
 

@@ -3,7 +3,7 @@
 //! file again as `f32`. The raw and NRRD loaders (raw and gzip encodings) and the NIfTI loader
 //! (volumes in LPS order or mirrored in x and y, unscaled) read through here.
 
-use super::bricks::{GridBuilder, Stored, Voxels};
+use super::bricks::{Grid, GridBuilder, Stored, Voxels};
 use super::{code_scale, Volume, VolumeError, VolumeErrorKind, VoxelType};
 use std::io::Read;
 use std::path::Path;
@@ -49,20 +49,26 @@ pub(crate) fn stream_volume(spec: &StreamSpec<'_>, reader: impl Read) -> Result<
     let be = spec.big_endian;
     let short = move |b: &[u8]| if be { u16::from_be_bytes([b[0], b[1]]) } else { u16::from_le_bytes([b[0], b[1]]) };
     match spec.ty {
-        VoxelType::U8 => stream_ints::<u8>(spec, reader, |b, out| out.copy_from_slice(b), 0.0),
-        VoxelType::I8 => {
-            stream_ints::<u8>(spec, reader, |b, out| out.iter_mut().zip(b).for_each(|(o, &v)| *o = v ^ 0x80), -128.0)
-        }
+        VoxelType::U8 => stream_ints::<u8>(spec, reader, |b, out| out.copy_from_slice(b), Voxels::U8, 0.0),
+        VoxelType::I8 => stream_ints::<u8>(
+            spec,
+            reader,
+            |b, out| out.iter_mut().zip(b).for_each(|(o, &v)| *o = v ^ 0x80),
+            Voxels::U8,
+            -128.0,
+        ),
         VoxelType::U16 => stream_ints::<u16>(
             spec,
             reader,
-            |b, out| out.iter_mut().zip(b.chunks_exact(2)).for_each(|(o, v)| *o = short(v)),
+            |b, out: &mut [u16]| out.iter_mut().zip(b.chunks_exact(2)).for_each(|(o, v)| *o = short(v)),
+            Voxels::U16,
             0.0,
         ),
         VoxelType::I16 => stream_ints::<u16>(
             spec,
             reader,
-            |b, out| out.iter_mut().zip(b.chunks_exact(2)).for_each(|(o, v)| *o = short(v) ^ 0x8000),
+            |b, out: &mut [u16]| out.iter_mut().zip(b.chunks_exact(2)).for_each(|(o, v)| *o = short(v) ^ 0x8000),
+            Voxels::U16,
             -32_768.0,
         ),
         _ => stream_floats(spec, reader),
@@ -144,11 +150,13 @@ fn mirror<T>(slice: &mut [T], nx: usize, flip: [bool; 2]) {
 }
 
 /// 8- and 16-bit values: stored as read (`decode` gives the stored values of a slice's bytes:
-/// signed ones offset to unsigned); `bias` is the source value of stored 0.
+/// signed ones offset to unsigned, `wrap` the [`Voxels`] of their grid); `bias` is the source
+/// value of stored 0.
 fn stream_ints<T: Stored + Ord + Into<u32>>(
     spec: &StreamSpec<'_>,
     reader: impl Read,
     decode: impl Fn(&[u8], &mut [T]),
+    wrap: fn(Grid<T>) -> Voxels,
     bias: f32,
 ) -> Result<Volume, VolumeError> {
     let [nx, ny, _] = spec.dims;
@@ -165,7 +173,7 @@ fn stream_ints<T: Stored + Ord + Into<u32>>(
         builder.push_slice(&slice);
     })?;
     let grid = builder.finish().map_err(|e| e.at(spec.path))?;
-    let voxels = into_voxels(grid);
+    let voxels = wrap(grid);
     let (lo, hi) = (lo as f32, hi as f32);
     Ok(Volume::from_voxels(spec.name, spec.spacing, voxels, (lo + bias, hi + bias), lo, code_scale(hi - lo)))
 }
@@ -186,18 +194,6 @@ fn min_max<T: Copy + PartialOrd>(s: &[T]) -> Option<(T, T)> {
     let l = chunks.remainder().iter().chain(&lo).fold(first, |m, &v| pick(m, v, true));
     let h = chunks.remainder().iter().chain(&hi).fold(first, |m, &v| pick(m, v, false));
     Some((l, h))
-}
-
-/// A grid of `u8` or `u16` as [`Voxels`].
-fn into_voxels<T: Stored>(grid: super::bricks::Grid<T>) -> Voxels {
-    let any: Box<dyn std::any::Any> = Box::new(grid);
-    match any.downcast::<super::bricks::Grid<u8>>() {
-        Ok(g) => Voxels::U8(*g),
-        Err(any) => match any.downcast::<super::bricks::Grid<u16>>() {
-            Ok(g) => Voxels::U16(*g),
-            Err(any) => Voxels::F32(*any.downcast::<super::bricks::Grid<f32>>().expect("bricks of u8, u16 or f32")),
-        },
-    }
 }
 
 /// Other types: read as `f32` (as the loaders always converted them), then normalized over
