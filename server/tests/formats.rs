@@ -867,6 +867,8 @@ fn load_speed() {
     .unwrap();
     let vti = dir.join("v.vti");
     write(&vti, &bytes, VoxelType::I16, dims, sp, WriteFormat::AppendedRaw { zlib: false }, true).unwrap();
+    let vtiz = dir.join("z.vti");
+    write(&vtiz, &bytes, VoxelType::I16, dims, sp, WriteFormat::AppendedRaw { zlib: true }, true).unwrap();
     let tif = dir.join("v.tif");
     let plane = (n * n) as usize;
     let pages: Vec<_> = (0..n as usize)
@@ -895,6 +897,7 @@ fn load_speed() {
         ("NIfTI gzip", &niigz),
         ("NIfTI, x and y flipped", &ras),
         (".vti appended raw", &vti),
+        (".vti appended zlib", &vtiz),
         ("TIFF, one page a slice", &tif),
         ("DICOM, one file a slice", &dcm),
     ] {
@@ -917,4 +920,108 @@ fn load_speed() {
         }
     }
     std::fs::remove_dir_all(&dir).ok();
+}
+
+/// DICOM series, TIFF stacks and `.vti` appended data stream into bricks of their own type:
+/// a 64³ 16-bit volume loads within a memory limit that decoding it whole (4 bytes a voxel
+/// kept, 8 while loading) would exceed, and gives raw's voxels; a `.vti` whose Direction
+/// permutes the axes is decoded whole and refused under that limit.
+#[test]
+fn streamed_formats_load_within_their_stored_size() {
+    use volwarp_server::volume::vti::{write, WriteFormat};
+    use volwarp_server::volume::MemoryLimit;
+    let dir = temp_dir("streamed");
+    let n = 64u32;
+    let plane = (n * n) as usize;
+    let vals: Vec<i16> = (0..n * n * n).map(|i| ((i * 7919 % 4093) as i32 - 2000) as i16).collect();
+    let bytes = le(&vals);
+    let raw = dir.join(format!("v_{n}x{n}x{n}_int16.raw"));
+    std::fs::write(&raw, &bytes).unwrap();
+    let limited = LoadOptions { memory: MemoryLimit::Bytes(3 << 19), ..LoadOptions::default() };
+    let r = load_volume(&raw, &limited).unwrap();
+
+    let dcm = dir.join("dicom");
+    std::fs::create_dir_all(&dcm).unwrap();
+    for z in 0..n as usize {
+        let px: Vec<u16> = vals[z * plane..(z + 1) * plane].iter().map(|&x| x as u16).collect();
+        let s = Slice { rows: n as u16, cols: n as u16, ps: [1.0, 1.0], ..axial("1", z as f64, px) };
+        // Shuffled file names: the order comes from the positions.
+        write_dicom(&dcm.join(format!("{}.dcm", (z * 37) % 64)), &s, z as u32);
+    }
+    let tif = dir.join("v.tif");
+    let pages: Vec<_> = (0..n as usize)
+        .map(|z| (n, n, vals[z * plane..(z + 1) * plane].iter().map(|&x| (x as i32 + 2048) as u16).collect::<Vec<_>>()))
+        .collect();
+    write_tiff_pages(&tif, &pages);
+    let vti = dir.join("v.vti");
+    write(&vti, &bytes, VoxelType::I16, [n; 3], Vec3::ONE, WriteFormat::AppendedRaw { zlib: false }, false).unwrap();
+    let vtiz = dir.join("z.vti");
+    write(&vtiz, &bytes, VoxelType::I16, [n; 3], Vec3::ONE, WriteFormat::AppendedRaw { zlib: true }, true).unwrap();
+    for p in [&dcm, &tif, &vti, &vtiz] {
+        let v = load_volume(p, &limited).unwrap_or_else(|e| panic!("{}: {e}", p.display()));
+        assert!(v.values() == r.values(), "{}: voxels differ from raw", p.display());
+        assert_eq!(v.dims(), [n; 3]);
+        assert!(v.memory_bytes() < 2 * bytes.len() as u64, "{}: {} bytes", p.display(), v.memory_bytes());
+    }
+    // The same appended data with a permuting Direction: decoded whole, over the limit.
+    let text = std::fs::read(&vti).unwrap();
+    let at = text.windows(9).position(|w| w == b"Spacing=\"").unwrap();
+    let mut permuted = text[..at].to_vec();
+    permuted.extend_from_slice(b"Direction=\"0 1 0 1 0 0 0 0 1\" ");
+    permuted.extend_from_slice(&text[at..]);
+    let pv = dir.join("permuted.vti");
+    std::fs::write(&pv, &permuted).unwrap();
+    let e = load_volume(&pv, &limited).expect_err("a permuted .vti is decoded whole");
+    assert!(matches!(e.kind, VolumeErrorKind::OutOfMemory { .. }), "{e}");
+    let v = load_volume(&pv, &LoadOptions::default()).unwrap();
+    assert!(v.source().orientation.contains("(+j, +i, +k)"), "{}", v.source().orientation);
+    std::fs::remove_dir_all(&dir).ok();
+}
+
+/// The pixel data is found where the data set has it, not inside a sequence item that holds
+/// its own (an icon image), and behind elements larger than the first bytes read of a file;
+/// 12 bits stored of 16 keep their low bits, sign-extended.
+#[test]
+fn dicom_pixel_data_behind_sequences_and_large_elements() {
+    use dicom_core::value::DataSetSequence;
+    use dicom_core::{DataElement, Length, PrimitiveValue, VR};
+    use dicom_dictionary_std::tags;
+    let dir = temp_dir("dicom-walk");
+    let r = reference();
+    for (k, case) in ["icon", "large", "bits"].iter().enumerate() {
+        let series = dir.join(case);
+        std::fs::create_dir_all(&series).unwrap();
+        for z in 0..DIMS[2] as usize {
+            let p = series.join(format!("{z}.dcm"));
+            let mut px = slice_i16(z);
+            if *case == "bits" {
+                // Junk in the 4 bits above the 12 stored: the ramp fits in 12 signed bits.
+                px.iter_mut().for_each(|v| *v = (*v & 0x0FFF) | 0x5000);
+            }
+            write_dicom(&p, &axial("5.5", 2.0 * z as f64, px), (100 * k + z) as u32);
+            let mut o = dicom_object::open_file(&p).unwrap();
+            match *case {
+                "icon" => {
+                    let icon = dicom_object::InMemDicomObject::from_element_iter([
+                        DataElement::new(tags::ROWS, VR::US, PrimitiveValue::from(2u16)),
+                        DataElement::new(tags::COLUMNS, VR::US, PrimitiveValue::from(2u16)),
+                        DataElement::new(tags::PIXEL_DATA, VR::OB, PrimitiveValue::from(vec![9u8, 9, 9, 9])),
+                    ]);
+                    let seq = DataSetSequence::new(vec![icon], Length::UNDEFINED);
+                    o.put(DataElement::new(tags::ICON_IMAGE_SEQUENCE, VR::SQ, seq));
+                }
+                "large" => {
+                    let blob = vec![7u8; 100_000];
+                    o.put(DataElement::new(dicom_core::Tag(0x0009, 0x1010), VR::OB, PrimitiveValue::from(blob)));
+                }
+                _ => {
+                    o.put(DataElement::new(tags::BITS_STORED, VR::US, PrimitiveValue::from(12u16)));
+                    o.put(DataElement::new(tags::HIGH_BIT, VR::US, PrimitiveValue::from(11u16)));
+                }
+            }
+            o.write_to_file(&p).unwrap();
+        }
+        let v = load(&series);
+        assert_same(&v, &r, case);
+    }
 }

@@ -88,6 +88,8 @@ struct Header {
     pixel_spacing: Option<[f64; 2]>,
     between: Option<f64>,
     frame_info: Vec<Frame>,
+    /// Where the native pixel data lies in the file (offset, bytes), where the walk found it.
+    pixels: Option<(u64, u64)>,
 }
 
 type Obj = InMemDicomObject;
@@ -131,16 +133,33 @@ const SHORT_VRS: [&[u8; 2]; 21] = [
     b"ST", b"TM", b"UI", b"UL", b"US",
 ];
 
-/// Walks the elements of a DICOM file and checks that every defined length fits in what is
-/// left of the file, before `dicom-object` reads it: its parser allocates what a length says
-/// (a 600-byte file claiming a 4 GiB element cost 4 GiB and seconds). Returns the transfer
-/// syntax; a deflated data set (which this walk cannot see into) is refused here.
-fn check_lengths(b: &[u8]) -> Result<String, VolumeError> {
+/// Where a walk over a file's elements ended.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+enum Walked {
+    /// At the data set's own (not a sequence item's) PixelData with a defined length: where its
+    /// value starts in the file and its length.
+    Pixels { offset: u64, len: u64 },
+    /// At the end of the file, without native pixel data at the top level.
+    End,
+    /// The bytes given (a prefix of the file) end before either.
+    NeedMore,
+}
+
+/// Walks the elements of a DICOM file (`b`, its first bytes, of a file of `file_len` bytes) and
+/// checks that every defined length fits in what is left of the file, before `dicom-object`
+/// reads it: its parser allocates what a length says (a 600-byte file claiming a 4 GiB element
+/// cost 4 GiB and seconds). Returns the transfer syntax and where the walk ended (it stops at
+/// the top-level PixelData, so a prefix that holds everything before the pixels is enough); a
+/// deflated data set (which this walk cannot see into) is refused here.
+fn check_lengths(b: &[u8], file_len: u64) -> Result<(String, Walked), VolumeError> {
     if b.get(128..132) != Some(b"DICM") {
         return Err(bad("no DICM magic at byte 128"));
     }
     let mut at = 132;
-    let meta = walk(b, &mut at, true, false, true)?;
+    let (meta, walked) = walk(b, file_len, &mut at, true, false, true)?;
+    if walked == Walked::NeedMore {
+        return Ok((String::new(), walked));
+    }
     let ts = meta.unwrap_or_default();
     let (explicit, big) = match ts.as_str() {
         "1.2.840.10008.1.2" => (false, false),
@@ -150,13 +169,20 @@ fn check_lengths(b: &[u8]) -> Result<String, VolumeError> {
         }
         _ => (true, false),
     };
-    walk(b, &mut at, explicit, big, false)?;
-    Ok(ts)
+    let (_, walked) = walk(b, file_len, &mut at, explicit, big, false)?;
+    Ok((ts, walked))
 }
 
 /// Walks elements from `at` (the meta group only where `meta`: it returns its transfer syntax),
-/// descending into sequences and items.
-fn walk(b: &[u8], at: &mut usize, explicit: bool, big: bool, meta: bool) -> Result<Option<String>, VolumeError> {
+/// descending into sequences and items, until the top-level PixelData or the end of `b`.
+fn walk(
+    b: &[u8],
+    file_len: u64,
+    at: &mut usize,
+    explicit: bool,
+    big: bool,
+    meta: bool,
+) -> Result<(Option<String>, Walked), VolumeError> {
     let u16_at = |i: usize| {
         let a = [b[i], b[i + 1]];
         if big {
@@ -173,17 +199,30 @@ fn walk(b: &[u8], at: &mut usize, explicit: bool, big: bool, meta: bool) -> Resu
             u32::from_le_bytes(a)
         }
     };
+    let prefix = (b.len() as u64) < file_len;
+    let ended = move || if prefix { Walked::NeedMore } else { Walked::End };
     let mut ts = None;
     // Inside encapsulated pixel data: items are fragments (bytes, not elements).
     let mut fragments = false;
-    while *at + 8 <= b.len() {
+    // The open sequences: where each with a defined length ends (`None`: a delimiter ends it).
+    let mut open: Vec<Option<usize>> = Vec::new();
+    loop {
+        while open.last().is_some_and(|e| e.is_some_and(|end| *at >= end)) {
+            open.pop();
+        }
+        if *at + 8 > b.len() {
+            return Ok((ts, ended()));
+        }
         let (group, elem) = (u16_at(*at), u16_at(*at + 2));
         if meta && group != 0x0002 {
-            break;
+            return Ok((ts, Walked::End));
         }
         let (len, header, seq) = if group == 0xFFFE {
             let len = u32_at(*at + 4);
             if elem == 0xE0DD {
+                if !fragments {
+                    open.pop();
+                }
                 fragments = false;
             }
             // A fragment's bytes are skipped like a value; an item's elements are walked.
@@ -192,6 +231,9 @@ fn walk(b: &[u8], at: &mut usize, explicit: bool, big: bool, meta: bool) -> Resu
             let vr = [b[*at + 4], b[*at + 5]];
             if LONG_VRS.contains(&&vr) {
                 if *at + 12 > b.len() {
+                    if prefix {
+                        return Ok((ts, Walked::NeedMore));
+                    }
                     return Err(bad("the file ends inside an element header"));
                 }
                 (u32_at(*at + 8), 12, &vr == b"SQ")
@@ -210,32 +252,54 @@ fn walk(b: &[u8], at: &mut usize, explicit: bool, big: bool, meta: bool) -> Resu
             (len, 8, item)
         };
         *at += header;
-        if (group, elem) == (0x7FE0, 0x0010) && len == u32::MAX {
+        let pixels = (group, elem) == (0x7FE0, 0x0010);
+        if pixels && len == u32::MAX {
             fragments = true;
         }
-        if len == u32::MAX || seq {
-            continue; // a sequence or item: its elements follow
-        }
-        let left = b.len() - *at;
-        if len as usize > left {
+        let left = file_len.saturating_sub(*at as u64);
+        if len != u32::MAX && !seq && u64::from(len) > left {
             return Err(bad(format!(
                 "element ({group:04X},{elem:04X}) claims {len} bytes, {left} are left in the file (truncated?)"
             )));
         }
+        if pixels && !meta && open.is_empty() && len != u32::MAX {
+            return Ok((ts, Walked::Pixels { offset: *at as u64, len: u64::from(len) }));
+        }
+        if group != 0xFFFE && (seq || (len == u32::MAX && !pixels)) {
+            // A sequence: its items' elements follow, up to its end or its delimiter.
+            open.push((len != u32::MAX).then(|| *at + len as usize));
+        }
+        if len == u32::MAX || seq {
+            continue; // a sequence or item: its elements follow
+        }
         if meta && (group, elem) == (0x0002, 0x0010) {
-            ts = Some(String::from_utf8_lossy(&b[*at..*at + len as usize]).trim_end_matches(['\0', ' ']).to_string());
+            let Some(v) = b.get(*at..*at + len as usize) else {
+                return Ok((ts, ended()));
+            };
+            ts = Some(String::from_utf8_lossy(v).trim_end_matches(['\0', ' ']).to_string());
         }
         *at += len as usize;
     }
-    Ok(ts)
 }
+
+/// Bytes read first from each file: the elements before the pixel data fit in them in files
+/// as scanners write them (else the whole file is read).
+const HEAD_BYTES: u64 = 64 << 10;
 
 /// The header of an image file, `None` for a DICOM object that is no image (a DICOMDIR, a
 /// report, a presentation state: no Rows).
 fn read_header(path: &Path, file: usize) -> Result<Option<Header>, VolumeError> {
-    let bytes = std::fs::read(path).map_err(|e| VolumeError::io(path, e))?;
-    check_lengths(&bytes).map_err(|e| e.at(path))?;
-    // The part 10 stream after the preamble, from memory.
+    use std::io::Read;
+    let f = std::fs::File::open(path).map_err(|e| VolumeError::io(path, e))?;
+    let file_len = f.metadata().map_err(|e| VolumeError::io(path, e))?.len();
+    let mut bytes = Vec::with_capacity(file_len.min(HEAD_BYTES) as usize);
+    f.take(HEAD_BYTES).read_to_end(&mut bytes).map_err(|e| VolumeError::io(path, e))?;
+    let (_, mut walked) = check_lengths(&bytes, file_len).map_err(|e| e.at(path))?;
+    if walked == Walked::NeedMore {
+        bytes = std::fs::read(path).map_err(|e| VolumeError::io(path, e))?;
+        (_, walked) = check_lengths(&bytes, bytes.len() as u64).map_err(|e| e.at(path))?;
+    }
+    // The part 10 stream after the preamble, from memory, up to the pixel data.
     let obj = OpenFileOptions::new()
         .read_until(tags::PIXEL_DATA)
         .from_reader(&bytes[128..])
@@ -243,7 +307,11 @@ fn read_header(path: &Path, file: usize) -> Result<Option<Header>, VolumeError> 
     if obj.get(tags::ROWS).is_none() && obj.get(tags::PIXEL_DATA).is_none() {
         return Ok(None);
     }
-    header_of(path, file, &obj).map(Some).map_err(|e| e.at(path))
+    let mut h = header_of(path, file, &obj).map_err(|e| e.at(path))?;
+    if let Walked::Pixels { offset, len } = walked {
+        h.pixels = Some((offset, len));
+    }
+    Ok(Some(h))
 }
 
 fn header_of(path: &Path, file: usize, obj: &DefaultDicomObject) -> Result<Header, VolumeError> {
@@ -311,6 +379,7 @@ fn header_of(path: &Path, file: usize, obj: &DefaultDicomObject) -> Result<Heade
         pixel_spacing,
         between,
         frame_info,
+        pixels: None,
     })
 }
 
@@ -457,7 +526,6 @@ pub fn load_files(name: &Path, files: &[PathBuf], opts: &LoadOptions) -> Result<
     let cols_dir = [row.map(|c| c * ps[1]), col.map(|c| c * ps[0]), normal.map(|c| c * dz)];
     let r = axis_aligned(cols_dir).map_err(|e| e.at(name))?;
     let dims = [first.cols, first.rows, u32::try_from(nz).map_err(|_| bad("too many slices").at(name))?];
-    let voxels = check_load(dims, r.spacing, opts, 4, 8).map_err(|e| e.at(name))?;
     let ty = match (first.bits, first.signed) {
         (8, false) => VoxelType::U8,
         (8, true) => VoxelType::I8,
@@ -467,12 +535,80 @@ pub fn load_files(name: &Path, files: &[PathBuf], opts: &LoadOptions) -> Result<
         _ => VoxelType::I32,
     };
     let frame_bytes = first.rows as usize * first.cols as usize * ty.size();
+    let vol_name = name.file_stem().and_then(|s| s.to_str()).unwrap_or("dicom");
+    let big = |h: &Header| h.syntax == NATIVE[2].0;
+    // Streamed into bricks in the stored type where the slices share one integer rescale
+    // intercept and a slope of 1, 8 or 16 bits in one byte order, the pixel data was found by
+    // the header walk, and the slices are not permuted (flips are read in mirrored order);
+    // else decoded whole as values (8 bytes per voxel while loading).
+    let intercept = frames[0].intercept;
+    let stream = frames.iter().all(|f| f.slope == 1.0 && f.intercept == intercept)
+        && intercept.fract() == 0.0
+        && intercept.abs() < 16_777_216.0
+        && (first.bits == 16 || first.bits == 8 && !big(first))
+        && hs.iter().all(|h| big(h) == big(first) && h.pixels.is_some())
+        && r.perm == [0, 1, 2];
+    let stored = if stream { super::stream::stored_size(ty) } else { 4 };
+    let voxels = check_load(dims, r.spacing, opts, stored, if stream { 0 } else { 8 }).map_err(|e| e.at(name))?;
+    let source = SourceInfo {
+        format: "DICOM".into(),
+        voxel_type: Some(ty),
+        orientation: format!("{} (ImageOrientationPatient; slices ordered by position)", r.describe()),
+        data_bytes: voxel_bytes(voxels, ty).map_err(|e| e.at(name))?,
+        files: hs.len(),
+    };
+    let spacing = opts.spacing.unwrap_or(r.spacing);
+    if stream {
+        let spec = super::stream::StreamSpec {
+            name: vol_name,
+            dims,
+            spacing,
+            ty,
+            big_endian: big(first),
+            flip_xy: [r.flip[0], r.flip[1]],
+            path: name,
+        };
+        let by_file: std::collections::HashMap<usize, &Header> =
+            hs.iter().map(|h| (h.frame_info[0].file, *h)).collect();
+        let mut sink = super::stream::SliceSink::new(&spec)?;
+        let mut buf = vec![0u8; frame_bytes];
+        let mut file: Option<(usize, std::fs::File)> = None;
+        let order: Box<dyn Iterator<Item = &Frame>> =
+            if r.flip[2] { Box::new(frames.iter().rev()) } else { Box::new(frames.iter()) };
+        for f in order {
+            let h = by_file[&f.file];
+            let (offset, len) = h.pixels.unwrap_or_default();
+            let need = (h.frames * frame_bytes) as u64;
+            if len < need {
+                return Err(
+                    VolumeError::new(super::VolumeErrorKind::SizeMismatch { expected: need, actual: len }).at(&h.path)
+                );
+            }
+            if file.as_ref().is_none_or(|(i, _)| *i != f.file) {
+                file = Some((f.file, std::fs::File::open(&h.path).map_err(|e| VolumeError::io(&h.path, e))?));
+            }
+            if let Some((_, fd)) = file.as_mut() {
+                use std::io::{Read, Seek, SeekFrom};
+                fd.seek(SeekFrom::Start(offset + (f.index * frame_bytes) as u64))
+                    .and_then(|_| fd.read_exact(&mut buf))
+                    .map_err(|e| VolumeError::io(&h.path, e))?;
+            }
+            if h.stored < h.bits {
+                mask_bytes(&mut buf, h.bits, h.stored, h.signed, big(h));
+            }
+            sink.push(&buf);
+        }
+        let mut vol = sink.finish()?;
+        let (lo, hi) = vol.value_range;
+        vol.value_range = ((f64::from(lo) + intercept) as f32, (f64::from(hi) + intercept) as f32);
+        return Ok(vol.with_source(source));
+    }
     // Pixels, file by file (each file read once), placed at their frame's slice.
     let mut values = vec![0f32; voxels as usize];
     let plane = first.rows as usize * first.cols as usize;
     for h in &hs {
         let bytes = std::fs::read(&h.path).map_err(|e| VolumeError::io(&h.path, e))?;
-        check_lengths(&bytes).map_err(|e| e.at(&h.path))?;
+        check_lengths(&bytes, bytes.len() as u64).map_err(|e| e.at(&h.path))?;
         let obj = OpenFileOptions::new()
             .from_reader(&bytes[128..])
             .map_err(|e| bad(format!("cannot parse: {e}")).at(&h.path))?;
@@ -498,16 +634,30 @@ pub fn load_files(name: &Path, files: &[PathBuf], opts: &LoadOptions) -> Result<
     }
     let values = r.apply(values, dims);
     let out_dims = r.dims(dims);
-    let spacing = opts.spacing.unwrap_or(r.spacing);
-    let vol_name = name.file_stem().and_then(|s| s.to_str()).unwrap_or("dicom");
-    let source = SourceInfo {
-        format: "DICOM".into(),
-        voxel_type: Some(ty),
-        orientation: format!("{} (ImageOrientationPatient; slices ordered by position)", r.describe()),
-        data_bytes: voxel_bytes(voxels, ty).map_err(|e| e.at(name))?,
-        files: hs.len(),
-    };
     Ok(Volume::from_values(vol_name, out_dims, spacing, values).map_err(|e| e.at(name))?.with_source(source))
+}
+
+/// Keeps the `stored` low bits of each `bits`-bit (8 or 16) value of `bytes` in place:
+/// unsigned values masked, signed ones sign-extended (as [`mask`] does for one value).
+fn mask_bytes(bytes: &mut [u8], bits: u16, stored: u16, signed: bool, big: bool) {
+    let (m, sign) = ((1u32 << stored) - 1, 1u32 << (stored - 1));
+    let fix = |v: u32| {
+        let u = v & m;
+        if signed && u & sign != 0 {
+            u | !m
+        } else {
+            u
+        }
+    };
+    if bits == 8 {
+        bytes.iter_mut().for_each(|b| *b = fix(u32::from(*b)) as u8);
+    } else {
+        for p in bytes.chunks_exact_mut(2) {
+            let v = if big { u16::from_be_bytes([p[0], p[1]]) } else { u16::from_le_bytes([p[0], p[1]]) };
+            let w = fix(u32::from(v)) as u16;
+            p.copy_from_slice(&if big { w.to_be_bytes() } else { w.to_le_bytes() });
+        }
+    }
 }
 
 /// The value of a pixel with `stored` significant bits of `bits`: unsigned values masked, signed
@@ -559,4 +709,46 @@ fn syntax_name(uid: &str) -> &'static str {
 /// Loads one DICOM file (a multi-frame volume, or a single slice).
 pub fn load_file(path: &Path, opts: &LoadOptions) -> Result<Volume, VolumeError> {
     load_files(path, &[path.to_path_buf()], opts)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn masking_bytes_equals_masking_values() {
+        for bits in [8u16, 16] {
+            for stored in 2..bits {
+                for signed in [false, true] {
+                    for big in [false, true] {
+                        let values: Vec<u32> = (0..300u32).map(|i| i.wrapping_mul(2_654_435_761) >> 16).collect();
+                        let mut bytes: Vec<u8> = if bits == 8 {
+                            values.iter().map(|&v| v as u8).collect()
+                        } else {
+                            values
+                                .iter()
+                                .flat_map(|&v| if big { (v as u16).to_be_bytes() } else { (v as u16).to_le_bytes() })
+                                .collect()
+                        };
+                        mask_bytes(&mut bytes, bits, stored, signed, big);
+                        let ty = match (bits, signed) {
+                            (8, false) => VoxelType::U8,
+                            (8, true) => VoxelType::I8,
+                            (_, false) => VoxelType::U16,
+                            _ => VoxelType::I16,
+                        };
+                        let got = decode_voxels(&bytes, ty, big);
+                        for (k, &v) in values.iter().enumerate() {
+                            let x = if bits == 8 { v as u8 as f32 } else { v as u16 as f32 };
+                            assert_eq!(
+                                got[k] as f64,
+                                mask(x, stored, bits, signed),
+                                "{bits} {stored} {signed} {big} {v}"
+                            );
+                        }
+                    }
+                }
+            }
+        }
+    }
 }

@@ -3,7 +3,7 @@
 //! file again as `f32`. The raw and NRRD loaders (raw and gzip encodings) and the NIfTI loader
 //! (volumes in LPS order or mirrored in x and y, unscaled) read through here.
 
-use super::bricks::{Grid, GridBuilder, Stored, Voxels};
+use super::bricks::{GridBuilder, Stored, Voxels};
 use super::{code_scale, Volume, VolumeError, VolumeErrorKind, VoxelType};
 use std::io::Read;
 use std::path::Path;
@@ -46,33 +46,153 @@ pub(crate) struct StreamSpec<'a> {
 /// Reads `spec.dims` voxels of `spec.ty` from `reader` (exactly: fewer or more bytes are a
 /// [`VolumeErrorKind::SizeMismatch`]) into bricks.
 pub(crate) fn stream_volume(spec: &StreamSpec<'_>, reader: impl Read) -> Result<Volume, VolumeError> {
-    let be = spec.big_endian;
-    let short = move |b: &[u8]| if be { u16::from_be_bytes([b[0], b[1]]) } else { u16::from_le_bytes([b[0], b[1]]) };
-    match spec.ty {
-        VoxelType::U8 => stream_ints::<u8>(spec, reader, |b, out| out.copy_from_slice(b), Voxels::U8, 0.0),
-        VoxelType::I8 => stream_ints::<u8>(
-            spec,
-            reader,
-            |b, out| out.iter_mut().zip(b).for_each(|(o, &v)| *o = v ^ 0x80),
-            Voxels::U8,
-            -128.0,
-        ),
-        VoxelType::U16 => stream_ints::<u16>(
-            spec,
-            reader,
-            |b, out: &mut [u16]| out.iter_mut().zip(b.chunks_exact(2)).for_each(|(o, v)| *o = short(v)),
-            Voxels::U16,
-            0.0,
-        ),
-        VoxelType::I16 => stream_ints::<u16>(
-            spec,
-            reader,
-            |b, out: &mut [u16]| out.iter_mut().zip(b.chunks_exact(2)).for_each(|(o, v)| *o = short(v) ^ 0x8000),
-            Voxels::U16,
-            -32_768.0,
-        ),
-        _ => stream_floats(spec, reader),
+    let mut sink = SliceSink::new(spec)?;
+    for_each_slice(spec, reader, |bytes| sink.push(bytes))?;
+    sink.finish()
+}
+
+/// The bricks being built from slices pushed in z order, in the file's own type (8- and 16-bit
+/// values stored as read, signed ones offset to unsigned; other types as `f32`, normalized over
+/// their finite range when finished): what every streaming loader feeds, whatever its slices
+/// come from (a byte stream, TIFF pages, DICOM files).
+pub(crate) struct SliceSink<'a> {
+    spec: &'a StreamSpec<'a>,
+    slices: u32,
+    kind: SinkKind,
+}
+
+enum SinkKind {
+    U8 { grid: GridBuilder<u8>, slice: Vec<u8>, lo: u32, hi: u32 },
+    U16 { grid: GridBuilder<u16>, slice: Vec<u16>, lo: u32, hi: u32 },
+    F32 { grid: GridBuilder<f32>, slice: Vec<f32>, lo: f32, hi: f32 },
+}
+
+impl<'a> SliceSink<'a> {
+    /// A sink for the slices of `spec` (allocates the bricks).
+    pub(crate) fn new(spec: &'a StreamSpec<'a>) -> Result<SliceSink<'a>, VolumeError> {
+        let plane = spec.dims[0] as usize * spec.dims[1] as usize;
+        let at = |e: VolumeError| e.at(spec.path);
+        let kind = match spec.ty {
+            VoxelType::U8 | VoxelType::I8 => SinkKind::U8 {
+                grid: GridBuilder::new(spec.dims).map_err(at)?,
+                slice: vec![0; plane],
+                lo: u32::MAX,
+                hi: 0,
+            },
+            VoxelType::U16 | VoxelType::I16 => SinkKind::U16 {
+                grid: GridBuilder::new(spec.dims).map_err(at)?,
+                slice: vec![0; plane],
+                lo: u32::MAX,
+                hi: 0,
+            },
+            _ => SinkKind::F32 {
+                grid: GridBuilder::new(spec.dims).map_err(at)?,
+                slice: Vec::with_capacity(plane),
+                lo: f32::INFINITY,
+                hi: f32::NEG_INFINITY,
+            },
+        };
+        Ok(SliceSink { spec, slices: 0, kind })
     }
+
+    /// Adds the next slice: `nx·ny` values of the spec's type as bytes in its byte order
+    /// (slices past the last one are ignored).
+    pub(crate) fn push(&mut self, bytes: &[u8]) {
+        let spec = self.spec;
+        if self.slices >= spec.dims[2] {
+            return;
+        }
+        self.slices += 1;
+        let be = spec.big_endian;
+        let short =
+            move |b: &[u8]| if be { u16::from_be_bytes([b[0], b[1]]) } else { u16::from_le_bytes([b[0], b[1]]) };
+        let nx = spec.dims[0] as usize;
+        match &mut self.kind {
+            SinkKind::U8 { grid, slice, lo, hi } => {
+                let flip = if spec.ty == VoxelType::I8 { 0x80 } else { 0 };
+                slice.iter_mut().zip(bytes).for_each(|(o, &v)| *o = v ^ flip);
+                add_slice(grid, slice, nx, spec.flip_xy, lo, hi);
+            }
+            SinkKind::U16 { grid, slice, lo, hi } => {
+                let flip = if spec.ty == VoxelType::I16 { 0x8000 } else { 0 };
+                slice.iter_mut().zip(bytes.chunks_exact(2)).for_each(|(o, v)| *o = short(v) ^ flip);
+                add_slice(grid, slice, nx, spec.flip_xy, lo, hi);
+            }
+            SinkKind::F32 { grid, slice, lo, hi } => {
+                slice.clear();
+                slice.extend(super::decode_voxels(bytes, spec.ty, spec.big_endian));
+                for &v in slice.iter().filter(|v| v.is_finite()) {
+                    *lo = lo.min(v);
+                    *hi = hi.max(v);
+                }
+                mirror(slice, nx, spec.flip_xy);
+                grid.push_slice(slice);
+            }
+        }
+    }
+
+    /// The volume, once every slice is in (fewer slices are a
+    /// [`VolumeErrorKind::SizeMismatch`]).
+    pub(crate) fn finish(self) -> Result<Volume, VolumeError> {
+        let spec = self.spec;
+        let slice_bytes = spec.dims[0] as u64 * spec.dims[1] as u64 * spec.ty.size() as u64;
+        if self.slices < spec.dims[2] {
+            return Err(VolumeError::new(VolumeErrorKind::SizeMismatch {
+                expected: slice_bytes * u64::from(spec.dims[2]),
+                actual: slice_bytes * u64::from(self.slices),
+            })
+            .at(spec.path));
+        }
+        let at = |e: VolumeError| e.at(spec.path);
+        let ints = |lo: u32, hi: u32, bias: f32| {
+            let (lo, hi) = if lo > hi { (0.0, 0.0) } else { (lo as f32, hi as f32) };
+            ((lo + bias, hi + bias), lo, code_scale(hi - lo))
+        };
+        let signed = matches!(spec.ty, VoxelType::I8 | VoxelType::I16);
+        let (voxels, range, offset, scale) = match self.kind {
+            SinkKind::U8 { grid, lo, hi, .. } => {
+                let (range, offset, scale) = ints(lo, hi, if signed { -128.0 } else { 0.0 });
+                (Voxels::U8(grid.finish().map_err(at)?), range, offset, scale)
+            }
+            SinkKind::U16 { grid, lo, hi, .. } => {
+                let (range, offset, scale) = ints(lo, hi, if signed { -32_768.0 } else { 0.0 });
+                (Voxels::U16(grid.finish().map_err(at)?), range, offset, scale)
+            }
+            SinkKind::F32 { grid, mut lo, mut hi, .. } => {
+                let mut grid = grid.finish().map_err(at)?;
+                if lo > hi {
+                    (lo, hi) = (0.0, 0.0);
+                }
+                let inv_range = if hi > lo { 1.0 / (hi as f64 - lo as f64) } else { 0.0 };
+                grid.map_in_place(|v| {
+                    if v.is_finite() {
+                        ((v as f64 - lo as f64) * inv_range).clamp(0.0, 1.0) as f32
+                    } else {
+                        0.0
+                    }
+                });
+                (Voxels::F32(grid), (lo, hi), 0.0, 1.0)
+            }
+        };
+        Ok(Volume::from_voxels(spec.name, spec.spacing, voxels, range, offset, scale))
+    }
+}
+
+/// Adds an 8- or 16-bit slice to `grid`, widening `lo..=hi` to its values.
+fn add_slice<T: Stored + Ord + Into<u32>>(
+    grid: &mut GridBuilder<T>,
+    slice: &mut [T],
+    nx: usize,
+    flip: [bool; 2],
+    lo: &mut u32,
+    hi: &mut u32,
+) {
+    if let Some((l, h)) = min_max(slice) {
+        *lo = (*lo).min(l.into());
+        *hi = (*hi).max(h.into());
+    }
+    mirror(slice, nx, flip);
+    grid.push_slice(slice);
 }
 
 /// Reads the slices of `spec` from `reader` (each `nx·ny·size` bytes) and hands each to `f`
@@ -149,35 +269,6 @@ fn mirror<T>(slice: &mut [T], nx: usize, flip: [bool; 2]) {
     }
 }
 
-/// 8- and 16-bit values: stored as read (`decode` gives the stored values of a slice's bytes:
-/// signed ones offset to unsigned, `wrap` the [`Voxels`] of their grid); `bias` is the source
-/// value of stored 0.
-fn stream_ints<T: Stored + Ord + Into<u32>>(
-    spec: &StreamSpec<'_>,
-    reader: impl Read,
-    decode: impl Fn(&[u8], &mut [T]),
-    wrap: fn(Grid<T>) -> Voxels,
-    bias: f32,
-) -> Result<Volume, VolumeError> {
-    let [nx, ny, _] = spec.dims;
-    let mut builder = GridBuilder::<T>::new(spec.dims).map_err(|e| e.at(spec.path))?;
-    let mut slice = vec![T::default(); nx as usize * ny as usize];
-    let (mut lo, mut hi) = (u32::MAX, 0u32);
-    for_each_slice(spec, reader, |bytes| {
-        decode(bytes, &mut slice);
-        if let Some((l, h)) = min_max(&slice) {
-            lo = lo.min(l.into());
-            hi = hi.max(h.into());
-        }
-        mirror(&mut slice, nx as usize, spec.flip_xy);
-        builder.push_slice(&slice);
-    })?;
-    let grid = builder.finish().map_err(|e| e.at(spec.path))?;
-    let voxels = wrap(grid);
-    let (lo, hi) = (lo as f32, hi as f32);
-    Ok(Volume::from_voxels(spec.name, spec.spacing, voxels, (lo + bias, hi + bias), lo, code_scale(hi - lo)))
-}
-
 /// The least and the greatest of `s` (`None` if empty), over 32 independent lanes so that the
 /// compiler vectorizes it (`Iterator::min` keeps a scalar chain).
 fn min_max<T: Copy + PartialOrd>(s: &[T]) -> Option<(T, T)> {
@@ -194,34 +285,6 @@ fn min_max<T: Copy + PartialOrd>(s: &[T]) -> Option<(T, T)> {
     let l = chunks.remainder().iter().chain(&lo).fold(first, |m, &v| pick(m, v, true));
     let h = chunks.remainder().iter().chain(&hi).fold(first, |m, &v| pick(m, v, false));
     Some((l, h))
-}
-
-/// Other types: read as `f32` (as the loaders always converted them), then normalized over
-/// their finite range in place (non-finite values become 0, the minimum).
-fn stream_floats(spec: &StreamSpec<'_>, reader: impl Read) -> Result<Volume, VolumeError> {
-    let [nx, ny, _] = spec.dims;
-    let mut builder = GridBuilder::<f32>::new(spec.dims).map_err(|e| e.at(spec.path))?;
-    let (mut lo, mut hi) = (f32::INFINITY, f32::NEG_INFINITY);
-    let mut slice = Vec::with_capacity(nx as usize * ny as usize);
-    for_each_slice(spec, reader, |bytes| {
-        slice.clear();
-        slice.extend(super::decode_voxels(bytes, spec.ty, spec.big_endian));
-        for &v in slice.iter().filter(|v| v.is_finite()) {
-            lo = lo.min(v);
-            hi = hi.max(v);
-        }
-        mirror(&mut slice, nx as usize, spec.flip_xy);
-        builder.push_slice(&slice);
-    })?;
-    let mut grid = builder.finish().map_err(|e| e.at(spec.path))?;
-    if lo > hi {
-        (lo, hi) = (0.0, 0.0);
-    }
-    let inv_range = if hi > lo { 1.0 / (hi as f64 - lo as f64) } else { 0.0 };
-    grid.map_in_place(
-        |v| if v.is_finite() { ((v as f64 - lo as f64) * inv_range).clamp(0.0, 1.0) as f32 } else { 0.0 },
-    );
-    Ok(Volume::from_voxels(spec.name, spec.spacing, Voxels::F32(grid), (lo, hi), 0.0, 1.0))
 }
 
 #[cfg(test)]

@@ -9,6 +9,7 @@
 //! `z = k`, row 0 is `y = 0`: the stored order. TIFF carries no slice spacing: the spacing is
 //! 1, 1, 1 unless [`LoadOptions::spacing`] says otherwise.
 
+use super::stream::{stored_size, SliceSink, StreamSpec};
 use super::{check_load, voxel_bytes, LoadOptions, SourceInfo, Volume, VolumeError, VoxelType};
 use std::path::{Path, PathBuf};
 use tiff::decoder::{Decoder, DecodingResult, Limits};
@@ -83,7 +84,7 @@ fn tiff_err(path: &Path, what: &str, e: tiff::TiffError) -> VolumeError {
     }
 }
 
-fn open(path: &Path, max_voxels: u64) -> Result<Decoder<std::io::BufReader<std::fs::File>>, VolumeError> {
+fn open(path: &Path, max_voxels: u64) -> Result<Page, VolumeError> {
     let f = std::fs::File::open(path).map_err(|e| VolumeError::io(path, e))?;
     let mut limits = Limits::default();
     // One page as f64 at most: the voxel limit bounds every decode buffer.
@@ -91,12 +92,18 @@ fn open(path: &Path, max_voxels: u64) -> Result<Decoder<std::io::BufReader<std::
     Ok(Decoder::new(std::io::BufReader::new(f)).map_err(|e| tiff_err(path, "header", e))?.with_limits(limits))
 }
 
-/// A decoded page: its values and voxel type.
-fn page_values(
-    path: &Path,
-    what: &str,
-    d: &mut Decoder<std::io::BufReader<std::fs::File>>,
-) -> Result<(Vec<f32>, VoxelType), VolumeError> {
+/// The stored bytes per voxel of a page's colour type (before decoding it), for the memory check.
+fn page_stored_bytes(path: &Path, what: &str, d: &mut Page) -> Result<u64, VolumeError> {
+    Ok(match d.colortype().map_err(|e| tiff_err(path, what, e))? {
+        ColorType::Gray(8) => 1,
+        ColorType::Gray(16) => 2,
+        _ => 4,
+    })
+}
+
+/// Decodes the current page of `d` into `buf` (reused between pages; native byte order) and
+/// returns its voxel type.
+fn decode_page(path: &Path, what: &str, d: &mut Page, buf: &mut DecodingResult) -> Result<VoxelType, VolumeError> {
     match d.colortype().map_err(|e| tiff_err(path, what, e))? {
         ColorType::Gray(_) => {}
         other => {
@@ -105,22 +112,61 @@ fn page_values(
             )
         }
     }
-    let img = d.read_image().map_err(|e| tiff_err(path, what, e))?;
-    Ok(match img {
-        DecodingResult::U8(v) => (v.into_iter().map(f32::from).collect(), VoxelType::U8),
-        DecodingResult::I8(v) => (v.into_iter().map(f32::from).collect(), VoxelType::I8),
-        DecodingResult::U16(v) => (v.into_iter().map(f32::from).collect(), VoxelType::U16),
-        DecodingResult::I16(v) => (v.into_iter().map(f32::from).collect(), VoxelType::I16),
-        DecodingResult::U32(v) => (v.into_iter().map(|x| x as f32).collect(), VoxelType::U32),
-        DecodingResult::I32(v) => (v.into_iter().map(|x| x as f32).collect(), VoxelType::I32),
-        DecodingResult::F32(v) => (v, VoxelType::F32),
-        DecodingResult::F64(v) => (v.into_iter().map(|x| x as f32).collect(), VoxelType::F64),
+    d.read_image_to_buffer(buf).map_err(|e| tiff_err(path, what, e))?;
+    Ok(match buf {
+        DecodingResult::U8(_) => VoxelType::U8,
+        DecodingResult::I8(_) => VoxelType::I8,
+        DecodingResult::U16(_) => VoxelType::U16,
+        DecodingResult::I16(_) => VoxelType::I16,
+        DecodingResult::U32(_) => VoxelType::U32,
+        DecodingResult::I32(_) => VoxelType::I32,
+        DecodingResult::F32(_) => VoxelType::F32,
+        DecodingResult::F64(_) => VoxelType::F64,
         _ => {
             return Err(
                 VolumeError::unsupported(format!("TIFF {what}: 64-bit integer or 16-bit float samples")).at(path)
             )
         }
     })
+}
+
+/// A TIFF decoder over a file.
+type Page = Decoder<std::io::BufReader<std::fs::File>>;
+
+/// Streams `dims[2]` pages into bricks: `page(k, buf)` decodes page `k` into `buf` and returns
+/// its type and its label and file for errors. Every page must hold the first page's type.
+fn stream_pages(
+    name: &str,
+    path: &Path,
+    dims: [u32; 3],
+    opts: &LoadOptions,
+    files: usize,
+    mut page: impl FnMut(usize, &mut DecodingResult) -> Result<(VoxelType, String, PathBuf), VolumeError>,
+) -> Result<Volume, VolumeError> {
+    let spacing = opts.spacing.unwrap_or(Vec3::ONE);
+    let mut buf = DecodingResult::U8(Vec::new());
+    let (ty, first, _) = page(0, &mut buf)?;
+    let voxels = check_load(dims, spacing, opts, stored_size(ty), 0).map_err(|e| e.at(path))?;
+    // The decoder's values are in this machine's byte order.
+    let big_endian = cfg!(target_endian = "big");
+    let spec = StreamSpec { name, dims, spacing, ty, big_endian, flip_xy: [false; 2], path };
+    let mut sink = SliceSink::new(&spec)?;
+    sink.push(buf.as_buffer(0).as_bytes());
+    for k in 1..dims[2] as usize {
+        let (t, what, file) = page(k, &mut buf)?;
+        if t != ty {
+            return Err(VolumeError::malformed(FORMAT, format!("{what} holds {t:?} samples, {first} {ty:?}")).at(&file));
+        }
+        sink.push(buf.as_buffer(0).as_bytes());
+    }
+    let source = SourceInfo {
+        format: "TIFF".into(),
+        voxel_type: Some(ty),
+        orientation: "none (slice k is z = k, row 0 is y = 0)".into(),
+        data_bytes: voxel_bytes(voxels, ty).map_err(|e| e.at(path))?,
+        files,
+    };
+    Ok(sink.finish()?.with_source(source))
 }
 
 /// The most common page size, or the first page of another size and an error naming it and
@@ -150,27 +196,6 @@ fn check_sizes(sizes: &[(u32, u32)], label: impl Fn(usize) -> String) -> Result<
     }
 }
 
-fn finish(
-    name: &str,
-    path: &Path,
-    dims: [u32; 3],
-    values: Vec<f32>,
-    ty: VoxelType,
-    files: usize,
-    opts: &LoadOptions,
-) -> Result<Volume, VolumeError> {
-    let spacing = opts.spacing.unwrap_or(Vec3::ONE);
-    let voxels = check_load(dims, spacing, opts, 4, 8).map_err(|e| e.at(path))?;
-    let source = SourceInfo {
-        format: "TIFF".into(),
-        voxel_type: Some(ty),
-        orientation: "none (slice k is z = k, row 0 is y = 0)".into(),
-        data_bytes: voxel_bytes(voxels, ty).map_err(|e| e.at(path))?,
-        files,
-    };
-    Ok(Volume::from_values(name, dims, spacing, values).map_err(|e| e.at(path))?.with_source(source))
-}
-
 /// Loads a multi-page TIFF file (a single page is a volume one slice deep).
 pub fn load_file(path: &Path, opts: &LoadOptions) -> Result<Volume, VolumeError> {
     // First the page sizes (directories only), then the pixels.
@@ -193,27 +218,17 @@ pub fn load_file(path: &Path, opts: &LoadOptions) -> Result<Volume, VolumeError>
     }
     let (w, h) = check_sizes(&sizes, |i| format!("page {}", i + 1)).map_err(|(_, e)| e.at(path))?;
     let dims = [w, h, sizes.len() as u32];
-    check_load(dims, opts.spacing.unwrap_or(Vec3::ONE), opts, 4, 8).map_err(|e| e.at(path))?;
     let mut d = open(path, opts.max_voxels)?;
-    let mut values = Vec::with_capacity((w as usize) * (h as usize) * sizes.len());
-    let mut ty = None;
-    for k in 0..sizes.len() {
+    let stored = page_stored_bytes(path, "page 1", &mut d)?;
+    check_load(dims, opts.spacing.unwrap_or(Vec3::ONE), opts, stored, 0).map_err(|e| e.at(path))?;
+    let name = path.file_stem().and_then(|s| s.to_str()).unwrap_or("volume");
+    stream_pages(name, path, dims, opts, 1, |k, buf| {
         let what = format!("page {}", k + 1);
         if k > 0 {
             d.next_image().map_err(|e| tiff_err(path, &what, e))?;
         }
-        let (v, t) = page_values(path, &what, &mut d)?;
-        if *ty.get_or_insert(t) != t {
-            return Err(VolumeError::malformed(
-                FORMAT,
-                format!("{what} holds {t:?} samples, page 1 {:?}", ty.unwrap_or(t)),
-            )
-            .at(path));
-        }
-        values.extend(v);
-    }
-    let name = path.file_stem().and_then(|s| s.to_str()).unwrap_or("volume");
-    finish(name, path, dims, values, ty.unwrap_or(VoxelType::U8), 1, opts)
+        Ok((decode_page(path, &what, &mut d, buf)?, what, path.to_path_buf()))
+    })
 }
 
 /// The trailing number of a file stem (`slice_017` → 17).
@@ -267,24 +282,14 @@ pub fn load_files(dir: &Path, files: &[PathBuf], opts: &LoadOptions) -> Result<V
     let label = |i: usize| format!("slice {} ({})", i + 1, files[i].file_name().unwrap_or_default().to_string_lossy());
     let (w, h) = check_sizes(&sizes, label).map_err(|(odd, e)| e.at(&files[odd]))?;
     let dims = [w, h, files.len() as u32];
-    check_load(dims, opts.spacing.unwrap_or(Vec3::ONE), opts, 4, 8).map_err(|e| e.at(dir))?;
-    let mut values = Vec::with_capacity((w as usize) * (h as usize) * files.len());
-    let mut ty = None;
-    for (k, f) in files.iter().enumerate() {
-        let what = format!("slice {}", k + 1);
-        let mut d = open(f, opts.max_voxels)?;
-        let (v, t) = page_values(f, &what, &mut d)?;
-        if *ty.get_or_insert(t) != t {
-            return Err(VolumeError::malformed(
-                FORMAT,
-                format!("{what} holds {t:?} samples, slice 1 {:?}", ty.unwrap_or(t)),
-            )
-            .at(f));
-        }
-        values.extend(v);
-    }
+    let stored = page_stored_bytes(&files[0], "slice 1", &mut open(&files[0], opts.max_voxels)?)?;
+    check_load(dims, opts.spacing.unwrap_or(Vec3::ONE), opts, stored, 0).map_err(|e| e.at(dir))?;
     let name = dir.file_name().and_then(|s| s.to_str()).unwrap_or("volume");
-    finish(name, dir, dims, values, ty.unwrap_or(VoxelType::U8), files.len(), opts)
+    stream_pages(name, dir, dims, opts, files.len(), |k, buf| {
+        let (what, f) = (format!("slice {}", k + 1), &files[k]);
+        let mut d = open(f, opts.max_voxels)?;
+        Ok((decode_page(f, &what, &mut d, buf)?, what, f.clone()))
+    })
 }
 
 #[cfg(test)]

@@ -18,6 +18,7 @@
 //! (fuzzed through `load_volume`).
 
 use super::orient::axis_aligned;
+use super::stream::{stored_size, stream_volume, StreamSpec};
 use super::{check_load, decode_voxels, voxel_bytes, LoadOptions, SourceInfo, Volume, VolumeError, VoxelType};
 use base64::Engine;
 use quick_xml::events::{BytesStart, Event};
@@ -293,24 +294,8 @@ fn read_block(src: Source, h: &Header, expected: u64) -> Result<Vec<u8>, VolumeE
     }
     // Compressed: [blocks, block size, last block size, compressed sizes...].
     let (first, _) = src.split_header(3, isz)?;
-    let blocks = int(&first, 0)?;
-    let block = int(&first, 1)?;
-    let last = int(&first, 2)?;
-    let max_blocks = expected / block.max(1) + 2;
-    if blocks > max_blocks || blocks == 0 && expected > 0 {
-        return Err(bad(format!("{blocks} compressed blocks of {block} bytes cannot hold {expected} bytes")));
-    }
-    let total = if blocks == 0 {
-        0
-    } else {
-        (blocks - 1)
-            .checked_mul(block)
-            .and_then(|t| t.checked_add(if last == 0 { block } else { last }))
-            .ok_or_else(|| bad("compressed block sizes overflow"))?
-    };
-    if total != expected {
-        return Err(super::VolumeError::new(super::VolumeErrorKind::SizeMismatch { expected, actual: total }));
-    }
+    let (blocks, block, last) = (int(&first, 0)?, int(&first, 1)?, int(&first, 2)?);
+    check_blocks(blocks, block, last, expected)?;
     let (hdr, rest) = src.split_header(3 + blocks as usize, isz)?;
     let data = if is_b64 { b64(&rest)? } else { rest };
     let mut out = Vec::with_capacity(expected as usize);
@@ -323,48 +308,52 @@ fn read_block(src: Source, h: &Header, expected: u64) -> Result<Vec<u8>, VolumeE
             .ok_or_else(|| bad(format!("compressed block {i} of {csize} bytes runs past the data")))?;
         at += chunk.len();
         let want = if i + 1 == blocks as usize && last != 0 { last } else { block };
-        let before = out.len();
-        flate2::read::ZlibDecoder::new(chunk)
-            .take(want)
-            .read_to_end(&mut out)
-            .map_err(|e| super::VolumeError::new(super::VolumeErrorKind::Decompress(format!("zlib block {i}: {e}"))))?;
-        if (out.len() - before) as u64 != want {
-            return Err(bad(format!("zlib block {i} inflates to {} bytes, not {want}", out.len() - before)));
-        }
+        inflate_block(i, chunk, want, &mut out).map_err(|e| match e.kind() {
+            std::io::ErrorKind::InvalidData => VolumeError::new(super::VolumeErrorKind::Decompress(e.to_string())),
+            _ => VolumeError::new(super::VolumeErrorKind::Io(e)),
+        })?;
     }
     Ok(out)
 }
 
-/// Loads a `.vti` file.
+/// Bytes read first: the XML part of a file with appended data fits in them (else the whole
+/// file is read).
+const HEAD_BYTES: u64 = 1 << 20;
+
+/// Loads a `.vti` file. Raw appended data (plain or zlib blocks) in the stored order or
+/// mirrored in x and y streams from the file into bricks; other files are read whole.
 pub fn load(path: &Path, opts: &LoadOptions) -> Result<Volume, VolumeError> {
-    let bytes = std::fs::read(path).map_err(|e| VolumeError::io(path, e))?;
+    let mut f = std::fs::File::open(path).map_err(|e| VolumeError::io(path, e))?;
+    let file_len = f.metadata().map_err(|e| VolumeError::io(path, e))?.len();
+    let mut head = Vec::with_capacity(file_len.min(HEAD_BYTES) as usize);
+    f.by_ref().take(HEAD_BYTES).read_to_end(&mut head).map_err(|e| VolumeError::io(path, e))?;
+    if let Some(v) = stream_appended(path, &head, f, file_len, opts).map_err(|e| e.at(path))? {
+        return Ok(v);
+    }
+    let bytes =
+        if head.len() as u64 == file_len { head } else { std::fs::read(path).map_err(|e| VolumeError::io(path, e))? };
     load_bytes(path, &bytes, opts).map_err(|e| e.at(path))
 }
 
-fn find(hay: &[u8], needle: &[u8]) -> Option<usize> {
-    hay.windows(needle.len()).position(|w| w == needle)
+/// The XML part's end and where the appended data starts (after its `_`), if the file has
+/// appended data and `bytes` reach it.
+fn appended_start(bytes: &[u8]) -> Result<Option<(usize, usize)>, VolumeError> {
+    let Some(i) = find(bytes, b"<AppendedData") else { return Ok(None) };
+    let close = bytes[i..]
+        .iter()
+        .position(|&c| c == b'>')
+        .map(|p| i + p + 1)
+        .ok_or_else(|| bad("unclosed <AppendedData> tag"))?;
+    let us = bytes[close..]
+        .iter()
+        .position(|&c| c == b'_')
+        .map(|p| close + p + 1)
+        .ok_or_else(|| bad("no `_` starting the appended data"))?;
+    Ok(Some((close, us)))
 }
 
-fn load_bytes(path: &Path, bytes: &[u8], opts: &LoadOptions) -> Result<Volume, VolumeError> {
-    // The XML part ends with the `<AppendedData …>` tag; raw appended bytes follow its `_`.
-    let (xml_end, appended) = match find(bytes, b"<AppendedData") {
-        Some(i) => {
-            let close = bytes[i..]
-                .iter()
-                .position(|&c| c == b'>')
-                .map(|p| i + p + 1)
-                .ok_or_else(|| bad("unclosed <AppendedData> tag"))?;
-            let us = bytes[close..]
-                .iter()
-                .position(|&c| c == b'_')
-                .map(|p| close + p + 1)
-                .ok_or_else(|| bad("no `_` starting the appended data"))?;
-            (close, Some(&bytes[us..]))
-        }
-        None => (bytes.len(), None),
-    };
-    let xml = std::str::from_utf8(&bytes[..xml_end]).map_err(|_| bad("the XML part is not UTF-8"))?;
-    let h = parse_xml(xml)?;
+/// What the header says about the volume: dims and the array read.
+fn volume_of(h: &Header) -> Result<([u32; 3], Array), VolumeError> {
     if h.pieces > 1 {
         return Err(VolumeError::unsupported(format!("{} pieces (one piece is read)", h.pieces)));
     }
@@ -385,6 +374,201 @@ fn load_bytes(path: &Path, bytes: &[u8], opts: &LoadOptions) -> Result<Volume, V
             VolumeError::unsupported(format!("no one-component point data array among {:?}", h.arrays_seen))
         });
     };
+    Ok((dims, arr))
+}
+
+/// The reordering into the volume's axes: VTK's row-major Direction (column `i` is axis `i`'s
+/// direction) and the spacing signs.
+fn reorient_of(h: &Header) -> Result<super::orient::Reorient, VolumeError> {
+    let (d, s) = (h.direction.unwrap_or([1.0, 0.0, 0.0, 0.0, 1.0, 0.0, 0.0, 0.0, 1.0]), h.spacing);
+    axis_aligned(std::array::from_fn(|i| [d[i] * s[i], d[3 + i] * s[i], d[6 + i] * s[i]]))
+}
+
+/// What [`Volume::source`] says of a `.vti` file.
+fn source_of(ty: VoxelType, r: &super::orient::Reorient, data_bytes: u64) -> SourceInfo {
+    SourceInfo {
+        format: "VTK image data".into(),
+        voxel_type: Some(ty),
+        orientation: if r.is_identity() {
+            "none (the stored order)".into()
+        } else {
+            format!("{} (Direction and Spacing signs)", r.describe())
+        },
+        data_bytes,
+        files: 1,
+    }
+}
+
+/// Streams raw appended data (`file` positioned after `head`) into bricks; `None` where the
+/// file is not one that streams (inline or base64 data, a permuted or z-flipped Direction).
+fn stream_appended(
+    path: &Path,
+    head: &[u8],
+    mut file: std::fs::File,
+    file_len: u64,
+    opts: &LoadOptions,
+) -> Result<Option<Volume>, VolumeError> {
+    use std::io::{Seek, SeekFrom};
+    let Some((xml_end, start)) = appended_start(head)? else { return Ok(None) };
+    let xml = std::str::from_utf8(&head[..xml_end]).map_err(|_| bad("the XML part is not UTF-8"))?;
+    let h = parse_xml(xml)?;
+    let (dims, arr) = volume_of(&h)?;
+    let r = reorient_of(&h)?;
+    if arr.format != "appended" || h.appended_encoding.as_deref() != Some("raw") || r.perm != [0, 1, 2] || r.flip[2] {
+        return Ok(None);
+    }
+    let ty = arr.ty.unwrap_or(VoxelType::F32);
+    let voxels = check_load(dims, r.spacing, opts, stored_size(ty), 0)?;
+    let expected = voxel_bytes(voxels, ty)?;
+    let off = arr.offset.ok_or_else(|| bad("an appended DataArray without offset"))?;
+    let at = (start as u64)
+        .checked_add(off)
+        .filter(|&a| a <= file_len)
+        .ok_or_else(|| bad(format!("offset {off} is past the appended data")))?;
+    file.seek(SeekFrom::Start(at)).map_err(|e| VolumeError::io(path, e))?;
+    let mut file = std::io::BufReader::with_capacity(1 << 20, file);
+    let isz = if h.header64 { 8 } else { 4 };
+    let mut ints = |n: usize| -> Result<Vec<u64>, VolumeError> {
+        if (n * isz) as u64 > file_len - at {
+            return Err(bad("the data block is shorter than its header"));
+        }
+        let mut b = vec![0u8; n * isz];
+        file.read_exact(&mut b).map_err(|e| VolumeError::io(path, e))?;
+        Ok((0..n).filter_map(|i| header_int(&b, i * isz, h.header64, h.big_endian)).collect())
+    };
+    let spec = StreamSpec {
+        name: path.file_stem().and_then(|s| s.to_str()).unwrap_or("volume"),
+        dims,
+        spacing: opts.spacing.unwrap_or(r.spacing),
+        ty,
+        big_endian: h.big_endian,
+        flip_xy: [r.flip[0], r.flip[1]],
+        path,
+    };
+    let vol = if !h.zlib {
+        let n = ints(1)?[0];
+        if n != expected {
+            return Err(VolumeError::new(super::VolumeErrorKind::SizeMismatch { expected, actual: n }));
+        }
+        stream_volume(&spec, file.take(expected))?
+    } else {
+        let first = ints(3)?;
+        let (blocks, block, last) = (first[0], first[1], first[2]);
+        check_blocks(blocks, block, last, expected)?;
+        let sizes = ints(blocks as usize)?;
+        let reader = ZlibBlocks { src: file, sizes, block, last, next: 0, out: Vec::new(), pos: 0 };
+        stream_volume(&spec, reader).map_err(|e| match e.kind {
+            super::VolumeErrorKind::Io(io) if io.kind() == std::io::ErrorKind::InvalidData => {
+                VolumeError::new(super::VolumeErrorKind::Decompress(io.to_string()))
+            }
+            _ => e,
+        })?
+    };
+    Ok(Some(vol.with_source(source_of(ty, &r, expected))))
+}
+
+/// Checks a zlib header's block count and sizes against the `expected` bytes.
+fn check_blocks(blocks: u64, block: u64, last: u64, expected: u64) -> Result<(), VolumeError> {
+    let max_blocks = expected / block.max(1) + 2;
+    if blocks > max_blocks || blocks == 0 && expected > 0 {
+        return Err(bad(format!("{blocks} compressed blocks of {block} bytes cannot hold {expected} bytes")));
+    }
+    let total = if blocks == 0 {
+        0
+    } else {
+        (blocks - 1)
+            .checked_mul(block)
+            .and_then(|t| t.checked_add(if last == 0 { block } else { last }))
+            .ok_or_else(|| bad("compressed block sizes overflow"))?
+    };
+    if total != expected {
+        return Err(super::VolumeError::new(super::VolumeErrorKind::SizeMismatch { expected, actual: total }));
+    }
+    Ok(())
+}
+
+/// Inflates one zlib block that must give `want` bytes, appending them to `out`.
+fn inflate_block(i: usize, chunk: &[u8], want: u64, out: &mut Vec<u8>) -> std::io::Result<()> {
+    let before = out.len();
+    flate2::read::ZlibDecoder::new(chunk)
+        .take(want)
+        .read_to_end(out)
+        .map_err(|e| std::io::Error::new(std::io::ErrorKind::InvalidData, format!("zlib block {i}: {e}")))?;
+    if (out.len() - before) as u64 != want {
+        let msg = format!("zlib block {i} inflates to {} bytes, not {want}", out.len() - before);
+        return Err(std::io::Error::new(std::io::ErrorKind::InvalidData, msg));
+    }
+    Ok(())
+}
+
+/// The blocks of a zlib-compressed appended array as one stream: read in batches and
+/// inflated on all cores (the blocks are independent), served in order.
+struct ZlibBlocks<R> {
+    src: R,
+    sizes: Vec<u64>,
+    block: u64,
+    last: u64,
+    next: usize,
+    out: Vec<u8>,
+    pos: usize,
+}
+
+/// Blocks inflated at a time (32 KiB each as VTK writes them: 1 MiB a batch).
+const BATCH_BLOCKS: usize = 32;
+
+impl<R: Read> Read for ZlibBlocks<R> {
+    fn read(&mut self, buf: &mut [u8]) -> std::io::Result<usize> {
+        use rayon::prelude::*;
+        if self.pos == self.out.len() {
+            let end = (self.next + BATCH_BLOCKS).min(self.sizes.len());
+            let mut chunks = Vec::with_capacity(end - self.next);
+            for i in self.next..end {
+                let mut c = Vec::new();
+                let n = (&mut self.src).take(self.sizes[i]).read_to_end(&mut c)?;
+                if (n as u64) < self.sizes[i] {
+                    let msg = format!("compressed block {i} of {} bytes runs past the data", self.sizes[i]);
+                    return Err(std::io::Error::new(std::io::ErrorKind::InvalidData, msg));
+                }
+                chunks.push(c);
+            }
+            let (first, count, block, last) = (self.next, self.sizes.len(), self.block, self.last);
+            let parts: Vec<std::io::Result<Vec<u8>>> = chunks
+                .par_iter()
+                .enumerate()
+                .map(|(k, c)| {
+                    let i = first + k;
+                    let want = if i + 1 == count && last != 0 { last } else { block };
+                    let mut out = Vec::with_capacity(want.min(1 << 24) as usize);
+                    inflate_block(i, c, want, &mut out).map(|_| out)
+                })
+                .collect();
+            self.out.clear();
+            self.pos = 0;
+            for p in parts {
+                self.out.extend_from_slice(&p?);
+            }
+            self.next = end;
+        }
+        let n = buf.len().min(self.out.len() - self.pos);
+        buf[..n].copy_from_slice(&self.out[self.pos..self.pos + n]);
+        self.pos += n;
+        Ok(n)
+    }
+}
+
+fn find(hay: &[u8], needle: &[u8]) -> Option<usize> {
+    hay.windows(needle.len()).position(|w| w == needle)
+}
+
+fn load_bytes(path: &Path, bytes: &[u8], opts: &LoadOptions) -> Result<Volume, VolumeError> {
+    // The XML part ends with the `<AppendedData …>` tag; raw appended bytes follow its `_`.
+    let (xml_end, appended) = match appended_start(bytes)? {
+        Some((close, us)) => (close, Some(&bytes[us..])),
+        None => (bytes.len(), None),
+    };
+    let xml = std::str::from_utf8(&bytes[..xml_end]).map_err(|_| bad("the XML part is not UTF-8"))?;
+    let h = parse_xml(xml)?;
+    let (dims, arr) = volume_of(&h)?;
     let ty = arr.ty.unwrap_or(VoxelType::F32);
     let s = h.spacing;
     let sp = Vec3::new(s[0].abs() as f32, s[1].abs() as f32, s[2].abs() as f32);
@@ -443,27 +627,16 @@ fn load_bytes(path: &Path, bytes: &[u8], opts: &LoadOptions) -> Result<Volume, V
         }
     };
     // Negative spacings and an axis-aligned Direction: reorder.
-    let d = h.direction.unwrap_or([1.0, 0.0, 0.0, 0.0, 1.0, 0.0, 0.0, 0.0, 1.0]);
-    // VTK's Direction is row-major: column i is the direction of axis i.
-    let cols = std::array::from_fn(|i| [d[i] * s[i], d[3 + i] * s[i], d[6 + i] * s[i]]);
-    let r = axis_aligned(cols)?;
+    let r = reorient_of(&h)?;
     let values = r.apply(values, dims);
     let out_dims = r.dims(dims);
     let spacing = opts.spacing.unwrap_or(r.spacing);
     let name = path.file_stem().and_then(|s| s.to_str()).unwrap_or("volume");
-    let source = SourceInfo {
-        format: "VTK image data".into(),
-        voxel_type: Some(ty),
-        orientation: if r.is_identity() {
-            "none (the stored order)".into()
-        } else {
-            format!("{} (Direction and Spacing signs)", r.describe())
-        },
-        data_bytes: expected,
-        files: 1,
-    };
-    Ok(Volume::from_values(name, out_dims, spacing, values)?.with_source(source))
+    Ok(Volume::from_values(name, out_dims, spacing, values)?.with_source(source_of(ty, &r, expected)))
 }
+
+/// The zlib block size [`write()`] uses (VTK's default).
+const ZLIB_BLOCK: usize = 32 << 10;
 
 /// How [`write()`] stores the array.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
@@ -511,7 +684,8 @@ pub fn write(
         if !zlib {
             return Ok((int(volume_bytes.len() as u64), volume_bytes.to_vec()));
         }
-        let bs = 64usize; // small blocks, so that tests cover several
+        // VTK's 32 KiB blocks, and at least four for small arrays (readers see several).
+        let bs = ZLIB_BLOCK.min(volume_bytes.len().div_ceil(4)).max(1);
         let chunks: Vec<&[u8]> = volume_bytes.chunks(bs).collect();
         let mut header = int(chunks.len() as u64);
         header.extend(int(bs as u64));
