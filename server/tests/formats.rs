@@ -1025,3 +1025,62 @@ fn dicom_pixel_data_behind_sequences_and_large_elements() {
         assert_same(&v, &r, case);
     }
 }
+
+/// The ramp written in every format that streams (raw, NRRD, NIfTI, `.vti` plain and zlib, a
+/// signed 16-bit TIFF stack, a DICOM series) renders the identical image and the identical
+/// layered frame (colors and depths bit for bit).
+#[test]
+fn one_volume_in_every_format_renders_the_same() {
+    use std::sync::Arc;
+    use volwarp_core::Camera;
+    use volwarp_server::transfer_function::TransferFunction;
+    use volwarp_server::volume::vti::{write, WriteFormat};
+    use volwarp_server::Marcher;
+    let dir = temp_dir("render");
+    let bytes = le(&ramp());
+    let raw = dir.join("ramp_7x5x3_int16.raw");
+    std::fs::write(&raw, &bytes).unwrap();
+    let nrrd_p = dir.join("ramp.nrrd");
+    nrrd::write(&nrrd_p, &bytes, VoxelType::I16, DIMS, SPACING, true, None).unwrap();
+    let nii = dir.join("ramp.nii.gz");
+    nifti_lps(&nii, 1, true);
+    let vti = dir.join("ramp.vti");
+    write(&vti, &bytes, VoxelType::I16, DIMS, SPACING, WriteFormat::AppendedRaw { zlib: false }, false).unwrap();
+    let vtiz = dir.join("rampz.vti");
+    write(&vtiz, &bytes, VoxelType::I16, DIMS, SPACING, WriteFormat::AppendedRaw { zlib: true }, true).unwrap();
+    let tif = dir.join("ramp.tif");
+    {
+        use tiff::encoder::{colortype::GrayI16, TiffEncoder};
+        let mut enc = TiffEncoder::new(std::io::BufWriter::new(std::fs::File::create(&tif).unwrap())).unwrap();
+        let plane = (DIMS[0] * DIMS[1]) as usize;
+        for z in ramp().chunks(plane) {
+            enc.write_image::<GrayI16>(DIMS[0], DIMS[1], z).unwrap();
+        }
+    }
+    let dcm = dir.join("dicom");
+    std::fs::create_dir_all(&dcm).unwrap();
+    for z in 0..DIMS[2] as usize {
+        write_dicom(&dcm.join(format!("{z}.dcm")), &axial("3.3", 2.0 * z as f64, slice_i16(z)), z as u32);
+    }
+    let with_spacing = LoadOptions { spacing: Some(SPACING), ..LoadOptions::default() };
+    let tf = TransferFunction::from_points(
+        "ramp",
+        &[(0.0, [0.1, 0.2, 0.9]), (0.5, [0.9, 0.6, 0.1]), (1.0, [1.0, 1.0, 1.0])],
+        &[(0.0, 0.0), (0.3, 0.4), (1.0, 0.9)],
+    );
+    let extent = Vec3::new(7.0 * 0.5, 5.0, 3.0 * 2.0);
+    let cam = Camera::look_at(extent * 0.5 + Vec3::new(9.0, -6.0, 11.0), extent * 0.5, Vec3::Y, 40.0, 48, 40);
+    let render = |p: &Path| {
+        let v = load_volume(p, &with_spacing).unwrap_or_else(|e| panic!("{e}"));
+        let m = Marcher::new(Arc::new(v), &tf);
+        (m.render_image(&cam), m.march_layers(&cam, 4))
+    };
+    let (want_image, want_layers) = render(&raw);
+    assert!(want_layers.count.iter().any(|&c| c > 1), "the view sees layered segments");
+    for p in [&nrrd_p, &nii, &vti, &vtiz, &tif, &dcm] {
+        let (image, layers) = render(p);
+        assert!(image == want_image, "{}: the image differs from raw's", p.display());
+        assert!(layers == want_layers, "{}: the layered frame differs from raw's", p.display());
+    }
+    std::fs::remove_dir_all(&dir).ok();
+}
