@@ -158,7 +158,7 @@ struct VisualArgs {
     #[arg(long, global = true, value_name = "W,L", allow_hyphen_values = true)]
     window_level: Option<String>,
     /// Every opacity of the transfer function times S (0..=100).
-    #[arg(long, global = true, value_name = "S", default_value_t = 1.0)]
+    #[arg(long, global = true, value_name = "S", default_value_t = 1.0, allow_hyphen_values = true)]
     opacity_scale: f32,
     /// Crop box in fractions of the volume box (0,0,0,1,1,1 is the whole volume).
     #[arg(long, global = true, value_name = "X0,Y0,Z0,X1,Y1,Z1")]
