@@ -11,6 +11,10 @@
 //! Camera: the server's default camera orbited 20°/10° and moved to 0.68 of its distance
 //! (`volwarp-server dump --zoom 0.68 --orbit 20,10`), the MRI benchmark view.
 //!
+//! `VTK_BENCH_SHADE=1` shades both sides: the marchers with gradient shading
+//! (`Shading::DEFAULT`: ambient 0.3, diffuse 0.7, specular 0.2, exponent 32, light fixed to the
+//! volume) and VTK with `ShadeOn()` and the same coefficients.
+//!
 //! `VTK_BENCH_VOLUME=/path/to/name_XxYxZ_type.raw` benches that one file instead (at 1024², with
 //! its preset transfer function), e.g. a synthetic volume of `volwarp-server synth`.
 
@@ -19,6 +23,7 @@ use std::path::{Path, PathBuf};
 use std::time::Instant;
 use volwarp_core::wire::CameraRequest;
 use volwarp_core::Heuristic;
+use volwarp_server::marcher::Shading;
 use volwarp_server::volume::parse_raw_name;
 use volwarp_server::{Dataset, MarchKernel, MarchOptions, Marcher};
 
@@ -90,6 +95,7 @@ fn scene_json(s: &Scene, m: &Marcher, threads: usize, runs: usize) -> serde_json
         "sample_distance": m.step(),
         "threads": threads,
         "runs": runs,
+        "shade": m.options().shading.is_some(),
     })
 }
 
@@ -148,15 +154,18 @@ fn main() {
     };
     let load = std::fs::read_to_string("/proc/loadavg").unwrap_or_default();
     eprintln!(
-        "vs_vtk: {threads} threads, {:?} lanes, median of {runs} runs; load {}",
+        "vs_vtk: {threads} threads, {:?} lanes, shading {}, median of {runs} runs; load {}",
         volwarp_server::lane_kind(),
+        std::env::var("VTK_BENCH_SHADE").as_deref() == Ok("1"),
         load.trim()
     );
     let pool = rayon::ThreadPoolBuilder::new().num_threads(threads).build().expect("thread pool");
     let mut ours = Vec::new();
     let mut json = Vec::new();
     for s in &scenes {
-        let packet = Marcher::from_dataset(&s.ds);
+        let shading = (std::env::var("VTK_BENCH_SHADE").as_deref() == Ok("1")).then_some(Shading::DEFAULT);
+        let packet =
+            Marcher::with_options(s.ds.volume.clone(), &s.ds.tf, MarchOptions { shading, ..MarchOptions::default() });
         let scalar =
             packet.with_transfer_function(&s.ds.tf, MarchOptions { kernel: MarchKernel::Scalar, ..packet.options() });
         let req = request(&packet, s.size);

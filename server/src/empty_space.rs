@@ -202,6 +202,25 @@ fn chebyshev_distance(bricks: [u32; 3], occupied: &[bool]) -> Vec<u8> {
 }
 
 impl Occupancy {
+    /// The occupancy with every brick `keep` refuses made invisible (a crop box: the bricks
+    /// outside it), distances recomputed.
+    pub fn restricted(&self, keep: impl Fn([u32; 3]) -> bool) -> Occupancy {
+        let [nx, ny, _] = self.bricks;
+        let occupied: Vec<bool> = self
+            .occupied
+            .iter()
+            .enumerate()
+            .map(|(i, &o)| {
+                let i = i as u32;
+                o && keep([i % nx, i / nx % ny, i / (nx * ny)])
+            })
+            .collect();
+        let dist = chebyshev_distance(self.bricks, &occupied);
+        let empty: Vec<bool> = occupied.iter().map(|&o| !o).collect();
+        let visible_reach = chebyshev_distance(self.bricks, &empty);
+        Occupancy { brick: self.brick, bricks: self.bricks, occupied, dist, visible_reach, spacing: self.spacing }
+    }
+
     /// The brick of continuous voxel coordinate `g` (clamped).
     #[inline(always)]
     pub fn brick_of(&self, g: Vec3) -> [u32; 3] {

@@ -128,6 +128,8 @@ pub(crate) trait Lanes: volwarp_lanes::Ops {
     /// Per lane `(data[idx], data[idx + 1])` as `f32` (exact), each index clamped to
     /// `0 ..= data.len() − 2` first (a slice shorter than 2 gives zeros).
     fn gather_short_pairs(data: &[u16], idx: Self::I) -> (Self, Self);
+    /// Per lane the square root, correctly rounded (IEEE, as `f32::sqrt`).
+    fn sqrt(self) -> Self;
 }
 
 /// The portable lanes: `wide`'s, whatever it was compiled for.
@@ -255,6 +257,10 @@ impl Lanes for f32x8 {
             f32x8::new(core::array::from_fn(|l| data[i[l]] as f32)),
             f32x8::new(core::array::from_fn(|l| data[i[l] + 1] as f32)),
         )
+    }
+    #[inline(always)]
+    fn sqrt(self) -> Self {
+        f32x8::sqrt(self)
     }
 }
 
@@ -401,6 +407,10 @@ impl<L: Lanes> Lanes for X2<L> {
         let ((a0, b0), (a1, b1)) = (L::gather_short_pairs(data, idx.0), L::gather_short_pairs(data, idx.1));
         (X2(a0, a1), X2(b0, b1))
     }
+    #[inline(always)]
+    fn sqrt(self) -> Self {
+        X2(self.0.sqrt(), self.1.sqrt())
+    }
 }
 
 #[cfg(target_arch = "x86_64")]
@@ -461,6 +471,10 @@ mod x86 {
             #[inline(always)]
             fn mul_i(a: $ti, b: $ti) -> $ti {
                 a.mul_lo(b)
+            }
+            #[inline(always)]
+            fn sqrt(self) -> Self {
+                $t::sqrt(self)
             }
         };
     }

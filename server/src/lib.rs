@@ -49,6 +49,7 @@ pub mod server;
 pub mod synth;
 pub mod testdata;
 pub mod transfer_function;
+pub mod visual;
 pub mod volume;
 
 pub use dataset::Dataset;

@@ -5,6 +5,7 @@
 //! volwarp-server --volume head.nrrd --tf tf.json --listen 0.0.0.0:7878 --token-file ~/.volwarp-token
 //! volwarp-server render --volume FILE [--tf FILE] [--orbit 30,10] [--size 1024x1024] --out img.png
 //! volwarp-server dump [--orbit 30,10] [--heuristic threshold] [--encoding compact|raw12] --out frame.vwf
+//! volwarp-server render --preset ct-bone --window-level 0.8,0.45 --crop 0,0,0,1,0.5,1 --out cut.png
 //! volwarp-server info scan.nii.gz                  # what a volume file holds, without rendering
 //! volwarp-server synth --dims 1024,1024,1024 --type u8 --out /tmp/big   # a synthetic volume
 //! ```
@@ -135,6 +136,65 @@ struct DataArgs {
     /// client may ask for in its Hello (default 16).
     #[arg(long, global = true, value_parser = clap::value_parser!(u8).range(1..=16))]
     layers: Option<u8>,
+    #[command(flatten)]
+    visual: VisualArgs,
+}
+
+/// The visual state (`volwarp_server::visual`): what a client can change live, a script can
+/// render.
+#[derive(Args, Debug)]
+struct VisualArgs {
+    /// Gradient shading (ambient, diffuse, Blinn–Phong specular; light fixed to the volume):
+    /// true or false. Default: on with the ct-bone, ct-soft-tissue and mr-default presets, off
+    /// otherwise.
+    #[arg(long, global = true, value_name = "BOOL", action = clap::ArgAction::Set)]
+    shade: Option<bool>,
+    /// A bundled transfer-function preset instead of --tf or the volume's own: grey, ct-bone,
+    /// ct-soft-tissue, mr-default, cool-warm (data/presets/NAME.json).
+    #[arg(long, global = true, value_name = "NAME", conflicts_with = "tf")]
+    preset: Option<String>,
+    /// Window and level as fractions of the value range: the transfer function spans
+    /// LEVEL ± WINDOW/2 (default 1,0.5: as it is).
+    #[arg(long, global = true, value_name = "W,L", allow_hyphen_values = true)]
+    window_level: Option<String>,
+    /// Every opacity of the transfer function times S (0..=100).
+    #[arg(long, global = true, value_name = "S", default_value_t = 1.0, allow_hyphen_values = true)]
+    opacity_scale: f32,
+    /// Crop box in fractions of the volume box (0,0,0,1,1,1 is the whole volume).
+    #[arg(long, global = true, value_name = "X0,Y0,Z0,X1,Y1,Z1")]
+    crop: Option<String>,
+    /// Clip plane: a point in fractions of the volume box and a normal; the side the normal
+    /// points to is kept.
+    #[arg(long, global = true, value_name = "PX,PY,PZ,NX,NY,NZ", allow_hyphen_values = true)]
+    clip: Option<String>,
+}
+
+/// The visual state of the command line, checked.
+fn visual_state(a: &VisualArgs) -> Result<volwarp_server::visual::VisualState, String> {
+    use volwarp_server::visual::{parse_numbers, VisualState};
+    let mut vs =
+        VisualState { opacity_scale: a.opacity_scale, ..VisualState::default() }.with_preset(a.preset.clone(), a.shade);
+    let e = |e: volwarp_server::visual::VisualError| e.to_string();
+    if let Some(s) = &a.window_level {
+        [vs.window, vs.level] = parse_numbers::<2>(s, "--window-level").map_err(e)?;
+    }
+    if let Some(s) = &a.crop {
+        vs.crop = parse_numbers::<6>(s, "--crop").map_err(e)?;
+    }
+    if let Some(s) = &a.clip {
+        vs.clip = Some(parse_numbers::<6>(s, "--clip").map_err(e)?);
+    }
+    vs.validate().map_err(|e| {
+        let flag = match e.0.split_whitespace().next() {
+            Some("window") | Some("level") => "--window-level",
+            Some("opacity") => "--opacity-scale",
+            Some("crop") => "--crop",
+            Some("clip") => "--clip",
+            _ => "--preset",
+        };
+        format!("{flag}: {e}")
+    })?;
+    Ok(vs)
 }
 
 #[derive(Args, Debug)]
@@ -335,6 +395,7 @@ fn run(cli: Cli) -> Result<(), String> {
         }
         _ => {}
     }
+    let visual = visual_state(&cli.data.visual)?;
     let ds = load(&cli.data)?;
     let heuristic = Heuristic::from_name(&cli.data.heuristic)
         .ok_or_else(|| format!("unknown heuristic {:?}", cli.data.heuristic))?;
@@ -346,8 +407,12 @@ fn run(cli: Cli) -> Result<(), String> {
         kernel,
         skip_empty: cli.data.skip_empty,
         early_termination: cli.data.early_termination,
+        shading: None,
     };
     let marcher = Marcher::with_options(ds.volume.clone(), &ds.tf, opts);
+    let marcher = marcher.with_visual(&ds.tf, &visual).map_err(|e| e.to_string())?;
+    // The transfer function shown (a preset, windowed, opacity-scaled): the levels' too.
+    let tf = visual.transfer_function(&ds.tf, ds.volume.value_range()).map_err(|e| e.to_string())?;
     match cli.cmd.unwrap_or(Cmd::Serve) {
         Cmd::Serve => {
             let n = &cli.net;
@@ -371,7 +436,7 @@ fn run(cli: Cli) -> Result<(), String> {
                     None => None,
                 },
             };
-            let server = Server::with_transfer_function(config, marcher, &ds.tf).map_err(|e| e.to_string())?;
+            let server = Server::with_transfer_function(config, marcher, &tf).map_err(|e| e.to_string())?;
             println!("listening on {}", server.local_addr());
             use std::io::Write;
             let _ = std::io::stdout().flush();
@@ -389,7 +454,7 @@ fn run(cli: Cli) -> Result<(), String> {
             let cam = camera(&ds, &cam)?;
             let levels;
             let marcher = if level > 0 {
-                levels = marcher.levels(&ds.tf).map_err(|e| e.to_string())?;
+                levels = marcher.levels(&tf).map_err(|e| e.to_string())?;
                 let m = levels
                     .get(usize::from(level))
                     .ok_or_else(|| format!("--level {level}: the volume has {} levels", levels.len()))?;

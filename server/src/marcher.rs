@@ -19,7 +19,7 @@
 use crate::compaction;
 use crate::empty_space::{MinMaxGrid, Occupancy};
 use crate::march_settings::MarchSetup;
-pub use crate::march_settings::{MarchKernel, MarchOptions, RADIUS_CODE};
+pub use crate::march_settings::{Cut, MarchKernel, MarchOptions, Shading, RADIUS_CODE};
 #[cfg(doc)]
 use crate::radius::RadiusModel;
 use crate::radius::{FrameRadius, RaySpread, Uncertainty};
@@ -120,6 +120,11 @@ pub struct Marcher {
     /// smallest spacing of the volume itself, at every level of detail (so a coarser level is
     /// as opaque as the volume, not 2^level times as transparent).
     opacity_unit: f32,
+    /// The crop box and clip plane (the whole volume unless [`Marcher::with_cut`]).
+    cut: Cut,
+    /// The transfer function the table was made of (the empty-space grid's occupancy is
+    /// remade from it under a crop).
+    tf: TransferFunction,
 }
 
 impl Marcher {
@@ -176,6 +181,7 @@ impl Marcher {
         let occupancy = grid.occupancy(tf, sp);
         log::debug!("empty-space grid: {:.1} % of bricks visible", occupancy.fraction_occupied() * 100.0);
         let lut_argb = Arc::new(lut.iter().flat_map(|&[r, g, b, a]| [a, r, g, b]).collect::<Vec<f32>>());
+        let (volume_dims, extent) = (volume.dims(), volume.extent());
         let looks = Arc::new(occupancy.look_table());
         Marcher {
             volume,
@@ -189,6 +195,8 @@ impl Marcher {
             inv_spacing: 1.0 / sp,
             level: 0,
             opacity_unit,
+            cut: Cut::whole(volume_dims, extent),
+            tf: tf.clone(),
         }
     }
 
@@ -219,6 +227,7 @@ impl Marcher {
         for (l, v) in volumes.into_iter().enumerate().skip(1) {
             let grid = Arc::new(MinMaxGrid::new(&v));
             let m = Marcher::with_grid_unit(v, grid, tf, self.opts, Some(self.opacity_unit));
+            let m = if self.cut.is_whole(self.volume.extent()) { m } else { m.with_cut(self.cut) };
             out.push(Arc::new(m.at_level(l as u8)));
         }
         log::info!(
@@ -235,8 +244,58 @@ impl Marcher {
     /// The same volume and grid with another transfer function or options (no rebuild of the
     /// min/max grid).
     pub fn with_transfer_function(&self, tf: &TransferFunction, opts: MarchOptions) -> Marcher {
-        Marcher::with_grid_unit(self.volume.clone(), self.grid.clone(), tf, opts, Some(self.opacity_unit))
-            .at_level(self.level)
+        let m = Marcher::with_grid_unit(self.volume.clone(), self.grid.clone(), tf, opts, Some(self.opacity_unit))
+            .at_level(self.level);
+        if self.cut.is_whole(self.volume.extent()) {
+            m
+        } else {
+            m.with_cut(self.cut)
+        }
+    }
+
+    /// The marcher cropped and clipped by `cut` (world units, see [`Cut`]; its voxel range is
+    /// clamped into this marcher's volume).
+    ///
+    /// Bricks of the empty-space grid outside the crop box's voxels (and the one voxel around
+    /// them a trilinear stencil reaches) count as empty, so rays leap over them.
+    pub fn with_cut(mut self, cut: Cut) -> Marcher {
+        let sp = self.volume.spacing();
+        self.cut = cut.for_volume(self.volume.dims(), sp);
+        let occupancy = self.grid.occupancy(&self.tf, sp);
+        self.occupancy = if self.cut.is_whole(self.volume.extent()) {
+            occupancy
+        } else {
+            let e = self.occupancy.brick() as f32;
+            let (lo, hi) = ((self.cut.grid_lo() - 1.0).floor(), (self.cut.grid_hi() + 2.0).ceil());
+            occupancy.restricted(|b| {
+                let b = Vec3::new(b[0] as f32, b[1] as f32, b[2] as f32);
+                (b * e).cmple(hi).all() && ((b + 1.0) * e).cmpge(lo).all()
+            })
+        };
+        self.looks = Arc::new(self.occupancy.look_table());
+        self
+    }
+
+    /// This marcher's volume and grid showing `state` over `base`, the transfer function given at
+    /// start (see [`crate::visual`]): the transfer-function tables and the empty-space
+    /// occupancy are rebuilt, the volume and its min/max grid are shared. A bad state is an
+    /// error naming what is wrong.
+    pub fn with_visual(
+        &self,
+        base: &TransferFunction,
+        state: &crate::visual::VisualState,
+    ) -> Result<Marcher, crate::visual::VisualError> {
+        let tf = state.transfer_function(base, self.volume.value_range())?;
+        let opts = MarchOptions { shading: state.shade.then_some(Shading::DEFAULT), ..self.opts };
+        let m = Marcher::with_grid_unit(self.volume.clone(), self.grid.clone(), &tf, opts, Some(self.opacity_unit))
+            .at_level(self.level);
+        let cut = state.cut(&self.volume);
+        Ok(if cut.is_whole(self.volume.extent()) { m } else { m.with_cut(cut) })
+    }
+
+    /// The crop box and clip plane in use.
+    pub fn cut(&self) -> &Cut {
+        &self.cut
     }
 
     /// The volume.
@@ -274,6 +333,7 @@ impl Marcher {
             opts: self.opts,
             dt: self.dt,
             inv_spacing: self.inv_spacing,
+            cut: &self.cut,
         }
     }
 
@@ -340,6 +400,10 @@ impl Marcher {
         let (mut r, mut g, mut b, mut a) = (0.0f32, 0.0f32, 0.0f32, 0.0f32);
         let skip = self.opts.skip_empty;
         let occ = &self.occupancy;
+        let (glo, ghi) = (self.cut.grid_lo(), self.cut.grid_hi());
+        let shading = self.opts.shading;
+        let half = shading.map_or(Vec3::ZERO, |s| s.half_vector(d));
+        let isp = self.inv_spacing;
         // Samples before `t_check` lie in a brick already found visible: no need to look again.
         // (A sample a rounding error past that brick's face may then be sampled needlessly; that
         // is harmless, skipping is the only thing that must be exact.)
@@ -368,9 +432,19 @@ impl Marcher {
                 }
                 t_check = t_out;
             }
-            let v = vol.sample_grid(gp);
+            let v = vol.sample_grid_in(gp, glo, ghi);
             let [cr, cg, cb, ca] = self.lut[TransferFunction::index(v)];
             if ca > 0.0 {
+                let [cr, cg, cb, ca] = match &shading {
+                    None => [cr, cg, cb, ca],
+                    Some(sh) => {
+                        let at = |x: f32, y: f32, z: f32| vol.sample_grid_in(Vec3::new(x, y, z), glo, ghi);
+                        let gx = (at(gp.x + 1.0, gp.y, gp.z) - at(gp.x - 1.0, gp.y, gp.z)) * isp.x;
+                        let gy = (at(gp.x, gp.y + 1.0, gp.z) - at(gp.x, gp.y - 1.0, gp.z)) * isp.y;
+                        let gz = (at(gp.x, gp.y, gp.z + 1.0) - at(gp.x, gp.y, gp.z - 1.0)) * isp.z;
+                        sh.shade([gx, gy, gz], half, [cr, cg, cb, ca])
+                    }
+                };
                 let w = 1.0 - a;
                 r += w * cr;
                 g += w * cg;

@@ -304,6 +304,117 @@ impl<L: Lanes> Axis<L> {
     }
 }
 
+/// What a trilinear sample in lanes reads: the clamp range, the bricks' layout in lanes and the
+/// normalization ([`crate::volume::Volume::sample_grid_in`] in lanes).
+struct Sampler<'a, L: Lanes> {
+    voxels: &'a Voxels,
+    lo: [L; 3],
+    hi: [L; 3],
+    sbx: L::I,
+    sby: L::I,
+    span: L::I,
+    span2: L::I,
+    brick_values: L::I,
+    edge_mask: L::I,
+    chunks: usize,
+    per_chunk: L,
+    per_chunk_inv: L,
+    offset: L,
+    scale: L,
+}
+
+impl<'a, L: Lanes> Sampler<'a, L> {
+    #[inline(always)]
+    fn new(m: &MarchSetup<'a>, voxels: &'a Voxels) -> Self {
+        let (glo, ghi) = (m.cut.grid_lo(), m.cut.grid_hi());
+        // The bricks ([`crate::volume::bricks`]): per axis, and the chunks of brick z-slabs.
+        let layout = *voxels.layout();
+        let nbr = layout.bricks();
+        let (offset, scale) = m.volume.normalization();
+        Sampler {
+            voxels,
+            lo: [L::splat(glo.x), L::splat(glo.y), L::splat(glo.z)],
+            hi: [L::splat(ghi.x), L::splat(ghi.y), L::splat(ghi.z)],
+            sbx: L::splat_i(nbr[0] as i32),
+            sby: L::splat_i(nbr[1] as i32),
+            span: L::splat_i(BRICK_SPAN as i32),
+            span2: L::splat_i((BRICK_SPAN * BRICK_SPAN) as i32),
+            brick_values: L::splat_i(BRICK_VALUES as i32),
+            edge_mask: L::splat_i(BRICK_EDGE as i32 - 1),
+            chunks: layout.chunks(),
+            per_chunk: L::splat((1u32 << layout.slab_shift()) as f32),
+            per_chunk_inv: L::splat(1.0 / (1u32 << layout.slab_shift()) as f32),
+            offset: L::splat(offset),
+            scale: L::splat(scale),
+        }
+    }
+
+    /// The normalized trilinear sample at continuous voxel coordinates `(px, py, pz)`, clamped
+    /// to the sampler's range: `Volume::sample_grid_in`, in lanes, bit for bit.
+    #[inline(always)]
+    fn sample<const M: usize>(&self, px: L, py: L, pz: L) -> L {
+        let gx = px.max(self.lo[0]).min(self.hi[0]);
+        let gy = py.max(self.lo[1]).min(self.hi[1]);
+        let gz = pz.max(self.lo[2]).min(self.hi[2]);
+        let (xi, yi, zi) = (gx.trunc_int(), gy.trunc_int(), gz.trunc_int());
+        let (xf, yf, zf) = (L::int_to_float(xi), L::int_to_float(yi), L::int_to_float(zi));
+        let (fx, fy, fz) = (gx - xf, gy - yf, gz - zf);
+        // The stencil's brick and its lowest corner in it: the other corners are at +1,
+        // +BRICK_SPAN and +BRICK_SPAN² (the brick's apron holds the far ones; past the
+        // volume's last voxel it repeats it, where the fraction is exactly 0, so
+        // `c + (far - c) * 0` is `c`, as the scalar marcher's read gives).
+        let (sbx, sby, span, span2, brick_values) = (self.sbx, self.sby, self.span, self.span2, self.brick_values);
+        let (bx, by, bz) = (L::shr_i::<SHIFT>(xi), L::shr_i::<SHIFT>(yi), L::shr_i::<SHIFT>(zi));
+        let (lx, ly, lz) = (L::and_i(xi, self.edge_mask), L::and_i(yi, self.edge_mask), L::and_i(zi, self.edge_mask));
+        let (c000, c100, c010, c110, c001, c101, c011, c111) = if self.chunks == 1 {
+            let brick = bx + L::mul_i(sbx, by + L::mul_i(sby, bz));
+            let base = L::mul_i(brick, brick_values) + lx + L::mul_i(span, ly) + L::mul_i(span2, lz);
+            let [c0, c1, c2, c3, c4, c5, c6, c7] = corners::<L>(self.voxels, 0, base);
+            (c0, c1, c2, c3, c4, c5, c6, c7)
+        } else {
+            // Several chunks of brick z-slabs: each lane's chunk and slab in it.
+            let bzf = L::int_to_float(bz);
+            let czf = L::int_to_float((bzf * self.per_chunk_inv).trunc_int());
+            let bzl = (bzf - czf * self.per_chunk).trunc_int();
+            let brick = bx + L::mul_i(sbx, by + L::mul_i(sby, bzl));
+            let base = L::mul_i(brick, brick_values) + lx + L::mul_i(span, ly) + L::mul_i(span2, lz);
+            // Usually every lane is in the first lane's chunk: one set of gathers.
+            let cs: [f32; M] = czf.to_array();
+            let c0 = L::splat(cs[0]);
+            let mut acc = corners::<L>(self.voxels, cs[0] as usize, base);
+            if (czf.simd_gt(c0) | czf.simd_lt(c0)).any() {
+                let (mut first, mut last) = (cs[0], cs[0]);
+                for &c in &cs[1..] {
+                    first = first.min(c);
+                    last = last.max(c);
+                }
+                let mut c = first;
+                while c <= last {
+                    // The first lane's chunk is gathered already.
+                    if c != cs[0] {
+                        let cl = L::splat(c);
+                        let here = czf.simd_ge(cl).and_not(czf.simd_gt(cl));
+                        let part = corners::<L>(self.voxels, c as usize, base);
+                        for (a, p) in acc.iter_mut().zip(part) {
+                            *a = here.select(p, *a);
+                        }
+                    }
+                    c += 1.0;
+                }
+            }
+            let [c0, c1, c2, c3, c4, c5, c6, c7] = acc;
+            (c0, c1, c2, c3, c4, c5, c6, c7)
+        };
+        let c00 = c000 + (c100 - c000) * fx;
+        let c10 = c010 + (c110 - c010) * fx;
+        let c01 = c001 + (c101 - c001) * fx;
+        let c11 = c011 + (c111 - c011) * fx;
+        let c0 = c00 + (c10 - c00) * fy;
+        let c1 = c01 + (c11 - c01) * fy;
+        (c0 + (c1 - c0) * fz - self.offset) * self.scale
+    }
+}
+
 /// The march settings the kernel reads, borrowed from a [`crate::marcher::Marcher`].
 pub(crate) struct Kernel<'a> {
     /// The options, step and volume box.
@@ -358,7 +469,6 @@ impl Kernel<'_> {
     fn march<L: Lanes, F: Feed<M>, const M: usize>(&self, o: Vec3, rays: &Rays<M>, feed: &mut F) -> [[f32; 4]; M] {
         let m = self.m;
         let vol = m.volume;
-        let [nx, ny, nz] = vol.dims();
         let dt = m.dt;
         let opts = m.opts;
         let occ = m.occupancy;
@@ -372,19 +482,17 @@ impl Kernel<'_> {
         let te = L::new(&rays.t_enter);
         let n = L::new(&rays.n);
         let (dtl, half, one, zero) = (L::splat(dt), L::splat(0.5), L::splat(1.0), L::splat(0.0));
-        let (mx, my, mz) = (L::splat((nx - 1) as f32), L::splat((ny - 1) as f32), L::splat((nz - 1) as f32));
-        // The bricks ([`crate::volume::bricks`]): per axis, and the chunks of brick z-slabs.
-        let layout = *self.voxels.layout();
-        let nbr = layout.bricks();
-        let (sbx, sby) = (L::splat_i(nbr[0] as i32), L::splat_i(nbr[1] as i32));
-        let (span, span2) = (L::splat_i(BRICK_SPAN as i32), L::splat_i((BRICK_SPAN * BRICK_SPAN) as i32));
-        let brick_values = L::splat_i(BRICK_VALUES as i32);
-        let edge_mask = L::splat_i(BRICK_EDGE as i32 - 1);
-        let chunks = layout.chunks();
-        let per_chunk = L::splat((1u32 << layout.slab_shift()) as f32);
-        let per_chunk_inv = L::splat(1.0 / (1u32 << layout.slab_shift()) as f32);
-        let (offset, scale) = vol.normalization();
-        let (offset, scale) = (L::splat(offset), L::splat(scale));
+        let sampler = Sampler::<L>::new(&m, self.voxels);
+        // Shading: the weights, the light, each lane's half vector and `1 / spacing`.
+        let shading = opts.shading;
+        let sh = shading.unwrap_or(crate::march_settings::Shading::DEFAULT);
+        let (ka, kd, ks) = (L::splat(sh.ambient), L::splat(sh.diffuse), L::splat(sh.specular));
+        let (lx, ly, lz) = (L::splat(sh.light.x), L::splat(sh.light.y), L::splat(sh.light.z));
+        let hv: [Vec3; M] = core::array::from_fn(|l| sh.half_vector(rays.d[l]));
+        let hx = L::new(&core::array::from_fn::<f32, M, _>(|l| hv[l].x));
+        let hy = L::new(&core::array::from_fn::<f32, M, _>(|l| hv[l].y));
+        let hz = L::new(&core::array::from_fn::<f32, M, _>(|l| hv[l].z));
+        let (isx, isy, isz) = (L::splat(inv_spacing.x), L::splat(inv_spacing.y), L::splat(inv_spacing.z));
         // TransferFunction::index scales by the last entry's index and clamps to it.
         let lut_max = L::splat((self.lut.len() / 4).max(1) as f32 - 1.0);
         let ert = L::splat(opts.early_termination);
@@ -459,65 +567,9 @@ impl Kernel<'_> {
             if !active.any() {
                 break;
             }
-            // Volume::sample_grid_clamped, in lanes.
-            let gx = (ogx + dgx * t).max(zero).min(mx);
-            let gy = (ogy + dgy * t).max(zero).min(my);
-            let gz = (ogz + dgz * t).max(zero).min(mz);
-            let (xi, yi, zi) = (gx.trunc_int(), gy.trunc_int(), gz.trunc_int());
-            let (xf, yf, zf) = (L::int_to_float(xi), L::int_to_float(yi), L::int_to_float(zi));
-            let (fx, fy, fz) = (gx - xf, gy - yf, gz - zf);
-            // The stencil's brick and its lowest corner in it: the other corners are at +1,
-            // +BRICK_SPAN and +BRICK_SPAN² (the brick's apron holds the far ones; past the
-            // volume's last voxel it repeats it, where the fraction is exactly 0, so
-            // `c + (far - c) * 0` is `c`, as the scalar marcher's read gives).
-            let (bx, by, bz) = (L::shr_i::<SHIFT>(xi), L::shr_i::<SHIFT>(yi), L::shr_i::<SHIFT>(zi));
-            let (lx, ly, lz) = (L::and_i(xi, edge_mask), L::and_i(yi, edge_mask), L::and_i(zi, edge_mask));
-            let (c000, c100, c010, c110, c001, c101, c011, c111) = if chunks == 1 {
-                let brick = bx + L::mul_i(sbx, by + L::mul_i(sby, bz));
-                let base = L::mul_i(brick, brick_values) + lx + L::mul_i(span, ly) + L::mul_i(span2, lz);
-                let [c0, c1, c2, c3, c4, c5, c6, c7] = corners::<L>(self.voxels, 0, base);
-                (c0, c1, c2, c3, c4, c5, c6, c7)
-            } else {
-                // Several chunks of brick z-slabs: each lane's chunk and slab in it.
-                let bzf = L::int_to_float(bz);
-                let czf = L::int_to_float((bzf * per_chunk_inv).trunc_int());
-                let bzl = (bzf - czf * per_chunk).trunc_int();
-                let brick = bx + L::mul_i(sbx, by + L::mul_i(sby, bzl));
-                let base = L::mul_i(brick, brick_values) + lx + L::mul_i(span, ly) + L::mul_i(span2, lz);
-                // Usually every lane is in the first lane's chunk: one set of gathers.
-                let cs: [f32; M] = czf.to_array();
-                let c0 = L::splat(cs[0]);
-                let mut acc = corners::<L>(self.voxels, cs[0] as usize, base);
-                if (czf.simd_gt(c0) | czf.simd_lt(c0)).any() {
-                    let (mut first, mut last) = (cs[0], cs[0]);
-                    for &c in &cs[1..] {
-                        first = first.min(c);
-                        last = last.max(c);
-                    }
-                    let mut c = first;
-                    while c <= last {
-                        // The first lane's chunk is gathered already.
-                        if c != cs[0] {
-                            let cl = L::splat(c);
-                            let here = czf.simd_ge(cl).and_not(czf.simd_gt(cl));
-                            let part = corners::<L>(self.voxels, c as usize, base);
-                            for (a, p) in acc.iter_mut().zip(part) {
-                                *a = here.select(p, *a);
-                            }
-                        }
-                        c += 1.0;
-                    }
-                }
-                let [c0, c1, c2, c3, c4, c5, c6, c7] = acc;
-                (c0, c1, c2, c3, c4, c5, c6, c7)
-            };
-            let c00 = c000 + (c100 - c000) * fx;
-            let c10 = c010 + (c110 - c010) * fx;
-            let c01 = c001 + (c101 - c001) * fx;
-            let c11 = c011 + (c111 - c011) * fx;
-            let c0 = c00 + (c10 - c00) * fy;
-            let c1 = c01 + (c11 - c01) * fy;
-            let v = (c0 + (c1 - c0) * fz - offset) * scale;
+            // Volume::sample_grid_in, in lanes.
+            let (px, py, pz) = (ogx + dgx * t, ogy + dgy * t, ogz + dgz * t);
+            let v = sampler.sample::<M>(px, py, pz);
             // TransferFunction::index, in lanes.
             let idx = (v * lut_max + half).max(zero).min(lut_max).trunc_int();
             // The table's entries are (a, r, g, b): opacity and red in one 64-bit gather.
@@ -527,6 +579,41 @@ impl Kernel<'_> {
             let vis = active & ca.simd_gt(zero);
             if vis.any() {
                 let (cg, cb) = L::gather_pairs(self.lut, q + L::splat_i(2));
+                let (cr, cg, cb) = if shading.is_some() {
+                    // Shading::shade, in lanes: central differences, then Blinn–Phong.
+                    // The six neighbours in a loop: one copy of the sampler's code, not six (no
+                    // closure: see `band`).
+                    let mut nb = [zero; 6];
+                    for (i, s) in nb.iter_mut().enumerate() {
+                        let (a, b) = (if i & 1 == 0 { one } else { zero - one }, zero);
+                        let (x, y, z) = match i >> 1 {
+                            0 => (px + a, py + b, pz + b),
+                            1 => (px + b, py + a, pz + b),
+                            _ => (px + b, py + b, pz + a),
+                        };
+                        *s = sampler.sample::<M>(x, y, z);
+                    }
+                    let gx = (nb[0] - nb[1]) * isx;
+                    let gy = (nb[2] - nb[3]) * isy;
+                    let gz = (nb[4] - nb[5]) * isz;
+                    let g2 = gx * gx + gy * gy + gz * gz;
+                    let len = g2.sqrt();
+                    let ndl = gx * lx + gy * ly + gz * lz;
+                    let ndh = gx * hx + gy * hy + gz * hz;
+                    let some = g2.simd_gt(zero);
+                    let diff = some.select(ndl.max(zero - ndl) / len, one);
+                    let spec = some.select(ndh.max(zero - ndh) / len, zero);
+                    let s2 = spec * spec;
+                    let s4 = s2 * s2;
+                    let s8 = s4 * s4;
+                    let s16 = s8 * s8;
+                    let s32 = s16 * s16;
+                    let f = ka + kd * diff;
+                    let sa = ks * s32 * ca;
+                    ((cr * f + sa).min(ca), (cg * f + sa).min(ca), (cb * f + sa).min(ca))
+                } else {
+                    (cr, cg, cb)
+                };
                 let w = one - a;
                 r = vis.select(r + w * cr, r);
                 g = vis.select(g + w * cg, g);

@@ -11,7 +11,8 @@
 //! - **ParaView JSON** (`.json`, *Save colormap* / exported transfer function): the first object
 //!   (or the object itself) with `RGBPoints` (`x, r, g, b` quadruples) and optional opacity
 //!   `Points` (`x, α, midpoint, sharpness` quadruples; midpoint and sharpness ignored). `x` is in
-//!   data units.
+//!   data units, or in fractions of the value range where the object has `"Normalized": true`
+//!   (the bundled presets, [`crate::visual::PRESETS`]).
 //! - **Text** (any other extension), one control point per line, `#` starts a comment:
 //!   `x r g b a` (color and opacity point), `x r g b` (color point), `x a` (opacity point).
 //!   `x` is in data units unless the file has a line `normalized`, then it is in `0..=1`.
@@ -98,6 +99,22 @@ impl TransferFunction {
                 [r, g, b, a]
             })
             .collect();
+        TransferFunction { name: name.to_string(), lut }
+    }
+
+    /// A function of a whole table of [`LUT_SIZE`] entries (straight RGB, reference-step
+    /// opacity; non-finite values become 0, all clamped to `0..=1`; a table of another length
+    /// is resampled by nearest entry).
+    pub fn from_table(name: &str, table: Vec<[f32; 4]>) -> TransferFunction {
+        let clean = |e: [f32; 4]| e.map(|c| if c.is_finite() { c.clamp(0.0, 1.0) } else { 0.0 });
+        let lut = if table.len() == LUT_SIZE {
+            table.into_iter().map(clean).collect()
+        } else if table.is_empty() {
+            vec![[1.0, 1.0, 1.0, 0.0]; LUT_SIZE]
+        } else {
+            let n = table.len();
+            (0..LUT_SIZE).map(|i| clean(table[(i * n / LUT_SIZE).min(n - 1)])).collect()
+        };
         TransferFunction { name: name.to_string(), lut }
     }
 
@@ -294,7 +311,10 @@ impl TransferFunction {
                 Some(_) => Err(format!("{key} is not an array")),
             }
         };
-        let norm = Self::normalizer(value_range);
+        // `"Normalized": true` (volwarp's presets; ParaView ignores the key): points in
+        // fractions of the value range.
+        let normalized = obj.get("Normalized").and_then(|n| n.as_bool()).unwrap_or(false);
+        let norm = Self::normalizer(if normalized { (0.0, 1.0) } else { value_range });
         let rgb = nums("RGBPoints")?.ok_or("no RGBPoints")?;
         if rgb.len() % 4 != 0 || rgb.is_empty() {
             return Err(format!("RGBPoints has {} numbers, not a multiple of 4", rgb.len()));

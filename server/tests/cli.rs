@@ -50,6 +50,55 @@ fn bad_arguments_fail_with_a_message() {
     }
 }
 
+/// The visual-state flags: a preset renders as its JSON file given with `--tf`; crop, clip,
+/// window/level and opacity change the image; bad values fail with a message naming the flag.
+#[test]
+fn visual_flags_render_and_bad_values_fail_clearly() {
+    let dir = common::temp_dir("cli-visual");
+    let render = |name: &str, args: &[&str]| {
+        let png = dir.join(name);
+        let out = Command::new(BIN)
+            .args(["render", "--volume", "data/mri_colin27.nrrd", "--size", "40x40", "--orbit", "20,10"])
+            .current_dir(concat!(env!("CARGO_MANIFEST_DIR"), "/.."))
+            .args(args)
+            .arg("--out")
+            .arg(&png)
+            .output()
+            .unwrap();
+        assert!(out.status.success(), "{args:?}: {}", String::from_utf8_lossy(&out.stderr));
+        std::fs::read(&png).unwrap()
+    };
+    let preset = render("p.png", &["--preset", "ct-bone", "--shade", "true"]);
+    assert_eq!(preset, render("f.png", &["--tf", "data/presets/ct-bone.json", "--shade", "true"]));
+    assert_eq!(preset, render("d.png", &["--preset", "ct-bone"]), "the CT presets shade by default");
+    let plain = render("n.png", &[]);
+    for args in [
+        &["--crop", "0,0,0,1,0.5,1"][..],
+        &["--clip", "0.5,0.5,0.5,0,-1,0"],
+        &["--window-level", "0.5,0.6"],
+        &["--opacity-scale", "0.3"],
+        &["--shade", "true"],
+    ] {
+        assert_ne!(render("x.png", args), plain, "{args:?}");
+    }
+    for (args, want) in [
+        (&["--window-level", "0,0.5"][..], "--window-level"),
+        (&["--window-level", "nan,0.5"], "--window-level"),
+        (&["--window-level", "1"], "--window-level"),
+        (&["--opacity-scale", "-2"], "--opacity-scale"),
+        (&["--crop", "0,0,0,1,1,1.5"], "--crop"),
+        (&["--crop", "0.6,0,0,0.4,1,1"], "--crop"),
+        (&["--clip", "0.5,0.5,0.5,0,0,0"], "--clip"),
+        (&["--preset", "bone"], "--preset"),
+        (&["--shade", "maybe"], "--shade"),
+    ] {
+        let out = Command::new(BIN).args(["render", "--out", "x.png"]).args(args).output().unwrap();
+        assert!(!out.status.success(), "{args:?}");
+        let err = String::from_utf8_lossy(&out.stderr);
+        assert!(err.contains(want), "{args:?}: {err}");
+    }
+}
+
 /// Starts the server on a free loopback port with the small procedural volume and `extra`
 /// arguments; returns it and the address it printed.
 fn serve(extra: &[&std::ffi::OsStr]) -> (std::process::Child, std::net::SocketAddr) {

@@ -57,7 +57,15 @@ def volume_property(scene):
     prop.SetColor(color)
     prop.SetScalarOpacity(opacity)
     prop.SetInterpolationTypeToLinear()
-    prop.ShadeOff()
+    if scene.get("shade"):
+        # volwarp's Shading::DEFAULT (the light differs: VTK's is the renderer's headlight).
+        prop.ShadeOn()
+        prop.SetAmbient(0.3)
+        prop.SetDiffuse(0.7)
+        prop.SetSpecular(0.2)
+        prop.SetSpecularPower(32.0)
+    else:
+        prop.ShadeOff()
     prop.SetScalarOpacityUnitDistance(scene["opacity_unit"])
     return prop
 

@@ -18,9 +18,17 @@ impl Volume {
     #[inline(always)]
     pub fn sample_grid(&self, g: Vec3) -> f32 {
         let [nx, ny, nz] = self.dims;
-        let gx = g.x.max(0.0).min((nx - 1) as f32); // NaN -> 0
-        let gy = g.y.max(0.0).min((ny - 1) as f32); // NaN -> 0
-        let gz = g.z.max(0.0).min((nz - 1) as f32); // NaN -> 0
+        self.sample_grid_in(g, Vec3::ZERO, Vec3::new((nx - 1) as f32, (ny - 1) as f32, (nz - 1) as f32))
+    }
+
+    /// [`Volume::sample_grid`] with `g` clamped to `[lo, hi]` instead of the whole volume
+    /// (`0 ≤ lo ≤ hi ≤ dims − 1`; a crop box's voxels): a cropped volume's sample reads no voxel
+    /// outside the crop beyond what its trilinear stencil needs at a fraction of zero.
+    #[inline(always)]
+    pub fn sample_grid_in(&self, g: Vec3, lo: Vec3, hi: Vec3) -> f32 {
+        let gx = g.x.max(lo.x).min(hi.x); // NaN -> lo
+        let gy = g.y.max(lo.y).min(hi.y); // NaN -> lo
+        let gz = g.z.max(lo.z).min(hi.z); // NaN -> lo
         let (x0, y0, z0) = (gx as u32, gy as u32, gz as u32);
         let (fx, fy, fz) = (gx - x0 as f32, gy - y0 as f32, gz - z0 as f32);
         let c = self.voxels.corners(x0, y0, z0);
