@@ -8,14 +8,14 @@
 //! the merged bands are gathered to rank 0, which assembles and encodes the frame as the
 //! one-process server does ([`super::FrameGeometry`]).
 //!
-//! **Faults.** MPI calls run on rank 0's main thread only; a watchdog thread times every frame.
-//! A frame not done within the rank timeout (a rank died or hangs) makes rank 0 send every
-//! waiting client an `INTERNAL` error naming the timeout, print it and exit with status 3 —
-//! never a silent hang. (Launch with `mpiexec -disable-auto-cleanup` so that rank 0 outlives a
-//! killed rank to say so; by default MPICH's `mpiexec` kills every rank when one dies.) A bad
-//! launch — files that differ between ranks, more ranks than the volume has bricks, a part
-//! refused for memory — is reported by rank 0 (and the rank concerned) before any frame, and
-//! every rank exits non-zero.
+//! **Faults.** MPI calls run on rank 0's main thread only, with errors returned rather than
+//! fatal; a watchdog thread times every frame. A frame not done within the rank timeout (a
+//! rank hangs) or whose bands do not arrive whole (a rank failed) makes rank 0 send every
+//! waiting client an `INTERNAL` error, print it and exit with status 3 — never a silent hang.
+//! A rank that dies makes MPICH's `mpiexec` kill every rank, rank 0 too: the clients'
+//! connections close and `mpiexec` fails. A bad launch — files that differ between ranks, more
+//! ranks than the volume has bricks, a part refused for memory — is reported by rank 0 (and
+//! the rank concerned) before any frame, and every rank exits non-zero.
 
 use super::composite::{self, Band};
 use super::decomposition::{self, Decomposition};
@@ -154,7 +154,7 @@ fn frame_collective(
     part: &PartMarcher,
     req: &CameraRequest,
     layers: u32,
-) -> Option<(Vec<Band>, Vec<RankStats>)> {
+) -> Option<Result<(Vec<Band>, Vec<RankStats>), String>> {
     let size = world.size() as usize;
     let rank = world.rank() as usize;
     let cam = &req.camera;
@@ -191,11 +191,14 @@ fn frame_collective(
     st.exchange_us = (t2 - t1).as_micros() as u64;
     let rows = composite::band_rows(cam.height, size, rank);
     let pixels = (rows.end - rows.start) as usize * cam.width as usize;
+    // A band that does not decode (a failed rank's): rank 0 fails the frame.
+    let mut broken = false;
     let bands: Vec<Band> = (0..size)
         .map(|r| {
             let (a, n) = (rdispl[r] as usize, rcounts[r] as usize);
             composite::decode_band(&recv[a..a + n], pixels, k).unwrap_or_else(|e| {
                 log::error!("rank {rank}: the band from rank {r} is broken ({e}); left out");
+                broken = true;
                 Band { count: vec![0; pixels], start: vec![0; pixels], segs: Vec::new() }
             })
         })
@@ -219,17 +222,18 @@ fn frame_collective(
             let mut rp = PartitionMut::new(&mut all[..], &lens[..], &displs[..]);
             root.gather_varcount_into_root(&merged[..], &mut rp);
         }
-        let mut out = Vec::with_capacity(size);
+        let mut out = Ok(Vec::with_capacity(size));
         for b in 0..size {
             let rows = composite::band_rows(cam.height, size, b);
             let pixels = (rows.end - rows.start) as usize * cam.width as usize;
             let (a, n) = (displs[b] as usize, lens[b] as usize);
-            match composite::decode_band(&all[a..a + n], pixels, k) {
-                Ok(band) => out.push(band),
-                Err(e) => {
-                    log::error!("rank 0: the merged band of rank {b} is broken ({e})");
-                    out.push(Band { count: vec![0; pixels], start: vec![0; pixels], segs: Vec::new() });
+            match (&mut out, composite::decode_band(&all[a..a + n], pixels, k)) {
+                (Ok(o), Ok(band)) if !broken => o.push(band),
+                (Ok(_), r) => {
+                    let why = r.err().unwrap_or_else(|| "a band it received was broken".into());
+                    out = Err(format!("rank {b} sent no valid band ({why}): a rank failed"));
                 }
+                (Err(_), _) => {}
             }
         }
         Some(out)
@@ -247,7 +251,7 @@ fn frame_collective(
             .chunks_exact(5)
             .map(|s| RankStats { march_us: s[0], exchange_us: s[1], merge_us: s[2], gather_us: s[3], bytes_sent: s[4] })
             .collect();
-        out.map(|o| (o, stats))
+        out.map(|o| o.map(|o| (o, stats)))
     } else {
         root.gather_into(&mine[..]);
         None
@@ -283,6 +287,14 @@ impl Watchdog {
             })
             .expect("spawning the watchdog");
         w
+    }
+
+    /// Fails the server: every waiting client gets `msg`, then the process exits with 3.
+    fn fail(&self, msg: String) -> ! {
+        *self.failed.lock().unwrap_or_else(|e| e.into_inner()) = Some(msg.clone());
+        std::thread::sleep(Duration::from_millis(500));
+        eprintln!("volwarp-server (rank 0): {msg}");
+        std::process::exit(3);
     }
 
     fn failed(&self) -> Option<String> {
@@ -363,6 +375,13 @@ pub fn run(launch: Launch, job: Job) -> Result<(), String> {
     let (universe, _) =
         mpi::initialize_with_threading(mpi::Threading::Funneled).ok_or("MPI is already initialized or cannot start")?;
     let world = universe.world();
+    // A failed peer makes MPI calls return (their results then fail the frame's checks, or the
+    // watchdog's timeout fires) instead of aborting rank 0 before it can tell its clients.
+    // SAFETY: the communicator is valid for the universe's life; MPI_ERRORS_RETURN is a
+    // predefined handler.
+    unsafe {
+        mpi::ffi::MPI_Comm_set_errhandler(world.as_raw(), mpi::ffi::RSMPI_ERRORS_RETURN);
+    }
     let (rank, size) = (world.rank() as usize, world.size() as usize);
     // The same file on every rank: its dims, voxel spacing and size.
     let fingerprint = |path: &std::path::Path| -> Result<[u64; 5], String> {
@@ -432,20 +451,30 @@ pub fn run(launch: Launch, job: Job) -> Result<(), String> {
         watchdog.start();
         let mut cmd = encode_cmd(req, layers);
         root.broadcast_into(&mut cmd[..]);
-        let (bands, stats) = frame_collective(&world, &part, req, layers).unwrap_or_default();
+        let (bands, stats) = match frame_collective(&world, &part, req, layers) {
+            Some(Ok(r)) => r,
+            Some(Err(e)) => watchdog.fail(e),
+            None => watchdog.fail("rank 0 got no frame".into()),
+        };
         watchdog.done();
         let total = t0.elapsed().as_micros() as u64;
         let march = stats.iter().map(|s| s.march_us).max().unwrap_or(0);
+        let march_min = stats.iter().map(|s| s.march_us).min().unwrap_or(0);
+        let bytes_max = stats.iter().map(|s| s.bytes_sent).max().unwrap_or(0);
+        let bytes_mean = stats.iter().map(|s| s.bytes_sent).sum::<u64>() / size.max(1) as u64;
+        let r0 = stats.first().copied().unwrap_or_default();
+        let ms = |us: u64| us as f64 / 1e3;
         log::info!(
-            "frame {}x{} K={layers} on {size} ranks: {:.1} ms (march max {:.1} ms; exchange {:.1}, merge {:.1}, gather {:.1} ms on rank 0); bytes sent per rank {:?}",
+            "mpi frame {}x{} K={layers}: ranks={size} total_ms={:.1} march_max_ms={:.1} march_min_ms={:.1} \
+             exchange_ms={:.1} merge_ms={:.1} gather_ms={:.1} bytes_per_rank_max={bytes_max} bytes_per_rank_mean={bytes_mean}",
             req.camera.width,
             req.camera.height,
-            total as f64 / 1e3,
-            march as f64 / 1e3,
-            stats.first().map_or(0, |s| s.exchange_us) as f64 / 1e3,
-            stats.first().map_or(0, |s| s.merge_us) as f64 / 1e3,
-            stats.first().map_or(0, |s| s.gather_us) as f64 / 1e3,
-            stats.iter().map(|s| s.bytes_sent).collect::<Vec<_>>()
+            ms(total),
+            ms(march),
+            ms(march_min),
+            ms(r0.exchange_us),
+            ms(r0.merge_us),
+            ms(r0.gather_us),
         );
         let samples = bands.iter().map(|b| b.segs.len()).sum();
         let fs = FrameStats {
