@@ -58,6 +58,16 @@ pub struct Launch {
     pub rank_timeout: Duration,
 }
 
+/// What a `dump` does with its frame: the frame, its message bytes, their encoding and the
+/// frame's stats.
+pub type WriteFrame = Box<dyn FnOnce(&Frame, Vec<u8>, Encoding, &FrameStats) -> Result<(), String> + Send>;
+
+/// A frame request to rank 0's MPI thread and where its frame goes.
+type FrameJob = (CameraRequest, u32, mpsc::Sender<(Frame, FrameStats)>);
+
+/// Rank 0's merged bands of a frame, image order, and every rank's stats.
+type Gathered = (Vec<Band>, Vec<RankStats>);
+
 /// What rank 0 does with the ranks.
 pub enum Job {
     /// Serve clients over TCP (the one-process server's front end).
@@ -69,12 +79,7 @@ pub enum Job {
     ),
     /// Render one frame for a request (given the default camera), with `layers` segments per
     /// pixel, encoded in `Encoding`, and hand its bytes over.
-    Dump(
-        Box<dyn FnOnce(Camera) -> Result<CameraRequest, String> + Send>,
-        u32,
-        Encoding,
-        Box<dyn FnOnce(&Frame, Vec<u8>, Encoding, &FrameStats) -> Result<(), String> + Send>,
-    ),
+    Dump(Box<dyn FnOnce(Camera) -> Result<CameraRequest, String> + Send>, u32, Encoding, WriteFrame),
 }
 
 /// Per-rank timings and bytes of one frame.
@@ -154,7 +159,7 @@ fn frame_collective(
     part: &PartMarcher,
     req: &CameraRequest,
     layers: u32,
-) -> Option<Result<(Vec<Band>, Vec<RankStats>), String>> {
+) -> Option<Result<Gathered, String>> {
     let size = world.size() as usize;
     let rank = world.rank() as usize;
     let cam = &req.camera;
@@ -313,7 +318,7 @@ impl Watchdog {
 /// Rank 0's frames for the TCP server: requests go to the main thread (which alone calls
 /// MPI), answers come back or the watchdog's error does.
 struct Source {
-    jobs: Mutex<mpsc::Sender<(CameraRequest, u32, mpsc::Sender<(Frame, FrameStats)>)>>,
+    jobs: Mutex<mpsc::Sender<FrameJob>>,
     geometry: FrameGeometry,
     watchdog: Arc<Watchdog>,
 }
@@ -507,7 +512,7 @@ pub fn run(launch: Launch, job: Job) -> Result<(), String> {
             write(&f, bytes, got, &stats)
         })(),
         Job::Serve(config, ready) => (|| {
-            let (tx, rx) = mpsc::channel::<(CameraRequest, u32, mpsc::Sender<(Frame, FrameStats)>)>();
+            let (tx, rx) = mpsc::channel::<FrameJob>();
             let source = Arc::new(Source { jobs: Mutex::new(tx), geometry, watchdog: watchdog.clone() });
             // The marcher only names the volume in the server's log.
             let marcher = Marcher::new(volume.clone(), &tf);
