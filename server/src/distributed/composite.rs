@@ -173,18 +173,36 @@ pub fn decode_band(bytes: &[u8], pixels: usize, k: usize) -> Result<Band, String
 }
 
 /// Merges the bands every part sent for one band of the image into `k` segments per pixel
-/// (the band's owner's work), as a [`Band`].
+/// (the band's owner's work, in parallel over runs of pixels), as a [`Band`].
 pub fn merge_bands(bands: &[Band], pixels: usize, k: usize, ert: f32) -> Band {
+    use rayon::prelude::*;
+    const RUN: usize = 4096;
+    let runs: Vec<(Vec<u8>, Vec<Seg>)> = (0..pixels.div_ceil(RUN))
+        .into_par_iter()
+        .map(|r| {
+            let mut count = Vec::with_capacity(RUN);
+            let mut segs = Vec::new();
+            let mut buf = Vec::new();
+            let mut lists: Vec<&[Seg]> = Vec::with_capacity(bands.len());
+            for i in r * RUN..((r + 1) * RUN).min(pixels) {
+                lists.clear();
+                lists.extend(bands.iter().map(|b| b.pixel(i)));
+                merge(&lists, k, ert, &mut buf);
+                count.push(buf.len() as u8);
+                segs.extend_from_slice(&buf);
+            }
+            (count, segs)
+        })
+        .collect();
     let mut out = Band { count: Vec::with_capacity(pixels), start: Vec::with_capacity(pixels), segs: Vec::new() };
-    let mut buf = Vec::new();
-    let mut lists: Vec<&[Seg]> = Vec::with_capacity(bands.len());
-    for i in 0..pixels {
-        lists.clear();
-        lists.extend(bands.iter().map(|b| b.pixel(i)));
-        merge(&lists, k, ert, &mut buf);
-        out.start.push(out.segs.len() as u32);
-        out.count.push(buf.len() as u8);
-        out.segs.extend_from_slice(&buf);
+    let mut at = 0u32;
+    for (count, segs) in runs {
+        for &c in &count {
+            out.start.push(at);
+            at += u32::from(c);
+        }
+        out.count.extend_from_slice(&count);
+        out.segs.extend_from_slice(&segs);
     }
     out
 }

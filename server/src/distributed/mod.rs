@@ -24,6 +24,7 @@ use crate::marcher::{MarchOptions, RADIUS_CODE};
 use crate::radius::{FrameRadius, Uncertainty};
 use composite::Band;
 use partial::PartMarcher;
+use rayon::prelude::*;
 use volwarp_core::compact_frame::{EncodeOptions, Encoding, RadiusPrediction};
 use volwarp_core::sample::{pack_color_f32, Bounds, Quantizer};
 use volwarp_core::wire::{self, CameraRequest, Frame, FrameHeader, Message};
@@ -75,20 +76,40 @@ impl FrameGeometry {
         let w = req.camera.width.max(1);
         let mut frame =
             Frame { header: self.header(req), samples: Vec::new(), colors: Vec::new(), segments: Vec::new() };
-        let mut i = 0u32;
-        for b in bands {
-            for p in 0..b.count.len() {
-                let d = basis.dir(i % w, i / w);
-                for (j, s) in b.pixel(p).iter().enumerate() {
-                    let r = if layers > 1 { radius.at(d, s.t) } else { radius.at_ray(d, s.t, &Uncertainty::default()) };
-                    frame.samples.push(q.pack(o + d * s.t, r));
-                    frame.colors.push(pack_color_f32(s.c));
-                    if layers > 1 {
-                        frame.segments.push(j as u8);
+        // Each band's samples in parallel, then joined in image order.
+        let first: Vec<u32> = bands
+            .iter()
+            .scan(0u32, |at, b| {
+                let f = *at;
+                *at += b.count.len() as u32;
+                Some(f)
+            })
+            .collect();
+        let parts: Vec<(Vec<u64>, Vec<u32>, Vec<u8>)> = bands
+            .par_iter()
+            .zip(first.par_iter())
+            .map(|(b, &first)| {
+                let (mut samples, mut colors, mut segments) = (Vec::new(), Vec::new(), Vec::new());
+                for p in 0..b.count.len() {
+                    let i = first + p as u32;
+                    let d = basis.dir(i % w, i / w);
+                    for (j, s) in b.pixel(p).iter().enumerate() {
+                        let r =
+                            if layers > 1 { radius.at(d, s.t) } else { radius.at_ray(d, s.t, &Uncertainty::default()) };
+                        samples.push(q.pack(o + d * s.t, r));
+                        colors.push(pack_color_f32(s.c));
+                        if layers > 1 {
+                            segments.push(j as u8);
+                        }
                     }
                 }
-                i += 1;
-            }
+                (samples, colors, segments)
+            })
+            .collect();
+        for (s, c, g) in parts {
+            frame.samples.extend_from_slice(&s);
+            frame.colors.extend_from_slice(&c);
+            frame.segments.extend_from_slice(&g);
         }
         frame.header.radius_unit = radius.unit();
         frame.header.count = frame.samples.len() as u32;

@@ -87,7 +87,9 @@ pub enum Job {
 pub struct RankStats {
     /// Marching the part, µs.
     pub march_us: u64,
-    /// The all-to-all of the bands, µs.
+    /// Waiting for the slowest rank's march (a barrier), µs.
+    pub wait_us: u64,
+    /// Encoding the bands and their all-to-all, µs.
     pub exchange_us: u64,
     /// Decoding and merging the received bands, µs.
     pub merge_us: u64,
@@ -168,8 +170,8 @@ fn frame_collective(
     let mut st = RankStats::default();
     let t0 = Instant::now();
     let pf = part.march(cam, layers, req.heuristic);
-    let t1 = Instant::now();
-    st.march_us = (t1 - t0).as_micros() as u64;
+    let t_marched = Instant::now();
+    st.march_us = (t_marched - t0).as_micros() as u64;
     // Direct-send: band b to rank b.
     let mut send = Vec::new();
     let mut scounts = vec![0i32; size];
@@ -182,6 +184,10 @@ fn frame_collective(
         send.extend_from_slice(&bytes);
     }
     drop(pf);
+    // The ranks wait for the slowest march here (timed apart from the exchange itself).
+    world.barrier();
+    let t1 = Instant::now();
+    st.wait_us = (t1 - t_marched).as_micros() as u64;
     let mut rcounts = vec![0i32; size];
     world.all_to_all_into(&scounts[..], &mut rcounts[..]);
     let (sdispl, rdispl) = (prefix(&scounts), prefix(&rcounts));
@@ -248,13 +254,20 @@ fn frame_collective(
         None
     };
     st.gather_us = t3.elapsed().as_micros() as u64;
-    let mine = [st.march_us, st.exchange_us, st.merge_us, st.gather_us, st.bytes_sent];
+    let mine = [st.march_us, st.wait_us, st.exchange_us, st.merge_us, st.gather_us, st.bytes_sent];
     if rank == 0 {
-        let mut all = vec![0u64; 5 * size];
+        let mut all = vec![0u64; 6 * size];
         root.gather_into_root(&mine[..], &mut all[..]);
         let stats = all
-            .chunks_exact(5)
-            .map(|s| RankStats { march_us: s[0], exchange_us: s[1], merge_us: s[2], gather_us: s[3], bytes_sent: s[4] })
+            .chunks_exact(6)
+            .map(|s| RankStats {
+                march_us: s[0],
+                wait_us: s[1],
+                exchange_us: s[2],
+                merge_us: s[3],
+                gather_us: s[4],
+                bytes_sent: s[5],
+            })
             .collect();
         out.map(|o| o.map(|o| (o, stats)))
     } else {
@@ -467,7 +480,7 @@ pub fn run(launch: Launch, job: Job) -> Result<(), String> {
         let march_min = stats.iter().map(|s| s.march_us).min().unwrap_or(0);
         let bytes_max = stats.iter().map(|s| s.bytes_sent).max().unwrap_or(0);
         let bytes_mean = stats.iter().map(|s| s.bytes_sent).sum::<u64>() / size.max(1) as u64;
-        let r0 = stats.first().copied().unwrap_or_default();
+        let slowest = |f: fn(&RankStats) -> u64| stats.iter().map(f).max().unwrap_or(0);
         let ms = |us: u64| us as f64 / 1e3;
         log::info!(
             "mpi frame {}x{} K={layers}: ranks={size} total_ms={:.1} march_max_ms={:.1} march_min_ms={:.1} \
@@ -477,9 +490,9 @@ pub fn run(launch: Launch, job: Job) -> Result<(), String> {
             ms(total),
             ms(march),
             ms(march_min),
-            ms(r0.exchange_us),
-            ms(r0.merge_us),
-            ms(r0.gather_us),
+            ms(slowest(|s| s.exchange_us)),
+            ms(slowest(|s| s.merge_us)),
+            ms(slowest(|s| s.gather_us)),
         );
         let samples = bands.iter().map(|b| b.segs.len()).sum();
         let fs = FrameStats {
@@ -506,9 +519,16 @@ pub fn run(launch: Launch, job: Job) -> Result<(), String> {
         Job::Dump(request, layers, encoding, write) => (|| {
             let req = request(default_camera)?;
             let (bands, stats) = frame(&req, layers);
+            let t = Instant::now();
             let f =
                 geometry.frame(&req, layers, &bands, (stats.march_us + stats.compact_us).min(u32::MAX as u64) as u32);
+            let t_frame = t.elapsed();
             let (bytes, got) = geometry.encode(&req, &f, encoding, true);
+            log::info!(
+                "mpi frame assembly_ms={:.1} encode_ms={:.1}",
+                t_frame.as_secs_f64() * 1e3,
+                (t.elapsed() - t_frame).as_secs_f64() * 1e3
+            );
             write(&f, bytes, got, &stats)
         })(),
         Job::Serve(config, ready) => (|| {
