@@ -101,12 +101,21 @@ pub fn merge_reference(lists: &[&[Seg]], k: usize, ert: f32) -> Vec<Seg> {
 
 /// Merges pixel lists and reduces them to `k` (the fast path of [`merge_reference`]).
 pub fn merge(lists: &[&[Seg]], k: usize, ert: f32, out: &mut Vec<Seg>) {
-    merge_lists(lists, out);
+    let mut nonempty = lists.iter().filter(|l| !l.is_empty());
+    match (nonempty.next(), nonempty.next()) {
+        (None, _) => out.clear(),
+        // One part saw the pixel: its list as it is (most pixels).
+        (Some(l), None) => {
+            out.clear();
+            out.extend_from_slice(l);
+        }
+        _ => merge_lists(lists, out),
+    }
     reduce(out, k, ert);
 }
 
 /// A band of a [`PartFrame`] as the bytes a rank sends its band's owner: a segment count per
-/// pixel, then the segments (`t` and RGBA as little-endian `f32`, [`SEG_BYTES`] each).
+/// pixel, then the segments (`t` and RGBA as `f32` in memory order, [`SEG_BYTES`] each).
 pub fn encode_band(pf: &PartFrame, rows: std::ops::Range<u32>) -> Vec<u8> {
     let w = pf.width as usize;
     let (p0, p1) = (rows.start as usize * w, rows.end as usize * w);
@@ -114,12 +123,7 @@ pub fn encode_band(pf: &PartFrame, rows: std::ops::Range<u32>) -> Vec<u8> {
     let mut out = Vec::with_capacity(p1 - p0 + n * SEG_BYTES);
     out.extend_from_slice(&pf.count[p0..p1]);
     for i in p0..p1 {
-        for s in pf.pixel(i) {
-            out.extend_from_slice(&s.t.to_le_bytes());
-            for c in s.c {
-                out.extend_from_slice(&c.to_le_bytes());
-            }
-        }
+        out.extend_from_slice(bytemuck::cast_slice(pf.pixel(i)));
     }
     out
 }
@@ -155,11 +159,7 @@ pub fn decode_band(bytes: &[u8], pixels: usize, k: usize) -> Result<Band, String
     if body.len() != n * SEG_BYTES {
         return Err(format!("a band of {n} segments holds {} bytes, not {}", body.len(), n * SEG_BYTES));
     }
-    let f = |b: &[u8]| f32::from_le_bytes([b[0], b[1], b[2], b[3]]);
-    let segs: Vec<Seg> = body
-        .chunks_exact(SEG_BYTES)
-        .map(|c| Seg { t: f(&c[0..4]), c: [f(&c[4..8]), f(&c[8..12]), f(&c[12..16]), f(&c[16..20])] })
-        .collect();
+    let segs: Vec<Seg> = bytemuck::pod_collect_to_vec(body);
     if segs.iter().any(|s| !s.t.is_finite() || s.c.iter().any(|v| !v.is_finite())) {
         return Err("a segment with a non-finite value".into());
     }
@@ -211,11 +211,6 @@ pub fn merge_bands(bands: &[Band], pixels: usize, k: usize, ert: f32) -> Band {
 pub fn encode_merged(b: &Band) -> Vec<u8> {
     let mut out = Vec::with_capacity(b.count.len() + b.segs.len() * SEG_BYTES);
     out.extend_from_slice(&b.count);
-    for s in &b.segs {
-        out.extend_from_slice(&s.t.to_le_bytes());
-        for c in s.c {
-            out.extend_from_slice(&c.to_le_bytes());
-        }
-    }
+    out.extend_from_slice(bytemuck::cast_slice(&b.segs));
     out
 }

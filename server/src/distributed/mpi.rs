@@ -175,8 +175,14 @@ fn frame_collective(
     // Direct-send: band b to rank b.
     let mut send = Vec::new();
     let mut scounts = vec![0i32; size];
-    for (b, c) in scounts.iter_mut().enumerate() {
-        let bytes = composite::encode_band(&pf, composite::band_rows(cam.height, size, b));
+    let coded: Vec<Vec<u8>> = {
+        use rayon::prelude::*;
+        (0..size)
+            .into_par_iter()
+            .map(|b| composite::encode_band(&pf, composite::band_rows(cam.height, size, b)))
+            .collect()
+    };
+    for (b, (c, bytes)) in scounts.iter_mut().zip(coded).enumerate() {
         *c = bytes.len() as i32;
         if b != rank {
             st.bytes_sent += bytes.len() as u64;

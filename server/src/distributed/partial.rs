@@ -25,8 +25,10 @@ use std::sync::Arc;
 use volwarp_core::segments::{Segmenter, MAX_LAYERS};
 use volwarp_core::{Camera, DepthPicker, FirstPassAccumulator, Heuristic, Vec3};
 
-/// One depth segment as ranks exchange it: representative depth and premultiplied RGBA.
-#[derive(Clone, Copy, Debug, Default, PartialEq)]
+/// One depth segment as ranks exchange it: representative depth and premultiplied RGBA (sent
+/// as its 20 bytes in memory order: ranks of one job share one byte order).
+#[derive(Clone, Copy, Debug, Default, PartialEq, bytemuck::Pod, bytemuck::Zeroable)]
+#[repr(C)]
 pub struct Seg {
     /// Depth (ray parameter along the unit ray).
     pub t: f32,
