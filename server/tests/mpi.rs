@@ -170,6 +170,21 @@ fn a_client_over_loopback_gets_the_composited_frames() {
             assert!(f.samples.len() > 500);
         }
         c.send(&Message::Bye);
+        // A frame whose segments could pass 2 GiB is refused with a clear error, not wrapped.
+        let mut big = Client::connect(addr);
+        big.send(&Message::Hello(Hello::new(0).with_layers(16)));
+        assert!(matches!(big.recv(), Ok(Message::Hello(h)) if h.layers == 16));
+        let camera = m.default_camera(4096, 4096);
+        big.send(&Message::CameraRequest(CameraRequest {
+            seq: 9,
+            camera,
+            heuristic: Heuristic::Threshold,
+            radius_scale: 1.0,
+        }));
+        match big.recv() {
+            Ok(Message::Error(e)) => assert!(e.text.contains("too large for the exchange"), "{}", e.text),
+            other => panic!("expected an error, got {other:?}"),
+        }
         let _ = child.kill();
         let _ = child.wait();
     }

@@ -63,7 +63,7 @@ pub struct Launch {
 pub type WriteFrame = Box<dyn FnOnce(&Frame, Vec<u8>, Encoding, &FrameStats) -> Result<(), String> + Send>;
 
 /// A frame request to rank 0's MPI thread and where its frame goes.
-type FrameJob = (CameraRequest, u32, mpsc::Sender<(Frame, FrameStats)>);
+type FrameJob = (CameraRequest, u32, mpsc::Sender<Result<(Frame, FrameStats), String>>);
 
 /// Rank 0's merged bands of a frame, image order, and every rank's stats.
 type Gathered = (Vec<Band>, Vec<RankStats>);
@@ -355,10 +355,11 @@ impl FrameSource for Source {
             .map_err(|_| "the MPI front end has stopped".to_string())?;
         loop {
             match rx.recv_timeout(Duration::from_millis(50)) {
-                Ok((f, stats)) => {
+                Ok(Ok((f, stats))) => {
                     *frame = f;
                     return Ok(stats);
                 }
+                Ok(Err(e)) => return Err(e),
                 Err(mpsc::RecvTimeoutError::Timeout) => {
                     if let Some(e) = self.watchdog.failed() {
                         return Err(e);
@@ -470,7 +471,17 @@ pub fn run(launch: Launch, job: Job) -> Result<(), String> {
     }
     let watchdog = Watchdog::spawn(launch.rank_timeout);
     let root = world.process_at_rank(0);
-    let frame = |req: &CameraRequest, layers: u32| -> (Vec<Band>, FrameStats) {
+    let frame = |req: &CameraRequest, layers: u32| -> Result<(Vec<Band>, FrameStats), String> {
+        // MPI counts and displacements are 32-bit: the most bytes a frame's segments may take.
+        let k = u64::from(layers.clamp(1, volwarp_core::segments::MAX_LAYERS as u32));
+        let pixels = u64::from(req.camera.width) * u64::from(req.camera.height);
+        if pixels * (1 + super::partial::SEG_BYTES as u64 * k) > i32::MAX as u64 {
+            return Err(format!(
+                "a {}x{} frame of {k} segments per pixel is too large for the exchange between MPI ranks \
+                 (2 GiB of segments): ask for fewer pixels or segments",
+                req.camera.width, req.camera.height
+            ));
+        }
         let t0 = Instant::now();
         watchdog.start();
         let mut cmd = encode_cmd(req, layers);
@@ -507,7 +518,7 @@ pub fn run(launch: Launch, job: Job) -> Result<(), String> {
             samples,
             pixels: (req.camera.width * req.camera.height) as usize,
         };
-        (bands, fs)
+        Ok((bands, fs))
     };
     let default_camera = {
         let b = geometry.bounds();
@@ -519,12 +530,12 @@ pub fn run(launch: Launch, job: Job) -> Result<(), String> {
         Job::Render(camera, write) => (|| {
             let cam = camera(default_camera)?;
             let req = CameraRequest { seq: 0, camera: cam, heuristic: Heuristic::Threshold, radius_scale: 1.0 };
-            let (bands, _) = frame(&req, volwarp_core::segments::DEFAULT_LAYERS as u32);
+            let (bands, _) = frame(&req, volwarp_core::segments::DEFAULT_LAYERS as u32)?;
             write(super::image(cam.width, cam.height, &bands))
         })(),
         Job::Dump(request, layers, encoding, write) => (|| {
             let req = request(default_camera)?;
-            let (bands, stats) = frame(&req, layers);
+            let (bands, stats) = frame(&req, layers)?;
             let t = Instant::now();
             let f =
                 geometry.frame(&req, layers, &bands, (stats.march_us + stats.compact_us).min(u32::MAX as u64) as u32);
@@ -547,7 +558,13 @@ pub fn run(launch: Launch, job: Job) -> Result<(), String> {
             ready(server.local_addr());
             let _handle = server.spawn();
             for (req, layers, reply) in rx {
-                let (bands, stats) = frame(&req, layers);
+                let (bands, stats) = match frame(&req, layers) {
+                    Ok(r) => r,
+                    Err(e) => {
+                        let _ = reply.send(Err(e));
+                        continue;
+                    }
+                };
                 let t = Instant::now();
                 let f = geometry.frame(&req, layers, &bands, 0);
                 let stats = FrameStats { compact_us: stats.compact_us + t.elapsed().as_micros() as u64, ..stats };
@@ -558,7 +575,7 @@ pub fn run(launch: Launch, job: Job) -> Result<(), String> {
                     },
                     ..f
                 };
-                let _ = reply.send((f, stats));
+                let _ = reply.send(Ok((f, stats)));
             }
             Ok(())
         })(),
