@@ -12,7 +12,10 @@ need=()
 # gcc-aarch64-linux-gnu: minifb's and zstd-sys's build scripts compile C for the ARM check of the
 # client; libc6-dev-arm64-cross: the C library headers that C needs (only a "Recommends" of the
 # compiler, which --no-install-recommends leaves out).
-for p in mesa-vulkan-drivers libvulkan1 xvfb xauth x11-apps gcc-aarch64-linux-gnu libc6-dev-arm64-cross; do
+# mpich, libmpich-dev: the MPI the server's feature `mpi` links (rsmpi) and whose mpiexec the
+# end-to-end tests launch; libclang-dev: bindgen, which rsmpi's build runs over mpi.h.
+for p in mesa-vulkan-drivers libvulkan1 xvfb xauth x11-apps gcc-aarch64-linux-gnu libc6-dev-arm64-cross \
+  mpich libmpich-dev libclang-dev; do
   dpkg -s "$p" >/dev/null 2>&1 || need+=("$p")
 done
 if [ ${#need[@]} -gt 0 ]; then

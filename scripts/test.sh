@@ -34,6 +34,16 @@ cargo check --target aarch64-unknown-linux-gnu -p volwarp-cpu-tracer -p volwarp-
 echo "== tests (window tests under Xvfb)"
 xvfb-run -a -s "-screen 0 1280x1024x24" cargo test --workspace
 
+echo "== the server across MPI ranks: clippy and mpiexec -n 1..4 end to end (feature mpi, MPICH)"
+# The default server and the client link no MPI.
+if cargo tree -p volwarp-server -p volwarp-client -e normal | grep -q " mpi v"; then
+  echo "the default build depends on MPI"; exit 1
+fi
+cargo clippy -p volwarp-server --all-targets --features mpi -- -D warnings
+cargo test -p volwarp-server --features mpi --test mpi
+# The real client, headless over loopback, against 3 ranks.
+scripts/mpi-client.sh target/debug/volwarp-server target/debug/volwarp-client
+
 if [ "${VOLWARP_NO_FUZZ:-0}" != 1 ]; then
   echo "== fuzz smoke"
   scripts/fuzz-smoke.sh "${VOLWARP_FUZZ_SECONDS:-30}"

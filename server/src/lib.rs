@@ -36,6 +36,7 @@
 
 pub mod compaction;
 pub mod dataset;
+pub mod distributed;
 pub mod empty_space;
 pub mod encoding;
 mod lanes;

@@ -138,6 +138,10 @@ struct DataArgs {
     layers: Option<u8>,
     #[command(flatten)]
     visual: VisualArgs,
+    /// Under `mpiexec` (a build with the feature `mpi`): seconds a frame may take on the
+    /// ranks before rank 0 reports a failed rank to its clients and exits with status 3.
+    #[arg(long, global = true, default_value_t = 120.0)]
+    rank_timeout: f64,
 }
 
 /// The visual state (`volwarp_server::visual`): what a client can change live, a script can
@@ -273,6 +277,11 @@ fn secs(s: f64, what: &str) -> Result<Duration, String> {
 }
 
 fn camera(ds: &Dataset, a: &CameraArgs) -> Result<Camera, String> {
+    camera_from(default_camera(&ds.volume, 1, 1), a)
+}
+
+/// The camera of `--orbit`, `--zoom`, `--fov` and `--size` from the volume's default camera.
+fn camera_from(default: Camera, a: &CameraArgs) -> Result<Camera, String> {
     let (w, h) = a
         .size
         .split_once(['x', 'X'])
@@ -283,7 +292,7 @@ fn camera(ds: &Dataset, a: &CameraArgs) -> Result<Camera, String> {
         .split_once(',')
         .and_then(|(y, p)| Some((y.trim().parse::<f32>().ok()?, p.trim().parse::<f32>().ok()?)))
         .ok_or_else(|| format!("--orbit {:?} is not YAW,PITCH", a.orbit))?;
-    let cam = Camera { fov_y_deg: a.fov, ..default_camera(&ds.volume, w, h) }.orbit(yaw, pitch).dolly(a.zoom);
+    let cam = Camera { fov_y_deg: a.fov, width: w, height: h, ..default }.orbit(yaw, pitch).dolly(a.zoom);
     cam.validate(16384).map_err(|e| format!("camera: {e}"))?;
     Ok(cam)
 }
@@ -385,6 +394,30 @@ fn token(n: &NetArgs) -> Result<Option<String>, String> {
     Ok(std::env::var("VOLWARP_TOKEN").ok().filter(|t| !t.is_empty()))
 }
 
+/// The server settings of the command line.
+fn server_config(n: &NetArgs, layers: Option<u8>) -> Result<ServerConfig, String> {
+    let token = token(n)?;
+    Ok(ServerConfig {
+        listen: n.listen,
+        threads: n.threads,
+        max_clients: n.max_clients,
+        max_message: n.max_message,
+        handshake_timeout: secs(n.handshake_timeout, "handshake-timeout")?,
+        idle_timeout: secs(n.idle_timeout, "idle-timeout")?,
+        send_timeout: secs(n.send_timeout, "send-timeout")?,
+        max_viewport: n.max_viewport,
+        token,
+        max_auth_failures: n.max_auth_failures,
+        frame_delay: (n.frame_delay_ms > 0).then(|| Duration::from_millis(n.frame_delay_ms)),
+        compact: !n.no_compact,
+        layers: layers.unwrap_or(volwarp_core::segments::MAX_LAYERS as u8),
+        frame_budget: match n.frame_budget_ms {
+            Some(ms) => Some(secs(ms / 1e3, "frame-budget-ms")?),
+            None => None,
+        },
+    })
+}
+
 fn run(cli: Cli) -> Result<(), String> {
     match &cli.cmd {
         Some(Cmd::Info { path }) => return info(path, &cli.data),
@@ -396,6 +429,10 @@ fn run(cli: Cli) -> Result<(), String> {
         _ => {}
     }
     let visual = visual_state(&cli.data.visual)?;
+    #[cfg(feature = "mpi")]
+    if volwarp_server::distributed::mpi::launched_by_mpiexec() {
+        return run_mpi(cli);
+    }
     let ds = load(&cli.data)?;
     let heuristic = Heuristic::from_name(&cli.data.heuristic)
         .ok_or_else(|| format!("unknown heuristic {:?}", cli.data.heuristic))?;
@@ -416,26 +453,7 @@ fn run(cli: Cli) -> Result<(), String> {
     match cli.cmd.unwrap_or(Cmd::Serve) {
         Cmd::Serve => {
             let n = &cli.net;
-            let token = token(n)?;
-            let config = ServerConfig {
-                listen: n.listen,
-                threads: n.threads,
-                max_clients: n.max_clients,
-                max_message: n.max_message,
-                handshake_timeout: secs(n.handshake_timeout, "handshake-timeout")?,
-                idle_timeout: secs(n.idle_timeout, "idle-timeout")?,
-                send_timeout: secs(n.send_timeout, "send-timeout")?,
-                max_viewport: n.max_viewport,
-                token,
-                max_auth_failures: n.max_auth_failures,
-                frame_delay: (n.frame_delay_ms > 0).then(|| Duration::from_millis(n.frame_delay_ms)),
-                compact: !n.no_compact,
-                layers: cli.data.layers.unwrap_or(volwarp_core::segments::MAX_LAYERS as u8),
-                frame_budget: match n.frame_budget_ms {
-                    Some(ms) => Some(secs(ms / 1e3, "frame-budget-ms")?),
-                    None => None,
-                },
-            };
+            let config = server_config(&cli.net, cli.data.layers)?;
             let server = Server::with_transfer_function(config, marcher, &tf).map_err(|e| e.to_string())?;
             println!("listening on {}", server.local_addr());
             use std::io::Write;
@@ -502,6 +520,89 @@ fn run(cli: Cli) -> Result<(), String> {
         Cmd::Info { path } => info(&path, &cli.data),
         Cmd::Synth { out } => synth(&cli.data, &out),
     }
+}
+
+/// `mpiexec -n N volwarp-server serve|render|dump …`: the volume split across the ranks,
+/// rank 0 the front end ([`volwarp_server::distributed`]).
+#[cfg(feature = "mpi")]
+fn run_mpi(cli: Cli) -> Result<(), String> {
+    use volwarp_server::distributed::mpi::{run, Job, Launch};
+    let volume = cli.data.volume.clone().ok_or("under mpiexec --volume names the file every rank reads")?;
+    let heuristic = Heuristic::from_name(&cli.data.heuristic)
+        .ok_or_else(|| format!("unknown heuristic {:?}", cli.data.heuristic))?;
+    let launch = Launch {
+        volume: PathBuf::from(volume),
+        load: load_options(&cli.data)?,
+        tf: cli.data.tf.clone(),
+        opts: MarchOptions {
+            step_voxels: cli.data.step,
+            radius: cli.data.radius,
+            uncertainty: volwarp_server::radius::UncertaintyParams::DEFAULT,
+            kernel: MarchKernel::Scalar,
+            skip_empty: cli.data.skip_empty,
+            early_termination: cli.data.early_termination,
+        },
+        rank_timeout: secs(cli.data.rank_timeout, "rank-timeout")?,
+    };
+    let radius_scale = cli.data.radius_scale;
+    let layers = cli.data.layers.unwrap_or(1) as u32;
+    let job = match cli.cmd.as_ref().unwrap_or(&Cmd::Serve) {
+        Cmd::Serve => {
+            let config = server_config(&cli.net, cli.data.layers)?;
+            Job::Serve(
+                config,
+                Box::new(|addr| {
+                    use std::io::Write;
+                    println!("listening on {addr}");
+                    let _ = std::io::stdout().flush();
+                }),
+            )
+        }
+        Cmd::Render { cam, out, level } => {
+            if *level > 0 {
+                return Err("--level: levels of detail are not built across MPI ranks".into());
+            }
+            let (cam, out) = (clone_cam(cam), out.clone());
+            Job::Render(
+                Box::new(move |d| camera_from(d, &cam)),
+                Box::new(move |img| {
+                    img.save_png(&out).map_err(|e| e.to_string())?;
+                    println!("wrote {}", out.display());
+                    Ok(())
+                }),
+            )
+        }
+        Cmd::Dump { cam, out, encoding } => {
+            if !(radius_scale > 0.0 && radius_scale <= 16.0) {
+                return Err("--radius-scale must be in (0, 16]".into());
+            }
+            let (cam, out) = (clone_cam(cam), out.clone());
+            Job::Dump(
+                Box::new(move |d| Ok(CameraRequest { seq: 0, camera: camera_from(d, &cam)?, heuristic, radius_scale })),
+                layers,
+                *encoding,
+                Box::new(move |_, bytes, got, stats| {
+                    std::fs::write(&out, &bytes).map_err(|e| format!("{}: {e}", out.display()))?;
+                    println!(
+                        "wrote {} ({} samples, {} bytes, {:.3} bytes/sample, {})",
+                        out.display(),
+                        stats.samples,
+                        bytes.len(),
+                        bytes.len() as f64 / stats.samples.max(1) as f64,
+                        got.name()
+                    );
+                    Ok(())
+                }),
+            )
+        }
+        Cmd::Info { .. } | Cmd::Synth { .. } => unreachable!("answered before any volume is loaded"),
+    };
+    run(launch, job)
+}
+
+#[cfg(feature = "mpi")]
+fn clone_cam(c: &CameraArgs) -> CameraArgs {
+    CameraArgs { orbit: c.orbit.clone(), zoom: c.zoom, fov: c.fov, size: c.size.clone() }
 }
 
 fn parse_encoding(s: &str) -> Result<Encoding, String> {

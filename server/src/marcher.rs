@@ -303,6 +303,12 @@ impl Marcher {
         &self.volume
     }
 
+    /// The opacity-corrected, premultiplied table the scalar kernel classifies with (what a
+    /// part of a distributed volume marches with, [`crate::distributed`]).
+    pub(crate) fn lut_table(&self) -> &[[f32; 4]] {
+        &self.lut
+    }
+
     /// The options in use.
     pub fn options(&self) -> MarchOptions {
         self.opts

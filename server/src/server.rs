@@ -25,7 +25,7 @@
 //! `RATE_LIMITED` and a close at once, before any byte of its Hello is read.
 
 use crate::dataset::Dataset;
-use crate::marcher::Marcher;
+use crate::marcher::{FrameStats, Marcher};
 use crate::render_queue::{LevelPolicy, RenderCounts, RenderQueue};
 use std::collections::HashMap;
 use std::io::{self, BufWriter, Read};
@@ -35,7 +35,7 @@ use std::sync::{Arc, Condvar, Mutex};
 use std::thread::JoinHandle;
 use std::time::{Duration, Instant};
 use volwarp_core::compact_frame::Encoding;
-use volwarp_core::wire::{self, error_code, CameraRequest, ErrorMsg, Hello, Limits, Message, WireError};
+use volwarp_core::wire::{self, error_code, CameraRequest, ErrorMsg, Frame, Hello, Limits, Message, WireError};
 
 /// Server settings (every limit has a command-line flag in the binary).
 #[derive(Clone, Debug, PartialEq)]
@@ -178,8 +178,21 @@ impl Drop for AuthCharge<'_> {
     }
 }
 
+/// Renders and encodes a server's frames in place of its marcher (the MPI front end,
+/// [`crate::distributed`]): rank 0 serves clients exactly as a one-process server does.
+pub trait FrameSource: Send + Sync {
+    /// Renders `req` with at most `layers` segments per pixel into `frame`; an error (a rank
+    /// failed) is sent to the client, which is then disconnected.
+    fn render(&self, req: &CameraRequest, layers: u32, frame: &mut Frame) -> Result<FrameStats, String>;
+    /// The message bytes (header included) of a frame it rendered, in `encoding` where the
+    /// frame fits it, for a receiver of colors coded against green (`green`) or not.
+    fn encode(&self, req: &CameraRequest, frame: &Frame, encoding: Encoding, green: bool) -> (Vec<u8>, Encoding);
+}
+
 struct Shared {
     config: ServerConfig,
+    /// Where frames come from instead of the render queue, if set.
+    source: Option<Arc<dyn FrameSource>>,
     /// The token-guessing limiter (with a token and a nonzero `max_auth_failures` only).
     auth: Option<AuthLimiter>,
     marcher: Arc<Marcher>,
@@ -262,6 +275,7 @@ impl Server {
             .then(|| AuthLimiter::new(config.max_auth_failures));
         let shared = Arc::new(Shared {
             config,
+            source: None,
             auth,
             queue: RenderQueue::with_levels(levels, policy, pool),
             marcher,
@@ -277,6 +291,17 @@ impl Server {
     /// The bound address (with the real port when the config asked for port 0).
     pub fn local_addr(&self) -> SocketAddr {
         self.addr
+    }
+
+    /// The server with its frames rendered and encoded by `source` (its marcher then only
+    /// names the volume in the log).
+    pub fn with_source(self, source: Arc<dyn FrameSource>) -> Server {
+        let mut shared = match Arc::try_unwrap(self.shared) {
+            Ok(s) => s,
+            Err(_) => unreachable!("a server not yet serving holds its state alone"),
+        };
+        shared.source = Some(source);
+        Server { listener: self.listener, addr: self.addr, shared: Arc::new(shared) }
     }
 
     /// Serves on a background thread.
@@ -606,10 +631,19 @@ fn serve(sh: &Shared, stream: &TcpStream, id: u64, charged: Option<IpAddr>) -> S
         }
         let moving = last_camera.is_some_and(|c| c != req.camera);
         last_camera = Some(req.camera);
-        let stats = sh.queue.render_view(&req, layers as u32, moving, &mut frame);
+        let stats = match &sh.source {
+            Some(source) => match source.render(&req, layers as u32, &mut frame) {
+                Ok(stats) => stats,
+                Err(e) => break End::Error(error_code::INTERNAL, e),
+            },
+            None => sh.queue.render_view(&req, layers as u32, moving, &mut frame),
+        };
         let t_send = Instant::now();
         let sent = if encoding == Encoding::Compact {
-            let (bytes, _) = crate::encoding::encode_frame_for(&sh.marcher, &req, &frame, encoding, green);
+            let (bytes, _) = match &sh.source {
+                Some(source) => source.encode(&req, &frame, encoding, green),
+                None => crate::encoding::encode_frame_for(&sh.marcher, &req, &frame, encoding, green),
+            };
             io::Write::write_all(&mut out, &bytes).map_err(|e| e.to_string())
         } else {
             let mut w = embedded_io_adapters::std::FromStd::new(&mut out);

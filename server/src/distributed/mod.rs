@@ -1,0 +1,187 @@
+//! The server across MPI ranks: the volume split by a k-d tree, each rank marching its part on
+//! the global ray grid into per-pixel depth segments, composited sort-last.
+//!
+//! One file per step:
+//! - [`decomposition`]: the k-d split into parts with a one-voxel apron, each rank reading only
+//!   its part of the file;
+//! - [`partial`]: a part's march on the global ray grid into at most K segments per pixel;
+//! - [`composite`]: direct-send by bands of image rows, the merge by depth and the fuse to the
+//!   client's K (the compositing rule is stated there);
+//! - `mpi` (feature `mpi`): the front end over rsmpi: rank 0 serves TCP (or renders, or dumps)
+//!   as the one-process server does; every rank marches and composites its band.
+//!
+//! This module (without `mpi`) also assembles the frame rank 0 sends ([`FrameGeometry`]) and
+//! runs every part in one process ([`render_in_process`]), which the tests compare with the
+//! one-process marcher.
+
+pub mod composite;
+pub mod decomposition;
+#[cfg(feature = "mpi")]
+pub mod mpi;
+pub mod partial;
+
+use crate::marcher::{MarchOptions, RADIUS_CODE};
+use crate::radius::{FrameRadius, Uncertainty};
+use composite::Band;
+use partial::PartMarcher;
+use rayon::prelude::*;
+use volwarp_core::compact_frame::{EncodeOptions, Encoding, RadiusPrediction};
+use volwarp_core::sample::{pack_color_f32, Bounds, Quantizer};
+use volwarp_core::wire::{self, CameraRequest, Frame, FrameHeader, Message};
+use volwarp_core::{Image, Vec3, BACKGROUND};
+
+/// What rank 0 needs of the whole volume to make frames without holding it: its box, its
+/// voxel diagonal and the march options (the same values the one-process marcher reads of
+/// its volume).
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct FrameGeometry {
+    /// The whole volume's dims.
+    pub dims: [u32; 3],
+    /// Voxel spacing.
+    pub spacing: Vec3,
+    /// The march options.
+    pub opts: MarchOptions,
+}
+
+impl FrameGeometry {
+    /// The volume box.
+    pub fn bounds(&self) -> Bounds {
+        Bounds::new(Vec3::ZERO, Vec3::new(self.dims[0] as f32, self.dims[1] as f32, self.dims[2] as f32) * self.spacing)
+    }
+
+    /// [`crate::Marcher::frame_radius`] of the whole volume.
+    pub fn frame_radius(&self, req: &CameraRequest) -> FrameRadius {
+        let scale =
+            if req.radius_scale.is_finite() && req.radius_scale > 0.0 { req.radius_scale.min(16.0) } else { 1.0 };
+        FrameRadius::with_params(
+            self.opts.radius,
+            self.opts.uncertainty,
+            scale,
+            &req.camera,
+            &self.bounds(),
+            0.5 * self.spacing.length(),
+            RADIUS_CODE,
+        )
+    }
+
+    /// The frame of merged per-pixel segments (`rows` of them, row bands in image order, each
+    /// pixel's segments front to back), as the one-process marcher assembles it: `layers` > 1
+    /// gives a layered frame (each segment a sample, its index in `Frame::segments`), 1 one
+    /// sample per non-empty pixel.
+    pub fn frame(&self, req: &CameraRequest, layers: u32, bands: &[Band], render_us: u32) -> Frame {
+        let radius = self.frame_radius(req);
+        let q = Quantizer::new(self.bounds(), radius.unit());
+        let basis = req.camera.ray_basis();
+        let o = basis.origin();
+        let w = req.camera.width.max(1);
+        let mut frame =
+            Frame { header: self.header(req), samples: Vec::new(), colors: Vec::new(), segments: Vec::new() };
+        // Each band's samples in parallel, then joined in image order.
+        let first: Vec<u32> = bands
+            .iter()
+            .scan(0u32, |at, b| {
+                let f = *at;
+                *at += b.count.len() as u32;
+                Some(f)
+            })
+            .collect();
+        let parts: Vec<(Vec<u64>, Vec<u32>, Vec<u8>)> = bands
+            .par_iter()
+            .zip(first.par_iter())
+            .map(|(b, &first)| {
+                let (mut samples, mut colors, mut segments) = (Vec::new(), Vec::new(), Vec::new());
+                for p in 0..b.count.len() {
+                    let i = first + p as u32;
+                    let d = basis.dir(i % w, i / w);
+                    for (j, s) in b.pixel(p).iter().enumerate() {
+                        let r =
+                            if layers > 1 { radius.at(d, s.t) } else { radius.at_ray(d, s.t, &Uncertainty::default()) };
+                        samples.push(q.pack(o + d * s.t, r));
+                        colors.push(pack_color_f32(s.c));
+                        if layers > 1 {
+                            segments.push(j as u8);
+                        }
+                    }
+                }
+                (samples, colors, segments)
+            })
+            .collect();
+        for (s, c, g) in parts {
+            frame.samples.extend_from_slice(&s);
+            frame.colors.extend_from_slice(&c);
+            frame.segments.extend_from_slice(&g);
+        }
+        frame.header.radius_unit = radius.unit();
+        frame.header.count = frame.samples.len() as u32;
+        frame.header.render_us = render_us;
+        frame
+    }
+
+    fn header(&self, req: &CameraRequest) -> FrameHeader {
+        FrameHeader {
+            seq: req.seq,
+            camera: req.camera,
+            heuristic: req.heuristic,
+            bounds: self.bounds(),
+            radius_unit: 0.5 * self.spacing.length() / RADIUS_CODE,
+            render_us: 0,
+            level: 0,
+            count: 0,
+        }
+    }
+
+    /// [`crate::encoding::encode_frame_for`] of a frame made by [`FrameGeometry::frame`].
+    pub fn encode(&self, req: &CameraRequest, frame: &Frame, encoding: Encoding, green: bool) -> (Vec<u8>, Encoding) {
+        if encoding == Encoding::Compact {
+            let r = self.frame_radius(req);
+            let opts = EncodeOptions {
+                radius: Some(RadiusPrediction { constant: r.constant(), per_depth: r.per_depth() }),
+                colors_against_green: green,
+                ..EncodeOptions::default()
+            };
+            if let Some(b) = crate::encoding::encode_compact(frame, &opts, crate::encoding::ZSTD_LEVEL) {
+                return (b, Encoding::Compact);
+            }
+        }
+        (wire::encode_to_vec(&Message::Frame(frame.clone())), Encoding::Raw12)
+    }
+}
+
+/// The composited image of merged bands (each pixel's segments over [`BACKGROUND`], as the
+/// one-process `render_image` shows a pixel).
+pub fn image(width: u32, height: u32, bands: &[Band]) -> Image {
+    let mut img = Image::new(width, height);
+    let mut i = 0;
+    for b in bands {
+        for p in 0..b.count.len() {
+            let c = b.pixel(p).iter().fold([0.0f32; 4], |acc, s| {
+                let keep = 1.0 - acc[3];
+                [0, 1, 2, 3].map(|j| acc[j] + keep * s.c[j])
+            });
+            img.pixels[i] = volwarp_core::sample::over_background(pack_color_f32(c), BACKGROUND);
+            i += 1;
+        }
+    }
+    img
+}
+
+/// Every part marched and composited in one process, with `bands` bands of rows (what `N`
+/// ranks compute between them): the merged bands, in image order.
+pub fn render_in_process(parts: &[PartMarcher], req: &CameraRequest, layers: u32, bands: usize) -> Vec<Band> {
+    let cam = &req.camera;
+    let k = layers.clamp(1, volwarp_core::segments::MAX_LAYERS as u32) as usize;
+    let ert = parts.first().map_or(0.99, |p| p.options().early_termination);
+    let frames: Vec<_> = parts.iter().map(|p| p.march(cam, layers, req.heuristic)).collect();
+    (0..bands)
+        .map(|b| {
+            let rows = composite::band_rows(cam.height, bands, b);
+            let pixels = (rows.end - rows.start) as usize * cam.width as usize;
+            let sent: Vec<Band> = frames
+                .iter()
+                .map(|f| composite::decode_band(&composite::encode_band(f, rows.clone()), pixels, f.k))
+                .collect::<Result<_, _>>()
+                .expect("bands this process encoded decode");
+            composite::merge_bands(&sent, pixels, k, ert)
+        })
+        .collect()
+}

@@ -1,0 +1,586 @@
+//! The MPI front end (feature `mpi`): `mpiexec -n N volwarp-server serve|render|dump …`.
+//!
+//! Every rank reads its part of the volume ([`super::decomposition`]); rank 0 keeps the
+//! one-process front end (the TCP server with its wire format, or the `render` / `dump` file)
+//! and for each frame broadcasts the request; every rank marches its part
+//! ([`super::partial`]), sends each band of image rows to the band's owner (rank `b` owns band
+//! `b`: one all-to-all, direct-send), merges what it received ([`super::composite`]), and
+//! the merged bands are gathered to rank 0, which assembles and encodes the frame as the
+//! one-process server does ([`super::FrameGeometry`]).
+//!
+//! **Faults.** MPI calls run on rank 0's main thread only, with errors returned rather than
+//! fatal; a watchdog thread times every frame. A frame not done within the rank timeout (a
+//! rank hangs) or whose bands do not arrive whole (a rank failed) makes rank 0 send every
+//! waiting client an `INTERNAL` error, print it and exit with status 3 — never a silent hang.
+//! A rank that dies makes MPICH's `mpiexec` kill every rank, rank 0 too: the clients'
+//! connections close and `mpiexec` fails. A bad launch — files that differ between ranks, more
+//! ranks than the volume has bricks, a part refused for memory — is reported by rank 0 (and
+//! the rank concerned) before any frame, and every rank exits non-zero.
+
+use super::composite::{self, Band};
+use super::decomposition::{self, Decomposition};
+use super::partial::PartMarcher;
+use super::FrameGeometry;
+use crate::marcher::{FrameStats, MarchOptions, Marcher};
+use crate::server::{FrameSource, Server, ServerConfig};
+use crate::transfer_function::TransferFunction;
+use crate::volume::LoadOptions;
+use mpi::collective::SystemOperation;
+use mpi::datatype::{Partition, PartitionMut};
+use mpi::topology::SimpleCommunicator;
+use mpi::traits::*;
+use std::path::PathBuf;
+use std::sync::mpsc;
+use std::sync::{Arc, Mutex};
+use std::time::{Duration, Instant};
+use volwarp_core::compact_frame::Encoding;
+use volwarp_core::wire::{CameraRequest, Frame};
+use volwarp_core::{Camera, Heuristic, Image, Vec3};
+
+/// Whether this process was started by an MPI launcher (`mpiexec` sets `PMI_RANK`; Open MPI
+/// sets `OMPI_COMM_WORLD_SIZE`).
+pub fn launched_by_mpiexec() -> bool {
+    ["PMI_RANK", "PMI_SIZE", "OMPI_COMM_WORLD_SIZE"].iter().any(|v| std::env::var_os(v).is_some())
+}
+
+/// What every rank loads and marches.
+#[derive(Clone, Debug)]
+pub struct Launch {
+    /// The volume file (each rank reads its part of it).
+    pub volume: PathBuf,
+    /// Loader options (`--max-memory` applies to each rank's part).
+    pub load: LoadOptions,
+    /// Transfer function file (else the preset for the volume's name and dims).
+    pub tf: Option<PathBuf>,
+    /// March options.
+    pub opts: MarchOptions,
+    /// How long a frame may take before rank 0 gives up on the other ranks.
+    pub rank_timeout: Duration,
+}
+
+/// What a `dump` does with its frame: the frame, its message bytes, their encoding and the
+/// frame's stats.
+pub type WriteFrame = Box<dyn FnOnce(&Frame, Vec<u8>, Encoding, &FrameStats) -> Result<(), String> + Send>;
+
+/// A frame request to rank 0's MPI thread and where its frame goes.
+type FrameJob = (CameraRequest, u32, mpsc::Sender<Result<(Frame, FrameStats), String>>);
+
+/// Rank 0's merged bands of a frame, image order, and every rank's stats.
+type Gathered = (Vec<Band>, Vec<RankStats>);
+
+/// What rank 0 does with the ranks.
+pub enum Job {
+    /// Serve clients over TCP (the one-process server's front end).
+    Serve(ServerConfig, Box<dyn FnOnce(std::net::SocketAddr) + Send>),
+    /// Render the composited image for a camera (given the default camera of the volume box).
+    Render(
+        Box<dyn FnOnce(Camera) -> Result<Camera, String> + Send>,
+        Box<dyn FnOnce(Image) -> Result<(), String> + Send>,
+    ),
+    /// Render one frame for a request (given the default camera), with `layers` segments per
+    /// pixel, encoded in `Encoding`, and hand its bytes over.
+    Dump(Box<dyn FnOnce(Camera) -> Result<CameraRequest, String> + Send>, u32, Encoding, WriteFrame),
+}
+
+/// Per-rank timings and bytes of one frame.
+#[derive(Clone, Copy, Debug, Default, PartialEq)]
+pub struct RankStats {
+    /// Marching the part, µs.
+    pub march_us: u64,
+    /// Waiting for the slowest rank's march (a barrier), µs.
+    pub wait_us: u64,
+    /// Encoding the bands and their all-to-all, µs.
+    pub exchange_us: u64,
+    /// Decoding and merging the received bands, µs.
+    pub merge_us: u64,
+    /// The gather to rank 0, µs.
+    pub gather_us: u64,
+    /// Bytes sent to other ranks (bands and the merged band).
+    pub bytes_sent: u64,
+}
+
+const CMD_LEN: usize = 72;
+const CMD_QUIT: u8 = 0;
+const CMD_FRAME: u8 = 1;
+
+fn encode_cmd(req: &CameraRequest, layers: u32) -> [u8; CMD_LEN] {
+    let mut b = [0u8; CMD_LEN];
+    b[0] = CMD_FRAME;
+    b[1] = layers.min(255) as u8;
+    b[2] = req.heuristic.code();
+    b[64..72].copy_from_slice(&req.seq.to_le_bytes());
+    let c = &req.camera;
+    let f = [c.eye.x, c.eye.y, c.eye.z, c.target.x, c.target.y, c.target.z, c.up.x, c.up.y, c.up.z, c.fov_y_deg];
+    for (i, v) in f.iter().enumerate() {
+        b[8 + 4 * i..12 + 4 * i].copy_from_slice(&v.to_le_bytes());
+    }
+    b[48..52].copy_from_slice(&c.width.to_le_bytes());
+    b[52..56].copy_from_slice(&c.height.to_le_bytes());
+    b[56..60].copy_from_slice(&req.radius_scale.to_le_bytes());
+    b
+}
+
+fn decode_cmd(b: &[u8; CMD_LEN]) -> Option<(CameraRequest, u32)> {
+    if b[0] != CMD_FRAME {
+        return None;
+    }
+    let f = |i: usize| f32::from_le_bytes([b[i], b[i + 1], b[i + 2], b[i + 3]]);
+    let u = |i: usize| u32::from_le_bytes([b[i], b[i + 1], b[i + 2], b[i + 3]]);
+    let camera = Camera {
+        eye: Vec3::new(f(8), f(12), f(16)),
+        target: Vec3::new(f(20), f(24), f(28)),
+        up: Vec3::new(f(32), f(36), f(40)),
+        fov_y_deg: f(44),
+        width: u(48),
+        height: u(52),
+    };
+    let req = CameraRequest {
+        seq: u64::from_le_bytes([b[64], b[65], b[66], b[67], b[68], b[69], b[70], b[71]]),
+        camera,
+        heuristic: Heuristic::from_code(b[2]).unwrap_or(Heuristic::Threshold),
+        radius_scale: f(56),
+    };
+    Some((req, u32::from(b[1])))
+}
+
+fn prefix(counts: &[i32]) -> Vec<i32> {
+    counts
+        .iter()
+        .scan(0i32, |acc, &c| {
+            let d = *acc;
+            *acc += c;
+            Some(d)
+        })
+        .collect()
+}
+
+/// One frame on every rank (collective): march, direct-send by bands, merge, gather. Rank 0
+/// gets the merged bands in image order and every rank's stats.
+fn frame_collective(
+    world: &SimpleCommunicator,
+    part: &PartMarcher,
+    req: &CameraRequest,
+    layers: u32,
+) -> Option<Result<Gathered, String>> {
+    let size = world.size() as usize;
+    let rank = world.rank() as usize;
+    let cam = &req.camera;
+    let k = layers.clamp(1, volwarp_core::segments::MAX_LAYERS as u32) as usize;
+    let ert = part.options().early_termination;
+    let mut st = RankStats::default();
+    let t0 = Instant::now();
+    let pf = part.march(cam, layers, req.heuristic);
+    let t_marched = Instant::now();
+    st.march_us = (t_marched - t0).as_micros() as u64;
+    // Direct-send: band b to rank b.
+    let mut send = Vec::new();
+    let mut scounts = vec![0i32; size];
+    let coded: Vec<Vec<u8>> = {
+        use rayon::prelude::*;
+        (0..size)
+            .into_par_iter()
+            .map(|b| composite::encode_band(&pf, composite::band_rows(cam.height, size, b)))
+            .collect()
+    };
+    for (b, (c, bytes)) in scounts.iter_mut().zip(coded).enumerate() {
+        *c = bytes.len() as i32;
+        if b != rank {
+            st.bytes_sent += bytes.len() as u64;
+        }
+        send.extend_from_slice(&bytes);
+    }
+    drop(pf);
+    // The ranks wait for the slowest march here (timed apart from the exchange itself).
+    world.barrier();
+    let t1 = Instant::now();
+    st.wait_us = (t1 - t_marched).as_micros() as u64;
+    let mut rcounts = vec![0i32; size];
+    world.all_to_all_into(&scounts[..], &mut rcounts[..]);
+    let (sdispl, rdispl) = (prefix(&scounts), prefix(&rcounts));
+    let mut recv = vec![0u8; rcounts.iter().map(|&c| c as usize).sum()];
+    {
+        let sp = Partition::new(&send[..], &scounts[..], &sdispl[..]);
+        let mut rp = PartitionMut::new(&mut recv[..], &rcounts[..], &rdispl[..]);
+        world.all_to_all_varcount_into(&sp, &mut rp);
+    }
+    drop(send);
+    let t2 = Instant::now();
+    st.exchange_us = (t2 - t1).as_micros() as u64;
+    let rows = composite::band_rows(cam.height, size, rank);
+    let pixels = (rows.end - rows.start) as usize * cam.width as usize;
+    // A band that does not decode (a failed rank's): rank 0 fails the frame.
+    let mut broken = false;
+    let bands: Vec<Band> = (0..size)
+        .map(|r| {
+            let (a, n) = (rdispl[r] as usize, rcounts[r] as usize);
+            composite::decode_band(&recv[a..a + n], pixels, k).unwrap_or_else(|e| {
+                log::error!("rank {rank}: the band from rank {r} is broken ({e}); left out");
+                broken = true;
+                Band { count: vec![0; pixels], start: vec![0; pixels], segs: Vec::new() }
+            })
+        })
+        .collect();
+    drop(recv);
+    let merged = composite::encode_merged(&composite::merge_bands(&bands, pixels, k, ert));
+    drop(bands);
+    let t3 = Instant::now();
+    st.merge_us = (t3 - t2).as_micros() as u64;
+    if rank != 0 {
+        st.bytes_sent += merged.len() as u64;
+    }
+    let root = world.process_at_rank(0);
+    let len = merged.len() as i32;
+    let out = if rank == 0 {
+        let mut lens = vec![0i32; size];
+        root.gather_into_root(&len, &mut lens[..]);
+        let displs = prefix(&lens);
+        let mut all = vec![0u8; lens.iter().map(|&c| c as usize).sum()];
+        {
+            let mut rp = PartitionMut::new(&mut all[..], &lens[..], &displs[..]);
+            root.gather_varcount_into_root(&merged[..], &mut rp);
+        }
+        let mut out = Ok(Vec::with_capacity(size));
+        for b in 0..size {
+            let rows = composite::band_rows(cam.height, size, b);
+            let pixels = (rows.end - rows.start) as usize * cam.width as usize;
+            let (a, n) = (displs[b] as usize, lens[b] as usize);
+            match (&mut out, composite::decode_band(&all[a..a + n], pixels, k)) {
+                (Ok(o), Ok(band)) if !broken => o.push(band),
+                (Ok(_), r) => {
+                    let why = r.err().unwrap_or_else(|| "a band it received was broken".into());
+                    out = Err(format!("rank {b} sent no valid band ({why}): a rank failed"));
+                }
+                (Err(_), _) => {}
+            }
+        }
+        Some(out)
+    } else {
+        root.gather_into(&len);
+        root.gather_varcount_into(&merged[..]);
+        None
+    };
+    st.gather_us = t3.elapsed().as_micros() as u64;
+    let mine = [st.march_us, st.wait_us, st.exchange_us, st.merge_us, st.gather_us, st.bytes_sent];
+    if rank == 0 {
+        let mut all = vec![0u64; 6 * size];
+        root.gather_into_root(&mine[..], &mut all[..]);
+        let stats = all
+            .chunks_exact(6)
+            .map(|s| RankStats {
+                march_us: s[0],
+                wait_us: s[1],
+                exchange_us: s[2],
+                merge_us: s[3],
+                gather_us: s[4],
+                bytes_sent: s[5],
+            })
+            .collect();
+        out.map(|o| o.map(|o| (o, stats)))
+    } else {
+        root.gather_into(&mine[..]);
+        None
+    }
+}
+
+/// The watchdog of rank 0: a frame in flight longer than the timeout is a failed rank.
+struct Watchdog {
+    started: Mutex<Option<Instant>>,
+    failed: Mutex<Option<String>>,
+}
+
+impl Watchdog {
+    fn spawn(timeout: Duration) -> Arc<Watchdog> {
+        let w = Arc::new(Watchdog { started: Mutex::new(None), failed: Mutex::new(None) });
+        let wd = w.clone();
+        std::thread::Builder::new()
+            .name("volwarp-mpi-watchdog".into())
+            .spawn(move || loop {
+                std::thread::sleep(Duration::from_millis(50));
+                let late = wd.started.lock().unwrap_or_else(|e| e.into_inner()).is_some_and(|t| t.elapsed() > timeout);
+                if late {
+                    let msg = format!(
+                        "the MPI ranks did not finish a frame within {:.1} s: a rank died or hangs",
+                        timeout.as_secs_f64()
+                    );
+                    *wd.failed.lock().unwrap_or_else(|e| e.into_inner()) = Some(msg.clone());
+                    // Give the client threads time to send the error, then leave.
+                    std::thread::sleep(Duration::from_millis(500));
+                    eprintln!("volwarp-server (rank 0): {msg}");
+                    std::process::exit(3);
+                }
+            })
+            .expect("spawning the watchdog");
+        w
+    }
+
+    /// Fails the server: every waiting client gets `msg`, then the process exits with 3.
+    fn fail(&self, msg: String) -> ! {
+        *self.failed.lock().unwrap_or_else(|e| e.into_inner()) = Some(msg.clone());
+        std::thread::sleep(Duration::from_millis(500));
+        eprintln!("volwarp-server (rank 0): {msg}");
+        std::process::exit(3);
+    }
+
+    fn failed(&self) -> Option<String> {
+        self.failed.lock().unwrap_or_else(|e| e.into_inner()).clone()
+    }
+
+    fn start(&self) {
+        *self.started.lock().unwrap_or_else(|e| e.into_inner()) = Some(Instant::now());
+    }
+
+    fn done(&self) {
+        *self.started.lock().unwrap_or_else(|e| e.into_inner()) = None;
+    }
+}
+
+/// Rank 0's frames for the TCP server: requests go to the main thread (which alone calls
+/// MPI), answers come back or the watchdog's error does.
+struct Source {
+    jobs: Mutex<mpsc::Sender<FrameJob>>,
+    geometry: FrameGeometry,
+    watchdog: Arc<Watchdog>,
+}
+
+impl FrameSource for Source {
+    fn render(&self, req: &CameraRequest, layers: u32, frame: &mut Frame) -> Result<FrameStats, String> {
+        if let Some(e) = self.watchdog.failed() {
+            return Err(e);
+        }
+        let (tx, rx) = mpsc::channel();
+        self.jobs
+            .lock()
+            .unwrap_or_else(|e| e.into_inner())
+            .send((*req, layers, tx))
+            .map_err(|_| "the MPI front end has stopped".to_string())?;
+        loop {
+            match rx.recv_timeout(Duration::from_millis(50)) {
+                Ok(Ok((f, stats))) => {
+                    *frame = f;
+                    return Ok(stats);
+                }
+                Ok(Err(e)) => return Err(e),
+                Err(mpsc::RecvTimeoutError::Timeout) => {
+                    if let Some(e) = self.watchdog.failed() {
+                        return Err(e);
+                    }
+                }
+                Err(mpsc::RecvTimeoutError::Disconnected) => return Err("the MPI front end has stopped".into()),
+            }
+        }
+    }
+
+    fn encode(&self, req: &CameraRequest, frame: &Frame, encoding: Encoding, green: bool) -> (Vec<u8>, Encoding) {
+        self.geometry.encode(req, frame, encoding, green)
+    }
+}
+
+/// A failure every rank agrees on: `Err` on every rank where any rank's `result` is `Err`
+/// (the failing ranks print their own message, rank 0 names them).
+fn agree<T>(world: &SimpleCommunicator, what: &str, result: Result<T, String>) -> Result<T, String> {
+    let rank = world.rank();
+    let bad = i32::from(result.is_err());
+    let mut all = vec![0i32; world.size() as usize];
+    world.all_gather_into(&bad, &mut all[..]);
+    if let Err(e) = &result {
+        eprintln!("volwarp-server (rank {rank}): {what}: {e}");
+    }
+    let failed: Vec<usize> = all.iter().enumerate().filter(|(_, &b)| b != 0).map(|(r, _)| r).collect();
+    match (result, failed.is_empty()) {
+        (Ok(v), true) => Ok(v),
+        (Err(e), _) => Err(e),
+        (Ok(_), false) => Err(format!("{what} failed on rank(s) {failed:?}")),
+    }
+}
+
+/// Runs `job` on `mpiexec`'s ranks (every rank calls this; rank 0 does the job, the others
+/// serve frames until rank 0 is done). Returns the error to print; every rank of a failed
+/// launch returns one.
+pub fn run(launch: Launch, job: Job) -> Result<(), String> {
+    let (universe, _) =
+        mpi::initialize_with_threading(mpi::Threading::Funneled).ok_or("MPI is already initialized or cannot start")?;
+    let world = universe.world();
+    // A failed peer makes MPI calls return (their results then fail the frame's checks, or the
+    // watchdog's timeout fires) instead of aborting rank 0 before it can tell its clients.
+    // SAFETY: the communicator is valid for the universe's life; MPI_ERRORS_RETURN is a
+    // predefined handler.
+    unsafe {
+        mpi::ffi::MPI_Comm_set_errhandler(world.as_raw(), mpi::ffi::RSMPI_ERRORS_RETURN);
+    }
+    let (rank, size) = (world.rank() as usize, world.size() as usize);
+    // The same file on every rank: its dims, voxel spacing and size.
+    let fingerprint = |path: &std::path::Path| -> Result<[u64; 5], String> {
+        let dims = decomposition::volume_dims(path, &launch.load).map_err(|e| e.to_string())?;
+        let len = std::fs::metadata(path).map_err(|e| format!("{}: {e}", path.display()))?.len();
+        Ok([dims[0].into(), dims[1].into(), dims[2].into(), len, 0])
+    };
+    let fp = agree(&world, "opening the volume", fingerprint(&launch.volume))?;
+    let mut all = vec![0u64; 5 * size];
+    world.all_gather_into(&fp[..], &mut all[..]);
+    if let Some(r) = (1..size).find(|&r| all[5 * r..5 * r + 5] != all[..5]) {
+        return Err(format!(
+            "rank {r} sees {} as {:?} (dims, bytes), rank 0 as {:?}: every rank must read the same file",
+            launch.volume.display(),
+            &all[5 * r..5 * r + 4],
+            &all[..4]
+        ));
+    }
+    let dims = [fp[0] as u32, fp[1] as u32, fp[2] as u32];
+    let dec = Arc::new(agree(&world, "splitting the volume", Decomposition::new(dims, size))?);
+    let t_load = Instant::now();
+    let data = agree(
+        &world,
+        "reading this rank's part",
+        decomposition::read_part(&launch.volume, &launch.load, &dec, rank).map_err(|e| e.to_string()),
+    )?;
+    let (mut lo, mut hi) = (0.0f32, 0.0f32);
+    world.all_reduce_into(&data.range.0, &mut lo, SystemOperation::min());
+    world.all_reduce_into(&data.range.1, &mut hi, SystemOperation::max());
+    let name = data.name.clone();
+    let spacing = data.spacing;
+    let held = data.part.held_dims();
+    let volume = agree(&world, "building this rank's part", data.into_volume((lo, hi)).map_err(|e| e.to_string()))?;
+    let tf = match &launch.tf {
+        Some(p) => TransferFunction::load(p, volume.value_range()).map_err(|e| e.to_string()),
+        None => Ok(TransferFunction::preset_for(&name, dims)),
+    };
+    let tf = agree(&world, "loading the transfer function", tf)?;
+    log::info!(
+        "rank {rank}/{size} (pid {}): part {:?}..{:?} of {dims:?} ({held:?} held, {:.1} MiB) read in {:.2} s",
+        std::process::id(),
+        dec.parts[rank].lo,
+        dec.parts[rank].hi,
+        volume.memory_bytes() as f64 / (1u64 << 20) as f64,
+        t_load.elapsed().as_secs_f64()
+    );
+    let volume = Arc::new(volume);
+    let part = PartMarcher::new(volume.clone(), dec.clone(), rank, &tf, launch.opts)?;
+    let geometry = FrameGeometry { dims, spacing, opts: part.options() };
+    if rank != 0 {
+        let root = world.process_at_rank(0);
+        loop {
+            let mut cmd = [0u8; CMD_LEN];
+            root.broadcast_into(&mut cmd[..]);
+            match decode_cmd(&cmd) {
+                Some((req, layers)) => {
+                    frame_collective(&world, &part, &req, layers);
+                }
+                None => return Ok(()),
+            }
+        }
+    }
+    let watchdog = Watchdog::spawn(launch.rank_timeout);
+    let root = world.process_at_rank(0);
+    let frame = |req: &CameraRequest, layers: u32| -> Result<(Vec<Band>, FrameStats), String> {
+        // MPI counts and displacements are 32-bit: the most bytes a frame's segments may take.
+        let k = u64::from(layers.clamp(1, volwarp_core::segments::MAX_LAYERS as u32));
+        let pixels = u64::from(req.camera.width) * u64::from(req.camera.height);
+        if pixels * (1 + super::partial::SEG_BYTES as u64 * k) > i32::MAX as u64 {
+            return Err(format!(
+                "a {}x{} frame of {k} segments per pixel is too large for the exchange between MPI ranks \
+                 (2 GiB of segments): ask for fewer pixels or segments",
+                req.camera.width, req.camera.height
+            ));
+        }
+        let t0 = Instant::now();
+        watchdog.start();
+        let mut cmd = encode_cmd(req, layers);
+        root.broadcast_into(&mut cmd[..]);
+        let (bands, stats) = match frame_collective(&world, &part, req, layers) {
+            Some(Ok(r)) => r,
+            Some(Err(e)) => watchdog.fail(e),
+            None => watchdog.fail("rank 0 got no frame".into()),
+        };
+        watchdog.done();
+        let total = t0.elapsed().as_micros() as u64;
+        let march = stats.iter().map(|s| s.march_us).max().unwrap_or(0);
+        let march_min = stats.iter().map(|s| s.march_us).min().unwrap_or(0);
+        let bytes_max = stats.iter().map(|s| s.bytes_sent).max().unwrap_or(0);
+        let bytes_mean = stats.iter().map(|s| s.bytes_sent).sum::<u64>() / size.max(1) as u64;
+        let slowest = |f: fn(&RankStats) -> u64| stats.iter().map(f).max().unwrap_or(0);
+        let ms = |us: u64| us as f64 / 1e3;
+        log::info!(
+            "mpi frame {}x{} K={layers}: ranks={size} total_ms={:.1} march_max_ms={:.1} march_min_ms={:.1} \
+             exchange_ms={:.1} merge_ms={:.1} gather_ms={:.1} bytes_per_rank_max={bytes_max} bytes_per_rank_mean={bytes_mean}",
+            req.camera.width,
+            req.camera.height,
+            ms(total),
+            ms(march),
+            ms(march_min),
+            ms(slowest(|s| s.exchange_us)),
+            ms(slowest(|s| s.merge_us)),
+            ms(slowest(|s| s.gather_us)),
+        );
+        let samples = bands.iter().map(|b| b.segs.len()).sum();
+        let fs = FrameStats {
+            march_us: march,
+            compact_us: total.saturating_sub(march),
+            samples,
+            pixels: (req.camera.width * req.camera.height) as usize,
+        };
+        Ok((bands, fs))
+    };
+    let default_camera = {
+        let b = geometry.bounds();
+        let f = Camera::framing(b.min(), b.max(), 0.0, 0.0, 30.0, 1, 1);
+        let dist = (f.eye - f.target).length();
+        Camera::look_at(f.target + Vec3::Y * dist, f.target, Vec3::Z, 30.0, 1, 1)
+    };
+    let result = match job {
+        Job::Render(camera, write) => (|| {
+            let cam = camera(default_camera)?;
+            let req = CameraRequest { seq: 0, camera: cam, heuristic: Heuristic::Threshold, radius_scale: 1.0 };
+            let (bands, _) = frame(&req, volwarp_core::segments::DEFAULT_LAYERS as u32)?;
+            write(super::image(cam.width, cam.height, &bands))
+        })(),
+        Job::Dump(request, layers, encoding, write) => (|| {
+            let req = request(default_camera)?;
+            let (bands, stats) = frame(&req, layers)?;
+            let t = Instant::now();
+            let f =
+                geometry.frame(&req, layers, &bands, (stats.march_us + stats.compact_us).min(u32::MAX as u64) as u32);
+            let t_frame = t.elapsed();
+            let (bytes, got) = geometry.encode(&req, &f, encoding, true);
+            log::info!(
+                "mpi frame assembly_ms={:.1} encode_ms={:.1}",
+                t_frame.as_secs_f64() * 1e3,
+                (t.elapsed() - t_frame).as_secs_f64() * 1e3
+            );
+            write(&f, bytes, got, &stats)
+        })(),
+        Job::Serve(config, ready) => (|| {
+            let (tx, rx) = mpsc::channel::<FrameJob>();
+            let source = Arc::new(Source { jobs: Mutex::new(tx), geometry, watchdog: watchdog.clone() });
+            // The marcher only names the volume in the server's log.
+            let marcher = Marcher::new(volume.clone(), &tf);
+            let server =
+                Server::with_marcher(config, Arc::new(marcher)).map_err(|e| e.to_string())?.with_source(source);
+            ready(server.local_addr());
+            let _handle = server.spawn();
+            for (req, layers, reply) in rx {
+                let (bands, stats) = match frame(&req, layers) {
+                    Ok(r) => r,
+                    Err(e) => {
+                        let _ = reply.send(Err(e));
+                        continue;
+                    }
+                };
+                let t = Instant::now();
+                let f = geometry.frame(&req, layers, &bands, 0);
+                let stats = FrameStats { compact_us: stats.compact_us + t.elapsed().as_micros() as u64, ..stats };
+                let f = Frame {
+                    header: volwarp_core::wire::FrameHeader {
+                        render_us: (stats.march_us + stats.compact_us).min(u32::MAX as u64) as u32,
+                        ..f.header
+                    },
+                    ..f
+                };
+                let _ = reply.send(Ok((f, stats)));
+            }
+            Ok(())
+        })(),
+    };
+    let mut quit = [CMD_QUIT; CMD_LEN];
+    root.broadcast_into(&mut quit[..]);
+    result
+}

@@ -1,0 +1,270 @@
+//! One rank's march: the samples of its part on the **global** ray grid, cut into per-pixel
+//! depth segments.
+//!
+//! A ray's samples are the one-process marcher's: `t_k = t_enter + (k + ½)·Δt` with `t_enter`
+//! the entry into the whole volume's box ([`crate::marcher`]); a part takes those whose grid
+//! position lies in its owned box ([`Decomposition::owns`]), samples them in its own held
+//! voxels (the same bits as the whole volume, see [`super::decomposition`]), classifies them
+//! through the same table and composites them front to back from an empty accumulation, with
+//! early termination at the options' threshold of the part's own opacity. The part's
+//! samples are cut by core's [`Segmenter`] into at most K segments; for K = 1 the segment's
+//! depth is the requested heuristic's pick over the part's samples (two-pass heuristics take
+//! their first pass over the part too).
+//!
+//! With one part this is the scalar marcher's arithmetic step for step, so its segments are
+//! the one-process frame's bit for bit (tested). Empty space is skipped as the marcher skips it,
+//! with the part's own min/max grid (built over its held voxels) and the ray's origin in the
+//! part's coordinates; skipping never changes a result, only the time.
+
+use super::decomposition::Decomposition;
+use crate::marcher::{MarchOptions, Marcher};
+use crate::transfer_function::{TransferFunction, LUT_SIZE};
+use crate::volume::Volume;
+use rayon::prelude::*;
+use std::sync::Arc;
+use volwarp_core::segments::{Segmenter, MAX_LAYERS};
+use volwarp_core::{Camera, DepthPicker, FirstPassAccumulator, Heuristic, Vec3};
+
+/// One depth segment as ranks exchange it: representative depth and premultiplied RGBA (sent
+/// as its 20 bytes in memory order: ranks of one job share one byte order).
+#[derive(Clone, Copy, Debug, Default, PartialEq, bytemuck::Pod, bytemuck::Zeroable)]
+#[repr(C)]
+pub struct Seg {
+    /// Depth (ray parameter along the unit ray).
+    pub t: f32,
+    /// Premultiplied RGBA in `[0, 1]`.
+    pub c: [f32; 4],
+}
+
+/// Bytes of one [`Seg`] between ranks.
+pub const SEG_BYTES: usize = 20;
+
+/// A rank's segments of every pixel: `count[i]` segments of pixel `i` at slots `i·k ..`.
+#[derive(Clone, Debug, PartialEq)]
+pub struct PartFrame {
+    /// Width in pixels.
+    pub width: u32,
+    /// Height in pixels.
+    pub height: u32,
+    /// Slots per pixel.
+    pub k: usize,
+    /// Segments per pixel.
+    pub count: Vec<u8>,
+    /// Segment slots.
+    pub segs: Vec<Seg>,
+}
+
+impl PartFrame {
+    /// Pixel `i`'s segments, front to back.
+    pub fn pixel(&self, i: usize) -> &[Seg] {
+        &self.segs[i * self.k..i * self.k + self.count[i] as usize]
+    }
+}
+
+/// The marcher of one part.
+#[derive(Clone, Debug)]
+pub struct PartMarcher {
+    volume: Arc<Volume>,
+    dec: Arc<Decomposition>,
+    part: usize,
+    lut: Vec<[f32; 4]>,
+    opts: MarchOptions,
+    dt: f32,
+    inv_spacing: Vec3,
+    /// The whole volume's box extent (world units).
+    extent: Vec3,
+    /// The part's held block's first voxel, as a grid offset.
+    off: Vec3,
+    /// Which of the part's bricks the transfer function can make visible.
+    occ: crate::empty_space::Occupancy,
+}
+
+/// A ray's entry and exit of the box `[0, ext]` (the marcher's clip, the same operations).
+#[inline]
+fn clip(o: Vec3, inv_d: Vec3, lo: Vec3, ext: Vec3) -> Option<(f32, f32)> {
+    let t0 = (lo - o) * inv_d;
+    let t1 = (ext - o) * inv_d;
+    let tmin = t0.min(t1);
+    let tmax = t0.max(t1);
+    let enter = tmin.x.max(tmin.y).max(tmin.z).max(0.0);
+    let exit = tmax.x.min(tmax.y).min(tmax.z);
+    (enter < exit && exit.is_finite()).then_some((enter, exit))
+}
+
+impl PartMarcher {
+    /// The marcher of part `part` of `dec`, whose held voxels are `volume` (from
+    /// [`super::decomposition::PartData::into_volume`]), with transfer function `tf`.
+    pub fn new(
+        volume: Arc<Volume>,
+        dec: Arc<Decomposition>,
+        part: usize,
+        tf: &TransferFunction,
+        opts: MarchOptions,
+    ) -> Result<PartMarcher, String> {
+        let p = dec.parts.get(part).ok_or_else(|| format!("no part {part} of {}", dec.parts.len()))?;
+        if volume.dims() != p.held_dims() {
+            return Err(format!("part {part} holds {:?} voxels, its volume {:?}", p.held_dims(), volume.dims()));
+        }
+        // The table and step exactly as the one-process marcher makes them (same spacing).
+        let m = Marcher::with_options(volume.clone(), tf, MarchOptions { skip_empty: false, ..opts });
+        let lut = m.lut_table().to_vec();
+        debug_assert_eq!(lut.len(), LUT_SIZE);
+        let sp = volume.spacing();
+        let extent = Vec3::new(dec.dims[0] as f32, dec.dims[1] as f32, dec.dims[2] as f32) * sp;
+        let off = Vec3::new(p.held_lo[0] as f32, p.held_lo[1] as f32, p.held_lo[2] as f32);
+        let occ = m.occupancy().clone();
+        let opts = MarchOptions { skip_empty: opts.skip_empty, ..m.options() };
+        Ok(PartMarcher { volume, dec, part, lut, opts, dt: m.step(), inv_spacing: 1.0 / sp, extent, off, occ })
+    }
+
+    /// The march options.
+    pub fn options(&self) -> MarchOptions {
+        self.opts
+    }
+
+    /// The part's held voxels.
+    pub fn volume(&self) -> &Volume {
+        &self.volume
+    }
+
+    /// The part index.
+    pub fn part(&self) -> usize {
+        self.part
+    }
+
+    /// The decomposition.
+    pub fn decomposition(&self) -> &Arc<Decomposition> {
+        &self.dec
+    }
+
+    /// Marches one ray through the part, feeding `(t, src_a, dst)` for every visible sample
+    /// (the part's own accumulation); returns the ray's exit from the whole volume's box
+    /// (`None` where it misses the box).
+    #[inline]
+    fn march_ray(&self, o: Vec3, d: Vec3, mut feed: impl FnMut(f32, f32, [f32; 4])) -> Option<f32> {
+        let inv_d = 1.0 / d;
+        let (t_enter, t_exit) = clip(o, inv_d, Vec3::ZERO, self.extent)?;
+        let dt = self.dt;
+        let n = ((t_exit - t_enter) / dt - 0.5).ceil().max(0.0);
+        let n = if n < 1e7 { n as u32 } else { 10_000_000 };
+        // The part's owned box, widened by a voxel: the samples to test lie inside it.
+        let p = &self.dec.parts[self.part];
+        let sp = 1.0 / self.inv_spacing;
+        let lo = Vec3::new(p.lo[0] as f32 - 1.0, p.lo[1] as f32 - 1.0, p.lo[2] as f32 - 1.0).max(Vec3::ZERO) * sp;
+        let hi = Vec3::new(p.hi[0] as f32 + 1.0, p.hi[1] as f32 + 1.0, p.hi[2] as f32 + 1.0) * sp;
+        let Some((t0, t1)) = clip(o, inv_d, lo, hi.min(self.extent + sp)) else {
+            return Some(t_exit);
+        };
+        let k0 = (((t0 - t_enter) / dt - 0.5).floor() - 1.0).max(0.0);
+        let k1 = (((t1 - t_enter) / dt - 0.5).ceil() + 2.0).max(0.0);
+        let (k0, k1) = (if k0 < 1e7 { k0 as u32 } else { n }, if k1 < 1e7 { (k1 as u32).min(n) } else { n });
+        let og = o * self.inv_spacing - 0.5;
+        let dg = d * self.inv_spacing;
+        let ert = self.opts.early_termination;
+        let (mut r, mut g, mut b, mut a) = (0.0f32, 0.0f32, 0.0f32, 0.0f32);
+        let skip = self.opts.skip_empty;
+        let occ = &self.occ;
+        // The ray's origin in the part's own world coordinates (what its grid's leaps use).
+        let o_part = o - self.off * sp;
+        let mut t_check = f32::NEG_INFINITY;
+        let mut k = k0;
+        while k < k1 {
+            let t = t_enter + (k as f32 + 0.5) * dt;
+            let gp = og + dg * t;
+            if !self.dec.owns(self.part, gp) {
+                k += 1;
+                continue;
+            }
+            let gl = gp - self.off;
+            if skip && t >= t_check {
+                let br = occ.brick_of(gl);
+                let (r, reach) = occ.look(br);
+                let t_out = occ.leap_exit_t(br, reach, o_part, inv_d);
+                if r > 0 {
+                    // The marcher's resume: the first lattice sample at or after t_out.
+                    let x = (t_out - t_enter) / dt - 0.5;
+                    k = if x >= k1 as f32 {
+                        k1
+                    } else if x > (k + 1) as f32 {
+                        let c = x as u32;
+                        c + u32::from((c as f32) < x)
+                    } else {
+                        k + 1
+                    };
+                    continue;
+                }
+                t_check = t_out;
+            }
+            k += 1;
+            let v = self.volume.sample_grid(gl);
+            let [cr, cg, cb, ca] = self.lut[TransferFunction::index(v)];
+            if ca > 0.0 {
+                let w = 1.0 - a;
+                r += w * cr;
+                g += w * cg;
+                b += w * cb;
+                a += w * ca;
+                feed(t, ca, [r, g, b, a]);
+                if a >= ert {
+                    break;
+                }
+            }
+        }
+        Some(t_exit)
+    }
+
+    /// One ray's segments in this part: at most `layers` of them; with `layers` ≤ 1 one
+    /// segment: the part's accumulated color at `heuristic`'s pick over the part's samples
+    /// (the picker's fallback being the ray's exit from the whole box, as in the one-process
+    /// marcher), none where the picker finds the part's samples empty.
+    pub fn ray(&self, o: Vec3, d: Vec3, layers: u32, heuristic: Heuristic, out: &mut [Seg]) -> usize {
+        if layers <= 1 {
+            let first = heuristic.needs_first_pass().then(|| {
+                let mut acc = FirstPassAccumulator::new();
+                self.march_ray(o, d, |_, sa, dst| acc.feed(sa, dst[3]));
+                acc.finish()
+            });
+            let mut picker = DepthPicker::new(heuristic, first);
+            let mut last = [0.0f32; 4];
+            let Some(t_exit) = self.march_ray(o, d, |t, sa, dst| {
+                picker.feed(t, sa, dst[3]);
+                last = dst;
+            }) else {
+                return 0;
+            };
+            return match picker.finish(t_exit) {
+                Some(t) if last[3] > 0.0 => {
+                    out[0] = Seg { t, c: last };
+                    1
+                }
+                _ => 0,
+            };
+        }
+        let mut seg = Segmenter::new(layers, self.dt);
+        if self.march_ray(o, d, |t, _, dst| seg.feed(t, dst)).is_none() {
+            return 0;
+        }
+        let s = seg.finish();
+        for (o, s) in out.iter_mut().zip(s) {
+            *o = Seg { t: s.t, c: s.color };
+        }
+        s.len()
+    }
+
+    /// Marches every pixel of `camera` (parallel over rows).
+    pub fn march(&self, camera: &Camera, layers: u32, heuristic: Heuristic) -> PartFrame {
+        let k = layers.clamp(1, MAX_LAYERS as u32) as usize;
+        let (w, h) = (camera.width as usize, camera.height as usize);
+        let basis = camera.ray_basis();
+        let o = basis.origin();
+        let mut count = vec![0u8; w * h];
+        let mut segs = vec![Seg::default(); w * h * k];
+        count.par_chunks_mut(w.max(1)).zip(segs.par_chunks_mut(w.max(1) * k)).enumerate().for_each(|(y, (c, s))| {
+            for (x, c) in c.iter_mut().enumerate() {
+                let d = basis.dir(x as u32, y as u32);
+                *c = self.ray(o, d, k as u32, heuristic, &mut s[x * k..x * k + k]) as u8;
+            }
+        });
+        PartFrame { width: camera.width, height: camera.height, k, count, segs }
+    }
+}
