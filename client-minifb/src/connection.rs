@@ -241,6 +241,12 @@ impl Write for Greeting {
 /// server sent before any handshake (busy, rate-limited) is that error.
 fn tls_err(addr: &str, e: TlsError) -> ClientError {
     match e {
+        // A self-signed certificate made without `basicConstraints CA:FALSE` is a CA
+        // certificate, which webpki refuses as a server's (docs/security.md has the command).
+        TlsError::Certificate(c) if format!("{c:?}").contains("CaUsedAsEndEntity") => ClientError::Tls(format!(
+            "the certificate of {addr} is refused ({c:?}): it is a CA certificate, not a server's; make the \
+             server's certificate with basicConstraints CA:FALSE (docs/security.md) and pin it with --ca"
+        )),
         TlsError::Certificate(c) => ClientError::Tls(format!(
             "the certificate of {addr} is refused ({c:?}); pass --ca FILE with the CA that issued it, or the \
              server's own certificate to pin it"

@@ -236,7 +236,13 @@ fn mixed_plain_and_tls_peers_are_told_and_the_server_keeps_serving() {
     // A TLS client on a plain server.
     let plain_server = serve(&s, 0, false, 8);
     let e = connect_secure(&plain_server.local_addr().to_string(), None, TIMEOUT, 1, Some(&s.trusted)).unwrap_err();
-    assert!(matches!(e, ClientError::Tls(_)) && e.to_string().contains("does not speak TLS"), "{e}");
+    match &e {
+        ClientError::Server { code: error_code::BAD_REQUEST, text } => {
+            assert!(text.contains("does not speak TLS") && text.contains("without --tls"), "{text}")
+        }
+        other => panic!("expected the plain server's BAD_REQUEST, got {other:?}"),
+    }
+    assert!(is_permanent(&e));
     plain_server.shutdown();
     // A full TLS server (2 slots: the network's and this one) refuses in plain before any
     // handshake; the TLS client reads it as the server's BUSY, which is worth retrying.
@@ -249,4 +255,48 @@ fn mixed_plain_and_tls_peers_are_told_and_the_server_keeps_serving() {
     assert!(next_scene(&net, &home, Instant::now(), TIMEOUT), "the TLS client still gets frames");
     net.shutdown();
     server.shutdown();
+}
+
+/// The real programs: `volwarp-server --tls-cert --tls-key` and `volwarp-client --connect
+/// --tls --ca` (headless), and the client's error for a certificate it does not trust.
+#[test]
+fn the_programs_speak_tls_end_to_end() {
+    use std::io::BufRead;
+    let dir = scratch("tls-programs");
+    let (cert, key) = certificate(&dir, "server", &["localhost", "127.0.0.1"]);
+    let (other, _) = certificate(&dir, "other", &["localhost"]);
+    let mut server = std::process::Command::new(common::server_program())
+        .args(["--listen", "127.0.0.1:0", "--threads", "2", "--tls-cert"])
+        .arg(&cert)
+        .arg("--tls-key")
+        .arg(&key)
+        .stdout(std::process::Stdio::piped())
+        .stderr(std::process::Stdio::null())
+        .spawn()
+        .unwrap();
+    let mut out = std::io::BufReader::new(server.stdout.take().unwrap());
+    let mut line = String::new();
+    out.read_line(&mut line).unwrap();
+    let addr = line.trim().strip_prefix("listening on ").expect("the server listens").to_string();
+    let frames = dir.join("frames");
+    let (cert_s, other_s, frames_s) =
+        (cert.to_str().unwrap(), other.to_str().unwrap(), frames.to_str().unwrap());
+    let ok = common::run(
+        &["--connect", &addr, "--tls", "--ca", cert_s, "--headless", "--out", frames_s, "--frames", "4", "--size", "96x96"],
+        Duration::from_secs(120),
+    );
+    assert!(ok.status.success(), "{}", String::from_utf8_lossy(&ok.stderr));
+    assert_eq!(common::pngs(&frames).len(), 4, "four frames over TLS");
+    let refused = common::run(
+        &["--connect", &addr, "--tls", "--ca", other_s, "--headless", "--out", frames_s, "--frames", "4"],
+        Duration::from_secs(60),
+    );
+    assert_eq!(refused.status.code(), Some(1));
+    let err = common::error_line(&refused);
+    assert!(err.contains("TLS") && err.contains("certificate") && err.contains("--ca"), "{err}");
+    let usage = common::run(&["--tls", "--headless", "--out", frames_s], Duration::from_secs(60));
+    assert_eq!(usage.status.code(), Some(2), "--tls needs --connect");
+    let _ = server.kill();
+    let _ = server.wait();
+    let _ = std::fs::remove_dir_all(dir);
 }

@@ -682,6 +682,12 @@ fn serve(sh: &Shared, stream: &TcpStream, id: u64, charged: Option<IpAddr>) -> S
             send_error(&mut sink, error_code::BAD_REQUEST, &text);
             return text;
         }
+        // A TLS client on a plain server: say so, in plain (its TLS layer hands it over).
+        Err(WireError::BadMagic(m)) if tls.is_none() && volwarp_tls::looks_like_tls(m[0]) => {
+            let text = "this server does not speak TLS: connect without --tls";
+            send_error(&mut sink, error_code::BAD_REQUEST, text);
+            return format!("a TLS client on a plain server ({text})");
+        }
         Err(e) => {
             let text = format!("handshake failed: {e}");
             if let Some((code, t)) = wire_error_reply(&e) {

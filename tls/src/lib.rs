@@ -235,11 +235,9 @@ impl TlsLink {
     /// The protocol version and cipher suite agreed on, for logs.
     pub fn describe(&self) -> String {
         let c = self.lock();
-        format!(
-            "{:?} {:?}",
-            c.protocol_version().map_or("?".into(), |v| format!("{v:?}")),
-            c.negotiated_cipher_suite().map(|s| s.suite())
-        )
+        let version = c.protocol_version().map_or("?".into(), |v| format!("{v:?}"));
+        let suite = c.negotiated_cipher_suite().map_or("?".into(), |s| format!("{:?}", s.suite()));
+        format!("{version} {suite}")
     }
 
     /// The reading half over `raw` (a handle of the socket).
