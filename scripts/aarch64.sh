@@ -13,9 +13,16 @@ TARGET_DIR="${CARGO_TARGET_DIR:-target}"
 
 t0=$(date +%s)
 echo "== aarch64 under qemu-user: volwarp-lanes, volwarp-core and volwarp-cpu-tracer tests"
-# Every test of the three crates (cpu-tracer's arch_lanes asserts the portable lanes ran).
-# VOLWARP_NO_SHARED_DATA: the tests on ../shared/data's big volumes are the x86-64 run's job.
-VOLWARP_NO_SHARED_DATA=1 cargo test --target aarch64-unknown-linux-gnu -p volwarp-lanes -p volwarp-core -p volwarp-cpu-tracer
+# Every test of lanes and core (about 30 s emulated). Of cpu-tracer's, those that run its
+# portable kernels against the scalar reference in seconds: arch_lanes (asserts the portable
+# lanes are the kind taken), portable_simd, the unit tests, the layered frames, hole filling
+# and the parallel LBVH build. Left to the x86-64 run (the same portable code, 30 s to minutes
+# each under emulation): packet_vs_scalar, baselines, real_frames, robustness, tile_cull,
+# tile_splat, avx2_lanes.
+# One invocation: the three crates' dependencies are built once, with the same features.
+cargo test --target aarch64-unknown-linux-gnu -p volwarp-lanes -p volwarp-core -p volwarp-cpu-tracer --lib \
+  --test compact_fast --test compact_frame --test fuzz_mirror --test layers --test properties \
+  --test arch_lanes --test portable_simd --test layer_frames --test hole_fill --test parallel_build
 t1=$(date +%s)
 
 echo "== aarch64 headless client (qemu-user) against a local x86-64 server"

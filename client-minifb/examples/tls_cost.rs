@@ -125,7 +125,10 @@ fn main() {
     round(&mut plain, size, 1.0, &mut seq_p);
     round(&mut tls, size, 1.0, &mut seq_t);
     let load = std::fs::read_to_string("/proc/loadavg").unwrap_or_default();
-    println!("tls_cost: bundled volume at {size}², 4 segments per pixel, {rounds} alternating rounds of {secs} s; load {}", load.trim());
+    println!(
+        "tls_cost: bundled volume at {size}², 4 segments per pixel, {rounds} alternating rounds of {secs} s; load {}",
+        load.trim()
+    );
     let (mut p, mut t) = (Vec::new(), Vec::new());
     for r in 0..rounds {
         let a = round(&mut plain, size, secs, &mut seq_p);

@@ -7,11 +7,11 @@ use std::io::{self, Read, Write};
 use std::net::{SocketAddr, TcpStream, ToSocketAddrs};
 use std::sync::Arc;
 use std::time::{Duration, Instant};
-use volwarp_tls::rustls::ClientConfig;
-use volwarp_tls::{TlsError, TlsLink, TlsReader, TlsWriter};
 use volwarp_core::sample::Bounds;
 use volwarp_core::wire::{self, error_code, CameraRequest, Hello, Limits, Message, WireError, HEADER_LEN};
 use volwarp_core::{Camera, Heuristic, Vec3};
+use volwarp_tls::rustls::ClientConfig;
+use volwarp_tls::{TlsError, TlsLink, TlsReader, TlsWriter};
 
 /// A connection's TLS state: the rustls connection shared by the reader and writer halves,
 /// and the reading half (it may hold ciphertext already read).

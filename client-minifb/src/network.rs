@@ -586,7 +586,10 @@ impl Session {
                 Some(l) => {
                     let mut w = l.writer(raw);
                     write_loop(&sh_w, &mut w, request);
-                    w.close();
+                    // After the Bye of a client stopping (not on a dead connection).
+                    if sh_w.stop.load(Ordering::SeqCst) {
+                        w.close();
+                    }
                 }
                 None => write_loop(&sh_w, raw, request),
             }

@@ -104,9 +104,10 @@ fn redial(addr: &str) -> Redial {
     Redial { addr: addr.into(), token: None, layers: 4, backoff: Backoff::default(), tls: None }
 }
 
-/// Kills the server `kills` times mid-stream and restarts it; returns, per kill, the time from
-/// the new server's "listening" to the client's first new frame.
-fn kill_and_restart(kills: usize) -> Vec<Duration> {
+/// Kills the server `kills` times mid-stream and restarts it after `down(k)` (the client's
+/// backoff grows meanwhile); returns, per kill, the time from the new server's "listening" to
+/// the client's first new frame.
+fn kill_and_restart(kills: usize, down: impl Fn(usize) -> Duration) -> Vec<Duration> {
     count_panics();
     let port = free_port();
     let (mut child, _) = start_server(port);
@@ -129,6 +130,11 @@ fn kill_and_restart(kills: usize) -> Vec<Duration> {
             std::thread::sleep(Duration::from_millis(2));
         }
         assert!(matches!(net.state(), ConnectionState::Reconnecting { .. }), "{:?}", net.state());
+        while t.elapsed() < down(k) {
+            net.set_view(view(&home, k as u32));
+            assert!(net.error().is_none(), "{:?}", net.error());
+            std::thread::sleep(Duration::from_millis(5));
+        }
         let (c, listening) = start_server(port);
         child = c;
         let at = next_scene(&net, &home, listening, Duration::from_secs(20)).expect("frames after the restart");
@@ -144,23 +150,28 @@ fn kill_and_restart(kills: usize) -> Vec<Duration> {
 }
 
 #[test]
-fn a_server_killed_mid_stream_and_restarted_is_back_within_two_seconds() {
-    let back = kill_and_restart(2);
+fn a_server_killed_mid_stream_and_restarted_is_back_soon() {
+    // Restarted at once, and after 700 ms down (a few failed attempts first).
+    let back = kill_and_restart(2, |k| Duration::from_millis(700 * k as u64));
     eprintln!("frames again after {back:?}");
+    // The 2 s target is the figure's (p95 over 20 kills, the ignored test below); a loaded
+    // test machine gets slack: the backoff's 2 s cap plus a slow first frame.
     for b in back {
-        assert!(b < Duration::from_secs(2), "back after {b:?}");
+        assert!(b < Duration::from_secs(4), "back after {b:?}");
     }
 }
 
 #[test]
 #[ignore = "figure for docs/perf.md: reconnect time over 20 SIGKILLs"]
 fn reconnect_time_over_twenty_kills() {
-    let mut back = kill_and_restart(20);
+    // Down from 0 to 2.85 s (150 ms more each time): the backoff is at every stage of its
+    // growth (100 ms doubling to 2 s) when the server comes back.
+    let mut back = kill_and_restart(20, |k| Duration::from_millis(150 * k as u64));
     back.sort();
     let ms = |d: Duration| d.as_secs_f64() * 1e3;
     let p = |q: f64| back[((back.len() - 1) as f64 * q).round() as usize];
     println!(
-        "reconnect after SIGKILL + restart, 20 kills: median {:.0} ms, p95 {:.0} ms, max {:.0} ms (from 'listening' to the first new frame)",
+        "reconnect after SIGKILL + restart (down 0 to 2.85 s), 20 kills: median {:.0} ms, p95 {:.0} ms, max {:.0} ms (from 'listening' to the first new frame)",
         ms(p(0.5)),
         ms(p(0.95)),
         ms(back[back.len() - 1])
@@ -264,7 +275,11 @@ fn a_connection_cut_mid_frame_never_yields_a_torn_frame_and_reconnects() {
     assert!(scenes >= 5, "whole frames after the cuts");
     assert!(net.reconnects() >= 2, "reconnected after the cuts: {}", net.reconnects());
     assert_eq!(net.state(), ConnectionState::Connected);
-    eprintln!("{scenes} whole scenes, {} frames, {} reconnects through {n_cuts} cuts", net.frames_received(), net.reconnects());
+    eprintln!(
+        "{scenes} whole scenes, {} frames, {} reconnects through {n_cuts} cuts",
+        net.frames_received(),
+        net.reconnects()
+    );
     net.shutdown();
     server.shutdown();
     assert_eq!(PANICS.load(Ordering::SeqCst), 0, "something panicked");

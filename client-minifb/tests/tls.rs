@@ -105,7 +105,11 @@ fn next_scene(net: &Network, home: &volwarp_core::Camera, after: Instant, limit:
     let t0 = Instant::now();
     let mut i = 0u32;
     while t0.elapsed() < limit {
-        net.set_view(View { camera: home.orbit(i as f32 * 2.0, 0.0), heuristic: Heuristic::Threshold, radius_scale: 1.0 });
+        net.set_view(View {
+            camera: home.orbit(i as f32 * 2.0, 0.0),
+            heuristic: Heuristic::Threshold,
+            radius_scale: 1.0,
+        });
         i += 1;
         if let Some(s) = net.take_scene() {
             let h = &s.scene.header;
@@ -180,7 +184,11 @@ fn unknown_or_misnamed_certificates_are_refused_for_good() {
     let server = serve(&s, 0, true, 8);
     let port = server.local_addr().port();
     let cases = [
-        ("the Mozilla roots do not know a self-signed certificate", volwarp_tls::client_config(None).unwrap(), "localhost"),
+        (
+            "the Mozilla roots do not know a self-signed certificate",
+            volwarp_tls::client_config(None).unwrap(),
+            "localhost",
+        ),
         ("another certificate pinned", volwarp_tls::client_config(Some(&s.other_cert)).unwrap(), "127.0.0.1"),
     ];
     for (what, cfg, host) in cases {
@@ -200,7 +208,8 @@ fn unknown_or_misnamed_certificates_are_refused_for_good() {
     let e = connect_secure(&named_server.local_addr().to_string(), None, TIMEOUT, 1, Some(&trusting)).unwrap_err();
     assert!(matches!(e, ClientError::Tls(_)) && e.to_string().contains("NotValidForName"), "{e}");
     // The same certificate, reached by its name, is fine.
-    let ok = connect_secure(&format!("localhost:{}", named_server.local_addr().port()), None, TIMEOUT, 1, Some(&trusting));
+    let ok =
+        connect_secure(&format!("localhost:{}", named_server.local_addr().port()), None, TIMEOUT, 1, Some(&trusting));
     assert!(ok.is_ok(), "{:?}", ok.err());
     // The server carried on through the refused handshakes.
     assert!(connect_secure(&format!("127.0.0.1:{port}"), None, TIMEOUT, 1, Some(&s.trusted)).is_ok());
@@ -279,10 +288,22 @@ fn the_programs_speak_tls_end_to_end() {
     out.read_line(&mut line).unwrap();
     let addr = line.trim().strip_prefix("listening on ").expect("the server listens").to_string();
     let frames = dir.join("frames");
-    let (cert_s, other_s, frames_s) =
-        (cert.to_str().unwrap(), other.to_str().unwrap(), frames.to_str().unwrap());
+    let (cert_s, other_s, frames_s) = (cert.to_str().unwrap(), other.to_str().unwrap(), frames.to_str().unwrap());
     let ok = common::run(
-        &["--connect", &addr, "--tls", "--ca", cert_s, "--headless", "--out", frames_s, "--frames", "4", "--size", "96x96"],
+        &[
+            "--connect",
+            &addr,
+            "--tls",
+            "--ca",
+            cert_s,
+            "--headless",
+            "--out",
+            frames_s,
+            "--frames",
+            "4",
+            "--size",
+            "96x96",
+        ],
         Duration::from_secs(120),
     );
     assert!(ok.status.success(), "{}", String::from_utf8_lossy(&ok.stderr));

@@ -398,7 +398,11 @@ fn accept(shared: &Arc<Shared>, stream: TcpStream) {
             if !limiter.charge(a.ip()) {
                 log::warn!("client {id} ({peer}) refused: too many wrong tokens from {}", a.ip());
                 let _ = stream.set_write_timeout(Some(Duration::from_secs(1)));
-                send_error(&mut &stream, error_code::RATE_LIMITED, "too many wrong tokens from this address; try later");
+                send_error(
+                    &mut &stream,
+                    error_code::RATE_LIMITED,
+                    "too many wrong tokens from this address; try later",
+                );
                 let _ = stream.shutdown(Shutdown::Both);
                 return;
             }
@@ -565,7 +569,7 @@ impl<R: Read> embedded_io::Read for SocketReader<'_, R> {
                         // A TLS stream ended without close_notify, or not TLS at all.
                         io::ErrorKind::UnexpectedEof => embedded_io::ErrorKind::ConnectionReset,
                         k => k.into(),
-                    }))
+                    }));
                 }
             }
         }
@@ -799,6 +803,9 @@ fn serve(sh: &Shared, stream: &TcpStream, id: u64, charged: Option<IpAddr>) -> S
             if dropped > 0 { format!(", {dropped} stale requests skipped") } else { String::new() }
         );
     };
+    // Only a connection that ends cleanly gets TLS's close_notify: a dead or stalled socket
+    // would hold this thread up to another send timeout.
+    let clean = !matches!(reason, End::Gone(_));
     let reason = match reason {
         End::Bye => "bye".to_string(),
         End::Gone(r) => r,
@@ -807,8 +814,10 @@ fn serve(sh: &Shared, stream: &TcpStream, id: u64, charged: Option<IpAddr>) -> S
             text
         }
     };
-    if let Ok(mut sink) = out.into_inner() {
-        sink.close();
+    if clean {
+        if let Ok(mut sink) = out.into_inner() {
+            sink.close();
+        }
     }
     let _ = stream.shutdown(Shutdown::Both);
     let _ = reader.join();

@@ -124,7 +124,9 @@ impl std::fmt::Display for TlsError {
             TlsError::Io(e) => write!(f, "{e}"),
             TlsError::Closed => write!(f, "the peer closed the connection during the TLS handshake"),
             TlsError::Certificate(e) => write!(f, "certificate refused: {e:?}"),
-            TlsError::NotTls(b) => write!(f, "the peer does not speak TLS (it sent {} bytes that are no TLS record)", b.len()),
+            TlsError::NotTls(b) => {
+                write!(f, "the peer does not speak TLS (it sent {} bytes that are no TLS record)", b.len())
+            }
             TlsError::Tls(e) => write!(f, "{e}"),
         }
     }
@@ -384,7 +386,8 @@ mod tests {
             let dir = std::env::temp_dir().join(format!("volwarp-tls-{tag}-{}", std::process::id()));
             std::fs::create_dir_all(&dir).unwrap();
             let key = rcgen::KeyPair::generate().unwrap();
-            let params = rcgen::CertificateParams::new(names.iter().map(|s| s.to_string()).collect::<Vec<_>>()).unwrap();
+            let params =
+                rcgen::CertificateParams::new(names.iter().map(|s| s.to_string()).collect::<Vec<_>>()).unwrap();
             let cert = params.self_signed(&key).unwrap();
             std::fs::write(dir.join("cert.pem"), cert.pem()).unwrap();
             std::fs::write(dir.join("key.pem"), key.serialize_pem()).unwrap();
@@ -406,12 +409,15 @@ mod tests {
 
     /// An echo server on one TLS connection: the reader half on another thread than the
     /// writer half, as volwarp's server runs them.
-    fn echo_server(cfg: Arc<rustls::ServerConfig>) -> (std::net::SocketAddr, std::thread::JoinHandle<Result<(), String>>) {
+    fn echo_server(
+        cfg: Arc<rustls::ServerConfig>,
+    ) -> (std::net::SocketAddr, std::thread::JoinHandle<Result<(), String>>) {
         let l = TcpListener::bind("127.0.0.1:0").unwrap();
         let addr = l.local_addr().unwrap();
         let h = std::thread::spawn(move || {
             let (s, _) = l.accept().map_err(|e| e.to_string())?;
-            let link = TlsLink::accept(cfg, &s, Some(Instant::now() + Duration::from_secs(10))).map_err(|e| e.to_string())?;
+            let link =
+                TlsLink::accept(cfg, &s, Some(Instant::now() + Duration::from_secs(10))).map_err(|e| e.to_string())?;
             let (tx, rx) = std::sync::mpsc::channel::<Vec<u8>>();
             let mut r = link.reader(s.try_clone().unwrap());
             let reader = std::thread::spawn(move || loop {
@@ -500,8 +506,8 @@ mod tests {
         });
         let s = TcpStream::connect(addr).unwrap();
         s.set_read_timeout(Some(Duration::from_secs(10))).unwrap();
-        let err = TlsLink::connect(client_config(None).unwrap(), server_name("localhost:1").unwrap(), &s, None)
-            .unwrap_err();
+        let err =
+            TlsLink::connect(client_config(None).unwrap(), server_name("localhost:1").unwrap(), &s, None).unwrap_err();
         match err {
             TlsError::NotTls(sent) => assert!(sent.starts_with(b"VWRP"), "{sent:?}"),
             e => panic!("expected NotTls, got {e:?}"),
