@@ -31,12 +31,12 @@ echo "== volwarp-core's codec tests on its no_std + alloc build (ruzstd, libm; i
 echo "== ARM thin client: cargo check for aarch64-unknown-linux-gnu (portable SIMD maps to NEON)"
 cargo check --target aarch64-unknown-linux-gnu -p volwarp-cpu-tracer -p volwarp-client
 
-# The same code run on aarch64 under qemu-user: core's, lanes' and cpu-tracer's tests and a
-# headless aarch64 client against a local server.
-scripts/aarch64.sh
-
 echo "== tests (window tests under Xvfb)"
 xvfb-run -a -s "-screen 0 1280x1024x24" cargo test --workspace
+
+# The same code run on aarch64 under qemu-user: lanes', core's and cpu-tracer's tests and a
+# headless aarch64 client against the local server the tests above built.
+scripts/aarch64.sh
 
 if [ "${VOLWARP_NO_FUZZ:-0}" != 1 ]; then
   echo "== fuzz smoke"

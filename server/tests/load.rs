@@ -28,24 +28,28 @@ struct ServerChild {
 
 impl ServerChild {
     fn start(extra: &[&str]) -> ServerChild {
-        let mut child = Command::new(env!("CARGO_BIN_EXE_volwarp-server"))
-            .args(["--listen", "127.0.0.1:0", "--threads", "2", "--max-clients", "200"])
-            .args(extra)
-            .stdout(Stdio::piped())
-            .stderr(Stdio::null())
-            .stdin(Stdio::null())
-            .spawn()
-            .expect("starting volwarp-server");
-        let mut out = BufReader::new(child.stdout.take().unwrap());
+        // Owned by a ServerChild at once: dropped on any way out, it is killed and waited for.
+        let mut server = ServerChild {
+            child: Command::new(env!("CARGO_BIN_EXE_volwarp-server"))
+                .args(["--listen", "127.0.0.1:0", "--threads", "2", "--max-clients", "200"])
+                .args(extra)
+                .stdout(Stdio::piped())
+                .stderr(Stdio::null())
+                .stdin(Stdio::null())
+                .spawn()
+                .expect("starting volwarp-server"),
+            addr: SocketAddr::from(([127, 0, 0, 1], 0)),
+        };
+        let mut out = BufReader::new(server.child.stdout.take().unwrap());
         let mut line = String::new();
         loop {
             line.clear();
             assert!(out.read_line(&mut line).unwrap() > 0, "the server ended before listening");
             if let Some(a) = line.trim().strip_prefix("listening on ") {
-                let addr = a.parse().unwrap();
+                server.addr = a.parse().unwrap();
                 // Keep draining its stdout so it never blocks on a full pipe.
                 std::thread::spawn(move || std::io::copy(&mut out, &mut std::io::sink()));
-                return ServerChild { child, addr };
+                return server;
             }
         }
     }
