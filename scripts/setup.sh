@@ -9,12 +9,13 @@ if [ "$(id -u)" != 0 ] && command -v sudo >/dev/null; then SUDO=sudo; fi
 
 # System packages: lavapipe (software Vulkan) for the GPU tests, Xvfb for the window test.
 need=()
-# gcc-aarch64-linux-gnu: minifb's and zstd-sys's build scripts compile C for the ARM check of the
-# client; libc6-dev-arm64-cross: the C library headers that C needs (only a "Recommends" of the
-# compiler, which --no-install-recommends leaves out).
+# gcc-aarch64-linux-gnu: minifb's, zstd-sys's and ring's build scripts compile C for the ARM
+# build of the client, and it links the aarch64 test binaries; libc6-dev-arm64-cross: the C
+# library headers and the aarch64 libc they run against (only a "Recommends" of the compiler,
+# which --no-install-recommends leaves out); qemu-user: runs those aarch64 binaries here.
 # mpich, libmpich-dev: the MPI the server's feature `mpi` links (rsmpi) and whose mpiexec the
 # end-to-end tests launch; libclang-dev: bindgen, which rsmpi's build runs over mpi.h.
-for p in mesa-vulkan-drivers libvulkan1 xvfb xauth x11-apps gcc-aarch64-linux-gnu libc6-dev-arm64-cross \
+for p in mesa-vulkan-drivers libvulkan1 xvfb xauth x11-apps gcc-aarch64-linux-gnu libc6-dev-arm64-cross qemu-user \
   mpich libmpich-dev libclang-dev; do
   dpkg -s "$p" >/dev/null 2>&1 || need+=("$p")
 done

@@ -44,6 +44,10 @@ cargo test -p volwarp-server --features mpi --test mpi
 # The real client, headless over loopback, against 3 ranks.
 scripts/mpi-client.sh target/debug/volwarp-server target/debug/volwarp-client
 
+# The same code run on aarch64 under qemu-user: lanes', core's and cpu-tracer's tests and a
+# headless aarch64 client against the local server the tests above built.
+scripts/aarch64.sh
+
 if [ "${VOLWARP_NO_FUZZ:-0}" != 1 ]; then
   echo "== fuzz smoke"
   scripts/fuzz-smoke.sh "${VOLWARP_FUZZ_SECONDS:-30}"

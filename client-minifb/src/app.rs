@@ -1,7 +1,7 @@
 //! Putting the client together: a `volwarp-server` child process or `--connect`, connection, network thread,
 //! renderers, recorder, and one of the window / headless / bench loops.
 
-use crate::connection::connect_layers;
+use crate::connection::connect_secure;
 use crate::controls::home_camera;
 use crate::display::Display;
 use crate::error::ClientError;
@@ -75,7 +75,8 @@ fn run_connected(opts: &Options, addr: &str, reconnect: bool) -> Result<(), Clie
             renderers.watertight(),
         )
     );
-    let conn = connect_layers(addr, opts.token.as_deref(), timeout, opts.layers())?;
+    let tls = opts.tls_config()?;
+    let conn = connect_secure(addr, opts.token.as_deref(), timeout, opts.layers(), tls.as_ref())?;
     let home = home_camera(&conn.bounds, opts.size.0, opts.size.1);
     let recorder = opts.record.as_deref().map(Recorder::create).transpose()?;
     let cfg = NetConfig {
@@ -94,6 +95,7 @@ fn run_connected(opts: &Options, addr: &str, reconnect: bool) -> Result<(), Clie
             layers: opts.layers(),
             // Clients started together do not retry in lockstep.
             backoff: Backoff { seed: u64::from(std::process::id()), ..Backoff::default() },
+            tls,
         };
         Network::start_reconnecting(conn, cfg, sink, redial)?
     } else {

@@ -1,20 +1,40 @@
-//! Connecting to a server: address resolution, TCP with timeouts, the Hello exchange and a 1×1
-//! probe frame whose header tells the client the volume's bounds (so it can frame the volume
-//! before it has seen anything).
+//! Connecting to a server: address resolution, TCP with timeouts, the TLS handshake where asked
+//! (`--tls`), the Hello exchange and a 1×1 probe frame whose header tells the client the
+//! volume's bounds (so it can frame the volume before it has seen anything).
 
 use crate::error::ClientError;
 use std::io::{self, Read, Write};
 use std::net::{SocketAddr, TcpStream, ToSocketAddrs};
-use std::time::Duration;
+use std::sync::Arc;
+use std::time::{Duration, Instant};
 use volwarp_core::sample::Bounds;
 use volwarp_core::wire::{self, error_code, CameraRequest, Hello, Limits, Message, WireError, HEADER_LEN};
 use volwarp_core::{Camera, Heuristic, Vec3};
+use volwarp_tls::rustls::ClientConfig;
+use volwarp_tls::{TlsError, TlsLink, TlsReader, TlsWriter};
+
+/// A connection's TLS state: the rustls connection shared by the reader and writer halves,
+/// and the reading half (it may hold ciphertext already read).
+pub struct TlsSession {
+    /// The shared TLS state.
+    pub link: TlsLink,
+    /// The reading half over the socket.
+    pub reader: TlsReader<TcpStream>,
+}
+
+impl std::fmt::Debug for TlsSession {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.write_str("TlsSession")
+    }
+}
 
 /// An open, greeted connection.
 #[derive(Debug)]
 pub struct Connection {
-    /// The socket.
+    /// The socket (with TLS: carrying its records; read and write through [`Connection::tls`]).
     pub stream: TcpStream,
+    /// The TLS session, where the connection has one.
+    pub tls: Option<TlsSession>,
     /// The server's address.
     pub addr: SocketAddr,
     /// The server's Hello.
@@ -23,6 +43,21 @@ pub struct Connection {
     pub bounds: Bounds,
     /// What this client accepts from the server.
     pub limits: Limits,
+}
+
+impl Connection {
+    /// Sends Bye (through TLS where the connection has it; best effort).
+    pub fn bye(&mut self) {
+        match &self.tls {
+            Some(t) => {
+                let Ok(raw) = self.stream.try_clone() else { return };
+                let mut w = t.link.writer(raw);
+                send_bye(&mut w);
+                w.close();
+            }
+            None => send_bye(&mut self.stream),
+        }
+    }
 }
 
 /// Resolves `addr` (`host:port`) to its first socket address.
@@ -167,13 +202,97 @@ pub fn connect_layers(
     timeout: Duration,
     layers: u8,
 ) -> Result<Connection, ClientError> {
+    connect_secure(addr, token, timeout, layers, None)
+}
+
+/// Reads and writes a connection during the greeting: the socket, or TLS over it.
+enum Greeting {
+    Plain(TcpStream),
+    Tls(TlsReader<TcpStream>, TlsWriter<TcpStream>),
+}
+
+impl Read for Greeting {
+    fn read(&mut self, buf: &mut [u8]) -> io::Result<usize> {
+        match self {
+            Greeting::Plain(s) => s.read(buf),
+            Greeting::Tls(r, _) => r.read(buf),
+        }
+    }
+}
+
+impl Write for Greeting {
+    fn write(&mut self, buf: &[u8]) -> io::Result<usize> {
+        match self {
+            Greeting::Plain(s) => s.write(buf),
+            Greeting::Tls(_, w) => w.write(buf),
+        }
+    }
+
+    fn flush(&mut self) -> io::Result<()> {
+        match self {
+            Greeting::Plain(s) => s.flush(),
+            Greeting::Tls(_, w) => w.flush(),
+        }
+    }
+}
+
+/// The client error of a failed TLS handshake with `addr`. Certificate refusals and a peer
+/// that is no TLS server are permanent ([`ClientError::Tls`]); a plain Error message the
+/// server sent before any handshake (busy, rate-limited) is that error.
+fn tls_err(addr: &str, e: TlsError) -> ClientError {
+    match e {
+        // A self-signed certificate made without `basicConstraints CA:FALSE` is a CA
+        // certificate, which webpki refuses as a server's (docs/security.md has the command).
+        TlsError::Certificate(c) if format!("{c:?}").contains("CaUsedAsEndEntity") => ClientError::Tls(format!(
+            "the certificate of {addr} is refused ({c:?}): it is a CA certificate, not a server's; make the \
+             server's certificate with basicConstraints CA:FALSE (docs/security.md) and pin it with --ca"
+        )),
+        TlsError::Certificate(c) => ClientError::Tls(format!(
+            "the certificate of {addr} is refused ({c:?}); pass --ca FILE with the CA that issued it, or the \
+             server's own certificate to pin it"
+        )),
+        TlsError::NotTls(sent) => match wire::read_message(&mut &sent[..], &Limits::default()) {
+            Ok(Message::Error(e)) => server_error(&e),
+            _ => ClientError::Tls(format!("{addr} does not speak TLS (a plain server? connect without --tls)")),
+        },
+        TlsError::Io(e) => io_err("in the TLS handshake", &e),
+        TlsError::Closed => ClientError::Gone(format!("{addr} closed the connection during the TLS handshake")),
+        TlsError::Tls(e) => ClientError::Tls(format!("{addr}: {e}")),
+    }
+}
+
+/// [`connect_layers`] over TLS with `tls` (certificates verified for the host of `addr`), or
+/// plain TCP with `None`.
+pub fn connect_secure(
+    addr: &str,
+    token: Option<&str>,
+    timeout: Duration,
+    layers: u8,
+    tls: Option<&Arc<ClientConfig>>,
+) -> Result<Connection, ClientError> {
     let sock = resolve(addr)?;
     let timeout = timeout.max(Duration::from_millis(10));
-    let mut stream = TcpStream::connect_timeout(&sock, timeout)
+    let stream = TcpStream::connect_timeout(&sock, timeout)
         .map_err(|e| ClientError::Connect(format!("{addr} ({sock}): {e}")))?;
     let _ = stream.set_nodelay(true);
     stream.set_read_timeout(Some(timeout)).map_err(|e| ClientError::Connect(e.to_string()))?;
     stream.set_write_timeout(Some(timeout)).map_err(|e| ClientError::Connect(e.to_string()))?;
+    let clone = || stream.try_clone().map_err(|e| ClientError::Connect(format!("cannot share the socket: {e}")));
+    let mut link = None;
+    let mut io = match tls {
+        Some(cfg) => {
+            let name = volwarp_tls::server_name(addr).map_err(ClientError::Tls)?;
+            let l = TlsLink::connect(cfg.clone(), name, &stream, Some(Instant::now() + timeout))
+                .map_err(|e| tls_err(addr, e))?;
+            // The handshake's deadline set a shorter read timeout: back to the full one.
+            stream.set_read_timeout(Some(timeout)).map_err(|e| ClientError::Connect(e.to_string()))?;
+            log::info!("TLS with {addr}: {}", l.describe());
+            let halves = Greeting::Tls(l.reader(clone()?), l.writer(clone()?));
+            link = Some(l);
+            halves
+        }
+        None => Greeting::Plain(clone()?),
+    };
     let mut limits = Limits::default().with_layers(layers);
 
     // Ask for CompactFrames (about 3 bytes per sample instead of 12; the server decides).
@@ -186,8 +305,8 @@ pub fn connect_layers(
     }
     let mut buf = Vec::new();
     let _ = wire::write_hello(&mut wire::VecWriter(&mut buf), &hello);
-    stream.write_all(&buf).map_err(|e| io_err("sending Hello", &e))?;
-    let server_hello = match read_message_bytes(&mut stream, &limits, "waiting for the server's Hello")?.1 {
+    io.write_all(&buf).map_err(|e| io_err("sending Hello", &e))?;
+    let server_hello = match read_message_bytes(&mut io, &limits, "waiting for the server's Hello")?.1 {
         Message::Hello(h) => h,
         Message::Error(e) => return Err(server_error(&e)),
         _ => return Err(ClientError::Protocol("the server did not answer Hello".into())),
@@ -203,15 +322,19 @@ pub fn connect_layers(
     // The negotiated maximum: a frame with more segments per pixel is a typed error.
     limits = limits.with_layers(server_hello.layers.min(limits.max_layers));
     let probe = CameraRequest { seq: 0, camera: probe_camera(), heuristic: Heuristic::Threshold, radius_scale: 1.0 };
-    send_request(&mut stream, &probe).map_err(|e| io_err("sending the probe request", &e))?;
-    let bounds = match read_message_bytes(&mut stream, &limits, "waiting for the probe frame")?.1 {
+    send_request(&mut io, &probe).map_err(|e| io_err("sending the probe request", &e))?;
+    let bounds = match read_message_bytes(&mut io, &limits, "waiting for the probe frame")?.1 {
         Message::Frame(f) => f.header.bounds,
         Message::Error(e) => return Err(server_error(&e)),
         Message::Bye => return Err(ClientError::Gone("the server said goodbye".into())),
         _ => return Err(ClientError::Protocol("the server did not answer the probe with a Frame".into())),
     };
     log::info!("connected to {sock}; volume bounds {:?} .. {:?}", bounds.min(), bounds.max());
-    Ok(Connection { stream, addr: sock, hello: server_hello, bounds, limits })
+    let tls = match (io, link) {
+        (Greeting::Tls(reader, _), Some(link)) => Some(TlsSession { link, reader }),
+        _ => None,
+    };
+    Ok(Connection { stream, tls, addr: sock, hello: server_hello, bounds, limits })
 }
 
 #[cfg(test)]

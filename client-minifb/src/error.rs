@@ -13,6 +13,9 @@ pub enum ClientError {
     BadAddress(String),
     /// The TCP connection could not be made.
     Connect(String),
+    /// TLS failed for good: the server's certificate is refused, or the server does not speak
+    /// TLS.
+    Tls(String),
     /// The server speaks another protocol version.
     Version(String),
     /// The server sent an Error message.
@@ -53,6 +56,7 @@ impl fmt::Display for ClientError {
             }
             ClientError::BadAddress(s) => write!(f, "bad server address: {s}"),
             ClientError::Connect(s) => write!(f, "cannot connect: {s}"),
+            ClientError::Tls(s) => write!(f, "TLS: {s}"),
             ClientError::Version(s) => write!(f, "protocol version mismatch: {s}"),
             ClientError::Server { code, text } => write!(f, "server error {code}: {text}"),
             ClientError::Gone(s) => write!(f, "server gone: {s}"),

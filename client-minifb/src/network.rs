@@ -24,7 +24,7 @@
 //! The display loop only ever `try_lock`s the slot ([`Network::take_scene`]); every lock the
 //! display takes is held for a few instructions.
 
-use crate::connection::{connect_layers, read_message_bytes_marked, send_bye, send_request, server_error, Connection};
+use crate::connection::{connect_secure, read_message_bytes_marked, send_bye, send_request, server_error, Connection};
 use crate::error::ClientError;
 use crate::link::{Throttled, TokenBucket};
 use crate::record::RecordSink;
@@ -161,15 +161,17 @@ pub struct Redial {
     pub layers: u8,
     /// Waits between attempts.
     pub backoff: Backoff,
+    /// TLS settings (`--tls`): every attempt verifies the server's certificate again.
+    pub tls: Option<std::sync::Arc<volwarp_tls::rustls::ClientConfig>>,
 }
 
 /// Whether a connection error will not go away by trying again: a wrong or missing token,
-/// another protocol version, a request the server refuses as malformed or too large, a bad
-/// address or command line. Everything else (refused or reset connections, timeouts, a busy
+/// another protocol version, a request the server refuses as malformed or too large, a
+/// refused TLS certificate or a server that does not speak TLS, a bad address or command line. Everything else (refused or reset connections, timeouts, a busy
 /// or rate-limiting server, a server that went away) is worth another attempt.
 pub fn is_permanent(e: &ClientError) -> bool {
     match e {
-        ClientError::Version(_) | ClientError::Usage(_) | ClientError::BadAddress(_) => true,
+        ClientError::Version(_) | ClientError::Usage(_) | ClientError::BadAddress(_) | ClientError::Tls(_) => true,
         ClientError::Server { code, .. } => matches!(
             *code,
             error_code::UNAUTHORIZED
@@ -546,6 +548,10 @@ impl Session {
         recorder: Option<RecordSink>,
     ) -> Result<Session, ClientError> {
         let stream = conn.stream;
+        let (tls_link, tls_reader) = match conn.tls {
+            Some(t) => (Some(t.link), Some(t.reader)),
+            None => (None, None),
+        };
         let _ = stream.set_read_timeout(Some(cfg.timeout.max(Duration::from_millis(10))));
         let clone = || stream.try_clone().map_err(|e| ClientError::Connect(format!("cannot share the socket: {e}")));
         let (rs, ws) = (clone()?, clone()?);
@@ -555,19 +561,39 @@ impl Session {
         lock(&sh.view).changed = true;
         let spawn_err = |e: std::io::Error| ClientError::Io(format!("cannot start a network thread: {e}"));
         let (sh_r, limits, read_mbps) = (sh.clone(), conn.limits, cfg.bandwidth_mbps);
+        // The link model throttles the bytes on the wire (TLS records with TLS).
         let reader = std::thread::Builder::new()
             .name("volwarp-net-read".into())
-            .spawn(move || match link(read_mbps) {
-                Some(b) => read_loop(&sh_r, Throttled::new(rs, b), limits, recorder.as_ref()),
-                None => read_loop(&sh_r, rs, limits, recorder.as_ref()),
+            .spawn(move || {
+                let raw: Box<dyn Read + Send> = match link(read_mbps) {
+                    Some(b) => Box::new(Throttled::new(rs, b)),
+                    None => Box::new(rs),
+                };
+                let src: Box<dyn Read + Send> = match tls_reader {
+                    Some(t) => Box::new(t.with_raw(raw)),
+                    None => raw,
+                };
+                read_loop(&sh_r, src, limits, recorder.as_ref())
             })
             .map_err(spawn_err)?;
         let (sh_w, request, write_mbps) = (sh.clone(), cfg.request, cfg.bandwidth_mbps);
-        let writer =
-            std::thread::Builder::new().name("volwarp-net-write".into()).spawn(move || match link(write_mbps) {
-                Some(b) => write_loop(&sh_w, Throttled::new(ws, b), request),
-                None => write_loop(&sh_w, ws, request),
-            });
+        let writer = std::thread::Builder::new().name("volwarp-net-write".into()).spawn(move || {
+            let raw: Box<dyn Write + Send> = match link(write_mbps) {
+                Some(b) => Box::new(Throttled::new(ws, b)),
+                None => Box::new(ws),
+            };
+            match tls_link {
+                Some(l) => {
+                    let mut w = l.writer(raw);
+                    write_loop(&sh_w, &mut w, request);
+                    // After the Bye of a client stopping (not on a dead connection).
+                    if sh_w.stop.load(Ordering::SeqCst) {
+                        w.close();
+                    }
+                }
+                None => write_loop(&sh_w, raw, request),
+            }
+        });
         let writer = match writer {
             Ok(w) => w,
             Err(e) => {
@@ -636,10 +662,10 @@ fn link_loop(sh: &Arc<Shared>, first: Session, cfg: &NetConfig, recorder: Option
                 return;
             }
             let timeout = cfg.timeout.clamp(Duration::from_millis(10), REDIAL_TIMEOUT);
-            let got = connect_layers(&r.addr, r.token.as_deref(), timeout, r.layers);
+            let got = connect_secure(&r.addr, r.token.as_deref(), timeout, r.layers, r.tls.as_ref());
             if sh.stop.load(Ordering::SeqCst) {
                 if let Ok(mut c) = got {
-                    send_bye(&mut c.stream);
+                    c.bye();
                 }
                 return;
             }

@@ -27,8 +27,9 @@ Without --connect the client starts the real volwarp-server program (found besid
 on PATH or in $VOLWARP_SERVER) on 127.0.0.1 (random port); it serves the bundled dataset, or
 --volume FILE, over real TCP and stops with the client. With --connect, a dropped connection
 (server restarted, network gone) is retried with backoff while the window keeps warping the
-last frames and its title says 'reconnecting in N s…'; a wrong token or another protocol version
-stops the client with that error instead (--no-reconnect: stop on any drop).
+last frames and its title says 'reconnecting in N s…'; a wrong token, another protocol version
+or a refused TLS certificate stops the client with that error instead (--no-reconnect: stop on
+any drop). --connect HOST:PORT --tls [--ca FILE] speaks TLS (certificate verified for HOST).
 
 With no display (DISPLAY and WAYLAND_DISPLAY unset, or the window cannot be opened) the client
 exits with an error: use --headless.";
@@ -52,6 +53,14 @@ pub struct Options {
     /// the client keeps warping the frames it has and retries, 100 ms doubling to 2 s apart).
     #[arg(long, requires = "connect")]
     pub no_reconnect: bool,
+    /// With --connect: speak TLS to a server started with --tls-cert/--tls-key. Its certificate
+    /// is verified for the host of --connect against --ca, or the Mozilla roots without it.
+    #[arg(long, requires = "connect")]
+    pub tls: bool,
+    /// With --tls: trust the CA certificates of this PEM file (or pin the server's own
+    /// self-signed certificate) instead of the Mozilla roots.
+    #[arg(long, value_name = "FILE", requires = "tls")]
+    pub ca: Option<PathBuf>,
     /// Render to PNG files instead of a window (needs --out unless --bench).
     #[arg(long)]
     pub headless: bool,
@@ -247,6 +256,14 @@ impl Options {
     /// Extra arguments of the child server (`--volume FILE`).
     pub fn server_args(&self) -> Vec<String> {
         self.volume.iter().flat_map(|v| ["--volume".to_string(), v.clone()]).collect()
+    }
+
+    /// The TLS settings of `--tls` and `--ca` (`None` without `--tls`).
+    pub fn tls_config(&self) -> Result<Option<std::sync::Arc<volwarp_tls::rustls::ClientConfig>>, ClientError> {
+        if !self.tls {
+            return Ok(None);
+        }
+        volwarp_tls::client_config(self.ca.as_deref()).map(Some).map_err(|e| ClientError::Usage(format!("--ca: {e}")))
     }
 
     /// The tracer thread count actually used.

@@ -81,7 +81,8 @@ fn the_client_gets_frames_again_from_a_restarted_server() {
     let addr = server.local_addr();
     let conn = connect_layers(&addr.to_string(), Some(TOKEN), Duration::from_secs(10), 1).unwrap();
     let home = home_camera(&conn.bounds, 64, 48);
-    let redial = Redial { addr: addr.to_string(), token: Some(TOKEN.into()), layers: 1, backoff: Backoff::default() };
+    let redial =
+        Redial { addr: addr.to_string(), token: Some(TOKEN.into()), layers: 1, backoff: Backoff::default(), tls: None };
     let net = Network::start_reconnecting(conn, net_config(), None, redial).unwrap();
     assert!(next_scene(&net, &home, Instant::now(), Duration::from_secs(10)).is_some(), "no first frame");
     assert_eq!(net.state(), ConnectionState::Connected);
@@ -127,7 +128,13 @@ fn a_wrong_token_after_a_restart_is_a_permanent_failure() {
     let conn = connect_layers(&addr.to_string(), Some(TOKEN), Duration::from_secs(10), 1).unwrap();
     let home = home_camera(&conn.bounds, 64, 48);
     // The redial carries another token (as if the server had a new one): refused for good.
-    let redial = Redial { addr: addr.to_string(), token: Some("guess".into()), layers: 1, backoff: Backoff::default() };
+    let redial = Redial {
+        addr: addr.to_string(),
+        token: Some("guess".into()),
+        layers: 1,
+        backoff: Backoff::default(),
+        tls: None,
+    };
     let net = Network::start_reconnecting(conn, net_config(), None, redial).unwrap();
     assert!(next_scene(&net, &home, Instant::now(), Duration::from_secs(10)).is_some(), "no first frame");
     server.shutdown();

@@ -57,6 +57,6 @@ pub use dataset::Dataset;
 pub use lanes::{lane_kind, limit_lanes, limit_lanes_from_env, LaneKind};
 pub use marcher::{default_camera, FrameStats, LayerBuffer, MarchKernel, MarchOptions, Marcher, PixelBuffer};
 pub use radius::RadiusModel;
-pub use server::{Server, ServerConfig, ServerHandle};
+pub use server::{Server, ServerConfig, ServerHandle, TlsIdentity};
 pub use transfer_function::TransferFunction;
 pub use volume::{load_volume, LoadOptions, Volume, VolumeError};

@@ -3,6 +3,7 @@
 //! ```text
 //! volwarp-server                                   # serve the bundled CT head on 127.0.0.1:7878
 //! volwarp-server --volume head.nrrd --tf tf.json --listen 0.0.0.0:7878 --token-file ~/.volwarp-token
+//! volwarp-server --listen 0.0.0.0:7878 --token-file T --tls-cert cert.pem --tls-key key.pem   # over TLS
 //! volwarp-server render --volume FILE [--tf FILE] [--orbit 30,10] [--size 1024x1024] --out img.png
 //! volwarp-server dump [--orbit 30,10] [--heuristic threshold] [--encoding compact|raw12] --out frame.vwf
 //! volwarp-server render --preset ct-bone --window-level 0.8,0.45 --crop 0,0,0,1,0.5,1 --out cut.png
@@ -19,7 +20,9 @@ use volwarp_core::compact_frame::Encoding;
 use volwarp_core::wire::CameraRequest;
 use volwarp_core::{Camera, Heuristic};
 use volwarp_server::volume::{parse_dims, LoadOptions, VoxelType};
-use volwarp_server::{default_camera, Dataset, MarchKernel, MarchOptions, Marcher, RadiusModel, Server, ServerConfig};
+use volwarp_server::{
+    default_camera, Dataset, MarchKernel, MarchOptions, Marcher, RadiusModel, Server, ServerConfig, TlsIdentity,
+};
 
 #[derive(Parser, Debug)]
 #[command(
@@ -217,6 +220,13 @@ struct NetArgs {
     /// many; then its connections get Error RATE_LIMITED before the handshake (0: no limit).
     #[arg(long, value_name = "N", default_value_t = 10)]
     max_auth_failures: u32,
+    /// Serve over TLS with this PEM certificate chain (leaf first; needs --tls-key). Clients
+    /// connect with `volwarp-client --tls [--ca FILE]`. Default: plain TCP.
+    #[arg(long, value_name = "FILE", requires = "tls_key")]
+    tls_cert: Option<PathBuf>,
+    /// The PEM private key of --tls-cert (PKCS#8, PKCS#1 or SEC1).
+    #[arg(long, value_name = "FILE", requires = "tls_cert")]
+    tls_key: Option<PathBuf>,
     /// Marcher threads (0 = one per core).
     #[arg(long, default_value_t = 0)]
     threads: usize,
@@ -408,6 +418,7 @@ fn server_config(n: &NetArgs, layers: Option<u8>) -> Result<ServerConfig, String
         max_viewport: n.max_viewport,
         token,
         max_auth_failures: n.max_auth_failures,
+        tls: tls(n)?,
         frame_delay: (n.frame_delay_ms > 0).then(|| Duration::from_millis(n.frame_delay_ms)),
         compact: !n.no_compact,
         layers: layers.unwrap_or(volwarp_core::segments::MAX_LAYERS as u8),
@@ -418,13 +429,24 @@ fn server_config(n: &NetArgs, layers: Option<u8>) -> Result<ServerConfig, String
     })
 }
 
+/// The TLS identity of `--tls-cert` and `--tls-key`, if given.
+fn tls(n: &NetArgs) -> Result<Option<TlsIdentity>, String> {
+    match (&n.tls_cert, &n.tls_key) {
+        (Some(cert), Some(key)) => {
+            TlsIdentity::from_pem_files(cert, key).map(Some).map_err(|e| format!("--tls-cert/--tls-key: {e}"))
+        }
+        _ => Ok(None),
+    }
+}
+
 fn run(cli: Cli) -> Result<(), String> {
     match &cli.cmd {
         Some(Cmd::Info { path }) => return info(path, &cli.data),
         Some(Cmd::Synth { out }) => return synth(&cli.data, out),
         None | Some(Cmd::Serve) => {
-            // A bad token file is reported before the volume is loaded.
+            // A bad token file or TLS file is reported before the volume is loaded.
             token(&cli.net)?;
+            tls(&cli.net)?;
         }
         _ => {}
     }

@@ -23,12 +23,19 @@
 //! one attempt from the address's bucket of `max_auth_failures` per second (as deep as its rate)
 //! and gets it back unless its token was wrong. An address whose bucket is empty gets Error
 //! `RATE_LIMITED` and a close at once, before any byte of its Hello is read.
+//!
+//! **TLS** ([`ServerConfig::tls`]): each connection's first byte tells a TLS ClientHello from a
+//! plain volwarp Hello. A TLS client gets the handshake (within the handshake timeout), then the
+//! same protocol inside it, its reader and writer threads sharing one rustls state
+//! ([`volwarp_tls::TlsLink`]); a plain client gets a plain Error `BAD_REQUEST` saying the server
+//! speaks TLS only. Refusals at accept time (`BUSY`, `RATE_LIMITED`) are sent in plain before any
+//! handshake, so they cost no TLS work; volwarp clients read them either way.
 
 use crate::dataset::Dataset;
 use crate::marcher::{FrameStats, Marcher};
 use crate::render_queue::{LevelPolicy, RenderCounts, RenderQueue};
 use std::collections::HashMap;
-use std::io::{self, BufWriter, Read};
+use std::io::{self, BufWriter, Read, Write};
 use std::net::{IpAddr, Ipv6Addr, Shutdown, SocketAddr, TcpListener, TcpStream};
 use std::sync::atomic::{AtomicBool, AtomicU64, AtomicUsize, Ordering};
 use std::sync::{Arc, Condvar, Mutex};
@@ -36,6 +43,25 @@ use std::thread::JoinHandle;
 use std::time::{Duration, Instant};
 use volwarp_core::compact_frame::Encoding;
 use volwarp_core::wire::{self, error_code, CameraRequest, ErrorMsg, Frame, Hello, Limits, Message, WireError};
+use volwarp_tls::{TlsLink, TlsReader, TlsWriter};
+
+/// A server's TLS certificate chain and key, ready to serve (`--tls-cert`, `--tls-key`).
+#[derive(Clone, Debug)]
+pub struct TlsIdentity(pub Arc<volwarp_tls::rustls::ServerConfig>);
+
+impl TlsIdentity {
+    /// Reads a PEM certificate chain (leaf first) and its PEM private key.
+    pub fn from_pem_files(cert: &std::path::Path, key: &std::path::Path) -> Result<TlsIdentity, String> {
+        volwarp_tls::server_config(cert, key).map(TlsIdentity)
+    }
+}
+
+impl PartialEq for TlsIdentity {
+    /// The same identity: the same loaded config.
+    fn eq(&self, other: &Self) -> bool {
+        Arc::ptr_eq(&self.0, &other.0)
+    }
+}
 
 /// Server settings (every limit has a command-line flag in the binary).
 #[derive(Clone, Debug, PartialEq)]
@@ -62,6 +88,8 @@ pub struct ServerConfig {
     /// as many; beyond that the address's connections get Error `RATE_LIMITED` before the
     /// handshake. 0: no limit. Used only with a token. Default 10.
     pub max_auth_failures: u32,
+    /// Serve over TLS with this identity (`None`, the default: plain TCP).
+    pub tls: Option<TlsIdentity>,
     /// Artificial delay before each frame (latency demos and benchmarks).
     pub frame_delay: Option<Duration>,
     /// Send CompactFrames to clients that ask for them (`CAP_COMPACT` in their Hello);
@@ -90,6 +118,7 @@ impl Default for ServerConfig {
             max_viewport: 4096,
             token: None,
             max_auth_failures: 10,
+            tls: None,
             frame_delay: None,
             compact: true,
             layers: volwarp_core::segments::MAX_LAYERS as u8,
@@ -394,7 +423,11 @@ fn accept(shared: &Arc<Shared>, stream: TcpStream) {
             if !limiter.charge(a.ip()) {
                 log::warn!("client {id} ({peer}) refused: too many wrong tokens from {}", a.ip());
                 let _ = stream.set_write_timeout(Some(Duration::from_secs(1)));
-                send_error(&stream, error_code::RATE_LIMITED, "too many wrong tokens from this address; try later");
+                send_error(
+                    &mut &stream,
+                    error_code::RATE_LIMITED,
+                    "too many wrong tokens from this address; try later",
+                );
                 let _ = stream.shutdown(Shutdown::Both);
                 return;
             }
@@ -410,7 +443,7 @@ fn accept(shared: &Arc<Shared>, stream: TcpStream) {
     if shared.active.load(Ordering::SeqCst) >= shared.config.max_clients {
         log::warn!("client {id} ({peer}) refused: {} clients already", shared.config.max_clients);
         let _ = stream.set_write_timeout(Some(Duration::from_secs(1)));
-        send_error(&stream, error_code::BUSY, "server busy: too many clients");
+        send_error(&mut &stream, error_code::BUSY, "server busy: too many clients");
         let _ = stream.shutdown(Shutdown::Both);
         refund();
         return;
@@ -443,15 +476,81 @@ fn accept(shared: &Arc<Shared>, stream: TcpStream) {
 /// deadline, every read waits at most until it: a client trickling one byte at a time cannot
 /// stretch a message past the handshake or idle timeout (a per-read timeout restarts on
 /// every byte).
-struct SocketReader<'a> {
+///
+/// It reads from `src`: the socket itself, or the TLS reader over it (whose socket reads the
+/// timeouts set on `stream` bound, since both are handles of one socket).
+struct SocketReader<'a, R> {
     stream: &'a TcpStream,
+    src: &'a mut R,
     deadline: Option<Instant>,
 }
 
-impl<'a> SocketReader<'a> {
-    /// A reader whose reads all end by `deadline`.
-    fn until(stream: &'a TcpStream, deadline: Instant) -> Self {
-        SocketReader { stream, deadline: Some(deadline) }
+impl<'a, R: Read> SocketReader<'a, R> {
+    /// A reader of `src` whose reads all end by `deadline`.
+    fn until(stream: &'a TcpStream, src: &'a mut R, deadline: Instant) -> Self {
+        SocketReader { stream, src, deadline: Some(deadline) }
+    }
+}
+
+/// What a connection reads from: the socket, or the TLS stream over it.
+enum Source<S> {
+    Plain(S),
+    Tls(TlsReader<S>),
+}
+
+impl<S: Read> Source<S> {
+    fn new(raw: S, tls: Option<&TlsLink>) -> Self {
+        match tls {
+            Some(l) => Source::Tls(l.reader(raw)),
+            None => Source::Plain(raw),
+        }
+    }
+}
+
+impl<S: Read> Read for Source<S> {
+    fn read(&mut self, buf: &mut [u8]) -> io::Result<usize> {
+        match self {
+            Source::Plain(s) => s.read(buf),
+            Source::Tls(t) => t.read(buf),
+        }
+    }
+}
+
+/// What a connection writes to: the socket, or the TLS stream over it.
+enum Sink<S: Write> {
+    Plain(S),
+    Tls(TlsWriter<S>),
+}
+
+impl<S: Write> Sink<S> {
+    fn new(raw: S, tls: Option<&TlsLink>) -> Self {
+        match tls {
+            Some(l) => Sink::Tls(l.writer(raw)),
+            None => Sink::Plain(raw),
+        }
+    }
+
+    /// Ends a TLS stream with close_notify (best effort).
+    fn close(&mut self) {
+        if let Sink::Tls(t) = self {
+            t.close();
+        }
+    }
+}
+
+impl<S: Write> Write for Sink<S> {
+    fn write(&mut self, buf: &[u8]) -> io::Result<usize> {
+        match self {
+            Sink::Plain(s) => s.write(buf),
+            Sink::Tls(t) => t.write(buf),
+        }
+    }
+
+    fn flush(&mut self) -> io::Result<()> {
+        match self {
+            Sink::Plain(s) => s.flush(),
+            Sink::Tls(t) => t.flush(),
+        }
     }
 }
 
@@ -472,11 +571,11 @@ impl embedded_io::Error for SocketError {
     }
 }
 
-impl embedded_io::ErrorType for SocketReader<'_> {
+impl<R> embedded_io::ErrorType for SocketReader<'_, R> {
     type Error = SocketError;
 }
 
-impl embedded_io::Read for SocketReader<'_> {
+impl<R: Read> embedded_io::Read for SocketReader<'_, R> {
     fn read(&mut self, buf: &mut [u8]) -> Result<usize, SocketError> {
         loop {
             if let Some(d) = self.deadline {
@@ -486,23 +585,63 @@ impl embedded_io::Read for SocketReader<'_> {
                 }
                 let _ = self.stream.set_read_timeout(Some(left.max(Duration::from_millis(1))));
             }
-            match (&mut &*self.stream).read(buf) {
+            match self.src.read(buf) {
                 Ok(n) => return Ok(n),
                 Err(e) if e.kind() == io::ErrorKind::Interrupted => continue,
                 Err(e) => {
                     return Err(SocketError(match e.kind() {
                         io::ErrorKind::WouldBlock | io::ErrorKind::TimedOut => embedded_io::ErrorKind::TimedOut,
+                        // A TLS stream ended without close_notify, or not TLS at all.
+                        io::ErrorKind::UnexpectedEof => embedded_io::ErrorKind::ConnectionReset,
                         k => k.into(),
-                    }))
+                    }));
                 }
             }
         }
     }
 }
 
-fn send_error(stream: &TcpStream, code: u16, text: &str) {
-    let mut w = embedded_io_adapters::std::FromStd::new(stream);
+fn send_error(out: &mut impl Write, code: u16, text: &str) {
+    let mut w = embedded_io_adapters::std::FromStd::new(&mut *out);
     let _ = wire::write_error(&mut w, &ErrorMsg::new(code, text));
+    let _ = out.flush();
+}
+
+/// The first byte the peer sends, waiting at most until `deadline` (`None`: it closed).
+fn first_byte(stream: &TcpStream, deadline: Instant) -> io::Result<Option<u8>> {
+    let mut b = [0u8; 1];
+    loop {
+        let left = deadline.saturating_duration_since(Instant::now());
+        if left.is_zero() {
+            return Err(io::ErrorKind::TimedOut.into());
+        }
+        let _ = stream.set_read_timeout(Some(left.max(Duration::from_millis(1))));
+        match stream.peek(&mut b) {
+            Ok(0) => return Ok(None),
+            Ok(_) => return Ok(Some(b[0])),
+            Err(e) if e.kind() == io::ErrorKind::Interrupted => continue,
+            Err(e) => return Err(e),
+        }
+    }
+}
+
+/// Runs the TLS handshake of a new connection on a TLS server; a plain volwarp client is
+/// told in plain to connect with TLS. `Err`: why the connection ends.
+fn tls_accept(id: &TlsIdentity, stream: &TcpStream, deadline: Instant) -> Result<TlsLink, String> {
+    match first_byte(stream, deadline) {
+        Ok(Some(b)) if volwarp_tls::looks_like_tls(b) => {}
+        Ok(Some(b)) => {
+            if b == wire::MAGIC[0] {
+                let text = "this server speaks TLS only: connect with --tls";
+                send_error(&mut &*stream, error_code::BAD_REQUEST, text);
+                return Err(format!("a plain client on a TLS server ({text})"));
+            }
+            return Err(format!("neither TLS nor volwarp (first byte {b:#04x})"));
+        }
+        Ok(None) => return Err("closed before the handshake".into()),
+        Err(e) => return Err(format!("handshake failed: {e}")),
+    }
+    TlsLink::accept(id.0.clone(), stream, Some(deadline)).map_err(|e| format!("TLS handshake failed: {e}"))
 }
 
 /// The error code and text to send for a decoding error, or `None` when the peer is gone.
@@ -551,19 +690,37 @@ fn serve(sh: &Shared, stream: &TcpStream, id: u64, charged: Option<IpAddr>) -> S
         max_viewport: cfg.max_viewport,
         max_layers: 1,
     };
-    // Handshake.
+    // Handshake (TLS first on a TLS server, within the same deadline).
     let handshake_deadline = Instant::now() + cfg.handshake_timeout.max(Duration::from_millis(1));
-    let hello = match wire::read_message(&mut SocketReader::until(stream, handshake_deadline), &limits) {
+    let tls = match &cfg.tls {
+        Some(identity) => match tls_accept(identity, stream, handshake_deadline) {
+            Ok(link) => {
+                log::info!("client {id}: TLS {}", link.describe());
+                Some(link)
+            }
+            Err(reason) => return reason,
+        },
+        None => None,
+    };
+    let mut src = Source::new(stream, tls.as_ref());
+    let mut sink = Sink::new(stream, tls.as_ref());
+    let hello = match wire::read_message(&mut SocketReader::until(stream, &mut src, handshake_deadline), &limits) {
         Ok(Message::Hello(h)) => h,
         Ok(other) => {
             let text = format!("expected Hello, got {}", msg_name(&other));
-            send_error(stream, error_code::BAD_REQUEST, &text);
+            send_error(&mut sink, error_code::BAD_REQUEST, &text);
             return text;
+        }
+        // A TLS client on a plain server: say so, in plain (its TLS layer hands it over).
+        Err(WireError::BadMagic(m)) if tls.is_none() && volwarp_tls::looks_like_tls(m[0]) => {
+            let text = "this server does not speak TLS: connect without --tls";
+            send_error(&mut sink, error_code::BAD_REQUEST, text);
+            return format!("a TLS client on a plain server ({text})");
         }
         Err(e) => {
             let text = format!("handshake failed: {e}");
             if let Some((code, t)) = wire_error_reply(&e) {
-                send_error(stream, code, &t);
+                send_error(&mut sink, code, &t);
             }
             return text;
         }
@@ -573,7 +730,8 @@ fn serve(sh: &Shared, stream: &TcpStream, id: u64, charged: Option<IpAddr>) -> S
             if let Some(c) = &mut charge {
                 c.spent = true;
             }
-            send_error(stream, error_code::UNAUTHORIZED, "missing or wrong token");
+            send_error(&mut sink, error_code::UNAUTHORIZED, "missing or wrong token");
+            sink.close();
             return "missing or wrong token".into();
         }
     }
@@ -586,10 +744,13 @@ fn serve(sh: &Shared, stream: &TcpStream, id: u64, charged: Option<IpAddr>) -> S
     // Layered frames: as many segments per pixel as the client asks, up to ours.
     let layers = hello.layers.clamp(1, cfg.layers.max(1));
     {
-        let mut w = embedded_io_adapters::std::FromStd::new(stream);
+        let mut w = embedded_io_adapters::std::FromStd::new(&mut sink);
         let caps = if compact { wire::CAP_COMPACT } else { 0 } | if green { wire::CAP_COLOR_GREEN } else { 0 };
         let answer = Hello::new(caps).with_layers(layers);
         if let Err(e) = wire::write_hello(&mut w, &answer) {
+            return format!("cannot send Hello: {e}");
+        }
+        if let Err(e) = sink.flush() {
             return format!("cannot send Hello: {e}");
         }
     }
@@ -605,11 +766,19 @@ fn serve(sh: &Shared, stream: &TcpStream, id: u64, charged: Option<IpAddr>) -> S
         let slot = slot.clone();
         let Ok(rs) = stream.try_clone() else { return "cannot clone the socket".into() };
         let idle = cfg.idle_timeout.max(Duration::from_millis(1));
-        std::thread::Builder::new().name(format!("volwarp-read-{id}")).spawn(move || read_loop(rs, limits, idle, slot))
+        let Ok(raw) = rs.try_clone() else { return "cannot clone the socket".into() };
+        // The TLS reader keeps the ciphertext the Hello's reads left over.
+        let src = match src {
+            Source::Plain(_) => Source::Plain(raw),
+            Source::Tls(t) => Source::Tls(t.with_raw(raw)),
+        };
+        std::thread::Builder::new()
+            .name(format!("volwarp-read-{id}"))
+            .spawn(move || read_loop(rs, src, limits, idle, slot))
     };
     let Ok(reader) = reader else { return "cannot spawn the reader thread".into() };
 
-    let mut out = BufWriter::with_capacity(64 * 1024, stream);
+    let mut out = BufWriter::with_capacity(64 * 1024, sink);
     // One frame per client, its vectors reused from frame to frame.
     let mut frame = sh.marcher.empty_frame();
     // The camera of the client's last request: a different one is a moving camera.
@@ -668,14 +837,22 @@ fn serve(sh: &Shared, stream: &TcpStream, id: u64, charged: Option<IpAddr>) -> S
             if dropped > 0 { format!(", {dropped} stale requests skipped") } else { String::new() }
         );
     };
+    // Only a connection that ends cleanly gets TLS's close_notify: a dead or stalled socket
+    // would hold this thread up to another send timeout.
+    let clean = !matches!(reason, End::Gone(_));
     let reason = match reason {
         End::Bye => "bye".to_string(),
         End::Gone(r) => r,
         End::Error(code, text) => {
-            send_error(stream, code, &text);
+            send_error(&mut out, code, &text);
             text
         }
     };
+    if clean {
+        if let Ok(mut sink) = out.into_inner() {
+            sink.close();
+        }
+    }
     let _ = stream.shutdown(Shutdown::Both);
     let _ = reader.join();
     reason
@@ -692,9 +869,15 @@ fn msg_name(m: &Message) -> &'static str {
 }
 
 /// Reads the client's messages; each must arrive complete within `idle` of the previous one.
-fn read_loop(stream: TcpStream, limits: Limits, idle: Duration, slot: Arc<(Mutex<Slot>, Condvar)>) {
+fn read_loop(
+    stream: TcpStream,
+    mut src: Source<TcpStream>,
+    limits: Limits,
+    idle: Duration,
+    slot: Arc<(Mutex<Slot>, Condvar)>,
+) {
     let end = loop {
-        match wire::read_message(&mut SocketReader::until(&stream, Instant::now() + idle), &limits) {
+        match wire::read_message(&mut SocketReader::until(&stream, &mut src, Instant::now() + idle), &limits) {
             Ok(Message::CameraRequest(r)) => {
                 let mut s = slot.0.lock().unwrap_or_else(|e| e.into_inner());
                 if s.latest.replace(r).is_some() {
