@@ -16,6 +16,14 @@ use std::time::Duration;
 /// Runs the client as the command line says.
 pub fn run(opts: &Options) -> Result<(), ClientError> {
     opts.validate()?;
+    let with_token;
+    let opts = match opts.access_token()? {
+        Some(t) if opts.token.as_deref() != Some(t.as_str()) => {
+            with_token = Options { token: Some(t), token_file: None, ..opts.clone() };
+            &with_token
+        }
+        _ => opts,
+    };
     crate::renderers::set_adapter(opts.adapter.clone());
     if let Some(path) = &opts.replay {
         return crate::replay::run(opts, path);

@@ -46,9 +46,13 @@ pub struct Options {
     /// Server address (host:port). Default: start a `volwarp-server` child process on loopback.
     #[arg(long, value_name = "ADDR")]
     pub connect: Option<String>,
-    /// Access token for the server.
-    #[arg(long)]
+    /// Access token for the server (also $VOLWARP_TOKEN).
+    #[arg(long, conflicts_with = "token_file")]
     pub token: Option<String>,
+    /// Read the access token from FILE (surrounding whitespace trimmed), so it does not show in
+    /// `ps` output.
+    #[arg(long, value_name = "FILE")]
+    pub token_file: Option<std::path::PathBuf>,
     /// With --connect: stop when the connection drops instead of connecting again (by default
     /// the client keeps warping the frames it has and retries, 100 ms doubling to 2 s apart).
     #[arg(long, requires = "connect")]
@@ -228,6 +232,24 @@ pub fn parse_heuristic(s: &str) -> Result<Heuristic, String> {
 }
 
 impl Options {
+    /// The access token: `--token`, else `--token-file` (trimmed), else `$VOLWARP_TOKEN`; an
+    /// unreadable or empty token file is a usage error.
+    pub fn access_token(&self) -> Result<Option<String>, ClientError> {
+        if let Some(t) = &self.token {
+            return Ok(Some(t.clone()));
+        }
+        if let Some(path) = &self.token_file {
+            let text = std::fs::read_to_string(path)
+                .map_err(|e| ClientError::Usage(format!("--token-file {}: {e}", path.display())))?;
+            let t = text.trim();
+            if t.is_empty() {
+                return Err(ClientError::Usage(format!("--token-file {}: the file holds no token", path.display())));
+            }
+            return Ok(Some(t.to_string()));
+        }
+        Ok(std::env::var("VOLWARP_TOKEN").ok().filter(|t| !t.is_empty()))
+    }
+
     /// Checks combinations clap cannot express.
     pub fn validate(&self) -> Result<(), ClientError> {
         if !(self.radius_scale > 0.0 && self.radius_scale <= 16.0) {

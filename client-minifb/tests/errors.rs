@@ -144,3 +144,39 @@ fn usage_errors_exit_with_2() {
     let err = String::from_utf8_lossy(&out.stderr);
     assert!(err.contains("unknown renderer") && err.contains("spheres-cpu"), "{err}");
 }
+
+/// `--token-file`: the token read from the file (whitespace trimmed) is what the Hello carries;
+/// an empty or missing file is a usage error naming the flag; `--token` and `--token-file`
+/// together are refused.
+#[test]
+fn the_token_file_is_sent_and_a_bad_one_is_a_usage_error() {
+    let dir = std::env::temp_dir().join(format!("volwarp-client-token-{}", std::process::id()));
+    std::fs::create_dir_all(&dir).unwrap();
+    let file = dir.join("token");
+    std::fs::write(&file, "  s3cret-from-a-file \n").unwrap();
+    let addr = fake_server(|mut s| {
+        use std::io::Write;
+        let Some(Message::Hello(h)) = read_msg(&mut s) else { panic!("no Hello") };
+        let got = String::from_utf8_lossy(&h.token).into_owned();
+        let e = ErrorMsg::new(error_code::UNAUTHORIZED, &format!("the Hello carried [{got}]"));
+        s.write_all(&encode(&Message::Error(e))).unwrap();
+        std::thread::sleep(Duration::from_millis(500));
+    });
+    let mut args = headless(&addr);
+    args.extend(["--token-file".into(), file.to_str().unwrap().into()]);
+    let args: Vec<&str> = args.iter().map(|s| s.as_str()).collect();
+    assert_clean_failure(&run(&args, LIMIT), "the Hello carried [s3cret-from-a-file]");
+
+    std::fs::write(&file, " \n").unwrap();
+    let out = run(&args, LIMIT);
+    assert_eq!(out.status.code(), Some(2));
+    assert!(error_line(&out).contains("--token-file") && error_line(&out).contains("no token"), "{}", error_line(&out));
+    std::fs::remove_file(&file).unwrap();
+    let out = run(&args, LIMIT);
+    assert_eq!(out.status.code(), Some(2));
+    assert!(error_line(&out).contains("--token-file"), "{}", error_line(&out));
+
+    let out = run(&["--token", "a", "--token-file", "b", "--headless", "--out", "x"], LIMIT);
+    assert_eq!(out.status.code(), Some(2), "both token flags are refused");
+    std::fs::remove_dir_all(&dir).ok();
+}
