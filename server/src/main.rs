@@ -453,6 +453,13 @@ fn run(cli: Cli) -> Result<(), String> {
     let visual = visual_state(&cli.data.visual)?;
     #[cfg(feature = "mpi")]
     if volwarp_server::distributed::mpi::launched_by_mpiexec() {
+        if visual != volwarp_server::visual::VisualState::default() {
+            return Err(
+                "--preset, --shade, --window-level, --opacity-scale, --crop and --clip are not applied across \
+                        MPI ranks yet: run them on one process, or give the transfer function with --tf"
+                    .into(),
+            );
+        }
         return run_mpi(cli);
     }
     let ds = load(&cli.data)?;
@@ -563,6 +570,7 @@ fn run_mpi(cli: Cli) -> Result<(), String> {
             kernel: MarchKernel::Scalar,
             skip_empty: cli.data.skip_empty,
             early_termination: cli.data.early_termination,
+            shading: None,
         },
         rank_timeout: secs(cli.data.rank_timeout, "rank-timeout")?,
     };

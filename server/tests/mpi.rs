@@ -202,6 +202,21 @@ fn more_ranks_than_bricks_is_a_clear_error() {
     assert!(err.contains("at most 8 ranks"), "{err}");
 }
 
+#[test]
+fn visual_state_flags_are_refused_across_ranks() {
+    let vol = data("neghip_64x64x64_uint8.raw");
+    for flag in [["--preset", "ct-bone"], ["--crop", "0,0,0,1,0.5,1"], ["--shade", "true"]] {
+        let out = Command::new("mpiexec")
+            .args(["-n", "2", BIN, "render", "--volume", vol.to_str().unwrap(), "--out", "/dev/null"])
+            .args(flag)
+            .output()
+            .unwrap();
+        assert!(!out.status.success(), "{flag:?}");
+        let err = String::from_utf8_lossy(&out.stderr);
+        assert!(err.contains("not applied across MPI ranks"), "{flag:?}: {err}");
+    }
+}
+
 /// Serves on 3 ranks, asks for a large frame and sends rank 2 `signal` while it is marched;
 /// returns what the client got, how long it took, and mpiexec's exit status.
 fn fault_mid_frame(
