@@ -259,3 +259,20 @@ impl MarchSetup<'_> {
         (n, t_enter, Some(t_exit))
     }
 }
+
+/// The next lattice sample index after skipping empty space up to `t_out`: the first `k' ≥ k + 1`
+/// with `t_enter + (k' + ½)·dt ≥ t_out`, at most `n` (ceil done by hand: the libm call showed in
+/// profiles); NaN or no progress steps by one. The scalar marcher's and the partial march's
+/// resume, so both take the same samples.
+#[inline]
+pub(crate) fn resume_after(t_out: f32, t_enter: f32, dt: f32, k: u32, n: u32) -> u32 {
+    let x = (t_out - t_enter) / dt - 0.5;
+    if x >= n as f32 {
+        n
+    } else if x > (k + 1) as f32 {
+        let c = x as u32;
+        c + u32::from((c as f32) < x)
+    } else {
+        k + 1
+    }
+}

@@ -425,15 +425,7 @@ impl Marcher {
                 if r > 0 {
                     // Resume at the first lattice sample at or after t_out (ceil, done by hand:
                     // the libm call showed in profiles); NaN or no progress steps by one.
-                    let x = (t_out - t_enter) / dt - 0.5;
-                    k = if x >= n as f32 {
-                        n
-                    } else if x > (k + 1) as f32 {
-                        let c = x as u32;
-                        c + u32::from((c as f32) < x)
-                    } else {
-                        k + 1
-                    };
+                    k = crate::march_settings::resume_after(t_out, t_enter, dt, k, n);
                     continue;
                 }
                 t_check = t_out;
@@ -757,8 +749,7 @@ impl Marcher {
     /// The frame's sphere radius for a request (its model from the options, its scale from
     /// the request).
     pub fn frame_radius(&self, req: &CameraRequest) -> FrameRadius {
-        let scale =
-            if req.radius_scale.is_finite() && req.radius_scale > 0.0 { req.radius_scale.min(16.0) } else { 1.0 };
+        let scale = request_radius_scale(req);
         FrameRadius::with_params(
             self.opts.radius,
             self.opts.uncertainty,
@@ -810,4 +801,13 @@ pub fn default_camera(volume: &Volume, width: u32, height: u32) -> Camera {
     let f = Camera::framing(b.min(), b.max(), 0.0, 0.0, 30.0, width, height);
     let dist = (f.eye - f.target).length();
     Camera::look_at(f.target + Vec3::Y * dist, f.target, Vec3::Z, 30.0, width, height)
+}
+
+/// A request's radius scale as frames use it: at most 16, 1 where it is not a positive number.
+pub(crate) fn request_radius_scale(req: &CameraRequest) -> f32 {
+    if req.radius_scale.is_finite() && req.radius_scale > 0.0 {
+        req.radius_scale.min(16.0)
+    } else {
+        1.0
+    }
 }

@@ -51,8 +51,7 @@ impl FrameGeometry {
 
     /// [`crate::Marcher::frame_radius`] of the whole volume.
     pub fn frame_radius(&self, req: &CameraRequest) -> FrameRadius {
-        let scale =
-            if req.radius_scale.is_finite() && req.radius_scale > 0.0 { req.radius_scale.min(16.0) } else { 1.0 };
+        let scale = crate::marcher::request_radius_scale(req);
         FrameRadius::with_params(
             self.opts.radius,
             self.opts.uncertainty,

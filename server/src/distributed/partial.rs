@@ -182,15 +182,7 @@ impl PartMarcher {
                 let t_out = occ.leap_exit_t(br, reach, o_part, inv_d);
                 if r > 0 {
                     // The marcher's resume: the first lattice sample at or after t_out.
-                    let x = (t_out - t_enter) / dt - 0.5;
-                    k = if x >= k1 as f32 {
-                        k1
-                    } else if x > (k + 1) as f32 {
-                        let c = x as u32;
-                        c + u32::from((c as f32) < x)
-                    } else {
-                        k + 1
-                    };
+                    k = crate::march_settings::resume_after(t_out, t_enter, dt, k, k1);
                     continue;
                 }
                 t_check = t_out;
