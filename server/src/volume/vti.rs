@@ -456,7 +456,7 @@ fn stream_appended(
         let (blocks, block, last) = (first[0], first[1], first[2]);
         check_blocks(blocks, block, last, expected)?;
         let sizes = ints(blocks as usize)?;
-        let reader = ZlibBlocks { src: file, sizes, block, last, next: 0, out: Vec::new(), pos: 0 };
+        let reader = ZlibBlocks::new(file, sizes, block, last);
         stream_volume(&spec, reader).map_err(|e| match e.kind {
             super::VolumeErrorKind::Io(io) if io.kind() == std::io::ErrorKind::InvalidData => {
                 VolumeError::new(super::VolumeErrorKind::Decompress(io.to_string()))
@@ -490,64 +490,116 @@ fn check_blocks(blocks: u64, block: u64, last: u64, expected: u64) -> Result<(),
 /// Inflates one zlib block that must give `want` bytes, appending them to `out`.
 fn inflate_block(i: usize, chunk: &[u8], want: u64, out: &mut Vec<u8>) -> std::io::Result<()> {
     let before = out.len();
-    flate2::read::ZlibDecoder::new(chunk)
-        .take(want)
-        .read_to_end(out)
-        .map_err(|e| std::io::Error::new(std::io::ErrorKind::InvalidData, format!("zlib block {i}: {e}")))?;
-    if (out.len() - before) as u64 != want {
-        let msg = format!("zlib block {i} inflates to {} bytes, not {want}", out.len() - before);
-        return Err(std::io::Error::new(std::io::ErrorKind::InvalidData, msg));
-    }
-    Ok(())
+    out.resize(before + want as usize, 0);
+    inflate_into(i, chunk, &mut out[before..])
 }
 
-/// The blocks of a zlib-compressed appended array as one stream: read in batches and
-/// inflated on all cores (the blocks are independent), served in order.
-struct ZlibBlocks<R> {
-    src: R,
-    sizes: Vec<u64>,
-    block: u64,
-    last: u64,
-    next: usize,
+/// Inflates one zlib block into `out`, which it must fill exactly (bytes past it are ignored),
+/// with this thread's inflate state (reset, not reallocated, per block).
+fn inflate_into(i: usize, chunk: &[u8], out: &mut [u8]) -> std::io::Result<()> {
+    use flate2::{Decompress, FlushDecompress};
+    thread_local! {
+        static INFLATE: std::cell::RefCell<Decompress> = std::cell::RefCell::new(Decompress::new(true));
+    }
+    let bad = |msg: String| std::io::Error::new(std::io::ErrorKind::InvalidData, msg);
+    INFLATE.with(|d| {
+        let mut d = d.borrow_mut();
+        d.reset(true);
+        d.decompress(chunk, out, FlushDecompress::Finish).map_err(|e| bad(format!("zlib block {i}: {e}")))?;
+        let got = d.total_out();
+        if got != out.len() as u64 {
+            return Err(bad(format!("zlib block {i} inflates to {got} bytes, not {}", out.len())));
+        }
+        Ok(())
+    })
+}
+
+/// The blocks of a zlib-compressed appended array as one stream: a thread reads them in batches
+/// and inflates each batch on all cores straight into its buffer (the blocks are independent),
+/// one batch ahead of the reader, which is building bricks meanwhile.
+struct ZlibBlocks {
+    batches: std::sync::mpsc::Receiver<std::io::Result<Vec<u8>>>,
+    /// Emptied buffers, back to the inflating thread.
+    spent: std::sync::mpsc::SyncSender<Vec<u8>>,
     out: Vec<u8>,
     pos: usize,
 }
 
-/// Blocks inflated at a time (32 KiB each as VTK writes them: 1 MiB a batch).
-const BATCH_BLOCKS: usize = 32;
+/// Blocks inflated at a time (32 KiB each as VTK writes them: 4 MiB a batch).
+const BATCH_BLOCKS: usize = 128;
 
-impl<R: Read> Read for ZlibBlocks<R> {
-    fn read(&mut self, buf: &mut [u8]) -> std::io::Result<usize> {
-        use rayon::prelude::*;
-        if self.pos == self.out.len() {
-            let end = (self.next + BATCH_BLOCKS).min(self.sizes.len());
-            let mut chunks = Vec::with_capacity(end - self.next);
-            for i in self.next..end {
-                let mut c = Vec::new();
-                let n = (&mut self.src).take(self.sizes[i]).read_to_end(&mut c)?;
-                if (n as u64) < self.sizes[i] {
-                    let msg = format!("compressed block {i} of {} bytes runs past the data", self.sizes[i]);
-                    return Err(std::io::Error::new(std::io::ErrorKind::InvalidData, msg));
+impl ZlibBlocks {
+    /// Starts inflating the blocks of `sizes` (compressed bytes each; `block` bytes inflated,
+    /// `last` for the last one unless 0) read from `src`.
+    fn new<R: Read + Send + 'static>(mut src: R, sizes: Vec<u64>, block: u64, last: u64) -> ZlibBlocks {
+        let (tx, batches) = std::sync::mpsc::sync_channel(1);
+        let (spent, back) = std::sync::mpsc::sync_channel::<Vec<u8>>(2);
+        std::thread::spawn(move || {
+            let mut comp = Vec::new();
+            let mut next = 0;
+            while next < sizes.len() {
+                let out = back.try_recv().unwrap_or_default();
+                let batch = inflate_batch(&mut src, &sizes, block, last, next, &mut comp, out);
+                let failed = batch.is_err();
+                if tx.send(batch).is_err() || failed {
+                    return; // the reader is gone, or this was the error it gets
                 }
-                chunks.push(c);
+                next = (next + BATCH_BLOCKS).min(sizes.len());
             }
-            let (first, count, block, last) = (self.next, self.sizes.len(), self.block, self.last);
-            let parts: Vec<std::io::Result<Vec<u8>>> = chunks
-                .par_iter()
-                .enumerate()
-                .map(|(k, c)| {
-                    let i = first + k;
-                    let want = if i + 1 == count && last != 0 { last } else { block };
-                    let mut out = Vec::with_capacity(want.min(1 << 24) as usize);
-                    inflate_block(i, c, want, &mut out).map(|_| out)
-                })
-                .collect();
-            self.out.clear();
-            self.pos = 0;
-            for p in parts {
-                self.out.extend_from_slice(&p?);
+        });
+        ZlibBlocks { batches, spent, out: Vec::new(), pos: 0 }
+    }
+}
+
+/// Reads the compressed blocks `first..` (a batch) from `src` into `comp` and inflates them in
+/// parallel into `out` (grown as they are read, never by what a header claims).
+fn inflate_batch(
+    src: &mut impl Read,
+    sizes: &[u64],
+    block: u64,
+    last: u64,
+    first: usize,
+    comp: &mut Vec<u8>,
+    mut out: Vec<u8>,
+) -> std::io::Result<Vec<u8>> {
+    use rayon::prelude::*;
+    let end = (first + BATCH_BLOCKS).min(sizes.len());
+    comp.clear();
+    let mut bounds = Vec::with_capacity(end - first);
+    for (i, &size) in sizes.iter().enumerate().take(end).skip(first) {
+        let start = comp.len();
+        let n = src.take(size).read_to_end(comp)?;
+        if (n as u64) < size {
+            let msg = format!("compressed block {i} of {size} bytes runs past the data");
+            return Err(std::io::Error::new(std::io::ErrorKind::InvalidData, msg));
+        }
+        bounds.push(start..comp.len());
+    }
+    let want = |i: usize| (if i + 1 == sizes.len() && last != 0 { last } else { block }) as usize;
+    out.resize((first..end).map(want).sum(), 0);
+    let mut slices = Vec::with_capacity(end - first);
+    let mut rest = &mut out[..];
+    for i in first..end {
+        let (a, b) = rest.split_at_mut(want(i));
+        slices.push(a);
+        rest = b;
+    }
+    let comp = &*comp;
+    slices.into_par_iter().zip(bounds).enumerate().try_for_each(|(k, (o, r))| inflate_into(first + k, &comp[r], o))?;
+    Ok(out)
+}
+
+impl Read for ZlibBlocks {
+    fn read(&mut self, buf: &mut [u8]) -> std::io::Result<usize> {
+        if self.pos == self.out.len() {
+            match self.batches.recv() {
+                Ok(batch) => {
+                    let spent = std::mem::replace(&mut self.out, batch?);
+                    let _ = self.spent.try_send(spent);
+                    self.pos = 0;
+                }
+                Err(_) => return Ok(0), // every batch read
             }
-            self.next = end;
         }
         let n = buf.len().min(self.out.len() - self.pos);
         buf[..n].copy_from_slice(&self.out[self.pos..self.pos + n]);
