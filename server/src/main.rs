@@ -13,7 +13,7 @@
 
 use clap::{Args, Parser, Subcommand};
 use std::net::SocketAddr;
-use std::path::PathBuf;
+use std::path::{Path, PathBuf};
 use std::process::ExitCode;
 use std::time::{Duration, Instant};
 use volwarp_core::compact_frame::Encoding;
@@ -535,16 +535,7 @@ fn run(cli: Cli) -> Result<(), String> {
             if got != encoding {
                 log::warn!("the frame does not fit the compact form; wrote the 12-byte form");
             }
-            std::fs::write(&out, &bytes).map_err(|e| format!("{}: {e}", out.display()))?;
-            println!(
-                "wrote {} ({} samples, {} bytes, {:.3} bytes/sample, {}, encoded in {encode_ms:.1} ms)",
-                out.display(),
-                stats.samples,
-                bytes.len(),
-                bytes.len() as f64 / stats.samples.max(1) as f64,
-                got.name()
-            );
-            Ok(())
+            write_dump(&out, &bytes, stats.samples, got, &format!(", encoded in {encode_ms:.1} ms"))
         }
         Cmd::Info { path } => info(&path, &cli.data),
         Cmd::Synth { out } => synth(&cli.data, &out),
@@ -611,18 +602,7 @@ fn run_mpi(cli: Cli) -> Result<(), String> {
                 Box::new(move |d| Ok(CameraRequest { seq: 0, camera: camera_from(d, &cam)?, heuristic, radius_scale })),
                 layers,
                 *encoding,
-                Box::new(move |_, bytes, got, stats| {
-                    std::fs::write(&out, &bytes).map_err(|e| format!("{}: {e}", out.display()))?;
-                    println!(
-                        "wrote {} ({} samples, {} bytes, {:.3} bytes/sample, {})",
-                        out.display(),
-                        stats.samples,
-                        bytes.len(),
-                        bytes.len() as f64 / stats.samples.max(1) as f64,
-                        got.name()
-                    );
-                    Ok(())
-                }),
+                Box::new(move |_, bytes, got, stats| write_dump(&out, &bytes, stats.samples, got, "")),
             )
         }
         Cmd::Info { .. } | Cmd::Synth { .. } => unreachable!("answered before any volume is loaded"),
@@ -633,6 +613,20 @@ fn run_mpi(cli: Cli) -> Result<(), String> {
 #[cfg(feature = "mpi")]
 fn clone_cam(c: &CameraArgs) -> CameraArgs {
     CameraArgs { orbit: c.orbit.clone(), zoom: c.zoom, fov: c.fov, size: c.size.clone() }
+}
+
+/// Writes a dumped frame's `bytes` to `out` and says what was written (`extra`: the end of
+/// the line, e.g. the encode time).
+fn write_dump(out: &Path, bytes: &[u8], samples: usize, got: Encoding, extra: &str) -> Result<(), String> {
+    std::fs::write(out, bytes).map_err(|e| format!("{}: {e}", out.display()))?;
+    println!(
+        "wrote {} ({samples} samples, {} bytes, {:.3} bytes/sample, {}{extra})",
+        out.display(),
+        bytes.len(),
+        bytes.len() as f64 / samples.max(1) as f64,
+        got.name()
+    );
+    Ok(())
 }
 
 fn parse_encoding(s: &str) -> Result<Encoding, String> {
