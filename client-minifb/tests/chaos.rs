@@ -12,7 +12,7 @@
 
 mod common;
 
-use common::{net_config, server_program};
+use common::{net_config, next_scene, server_program};
 use std::io::{BufRead, BufReader, Read, Write};
 use std::net::{Shutdown, SocketAddr, TcpListener, TcpStream};
 use std::process::{Child, Command, Stdio};
@@ -75,31 +75,6 @@ fn view(home: &Camera, i: u32) -> View {
     View { camera: home.orbit(i as f32 * 3.0, 10.0), heuristic: Heuristic::Threshold, radius_scale: 1.0 }
 }
 
-/// Shows views until a scene answering a request after `after` arrives (or `limit` passes),
-/// checking that every scene is a whole frame of the viewport; returns when it arrived.
-fn next_scene(net: &Network, home: &Camera, after: Instant, limit: Duration) -> Option<Instant> {
-    let t0 = Instant::now();
-    let mut i = 0;
-    while t0.elapsed() < limit {
-        net.set_view(view(home, i));
-        i += 1;
-        if let Some(s) = net.take_scene() {
-            let h = &s.scene.header;
-            assert_eq!((h.camera.width, h.camera.height), (home.width, home.height), "a frame of the viewport");
-            assert_eq!(s.scene.samples.len(), h.count as usize, "a torn frame: not every sample arrived");
-            assert!(!s.scene.samples.is_empty(), "the volume is in view");
-            let at = s.received_at;
-            net.recycle(s.scene);
-            if at > after {
-                return Some(at);
-            }
-        }
-        assert!(net.error().is_none(), "the network failed: {:?}", net.error());
-        std::thread::sleep(Duration::from_millis(2));
-    }
-    None
-}
-
 fn redial(addr: &str) -> Redial {
     Redial { addr: addr.into(), token: None, layers: 4, backoff: Backoff::default(), tls: None }
 }
@@ -115,11 +90,11 @@ fn kill_and_restart(kills: usize, down: impl Fn(usize) -> Duration) -> Vec<Durat
     let conn = connect_layers(&addr, None, Duration::from_secs(10), 4).unwrap();
     let home = home_camera(&conn.bounds, 96, 96);
     let net = Network::start_reconnecting(conn, net_config(), None, redial(&addr)).unwrap();
-    assert!(next_scene(&net, &home, Instant::now(), Duration::from_secs(20)).is_some(), "no first frame");
+    assert!(next_scene(&net, &home, view, Instant::now(), Duration::from_secs(20)).is_some(), "no first frame");
     let mut back = Vec::new();
     for k in 0..kills {
         // Frames are streaming (each arrival asks for the next view): kill in the middle.
-        let _ = next_scene(&net, &home, Instant::now(), Duration::from_secs(5));
+        let _ = next_scene(&net, &home, view, Instant::now(), Duration::from_secs(5));
         std::thread::sleep(Duration::from_millis(7 * (k as u64 % 5)));
         child.kill().unwrap(); // SIGKILL
         let _ = child.wait();
@@ -137,7 +112,7 @@ fn kill_and_restart(kills: usize, down: impl Fn(usize) -> Duration) -> Vec<Durat
         }
         let (c, listening) = start_server(port);
         child = c;
-        let at = next_scene(&net, &home, listening, Duration::from_secs(20)).expect("frames after the restart");
+        let at = next_scene(&net, &home, view, listening, Duration::from_secs(20)).expect("frames after the restart");
         back.push(at.saturating_duration_since(listening));
         assert_eq!(net.state(), ConnectionState::Connected);
     }
@@ -267,7 +242,7 @@ fn a_connection_cut_mid_frame_never_yields_a_torn_frame_and_reconnects() {
     let t0 = Instant::now();
     let mut scenes = 0;
     while (cut_done.load(Ordering::SeqCst) < n_cuts || scenes < 5) && t0.elapsed() < Duration::from_secs(60) {
-        if next_scene(&net, &home, Instant::now(), Duration::from_secs(10)).is_some() {
+        if next_scene(&net, &home, view, Instant::now(), Duration::from_secs(10)).is_some() {
             scenes += 1;
         }
     }

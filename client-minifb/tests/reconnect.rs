@@ -4,7 +4,7 @@
 
 mod common;
 
-use common::net_config;
+use common::{net_config, next_scene};
 use std::net::SocketAddr;
 use std::sync::Arc;
 use std::time::{Duration, Instant};
@@ -50,30 +50,6 @@ fn view(home: &Camera, i: u32) -> View {
     View { camera: home.orbit(i as f32 * 2.0, 0.0), heuristic: Heuristic::Threshold, radius_scale: 1.0 }
 }
 
-/// Shows views (as the display would) until a scene arrives that answers a request sent after
-/// `after`, or `limit` passes; checks every scene is whole on the way.
-fn next_scene(net: &Network, home: &Camera, after: Instant, limit: Duration) -> Option<Instant> {
-    let t0 = Instant::now();
-    let mut i = 0;
-    while t0.elapsed() < limit {
-        net.set_view(view(home, i));
-        i += 1;
-        if let Some(s) = net.take_scene() {
-            let h = &s.scene.header;
-            assert_eq!((h.camera.width, h.camera.height), (64, 48), "a whole frame of the viewport");
-            assert_eq!(s.scene.samples.len(), h.count as usize, "every sample of the frame");
-            assert!(!s.scene.samples.is_empty(), "the volume is in view");
-            if s.received_at > after {
-                return Some(s.received_at);
-            }
-            net.recycle(s.scene);
-        }
-        assert!(net.error().is_none(), "the network failed: {:?}", net.error());
-        std::thread::sleep(Duration::from_millis(5));
-    }
-    None
-}
-
 #[test]
 fn the_client_gets_frames_again_from_a_restarted_server() {
     let m = marcher();
@@ -84,7 +60,7 @@ fn the_client_gets_frames_again_from_a_restarted_server() {
     let redial =
         Redial { addr: addr.to_string(), token: Some(TOKEN.into()), layers: 1, backoff: Backoff::default(), tls: None };
     let net = Network::start_reconnecting(conn, net_config(), None, redial).unwrap();
-    assert!(next_scene(&net, &home, Instant::now(), Duration::from_secs(10)).is_some(), "no first frame");
+    assert!(next_scene(&net, &home, view, Instant::now(), Duration::from_secs(10)).is_some(), "no first frame");
     assert_eq!(net.state(), ConnectionState::Connected);
 
     for round in 1..=2u64 {
@@ -106,7 +82,7 @@ fn the_client_gets_frames_again_from_a_restarted_server() {
         // A new server on the same port.
         server = bind_on(addr.port(), &m);
         let started = Instant::now();
-        let back = next_scene(&net, &home, started, Duration::from_secs(10)).expect("frames again");
+        let back = next_scene(&net, &home, view, started, Duration::from_secs(10)).expect("frames again");
         let took = back.saturating_duration_since(started);
         eprintln!(
             "round {round}: server down {:?}; frames again {took:?} after the new server started",
@@ -136,7 +112,7 @@ fn a_wrong_token_after_a_restart_is_a_permanent_failure() {
         tls: None,
     };
     let net = Network::start_reconnecting(conn, net_config(), None, redial).unwrap();
-    assert!(next_scene(&net, &home, Instant::now(), Duration::from_secs(10)).is_some(), "no first frame");
+    assert!(next_scene(&net, &home, view, Instant::now(), Duration::from_secs(10)).is_some(), "no first frame");
     server.shutdown();
     let server = bind_on(addr.port(), &m);
     let t0 = Instant::now();
@@ -164,7 +140,7 @@ fn without_redial_a_drop_stops_the_network() {
     let conn = connect_layers(&addr.to_string(), Some(TOKEN), Duration::from_secs(10), 1).unwrap();
     let home = home_camera(&conn.bounds, 64, 48);
     let net = Network::start(conn, net_config(), None).unwrap();
-    assert!(next_scene(&net, &home, Instant::now(), Duration::from_secs(10)).is_some(), "no first frame");
+    assert!(next_scene(&net, &home, view, Instant::now(), Duration::from_secs(10)).is_some(), "no first frame");
     server.shutdown();
     let t0 = Instant::now();
     while net.error().is_none() && t0.elapsed() < Duration::from_secs(10) {

@@ -165,3 +165,36 @@ pub fn net_config() -> volwarp_client::network::NetConfig {
         request: volwarp_core::method::RequestPolicy::NONE,
     }
 }
+
+/// Shows views (`view(home, i)`, as the display would) until a scene arrives that answers a
+/// request sent after `after`, or `limit` passes; checks on the way that every scene is a
+/// whole frame of the viewport with the volume in view, and that the network has not failed.
+/// Returns when that scene arrived.
+pub fn next_scene(
+    net: &volwarp_client::network::Network,
+    home: &volwarp_core::Camera,
+    view: fn(&volwarp_core::Camera, u32) -> volwarp_client::network::View,
+    after: Instant,
+    limit: Duration,
+) -> Option<Instant> {
+    let t0 = Instant::now();
+    let mut i = 0;
+    while t0.elapsed() < limit {
+        net.set_view(view(home, i));
+        i += 1;
+        if let Some(s) = net.take_scene() {
+            let h = &s.scene.header;
+            assert_eq!((h.camera.width, h.camera.height), (home.width, home.height), "a frame of the viewport");
+            assert_eq!(s.scene.samples.len(), h.count as usize, "a torn frame: not every sample arrived");
+            assert!(!s.scene.samples.is_empty(), "the volume is in view");
+            let at = s.received_at;
+            net.recycle(s.scene);
+            if at > after {
+                return Some(at);
+            }
+        }
+        assert!(net.error().is_none(), "the network failed: {:?}", net.error());
+        std::thread::sleep(Duration::from_millis(2));
+    }
+    None
+}
