@@ -255,7 +255,17 @@ fn mixed_plain_and_tls_peers_are_told_and_the_server_keeps_serving() {
     plain_server.shutdown();
     // A full TLS server (2 slots: the network's and this one) refuses in plain before any
     // handshake; the TLS client reads it as the server's BUSY, which is worth retrying.
-    let second = connect_secure(&addr, None, TIMEOUT, 1, Some(&s.trusted)).unwrap();
+    // The refused and garbage connections above free their slots when their handler threads
+    // end, which may be a moment after the clients see the refusal: wait for a free slot.
+    let until = Instant::now() + TIMEOUT;
+    let second = loop {
+        match connect_secure(&addr, None, TIMEOUT, 1, Some(&s.trusted)) {
+            Err(ClientError::Server { code: error_code::BUSY, .. }) if Instant::now() < until => {
+                std::thread::sleep(Duration::from_millis(20))
+            }
+            other => break other.unwrap(),
+        }
+    };
     let e = connect_secure(&addr, None, TIMEOUT, 1, Some(&s.trusted)).unwrap_err();
     assert!(matches!(e, ClientError::Server { code: error_code::BUSY, .. }), "{e:?}");
     assert!(!is_permanent(&e));

@@ -607,6 +607,27 @@ fn send_error(out: &mut impl Write, code: u16, text: &str) {
     let _ = out.flush();
 }
 
+/// Ends the sending side and reads what the peer still sends (at most 64 KiB, 250 ms) before
+/// the socket closes. Closing with unread input makes the kernel send a reset, and a reset can
+/// throw away the reply the peer has not read yet (an Error message to a TLS client, whose
+/// ClientHello the server read only the first bytes of).
+fn drain_before_close(stream: &TcpStream) {
+    let _ = stream.shutdown(std::net::Shutdown::Write);
+    let until = Instant::now() + Duration::from_millis(250);
+    let mut buf = [0u8; 4096];
+    let mut left_bytes = 64 * 1024usize;
+    while left_bytes > 0 {
+        let left = until.saturating_duration_since(Instant::now());
+        if left.is_zero() || stream.set_read_timeout(Some(left)).is_err() {
+            return;
+        }
+        match (&mut &*stream).read(&mut buf) {
+            Ok(0) | Err(_) => return,
+            Ok(n) => left_bytes = left_bytes.saturating_sub(n),
+        }
+    }
+}
+
 /// The first byte the peer sends, waiting at most until `deadline` (`None`: it closed).
 fn first_byte(stream: &TcpStream, deadline: Instant) -> io::Result<Option<u8>> {
     let mut b = [0u8; 1];
@@ -715,6 +736,7 @@ fn serve(sh: &Shared, stream: &TcpStream, id: u64, charged: Option<IpAddr>) -> S
         Err(WireError::BadMagic(m)) if tls.is_none() && volwarp_tls::looks_like_tls(m[0]) => {
             let text = "this server does not speak TLS: connect without --tls";
             send_error(&mut sink, error_code::BAD_REQUEST, text);
+            drain_before_close(stream);
             return format!("a TLS client on a plain server ({text})");
         }
         Err(e) => {

@@ -143,6 +143,30 @@ impl From<rustls::Error> for TlsError {
     }
 }
 
+/// What a peer that does not speak TLS sent: `first` and whatever follows until it closes, up
+/// to 4 KiB and at most one second (or `deadline`). A plain server's Error message may arrive
+/// in more than one read; the caller wants it whole.
+fn rest_of_plain_reply(sock: &TcpStream, first: &[u8], deadline: Option<Instant>) -> Vec<u8> {
+    const MOST: usize = 4096;
+    let mut sent = first[..first.len().min(MOST)].to_vec();
+    let until = Instant::now() + std::time::Duration::from_secs(1);
+    let until = deadline.map_or(until, |d| d.min(until));
+    let mut buf = [0u8; 1024];
+    while sent.len() < MOST {
+        let left = until.saturating_duration_since(Instant::now());
+        if left.is_zero() || sock.set_read_timeout(Some(left)).is_err() {
+            break;
+        }
+        match (&mut &*sock).read(&mut buf) {
+            Ok(0) => break,
+            Ok(n) => sent.extend_from_slice(&buf[..n.min(MOST - sent.len())]),
+            Err(e) if e.kind() == io::ErrorKind::Interrupted => continue,
+            Err(_) => break,
+        }
+    }
+    sent
+}
+
 /// One TLS connection's state, shared by its reader and writer halves.
 #[derive(Clone)]
 pub struct TlsLink(Arc<Mutex<rustls::Connection>>);
@@ -190,7 +214,7 @@ impl TlsLink {
                 Err(e) => return Err(TlsError::Io(e)),
             };
             if std::mem::take(&mut first) && !looks_like_tls(buf[0]) {
-                return Err(TlsError::NotTls(buf[..n].to_vec()));
+                return Err(TlsError::NotTls(rest_of_plain_reply(sock, &buf[..n], deadline)));
             }
             let mut got = &buf[..n];
             while !got.is_empty() {
