@@ -30,6 +30,7 @@ fn opts(scenarios: &[&str], net: NetworkModel) -> SessionOptions {
             exact_when_still: true,
             encoding: Encoding::Compact,
             layers: 1,
+            resolution_cost: volwarp_eval::session::peers::ResolutionCost::MEASURED_512,
         },
         server_ms: None,
         calibration: Calibration::default(),

@@ -251,13 +251,16 @@ enum Cmd {
 /// The settings of `volwarp-eval session`.
 #[derive(Args, Clone)]
 struct SessionArgs {
-    /// Scenarios, comma-separated: orbit, stop-and-go, dolly, look-around (each with an
-    /// optional :DEG_PER_S), or record:FILE (a `volwarp-client --record` file).
+    /// Scenarios, comma-separated: orbit, stop-and-go, dolly, look-around, flick (180°/s for
+    /// 0.5 s, then rest), zoom (into detail, then rest) (each with an optional :DEG_PER_S), or
+    /// record:FILE (a `volwarp-client --record` file).
     #[arg(long, default_value = "orbit,stop-and-go,dolly,look-around")]
     scenarios: String,
     /// Methods, comma-separated, or `all`: each a renderer with the client's options,
     /// `RENDERER[+predict][+guard=G][+frames=K][+adapt][+pp=L]` (e.g. `splat-fill+predict+guard=0.1+frames=2`),
-    /// or `volwarp` (the window client's default method).
+    /// or `volwarp` (the window client's default method), or an image-sending peer:
+    /// `send-image` (JPEG q90), `downscale` / `downscale=4` (1/2 or 1/4 resolution at JPEG q50
+    /// while moving, full at rest).
     #[arg(long, default_value = "all")]
     methods: String,
     /// Viewport side.
@@ -344,6 +347,7 @@ fn session_options(s: SessionArgs, threads: usize) -> Result<volwarp_eval::sessi
             encoding: volwarp_core::compact_frame::Encoding::from_name(&s.encoding)
                 .ok_or_else(|| format!("unknown encoding {:?}; compact or raw12", s.encoding))?,
             layers: s.layers,
+            resolution_cost: volwarp_eval::session::peers::ResolutionCost::MEASURED_512,
         },
         server_ms: s.server_ms,
         calibration,

@@ -24,6 +24,7 @@
 //! client runs by default.
 //! The `stale` method never predicts nor widens: it is what a send-image system shows.
 
+use super::peers::ImagePeer;
 use crate::ErrorBox;
 use volwarp_core::guard::MAX_GUARD;
 use volwarp_core::method::Method as CoreMethod;
@@ -88,6 +89,30 @@ pub trait Method {
     }
     /// Draws the frames for `camera`; `frames` holds the frames kept, newest last.
     fn draw(&mut self, frames: &[&HeldFrame], camera: &Camera, out: &mut Image);
+    /// The image-sending peer it is (`send-image`, `downscale`), which the simulator serves
+    /// images instead of frames ([`super::peers`]); `None` for the frame-warping methods.
+    fn image_peer(&self) -> Option<ImagePeer> {
+        None
+    }
+}
+
+/// An image-sending peer ([`super::peers`]): the simulator serves it JPEG images and shows the
+/// newest upscaled; it draws no frame.
+pub struct PeerMethod {
+    name: String,
+    peer: ImagePeer,
+}
+
+impl Method for PeerMethod {
+    fn name(&self) -> &str {
+        &self.name
+    }
+    fn draw(&mut self, _frames: &[&HeldFrame], camera: &Camera, out: &mut Image) {
+        out.reset_for(camera);
+    }
+    fn image_peer(&self) -> Option<ImagePeer> {
+        Some(self.peer)
+    }
 }
 
 /// A method that is one renderer of the registry drawing the frames it keeps
@@ -324,12 +349,22 @@ impl MethodSpec {
     }
 }
 
-/// The methods of a comma-separated list of specs (`all`: [`ALL`]). The alias `volwarp` keeps
+/// The methods of a comma-separated list of specs (`all`: [`ALL`]) and image-sending peers
+/// (`send-image`, `downscale`, `downscale=4`: [`super::peers`]). The alias `volwarp` keeps
 /// its name in the CSV; every other spec is named canonically.
 pub fn make_methods(list: &str, threads: usize) -> Result<Vec<Box<dyn Method>>, ErrorBox> {
     let names: Vec<&str> = if list.trim() == "all" { ALL.to_vec() } else { list.split(',').collect() };
     let mut out: Vec<Box<dyn Method>> = Vec::new();
     for n in names {
+        if let Some(peer) = ImagePeer::parse(n) {
+            let peer = peer?;
+            let name = peer.name();
+            if out.iter().any(|m| m.name() == name) {
+                return Err(format!("method {name} is listed twice").into());
+            }
+            out.push(Box::new(PeerMethod { name, peer }));
+            continue;
+        }
         let spec = MethodSpec::parse(n)?;
         let name = if n.trim() == "volwarp" { "volwarp".to_string() } else { spec.name() };
         if out.iter().any(|m| m.name() == name) {

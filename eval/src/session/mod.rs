@@ -12,12 +12,14 @@
 //! | [`paths`] | steady orbit, stop-and-go, dolly, look-around, recorded paths |
 //! | [`model`] | server policy, network, client draw times, the calibration file |
 //! | [`methods`] | the methods compared (one registry entry each) |
+//! | [`peers`] | what users would pick instead: JPEG images, downscaled while moving |
 //! | [`simulate`] | the simulated clock and event loop, truth cache |
 //! | [`report`] | `session.csv`, summaries, charts, worst-tick strips |
 
 pub mod methods;
 pub mod model;
 pub mod paths;
+pub mod peers;
 pub mod report;
 pub mod simulate;
 
@@ -112,8 +114,10 @@ pub fn simulate_all(datasets: &[Dataset], opts: &SessionOptions) -> Result<Vec<R
                 sms.or_else(|| opts.calibration.server_ms(&ds.name, size)).unwrap_or(opts.cfg.net.server_ms);
             let draw_ms =
                 methods.iter().map(|m| (m.name().to_string(), opts.calibration.draw_ms(m.name(), size))).collect();
+            let resolution_cost = opts.calibration.resolution_cost(&ds.name, size).unwrap_or(opts.cfg.resolution_cost);
             let cfg = SessionConfig {
                 size,
+                resolution_cost,
                 net: NetworkModel { server_ms, mbps, ..opts.cfg.net },
                 client: ClientModel { draw_ms, ..opts.cfg.client.clone() },
                 ..opts.cfg.clone()
@@ -178,11 +182,33 @@ pub fn calibrate(
         let server = crate::median(&mut ms).unwrap_or(0.0);
         cal.ms.insert(("server".into(), ds.name.clone(), size), server);
         log::info!("{}: server {server:.1} ms per frame at {size}²", ds.name);
+        // The marcher's image at 1/2 and 1/4 of the resolution against the full one (the
+        // downscaling peers' and coarse frames' server time): the frame's time times the ratio.
+        let image_ms = |side: u32| {
+            let cam = marcher.default_camera(side.max(1), side.max(1));
+            let mut t: Vec<f64> = (0..runs.max(1))
+                .map(|_| {
+                    let s = Instant::now();
+                    std::hint::black_box(marcher.render_image(&cam));
+                    s.elapsed().as_secs_f64() * 1e3
+                })
+                .collect();
+            crate::median(&mut t).unwrap_or(0.0)
+        };
+        let full = image_ms(size);
+        for f in [2u32, 4] {
+            let ratio = if full > 0.0 { image_ms(size / f) / full } else { 1.0 };
+            cal.ms.insert(("server".into(), peers::scaled_name(&ds.name, f), size), server * ratio);
+            log::info!("{}: server at 1/{f} of {size}²: {ratio:.3} of the full resolution's time", ds.name);
+        }
         let held = methods::HeldFrame::new(frame.ok_or("no frame")?);
         // Methods that ask for layered frames draw one, K segments per pixel.
         let mut layered: Vec<(u32, methods::HeldFrame)> = Vec::new();
         let cam = c0.orbit(10.0, 0.0);
         for mut method in methods::make_methods(list, threads)? {
+            if method.image_peer().is_some() {
+                continue; // decoded and upscaled within a tick: the client model's default figure
+            }
             let k = method.request().layers;
             if k > 1 && !layered.iter().any(|(n, _)| *n == k) {
                 let req = CameraRequest { seq: 1, camera: c0, heuristic: Heuristic::Threshold, radius_scale: 1.0 };

@@ -192,6 +192,15 @@ impl Calibration {
         self.ms.get(&("server".into(), dataset.into(), size)).copied()
     }
 
+    /// The server's measured time at 1/2 and 1/4 of the resolution as fractions of its full
+    /// resolution's, for a dataset at a size (`server` lines `DATASET`, `DATASET/2` and
+    /// `DATASET/4`, [`super::peers::scaled_name`]), if all three were measured.
+    pub fn resolution_cost(&self, dataset: &str, size: u32) -> Option<super::peers::ResolutionCost> {
+        let full = self.server_ms(dataset, size).filter(|&ms| ms > 0.0)?;
+        let at = |f| self.server_ms(&super::peers::scaled_name(dataset, f), size).map(|ms| ms / full);
+        Some(super::peers::ResolutionCost { half: at(2)?, quarter: at(4)? })
+    }
+
     /// A method's draw time at a size: measured, else the default figure scaled by pixels.
     /// A method spec not measured takes its renderer's figure (the part before the first `+`;
     /// the alias `volwarp`: its spec's).

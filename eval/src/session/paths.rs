@@ -17,6 +17,19 @@ pub const DEFAULT_SPEED: f32 = 30.0;
 /// The scenarios `--all` and the default run: steady orbit, stop-and-go, dolly, look-around.
 pub const DEFAULT_SCENARIOS: [&str; 4] = ["orbit", "stop-and-go", "dolly", "look-around"];
 
+/// The flick's default speed, degrees per second.
+pub const FLICK_SPEED: f32 = 180.0;
+/// How long the flick turns, seconds.
+pub const FLICK_S: f64 = 0.5;
+/// The distance the zoom ends at, as a fraction of the start's.
+pub const ZOOM_TO: f64 = 0.35;
+/// How long the zoom takes at speed 30, seconds.
+pub const ZOOM_S: f64 = 1.5;
+
+/// The scenarios users produce besides the four: a fast flick (180°/s for 0.5 s, then rest)
+/// and a zoom into detail (then rest).
+pub const USER_SCENARIOS: [&str; 2] = ["flick", "zoom"];
+
 /// The largest viewport side a recorded camera may have (and the session size).
 pub const MAX_RECORDED_VIEWPORT: u32 = 4096;
 
@@ -32,6 +45,12 @@ pub enum PathKind {
     Dolly,
     /// Yaw at the speed, pitch ±15° (period 4 s) and zoom ±15 % (period 3 s) at once.
     LookAround,
+    /// A fast flick: orbit at the speed (default [`FLICK_SPEED`]) for [`FLICK_S`] seconds,
+    /// then rest.
+    Flick,
+    /// A zoom into detail: dolly in to [`ZOOM_TO`] of the distance over [`ZOOM_S`] seconds
+    /// (eased in and out; at speed 30), then rest.
+    Zoom,
     /// Cameras recorded by the window client, `(seconds, camera)` in time order.
     Recorded(Vec<(f64, Camera)>),
 }
@@ -67,8 +86,9 @@ impl std::fmt::Display for PathError {
         match self {
             PathError::Unknown(s) => write!(
                 f,
-                "unknown scenario {s:?}; one of {}, each with an optional :SPEED (deg/s), or record:FILE",
-                DEFAULT_SCENARIOS.join(", ")
+                "unknown scenario {s:?}; one of {}, {}, each with an optional :SPEED (deg/s), or record:FILE",
+                DEFAULT_SCENARIOS.join(", "),
+                USER_SCENARIOS.join(", ")
             ),
             PathError::BadSpeed(s) => write!(f, "scenario {s:?}: the speed after ':' is not a finite number"),
             PathError::Record(p, e) => write!(f, "camera path {}: {e}", p.display()),
@@ -81,8 +101,9 @@ impl std::fmt::Display for PathError {
 impl std::error::Error for PathError {}
 
 impl CameraPath {
-    /// Parses a scenario: `orbit`, `stop-and-go`, `dolly`, `look-around` (each optionally
-    /// `:SPEED` in deg/s), or `record:FILE` (a `--record` file of the window client).
+    /// Parses a scenario: `orbit`, `stop-and-go`, `dolly`, `look-around`, `flick`, `zoom`
+    /// (each optionally `:SPEED` in deg/s; the dolly, look-around and zoom take it as a time
+    /// scale, speed / 30), or `record:FILE` (a `--record` file of the window client).
     pub fn parse(spec: &str) -> Result<CameraPath, PathError> {
         if let Some(file) = spec.strip_prefix("record:") {
             return Ok(CameraPath { name: spec.into(), kind: read_recorded(Path::new(file))?, speed: DEFAULT_SPEED });
@@ -95,6 +116,7 @@ impl CameraPath {
                 }
                 (n, v)
             }
+            None if spec == "flick" => (spec, FLICK_SPEED),
             None => (spec, DEFAULT_SPEED),
         };
         let kind = match name {
@@ -102,6 +124,8 @@ impl CameraPath {
             "stop-and-go" => PathKind::StopAndGo,
             "dolly" => PathKind::Dolly,
             "look-around" => PathKind::LookAround,
+            "flick" => PathKind::Flick,
+            "zoom" => PathKind::Zoom,
             _ => return Err(PathError::Unknown(spec.into())),
         };
         Ok(CameraPath { name: spec.into(), kind, speed })
@@ -129,6 +153,12 @@ impl CameraPath {
                 let pitch = 15.0 * (std::f64::consts::TAU * u / 4.0).sin();
                 let zoom = 1.0 - 0.15 * (std::f64::consts::TAU * u / 3.0).sin();
                 c0.orbit(yaw as f32, pitch as f32).dolly(zoom as f32)
+            }
+            PathKind::Flick => c0.orbit((s * t.min(FLICK_S)) as f32, 0.0),
+            PathKind::Zoom => {
+                let u = (t * s / DEFAULT_SPEED as f64 / ZOOM_S).min(1.0);
+                let eased = u * u * (3.0 - 2.0 * u);
+                c0.dolly((1.0 - (1.0 - ZOOM_TO) * eased) as f32)
             }
             PathKind::Recorded(cams) => {
                 let i = cams.partition_point(|(ct, _)| *ct <= t).saturating_sub(1);
@@ -224,6 +254,22 @@ mod tests {
         assert!((stop_and_go_position(4.0) - 0.0).abs() < 1e-12, "back at the start after the reversal");
         assert!((stop_and_go_position(12.0) - 2.0 * 1.5).abs() < 1e-12);
         assert_eq!(CameraPath::still().camera(&c0(), 3.0), c0());
+    }
+
+    #[test]
+    fn the_flick_turns_fast_then_rests_and_the_zoom_closes_in_then_rests() {
+        let f = CameraPath::parse("flick").unwrap();
+        assert_eq!(f.speed, FLICK_SPEED);
+        assert!((angle(&f.camera(&c0(), 0.25), &c0()) - 45.0).abs() < 1e-3);
+        assert!((angle(&f.camera(&c0(), 0.5), &c0()) - 90.0).abs() < 1e-3);
+        assert_eq!(f.camera(&c0(), 0.5), f.camera(&c0(), 4.0), "rests after 0.5 s");
+        assert!((angle(&CameraPath::parse("flick:90").unwrap().camera(&c0(), 1.0), &c0()) - 45.0).abs() < 1e-3);
+        let z = CameraPath::parse("zoom").unwrap();
+        let dist = |c: &Camera| (c.eye - c.target).length();
+        let d0 = dist(&c0());
+        assert!(dist(&z.camera(&c0(), 0.75)) < d0 && dist(&z.camera(&c0(), 0.75)) > ZOOM_TO as f32 * d0);
+        assert!((dist(&z.camera(&c0(), 1.5)) / d0 - ZOOM_TO as f32).abs() < 1e-5);
+        assert_eq!(z.camera(&c0(), 1.5), z.camera(&c0(), 5.0), "rests after the zoom");
     }
 
     #[test]

@@ -24,6 +24,7 @@
 use super::methods::{HeldFrame, Method, SessionRequest};
 use super::model::{ClientModel, NetworkModel, Request, ServerPolicy};
 use super::paths::{CameraPath, MAX_RECORDED_VIEWPORT};
+use super::peers::{self, ImageStream, ResolutionCost};
 use crate::{ErrorBox, Metrics};
 use rayon::prelude::*;
 use std::collections::HashMap;
@@ -57,6 +58,8 @@ pub struct SessionConfig {
     pub encoding: Encoding,
     /// Segments per pixel of the frames (1: one sample per pixel).
     pub layers: u32,
+    /// The server's time at reduced resolutions, as a fraction of the full one's (measured).
+    pub resolution_cost: ResolutionCost,
 }
 
 impl SessionConfig {
@@ -140,7 +143,7 @@ pub struct Worst {
 pub struct SessionResult {
     /// The scored rows, tick by tick, methods in order.
     pub rows: Vec<TickRow>,
-    /// The frames, in order of arrival.
+    /// The first method's frames (or images), in order of arrival.
     pub frames: Vec<FrameEvent>,
     /// The worst tick of each method.
     pub worst: Vec<Worst>,
@@ -386,6 +389,13 @@ struct Stream {
     held: Vec<HeldFrame>,
 }
 
+/// Which stream a method shows: frames (warped) or a peer's images.
+#[derive(Clone, Copy)]
+enum StreamOf {
+    Frames(usize),
+    Images(usize),
+}
+
 /// Runs one session. `progress` gets a line per scored tick.
 #[allow(clippy::too_many_arguments)]
 pub fn run_session(
@@ -400,10 +410,32 @@ pub fn run_session(
     cfg.check()?;
     let cams = tick_cameras(marcher, path, cfg)?;
     let tick_ms = 1e3 / cfg.client.display_hz;
-    // One stream of frames per distinct request policy (the first method's is the result's).
+    // One stream of frames per distinct request policy, one of images per peer.
     let mut streams: Vec<Stream> = Vec::new();
+    let mut image_streams: Vec<ImageStream> = Vec::new();
     let mut stream_of = Vec::with_capacity(methods.len());
     for m in methods.iter() {
+        if let Some(peer) = m.image_peer() {
+            let i = match image_streams.iter().position(|s| s.peer == peer) {
+                Some(i) => i,
+                None => {
+                    let s = peers::serve_images(
+                        marcher,
+                        &cams,
+                        tick_ms,
+                        cfg.net,
+                        cfg.resolution_cost,
+                        policy,
+                        peer,
+                        truths,
+                    )?;
+                    image_streams.push(s);
+                    image_streams.len() - 1
+                }
+            };
+            stream_of.push(StreamOf::Images(i));
+            continue;
+        }
         let r = m.request();
         let i = match streams.iter().position(|s| s.request == r) {
             Some(i) => i,
@@ -415,7 +447,7 @@ pub fn run_session(
                 streams.len() - 1
             }
         };
-        stream_of.push(i);
+        stream_of.push(StreamOf::Frames(i));
     }
     // Layered frames are shown as they were rendered by compositing their segments.
     let mut exact_one = volwarp_cpu_tracer::create(RendererKind::Stale, 0).ok_or("the stale renderer is missing")?;
@@ -430,18 +462,32 @@ pub fn run_session(
         })
         .collect();
     let scored: Vec<usize> = (0..cams.len()).step_by(cfg.score_every).collect();
-    let mut result =
-        SessionResult { frames: streams.first().map(|s| s.frames.clone()).unwrap_or_default(), ..Default::default() };
+    // The result's frames: the first method's stream.
+    let frames = match stream_of.first() {
+        Some(StreamOf::Frames(i)) => streams[*i].frames.clone(),
+        Some(StreamOf::Images(i)) => image_streams[*i].frames.clone(),
+        None => Vec::new(),
+    };
+    let mut result = SessionResult { frames, ..Default::default() };
     let mut worst: Vec<Option<Worst>> = vec![None; methods.len()];
     let mut images: Vec<Image> = (0..methods.len()).map(|_| Image::new(0, 0)).collect();
     for (done, &j) in scored.iter().enumerate() {
         let mut shown_frame = Vec::with_capacity(methods.len());
         for (mi, m) in methods.iter_mut().enumerate() {
-            let st = &streams[stream_of[mi]];
             let n = draw[mi].1;
             // The newest draw finished by tick j started at a multiple of n.
             let k = if j + 1 >= n { ((j + 1) / n - 1) * n } else { 0 };
             let t_k = k as f64 * tick_ms;
+            let st = match stream_of[mi] {
+                StreamOf::Frames(i) => &streams[i],
+                StreamOf::Images(i) => {
+                    let st = &image_streams[i];
+                    let fi = st.frames.partition_point(|f| f.arrive_ms <= t_k).saturating_sub(1);
+                    peers::show(&st.held[fi], &cams[k], &mut images[mi]);
+                    shown_frame.push(fi);
+                    continue;
+                }
+            };
             let fi = st.frames.partition_point(|f| f.arrive_ms <= t_k).saturating_sub(1);
             let cam = &cams[k];
             if cfg.exact_when_still && *cam == st.frames[fi].view {
@@ -461,7 +507,10 @@ pub fn run_session(
             .collect();
         let t_j = j as f64 * tick_ms;
         for (mi, m) in methods.iter().enumerate() {
-            let f = &streams[stream_of[mi]].frames[shown_frame[mi]];
+            let f = match stream_of[mi] {
+                StreamOf::Frames(i) => &streams[i].frames[shown_frame[mi]],
+                StreamOf::Images(i) => &image_streams[i].frames[shown_frame[mi]],
+            };
             result.rows.push(TickRow {
                 method: m.name().into(),
                 tick: j,

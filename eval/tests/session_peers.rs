@@ -1,0 +1,142 @@
+//! The image-sending peers (`send-image`, `downscale`) and the scenarios users produce (flick,
+//! zoom, a recorded drag): real JPEG bytes decoded and scored, a reduced image's server time
+//! from the measured ratio, determinism of every new scenario.
+
+use volwarp_core::compact_frame::Encoding;
+use volwarp_core::Heuristic;
+use volwarp_eval::session::model::{Calibration, ClientModel, NetworkModel};
+use volwarp_eval::session::paths::CameraPath;
+use volwarp_eval::session::peers::{decode_jpeg, encode_jpeg, scaled_name, ResolutionCost};
+use volwarp_eval::session::report::{session_table, Run};
+use volwarp_eval::session::simulate::SessionConfig;
+use volwarp_eval::session::{calibrate, simulate_all, SessionOptions, Sweep};
+use volwarp_eval::Metrics;
+use volwarp_server::dataset::Dataset;
+use volwarp_server::Marcher;
+
+const SIZE: u32 = 32;
+
+fn opts(scenarios: &[&str], methods: &str, net: NetworkModel) -> SessionOptions {
+    SessionOptions {
+        march: volwarp_server::MarchOptions::default(),
+        cfg: SessionConfig {
+            size: SIZE,
+            duration_s: 2.0,
+            net,
+            client: ClientModel { display_hz: 30.0, draw_ms: Default::default() },
+            score_every: 2,
+            heuristic: Heuristic::Threshold,
+            exact_when_still: true,
+            encoding: Encoding::Compact,
+            layers: 1,
+            resolution_cost: ResolutionCost::MEASURED_512,
+        },
+        server_ms: None,
+        calibration: Calibration::default(),
+        scenarios: scenarios.iter().map(|s| CameraPath::parse(s).unwrap()).collect(),
+        methods: methods.into(),
+        threads: 1,
+        policy: "last-received".into(),
+        sweep: Sweep::None,
+    }
+}
+
+fn head() -> Vec<Dataset> {
+    vec![Dataset::default_bundled()]
+}
+
+fn rows<'a>(runs: &'a [Run], method: &'a str) -> impl Iterator<Item = &'a volwarp_eval::session::simulate::TickRow> {
+    runs.iter().flat_map(|r| &r.result.rows).filter(move |r| r.method == method)
+}
+
+#[test]
+fn send_image_shows_the_decoded_jpeg_of_the_truth_and_is_charged_its_bytes() {
+    // An instant server and link: every tick shows the JPEG of that tick's truth.
+    let o = opts(&["orbit"], "send-image", NetworkModel { server_ms: 0.0, latency_ms: 0.0, mbps: f64::INFINITY });
+    let runs = simulate_all(&head(), &o).unwrap();
+    let m = Marcher::from_dataset(&head()[0]);
+    let c0 = m.default_camera(SIZE, SIZE);
+    let truth = m.render_image(&c0);
+    let jpeg = encode_jpeg(&truth, 90).unwrap();
+    assert_eq!(runs[0].result.frames[0].bytes, jpeg.len() as u64, "the first image's bytes are its JPEG's");
+    let decoded = decode_jpeg(&jpeg).unwrap();
+    let expected = Metrics::of(&truth, &decoded).unwrap().flip;
+    let tick0 = rows(&runs, "send-image").next().unwrap();
+    assert_eq!(tick0.metrics.flip, expected, "tick 0 scores the decoded JPEG");
+    // JPEG is lossy: not the truth, but close at quality 90.
+    assert!(tick0.metrics.flip > 0.0 && tick0.metrics.flip < 0.1, "{}", tick0.metrics.flip);
+    for r in rows(&runs, "send-image") {
+        assert!(r.metrics.flip > 0.0 && r.metrics.flip < 0.15, "tick {}: {}", r.tick, r.metrics.flip);
+        assert_eq!(r.frame_age_ms, 0.0, "instant: a fresh image every tick");
+    }
+}
+
+#[test]
+fn downscale_sends_fewer_bytes_sooner_while_moving_and_full_resolution_at_rest() {
+    // A 500 ms server, 1 Mbit/s: the downscaled images are cheaper on both.
+    let net = NetworkModel { server_ms: 500.0, latency_ms: 20.0, mbps: 1.0 };
+    let mut o = opts(&["flick:90"], "downscale,send-image,stale", net);
+    o.cfg.size = 128;
+    o.cfg.duration_s = 3.0;
+    o.cfg.score_every = 1;
+    // The measured ratio from a calibration file: 1/2 of the resolution costs 0.25 of the time.
+    let ds = head();
+    o.calibration.ms.insert(("server".into(), ds[0].name.clone(), 128), 500.0);
+    o.calibration.ms.insert(("server".into(), scaled_name(&ds[0].name, 2), 128), 125.0);
+    o.calibration.ms.insert(("server".into(), scaled_name(&ds[0].name, 4), 128), 50.0);
+    o.server_ms = Some(500.0);
+    let runs = simulate_all(&ds, &o).unwrap();
+    let frames = &runs[0].result.frames; // downscale's images (the first method)
+    let tick_ms = 1e3 / 30.0;
+    let moving: Vec<_> = frames.iter().skip(1).filter(|f| f.request_ms < 0.5e3 + 0.5 * tick_ms).collect();
+    let resting: Vec<_> = frames.iter().skip(1).filter(|f| f.request_ms > 0.5e3 + 0.5 * tick_ms).collect();
+    assert!(!moving.is_empty() && !resting.is_empty(), "{frames:?}");
+    for f in &moving {
+        // arrive = start + server × ratio + bytes on the link + latency.
+        let link = f.bytes as f64 * 8.0 / 1e3;
+        assert!((f.arrive_ms - f.start_ms - 125.0 - link - 20.0).abs() < 1e-6, "{f:?}");
+    }
+    for f in &resting {
+        let link = f.bytes as f64 * 8.0 / 1e3;
+        assert!((f.arrive_ms - f.start_ms - 500.0 - link - 20.0).abs() < 1e-6, "{f:?}");
+    }
+    let mean = |v: &[&volwarp_eval::session::simulate::FrameEvent]| {
+        v.iter().map(|f| f.bytes as f64).sum::<f64>() / v.len() as f64
+    };
+    assert!(mean(&moving) < 0.5 * mean(&resting), "quarter the pixels at quality 50: {frames:?}");
+    // At rest the full-resolution image arrives: the last ticks show it at JPEG quality 90,
+    // as send-image does.
+    let last = |m: &str| rows(&runs, m).last().unwrap().metrics.flip;
+    assert_eq!(last("downscale"), last("send-image"));
+    // While the flick turns, the downscaled images are fresher than the full ones.
+    let age = |m: &str| rows(&runs, m).filter(|r| r.time_s < 1.0).map(|r| r.frame_age_ms).sum::<f64>();
+    assert!(age("downscale") < age("send-image"), "{} vs {}", age("downscale"), age("send-image"));
+}
+
+#[test]
+fn the_new_scenarios_are_deterministic() {
+    let net = NetworkModel { server_ms: 300.0, latency_ms: 50.0, mbps: 5.0 };
+    let o = opts(&["flick", "zoom"], "volwarp,downscale=4,send-image,stale", net);
+    let ds = vec![Dataset::marschner_lobb(24)];
+    let a = session_table(&simulate_all(&ds, &o).unwrap()).to_csv();
+    let b = session_table(&simulate_all(&ds, &o).unwrap()).to_csv();
+    assert_eq!(a, b);
+    // 2 scenarios × 31 scored ticks × 4 methods, plus the header.
+    assert_eq!(a.lines().count(), 1 + 2 * 31 * 4);
+    assert!(a.contains(",flick,") && a.contains(",zoom,") && a.contains(",downscale=4,"));
+}
+
+#[test]
+fn calibration_measures_the_reduced_resolutions_server_time() {
+    let ds = vec![Dataset::marschner_lobb(24)];
+    let cal = calibrate(&ds, 32, 1, 1, "stale,send-image").unwrap();
+    let name = &ds[0].name;
+    for f in [2, 4] {
+        let ms = cal.server_ms(&scaled_name(name, f), 32).unwrap();
+        assert!(ms.is_finite() && ms >= 0.0, "{f}: {ms}");
+    }
+    let cost = cal.resolution_cost(name, 32).unwrap();
+    assert!(cost.half.is_finite() && cost.quarter.is_finite());
+    assert!(cal.ms.keys().all(|(k, n, _)| !(k == "client" && n == "send-image")), "peers draw no frame");
+    assert!(simulate_all(&ds, &opts(&["orbit"], "downscale=3", NetworkModel::DEFAULT)).is_err());
+}
