@@ -4,13 +4,11 @@
 
 use crate::camera::Camera;
 use crate::renderer_kind::RendererKind;
-use crate::sample::pack_color;
 use crate::scene::Scene;
 use alloc::vec;
 use alloc::vec::Vec;
 
-/// The opaque background every renderer (and the ground-truth marcher) shows where nothing is.
-pub const BACKGROUND: u32 = pack_color(24, 24, 32, 255);
+pub use crate::sample::BACKGROUND;
 
 /// An RGBA8 image: pixels packed like sample colors (R in the low byte), row-major, row 0 at
 /// the top.

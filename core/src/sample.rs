@@ -194,6 +194,9 @@ pub const fn pack_color(r: u8, g: u8, b: u8, a: u8) -> u32 {
     u32::from_le_bytes([r, g, b, a])
 }
 
+/// The opaque background every renderer (and the ground-truth marcher) shows where nothing is.
+pub const BACKGROUND: u32 = pack_color(24, 24, 32, 255);
+
 /// Packs a premultiplied color given as floats in 0..=1 (clamped; NaN becomes 0).
 #[inline]
 pub fn pack_color_f32(c: [f32; 4]) -> u32 {

@@ -21,6 +21,7 @@
 //! front to back (`C += (1 − A)·c`, `A += (1 − A)·α`) the segments give `dst_end` exactly in
 //! real arithmetic.
 
+use crate::sample::{over_background, BACKGROUND};
 pub use crate::wire::{LayerError, MAX_LAYERS};
 
 /// The segments per pixel a client asks for by default with the `splat-layers` renderer,
@@ -147,6 +148,134 @@ impl Segmenter {
             self.close();
         }
         &self.out[..self.count as usize]
+    }
+}
+
+/// Accumulated opacity at which a client stops compositing a pixel's segments (front to back,
+/// [`composite_packed`]).
+pub const OPAQUE: f32 = 0.999;
+
+/// One front-to-back compositing step of a client over 8-bit premultiplied colors:
+/// `C += (1 − A)·c / 255` (the arithmetic of every CPU renderer's compositing).
+#[inline(always)]
+pub fn composite_step(acc: &mut [f32; 4], c: [u8; 4]) {
+    let wgt = (1.0 - acc[3]) * (1.0 / 255.0);
+    for i in 0..4 {
+        acc[i] += wgt * c[i] as f32;
+    }
+}
+
+/// A ray's packed segment colors composited front to back as a client does, stopping once the
+/// opacity reaches [`OPAQUE`] (premultiplied, before the background).
+pub fn composite_packed(colors: &[u32]) -> [f32; 4] {
+    let mut acc = [0.0f32; 4];
+    for &c in colors {
+        composite_step(&mut acc, c.to_le_bytes());
+        if acc[3] >= OPAQUE {
+            break;
+        }
+    }
+    acc
+}
+
+/// 8-bit rounding of one channel, as [`crate::sample::pack_color_f32`] rounds.
+#[inline(always)]
+fn round8(v: f32) -> u8 {
+    (crate::sample::pack_color_f32([v, 0.0, 0.0, 0.0]) & 0xFF) as u8
+}
+
+/// The 8-bit value `q` within `lo..=hi` nearest `start` for which `acc + wgt·q / 255` rounds to
+/// `target` (`start` where none does).
+fn fit_channel(acc: f32, wgt: f32, target: u8, start: u8, lo: u8, hi: u8) -> u8 {
+    if !(wgt > 0.0) || lo > hi {
+        return start.clamp(lo.min(hi), hi);
+    }
+    let hits = |q: u8| round8(acc + wgt * q as f32) == target;
+    // The value that lands on the target's centre, then its neighbours.
+    let ideal = libm::roundf((target as f32 / 255.0 - acc) / wgt).clamp(lo as f32, hi as f32) as i32;
+    for d in [0, -1, 1, -2, 2] {
+        let q = (ideal + d).clamp(lo as i32, hi as i32) as u8;
+        if hits(q) {
+            return q;
+        }
+    }
+    start.clamp(lo, hi)
+}
+
+/// The 8-bit colors of a ray's segments (front to back) into `out`, rounded so that a client
+/// compositing them ([`composite_packed`]) gets the ray's own color `ray` (premultiplied, what
+/// the marcher composited) rounded to 8 bits — the pixel of the server's image — wherever
+/// 8 bits can: each segment is rounded so that the client's composite so far follows the
+/// segments' real composite (the rounding error of one carried into the next), and the last
+/// one the client composites lands on the ray's 8-bit color. Without
+/// it the rounding of up to K segments adds up to ±2 levels per channel at the frame's own
+/// camera, which a frame shown where the camera rests must not have. Colors stay
+/// premultiplied (`r, g, b ≤ a`).
+pub fn pack_colors(segs: &[Segment], ray: [f32; 4], out: &mut [u32]) {
+    let n = segs.len().min(out.len());
+    let target = crate::sample::pack_color_f32(ray).to_le_bytes();
+    let mut acc = [0.0f32; 4];
+    // The segments' own composite so far (real colors): each segment is rounded so that the
+    // client's composite follows it (the error of one step carried into the next).
+    let mut real = [0.0f32; 4];
+    let mut adjusting = true;
+    for j in 0..n {
+        let c = segs[j].color;
+        let keep = 1.0 - real[3];
+        for i in 0..4 {
+            real[i] += keep * c[i];
+        }
+        let mut q = crate::sample::pack_color_f32(c).to_le_bytes();
+        if adjusting {
+            let wgt = (1.0 - acc[3]) * (1.0 / 255.0);
+            if wgt > 0.0 {
+                let follow = |i: usize, hi: u8| libm::roundf((real[i] - acc[i]) / wgt).clamp(0.0, hi as f32) as u8;
+                q[3] = follow(3, 255);
+                for i in 0..3 {
+                    q[i] = follow(i, q[3]);
+                }
+            }
+            let last = j + 1 == n;
+            let stops = acc[3] + wgt * q[3] as f32 >= OPAQUE;
+            if last || stops {
+                // The last segment takes the error on its opacity too; one where the client
+                // stops keeps its opacity, so it still stops there.
+                let fit_rgb = |mut q: [u8; 4]| {
+                    for i in 0..3 {
+                        q[i] = fit_channel(acc[i], wgt, target[i], q[i].min(q[3]), 0, q[3]);
+                    }
+                    q
+                };
+                if last {
+                    // Where a color channel cannot reach its target under the opacity
+                    // (premultiplied), a slightly higher opacity may still give the same pixel
+                    // over the background: the first of a few that does, else the nearest fit.
+                    let a = fit_channel(acc[3], wgt, target[3], q[3], 0, 255);
+                    let want = over_background(u32::from_le_bytes(target), BACKGROUND);
+                    let shown = |q: [u8; 4]| {
+                        let mut after = acc;
+                        composite_step(&mut after, q);
+                        over_background(crate::sample::pack_color_f32(after), BACKGROUND)
+                    };
+                    let first = fit_rgb([q[0], q[1], q[2], a]);
+                    q = first;
+                    if shown(first) != want {
+                        for d in 1..=3u8 {
+                            let c = fit_rgb([q[0], q[1], q[2], a.saturating_add(d)]);
+                            if shown(c) == want {
+                                q = c;
+                                break;
+                            }
+                        }
+                    }
+                } else {
+                    q = fit_rgb(q);
+                }
+                adjusting = false;
+            }
+            composite_step(&mut acc, q);
+        }
+        out[j] = u32::from_le_bytes(q);
     }
 }
 
@@ -711,6 +840,54 @@ mod layered_compact {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn packed_segments_composite_to_the_rays_own_pixel() {
+        // Pseudo-random rays of 1..=4 segments: the client's composite of the packed colors over
+        // the background is the ray's own pixel (the server's image) on (nearly) every ray, and
+        // plain rounding of each segment is not.
+        let mut state = 0x2545_F491_4F6C_DD1Du64;
+        let mut next = || {
+            state ^= state << 13;
+            state ^= state >> 7;
+            state ^= state << 17;
+            (state >> 40) as f32 / (1u64 << 24) as f32
+        };
+        let (mut exact, mut plain, n) = (0, 0, 20_000);
+        for _ in 0..n {
+            let k = 1 + (next() * 4.0) as usize % 4;
+            let mut segs = [Segment::default(); MAX_LAYERS];
+            for (j, sg) in segs.iter_mut().enumerate().take(k) {
+                let a = next();
+                *sg = Segment { t: j as f32, color: [next() * a, next() * a, next() * a, a] };
+            }
+            let segs = &segs[..k];
+            let mut ray = [0.0f32; 4];
+            for sg in segs {
+                let keep = 1.0 - ray[3];
+                for i in 0..4 {
+                    ray[i] += keep * sg.color[i];
+                }
+            }
+            let want = over_background(crate::sample::pack_color_f32(ray), BACKGROUND);
+            let mut packed = [0u32; MAX_LAYERS];
+            pack_colors(segs, ray, &mut packed[..k]);
+            for c in &packed[..k] {
+                let [r, g, b, a] = c.to_le_bytes();
+                assert!(r <= a && g <= a && b <= a, "premultiplied: {c:08x}");
+            }
+            let shown =
+                |cols: &[u32]| over_background(crate::sample::pack_color_f32(composite_packed(cols)), BACKGROUND);
+            exact += usize::from(shown(&packed[..k]) == want);
+            let mut rounded = [0u32; MAX_LAYERS];
+            for (r, sg) in rounded.iter_mut().zip(segs) {
+                *r = crate::sample::pack_color_f32(sg.color);
+            }
+            plain += usize::from(shown(&rounded[..k]) == want);
+        }
+        assert!(exact as f64 >= 0.99 * n as f64, "{exact} of {n} exact");
+        assert!((plain as f64) < 0.9 * exact as f64, "plain rounding: {plain} of {n}");
+    }
 
     /// Composites a profile of (t, premultiplied rgba) samples as the marcher does and
     /// segments it.

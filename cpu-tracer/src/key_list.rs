@@ -22,7 +22,7 @@ use volwarp_core::BACKGROUND;
 pub const LIST: usize = 16;
 
 /// Accumulated opacity at which a pixel's compositing stops.
-pub const OPAQUE: f32 = 0.999;
+pub const OPAQUE: f32 = volwarp_core::segments::OPAQUE;
 
 /// The depth key: the centre's distance from the eye (ordered bits of a non-negative float)
 /// and the sample id.

@@ -29,7 +29,7 @@ use rayon::prelude::*;
 use std::sync::Arc;
 use std::time::Instant;
 use volwarp_core::sample::{over_background, pack_color_f32, Quantizer};
-use volwarp_core::segments::{Segment, Segmenter, MAX_LAYERS};
+use volwarp_core::segments::{pack_colors, Segment, Segmenter, MAX_LAYERS};
 use volwarp_core::wire::{CameraRequest, Frame, FrameHeader};
 use volwarp_core::{Camera, DepthPicker, FirstPassAccumulator, Heuristic, Image, Vec3, BACKGROUND};
 
@@ -493,12 +493,17 @@ impl Marcher {
     /// One ray's layered samples: at most `layers` segments, front to back (the
     /// scalar reference of the packet marcher's layered path).
     pub fn segments(&self, o: Vec3, d: Vec3, layers: u32) -> Vec<Segment> {
+        self.segments_and_color(o, d, layers).0
+    }
+
+    /// [`Marcher::segments`] and the ray's composited premultiplied color.
+    fn segments_and_color(&self, o: Vec3, d: Vec3, layers: u32) -> (Vec<Segment>, [f32; 4]) {
         let mut seg = Segmenter::new(layers, self.dt);
-        let (_, exit) = self.march_ray_rgba(o, d, |t, _, dst| seg.feed(t, dst));
+        let (c, exit) = self.march_ray_rgba(o, d, |t, _, dst| seg.feed(t, dst));
         if exit.is_none() {
-            return Vec::new();
+            return (Vec::new(), c);
         }
-        seg.finish().to_vec()
+        (seg.finish().to_vec(), c)
     }
 
     /// Marches every pixel of `camera` into at most `layers` segments each (parallel over row
@@ -538,11 +543,11 @@ impl Marcher {
                 for (i, c) in cb.iter_mut().enumerate() {
                     let (x, y) = ((i % w) as u32, (b * BAND_ROWS + i / w) as u32);
                     let d = basis.dir(x, y);
-                    let segs = self.segments(o, d, k as u32);
+                    let (segs, ray) = self.segments_and_color(o, d, k as u32);
                     *c = segs.len() as u8;
+                    pack_colors(&segs, ray, &mut colb[i * k..i * k + segs.len()]);
                     for (j, sg) in segs.iter().enumerate() {
                         tb[i * k + j] = sg.t;
-                        colb[i * k + j] = pack_color_f32(sg.color);
                         if let (Some((q, radius)), Some(s)) = (pack, sb.get_mut(i * k + j)) {
                             *s = q.pack(o + d * sg.t, radius.at(d, sg.t));
                         }

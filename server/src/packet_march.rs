@@ -34,7 +34,7 @@ use crate::radius::{FrameRadius, RaySpread, Uncertainty};
 use crate::volume::bricks::{BRICK_EDGE, BRICK_SHIFT, BRICK_SPAN, BRICK_VALUES};
 use crate::volume::Voxels;
 use volwarp_core::sample::{over_background, pack_color_f32, Quantizer};
-use volwarp_core::segments::{Segment, Segmenter, SegmenterLanes};
+use volwarp_core::segments::{pack_colors, Segment, Segmenter, SegmenterLanes};
 use volwarp_core::{DepthPicker, FirstPassAccumulator, Heuristic, RayBasis, Vec3, BACKGROUND};
 
 /// Pixels per packet along x for `lanes` lanes (the packet is `pw × (lanes / pw)` pixels).
@@ -779,7 +779,7 @@ impl Kernel<'_> {
             for px in (0..w).step_by(pw(L::N)) {
                 let rays = self.rays(L::N, basis, o, px, py, w, h);
                 let mut segs = S::new(k as u32, step);
-                self.march::<L, _, M>(o, &rays, &mut segs);
+                let rays_color = self.march::<L, _, M>(o, &rays, &mut segs);
                 for l in 0..L::N.min(M) {
                     let (x, y) = (px + (l % pw(L::N)) as u32, py + (l / pw(L::N)) as u32);
                     if x >= w || y >= y0 + rows || rays.t_exit[l].is_none() {
@@ -790,13 +790,13 @@ impl Kernel<'_> {
                     if let Some(c) = out.count.get_mut(i) {
                         *c = list.len() as u8;
                     }
+                    if let Some(colors) = out.color.get_mut(i * k..i * k + list.len()) {
+                        pack_colors(list, rays_color[l], colors);
+                    }
                     for (j, sgm) in list.iter().enumerate() {
                         let slot = i * k + j;
                         if let Some(p) = out.t.get_mut(slot) {
                             *p = sgm.t;
-                        }
-                        if let Some(p) = out.color.get_mut(slot) {
-                            *p = pack_color_f32(sgm.color);
                         }
                         if let (Some((q, radius)), Some(s)) = (pack, out.packed.get_mut(slot)) {
                             let d = rays.d[l];

@@ -102,6 +102,20 @@ fn layered_frames_are_valid_and_recomposite_to_the_ground_truth() {
             }
         }
         assert!(worst <= 3, "{}: a recomposited channel is {worst} steps off", ds.name);
+        // As a client composites them (core's `composite_packed`), the packed colors give the
+        // marcher's own pixel: the frame shown where the camera rests is the server's image.
+        let exact = (0..truth.pixels.len())
+            .filter(|&i| {
+                let cols: Vec<u32> = lb.pixel(i).map(|(_, c)| c).collect();
+                let shown = if cols.is_empty() {
+                    BACKGROUND
+                } else {
+                    over_background(pack_color_f32(volwarp_core::segments::composite_packed(&cols)), BACKGROUND)
+                };
+                shown == truth.pixels[i]
+            })
+            .count();
+        assert!(exact * 100 >= truth.pixels.len() * 99, "{}: {exact} of {} pixels exact", ds.name, truth.pixels.len());
     }
 }
 
