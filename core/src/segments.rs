@@ -160,8 +160,8 @@ pub const OPAQUE: f32 = 0.999;
 #[inline(always)]
 pub fn composite_step(acc: &mut [f32; 4], c: [u8; 4]) {
     let wgt = (1.0 - acc[3]) * (1.0 / 255.0);
-    for i in 0..4 {
-        acc[i] += wgt * c[i] as f32;
+    for (a, c) in acc.iter_mut().zip(c) {
+        *a += wgt * c as f32;
     }
 }
 
@@ -222,8 +222,8 @@ pub fn pack_colors(segs: &[Segment], ray: [f32; 4], out: &mut [u32]) {
     for j in 0..n {
         let c = segs[j].color;
         let keep = 1.0 - real[3];
-        for i in 0..4 {
-            real[i] += keep * c[i];
+        for (r, c) in real.iter_mut().zip(c) {
+            *r += keep * c;
         }
         let mut q = crate::sample::pack_color_f32(c).to_le_bytes();
         if adjusting {
@@ -865,8 +865,8 @@ mod tests {
             let mut ray = [0.0f32; 4];
             for sg in segs {
                 let keep = 1.0 - ray[3];
-                for i in 0..4 {
-                    ray[i] += keep * sg.color[i];
+                for (r, c) in ray.iter_mut().zip(sg.color) {
+                    *r += keep * c;
                 }
             }
             let want = over_background(crate::sample::pack_color_f32(ray), BACKGROUND);

@@ -762,6 +762,8 @@ impl Kernel<'_> {
         }
     }
 
+    // The lane index `l` picks the lane of several per-lane arrays (rays, colors, segmenters).
+    #[allow(clippy::needless_range_loop)]
     #[inline(always)]
     fn band_layers_with<L: Lanes, S: LayerFeed<M>, const M: usize>(
         &self,
