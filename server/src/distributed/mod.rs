@@ -27,6 +27,7 @@ use partial::PartMarcher;
 use rayon::prelude::*;
 use volwarp_core::compact_frame::{EncodeOptions, Encoding, RadiusPrediction};
 use volwarp_core::sample::{pack_color_f32, Bounds, Quantizer};
+use volwarp_core::segments::{pack_colors, Segment, MAX_LAYERS};
 use volwarp_core::wire::{self, CameraRequest, Frame, FrameHeader, Message};
 use volwarp_core::{Image, Vec3, BACKGROUND};
 
@@ -92,11 +93,23 @@ impl FrameGeometry {
                 for p in 0..b.count.len() {
                     let i = first + p as u32;
                     let d = basis.dir(i % w, i / w);
-                    for (j, s) in b.pixel(p).iter().enumerate() {
+                    // Layered: the segments' colors rounded so their composite is the ray's own
+                    // pixel (core's `pack_colors`, as the one-process marcher packs them).
+                    let segs = b.pixel(p);
+                    let mut packed = [0u32; MAX_LAYERS];
+                    let n = segs.len().min(MAX_LAYERS);
+                    if layers > 1 {
+                        let mut list = [Segment::default(); MAX_LAYERS];
+                        for (l, s) in list.iter_mut().zip(segs) {
+                            *l = Segment { t: s.t, color: s.c };
+                        }
+                        pack_colors(&list[..n], composite(segs), &mut packed[..n]);
+                    }
+                    for (j, s) in segs.iter().enumerate() {
                         let r =
                             if layers > 1 { radius.at(d, s.t) } else { radius.at_ray(d, s.t, &Uncertainty::default()) };
                         samples.push(q.pack(o + d * s.t, r));
-                        colors.push(pack_color_f32(s.c));
+                        colors.push(if layers > 1 && j < n { packed[j] } else { pack_color_f32(s.c) });
                         if layers > 1 {
                             segments.push(j as u8);
                         }
@@ -146,6 +159,14 @@ impl FrameGeometry {
     }
 }
 
+/// A pixel's merged segments composited front to back (premultiplied).
+fn composite(segs: &[partial::Seg]) -> [f32; 4] {
+    segs.iter().fold([0.0f32; 4], |acc, s| {
+        let keep = 1.0 - acc[3];
+        [0, 1, 2, 3].map(|j| acc[j] + keep * s.c[j])
+    })
+}
+
 /// The composited image of merged bands (each pixel's segments over [`BACKGROUND`], as the
 /// one-process `render_image` shows a pixel).
 pub fn image(width: u32, height: u32, bands: &[Band]) -> Image {
@@ -153,10 +174,7 @@ pub fn image(width: u32, height: u32, bands: &[Band]) -> Image {
     let mut i = 0;
     for b in bands {
         for p in 0..b.count.len() {
-            let c = b.pixel(p).iter().fold([0.0f32; 4], |acc, s| {
-                let keep = 1.0 - acc[3];
-                [0, 1, 2, 3].map(|j| acc[j] + keep * s.c[j])
-            });
+            let c = composite(b.pixel(p));
             img.pixels[i] = volwarp_core::sample::over_background(pack_color_f32(c), BACKGROUND);
             i += 1;
         }
