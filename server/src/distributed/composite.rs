@@ -11,7 +11,9 @@
 //! `c = c₁ + (1 − α₁)·c₂`, `α = α₁ + (1 − α₁)·α₂`, and the depth their opacity-weighted mean
 //! `(α₁·t₁ + (1 − α₁)·α₂·t₂) / α` (the segmenter's rule for one segment, in real arithmetic).
 //! For K = 1 frames (one sample per pixel at a heuristic's depth) the parts' segments are
-//! composited into one whose depth is the **nearest** part's pick.
+//! composited into one whose depth is the **nearest** part's pick: the one-process depth bit
+//! for bit for Entrance, and for Threshold where the nearest visible part crosses on its own
+//! (the heuristics served across ranks: [`super::one_sample_heuristic`]).
 //!
 //! With one part the merged frame is the one-process frame bit for bit. With several, a
 //! part's segmenter sees only its own accumulated opacity, so cuts, colors (float order) and

@@ -28,7 +28,29 @@ use rayon::prelude::*;
 use volwarp_core::compact_frame::{EncodeOptions, Encoding, RadiusPrediction};
 use volwarp_core::sample::{pack_color_f32, Bounds, Quantizer};
 use volwarp_core::wire::{self, CameraRequest, Frame, FrameHeader, Message};
-use volwarp_core::{Image, Vec3, BACKGROUND};
+use volwarp_core::{Heuristic, Image, Vec3, BACKGROUND};
+
+/// Whether frames of one sample per pixel (K = 1) with `heuristic` are composited across ranks,
+/// and if not, why (the error a client gets). The composited depth is the nearest part's pick
+/// ([`composite::reduce`]), which is the one-process pick for:
+/// - **Entrance** always: the nearest part with a visible sample holds the ray's first one;
+/// - **Threshold** wherever the nearest part with a visible sample crosses the threshold
+///   itself (its accumulation is the ray's, bit for bit, as nothing in front of it is visible);
+///   a ray that crosses only over several parts gets the depth where it leaves the nearest
+///   visible part (the part's fallback), in front of the ray's crossing.
+///
+/// The others depend on the whole ray: Exit, Midpoint, Peak and Gradient on where the ray's
+/// early termination falls (each part stops at its own, later, one), RelThreshold on the ray's
+/// final opacity and EnExMean on its entrance and exit opacities, which no part knows.
+pub fn one_sample_heuristic(heuristic: Heuristic) -> Result<(), String> {
+    match heuristic {
+        Heuristic::Entrance | Heuristic::Threshold => Ok(()),
+        h => Err(format!(
+            "the {h} heuristic is not composited across MPI ranks at one sample per pixel (its depth depends \
+             on the whole ray, which no rank marches): ask for entrance or threshold, or for layered frames"
+        )),
+    }
+}
 
 /// What rank 0 needs of the whole volume to make frames without holding it: its box, its
 /// voxel diagonal and the march options (the same values the one-process marcher reads of

@@ -10,12 +10,14 @@
 //!
 //! **Faults.** MPI calls run on rank 0's main thread only, with errors returned rather than
 //! fatal; a watchdog thread times every frame. A frame not done within the rank timeout (a
-//! rank hangs) or whose bands do not arrive whole (a rank failed) makes rank 0 send every
-//! waiting client an `INTERNAL` error, print it and exit with status 3 — never a silent hang.
-//! A rank that dies makes MPICH's `mpiexec` kill every rank, rank 0 too: the clients'
-//! connections close and `mpiexec` fails. A bad launch — files that differ between ranks, more
-//! ranks than the volume has bricks, a part refused for memory — is reported by rank 0 (and
-//! the rank concerned) before any frame, and every rank exits non-zero.
+//! rank hangs), or whose bands do not arrive whole (a rank failed: a rank whose march panics
+//! still takes part in the exchange, sending bands that do not decode), makes rank 0 send every
+//! client, waiting for a frame or idle, an `INTERNAL` error, print it and end every rank with
+//! `MPI_Abort` (status 3) — never a silent hang. A rank that dies (killed, aborted) makes
+//! MPICH's `mpiexec` kill every rank, rank 0 too, even with `-disable-auto-cleanup` (MPICH
+//! 4.0): the clients' connections close and `mpiexec` fails. A bad launch — files that differ
+//! between ranks, more ranks than the volume has bricks, a part refused for memory — is
+//! reported by rank 0 (and the rank concerned) before any frame, and every rank exits non-zero.
 
 use super::composite::{self, Band};
 use super::decomposition::{self, Decomposition};
@@ -99,6 +101,53 @@ pub struct RankStats {
     pub bytes_sent: u64,
 }
 
+/// A failure injected into one rank for the fault tests, from the environment variable
+/// `VOLWARP_MPI_FAULT=RANK:FRAME:abort|panic|hang` (rank `RANK` ≥ 1 aborts the process, panics
+/// or hangs after marching its `FRAME`-th frame, counted from 1): what a crashed, failing or
+/// stuck node does mid-frame.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+struct Fault {
+    frame: u64,
+    what: FaultKind,
+}
+
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+enum FaultKind {
+    Abort,
+    Panic,
+    Hang,
+}
+
+impl Fault {
+    fn from_env(rank: usize) -> Option<Fault> {
+        let v = std::env::var("VOLWARP_MPI_FAULT").ok()?;
+        let mut it = v.split(':');
+        let (r, f, what) = (it.next()?.parse::<usize>().ok()?, it.next()?.parse().ok()?, it.next()?);
+        let what = match what {
+            "abort" => FaultKind::Abort,
+            "panic" => FaultKind::Panic,
+            "hang" => FaultKind::Hang,
+            _ => return None,
+        };
+        (r == rank && rank != 0).then_some(Fault { frame: f, what })
+    }
+
+    fn strike(self, rank: usize) {
+        eprintln!("volwarp-server (rank {rank}): VOLWARP_MPI_FAULT: {:?} mid-frame", self.what);
+        match self.what {
+            FaultKind::Abort => std::process::abort(),
+            FaultKind::Panic => panic!("VOLWARP_MPI_FAULT: a failure injected mid-frame"),
+            FaultKind::Hang => loop {
+                std::thread::sleep(Duration::from_secs(3600));
+            },
+        }
+    }
+}
+
+/// What a rank whose march failed sends for every band: no band decodes from it (a count
+/// above any K, or a byte too many for a band of no pixels).
+const FAILED_BAND: [u8; 1] = [0xff];
+
 const CMD_LEN: usize = 72;
 const CMD_QUIT: u8 = 0;
 const CMD_FRAME: u8 = 1;
@@ -161,6 +210,7 @@ fn frame_collective(
     part: &PartMarcher,
     req: &CameraRequest,
     layers: u32,
+    fault: Option<Fault>,
 ) -> Option<Result<Gathered, String>> {
     let size = world.size() as usize;
     let rank = world.rank() as usize;
@@ -169,18 +219,32 @@ fn frame_collective(
     let ert = part.options().early_termination;
     let mut st = RankStats::default();
     let t0 = Instant::now();
-    let pf = part.march(cam, layers, req.heuristic);
+    // A march that fails (a panic) still takes part in the collectives, sending bands that do
+    // not decode: the others go on, rank 0 fails the frame and ends the job.
+    let marched = std::panic::catch_unwind(std::panic::AssertUnwindSafe(|| {
+        let pf = part.march(cam, layers, req.heuristic);
+        if let Some(f) = fault {
+            f.strike(rank);
+        }
+        pf
+    }));
     let t_marched = Instant::now();
     st.march_us = (t_marched - t0).as_micros() as u64;
     // Direct-send: band b to rank b.
     let mut send = Vec::new();
     let mut scounts = vec![0i32; size];
-    let coded: Vec<Vec<u8>> = {
-        use rayon::prelude::*;
-        (0..size)
-            .into_par_iter()
-            .map(|b| composite::encode_band(&pf, composite::band_rows(cam.height, size, b)))
-            .collect()
+    let coded: Vec<Vec<u8>> = match &marched {
+        Ok(pf) => {
+            use rayon::prelude::*;
+            (0..size)
+                .into_par_iter()
+                .map(|b| composite::encode_band(pf, composite::band_rows(cam.height, size, b)))
+                .collect()
+        }
+        Err(_) => {
+            eprintln!("volwarp-server (rank {rank}): the march of this rank's part failed; the frame is failed");
+            vec![FAILED_BAND.to_vec(); size]
+        }
     };
     for (b, (c, bytes)) in scounts.iter_mut().zip(coded).enumerate() {
         *c = bytes.len() as i32;
@@ -189,7 +253,7 @@ fn frame_collective(
         }
         send.extend_from_slice(&bytes);
     }
-    drop(pf);
+    drop(marched);
     // The ranks wait for the slowest march here (timed apart from the exchange itself).
     world.barrier();
     let t1 = Instant::now();
@@ -286,11 +350,16 @@ fn frame_collective(
 struct Watchdog {
     started: Mutex<Option<Instant>>,
     failed: Mutex<Option<String>>,
+    /// How many clients the server still has (set once it serves).
+    clients: Mutex<Option<Box<dyn Fn() -> usize + Send>>>,
 }
+
+/// The longest rank 0 waits for its clients to be sent the error before it ends the job.
+const TELL_CLIENTS: Duration = Duration::from_secs(3);
 
 impl Watchdog {
     fn spawn(timeout: Duration) -> Arc<Watchdog> {
-        let w = Arc::new(Watchdog { started: Mutex::new(None), failed: Mutex::new(None) });
+        let w = Arc::new(Watchdog { started: Mutex::new(None), failed: Mutex::new(None), clients: Mutex::new(None) });
         let wd = w.clone();
         std::thread::Builder::new()
             .name("volwarp-mpi-watchdog".into())
@@ -298,26 +367,37 @@ impl Watchdog {
                 std::thread::sleep(Duration::from_millis(50));
                 let late = wd.started.lock().unwrap_or_else(|e| e.into_inner()).is_some_and(|t| t.elapsed() > timeout);
                 if late {
-                    let msg = format!(
+                    wd.fail(format!(
                         "the MPI ranks did not finish a frame within {:.1} s: a rank died or hangs",
                         timeout.as_secs_f64()
-                    );
-                    *wd.failed.lock().unwrap_or_else(|e| e.into_inner()) = Some(msg.clone());
-                    // Give the client threads time to send the error, then leave.
-                    std::thread::sleep(Duration::from_millis(500));
-                    eprintln!("volwarp-server (rank 0): {msg}");
-                    std::process::exit(3);
+                    ));
                 }
             })
             .expect("spawning the watchdog");
         w
     }
 
-    /// Fails the server: every waiting client gets `msg`, then the process exits with 3.
+    /// Fails the job: every client (waiting for a frame or idle) is sent `msg` as an
+    /// `INTERNAL` error, then every rank is ended with status 3 (`MPI_Abort`: the ranks still
+    /// alive, stuck in a collective with a dead or hung one, would otherwise hang `mpiexec`).
     fn fail(&self, msg: String) -> ! {
         *self.failed.lock().unwrap_or_else(|e| e.into_inner()) = Some(msg.clone());
-        std::thread::sleep(Duration::from_millis(500));
         eprintln!("volwarp-server (rank 0): {msg}");
+        // The clients' threads send the error and end within the server's poll of its source.
+        let t = Instant::now();
+        let clients = self.clients.lock().unwrap_or_else(|e| e.into_inner()).take();
+        let left = || clients.as_ref().map_or(0, |n| n());
+        while left() > 0 && t.elapsed() < TELL_CLIENTS {
+            std::thread::sleep(Duration::from_millis(20));
+        }
+        std::thread::sleep(Duration::from_millis(100));
+        // SAFETY: MPI is initialized (the watchdog starts after it) and not finalized (rank 0
+        // finalizes only after its job, and this call ends the process). MPI_Abort is the one
+        // call MPI allows from any thread in a failure; MPICH's needs no lock at the funneled
+        // threading level.
+        unsafe {
+            mpi::ffi::MPI_Abort(mpi::ffi::RSMPI_COMM_WORLD, 3);
+        }
         std::process::exit(3);
     }
 
@@ -372,6 +452,10 @@ impl FrameSource for Source {
 
     fn encode(&self, req: &CameraRequest, frame: &Frame, encoding: Encoding, green: bool) -> (Vec<u8>, Encoding) {
         self.geometry.encode(req, frame, encoding, green)
+    }
+
+    fn failed(&self) -> Option<String> {
+        self.watchdog.failed()
     }
 }
 
@@ -458,12 +542,15 @@ pub fn run(launch: Launch, job: Job) -> Result<(), String> {
     let geometry = FrameGeometry { dims, spacing, opts: part.options() };
     if rank != 0 {
         let root = world.process_at_rank(0);
+        let fault = Fault::from_env(rank);
+        let mut frames = 0u64;
         loop {
             let mut cmd = [0u8; CMD_LEN];
             root.broadcast_into(&mut cmd[..]);
             match decode_cmd(&cmd) {
                 Some((req, layers)) => {
-                    frame_collective(&world, &part, &req, layers);
+                    frames += 1;
+                    frame_collective(&world, &part, &req, layers, fault.filter(|f| f.frame == frames));
                 }
                 None => return Ok(()),
             }
@@ -472,6 +559,9 @@ pub fn run(launch: Launch, job: Job) -> Result<(), String> {
     let watchdog = Watchdog::spawn(launch.rank_timeout);
     let root = world.process_at_rank(0);
     let frame = |req: &CameraRequest, layers: u32| -> Result<(Vec<Band>, FrameStats), String> {
+        if layers <= 1 {
+            super::one_sample_heuristic(req.heuristic)?;
+        }
         // MPI counts and displacements are 32-bit: the most bytes a frame's segments may take.
         let k = u64::from(layers.clamp(1, volwarp_core::segments::MAX_LAYERS as u32));
         let pixels = u64::from(req.camera.width) * u64::from(req.camera.height);
@@ -486,7 +576,7 @@ pub fn run(launch: Launch, job: Job) -> Result<(), String> {
         watchdog.start();
         let mut cmd = encode_cmd(req, layers);
         root.broadcast_into(&mut cmd[..]);
-        let (bands, stats) = match frame_collective(&world, &part, req, layers) {
+        let (bands, stats) = match frame_collective(&world, &part, req, layers, None) {
             Some(Ok(r)) => r,
             Some(Err(e)) => watchdog.fail(e),
             None => watchdog.fail("rank 0 got no frame".into()),
@@ -556,7 +646,9 @@ pub fn run(launch: Launch, job: Job) -> Result<(), String> {
             let server =
                 Server::with_marcher(config, Arc::new(marcher)).map_err(|e| e.to_string())?.with_source(source);
             ready(server.local_addr());
-            let _handle = server.spawn();
+            let handle = Arc::new(server.spawn());
+            let h = handle.clone();
+            *watchdog.clients.lock().unwrap_or_else(|e| e.into_inner()) = Some(Box::new(move || h.active_clients()));
             for (req, layers, reply) in rx {
                 let (bands, stats) = match frame(&req, layers) {
                     Ok(r) => r,
