@@ -264,6 +264,39 @@ fn packet_parts_equal_scalar_parts_bit_for_bit() {
     }
 }
 
+#[test]
+fn band_owners_assemble_the_frame_rank_0_would() {
+    use volwarp_server::distributed::FramePart;
+    let ds = Dataset::load(data("ct_head_quarter.nhdr"), None).unwrap();
+    let opts = MarchOptions::default();
+    let m = Marcher::with_options(ds.volume.clone(), &ds.tf, opts);
+    let (dec, parts) = parts_of_file(&data("ct_head_quarter.nhdr"), 3);
+    let pm = marchers(&ds, &dec, parts, opts);
+    let geo = FrameGeometry { dims: ds.volume.dims(), spacing: ds.volume.spacing(), opts };
+    for (layers, heuristic) in [(4, Heuristic::Threshold), (1, Heuristic::Entrance)] {
+        let req = request(&m, 50, 20.0, heuristic);
+        let bands = render_in_process(&pm, &req, layers, 3);
+        let want = geo.frame(&req, layers, &bands, 7);
+        // Each band's owner assembles its pixels in runs; rank 0 joins the bytes.
+        let mut first = 0u32;
+        let bytes: Vec<Vec<u8>> = bands
+            .iter()
+            .map(|b| {
+                let n = b.count.len();
+                let runs: Vec<_> = (0..n.div_ceil(300)).map(|r| geo.frame_part(&req, layers, b, first, r * 300..((r + 1) * 300).min(n))).collect();
+                first += n as u32;
+                FramePart::join(&runs).to_bytes()
+            })
+            .collect();
+        let parts: Vec<&[u8]> = bytes.iter().map(|b| &b[..]).collect();
+        assert_eq!(geo.frame_of_bytes(&req, layers, &parts, 7).unwrap(), want, "K={layers}");
+        // Bytes that are not a part are an error (a failed rank's one byte, a short part).
+        for bad in [&[0xffu8][..], &bytes[0][..bytes[0].len() - 1]] {
+            assert!(geo.frame_of_bytes(&req, layers, &[bad], 7).is_err());
+        }
+    }
+}
+
 /// The largest channel difference and the share of identical pixels of two images.
 fn diff(a: &volwarp_core::Image, b: &volwarp_core::Image) -> (u32, f64) {
     let mut worst = 0;

@@ -209,6 +209,35 @@ pub fn merge_bands(bands: &[Band], pixels: usize, k: usize, ert: f32) -> Band {
     out
 }
 
+/// [`merge_bands`] handing each pixel's merged segments to `f(pixel, segments, acc)` in runs of
+/// pixels in parallel, instead of collecting them (a band owner assembles its frame samples
+/// this way, without a merged band in between): the runs' accumulators, in pixel order.
+pub fn merge_bands_with<A: Default + Send>(
+    bands: &[Band],
+    pixels: usize,
+    k: usize,
+    ert: f32,
+    f: impl Fn(usize, &[Seg], &mut A) + Sync,
+) -> Vec<A> {
+    use rayon::prelude::*;
+    const RUN: usize = 4096;
+    (0..pixels.div_ceil(RUN))
+        .into_par_iter()
+        .map(|r| {
+            let mut acc = A::default();
+            let mut buf = Vec::new();
+            let mut lists: Vec<&[Seg]> = Vec::with_capacity(bands.len());
+            for i in r * RUN..((r + 1) * RUN).min(pixels) {
+                lists.clear();
+                lists.extend(bands.iter().map(|b| b.pixel(i)));
+                merge(&lists, k, ert, &mut buf);
+                f(i, &buf, &mut acc);
+            }
+            acc
+        })
+        .collect()
+}
+
 /// The bytes of a merged band (the same coding as [`encode_band`]).
 pub fn encode_merged(b: &Band) -> Vec<u8> {
     let mut out = Vec::with_capacity(b.count.len() + b.segs.len() * SEG_BYTES);
