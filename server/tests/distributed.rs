@@ -283,7 +283,9 @@ fn band_owners_assemble_the_frame_rank_0_would() {
             .iter()
             .map(|b| {
                 let n = b.count.len();
-                let runs: Vec<_> = (0..n.div_ceil(300)).map(|r| geo.frame_part(&req, layers, b, first, r * 300..((r + 1) * 300).min(n))).collect();
+                let runs: Vec<_> = (0..n.div_ceil(300))
+                    .map(|r| geo.frame_part(&req, layers, b, first, r * 300..((r + 1) * 300).min(n)))
+                    .collect();
                 first += n as u32;
                 FramePart::join(&runs).to_bytes()
             })

@@ -243,7 +243,8 @@ impl Assembler {
         }
         let d = self.basis.dir(i % self.w, i / self.w);
         for (j, s) in segs.iter().enumerate() {
-            let r = if self.layered { self.radius.at(d, s.t) } else { self.radius.at_ray(d, s.t, &Uncertainty::default()) };
+            let r =
+                if self.layered { self.radius.at(d, s.t) } else { self.radius.at_ray(d, s.t, &Uncertainty::default()) };
             out.samples.push(self.q.pack(self.o + d * s.t, r));
             out.colors.push(pack_color_f32(s.c));
             if self.layered {
