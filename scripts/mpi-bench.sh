@@ -8,8 +8,9 @@
 # Prints a Markdown table (times in ms; bytes sent per rank per frame, the largest). The frame is
 # everything up to the encoded message but the encoding (which both servers do alike): for one
 # process the march and the compaction, for N ranks the broadcast, the slowest rank's march, the
-# band exchange, the merge, the gather and the frame's assembly on rank 0. The compositing share
-# is what of that is not the slowest march.
+# band exchange, the merge (with each band's samples assembled by its owner), the gather (with
+# rank 0 joining the bands' samples) and what rank 0 does after (the header: the assembly
+# column). The compositing share is what of that is not the slowest march.
 set -euo pipefail
 cd "$(dirname "$0")/.."
 vol=$1

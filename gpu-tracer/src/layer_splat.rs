@@ -35,7 +35,7 @@
 //! prefixes written in place).
 
 use crate::buffers::{grid, read_mapped, GrowBuffer};
-use crate::tracer::{SceneKey, MAX_GPU_VIEWPORT};
+use crate::tracer::{deq_uniforms, SceneKey, MAX_GPU_VIEWPORT};
 use crate::{GpuContext, GpuError};
 use bytemuck::{Pod, Zeroable};
 use std::time::{Duration, Instant};
@@ -159,7 +159,7 @@ fn params(
     let tan_x = tan_y * fc.aspect();
     let plane = fc.target.dot(fwd);
     let t_num = plane - camera.eye.dot(fwd);
-    let d = &scene.deq;
+    let (deq_min, deq_step) = deq_uniforms(&scene.deq);
     let (w, h) = (camera.width, camera.height);
     let (_, off_spans, off_sums) = work_layout(w, h);
     LayerParams {
@@ -175,8 +175,8 @@ fn params(
         bv: v4(s.bv),
         e: v4(s.e),
         proj: [view.px_x, view.px_y, view.half_w, view.half_h],
-        deq_min: [d.min.x, d.min.y, d.min.z, 0.0],
-        deq_step: [d.step.x, d.step.y, d.step.z, d.radius_unit],
+        deq_min,
+        deq_step,
         basis: camera.ray_basis(),
         f_eye: v4(fc.eye),
         f_u: v4(fu),

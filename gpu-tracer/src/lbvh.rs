@@ -223,13 +223,8 @@ impl LbvhBuilder {
     /// Sizes every scratch buffer for the frame's `n >= 2` samples and writes the uniform slots.
     fn prepare(&mut self, ctx: &GpuContext, frame: &Frame) -> Result<Vec<u32>, GpuError> {
         let n = frame.samples.len() as u32;
-        let deq = frame.header.dequantizer();
-        let counts = self.prepare_sort(
-            ctx,
-            n,
-            [deq.min.x, deq.min.y, deq.min.z, 0.0],
-            [deq.step.x, deq.step.y, deq.step.z, deq.radius_unit],
-        )?;
+        let (deq_min, deq_step) = crate::tracer::deq_uniforms(&frame.header.dequantizer());
+        let counts = self.prepare_sort(ctx, n, deq_min, deq_step)?;
         let n64 = n as u64;
         self.samples_in.ensure(ctx, n64 * 8)?;
         self.colors_in.ensure(ctx, n64 * 4)?;

@@ -365,22 +365,25 @@ fn center(s: PackedSample) -> vec3<f32> {
     return sample_center(s, P.deq_min, P.deq_step);
 }
 
+fn rounded(v: vec3<f32>) -> vec3<f32> {
+    return as_rounded(v, bitcast<u32>(P.deq_min.w));
+}
+
 struct Box {
     lo: vec3<f32>,
     hi: vec3<f32>,
 }
 
-// `sphere::sphere_box`: [c − r, c + r] widened by a relative 2⁻²⁰.
+// `sphere::sphere_box`: [c − r, c + r] widened by a relative 2⁻²⁰, each step rounded as the
+// CPU rounds it: `rounded` keeps the compiler from fusing the radius's product into the sums
+// (NVIDIA's does) or reassociating them.
 fn leaf_box(k: u32) -> Box {
     let s = samples_out[k];
     let c = center(s);
-    let r = sample_radius(s, P.deq_step);
+    let r = rounded(vec3<f32>(sample_radius(s, P.deq_step))).x;
     let k20 = 1.0 / 1048576.0;
-    let pad = vec3<f32>((abs(c.x) + r) * k20, (abs(c.y) + r) * k20, (abs(c.z) + r) * k20);
-    return Box(
-        vec3<f32>(c.x - r - pad.x, c.y - r - pad.y, c.z - r - pad.z),
-        vec3<f32>(c.x + r + pad.x, c.y + r + pad.y, c.z + r + pad.z),
-    );
+    let pad = rounded(abs(c) + vec3<f32>(r)) * k20;
+    return Box(rounded(c - vec3<f32>(r)) - pad, rounded(c + vec3<f32>(r)) + pad);
 }
 
 fn child_box(child: u32) -> Box {

@@ -26,7 +26,7 @@ alias PackedSample = vec2<u32>;
 // `tracer::TraceParams`: the trace (and splat) uniform.
 struct TraceParams {
     basis: RayBasis,
-    // Dequantizer: min.xyz, step.xyz, radius unit in step.w.
+    // Dequantizer: min.xyz (w = 0.0, see sample_center), step.xyz, radius unit in step.w.
     deq_min: vec4<f32>,
     deq_step: vec4<f32>,
     width: u32,
@@ -78,14 +78,21 @@ fn sample_coords(s: PackedSample) -> vec3<u32> {
     return vec3<u32>(x, y, z);
 }
 
-// `Dequantizer::center`: min + q·step per component.
+// `Dequantizer::center`: min + q·step per component, each step rounded as the CPU rounds it.
+// The product passes through its bits, xor-ed with deq_min.w's (0.0, `tracer::deq_uniforms`),
+// a value the compiler cannot know: it must round the product before the add and cannot
+// fuse the two into one fma.
 fn sample_center(s: PackedSample, deq_min: vec4<f32>, deq_step: vec4<f32>) -> vec3<f32> {
     let q = sample_coords(s);
-    return vec3<f32>(
-        deq_min.x + f32(q.x) * deq_step.x,
-        deq_min.y + f32(q.y) * deq_step.y,
-        deq_min.z + f32(q.z) * deq_step.z,
-    );
+    let p = vec3<f32>(f32(q.x) * deq_step.x, f32(q.y) * deq_step.y, f32(q.z) * deq_step.z);
+    return deq_min.xyz + as_rounded(p, bitcast<u32>(deq_min.w));
+}
+
+// `v` itself, through its bits xor-ed with `zero` (0, from a uniform the compiler cannot
+// know): the compiler must round `v` as it stands, so it can neither fuse it into the next
+// operation nor reassociate across it.
+fn as_rounded(v: vec3<f32>, zero: u32) -> vec3<f32> {
+    return bitcast<vec3<f32>>(bitcast<vec3<u32>>(v) ^ vec3<u32>(zero));
 }
 
 // `Dequantizer::radius`: code · unit.

@@ -9,7 +9,7 @@
 //! once per scene (the same scene cache as [`crate::GpuTracer`]).
 
 use crate::buffers::{grid, read_mapped, GrowBuffer};
-use crate::tracer::{SceneKey, TraceParams, MAX_GPU_VIEWPORT};
+use crate::tracer::{deq_uniforms, SceneKey, TraceParams, MAX_GPU_VIEWPORT};
 use crate::{GpuContext, GpuError};
 use bytemuck::{Pod, Zeroable};
 use std::time::{Duration, Instant};
@@ -184,11 +184,11 @@ impl GpuSplat {
             self.bind_groups = None;
         }
 
-        let d = &scene.deq;
+        let (deq_min, deq_step) = deq_uniforms(&scene.deq);
         let trace = TraceParams {
             basis: camera.ray_basis(),
-            deq_min: [d.min.x, d.min.y, d.min.z, 0.0],
-            deq_step: [d.step.x, d.step.y, d.step.z, d.radius_unit],
+            deq_min,
+            deq_step,
             width: w,
             height: h,
             n,

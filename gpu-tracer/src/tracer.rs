@@ -7,6 +7,7 @@ use crate::{GpuContext, GpuError};
 use bytemuck::{Pod, Zeroable};
 use std::time::{Duration, Instant};
 use volwarp_core::renderer::{Image, Renderer, BACKGROUND};
+use volwarp_core::sample::Dequantizer;
 use volwarp_core::wire::Frame;
 use volwarp_core::RendererKind;
 use volwarp_core::{Camera, RayBasis, Scene, SceneError};
@@ -21,7 +22,7 @@ pub const MAX_GPU_VIEWPORT: u32 = 16384;
 #[derive(Clone, Copy, Debug, Pod, Zeroable)]
 pub(crate) struct TraceParams {
     pub basis: RayBasis,
-    /// Dequantizer minimum (w unused).
+    /// Dequantizer minimum; w = 0.0 ([`deq_uniforms`]).
     pub deq_min: [f32; 4],
     /// Dequantizer step; w = radius unit.
     pub deq_step: [f32; 4],
@@ -29,6 +30,16 @@ pub(crate) struct TraceParams {
     pub height: u32,
     pub n: u32,
     pub background: u32,
+}
+
+/// The dequantizer as the shaders' two uniform vectors: `min.xyz` with `w = 0.0`, and
+/// `step.xyz` with `w` = the radius unit. `sample_center` xors the bits of the product
+/// `q · step` with those of that `0.0`, a value the shader compiler cannot know: so it must
+/// round the product before the add and cannot fuse the two into one `fma` (NVIDIA's compiler
+/// does, and the CPU rounds both), and the GPU's sample centers, leaf boxes and fitted trees
+/// equal the CPU's bit for bit.
+pub(crate) fn deq_uniforms(d: &Dequantizer) -> ([f32; 4], [f32; 4]) {
+    ([d.min.x, d.min.y, d.min.z, 0.0], [d.step.x, d.step.y, d.step.z, d.radius_unit])
 }
 
 /// What identifies an uploaded scene: where its arrays live, their length, the frame's sequence
@@ -242,11 +253,11 @@ impl GpuTracer {
             self.bind_group = None;
         }
         self.staging.ensure(&self.ctx, bytes)?;
-        let d = &scene.deq;
+        let (deq_min, deq_step) = deq_uniforms(&scene.deq);
         let params = TraceParams {
             basis: camera.ray_basis(),
-            deq_min: [d.min.x, d.min.y, d.min.z, 0.0],
-            deq_step: [d.step.x, d.step.y, d.step.z, d.radius_unit],
+            deq_min,
+            deq_step,
             width: w,
             height: h,
             n,

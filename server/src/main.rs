@@ -558,7 +558,7 @@ fn run_mpi(cli: Cli) -> Result<(), String> {
             step_voxels: cli.data.step,
             radius: cli.data.radius,
             uncertainty: volwarp_server::radius::UncertaintyParams::DEFAULT,
-            kernel: MarchKernel::Scalar,
+            kernel: if cli.data.kernel == "scalar" { MarchKernel::Scalar } else { MarchKernel::Packet },
             skip_empty: cli.data.skip_empty,
             early_termination: cli.data.early_termination,
             shading: None,

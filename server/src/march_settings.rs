@@ -276,3 +276,101 @@ pub(crate) fn resume_after(t_out: f32, t_enter: f32, dt: f32, k: u32, n: u32) ->
         k + 1
     }
 }
+
+/// A part of a volume split across MPI ranks ([`crate::distributed`]) as both kernels march it:
+/// rays on the whole volume's sample grid, samples taken only where the part owns the grid
+/// position, and read from the part's held block (its first voxel at grid offset `off`).
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub(crate) struct PartWindow {
+    /// The whole volume's box `[0, extent]` (world units): every ray's entry, exit and samples.
+    pub(crate) extent: Vec3,
+    /// The held block's first voxel, as a grid offset (a sample at grid position `g` reads the
+    /// block at `g − off`, an exact subtraction of integers).
+    pub(crate) off: Vec3,
+    /// The owned grid positions are `own_lo ≤ g < own_hi` per axis (`−∞` / `+∞` at the
+    /// volume's outer faces).
+    pub(crate) own_lo: Vec3,
+    /// See `own_lo`.
+    pub(crate) own_hi: Vec3,
+    /// The owned box widened by a voxel (world units): where a ray's samples to test lie.
+    pub(crate) near_lo: Vec3,
+    /// See `near_lo`.
+    pub(crate) near_hi: Vec3,
+    /// The held block's origin in world units (the empty-space leaps run in the block's own
+    /// coordinates).
+    pub(crate) origin: Vec3,
+    /// The owned box in world units, clipped to the volume box (the whole box `[0, extent]`
+    /// for a part that is the whole volume): where a threshold a part does not reach falls
+    /// back to.
+    pub(crate) own_box_lo: Vec3,
+    /// See `own_box_lo`.
+    pub(crate) own_box_hi: Vec3,
+}
+
+impl PartWindow {
+    /// The window of the part owning voxels `[lo, hi)` and holding `[held_lo, ..)` of a volume
+    /// of `dims` voxels of `spacing`.
+    pub(crate) fn new(dims: [u32; 3], lo: [u32; 3], hi: [u32; 3], held_lo: [u32; 3], spacing: Vec3) -> PartWindow {
+        let v = |a: [u32; 3]| Vec3::new(a[0] as f32, a[1] as f32, a[2] as f32);
+        let own_lo =
+            Vec3::from_array([0, 1, 2].map(|a| if lo[a] == 0 { f32::NEG_INFINITY } else { lo[a] as f32 - 0.5 }));
+        let own_hi =
+            Vec3::from_array([0, 1, 2].map(|a| if hi[a] == dims[a] { f32::INFINITY } else { hi[a] as f32 - 0.5 }));
+        // `1 / (1 / spacing)`: the value the partial march has always used here.
+        let sp = 1.0 / (1.0 / spacing);
+        let extent = v(dims) * spacing;
+        Self {
+            extent,
+            off: v(held_lo),
+            own_lo,
+            own_hi,
+            near_lo: (v(lo) - 1.0).max(Vec3::ZERO) * sp,
+            near_hi: ((v(hi) + 1.0) * sp).min(extent + sp),
+            origin: v(held_lo) * sp,
+            own_box_lo: Vec3::from_array([0, 1, 2].map(|a| if lo[a] == 0 { 0.0 } else { lo[a] as f32 * spacing[a] })),
+            own_box_hi: Vec3::from_array([0, 1, 2].map(|a| {
+                if hi[a] == dims[a] {
+                    extent[a]
+                } else {
+                    hi[a] as f32 * spacing[a]
+                }
+            })),
+        }
+    }
+
+    /// Whether the part owns grid position `g`.
+    #[inline(always)]
+    pub(crate) fn owns(&self, g: Vec3) -> bool {
+        g.cmpge(self.own_lo).all() && g.cmplt(self.own_hi).all()
+    }
+
+    /// A ray's samples on the whole volume's grid at step `dt`: their count `n`, the box
+    /// entry and exit (`None` where the ray misses the box), and the index range `[k0, k1)`
+    /// (within `0..n`) outside which the part owns none of them.
+    #[inline(always)]
+    pub(crate) fn ray(&self, o: Vec3, d: Vec3, dt: f32) -> (u32, f32, Option<f32>, u32, u32) {
+        let inv_d = 1.0 / d;
+        let Some((t_enter, t_exit)) = clip(o, inv_d, Vec3::ZERO, self.extent) else {
+            return (0, 0.0, None, 0, 0);
+        };
+        let n = ((t_exit - t_enter) / dt - 0.5).ceil().max(0.0);
+        let n = if n < 1e7 { n as u32 } else { 10_000_000 };
+        let Some((t0, t1)) = clip(o, inv_d, self.near_lo, self.near_hi) else {
+            return (n, t_enter, Some(t_exit), n, n);
+        };
+        let k0 = (((t0 - t_enter) / dt - 0.5).floor() - 1.0).max(0.0);
+        let k1 = (((t1 - t_enter) / dt - 0.5).ceil() + 2.0).max(0.0);
+        let k0 = if k0 < 1e7 { (k0 as u32).min(n) } else { n };
+        let k1 = if k1 < 1e7 { (k1 as u32).min(n) } else { n };
+        (n, t_enter, Some(t_exit), k0, k1)
+    }
+
+    /// Where a ray leaves the part's owned box (the box exit `t_exit` where it misses it; for
+    /// a part that is the whole volume, the box exit bit for bit): the depth a threshold-like
+    /// heuristic that the part's own samples do not meet falls back to, between the part's
+    /// samples and the next part's.
+    #[inline(always)]
+    pub(crate) fn part_exit(&self, o: Vec3, d: Vec3, t_exit: f32) -> f32 {
+        clip(o, 1.0 / d, self.own_box_lo, self.own_box_hi).map_or(t_exit, |(_, x)| x)
+    }
+}

@@ -349,7 +349,17 @@ impl Marcher {
             voxels: self.volume.voxels(),
             lut: &self.lut_argb,
             looks: &self.looks,
+            part: None,
         }
+    }
+
+    /// The packet kernel marching this marcher's volume as the held block of a part of a larger
+    /// volume (`part`; what [`crate::distributed::partial`] marches with).
+    pub(crate) fn part_kernel<'a>(
+        &'a self,
+        part: &'a crate::march_settings::PartWindow,
+    ) -> crate::packet_march::Kernel<'a> {
+        crate::packet_march::Kernel { part: Some(part), ..self.kernel() }
     }
 
     /// The samples the rays of `cam` have in the volume box (what a march without skipping or

@@ -28,8 +28,9 @@
 //! scalar marcher's bit for bit; the tests in `server/tests/packet_march.rs` check this on every
 //! bundled dataset and heuristic.
 
+use crate::distributed::partial::Seg;
 use crate::lanes::{dispatch, Lanes, Mask};
-use crate::march_settings::MarchSetup;
+use crate::march_settings::{MarchSetup, PartWindow};
 use crate::radius::{FrameRadius, RaySpread, Uncertainty};
 use crate::volume::bricks::{BRICK_EDGE, BRICK_SHIFT, BRICK_SPAN, BRICK_VALUES};
 use crate::volume::Voxels;
@@ -271,8 +272,12 @@ struct Rays<const M: usize> {
     t_enter: [f32; M],
     /// Box exit (`None`: the lane misses the box or lies outside the image).
     t_exit: [Option<f32>; M],
-    /// Sample count.
+    /// One past the last sample index (the sample count, or a part's last sample to test).
     n: [f32; M],
+    /// The first sample index (0, or a part's first sample to test).
+    k0: [f32; M],
+    /// A part's exit ([`PartWindow::part_exit`]; the box exit for the whole volume).
+    part_exit: [f32; M],
 }
 
 /// One axis of the packet's rays, for the empty-space leaps.
@@ -425,6 +430,9 @@ pub(crate) struct Kernel<'a> {
     pub(crate) lut: &'a [f32],
     /// [`crate::empty_space::Occupancy::look_table`].
     pub(crate) looks: &'a [f32],
+    /// A part of a volume split across ranks: the rays on the whole volume's grid, samples
+    /// where the part owns them (`None`: the whole volume is the marcher's).
+    pub(crate) part: Option<&'a PartWindow>,
 }
 
 impl Kernel<'_> {
@@ -441,8 +449,15 @@ impl Kernel<'_> {
         w: u32,
         h: u32,
     ) -> Rays<M> {
-        let mut r =
-            Rays { d: [Vec3::ZERO; M], inv_d: [Vec3::ZERO; M], t_enter: [0.0; M], t_exit: [None; M], n: [0.0; M] };
+        let mut r = Rays {
+            d: [Vec3::ZERO; M],
+            inv_d: [Vec3::ZERO; M],
+            t_enter: [0.0; M],
+            t_exit: [None; M],
+            n: [0.0; M],
+            k0: [0.0; M],
+            part_exit: [0.0; M],
+        };
         let first = basis.dir(x0, y0);
         for l in 0..lanes {
             let (x, y) = (x0 + (l % pw(lanes)) as u32, y0 + (l / pw(lanes)) as u32);
@@ -452,13 +467,26 @@ impl Kernel<'_> {
                 continue;
             }
             let d = basis.dir(x, y);
-            let (ray_n, te, tx) = self.m.ray_setup(o, d);
+            let (te, tx, k0, k1) = match self.part {
+                None => {
+                    let (ray_n, te, tx) = self.m.ray_setup(o, d);
+                    (te, tx, 0, ray_n)
+                }
+                Some(w) => {
+                    let (_, te, tx, k0, k1) = w.ray(o, d, self.m.dt);
+                    if let Some(tx) = tx {
+                        r.part_exit[l] = w.part_exit(o, d, tx);
+                    }
+                    (te, tx, k0, k1)
+                }
+            };
             r.d[l] = d;
             r.inv_d[l] = 1.0 / d;
             if let Some(tx) = tx {
                 r.t_enter[l] = te;
                 r.t_exit[l] = Some(tx);
-                r.n[l] = ray_n as f32;
+                r.n[l] = k1 as f32;
+                r.k0[l] = k0 as f32;
             }
         }
         r
@@ -467,6 +495,21 @@ impl Kernel<'_> {
     /// Marches the packet's rays, feeding `feed`; returns each lane's premultiplied color.
     #[inline(always)]
     fn march<L: Lanes, F: Feed<M>, const M: usize>(&self, o: Vec3, rays: &Rays<M>, feed: &mut F) -> [[f32; 4]; M] {
+        self.march_in::<L, F, M, false>(o, rays, feed)
+    }
+
+    /// [`Kernel::march`]; with `P`, of the kernel's part ([`Kernel::part`]): a lane samples
+    /// only the grid positions the part owns, in the part's held block (the offset subtracted,
+    /// an exact operation), and its empty-space leaps run in the block's coordinates. The
+    /// positions, compositing and early termination are otherwise the same operations (so a
+    /// part's samples are the whole volume's bit for bit).
+    #[inline(always)]
+    fn march_in<L: Lanes, F: Feed<M>, const M: usize, const P: bool>(
+        &self,
+        o: Vec3,
+        rays: &Rays<M>,
+        feed: &mut F,
+    ) -> [[f32; 4]; M] {
         let m = self.m;
         let vol = m.volume;
         let dt = m.dt;
@@ -504,10 +547,20 @@ impl Kernel<'_> {
         let (snbx, snby) = (L::splat_i(nb[0] as i32), L::splat_i(nb[1] as i32));
         let brick = L::splat(occ.brick() as f32);
         let sp = vol.spacing();
-        let axes = [Axis::<L>::new(rays, 0, sp, o), Axis::new(rays, 1, sp, o), Axis::new(rays, 2, sp, o)];
+        // The part's window in lanes (the whole volume's: no offset, every position owned).
+        let (inf, ninf) = (Vec3::splat(f32::INFINITY), Vec3::splat(f32::NEG_INFINITY));
+        let (off, own_lo, own_hi, o_axes) = match self.part {
+            Some(w) if P => (w.off, w.own_lo, w.own_hi, o - w.origin),
+            _ => (Vec3::ZERO, ninf, inf, o),
+        };
+        let (offx, offy, offz) = (L::splat(off.x), L::splat(off.y), L::splat(off.z));
+        let (olx, oly, olz) = (L::splat(own_lo.x), L::splat(own_lo.y), L::splat(own_lo.z));
+        let (ohx, ohy, ohz) = (L::splat(own_hi.x), L::splat(own_hi.y), L::splat(own_hi.z));
+        let axes =
+            [Axis::<L>::new(rays, 0, sp, o_axes), Axis::new(rays, 1, sp, o_axes), Axis::new(rays, 2, sp, o_axes)];
         let skip = opts.skip_empty;
 
-        let mut k = zero;
+        let mut k = L::new(&rays.k0);
         let mut alive = zero.simd_lt(n);
         // `Feed::LANE_THRESHOLD`: each lane's target, whether it is still unmet, and the `t`
         // where it was met.
@@ -528,8 +581,15 @@ impl Kernel<'_> {
                 // around it and is checked again there, a lane in a visible one samples (as the
                 // scalar marcher, whatever `t_out` says) and next checks at `t_out`.
                 let mut check = alive & running & t.simd_ge(t_check);
+                if P {
+                    // A part looks only at samples it owns (the others it steps over).
+                    let (px, py, pz) = (ogx + dgx * t, ogy + dgy * t, ogz + dgz * t);
+                    let own = px.simd_ge(olx) & px.simd_lt(ohx) & py.simd_ge(oly);
+                    check = check & own & py.simd_lt(ohy) & pz.simd_ge(olz) & pz.simd_lt(ohz);
+                }
                 while check.any() {
                     let (px, py, pz) = (ogx + dgx * t, ogy + dgy * t, ogz + dgz * t);
+                    let (px, py, pz) = if P { (px - offx, py - offy, pz - offz) } else { (px, py, pz) };
                     let per_brick = L::splat(1.0 / occ.brick() as f32);
                     let bx = (px * per_brick).max(zero).min(nbx_m1).trunc_int();
                     let by = (py * per_brick).max(zero).min(nby_m1).trunc_int();
@@ -561,14 +621,27 @@ impl Kernel<'_> {
                     running = k.simd_lt(n);
                     t = te + (k + half) * dtl;
                     check = empty & alive & running & t.simd_ge(t_check);
+                    if P {
+                        let (px, py, pz) = (ogx + dgx * t, ogy + dgy * t, ogz + dgz * t);
+                        let own = px.simd_ge(olx) & px.simd_lt(ohx) & py.simd_ge(oly);
+                        check = check & own & py.simd_lt(ohy) & pz.simd_ge(olz) & pz.simd_lt(ohz);
+                    }
                 }
             }
-            let active = alive & running;
-            if !active.any() {
+            let live = alive & running;
+            if !live.any() {
                 break;
             }
             // Volume::sample_grid_in, in lanes.
             let (px, py, pz) = (ogx + dgx * t, ogy + dgy * t, ogz + dgz * t);
+            // A part composites the samples it owns, read from its held block.
+            let (active, px, py, pz) = if P {
+                let own = px.simd_ge(olx) & px.simd_lt(ohx) & py.simd_ge(oly);
+                let own = own & py.simd_lt(ohy) & pz.simd_ge(olz) & pz.simd_lt(ohz);
+                (live & own, px - offx, py - offy, pz - offz)
+            } else {
+                (live, px, py, pz)
+            };
             let v = sampler.sample::<M>(px, py, pz);
             // TransferFunction::index, in lanes.
             let idx = (v * lut_max + half).max(zero).min(lut_max).trunc_int();
@@ -640,6 +713,59 @@ impl Kernel<'_> {
         core::array::from_fn(|l| [r[l], g[l], b[l], a[l]])
     }
 
+    /// The colors, the depths `hr` picks and (with `spread`) the spreads of a packet's rays;
+    /// with `P`, over the samples of the kernel's part ([`Kernel::march_in`]).
+    #[inline(always)]
+    #[allow(clippy::type_complexity)]
+    fn pick<L: Lanes, const M: usize, const P: bool>(
+        &self,
+        o: Vec3,
+        rays: &Rays<M>,
+        hr: Heuristic,
+        spread: bool,
+    ) -> ([[f32; 4]; M], [Option<f32>; M], [Uncertainty; M]) {
+        let mut depth = [None; M];
+        let mut unc = [Uncertainty::default(); M];
+        // No closure here: one would be compiled without the caller's AVX2
+        // target feature, and the lanes' methods would not inline into it.
+        let first = if hr.needs_first_pass() {
+            let mut acc = [FirstPassAccumulator::new(); M];
+            self.march_in::<L, _, M, P>(o, rays, &mut acc);
+            Some(acc.map(|a| a.finish()))
+        } else {
+            None
+        };
+        let pickers: [DepthPicker; M] = core::array::from_fn(|l| DepthPicker::new(hr, first.map(|f| f[l])));
+        let c = if spread {
+            let mut ps = PickSpread { pickers, spread: [RaySpread::new(); M] };
+            let c = self.march_in::<L, _, M, P>(o, rays, &mut ps);
+            for l in 0..L::N {
+                depth[l] = rays.t_exit[l].and_then(|te| ps.pickers[l].finish(te));
+                unc[l] = ps.spread[l].finish();
+            }
+            c
+        } else if let Some(targets) = threshold_targets(&pickers) {
+            let mut lt = LaneThreshold { targets, chosen: [None; M] };
+            let c = self.march_in::<L, _, M, P>(o, rays, &mut lt);
+            for l in 0..L::N {
+                let picker = pickers[l].with_outcome(lt.chosen[l], c[l][3]);
+                // A part that does not cross falls back to its own exit, not the box exit
+                // (`crate::distributed::partial::PartMarcher::ray`).
+                let fallback = if P { rays.t_exit[l].map(|_| rays.part_exit[l]) } else { rays.t_exit[l] };
+                depth[l] = fallback.and_then(|te| picker.finish(te));
+            }
+            c
+        } else {
+            let mut pickers = pickers;
+            let c = self.march_in::<L, _, M, P>(o, rays, &mut pickers);
+            for l in 0..L::N {
+                depth[l] = rays.t_exit[l].and_then(|te| pickers[l].finish(te));
+            }
+            c
+        };
+        (c, depth, unc)
+    }
+
     /// Marches rows `y0 .. y0 + rows` of the image (rows a multiple of the packet height, or the
     /// image's last rows) into `t`, `color` and, with `pack`, `packed` (each `w × rows` long or
     /// empty). `heuristic` `None` renders colors over the background (the ground-truth image).
@@ -661,48 +787,10 @@ impl Kernel<'_> {
         for py in (y0..y0 + rows).step_by(L::N / pw(L::N)) {
             for px in (0..w).step_by(pw(L::N)) {
                 let rays = self.rays(L::N, basis, o, px, py, w, h);
-                let mut depth = [None; M];
-                let mut unc = [Uncertainty::default(); M];
                 let spread = pack.is_some_and(|(_, r)| r.uses_spread());
-                let c = match heuristic {
-                    None => self.march::<L, _, M>(o, &rays, &mut NoFeed),
-                    Some(hr) => {
-                        // No closure here: one would be compiled without the caller's AVX2
-                        // target feature, and the lanes' methods would not inline into it.
-                        let first = if hr.needs_first_pass() {
-                            let mut acc = [FirstPassAccumulator::new(); M];
-                            self.march::<L, _, M>(o, &rays, &mut acc);
-                            Some(acc.map(|a| a.finish()))
-                        } else {
-                            None
-                        };
-                        let pickers: [DepthPicker; M] =
-                            core::array::from_fn(|l| DepthPicker::new(hr, first.map(|f| f[l])));
-                        if spread {
-                            let mut ps = PickSpread { pickers, spread: [RaySpread::new(); M] };
-                            let c = self.march::<L, _, M>(o, &rays, &mut ps);
-                            for l in 0..L::N {
-                                depth[l] = rays.t_exit[l].and_then(|te| ps.pickers[l].finish(te));
-                                unc[l] = ps.spread[l].finish();
-                            }
-                            c
-                        } else if let Some(targets) = threshold_targets(&pickers) {
-                            let mut lt = LaneThreshold { targets, chosen: [None; M] };
-                            let c = self.march::<L, _, M>(o, &rays, &mut lt);
-                            for l in 0..L::N {
-                                let picker = pickers[l].with_outcome(lt.chosen[l], c[l][3]);
-                                depth[l] = rays.t_exit[l].and_then(|te| picker.finish(te));
-                            }
-                            c
-                        } else {
-                            let mut pickers = pickers;
-                            let c = self.march::<L, _, M>(o, &rays, &mut pickers);
-                            for l in 0..L::N {
-                                depth[l] = rays.t_exit[l].and_then(|te| pickers[l].finish(te));
-                            }
-                            c
-                        }
-                    }
+                let (c, depth, unc) = match heuristic {
+                    None => (self.march::<L, _, M>(o, &rays, &mut NoFeed), [None; M], [Uncertainty::default(); M]),
+                    Some(hr) => self.pick::<L, M, false>(o, &rays, hr, spread),
                 };
                 for l in 0..L::N {
                     let (x, y) = (px + (l % pw(L::N)) as u32, py + (l / pw(L::N)) as u32);
@@ -809,6 +897,113 @@ impl Kernel<'_> {
             }
         }
     }
+}
+
+/// Where a part's band goes ([`Kernel::part`]): per pixel of the band its segment count, and
+/// per pixel `k` slots of segments.
+pub(crate) struct PartOut<'a> {
+    pub(crate) k: usize,
+    pub(crate) count: &'a mut [u8],
+    pub(crate) segs: &'a mut [Seg],
+}
+
+impl Kernel<'_> {
+    /// Rows `y0 ..` (as many as `out.count` holds) of the kernel's part: each ray's samples in
+    /// the part cut into at most `out.k` segments, or with `out.k` = 1 one segment, the part's
+    /// color at `hr`'s pick over the part's samples (none where the part's samples are empty
+    /// or the picker finds no depth) — `crate::distributed::partial::PartMarcher::ray` in lanes.
+    #[inline(always)]
+    fn band_part<L: Lanes, const M: usize>(&self, basis: &RayBasis, hr: Heuristic, y0: u32, out: &mut PartOut<'_>) {
+        if out.k > 1 {
+            if L::N >= 32 {
+                self.band_part_layers::<L, SegmenterLanes<M>, M>(basis, y0, out)
+            } else {
+                self.band_part_layers::<L, [Segmenter; M], M>(basis, y0, out)
+            }
+            return;
+        }
+        let o = basis.origin();
+        let (w, h) = (basis.eye[3] as u32, basis.corner[3] as u32);
+        let rows = (out.count.len() / (w as usize).max(1)) as u32;
+        for py in (y0..y0 + rows).step_by(L::N / pw(L::N)) {
+            for px in (0..w).step_by(pw(L::N)) {
+                let rays = self.rays(L::N, basis, o, px, py, w, h);
+                let (c, depth, _) = self.pick::<L, M, true>(o, &rays, hr, false);
+                for l in 0..L::N.min(M) {
+                    let (x, y) = (px + (l % pw(L::N)) as u32, py + (l / pw(L::N)) as u32);
+                    if x >= w || y >= y0 + rows {
+                        continue;
+                    }
+                    let i = ((y - y0) * w + x) as usize;
+                    let seg = depth[l].filter(|_| c[l][3] > 0.0).map(|t| Seg { t, c: c[l] });
+                    if let (Some(n), Some(s)) = (out.count.get_mut(i), out.segs.get_mut(i)) {
+                        *n = u8::from(seg.is_some());
+                        *s = seg.unwrap_or_default();
+                    }
+                }
+            }
+        }
+    }
+
+    #[inline(always)]
+    fn band_part_layers<L: Lanes, S: LayerFeed<M>, const M: usize>(
+        &self,
+        basis: &RayBasis,
+        y0: u32,
+        out: &mut PartOut<'_>,
+    ) {
+        let o = basis.origin();
+        let (w, h) = (basis.eye[3] as u32, basis.corner[3] as u32);
+        let k = out.k;
+        let rows = (out.count.len() / (w as usize).max(1)) as u32;
+        let step = self.m.dt;
+        for py in (y0..y0 + rows).step_by(L::N / pw(L::N)) {
+            for px in (0..w).step_by(pw(L::N)) {
+                let rays = self.rays(L::N, basis, o, px, py, w, h);
+                let mut segs = S::new(k as u32, step);
+                self.march_in::<L, _, M, true>(o, &rays, &mut segs);
+                for l in 0..L::N.min(M) {
+                    let (x, y) = (px + (l % pw(L::N)) as u32, py + (l / pw(L::N)) as u32);
+                    if x >= w || y >= y0 + rows {
+                        continue;
+                    }
+                    let i = ((y - y0) * w + x) as usize;
+                    let list = if rays.t_exit[l].is_some() { segs.finish(l) } else { &[] };
+                    if let Some(c) = out.count.get_mut(i) {
+                        *c = list.len() as u8;
+                    }
+                    for (j, sgm) in list.iter().enumerate() {
+                        if let Some(p) = out.segs.get_mut(i * k + j) {
+                            *p = Seg { t: sgm.t, c: sgm.color };
+                        }
+                    }
+                }
+            }
+        }
+    }
+}
+
+#[inline(always)]
+fn band_part_kernel<L: Lanes, const M: usize>(
+    k: &Kernel<'_>,
+    basis: &RayBasis,
+    hr: Heuristic,
+    y0: u32,
+    out: &mut PartOut<'_>,
+) {
+    k.band_part::<L, M>(basis, hr, y0, out)
+}
+
+dispatch! {
+    /// Marches the rows of one band of a part ([`Kernel::part`]) with the best lanes this CPU
+    /// has (see [`Kernel::band_part`]).
+    fn march_band_part / march_band_part_avx2 / march_band_part_avx512 => band_part_kernel(
+        k: &Kernel<'_>,
+        basis: &RayBasis,
+        hr: Heuristic,
+        y0: u32,
+        out: &mut PartOut<'_>,
+    )
 }
 
 #[inline(always)]

@@ -216,7 +216,16 @@ pub trait FrameSource: Send + Sync {
     /// The message bytes (header included) of a frame it rendered, in `encoding` where the
     /// frame fits it, for a receiver of colors coded against green (`green`) or not.
     fn encode(&self, req: &CameraRequest, frame: &Frame, encoding: Encoding, green: bool) -> (Vec<u8>, Encoding);
+    /// Why the source can render no more frames (a rank failed), or `None` while it can: every
+    /// client, waiting for a frame or idle, is then sent this as an `INTERNAL` error and
+    /// disconnected (an idle client within [`SOURCE_POLL`]).
+    fn failed(&self) -> Option<String> {
+        None
+    }
 }
+
+/// How often an idle client's thread asks a [`FrameSource`] whether it failed.
+pub const SOURCE_POLL: Duration = Duration::from_millis(100);
 
 struct Shared {
     config: ServerConfig,
@@ -809,8 +818,22 @@ fn serve(sh: &Shared, stream: &TcpStream, id: u64, charged: Option<IpAddr>) -> S
         let req = {
             let (lock, cv) = &*slot;
             let mut s = lock.lock().unwrap_or_else(|e| e.into_inner());
+            let mut failed = None;
             while s.latest.is_none() && s.end.is_none() {
-                s = cv.wait(s).unwrap_or_else(|e| e.into_inner());
+                s = match &sh.source {
+                    // A source that fails tells idle clients too.
+                    Some(source) => {
+                        failed = source.failed();
+                        if failed.is_some() {
+                            break;
+                        }
+                        cv.wait_timeout(s, SOURCE_POLL).unwrap_or_else(|e| e.into_inner()).0
+                    }
+                    None => cv.wait(s).unwrap_or_else(|e| e.into_inner()),
+                };
+            }
+            if let Some(e) = failed {
+                break End::Error(error_code::INTERNAL, e);
             }
             match s.latest.take() {
                 Some(r) if s.end.is_none() => r,

@@ -212,6 +212,93 @@ fn one_part_gives_the_one_process_frame_bit_for_bit() {
     }
 }
 
+/// A part frame's segment slots as bits (equal bit for bit, not as floats).
+fn frame_bits(f: &volwarp_server::distributed::partial::PartFrame) -> (Vec<u8>, Vec<u32>) {
+    let bits = f
+        .segs
+        .iter()
+        .flat_map(|s| [s.t.to_bits(), s.c[0].to_bits(), s.c[1].to_bits(), s.c[2].to_bits(), s.c[3].to_bits()]);
+    (f.count.clone(), bits.collect())
+}
+
+#[test]
+fn packet_parts_equal_scalar_parts_bit_for_bit() {
+    use volwarp_server::{lane_kind, limit_lanes, LaneKind};
+    for file in ["ct_head_quarter.nhdr", "mri_colin27.nrrd"] {
+        let ds = Dataset::load(data(file), None).unwrap();
+        let m = Marcher::new(ds.volume.clone(), &ds.tf);
+        for (n, opts) in [
+            (1, MarchOptions::default()),
+            (3, MarchOptions::default()),
+            (4, MarchOptions { skip_empty: false, early_termination: 1.0, ..MarchOptions::default() }),
+            (2, MarchOptions { step_voxels: 0.7, ..MarchOptions::default() }),
+        ] {
+            let (dec, parts) = parts_of_file(&data(file), n);
+            let packet = marchers(&ds, &dec, parts, MarchOptions { kernel: MarchKernel::Packet, ..opts });
+            let (_, parts) = parts_of_file(&data(file), n);
+            let scalar = marchers(&ds, &dec, parts, MarchOptions { kernel: MarchKernel::Scalar, ..opts });
+            for (layers, heuristic, yaw) in [
+                (4, Heuristic::Threshold, 30.0),
+                (2, Heuristic::Peak, 160.0),
+                (1, Heuristic::Threshold, 70.0),
+                (1, Heuristic::RelThreshold, 250.0),
+                (1, Heuristic::Midpoint, 10.0),
+            ] {
+                // 37 pixels: packets cut by the image's edge.
+                let cam = request(&m, 37, yaw, heuristic).camera;
+                for (p, (fast, slow)) in packet.iter().zip(&scalar).enumerate() {
+                    let want = frame_bits(&slow.march(&cam, layers, heuristic));
+                    assert!(want.0.iter().any(|&c| c > 0) || n > 2, "{file}: part {p} of {n} saw nothing");
+                    for kind in [LaneKind::Avx512, LaneKind::Avx2, LaneKind::Portable] {
+                        limit_lanes(kind);
+                        if lane_kind() != kind {
+                            continue;
+                        }
+                        let got = frame_bits(&fast.march(&cam, layers, heuristic));
+                        assert!(got == want, "{file} n={n} part {p} K={layers} {heuristic} {kind:?} {opts:?}");
+                    }
+                    limit_lanes(LaneKind::Avx512);
+                }
+            }
+        }
+    }
+}
+
+#[test]
+fn band_owners_assemble_the_frame_rank_0_would() {
+    use volwarp_server::distributed::FramePart;
+    let ds = Dataset::load(data("ct_head_quarter.nhdr"), None).unwrap();
+    let opts = MarchOptions::default();
+    let m = Marcher::with_options(ds.volume.clone(), &ds.tf, opts);
+    let (dec, parts) = parts_of_file(&data("ct_head_quarter.nhdr"), 3);
+    let pm = marchers(&ds, &dec, parts, opts);
+    let geo = FrameGeometry { dims: ds.volume.dims(), spacing: ds.volume.spacing(), opts };
+    for (layers, heuristic) in [(4, Heuristic::Threshold), (1, Heuristic::Entrance)] {
+        let req = request(&m, 50, 20.0, heuristic);
+        let bands = render_in_process(&pm, &req, layers, 3);
+        let want = geo.frame(&req, layers, &bands, 7);
+        // Each band's owner assembles its pixels in runs; rank 0 joins the bytes.
+        let mut first = 0u32;
+        let bytes: Vec<Vec<u8>> = bands
+            .iter()
+            .map(|b| {
+                let n = b.count.len();
+                let runs: Vec<_> = (0..n.div_ceil(300))
+                    .map(|r| geo.frame_part(&req, layers, b, first, r * 300..((r + 1) * 300).min(n)))
+                    .collect();
+                first += n as u32;
+                FramePart::join(&runs).to_bytes()
+            })
+            .collect();
+        let parts: Vec<&[u8]> = bytes.iter().map(|b| &b[..]).collect();
+        assert_eq!(geo.frame_of_bytes(&req, layers, &parts, 7).unwrap(), want, "K={layers}");
+        // Bytes that are not a part are an error (a failed rank's one byte, a short part).
+        for bad in [&[0xffu8][..], &bytes[0][..bytes[0].len() - 1]] {
+            assert!(geo.frame_of_bytes(&req, layers, &[bad], 7).is_err());
+        }
+    }
+}
+
 /// The largest channel difference and the share of identical pixels of two images.
 fn diff(a: &volwarp_core::Image, b: &volwarp_core::Image) -> (u32, f64) {
     let mut worst = 0;
@@ -274,6 +361,42 @@ fn the_entrance_depth_is_the_one_process_depth() {
     }
     assert!(n > 500);
     assert_eq!(equal, n, "the nearest part's first visible sample is the ray's");
+}
+
+#[test]
+fn the_threshold_depth_is_the_one_process_depth_where_the_nearest_part_crosses() {
+    let ds = Dataset::load(data("mri_colin27.nrrd"), None).unwrap();
+    let opts = MarchOptions::default();
+    let m = Marcher::with_options(ds.volume.clone(), &ds.tf, opts);
+    let (dec, parts) = parts_of_file(&data("mri_colin27.nrrd"), 4);
+    let pm = marchers(&ds, &dec, parts, opts);
+    let req = request(&m, 64, 40.0, Heuristic::Threshold);
+    let want = m.march(&req.camera, Heuristic::Threshold);
+    let frames: Vec<_> = pm.iter().map(|p| p.march(&req.camera, 1, Heuristic::Threshold)).collect();
+    let order = dec.order(req.camera.eye / ds.volume.spacing());
+    let bands = render_in_process(&pm, &req, 1, 3);
+    let merged: Vec<Option<Seg>> =
+        bands.iter().flat_map(|b| (0..b.count.len()).map(|p| b.pixel(p).first().copied())).collect();
+    let (mut crossed, mut other) = (0, 0);
+    for (i, got) in merged.iter().enumerate() {
+        // The nearest part with a visible sample, and whether its own samples cross.
+        let Some(&near) = order.iter().find(|&&p| frames[p].count[i] > 0) else {
+            assert!(got.is_none() && !want.t[i].is_finite(), "pixel {i}: no part saw it");
+            continue;
+        };
+        let got = got.expect("a part saw the pixel");
+        if frames[near].pixel(i)[0].c[3] > volwarp_core::heuristics::THRESHOLD {
+            crossed += 1;
+            assert_eq!(got.t.to_bits(), want.t[i].to_bits(), "pixel {i}: the nearest part's crossing is the ray's");
+        } else {
+            // The ray crosses over several parts: where it leaves the nearest part, in front of
+            // the ray's crossing.
+            other += 1;
+            assert!(got.t <= want.t[i], "pixel {i}: {} behind {}", got.t, want.t[i]);
+        }
+    }
+    eprintln!("threshold: {crossed} pixels crossed in the nearest part, {other} over several parts");
+    assert!(crossed > 1000 && other > 0, "crossed {crossed}, over several parts {other}");
 }
 
 fn segs() -> impl Strategy<Value = (Vec<Vec<Seg>>, usize, f32)> {

@@ -106,10 +106,12 @@ fn two_to_four_ranks_render_the_one_process_image() {
     }
 }
 
-/// Starts `mpiexec -n n … serve` on a free loopback port; returns the child and the address.
+/// Starts `mpiexec -n n … serve` on a free loopback port (`extra`: mpiexec's options, `env`:
+/// the ranks' environment); returns the child and the address.
 fn serve(
     n: usize,
     extra: &[&str],
+    env: &[(&str, &str)],
 ) -> (std::process::Child, std::net::SocketAddr, BufReader<std::process::ChildStderr>) {
     let vol = data("ct_head_quarter.nhdr");
     let mut child = Command::new("mpiexec")
@@ -117,6 +119,7 @@ fn serve(
         .args(["-n", &n.to_string(), BIN, "--volume", vol.to_str().unwrap(), "--listen", "127.0.0.1:0"])
         .args(["--rank-timeout", "4"])
         .env("RUST_LOG", "info")
+        .envs(env.iter().copied())
         .stdout(Stdio::piped())
         .stderr(Stdio::piped())
         .spawn()
@@ -152,7 +155,7 @@ fn a_client_over_loopback_gets_the_composited_frames() {
             })
             .collect();
         let geo = FrameGeometry { dims: ds.volume.dims(), spacing: ds.volume.spacing(), opts };
-        let (mut child, addr, _err) = serve(n, &[]);
+        let (mut child, addr, _err) = serve(n, &[], &[]);
         // A client without the compact encoding gets the 12-byte samples: exact positions.
         let mut c = Client::connect(addr);
         c.send(&Message::Hello(Hello::new(0).with_layers(4)));
@@ -184,6 +187,21 @@ fn a_client_over_loopback_gets_the_composited_frames() {
         match big.recv() {
             Ok(Message::Error(e)) => assert!(e.text.contains("too large for the exchange"), "{}", e.text),
             other => panic!("expected an error, got {other:?}"),
+        }
+        // One sample per pixel: threshold is composited, peak (whole-ray) is refused with why.
+        let mut one = Client::connect(addr);
+        one.send(&Message::Hello(Hello::new(0).with_layers(1)));
+        assert!(matches!(one.recv(), Ok(Message::Hello(h)) if h.layers == 1));
+        let camera = m.default_camera(32, 32);
+        for (seq, heuristic) in [(1, Heuristic::Threshold), (2, Heuristic::Peak)] {
+            one.send(&Message::CameraRequest(CameraRequest { seq, camera, heuristic, radius_scale: 1.0 }));
+            match (heuristic, one.recv()) {
+                (Heuristic::Threshold, Ok(Message::Frame(f))) => assert!(f.samples.len() > 100),
+                (Heuristic::Peak, Ok(Message::Error(e))) => {
+                    assert!(e.text.contains("not composited across MPI ranks"), "{}", e.text)
+                }
+                (h, other) => panic!("{h}: got {other:?}"),
+            }
         }
         let _ = child.kill();
         let _ = child.wait();
@@ -217,76 +235,98 @@ fn visual_state_flags_are_refused_across_ranks() {
     }
 }
 
-/// Serves on 3 ranks, asks for a large frame and sends rank 2 `signal` while it is marched;
-/// returns what the client got, how long it took, and mpiexec's exit status.
-fn fault_mid_frame(
-    signal: i32,
-) -> (Result<Message, volwarp_core::wire::WireError>, Duration, std::process::ExitStatus) {
-    let (mut child, addr, err) = serve(3, &[]);
-    let (tx, rx) = std::sync::mpsc::channel();
-    std::thread::spawn(move || {
-        for line in err.lines().map_while(Result::ok) {
-            let _ = tx.send(line);
-        }
-    });
-    // The ranks log their pids.
-    let mut pid = None;
-    let t0 = Instant::now();
-    while pid.is_none() && t0.elapsed() < Duration::from_secs(30) {
-        if let Ok(line) = rx.recv_timeout(Duration::from_millis(100)) {
-            if let Some(rest) = line.split("rank 2/3 (pid ").nth(1) {
-                pid = rest.split(')').next().and_then(|p| p.parse::<i32>().ok());
-            }
-        }
-    }
-    let pid = pid.expect("rank 2 logs its pid");
-    let mut c = Client::connect(addr);
-    c.stream.set_read_timeout(Some(Duration::from_secs(30))).unwrap();
-    c.send(&Message::Hello(Hello::new(0).with_layers(4)));
-    assert!(matches!(c.recv(), Ok(Message::Hello(_))));
-    let ds = volwarp_server::Dataset::load(data("ct_head_quarter.nhdr"), None).unwrap();
-    let camera = volwarp_server::default_camera(&ds.volume, 1024, 1024);
-    c.send(&Message::CameraRequest(CameraRequest {
-        seq: 1,
-        camera,
-        heuristic: Heuristic::Threshold,
-        radius_scale: 1.0,
-    }));
-    std::thread::sleep(Duration::from_millis(100));
-    // SAFETY: kill(2) on the pid of a rank this test started.
-    assert_eq!(unsafe { libc::kill(pid, signal) }, 0);
-    let t = Instant::now();
-    let got = c.recv();
-    let took = t.elapsed();
-    let status = child.wait().unwrap();
-    // SAFETY: as above; a stopped rank left behind is killed (no-op where it is gone).
-    unsafe { libc::kill(pid, libc::SIGKILL) };
-    (got, took, status)
+/// What a fault test saw: the answers of the client that asked for the failing frame and of
+/// an idle client, how long the first took, and mpiexec's exit status.
+struct Fault {
+    asked: Result<Message, volwarp_core::wire::WireError>,
+    idle: Result<Message, volwarp_core::wire::WireError>,
+    took: Duration,
+    status: std::process::ExitStatus,
 }
 
-#[test]
-fn a_rank_that_hangs_mid_frame_is_reported_to_the_client() {
-    let (got, took, status) = fault_mid_frame(libc::SIGSTOP);
+/// Serves on 3 ranks with rank 2 failing (`what`: `abort` or `hang`, `VOLWARP_MPI_FAULT`) after
+/// marching the second frame, under `mpiexec` with `extra` options; one client asks for two
+/// frames while another is connected and idle.
+fn fault_mid_frame(what: &str, extra: &[&str]) -> Fault {
+    let fault = format!("2:2:{what}");
+    let (mut child, addr, err) = serve(3, extra, &[("VOLWARP_MPI_FAULT", &fault)]);
+    std::thread::spawn(move || err.lines().map_while(Result::ok).for_each(drop));
+    let hello = |c: &mut Client| {
+        c.stream.set_read_timeout(Some(Duration::from_secs(60))).unwrap();
+        c.send(&Message::Hello(Hello::new(0).with_layers(4)));
+        assert!(matches!(c.recv(), Ok(Message::Hello(_))));
+    };
+    let mut idle = Client::connect(addr);
+    hello(&mut idle);
+    let mut c = Client::connect(addr);
+    hello(&mut c);
+    let ds = volwarp_server::Dataset::load(data("ct_head_quarter.nhdr"), None).unwrap();
+    let camera = volwarp_server::default_camera(&ds.volume, 64, 64);
+    let req = |seq| CameraRequest { seq, camera, heuristic: Heuristic::Threshold, radius_scale: 1.0 };
+    c.send(&Message::CameraRequest(req(1)));
+    assert!(matches!(c.recv(), Ok(Message::Frame(_))), "the first frame arrives");
+    let t = Instant::now();
+    c.send(&Message::CameraRequest(req(2)));
+    let asked = c.recv();
+    let took = t.elapsed();
+    let idle = idle.recv();
+    // mpiexec ends by itself (a hung rank is killed with the job), within a bound.
+    let status = loop {
+        if let Some(s) = child.try_wait().unwrap() {
+            break s;
+        }
+        if t.elapsed() > Duration::from_secs(60) {
+            let _ = child.kill();
+            panic!("mpiexec still runs 60 s after the fault");
+        }
+        std::thread::sleep(Duration::from_millis(50));
+    };
+    Fault { asked, idle, took, status }
+}
+
+/// Asserts `got` is the failed-rank error.
+fn assert_rank_error(who: &str, got: &Result<Message, volwarp_core::wire::WireError>) {
     match got {
         Ok(Message::Error(e)) => {
-            assert_eq!(e.code, volwarp_core::wire::error_code::INTERNAL);
-            assert!(e.text.contains("a rank died or hangs"), "{}", e.text);
+            assert_eq!(e.code, volwarp_core::wire::error_code::INTERNAL, "{who}");
+            assert!(e.text.contains("rank"), "{who}: {}", e.text);
         }
-        other => panic!("expected an error message, got {other:?}"),
+        other => panic!("{who}: expected an error message, got {other:?}"),
     }
-    // --rank-timeout 4 and half a second to tell the clients.
-    assert!(took < Duration::from_secs(15), "{took:?}");
-    assert!(!status.success());
 }
 
 #[test]
-fn a_rank_killed_mid_frame_ends_the_job() {
-    // MPICH's mpiexec kills every rank (rank 0 too) when one dies: the client's connection
-    // closes, never a silent hang, and mpiexec fails.
-    let (got, took, status) = fault_mid_frame(libc::SIGKILL);
-    assert!(!matches!(got, Ok(Message::Frame(_))), "{got:?}");
-    assert!(took < Duration::from_secs(15), "{took:?}");
-    assert!(!status.success());
+fn a_rank_that_hangs_mid_frame_is_reported_to_the_clients() {
+    let f = fault_mid_frame("hang", &[]);
+    assert_rank_error("the client asking", &f.asked);
+    assert_rank_error("the idle client", &f.idle);
+    if let Ok(Message::Error(e)) = &f.asked {
+        assert!(e.text.contains("a rank died or hangs"), "{}", e.text);
+    }
+    // --rank-timeout 4 and the time to tell the clients.
+    assert!(f.took < Duration::from_secs(15), "{:?}", f.took);
+    assert!(!f.status.success());
+}
+
+#[test]
+fn a_rank_that_fails_mid_frame_is_reported_to_the_clients() {
+    // A march that panics: the rank sends bands that do not decode, rank 0 tells its clients
+    // and ends the job.
+    let f = fault_mid_frame("panic", &[]);
+    assert_rank_error("the client asking", &f.asked);
+    assert_rank_error("the idle client", &f.idle);
+    assert!(f.took < Duration::from_secs(15), "{:?}", f.took);
+    assert!(!f.status.success());
+}
+
+#[test]
+fn a_rank_that_dies_mid_frame_ends_the_job() {
+    // MPICH kills every rank (rank 0 too) when one dies: the clients' connections close,
+    // never a silent hang, and mpiexec fails.
+    let f = fault_mid_frame("abort", &[]);
+    assert!(!matches!(f.asked, Ok(Message::Frame(_))), "{:?}", f.asked);
+    assert!(f.took < Duration::from_secs(15), "{:?}", f.took);
+    assert!(!f.status.success());
 }
 
 #[test]

@@ -11,7 +11,9 @@
 //! `c = c₁ + (1 − α₁)·c₂`, `α = α₁ + (1 − α₁)·α₂`, and the depth their opacity-weighted mean
 //! `(α₁·t₁ + (1 − α₁)·α₂·t₂) / α` (the segmenter's rule for one segment, in real arithmetic).
 //! For K = 1 frames (one sample per pixel at a heuristic's depth) the parts' segments are
-//! composited into one whose depth is the **nearest** part's pick.
+//! composited into one whose depth is the **nearest** part's pick: the one-process depth bit
+//! for bit for Entrance, and for Threshold where the nearest visible part crosses on its own
+//! (the heuristics served across ranks: [`super::one_sample_heuristic`]).
 //!
 //! With one part the merged frame is the one-process frame bit for bit. With several, a
 //! part's segmenter sees only its own accumulated opacity, so cuts, colors (float order) and
@@ -205,6 +207,35 @@ pub fn merge_bands(bands: &[Band], pixels: usize, k: usize, ert: f32) -> Band {
         out.segs.extend_from_slice(&segs);
     }
     out
+}
+
+/// [`merge_bands`] handing each pixel's merged segments to `f(pixel, segments, acc)` in runs of
+/// pixels in parallel, instead of collecting them (a band owner assembles its frame samples
+/// this way, without a merged band in between): the runs' accumulators, in pixel order.
+pub fn merge_bands_with<A: Default + Send>(
+    bands: &[Band],
+    pixels: usize,
+    k: usize,
+    ert: f32,
+    f: impl Fn(usize, &[Seg], &mut A) + Sync,
+) -> Vec<A> {
+    use rayon::prelude::*;
+    const RUN: usize = 4096;
+    (0..pixels.div_ceil(RUN))
+        .into_par_iter()
+        .map(|r| {
+            let mut acc = A::default();
+            let mut buf = Vec::new();
+            let mut lists: Vec<&[Seg]> = Vec::with_capacity(bands.len());
+            for i in r * RUN..((r + 1) * RUN).min(pixels) {
+                lists.clear();
+                lists.extend(bands.iter().map(|b| b.pixel(i)));
+                merge(&lists, k, ert, &mut buf);
+                f(i, &buf, &mut acc);
+            }
+            acc
+        })
+        .collect()
 }
 
 /// The bytes of a merged band (the same coding as [`encode_band`]).

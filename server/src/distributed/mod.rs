@@ -29,7 +29,29 @@ use volwarp_core::compact_frame::{EncodeOptions, Encoding, RadiusPrediction};
 use volwarp_core::sample::{pack_color_f32, Bounds, Quantizer};
 use volwarp_core::segments::{pack_colors, Segment, MAX_LAYERS};
 use volwarp_core::wire::{self, CameraRequest, Frame, FrameHeader, Message};
-use volwarp_core::{Image, Vec3, BACKGROUND};
+use volwarp_core::{Heuristic, Image, Vec3, BACKGROUND};
+
+/// Whether frames of one sample per pixel (K = 1) with `heuristic` are composited across ranks,
+/// and if not, why (the error a client gets). The composited depth is the nearest part's pick
+/// ([`composite::reduce`]), which is the one-process pick for:
+/// - **Entrance** always: the nearest part with a visible sample holds the ray's first one;
+/// - **Threshold** wherever the nearest part with a visible sample crosses the threshold
+///   itself (its accumulation is the ray's, bit for bit, as nothing in front of it is visible);
+///   a ray that crosses only over several parts gets the depth where it leaves the nearest
+///   visible part (the part's fallback), in front of the ray's crossing.
+///
+/// The others depend on the whole ray: Exit, Midpoint, Peak and Gradient on where the ray's
+/// early termination falls (each part stops at its own, later, one), RelThreshold on the ray's
+/// final opacity and EnExMean on its entrance and exit opacities, which no part knows.
+pub fn one_sample_heuristic(heuristic: Heuristic) -> Result<(), String> {
+    match heuristic {
+        Heuristic::Entrance | Heuristic::Threshold => Ok(()),
+        h => Err(format!(
+            "the {h} heuristic is not composited across MPI ranks at one sample per pixel (its depth depends \
+             on the whole ray, which no rank marches): ask for entrance or threshold, or for layered frames"
+        )),
+    }
+}
 
 /// What rank 0 needs of the whole volume to make frames without holding it: its box, its
 /// voxel diagonal and the march options (the same values the one-process marcher reads of
@@ -69,13 +91,6 @@ impl FrameGeometry {
     /// gives a layered frame (each segment a sample, its index in `Frame::segments`), 1 one
     /// sample per non-empty pixel.
     pub fn frame(&self, req: &CameraRequest, layers: u32, bands: &[Band], render_us: u32) -> Frame {
-        let radius = self.frame_radius(req);
-        let q = Quantizer::new(self.bounds(), radius.unit());
-        let basis = req.camera.ray_basis();
-        let o = basis.origin();
-        let w = req.camera.width.max(1);
-        let mut frame =
-            Frame { header: self.header(req), samples: Vec::new(), colors: Vec::new(), segments: Vec::new() };
         // Each band's samples in parallel, then joined in image order.
         let first: Vec<u32> = bands
             .iter()
@@ -85,45 +100,96 @@ impl FrameGeometry {
                 Some(f)
             })
             .collect();
-        let parts: Vec<(Vec<u64>, Vec<u32>, Vec<u8>)> = bands
+        let parts: Vec<FramePart> = bands
             .par_iter()
             .zip(first.par_iter())
-            .map(|(b, &first)| {
-                let (mut samples, mut colors, mut segments) = (Vec::new(), Vec::new(), Vec::new());
-                for p in 0..b.count.len() {
-                    let i = first + p as u32;
-                    let d = basis.dir(i % w, i / w);
-                    // Layered: the segments' colors rounded so their composite is the ray's own
-                    // pixel (core's `pack_colors`, as the one-process marcher packs them).
-                    let segs = b.pixel(p);
-                    let mut packed = [0u32; MAX_LAYERS];
-                    let n = segs.len().min(MAX_LAYERS);
-                    if layers > 1 {
-                        let mut list = [Segment::default(); MAX_LAYERS];
-                        for (l, s) in list.iter_mut().zip(segs) {
-                            *l = Segment { t: s.t, color: s.c };
-                        }
-                        pack_colors(&list[..n], composite(segs), &mut packed[..n]);
-                    }
-                    for (j, s) in segs.iter().enumerate() {
-                        let r =
-                            if layers > 1 { radius.at(d, s.t) } else { radius.at_ray(d, s.t, &Uncertainty::default()) };
-                        samples.push(q.pack(o + d * s.t, r));
-                        colors.push(if layers > 1 && j < n { packed[j] } else { pack_color_f32(s.c) });
-                        if layers > 1 {
-                            segments.push(j as u8);
-                        }
-                    }
-                }
-                (samples, colors, segments)
-            })
+            .map(|(b, &first)| self.frame_part(req, layers, b, first, 0..b.count.len()))
             .collect();
-        for (s, c, g) in parts {
-            frame.samples.extend_from_slice(&s);
-            frame.colors.extend_from_slice(&c);
-            frame.segments.extend_from_slice(&g);
+        self.frame_of_parts(req, &parts, render_us)
+    }
+
+    /// The samples of pixels `range` of a merged band whose first pixel is pixel `first` of the
+    /// image: their share of [`FrameGeometry::frame`] (what a band's owner assembles).
+    pub fn frame_part(
+        &self,
+        req: &CameraRequest,
+        layers: u32,
+        band: &Band,
+        first: u32,
+        range: std::ops::Range<usize>,
+    ) -> FramePart {
+        let a = self.assembler(req, layers);
+        let mut out = FramePart::default();
+        for p in range {
+            a.push(first + p as u32, band.pixel(p), &mut out);
         }
-        frame.header.radius_unit = radius.unit();
+        out
+    }
+
+    /// What assembles a frame's samples pixel by pixel ([`Assembler::push`]).
+    pub fn assembler(&self, req: &CameraRequest, layers: u32) -> Assembler {
+        let radius = self.frame_radius(req);
+        let basis = req.camera.ray_basis();
+        Assembler {
+            q: Quantizer::new(self.bounds(), radius.unit()),
+            radius,
+            o: basis.origin(),
+            basis,
+            w: req.camera.width.max(1),
+            layered: layers > 1,
+        }
+    }
+
+    /// The frame of its parts as bytes ([`FramePart::to_bytes`]), in image order; an error for
+    /// bytes that are not parts.
+    pub fn frame_of_bytes(
+        &self,
+        req: &CameraRequest,
+        layers: u32,
+        parts: &[&[u8]],
+        render_us: u32,
+    ) -> Result<Frame, String> {
+        let counts = parts.iter().map(|b| FramePart::check(b, layers > 1)).collect::<Result<Vec<usize>, _>>()?;
+        let n: usize = counts.iter().sum();
+        let mut frame = Frame {
+            header: self.header(req),
+            samples: vec![0; n],
+            colors: vec![0; n],
+            segments: vec![0; if layers > 1 { n } else { 0 }],
+        };
+        // Straight copies of the bytes into the frame's vectors (any alignment).
+        let mut at = 0;
+        for (b, &m) in parts.iter().zip(&counts) {
+            let (s, rest) = b[4..].split_at(8 * m);
+            let (c, g) = rest.split_at(4 * m);
+            bytemuck::cast_slice_mut::<u64, u8>(&mut frame.samples[at..at + m]).copy_from_slice(s);
+            bytemuck::cast_slice_mut::<u32, u8>(&mut frame.colors[at..at + m]).copy_from_slice(c);
+            if layers > 1 {
+                frame.segments[at..at + m].copy_from_slice(g);
+            }
+            at += m;
+        }
+        frame.header.radius_unit = self.frame_radius(req).unit();
+        frame.header.count = frame.samples.len() as u32;
+        frame.header.render_us = render_us;
+        Ok(frame)
+    }
+
+    /// The frame of its parts, in image order (see [`FrameGeometry::frame`]).
+    pub fn frame_of_parts(&self, req: &CameraRequest, parts: &[FramePart], render_us: u32) -> Frame {
+        let n: usize = parts.iter().map(|p| p.samples.len()).sum();
+        let mut frame = Frame {
+            header: self.header(req),
+            samples: Vec::with_capacity(n),
+            colors: Vec::with_capacity(n),
+            segments: Vec::new(),
+        };
+        for p in parts {
+            frame.samples.extend_from_slice(&p.samples);
+            frame.colors.extend_from_slice(&p.colors);
+            frame.segments.extend_from_slice(&p.segments);
+        }
+        frame.header.radius_unit = self.frame_radius(req).unit();
         frame.header.count = frame.samples.len() as u32;
         frame.header.render_us = render_us;
         frame
@@ -156,6 +222,113 @@ impl FrameGeometry {
             }
         }
         (wire::encode_to_vec(&Message::Frame(frame.clone())), Encoding::Raw12)
+    }
+}
+
+/// A frame's samples pixel by pixel, as the one-process marcher makes them.
+pub struct Assembler {
+    radius: FrameRadius,
+    q: Quantizer,
+    basis: volwarp_core::RayBasis,
+    o: Vec3,
+    w: u32,
+    layered: bool,
+}
+
+impl Assembler {
+    /// Appends image pixel `i`'s samples: its merged segments `segs`, front to back.
+    #[inline]
+    pub fn push(&self, i: u32, segs: &[partial::Seg], out: &mut FramePart) {
+        if segs.is_empty() {
+            return;
+        }
+        let d = self.basis.dir(i % self.w, i / self.w);
+        // Layered: the segments' colors rounded so their composite is the ray's own pixel
+        // (core's `pack_colors`, as the one-process marcher packs them).
+        let n = segs.len().min(MAX_LAYERS);
+        let mut packed = [0u32; MAX_LAYERS];
+        if self.layered {
+            let mut list = [Segment::default(); MAX_LAYERS];
+            for (l, s) in list.iter_mut().zip(segs) {
+                *l = Segment { t: s.t, color: s.c };
+            }
+            pack_colors(&list[..n], composite(segs), &mut packed[..n]);
+        }
+        for (j, s) in segs.iter().enumerate() {
+            let r =
+                if self.layered { self.radius.at(d, s.t) } else { self.radius.at_ray(d, s.t, &Uncertainty::default()) };
+            out.samples.push(self.q.pack(self.o + d * s.t, r));
+            out.colors.push(if self.layered && j < n { packed[j] } else { pack_color_f32(s.c) });
+            if self.layered {
+                out.segments.push(j as u8);
+            }
+        }
+    }
+}
+
+/// A run of a frame's samples, in pixel order: packed positions and radii, colors and (layered
+/// frames) segment indices.
+#[derive(Clone, Debug, Default, PartialEq)]
+pub struct FramePart {
+    /// Packed samples.
+    pub samples: Vec<u64>,
+    /// Packed colors.
+    pub colors: Vec<u32>,
+    /// Segment indices (empty for one sample per pixel).
+    pub segments: Vec<u8>,
+}
+
+impl FramePart {
+    /// The part as bytes between ranks: the sample count (`u32`), the samples, the colors, the
+    /// segment indices (each in memory order: the ranks of one job share one byte order).
+    pub fn to_bytes(&self) -> Vec<u8> {
+        let n = self.samples.len();
+        let mut out = Vec::with_capacity(4 + 12 * n + self.segments.len());
+        out.extend_from_slice(&(n as u32).to_ne_bytes());
+        out.extend_from_slice(bytemuck::cast_slice(&self.samples));
+        out.extend_from_slice(bytemuck::cast_slice(&self.colors));
+        out.extend_from_slice(&self.segments);
+        out
+    }
+
+    /// The parts joined, in order.
+    pub fn join(parts: &[FramePart]) -> FramePart {
+        let mut out = FramePart::default();
+        for p in parts {
+            out.samples.extend_from_slice(&p.samples);
+            out.colors.extend_from_slice(&p.colors);
+            out.segments.extend_from_slice(&p.segments);
+        }
+        out
+    }
+
+    /// [`FramePart::to_bytes`] of the parts joined (without joining them first).
+    pub fn join_to_bytes(parts: &[FramePart]) -> Vec<u8> {
+        let n: usize = parts.iter().map(|p| p.samples.len()).sum();
+        let g: usize = parts.iter().map(|p| p.segments.len()).sum();
+        let mut out = Vec::with_capacity(4 + 12 * n + g);
+        out.extend_from_slice(&(n as u32).to_ne_bytes());
+        for p in parts {
+            out.extend_from_slice(bytemuck::cast_slice(&p.samples));
+        }
+        for p in parts {
+            out.extend_from_slice(bytemuck::cast_slice(&p.colors));
+        }
+        for p in parts {
+            out.extend_from_slice(&p.segments);
+        }
+        out
+    }
+
+    /// The sample count of bytes [`FramePart::to_bytes`] wrote, of a layered frame or not; an
+    /// error for bytes that are not a part.
+    pub fn check(b: &[u8], layered: bool) -> Result<usize, String> {
+        let n = b.get(..4).map(|c| u32::from_ne_bytes([c[0], c[1], c[2], c[3]]) as u64).ok_or("no sample count")?;
+        let want = 4 + n * (12 + u64::from(layered));
+        if b.len() as u64 != want {
+            return Err(format!("a part of {n} samples holds {} bytes, not {want}", b.len()));
+        }
+        Ok(n as usize)
     }
 }
 

@@ -4,18 +4,22 @@
 //! one-process front end (the TCP server with its wire format, or the `render` / `dump` file)
 //! and for each frame broadcasts the request; every rank marches its part
 //! ([`super::partial`]), sends each band of image rows to the band's owner (rank `b` owns band
-//! `b`: one all-to-all, direct-send), merges what it received ([`super::composite`]), and
-//! the merged bands are gathered to rank 0, which assembles and encodes the frame as the
-//! one-process server does ([`super::FrameGeometry`]).
+//! `b`: one all-to-all, direct-send), merges what it received ([`super::composite`]) and
+//! assembles its band's share of the frame (packed samples, colors, segment indices, as the
+//! one-process server makes them: [`super::FrameGeometry::frame_part`]); the shares are
+//! gathered to rank 0, which joins and encodes the frame (`render` gathers the merged bands
+//! instead, for the image).
 //!
 //! **Faults.** MPI calls run on rank 0's main thread only, with errors returned rather than
 //! fatal; a watchdog thread times every frame. A frame not done within the rank timeout (a
-//! rank hangs) or whose bands do not arrive whole (a rank failed) makes rank 0 send every
-//! waiting client an `INTERNAL` error, print it and exit with status 3 — never a silent hang.
-//! A rank that dies makes MPICH's `mpiexec` kill every rank, rank 0 too: the clients'
-//! connections close and `mpiexec` fails. A bad launch — files that differ between ranks, more
-//! ranks than the volume has bricks, a part refused for memory — is reported by rank 0 (and
-//! the rank concerned) before any frame, and every rank exits non-zero.
+//! rank hangs), or whose bands do not arrive whole (a rank failed: a rank whose march panics
+//! still takes part in the exchange, sending bands that do not decode), makes rank 0 send every
+//! client, waiting for a frame or idle, an `INTERNAL` error, print it and end every rank with
+//! `MPI_Abort` (status 3) — never a silent hang. A rank that dies (killed, aborted) makes
+//! MPICH's `mpiexec` kill every rank, rank 0 too, even with `-disable-auto-cleanup` (MPICH
+//! 4.0): the clients' connections close and `mpiexec` fails. A bad launch — files that differ
+//! between ranks, more ranks than the volume has bricks, a part refused for memory — is
+//! reported by rank 0 (and the rank concerned) before any frame, and every rank exits non-zero.
 
 use super::composite::{self, Band};
 use super::decomposition::{self, Decomposition};
@@ -65,8 +69,15 @@ pub type WriteFrame = Box<dyn FnOnce(&Frame, Vec<u8>, Encoding, &FrameStats) -> 
 /// A frame request to rank 0's MPI thread and where its frame goes.
 type FrameJob = (CameraRequest, u32, mpsc::Sender<Result<(Frame, FrameStats), String>>);
 
-/// Rank 0's merged bands of a frame, image order, and every rank's stats.
-type Gathered = (Vec<Band>, Vec<RankStats>);
+/// What rank 0 gathers of a frame, in image order: the merged bands (for an image) or the
+/// frame's samples, each band's assembled by its owner (for a frame to send).
+enum Collected {
+    Bands(Vec<Band>),
+    Frame(Frame),
+}
+
+/// What rank 0 gathers of a frame and every rank's stats.
+type Gathered = (Collected, Vec<RankStats>);
 
 /// What rank 0 does with the ranks.
 pub enum Job {
@@ -91,23 +102,74 @@ pub struct RankStats {
     pub wait_us: u64,
     /// Encoding the bands and their all-to-all, µs.
     pub exchange_us: u64,
-    /// Decoding and merging the received bands, µs.
+    /// Decoding and merging the received bands and, for a frame, assembling the band's
+    /// samples, µs.
     pub merge_us: u64,
     /// The gather to rank 0, µs.
     pub gather_us: u64,
+    /// Of `merge_us`, decoding the received bands, µs.
+    pub decode_us: u64,
     /// Bytes sent to other ranks (bands and the merged band).
     pub bytes_sent: u64,
 }
+
+/// A failure injected into one rank for the fault tests, from the environment variable
+/// `VOLWARP_MPI_FAULT=RANK:FRAME:abort|panic|hang` (rank `RANK` ≥ 1 aborts the process, panics
+/// or hangs after marching its `FRAME`-th frame, counted from 1): what a crashed, failing or
+/// stuck node does mid-frame.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+struct Fault {
+    frame: u64,
+    what: FaultKind,
+}
+
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+enum FaultKind {
+    Abort,
+    Panic,
+    Hang,
+}
+
+impl Fault {
+    fn from_env(rank: usize) -> Option<Fault> {
+        let v = std::env::var("VOLWARP_MPI_FAULT").ok()?;
+        let mut it = v.split(':');
+        let (r, f, what) = (it.next()?.parse::<usize>().ok()?, it.next()?.parse().ok()?, it.next()?);
+        let what = match what {
+            "abort" => FaultKind::Abort,
+            "panic" => FaultKind::Panic,
+            "hang" => FaultKind::Hang,
+            _ => return None,
+        };
+        (r == rank && rank != 0).then_some(Fault { frame: f, what })
+    }
+
+    fn strike(self, rank: usize) {
+        eprintln!("volwarp-server (rank {rank}): VOLWARP_MPI_FAULT: {:?} mid-frame", self.what);
+        match self.what {
+            FaultKind::Abort => std::process::abort(),
+            FaultKind::Panic => panic!("VOLWARP_MPI_FAULT: a failure injected mid-frame"),
+            FaultKind::Hang => loop {
+                std::thread::sleep(Duration::from_secs(3600));
+            },
+        }
+    }
+}
+
+/// What a rank whose march failed sends for every band: no band decodes from it (a count
+/// above any K, or a byte too many for a band of no pixels).
+const FAILED_BAND: [u8; 1] = [0xff];
 
 const CMD_LEN: usize = 72;
 const CMD_QUIT: u8 = 0;
 const CMD_FRAME: u8 = 1;
 
-fn encode_cmd(req: &CameraRequest, layers: u32) -> [u8; CMD_LEN] {
+fn encode_cmd(req: &CameraRequest, layers: u32, assemble: bool) -> [u8; CMD_LEN] {
     let mut b = [0u8; CMD_LEN];
     b[0] = CMD_FRAME;
     b[1] = layers.min(255) as u8;
     b[2] = req.heuristic.code();
+    b[3] = u8::from(assemble);
     b[64..72].copy_from_slice(&req.seq.to_le_bytes());
     let c = &req.camera;
     let f = [c.eye.x, c.eye.y, c.eye.z, c.target.x, c.target.y, c.target.z, c.up.x, c.up.y, c.up.z, c.fov_y_deg];
@@ -120,7 +182,7 @@ fn encode_cmd(req: &CameraRequest, layers: u32) -> [u8; CMD_LEN] {
     b
 }
 
-fn decode_cmd(b: &[u8; CMD_LEN]) -> Option<(CameraRequest, u32)> {
+fn decode_cmd(b: &[u8; CMD_LEN]) -> Option<(CameraRequest, u32, bool)> {
     if b[0] != CMD_FRAME {
         return None;
     }
@@ -140,7 +202,7 @@ fn decode_cmd(b: &[u8; CMD_LEN]) -> Option<(CameraRequest, u32)> {
         heuristic: Heuristic::from_code(b[2]).unwrap_or(Heuristic::Threshold),
         radius_scale: f(56),
     };
-    Some((req, u32::from(b[1])))
+    Some((req, u32::from(b[1]), b[3] != 0))
 }
 
 fn prefix(counts: &[i32]) -> Vec<i32> {
@@ -154,13 +216,15 @@ fn prefix(counts: &[i32]) -> Vec<i32> {
         .collect()
 }
 
-/// One frame on every rank (collective): march, direct-send by bands, merge, gather. Rank 0
-/// gets the merged bands in image order and every rank's stats.
+/// One frame on every rank (collective): march, direct-send by bands, merge, (with `assemble`)
+/// each band's samples assembled by its owner, gather. Rank 0 gets the merged bands or the
+/// frame, and every rank's stats.
 fn frame_collective(
     world: &SimpleCommunicator,
     part: &PartMarcher,
-    req: &CameraRequest,
-    layers: u32,
+    geometry: &FrameGeometry,
+    (req, layers, assemble): (&CameraRequest, u32, bool),
+    fault: Option<Fault>,
 ) -> Option<Result<Gathered, String>> {
     let size = world.size() as usize;
     let rank = world.rank() as usize;
@@ -169,18 +233,32 @@ fn frame_collective(
     let ert = part.options().early_termination;
     let mut st = RankStats::default();
     let t0 = Instant::now();
-    let pf = part.march(cam, layers, req.heuristic);
+    // A march that fails (a panic) still takes part in the collectives, sending bands that do
+    // not decode: the others go on, rank 0 fails the frame and ends the job.
+    let marched = std::panic::catch_unwind(std::panic::AssertUnwindSafe(|| {
+        let pf = part.march(cam, layers, req.heuristic);
+        if let Some(f) = fault {
+            f.strike(rank);
+        }
+        pf
+    }));
     let t_marched = Instant::now();
     st.march_us = (t_marched - t0).as_micros() as u64;
     // Direct-send: band b to rank b.
     let mut send = Vec::new();
     let mut scounts = vec![0i32; size];
-    let coded: Vec<Vec<u8>> = {
-        use rayon::prelude::*;
-        (0..size)
-            .into_par_iter()
-            .map(|b| composite::encode_band(&pf, composite::band_rows(cam.height, size, b)))
-            .collect()
+    let coded: Vec<Vec<u8>> = match &marched {
+        Ok(pf) => {
+            use rayon::prelude::*;
+            (0..size)
+                .into_par_iter()
+                .map(|b| composite::encode_band(pf, composite::band_rows(cam.height, size, b)))
+                .collect()
+        }
+        Err(_) => {
+            eprintln!("volwarp-server (rank {rank}): the march of this rank's part failed; the frame is failed");
+            vec![FAILED_BAND.to_vec(); size]
+        }
     };
     for (b, (c, bytes)) in scounts.iter_mut().zip(coded).enumerate() {
         *c = bytes.len() as i32;
@@ -189,7 +267,7 @@ fn frame_collective(
         }
         send.extend_from_slice(&bytes);
     }
-    drop(pf);
+    drop(marched);
     // The ranks wait for the slowest march here (timed apart from the exchange itself).
     world.barrier();
     let t1 = Instant::now();
@@ -221,7 +299,21 @@ fn frame_collective(
         })
         .collect();
     drop(recv);
-    let merged = composite::encode_merged(&composite::merge_bands(&bands, pixels, k, ert));
+    st.decode_us = t2.elapsed().as_micros() as u64;
+    let merged = if broken {
+        // Rank 0 learns of a broken band whoever received it.
+        FAILED_BAND.to_vec()
+    } else if assemble {
+        // Merged and assembled pixel by pixel: no merged band in between.
+        let first = rows.start * cam.width;
+        let a = geometry.assembler(req, layers);
+        let runs = composite::merge_bands_with(&bands, pixels, k, ert, |i, segs, out: &mut super::FramePart| {
+            a.push(first + i as u32, segs, out)
+        });
+        super::FramePart::join_to_bytes(&runs)
+    } else {
+        composite::encode_merged(&composite::merge_bands(&bands, pixels, k, ert))
+    };
     drop(bands);
     let t3 = Instant::now();
     st.merge_us = (t3 - t2).as_micros() as u64;
@@ -239,20 +331,29 @@ fn frame_collective(
             let mut rp = PartitionMut::new(&mut all[..], &lens[..], &displs[..]);
             root.gather_varcount_into_root(&merged[..], &mut rp);
         }
-        let mut out = Ok(Vec::with_capacity(size));
-        for b in 0..size {
-            let rows = composite::band_rows(cam.height, size, b);
-            let pixels = (rows.end - rows.start) as usize * cam.width as usize;
-            let (a, n) = (displs[b] as usize, lens[b] as usize);
-            match (&mut out, composite::decode_band(&all[a..a + n], pixels, k)) {
-                (Ok(o), Ok(band)) if !broken => o.push(band),
-                (Ok(_), r) => {
-                    let why = r.err().unwrap_or_else(|| "a band it received was broken".into());
-                    out = Err(format!("rank {b} sent no valid band ({why}): a rank failed"));
+        let part = |b: usize| &all[displs[b] as usize..(displs[b] + lens[b]) as usize];
+        let failed = |b: usize, why: String| format!("rank {b} sent no valid band ({why}): a rank failed");
+        let out = if broken {
+            Err("a band rank 0 received was broken: a rank failed".to_string())
+        } else if assemble {
+            // A failed rank's part is one byte: named before the parts are read.
+            match (0..size).find_map(|b| super::FramePart::check(part(b), layers > 1).err().map(|e| (b, e))) {
+                Some((b, why)) => Err(failed(b, why)),
+                None => {
+                    let parts: Vec<&[u8]> = (0..size).map(part).collect();
+                    geometry.frame_of_bytes(req, layers, &parts, 0).map(Collected::Frame)
                 }
-                (Err(_), _) => {}
             }
-        }
+        } else {
+            (0..size)
+                .map(|b| {
+                    let rows = composite::band_rows(cam.height, size, b);
+                    let pixels = (rows.end - rows.start) as usize * cam.width as usize;
+                    composite::decode_band(part(b), pixels, k).map_err(|why| failed(b, why))
+                })
+                .collect::<Result<Vec<Band>, String>>()
+                .map(Collected::Bands)
+        };
         Some(out)
     } else {
         root.gather_into(&len);
@@ -260,12 +361,12 @@ fn frame_collective(
         None
     };
     st.gather_us = t3.elapsed().as_micros() as u64;
-    let mine = [st.march_us, st.wait_us, st.exchange_us, st.merge_us, st.gather_us, st.bytes_sent];
+    let mine = [st.march_us, st.wait_us, st.exchange_us, st.merge_us, st.gather_us, st.bytes_sent, st.decode_us];
     if rank == 0 {
-        let mut all = vec![0u64; 6 * size];
+        let mut all = vec![0u64; 7 * size];
         root.gather_into_root(&mine[..], &mut all[..]);
         let stats = all
-            .chunks_exact(6)
+            .chunks_exact(7)
             .map(|s| RankStats {
                 march_us: s[0],
                 wait_us: s[1],
@@ -273,6 +374,7 @@ fn frame_collective(
                 merge_us: s[3],
                 gather_us: s[4],
                 bytes_sent: s[5],
+                decode_us: s[6],
             })
             .collect();
         out.map(|o| o.map(|o| (o, stats)))
@@ -286,11 +388,16 @@ fn frame_collective(
 struct Watchdog {
     started: Mutex<Option<Instant>>,
     failed: Mutex<Option<String>>,
+    /// How many clients the server still has (set once it serves).
+    clients: Mutex<Option<Box<dyn Fn() -> usize + Send>>>,
 }
+
+/// The longest rank 0 waits for its clients to be sent the error before it ends the job.
+const TELL_CLIENTS: Duration = Duration::from_secs(3);
 
 impl Watchdog {
     fn spawn(timeout: Duration) -> Arc<Watchdog> {
-        let w = Arc::new(Watchdog { started: Mutex::new(None), failed: Mutex::new(None) });
+        let w = Arc::new(Watchdog { started: Mutex::new(None), failed: Mutex::new(None), clients: Mutex::new(None) });
         let wd = w.clone();
         std::thread::Builder::new()
             .name("volwarp-mpi-watchdog".into())
@@ -298,26 +405,37 @@ impl Watchdog {
                 std::thread::sleep(Duration::from_millis(50));
                 let late = wd.started.lock().unwrap_or_else(|e| e.into_inner()).is_some_and(|t| t.elapsed() > timeout);
                 if late {
-                    let msg = format!(
+                    wd.fail(format!(
                         "the MPI ranks did not finish a frame within {:.1} s: a rank died or hangs",
                         timeout.as_secs_f64()
-                    );
-                    *wd.failed.lock().unwrap_or_else(|e| e.into_inner()) = Some(msg.clone());
-                    // Give the client threads time to send the error, then leave.
-                    std::thread::sleep(Duration::from_millis(500));
-                    eprintln!("volwarp-server (rank 0): {msg}");
-                    std::process::exit(3);
+                    ));
                 }
             })
             .expect("spawning the watchdog");
         w
     }
 
-    /// Fails the server: every waiting client gets `msg`, then the process exits with 3.
+    /// Fails the job: every client (waiting for a frame or idle) is sent `msg` as an
+    /// `INTERNAL` error, then every rank is ended with status 3 (`MPI_Abort`: the ranks still
+    /// alive, stuck in a collective with a dead or hung one, would otherwise hang `mpiexec`).
     fn fail(&self, msg: String) -> ! {
         *self.failed.lock().unwrap_or_else(|e| e.into_inner()) = Some(msg.clone());
-        std::thread::sleep(Duration::from_millis(500));
         eprintln!("volwarp-server (rank 0): {msg}");
+        // The clients' threads send the error and end within the server's poll of its source.
+        let t = Instant::now();
+        let clients = self.clients.lock().unwrap_or_else(|e| e.into_inner()).take();
+        let left = || clients.as_ref().map_or(0, |n| n());
+        while left() > 0 && t.elapsed() < TELL_CLIENTS {
+            std::thread::sleep(Duration::from_millis(20));
+        }
+        std::thread::sleep(Duration::from_millis(100));
+        // SAFETY: MPI is initialized (the watchdog starts after it) and not finalized (rank 0
+        // finalizes only after its job, and this call ends the process). MPI_Abort is the one
+        // call MPI allows from any thread in a failure; MPICH's needs no lock at the funneled
+        // threading level.
+        unsafe {
+            mpi::ffi::MPI_Abort(mpi::ffi::RSMPI_COMM_WORLD, 3);
+        }
         std::process::exit(3);
     }
 
@@ -372,6 +490,10 @@ impl FrameSource for Source {
 
     fn encode(&self, req: &CameraRequest, frame: &Frame, encoding: Encoding, green: bool) -> (Vec<u8>, Encoding) {
         self.geometry.encode(req, frame, encoding, green)
+    }
+
+    fn failed(&self) -> Option<String> {
+        self.watchdog.failed()
     }
 }
 
@@ -458,12 +580,16 @@ pub fn run(launch: Launch, job: Job) -> Result<(), String> {
     let geometry = FrameGeometry { dims, spacing, opts: part.options() };
     if rank != 0 {
         let root = world.process_at_rank(0);
+        let fault = Fault::from_env(rank);
+        let mut frames = 0u64;
         loop {
             let mut cmd = [0u8; CMD_LEN];
             root.broadcast_into(&mut cmd[..]);
             match decode_cmd(&cmd) {
-                Some((req, layers)) => {
-                    frame_collective(&world, &part, &req, layers);
+                Some((req, layers, assemble)) => {
+                    frames += 1;
+                    let fault = fault.filter(|f| f.frame == frames);
+                    frame_collective(&world, &part, &geometry, (&req, layers, assemble), fault);
                 }
                 None => return Ok(()),
             }
@@ -471,7 +597,10 @@ pub fn run(launch: Launch, job: Job) -> Result<(), String> {
     }
     let watchdog = Watchdog::spawn(launch.rank_timeout);
     let root = world.process_at_rank(0);
-    let frame = |req: &CameraRequest, layers: u32| -> Result<(Vec<Band>, FrameStats), String> {
+    let frame = |req: &CameraRequest, layers: u32, assemble: bool| -> Result<(Collected, FrameStats), String> {
+        if layers <= 1 {
+            super::one_sample_heuristic(req.heuristic)?;
+        }
         // MPI counts and displacements are 32-bit: the most bytes a frame's segments may take.
         let k = u64::from(layers.clamp(1, volwarp_core::segments::MAX_LAYERS as u32));
         let pixels = u64::from(req.camera.width) * u64::from(req.camera.height);
@@ -484,9 +613,9 @@ pub fn run(launch: Launch, job: Job) -> Result<(), String> {
         }
         let t0 = Instant::now();
         watchdog.start();
-        let mut cmd = encode_cmd(req, layers);
+        let mut cmd = encode_cmd(req, layers, assemble);
         root.broadcast_into(&mut cmd[..]);
-        let (bands, stats) = match frame_collective(&world, &part, req, layers) {
+        let (collected, stats) = match frame_collective(&world, &part, &geometry, (req, layers, assemble), None) {
             Some(Ok(r)) => r,
             Some(Err(e)) => watchdog.fail(e),
             None => watchdog.fail("rank 0 got no frame".into()),
@@ -501,7 +630,8 @@ pub fn run(launch: Launch, job: Job) -> Result<(), String> {
         let ms = |us: u64| us as f64 / 1e3;
         log::info!(
             "mpi frame {}x{} K={layers}: ranks={size} total_ms={:.1} march_max_ms={:.1} march_min_ms={:.1} \
-             exchange_ms={:.1} merge_ms={:.1} gather_ms={:.1} bytes_per_rank_max={bytes_max} bytes_per_rank_mean={bytes_mean}",
+             exchange_ms={:.1} merge_ms={:.1} decode_ms={:.1} gather_ms={:.1} bytes_per_rank_max={bytes_max} \
+             bytes_per_rank_mean={bytes_mean}",
             req.camera.width,
             req.camera.height,
             ms(total),
@@ -509,16 +639,20 @@ pub fn run(launch: Launch, job: Job) -> Result<(), String> {
             ms(march_min),
             ms(slowest(|s| s.exchange_us)),
             ms(slowest(|s| s.merge_us)),
+            ms(slowest(|s| s.decode_us)),
             ms(slowest(|s| s.gather_us)),
         );
-        let samples = bands.iter().map(|b| b.segs.len()).sum();
+        let samples = match &collected {
+            Collected::Bands(bands) => bands.iter().map(|b| b.segs.len()).sum(),
+            Collected::Frame(f) => f.samples.len(),
+        };
         let fs = FrameStats {
             march_us: march,
             compact_us: total.saturating_sub(march),
             samples,
             pixels: (req.camera.width * req.camera.height) as usize,
         };
-        Ok((bands, fs))
+        Ok((collected, fs))
     };
     let default_camera = {
         let b = geometry.bounds();
@@ -530,15 +664,20 @@ pub fn run(launch: Launch, job: Job) -> Result<(), String> {
         Job::Render(camera, write) => (|| {
             let cam = camera(default_camera)?;
             let req = CameraRequest { seq: 0, camera: cam, heuristic: Heuristic::Threshold, radius_scale: 1.0 };
-            let (bands, _) = frame(&req, volwarp_core::segments::DEFAULT_LAYERS as u32)?;
+            let Collected::Bands(bands) = frame(&req, volwarp_core::segments::DEFAULT_LAYERS as u32, false)?.0 else {
+                return Err("rank 0 gathered no bands".into());
+            };
             write(super::image(cam.width, cam.height, &bands))
         })(),
         Job::Dump(request, layers, encoding, write) => (|| {
             let req = request(default_camera)?;
-            let (bands, stats) = frame(&req, layers)?;
+            let (Collected::Frame(mut f), stats) = frame(&req, layers, true)? else {
+                return Err("rank 0 gathered no frame".into());
+            };
+            // The band owners assembled the frame's samples (their merge time), rank 0 joined
+            // them (its gather time): what is left is the header.
             let t = Instant::now();
-            let f =
-                geometry.frame(&req, layers, &bands, (stats.march_us + stats.compact_us).min(u32::MAX as u64) as u32);
+            f.header.render_us = (stats.march_us + stats.compact_us).min(u32::MAX as u64) as u32;
             let t_frame = t.elapsed();
             let (bytes, got) = geometry.encode(&req, &f, encoding, true);
             log::info!(
@@ -556,18 +695,21 @@ pub fn run(launch: Launch, job: Job) -> Result<(), String> {
             let server =
                 Server::with_marcher(config, Arc::new(marcher)).map_err(|e| e.to_string())?.with_source(source);
             ready(server.local_addr());
-            let _handle = server.spawn();
+            let handle = Arc::new(server.spawn());
+            let h = handle.clone();
+            *watchdog.clients.lock().unwrap_or_else(|e| e.into_inner()) = Some(Box::new(move || h.active_clients()));
             for (req, layers, reply) in rx {
-                let (bands, stats) = match frame(&req, layers) {
-                    Ok(r) => r,
+                let (f, stats) = match frame(&req, layers, true) {
+                    Ok((Collected::Frame(f), stats)) => (f, stats),
+                    Ok(_) => {
+                        let _ = reply.send(Err("rank 0 gathered no frame".into()));
+                        continue;
+                    }
                     Err(e) => {
                         let _ = reply.send(Err(e));
                         continue;
                     }
                 };
-                let t = Instant::now();
-                let f = geometry.frame(&req, layers, &bands, 0);
-                let stats = FrameStats { compact_us: stats.compact_us + t.elapsed().as_micros() as u64, ..stats };
                 let f = Frame {
                     header: volwarp_core::wire::FrameHeader {
                         render_us: (stats.march_us + stats.compact_us).min(u32::MAX as u64) as u32,

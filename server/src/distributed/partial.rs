@@ -9,15 +9,22 @@
 //! early termination at the options' threshold of the part's own opacity. The part's
 //! samples are cut by core's [`Segmenter`] into at most K segments; for K = 1 the segment's
 //! depth is the requested heuristic's pick over the part's samples (two-pass heuristics take
-//! their first pass over the part too).
+//! their first pass over the part too; a threshold the part's own samples do not reach falls
+//! back to where the ray leaves the part).
 //!
 //! With one part this is the scalar marcher's arithmetic step for step, so its segments are
 //! the one-process frame's bit for bit (tested). Empty space is skipped as the marcher skips it,
 //! with the part's own min/max grid (built over its held voxels) and the ray's origin in the
 //! part's coordinates; skipping never changes a result, only the time.
+//!
+//! Two kernels march a part, as they march the whole volume (the options' [`MarchKernel`]):
+//! the packet kernel ([`crate::packet_march`], the default) with the part's window in its lanes,
+//! and the scalar one ([`PartMarcher::ray`]), its reference; both take the same samples with the
+//! same operations, so their segments are equal bit for bit (tested).
 
 use super::decomposition::Decomposition;
-use crate::marcher::{MarchOptions, Marcher};
+use crate::march_settings::PartWindow;
+use crate::marcher::{MarchKernel, MarchOptions, Marcher};
 use crate::transfer_function::{TransferFunction, LUT_SIZE};
 use crate::volume::Volume;
 use rayon::prelude::*;
@@ -67,28 +74,15 @@ pub struct PartMarcher {
     volume: Arc<Volume>,
     dec: Arc<Decomposition>,
     part: usize,
+    /// The one-process marcher of the held block (its table, step, empty-space grid and packet
+    /// kernel).
+    m: Marcher,
     lut: Vec<[f32; 4]>,
     opts: MarchOptions,
     dt: f32,
     inv_spacing: Vec3,
-    /// The whole volume's box extent (world units).
-    extent: Vec3,
-    /// The part's held block's first voxel, as a grid offset.
-    off: Vec3,
-    /// Which of the part's bricks the transfer function can make visible.
-    occ: crate::empty_space::Occupancy,
-}
-
-/// A ray's entry and exit of the box `[0, ext]` (the marcher's clip, the same operations).
-#[inline]
-fn clip(o: Vec3, inv_d: Vec3, lo: Vec3, ext: Vec3) -> Option<(f32, f32)> {
-    let t0 = (lo - o) * inv_d;
-    let t1 = (ext - o) * inv_d;
-    let tmin = t0.min(t1);
-    let tmax = t0.max(t1);
-    let enter = tmin.x.max(tmin.y).max(tmin.z).max(0.0);
-    let exit = tmax.x.min(tmax.y).min(tmax.z);
-    (enter < exit && exit.is_finite()).then_some((enter, exit))
+    /// Where the part lies in the whole volume.
+    win: PartWindow,
 }
 
 impl PartMarcher {
@@ -105,16 +99,15 @@ impl PartMarcher {
         if volume.dims() != p.held_dims() {
             return Err(format!("part {part} holds {:?} voxels, its volume {:?}", p.held_dims(), volume.dims()));
         }
-        // The table and step exactly as the one-process marcher makes them (same spacing).
-        let m = Marcher::with_options(volume.clone(), tf, MarchOptions { skip_empty: false, ..opts });
+        // The table and step exactly as the one-process marcher makes them (same spacing);
+        // no shading (its gradient would read a voxel past the apron).
+        let m = Marcher::with_options(volume.clone(), tf, MarchOptions { shading: None, ..opts });
         let lut = m.lut_table().to_vec();
         debug_assert_eq!(lut.len(), LUT_SIZE);
         let sp = volume.spacing();
-        let extent = Vec3::new(dec.dims[0] as f32, dec.dims[1] as f32, dec.dims[2] as f32) * sp;
-        let off = Vec3::new(p.held_lo[0] as f32, p.held_lo[1] as f32, p.held_lo[2] as f32);
-        let occ = m.occupancy().clone();
-        let opts = MarchOptions { skip_empty: opts.skip_empty, ..m.options() };
-        Ok(PartMarcher { volume, dec, part, lut, opts, dt: m.step(), inv_spacing: 1.0 / sp, extent, off, occ })
+        let win = PartWindow::new(dec.dims, p.lo, p.hi, p.held_lo, sp);
+        let opts = m.options();
+        Ok(PartMarcher { volume, dec, part, lut, opts, dt: m.step(), inv_spacing: 1.0 / sp, m, win })
     }
 
     /// The march options.
@@ -143,39 +136,27 @@ impl PartMarcher {
     #[inline]
     fn march_ray(&self, o: Vec3, d: Vec3, mut feed: impl FnMut(f32, f32, [f32; 4])) -> Option<f32> {
         let inv_d = 1.0 / d;
-        let (t_enter, t_exit) = clip(o, inv_d, Vec3::ZERO, self.extent)?;
         let dt = self.dt;
-        let n = ((t_exit - t_enter) / dt - 0.5).ceil().max(0.0);
-        let n = if n < 1e7 { n as u32 } else { 10_000_000 };
-        // The part's owned box, widened by a voxel: the samples to test lie inside it.
-        let p = &self.dec.parts[self.part];
-        let sp = 1.0 / self.inv_spacing;
-        let lo = Vec3::new(p.lo[0] as f32 - 1.0, p.lo[1] as f32 - 1.0, p.lo[2] as f32 - 1.0).max(Vec3::ZERO) * sp;
-        let hi = Vec3::new(p.hi[0] as f32 + 1.0, p.hi[1] as f32 + 1.0, p.hi[2] as f32 + 1.0) * sp;
-        let Some((t0, t1)) = clip(o, inv_d, lo, hi.min(self.extent + sp)) else {
-            return Some(t_exit);
-        };
-        let k0 = (((t0 - t_enter) / dt - 0.5).floor() - 1.0).max(0.0);
-        let k1 = (((t1 - t_enter) / dt - 0.5).ceil() + 2.0).max(0.0);
-        let (k0, k1) = (if k0 < 1e7 { k0 as u32 } else { n }, if k1 < 1e7 { (k1 as u32).min(n) } else { n });
+        let (_, t_enter, t_exit, k0, k1) = self.win.ray(o, d, dt);
+        let t_exit = t_exit?;
         let og = o * self.inv_spacing - 0.5;
         let dg = d * self.inv_spacing;
         let ert = self.opts.early_termination;
         let (mut r, mut g, mut b, mut a) = (0.0f32, 0.0f32, 0.0f32, 0.0f32);
         let skip = self.opts.skip_empty;
-        let occ = &self.occ;
+        let occ = self.m.occupancy();
         // The ray's origin in the part's own world coordinates (what its grid's leaps use).
-        let o_part = o - self.off * sp;
+        let o_part = o - self.win.origin;
         let mut t_check = f32::NEG_INFINITY;
         let mut k = k0;
         while k < k1 {
             let t = t_enter + (k as f32 + 0.5) * dt;
             let gp = og + dg * t;
-            if !self.dec.owns(self.part, gp) {
+            if !self.win.owns(gp) {
                 k += 1;
                 continue;
             }
-            let gl = gp - self.off;
+            let gl = gp - self.win.off;
             if skip && t >= t_check {
                 let br = occ.brick_of(gl);
                 let (r, reach) = occ.look(br);
@@ -207,8 +188,10 @@ impl PartMarcher {
 
     /// One ray's segments in this part: at most `layers` of them; with `layers` ≤ 1 one
     /// segment: the part's accumulated color at `heuristic`'s pick over the part's samples
-    /// (the picker's fallback being the ray's exit from the whole box, as in the one-process
-    /// marcher), none where the picker finds the part's samples empty.
+    /// (the picker's fallback being where the ray leaves the part's owned box for the
+    /// threshold-like heuristics, so the parts' segments stay in visibility order, else the
+    /// ray's exit from the whole box, as in the one-process marcher), none where the picker
+    /// finds the part's samples empty.
     pub fn ray(&self, o: Vec3, d: Vec3, layers: u32, heuristic: Heuristic, out: &mut [Seg]) -> usize {
         if layers <= 1 {
             let first = heuristic.needs_first_pass().then(|| {
@@ -224,7 +207,12 @@ impl PartMarcher {
             }) else {
                 return 0;
             };
-            return match picker.finish(t_exit) {
+            // A threshold-like pick that the part's own samples do not meet falls back to where
+            // the ray leaves the part (between its samples and the next part's, so the parts'
+            // segments stay in visibility order when merged by depth; the box exit for a part
+            // that is the whole volume), not to the box exit.
+            let fallback = if picker.threshold_target().is_some() { self.win.part_exit(o, d, t_exit) } else { t_exit };
+            return match picker.finish(fallback) {
                 Some(t) if last[3] > 0.0 => {
                     out[0] = Seg { t, c: last };
                     1
@@ -251,12 +239,26 @@ impl PartMarcher {
         let o = basis.origin();
         let mut count = vec![0u8; w * h];
         let mut segs = vec![Seg::default(); w * h * k];
-        count.par_chunks_mut(w.max(1)).zip(segs.par_chunks_mut(w.max(1) * k)).enumerate().for_each(|(y, (c, s))| {
-            for (x, c) in c.iter_mut().enumerate() {
-                let d = basis.dir(x as u32, y as u32);
-                *c = self.ray(o, d, k as u32, heuristic, &mut s[x * k..x * k + k]) as u8;
-            }
-        });
+        if self.opts.kernel == MarchKernel::Packet {
+            // Bands of rows a multiple of every lane kind's packet height.
+            let rows = 8;
+            let kernel = self.m.part_kernel(&self.win);
+            count.par_chunks_mut(w.max(1) * rows).zip(segs.par_chunks_mut(w.max(1) * rows * k)).enumerate().for_each(
+                |(b, (count, segs))| {
+                    let mut out = crate::packet_march::PartOut { k, count, segs };
+                    crate::packet_march::march_band_part(&kernel, &basis, heuristic, (b * rows) as u32, &mut out);
+                },
+            );
+        } else {
+            count.par_chunks_mut(w.max(1)).zip(segs.par_chunks_mut(w.max(1) * k)).enumerate().for_each(
+                |(y, (c, s))| {
+                    for (x, c) in c.iter_mut().enumerate() {
+                        let d = basis.dir(x as u32, y as u32);
+                        *c = self.ray(o, d, k as u32, heuristic, &mut s[x * k..x * k + k]) as u8;
+                    }
+                },
+            );
+        }
         PartFrame { width: camera.width, height: camera.height, k, count, segs }
     }
 }
