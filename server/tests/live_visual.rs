@@ -205,3 +205,20 @@ fn bad_edits_get_clear_errors_and_everyone_keeps_being_served() {
     old.send(&Message::CameraRequest(request(4, &m)));
     assert!(same_frame(&before, &frame(&mut old)));
 }
+
+/// The occupancy's constant-time visibility test answers as the scan of the table does.
+#[test]
+fn the_visibility_test_agrees_with_the_table_scan() {
+    for name in preset_names() {
+        let tf = volwarp_server::visual::preset(name, (0.0, 255.0)).unwrap();
+        for tf in [tf.clone(), tf.windowed(0.1, 0.7, 1.0), tf.windowed(0.5, 0.2, 0.0)] {
+            let visible = tf.visibility();
+            for i in 0..=80 {
+                for j in 0..=80 {
+                    let (lo, hi) = (i as f32 / 64.0 - 0.1, j as f32 / 64.0 - 0.1);
+                    assert_eq!(visible(lo, hi), tf.max_opacity(lo, hi) > 0.0, "{name} {lo} {hi}");
+                }
+            }
+        }
+    }
+}
