@@ -105,11 +105,14 @@ fn a_preset_by_name_renders_as_its_json_given_at_start() {
     let server = serve(&ds, &VisualState::default());
     let m = Marcher::from_dataset(&ds);
     let (mut c, _) = live_client(server.local_addr());
+    // A camera first; then each edit alone brings a frame of that camera in the new state (an
+    // edit and a request sent together may bring two: the last camera's and the request's).
+    c.send(&Message::CameraRequest(request(1, &m)));
+    frame(&mut c);
     for (i, name) in preset_names().enumerate() {
         let id = 10 + i as u32;
         let edit = VisualEdit { id, preset: wire::preset_name(name), ..VisualEdit::default() };
         c.send(&Message::VisualEdit(edit));
-        c.send(&Message::CameraRequest(request(id as u64, &m)));
         let state = match c.recv() {
             Ok(Message::VisualState(s)) => s,
             other => panic!("expected VisualState, got {other:?}"),
@@ -123,7 +126,7 @@ fn a_preset_by_name_renders_as_its_json_given_at_start() {
         let reference = Marcher::new(ds.volume.clone(), &file)
             .with_visual(&file, &VisualState { shade, ..VisualState::default() })
             .unwrap();
-        let want = reference.render_frame_layers(&request(id as u64, &m), 1).0;
+        let want = reference.render_frame_layers(&request(1, &m), 1).0;
         assert!(same_frame(&got, &want), "preset {name} over the wire renders unlike its JSON file");
     }
 }

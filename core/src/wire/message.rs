@@ -33,6 +33,10 @@ impl Frame {
 }
 
 /// Any message.
+// The visual messages hold their bounded points and names inline (heapless, so the codec stays
+// allocation-free on no_std); 1.7 KB is nothing beside a frame's buffers, and a message is read
+// and handled one at a time, so boxing would only add an allocation per edit.
+#[allow(clippy::large_enum_variant)]
 #[derive(Clone, Debug, PartialEq)]
 pub enum Message {
     /// Hello.
