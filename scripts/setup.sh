@@ -15,7 +15,7 @@ need=()
 # which --no-install-recommends leaves out); qemu-user: runs those aarch64 binaries here.
 # mpich, libmpich-dev: the MPI the server's feature `mpi` links (rsmpi) and whose mpiexec the
 # end-to-end tests launch; libclang-dev: bindgen, which rsmpi's build runs over mpi.h.
-for p in mesa-vulkan-drivers libvulkan1 xvfb xauth x11-apps gcc-aarch64-linux-gnu libc6-dev-arm64-cross qemu-user \
+for p in mesa-vulkan-drivers libvulkan1 xvfb xauth x11-apps xdotool gcc-aarch64-linux-gnu libc6-dev-arm64-cross qemu-user \
   mpich libmpich-dev libclang-dev; do
   dpkg -s "$p" >/dev/null 2>&1 || need+=("$p")
 done

@@ -43,6 +43,8 @@ pub struct Connection {
     pub bounds: Bounds,
     /// What this client accepts from the server.
     pub limits: Limits,
+    /// The server's visual state and presets, where it applies live edits (`CAP_VISUAL`).
+    pub visual: Option<wire::VisualState>,
 }
 
 impl Connection {
@@ -163,6 +165,13 @@ pub fn decode_layered_parallel(payload: &[u8], limits: &Limits) -> Result<wire::
 pub fn send_request(stream: &mut impl Write, req: &CameraRequest) -> io::Result<()> {
     let mut buf = Vec::with_capacity(HEADER_LEN + wire::CAMERA_REQUEST_LEN);
     let _ = wire::write_camera_request(&mut wire::VecWriter(&mut buf), req);
+    stream.write_all(&buf)
+}
+
+/// Sends a visual edit.
+pub fn send_edit(stream: &mut impl Write, e: &wire::VisualEdit) -> io::Result<()> {
+    let mut buf = Vec::with_capacity(HEADER_LEN + e.encoded_len());
+    let _ = wire::write_visual_edit(&mut wire::VecWriter(&mut buf), e);
     stream.write_all(&buf)
 }
 
@@ -296,9 +305,13 @@ pub fn connect_secure(
     let mut limits = Limits::default().with_layers(layers);
 
     // Ask for CompactFrames (about 3 bytes per sample instead of 12; the server decides).
-    let mut hello =
-        Hello::new(wire::CAP_COMPACT | wire::CAP_COLOR_GREEN | if cfg!(feature = "gpu") { wire::CAP_GPU } else { 0 })
-            .with_layers(layers);
+    let mut hello = Hello::new(
+        wire::CAP_COMPACT
+            | wire::CAP_COLOR_GREEN
+            | wire::CAP_VISUAL
+            | if cfg!(feature = "gpu") { wire::CAP_GPU } else { 0 },
+    )
+    .with_layers(layers);
     if let Some(t) = token {
         hello =
             hello.with_token(t.as_bytes()).map_err(|_| ClientError::Usage("--token is longer than 64 bytes".into()))?;
@@ -323,18 +336,25 @@ pub fn connect_secure(
     limits = limits.with_layers(server_hello.layers.min(limits.max_layers));
     let probe = CameraRequest { seq: 0, camera: probe_camera(), heuristic: Heuristic::Threshold, radius_scale: 1.0 };
     send_request(&mut io, &probe).map_err(|e| io_err("sending the probe request", &e))?;
-    let bounds = match read_message_bytes(&mut io, &limits, "waiting for the probe frame")?.1 {
-        Message::Frame(f) => f.header.bounds,
-        Message::Error(e) => return Err(server_error(&e)),
-        Message::Bye => return Err(ClientError::Gone("the server said goodbye".into())),
-        _ => return Err(ClientError::Protocol("the server did not answer the probe with a Frame".into())),
+    // A server that applies live edits sends its visual state first.
+    let mut visual = None;
+    let bounds = loop {
+        match read_message_bytes(&mut io, &limits, "waiting for the probe frame")?.1 {
+            Message::Frame(f) => break f.header.bounds,
+            Message::VisualState(v) if server_hello.capabilities & wire::CAP_VISUAL != 0 && visual.is_none() => {
+                visual = Some(v)
+            }
+            Message::Error(e) => return Err(server_error(&e)),
+            Message::Bye => return Err(ClientError::Gone("the server said goodbye".into())),
+            _ => return Err(ClientError::Protocol("the server did not answer the probe with a Frame".into())),
+        }
     };
     log::info!("connected to {sock}; volume bounds {:?} .. {:?}", bounds.min(), bounds.max());
     let tls = match (io, link) {
         (Greeting::Tls(reader, _), Some(link)) => Some(TlsSession { link, reader }),
         _ => None,
     };
-    Ok(Connection { stream, tls, addr: sock, hello: server_hello, bounds, limits })
+    Ok(Connection { stream, tls, addr: sock, hello: server_hello, bounds, limits, visual })
 }
 
 #[cfg(test)]

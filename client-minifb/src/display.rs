@@ -29,6 +29,8 @@ pub struct FrameReport {
     pub during_build: bool,
     /// LBVH build time of the scene swapped in this display frame, in ms.
     pub build_ms: Option<f64>,
+    /// The visual state id of the shown frame (0: the server's start state).
+    pub state: u32,
 }
 
 /// Frames per second over a sliding window of one second.
@@ -124,11 +126,23 @@ impl Display {
     pub fn poll_scene(&mut self) -> bool {
         match self.net.take_scene() {
             Some(ready) => {
+                // Frames of another visual state are never drawn beside the new one (their
+                // colors would fill its holes): a state change drops them.
+                let state = ready.state;
                 if let Some(old) = self.shown.replace(ready) {
-                    if self.drawn {
+                    if self.drawn && old.state == state {
                         self.older.push_front(old);
                     } else {
                         self.net.recycle(old.scene);
+                    }
+                }
+                if self.older.iter().any(|o| o.state != state) {
+                    for o in std::mem::take(&mut self.older) {
+                        if o.state == state {
+                            self.older.push_back(o);
+                        } else {
+                            self.net.recycle(o.scene);
+                        }
                     }
                 }
                 self.drawn = false;
@@ -226,6 +240,7 @@ impl Display {
             new_frame,
             during_build: gen0 % 2 == 1 || gen1 != gen0,
             build_ms: if new_frame { self.shown.as_ref().map(|s| s.build_ms) } else { None },
+            state: self.shown.as_ref().map_or(0, |s| s.state),
         }
     }
 

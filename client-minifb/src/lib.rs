@@ -39,6 +39,7 @@ pub mod record;
 pub mod renderers;
 pub mod replay;
 pub mod server_process;
+pub mod visual;
 pub mod window;
 
 pub use app::run;

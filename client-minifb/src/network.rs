@@ -31,13 +31,13 @@ use crate::record::RecordSink;
 use std::collections::VecDeque;
 use std::io::{Read, Write};
 use std::net::{Shutdown, TcpStream};
-use std::sync::atomic::{AtomicBool, AtomicU64, Ordering};
+use std::sync::atomic::{AtomicBool, AtomicU32, AtomicU64, Ordering};
 use std::sync::{Arc, Condvar, Mutex, MutexGuard};
 use std::thread::JoinHandle;
 use std::time::{Duration, Instant};
 use volwarp_core::method::{Cadence, RequestPolicy, ViewEvents};
 use volwarp_core::prediction::{Horizon, Predictor};
-use volwarp_core::wire::{error_code, CameraRequest, Frame, Limits, Message};
+use volwarp_core::wire::{error_code, CameraRequest, Frame, Limits, Message, VisualEdit, VisualState};
 use volwarp_core::{Camera, Heuristic, Scene};
 use volwarp_cpu_tracer::ParallelBuilder;
 use volwarp_cpu_tracer::MAX_VIEWPORT;
@@ -73,6 +73,9 @@ pub struct ReadyScene {
     pub received_at: Instant,
     /// LBVH build time in ms.
     pub build_ms: f64,
+    /// The id of the visual state it was rendered with (the last VisualState before it on the
+    /// stream; 0: the server's start state, or a server without live edits).
+    pub state: u32,
 }
 
 /// Network settings.
@@ -234,6 +237,7 @@ struct LinkSlot {
 
 struct Pending {
     frame: Frame,
+    state: u32,
     requested_at: Option<Instant>,
     received_at: Instant,
 }
@@ -248,6 +252,20 @@ struct ViewSlot {
     predictor: Predictor,
     /// The predictor's clock.
     t0: Option<Instant>,
+    /// Visual edits to send before the next request.
+    edits: VecDeque<VisualEdit>,
+    /// The last edit sent or queued: sent again on a new connection (each edit carries the
+    /// whole state the client wants, and a new connection starts from the server's).
+    last_edit: Option<VisualEdit>,
+}
+
+/// What the server said of the visual state.
+#[derive(Default)]
+struct VisualSlot {
+    /// Its last VisualState (`None`: it applies no live edits).
+    state: Option<VisualState>,
+    /// Its last refusal of an edit (Error `BAD_EDIT`), not yet taken.
+    refused: Option<String>,
 }
 
 struct Shared {
@@ -267,6 +285,11 @@ struct Shared {
     down: AtomicBool,
     /// The last request sequence number sent (over all connections).
     seq: AtomicU64,
+    /// The server's visual state and refusals.
+    visual: Mutex<VisualSlot>,
+    /// The id of the server's last VisualState on the current connection: frames read after it
+    /// were rendered with it.
+    state_id: AtomicU32,
     /// Connections made again after a drop.
     reconnects: AtomicU64,
     frames: AtomicU64,
@@ -389,6 +412,8 @@ impl Network {
             link_cv: Condvar::new(),
             down: AtomicBool::new(false),
             seq: AtomicU64::new(0),
+            visual: Mutex::new(VisualSlot::default()),
+            state_id: AtomicU32::new(0),
             reconnects: AtomicU64::new(0),
             frames: AtomicU64::new(0),
             built: AtomicU64::new(0),
@@ -454,6 +479,27 @@ impl Network {
             drop(g);
             self.shared.view_cv.notify_one();
         }
+    }
+
+    /// Queues a visual edit (sent before the next camera request). It should carry the whole
+    /// state the client wants: it is sent again after a reconnect.
+    pub fn send_edit(&self, edit: VisualEdit) {
+        let mut g = lock(&self.shared.view);
+        g.last_edit = Some(edit.clone());
+        g.edits.push_back(edit);
+        drop(g);
+        self.shared.view_cv.notify_one();
+    }
+
+    /// The server's last VisualState (its presets, the state it renders with now); `None`
+    /// where it applies no live edits.
+    pub fn visual_state(&self) -> Option<VisualState> {
+        lock(&self.shared.visual).state.clone()
+    }
+
+    /// The server's last refusal of an edit, once.
+    pub fn take_refusal(&self) -> Option<String> {
+        lock(&self.shared.visual).refused.take()
     }
 
     /// The newest built scene, if one is ready and the slot is free right now (never waits).
@@ -548,6 +594,17 @@ impl Session {
         recorder: Option<RecordSink>,
     ) -> Result<Session, ClientError> {
         let stream = conn.stream;
+        // The new connection renders with the server's start state until our edit is applied.
+        sh.state_id.store(conn.visual.as_ref().map_or(0, |v| v.id), Ordering::SeqCst);
+        lock(&sh.visual).state = conn.visual.clone();
+        {
+            let mut v = lock(&sh.view);
+            if conn.visual.is_some() && v.edits.is_empty() {
+                if let Some(e) = v.last_edit.clone() {
+                    v.edits.push_back(e);
+                }
+            }
+        }
         let (tls_link, tls_reader) = match conn.tls {
             Some(t) => (Some(t.link), Some(t.reader)),
             None => (None, None),
@@ -713,19 +770,57 @@ fn read_loop(sh: &Shared, mut stream: impl Read, limits: Limits, recorder: Optio
                     if q.len() >= MAX_PENDING {
                         q.pop_front();
                     }
-                    q.push_back(Pending { frame, requested_at, received_at });
+                    let state = sh.state_id.load(Ordering::SeqCst);
+                    q.push_back(Pending { frame, state, requested_at, received_at });
                 }
                 sh.pending_cv.notify_one();
                 lock(&sh.view).frame_arrived = true;
                 sh.view_cv.notify_one();
             }
+            Message::VisualState(v) => {
+                log::info!("server: visual state {} ({})", v.id, describe_state(&v));
+                sh.state_id.store(v.id, Ordering::SeqCst);
+                lock(&sh.visual).state = Some(v);
+            }
+            // A refused edit: the connection stays, the state is unchanged.
+            Message::Error(e) if e.code == error_code::BAD_EDIT => {
+                log::warn!("server: {}", e.text);
+                lock(&sh.visual).refused = Some(e.text.to_string());
+            }
             Message::Error(e) => return sh.drop_link(server_error(&e)),
             Message::Bye => return sh.drop_link(ClientError::Gone("the server said goodbye".into())),
-            Message::Hello(_) | Message::CameraRequest(_) => {
+            Message::Hello(_) | Message::CameraRequest(_) | Message::VisualEdit(_) => {
                 return sh.drop_link(ClientError::Protocol("the server sent an unexpected message".into()))
             }
         }
     }
+}
+
+/// A visual state in a few words, for logs and titles: the preset (or the function), window and
+/// level, opacity, crop and clip where set.
+pub fn describe_state(v: &VisualState) -> String {
+    let tf = if v.custom {
+        "custom function"
+    } else if v.preset.is_empty() {
+        "start function"
+    } else {
+        v.preset.as_str()
+    };
+    let mut s = format!("{tf} W {:.2} L {:.2}", v.window_level[0], v.window_level[1]);
+    if v.opacity_scale != 1.0 {
+        s.push_str(&format!(" opacity {:.2}", v.opacity_scale));
+    }
+    if v.crop != [0.0, 0.0, 0.0, 1.0, 1.0, 1.0] {
+        let c = v.crop;
+        s.push_str(&format!(" crop {:.2},{:.2},{:.2}-{:.2},{:.2},{:.2}", c[0], c[1], c[2], c[3], c[4], c[5]));
+    }
+    if v.clip.is_some() {
+        s.push_str(" clip");
+    }
+    if v.shade {
+        s.push_str(" lit");
+    }
+    s
 }
 
 fn build_loop(sh: &Shared, cfg: &NetConfig) {
@@ -779,6 +874,7 @@ fn build_loop(sh: &Shared, cfg: &NetConfig) {
         }
         log::debug!("built scene seq {} ({} samples) in {build_ms:.1} ms", scene.header.seq, scene.samples.len());
         let ready = ReadyScene {
+            state: p.state,
             seq: scene.header.seq,
             scene,
             requested_at: p.requested_at,
@@ -812,6 +908,19 @@ fn write_loop(sh: &Shared, mut stream: impl Write, request: RequestPolicy) {
                 }
                 if sh.down.load(Ordering::SeqCst) {
                     return;
+                }
+                // Edits first, unthrottled: the server applies them to its next frame.
+                if !g.edits.is_empty() {
+                    let edits: Vec<VisualEdit> = g.edits.drain(..).collect();
+                    drop(g);
+                    for e in &edits {
+                        if let Err(err) = crate::connection::send_edit(&mut stream, e) {
+                            return sh.drop_link(ClientError::Gone(format!("cannot send the visual edit: {err}")));
+                        }
+                        log::debug!("sent visual edit {}", e.id);
+                    }
+                    g = lock(&sh.view);
+                    continue;
                 }
                 let events = ViewEvents { moved: g.changed, first_still: false, frame_arrived: g.frame_arrived };
                 if let Some(v) = g.view.filter(|_| request.due(&CADENCE, events)) {

@@ -18,10 +18,21 @@ Window controls:
   H / Shift+H                next / previous depth heuristic (sent to the server)
   [ ]                        smaller / larger sample radius (sent to the server)
   R                          reset the camera
+  Ctrl + left drag           window/level: right widens the window, up raises the level
+  P / Shift+P                next / previous transfer-function preset (the server's list,
+                             then the function it started with)
+  O / Shift+O                more / less opacity
+  C                          crop box on / off (starts with the front half cut away)
+  F / Shift+F                next / previous crop face (x min, y min, z min, x max, …)
+  Page Up / Page Down        move that crop face towards the box's max / min side
+  L                          lighting (gradient shading) on / off
+  F12                        save the window as volwarp-shot-N.png (current folder)
   Esc / Q                    quit
 The title shows display FPS, server frames per second, the age of the shown frame (time since
-its camera was requested), its sample count, the renderer, the heuristic and the warp levers
-that are on (predict, guard, adapt, frames kept).
+its camera was requested), its sample count, the renderer, the heuristic, the warp levers
+that are on (predict, guard, adapt, frames kept), then the preset, window/level, opacity and
+crop; 'updating…' while the frame of the newest visual edit has not arrived (until then the
+window warps the frames of the state it has, never mixing two states).
 
 Without --connect the client starts the real volwarp-server program (found beside this client,
 on PATH or in $VOLWARP_SERVER) on 127.0.0.1 (random port); it serves the bundled dataset, or

@@ -155,6 +155,7 @@ pub fn draw(replay: &mut Replay, renderers: &mut Renderers, req: &CameraRequest,
         new_frame: false,
         during_build: false,
         build_ms: None,
+        state: 0,
     }
 }
 

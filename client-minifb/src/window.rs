@@ -10,6 +10,7 @@ use crate::display::{to_0rgb, Display, RateMeter};
 use crate::error::ClientError;
 use crate::network::View;
 use crate::options::Options;
+use crate::visual::VisualControls;
 use minifb::{Key, KeyRepeat, MouseButton, MouseMode, Window, WindowOptions};
 use std::time::{Duration, Instant};
 use volwarp_core::renderer::Image;
@@ -158,6 +159,11 @@ pub fn run_live(opts: &Options, display: &mut Display, home: Camera) -> Result<(
     let mut mouse_prev: Option<(f32, f32)> = None;
     let mut shown_first = false;
     let mut frames = 0u64;
+    // The visual-state controls, once the server said it applies edits; the last edit's id and
+    // when it was made (until its first frame is shown).
+    let mut visual: Option<VisualControls> = None;
+    let mut edit_at: Option<(u32, Instant)> = None;
+    let mut shots = 0u32;
     let limit = opts.frames.filter(|n| *n > 0).map(u64::from);
     while !screen.quit() && limit.is_none_or(|n| frames < n) {
         let now = Instant::now();
@@ -190,10 +196,52 @@ pub fn run_live(opts: &Options, display: &mut Display, home: Camera) -> Result<(
         if w.is_key_pressed(Key::R, KeyRepeat::No) {
             controls.reset();
         }
+        if visual.is_none() {
+            visual = display.network().visual_state().map(|s| VisualControls::new(&s));
+        }
+        let shift = w.is_key_down(Key::LeftShift) || w.is_key_down(Key::RightShift);
+        let ctrl = w.is_key_down(Key::LeftCtrl) || w.is_key_down(Key::RightCtrl);
+        let mut edit = None;
+        if let Some(v) = &mut visual {
+            if w.is_key_pressed(Key::P, KeyRepeat::No) {
+                edit = v.cycle_preset(shift);
+            }
+            if w.is_key_pressed(Key::O, KeyRepeat::Yes) {
+                edit = Some(v.step_opacity(!shift));
+            }
+            if w.is_key_pressed(Key::C, KeyRepeat::No) {
+                edit = Some(v.toggle_crop());
+            }
+            if w.is_key_pressed(Key::F, KeyRepeat::No) {
+                v.cycle_face(shift);
+            }
+            if w.is_key_pressed(Key::PageUp, KeyRepeat::Yes) {
+                edit = Some(v.move_face(1.0));
+            }
+            if w.is_key_pressed(Key::PageDown, KeyRepeat::Yes) {
+                edit = Some(v.move_face(-1.0));
+            }
+            if w.is_key_pressed(Key::L, KeyRepeat::No) {
+                let shown = display.network().visual_state().is_some_and(|s| s.shade);
+                edit = Some(v.toggle_shade(shown));
+            }
+        }
+        if w.is_key_pressed(Key::F12, KeyRepeat::No) {
+            shots += 1;
+            let path = std::path::PathBuf::from(format!("volwarp-shot-{shots}.png"));
+            match display.image.save_png(&path) {
+                Ok(()) => log::info!("screenshot saved to {}", path.display()),
+                Err(e) => log::warn!("cannot save the screenshot {}: {e}", path.display()),
+            }
+        }
         let mouse = w.get_mouse_pos(MouseMode::Pass);
         if let (Some((x, y)), Some((px, py))) = (mouse, mouse_prev) {
             let (dx, dy) = (x - px, y - py);
-            if w.get_mouse_down(MouseButton::Left) {
+            if w.get_mouse_down(MouseButton::Left) && ctrl {
+                if let Some(v) = &mut visual {
+                    edit = v.window_level_drag(dx, dy, controls.camera.height).or(edit);
+                }
+            } else if w.get_mouse_down(MouseButton::Left) {
                 controls.orbit_pixels(dx, dy);
             } else if w.get_mouse_down(MouseButton::Right) {
                 controls.pan_pixels(dx, dy);
@@ -222,9 +270,21 @@ pub fn run_live(opts: &Options, display: &mut Display, home: Camera) -> Result<(
         if (sw, sh) != (controls.camera.width, controls.camera.height) {
             controls.resize(sw, sh);
         }
+        if let Some(e) = edit {
+            log::info!("visual edit {}: {}", e.id, visual.as_ref().map_or(String::new(), |v| v.label(e.id)));
+            edit_at = Some((e.id, Instant::now()));
+            display.network().send_edit(e);
+        }
+        if let Some(text) = display.network().take_refusal() {
+            log::warn!("the server refused the edit: {text}");
+        }
         // Draw.
         let view = View { camera: controls.camera, heuristic, radius_scale };
         let report = display.frame(&view);
+        if let Some((id, t)) = edit_at.filter(|(id, _)| *id == report.state) {
+            log::info!("visual state {id} shown {:.1} ms after the edit", t.elapsed().as_secs_f64() * 1e3);
+            edit_at = None;
+        }
         screen.present(&display.image)?;
         frames += 1;
         meter.add(1, Instant::now());
@@ -246,10 +306,13 @@ pub fn run_live(opts: &Options, display: &mut Display, home: Camera) -> Result<(
             );
             let (frames_used, watertight) = (display.frames_used(), display.renderers.watertight());
             let l = levers(opts.predict, opts.guard, display.renderers.adaptive_radius(), frames_used, watertight);
-            let title = match display.network().state().label() {
+            let mut title = match display.network().state().label() {
                 Some(link) => format!("{} | {l}", t.replacen("volwarp | ", &format!("volwarp | {link} | "), 1)),
                 None => format!("{t} | {l}"),
             };
+            if let Some(v) = &visual {
+                title = format!("{title} | {}", v.label(report.state));
+            }
             screen.window.set_title(&title);
         }
     }

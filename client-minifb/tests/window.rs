@@ -59,15 +59,179 @@ fn parse_xwd(b: &[u8]) -> Result<Shot, String> {
     Ok(Shot { width, height, rgb })
 }
 
-#[test]
-fn window_opens_and_shows_the_volume() {
+/// The window tests share one display: each holds this while its window is open, so a
+/// screenshot or an xdotool search sees one volwarp window.
+static SCREEN: std::sync::Mutex<()> = std::sync::Mutex::new(());
+
+/// Captures the whole screen.
+fn screenshot() -> Shot {
+    let xwd = Command::new("xwd").args(["-root", "-silent"]).output();
+    let xwd = xwd.expect("running xwd (x11-apps; scripts/setup.sh installs it)");
+    assert!(xwd.status.success(), "xwd failed: {}", String::from_utf8_lossy(&xwd.stderr));
+    parse_xwd(&xwd.stdout).unwrap()
+}
+
+/// The bounding box of the renderer's background color on screen: the window.
+fn window_region(shot: &Shot) -> (usize, usize, usize, usize) {
+    let bg = volwarp_core::BACKGROUND.to_le_bytes();
+    let bg = [bg[0], bg[1], bg[2]];
+    let (mut x0, mut y0, mut x1, mut y1) = (usize::MAX, usize::MAX, 0, 0);
+    for y in 0..shot.height {
+        for x in 0..shot.width {
+            if shot.rgb[y * shot.width + x] == bg {
+                (x0, y0, x1, y1) = (x0.min(x), y0.min(y), x1.max(x), y1.max(y));
+            }
+        }
+    }
+    assert!(x0 != usize::MAX, "no pixel of the background color on screen: no window");
+    (x0, y0, x1, y1)
+}
+
+/// Skips (with `VOLWARP_SKIP_WINDOW=1`) or fails without a display; `true`: run.
+fn have_display() -> bool {
     if std::env::var_os("DISPLAY").is_none_or(|d| d.is_empty()) {
         if std::env::var("VOLWARP_SKIP_WINDOW").as_deref() == Ok("1") {
             eprintln!("window test skipped: DISPLAY is not set and VOLWARP_SKIP_WINDOW=1");
-            return;
+            return false;
         }
         panic!("DISPLAY is not set: run the tests under xvfb-run (scripts/test.sh does), or set VOLWARP_SKIP_WINDOW=1 to skip the window test");
     }
+    true
+}
+
+/// The client's log lines as they come.
+fn log_lines(child: &mut std::process::Child) -> mpsc::Receiver<String> {
+    let (tx, rx) = mpsc::channel();
+    let stderr = child.stderr.take().unwrap();
+    std::thread::spawn(move || {
+        for line in BufReader::new(stderr).lines().map_while(Result::ok) {
+            let _ = tx.send(line);
+        }
+    });
+    rx
+}
+
+/// Waits for a log line containing `want` (90 s at most); `false` on an error or timeout.
+fn wait_for(rx: &mpsc::Receiver<String>, log: &mut String, want: &str) -> bool {
+    loop {
+        match rx.recv_timeout(Duration::from_secs(90)) {
+            Ok(l) => {
+                log.push_str(&l);
+                log.push('\n');
+                if l.contains(want) {
+                    return true;
+                }
+                if l.contains("volwarp-client: error") {
+                    return false;
+                }
+            }
+            Err(_) => return false,
+        }
+    }
+}
+
+fn xdotool(args: &[&str]) -> String {
+    let out = Command::new("xdotool")
+        .args(args)
+        .output()
+        .expect("running xdotool (scripts/setup.sh installs it): the window test drives input through it");
+    assert!(out.status.success(), "xdotool {args:?} failed: {}", String::from_utf8_lossy(&out.stderr));
+    String::from_utf8_lossy(&out.stdout).into_owned()
+}
+
+/// A Ctrl+drag in the window (window/level) changes the picture once the server's frame of the
+/// new state arrives; F12 saves a screenshot PNG.
+#[test]
+fn window_level_drag_changes_the_picture() {
+    if !have_display() {
+        return;
+    }
+    let _screen = SCREEN.lock().unwrap_or_else(|e| e.into_inner());
+    let dir = scratch("window-level");
+    let mut child = Command::new(bin())
+        .args(["--size", "320x240", "--threads", "1", "--frames", "6000", "--fps", "60"])
+        .current_dir(&dir)
+        .env("RUST_LOG", "info")
+        .env("VOLWARP_SERVER", server_program())
+        .stdout(Stdio::null())
+        .stderr(Stdio::piped())
+        .spawn()
+        .expect("starting volwarp-client");
+    let rx = log_lines(&mut child);
+    let mut log = String::new();
+    let kill = |child: &mut std::process::Child| {
+        let _ = child.kill();
+        let _ = child.wait();
+    };
+    if !wait_for(&rx, &mut log, "window: showing frame") {
+        kill(&mut child);
+        panic!("the window never showed a frame; log:\n{log}");
+    }
+    std::thread::sleep(Duration::from_millis(700));
+    let before = screenshot();
+    let (x0, y0, x1, y1) = window_region(&before);
+    let id = xdotool(&["search", "--name", "^volwarp"]);
+    let id = id.lines().next().unwrap_or_default().to_string();
+    assert!(!id.is_empty(), "xdotool found no volwarp window");
+    // Ctrl + left drag: left 60 px (a narrower window), down 40 px (a lower level: soft
+    // tissue shows), in steps the display loop sees one by one.
+    let mut drag: Vec<String> = [
+        "mousemove",
+        "--window",
+        &id,
+        "160",
+        "120",
+        "keydown",
+        "ctrl",
+        "sleep",
+        "0.3",
+        "mousedown",
+        "1",
+        "sleep",
+        "0.3",
+    ]
+    .iter()
+    .map(|s| s.to_string())
+    .collect();
+    for _ in 0..10 {
+        drag.extend(["sleep", "0.05", "mousemove_relative", "--", "-6", "4"].map(String::from));
+    }
+    drag.extend(["sleep", "0.3", "mouseup", "1", "keyup", "ctrl"].map(String::from));
+    xdotool(&drag.iter().map(|s| s.as_str()).collect::<Vec<_>>());
+    // The first frame of an edited state shown (the drag's last edits follow within frames).
+    if !wait_for(&rx, &mut log, "after the edit") {
+        kill(&mut child);
+        panic!("no frame of an edited state was shown; log:\n{log}");
+    }
+    std::thread::sleep(Duration::from_millis(1500));
+    let after = screenshot();
+    // Held for a while: a press and release within one display frame would not be seen.
+    xdotool(&["mousemove", "--window", &id, "160", "120", "keydown", "F12", "sleep", "0.3", "keyup", "F12"]);
+    let saved = wait_for(&rx, &mut log, "screenshot saved to");
+    kill(&mut child);
+    assert!(log.contains("visual edit"), "no edit was made; log:\n{log}");
+    let mut changed = 0;
+    for y in y0..=y1 {
+        for x in x0..=x1 {
+            let (p, q) = (before.rgb[y * before.width + x], after.rgb[y * after.width + x]);
+            if p.iter().zip(q).any(|(a, b)| a.abs_diff(b) > 30) {
+                changed += 1;
+            }
+        }
+    }
+    let area = (x1 + 1 - x0) * (y1 + 1 - y0);
+    assert!(changed > area / 50, "only {changed} of {area} window pixels changed after the drag; log:\n{log}");
+    assert!(saved, "F12 saved no screenshot; log:\n{log}");
+    let png = std::fs::read(dir.join("volwarp-shot-1.png")).expect("the screenshot file");
+    assert_eq!(&png[..8], b"\x89PNG\r\n\x1a\n");
+}
+
+#[test]
+fn window_opens_and_shows_the_volume() {
+    if !have_display() {
+        return;
+    }
+    let _screen = SCREEN.lock().unwrap_or_else(|e| e.into_inner());
     let (w, h) = (320usize, 240usize);
     let size = format!("{w}x{h}");
     let mut child = Command::new(bin())

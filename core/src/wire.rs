@@ -17,13 +17,17 @@ use glam::Vec3;
 
 mod errors;
 pub use errors::{CompactError, LayerError};
+mod visual;
+pub use visual::*;
 
 /// The four magic bytes that start every message.
 pub const MAGIC: [u8; 4] = *b"VWRP";
-/// The protocol version this crate speaks (and writes in every header). Version 3 (layered frames)
-/// added layered frames: a layer count in a Frame's byte 57 and a segment-index plane after its
-/// colors, the LayeredCompactFrame message (type 7) and the layer count in the Hello.
-pub const VERSION: u16 = 3;
+/// The protocol version this crate speaks (and writes in every header). Version 4 added the live
+/// visual state: the VisualEdit (type 8) and VisualState (type 9) messages, the [`CAP_VISUAL`]
+/// bit and the non-closing Error [`error_code::BAD_EDIT`]. Version 3 added layered frames: a
+/// layer count in a Frame's byte 57 and a segment-index plane after its colors, the
+/// LayeredCompactFrame message (type 7) and the layer count in the Hello.
+pub const VERSION: u16 = 4;
 /// The oldest version a receiver accepts: version 2 only added the CompactFrame message and the
 /// [`CAP_COMPACT`] bit, so every version-1 message is read as it was (old record files replay).
 pub const MIN_VERSION: u16 = 1;
@@ -74,6 +78,11 @@ pub enum MsgType {
     /// Server to client: a layered frame in the compact encoding, one CompactFrame per layer
     /// (version 3; `crate::segments`).
     LayeredCompactFrame = 7,
+    /// Client to server: change the visual state (version 4; [`VisualEdit`]).
+    VisualEdit = 8,
+    /// Server to client: the visual state the following frames are rendered with, and the
+    /// presets (version 4; [`VisualState`]).
+    VisualState = 9,
 }
 
 impl MsgType {
@@ -87,6 +96,8 @@ impl MsgType {
             5 => MsgType::Bye,
             6 => MsgType::CompactFrame,
             7 => MsgType::LayeredCompactFrame,
+            8 => MsgType::VisualEdit,
+            9 => MsgType::VisualState,
             _ => return None,
         })
     }
@@ -145,9 +156,11 @@ impl Limits {
         self
     }
 
-    /// Limits for a server reading client messages: nothing larger than an Error message.
+    /// Limits for a server reading client messages: nothing larger than the largest
+    /// VisualEdit (the largest message a client sends).
     pub const fn for_requests(max_viewport: u32) -> Limits {
-        Limits { max_payload: (4 + MAX_ERROR_TEXT) as u32, max_samples: 0, max_viewport, max_layers: 1 }
+        let max = if VISUAL_EDIT_MAX_LEN > 4 + MAX_ERROR_TEXT { VISUAL_EDIT_MAX_LEN } else { 4 + MAX_ERROR_TEXT };
+        Limits { max_payload: max as u32, max_samples: 0, max_viewport, max_layers: 1 }
     }
 }
 
@@ -210,6 +223,9 @@ pub enum WireError {
     Compact(CompactError),
     /// A layered frame's segments are invalid (version 3).
     Layers(LayerError),
+    /// A VisualEdit or VisualState is malformed (version 4). The whole payload was read: the
+    /// stream is at the next message.
+    BadVisual(VisualWireError),
 }
 
 impl core::fmt::Display for WireError {
@@ -236,6 +252,7 @@ impl core::fmt::Display for WireError {
             WireError::BufferTooSmall => f.write_str("buffers too small for the frame"),
             WireError::Compact(e) => write!(f, "{e}"),
             WireError::Layers(e) => write!(f, "{e}"),
+            WireError::BadVisual(e) => write!(f, "{e}"),
         }
     }
 }
@@ -360,6 +377,9 @@ pub mod error_code {
     /// Too many failed Hellos (wrong tokens) from this address lately: refused before the
     /// handshake; try again later.
     pub const RATE_LIMITED: u16 = 8;
+    /// A VisualEdit was refused (version 4): the text says why; the state is unchanged and,
+    /// unlike every other code, the connection stays open.
+    pub const BAD_EDIT: u16 = 9;
 }
 
 impl ErrorMsg {
@@ -615,6 +635,8 @@ pub fn parse_header(h: &[u8; HEADER_LEN], limits: &Limits) -> Result<Header, Wir
         MsgType::Bye => len == 0,
         MsgType::CompactFrame => len >= COMPACT_FIXED_LEN as u32,
         MsgType::LayeredCompactFrame => len >= FRAME_FIXED_LEN as u32,
+        MsgType::VisualEdit => (VISUAL_EDIT_FIXED_LEN as u32..=VISUAL_EDIT_MAX_LEN as u32).contains(&len),
+        MsgType::VisualState => (VISUAL_STATE_FIXED_LEN as u32..=VISUAL_STATE_MAX_LEN as u32).contains(&len),
     };
     if len > limits.max_payload {
         return Err(WireError::TooLarge { len, limit: limits.max_payload });

@@ -14,7 +14,10 @@ use volwarp_core::heuristics::Heuristic;
 use volwarp_core::sample::{Bounds, Dequantizer};
 use volwarp_core::scene::Scene;
 use volwarp_core::traversal::brute_force;
-use volwarp_core::wire::{encode_to_vec, ErrorMsg, Frame, FrameHeader, Hello, Message};
+use volwarp_core::wire::{
+    encode_to_vec, preset_name, ErrorMsg, Frame, FrameHeader, Hello, Message, PresetName, TfPoints, VisualEdit,
+    VisualState,
+};
 use volwarp_core::{Ray, Vec3};
 
 #[global_allocator]
@@ -91,7 +94,66 @@ fn message() -> impl Strategy<Value = Message> {
         frame().prop_map(Message::Frame),
         (any::<u16>(), ".{0,80}").prop_map(|(code, text)| Message::Error(ErrorMsg::new(code, &text))),
         Just(Message::Bye),
+        visual_edit().prop_map(Message::VisualEdit),
+        visual_state().prop_map(Message::VisualState),
     ]
+}
+
+fn floats<const N: usize>() -> impl Strategy<Value = [f32; N]> {
+    prop::collection::vec(float(), N).prop_map(|v| v.try_into().unwrap())
+}
+
+fn name() -> impl Strategy<Value = PresetName> {
+    "[a-z-]{0,32}".prop_map(|s| preset_name(&s).unwrap())
+}
+
+fn visual_edit() -> impl Strategy<Value = VisualEdit> {
+    let tf = (prop::collection::vec(floats::<4>(), 0..=8), prop::collection::vec(floats::<2>(), 0..=8))
+        .prop_map(|(c, o)| TfPoints { color: c.into_iter().collect(), opacity: o.into_iter().collect() });
+    (
+        any::<u32>(),
+        prop::option::of(any::<bool>()),
+        prop::option::of(name()),
+        prop::option::of(floats::<2>()),
+        prop::option::of(float()),
+        prop::option::of(floats::<6>()),
+        prop::option::of(prop::option::of(floats::<6>())),
+        prop::option::of(tf),
+    )
+        .prop_map(|(id, shade, preset, window_level, opacity_scale, crop, clip, transfer_function)| VisualEdit {
+            id,
+            shade,
+            preset,
+            window_level,
+            opacity_scale,
+            crop,
+            clip,
+            transfer_function,
+        })
+}
+
+fn visual_state() -> impl Strategy<Value = VisualState> {
+    (
+        any::<u32>(),
+        any::<(bool, bool)>(),
+        name(),
+        floats::<2>(),
+        float(),
+        floats::<6>(),
+        prop::option::of(floats::<6>()),
+        prop::collection::vec(name(), 0..=16),
+    )
+        .prop_map(|(id, (shade, custom), preset, window_level, opacity_scale, crop, clip, presets)| VisualState {
+            id,
+            shade,
+            preset,
+            custom,
+            window_level,
+            opacity_scale,
+            crop,
+            clip,
+            presets: presets.into_iter().collect(),
+        })
 }
 
 /// A mutation of an encoded stream: flip a byte, overwrite a little-endian `u32` with an

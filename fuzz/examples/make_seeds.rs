@@ -5,7 +5,10 @@ use std::fs;
 use volwarp_core::camera::Camera;
 use volwarp_core::heuristics::Heuristic;
 use volwarp_core::sample::{pack_color, Bounds, Quantizer};
-use volwarp_core::wire::{encode_to_vec, error_code, ErrorMsg, Frame, FrameHeader, Hello, Message, CAP_GPU};
+use volwarp_core::wire::{
+    encode_to_vec, error_code, preset_name, ErrorMsg, Frame, FrameHeader, Hello, Message, TfPoints, VisualEdit,
+    VisualState, CAP_GPU,
+};
 use volwarp_core::Vec3;
 
 fn frame(n: usize, bounds: Bounds, radius_unit: f32, w: u32, h: u32) -> Message {
@@ -40,6 +43,34 @@ fn main() {
     let hello_tok = Message::Hello(Hello::new(0).with_token(&[b'k'; 64]).unwrap());
     let req = volwarp_fuzz::checks::camera_request(7, cam, Heuristic::EnExMean, 1.0);
     let err = Message::Error(ErrorMsg::new(error_code::UNAUTHORIZED, "wrong token ✗"));
+    let mut tf = TfPoints::default();
+    for i in 0..4 {
+        let x = i as f32 / 3.0;
+        tf.color.push([x, 1.0, x, 0.5]).unwrap();
+        tf.opacity.push([x, x * x]).unwrap();
+    }
+    let edit = Message::VisualEdit(VisualEdit {
+        id: 3,
+        shade: Some(true),
+        preset: preset_name("ct-bone"),
+        window_level: Some([0.8, 0.45]),
+        opacity_scale: Some(1.5),
+        crop: Some([0.0, 0.5, 0.0, 1.0, 1.0, 1.0]),
+        clip: Some(Some([0.5, 0.5, 0.5, -1.0, 0.0, 0.0])),
+        transfer_function: Some(tf),
+    });
+    let mut state = VisualState {
+        id: 3,
+        preset: preset_name("ct-bone").unwrap(),
+        window_level: [0.8, 0.45],
+        opacity_scale: 1.0,
+        crop: [0.0, 0.0, 0.0, 1.0, 1.0, 1.0],
+        ..VisualState::default()
+    };
+    for n in ["grey", "ct-bone", "ct-soft-tissue", "mr-default", "cool-warm"] {
+        state.presets.push(preset_name(n).unwrap()).unwrap();
+    }
+    let state = Message::VisualState(state);
     let frames = [
         ("frame_empty", frame(0, unit, 0.01, 64, 64)),
         ("frame_one", frame(1, unit, 0.01, 64, 64)),
@@ -70,7 +101,14 @@ fn main() {
         v.extend_from_slice(s);
         v
     };
-    for (name, m) in [("hello", &hello), ("hello_token", &hello_tok), ("request", &req), ("error", &err)] {
+    for (name, m) in [
+        ("hello", &hello),
+        ("hello_token", &hello_tok),
+        ("request", &req),
+        ("error", &err),
+        ("visual_edit", &edit),
+        ("visual_state", &state),
+    ] {
         files.push(("roundtrip", name.into(), encode_to_vec(m)));
         files.push(("wire_decode_chunked", name.into(), prefix(&[0], u16::MAX, &encode_to_vec(m))));
     }

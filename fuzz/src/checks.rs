@@ -194,6 +194,35 @@ pub fn check_message(m: &Message, limits: &Limits) {
         Message::Frame(f) => check_frame(&f.header, &f.samples, &f.colors, limits),
         Message::Error(e) => assert!(e.text.len() <= MAX_ERROR_TEXT),
         Message::Bye => {}
+        Message::VisualEdit(_) | Message::VisualState(_) => {
+            assert!(visual_valid(m), "an accepted visual message holds a non-finite number or an empty name: {m:?}")
+        }
+    }
+}
+
+/// Whether a VisualEdit or VisualState is one the decoder accepts: every float it uses finite,
+/// every name it sends non-empty (the codec's own bounds hold by the types).
+pub fn visual_valid(m: &Message) -> bool {
+    let fin = |v: &[f32]| v.iter().all(|x| x.is_finite());
+    match m {
+        Message::VisualEdit(e) => {
+            e.window_level.is_none_or(|v| fin(&v))
+                && e.opacity_scale.is_none_or(|v| v.is_finite())
+                && e.crop.is_none_or(|v| fin(&v))
+                && e.clip.is_none_or(|c| c.is_none_or(|v| fin(&v)))
+                && e.preset.as_ref().is_none_or(|n| !n.is_empty())
+                && e.transfer_function
+                    .as_ref()
+                    .is_none_or(|t| t.color.iter().all(|p| fin(p)) && t.opacity.iter().all(|p| fin(p)))
+        }
+        Message::VisualState(s) => {
+            fin(&s.window_level)
+                && s.opacity_scale.is_finite()
+                && fin(&s.crop)
+                && s.clip.is_none_or(|v| fin(&v))
+                && s.presets.iter().all(|n| !n.is_empty())
+        }
+        _ => true,
     }
 }
 
@@ -332,6 +361,7 @@ pub fn expected_valid(m: &Message, limits: &Limits) -> bool {
     let cam_ok = |c: &Camera| c.validate(limits.max_viewport).is_ok();
     match m {
         Message::Hello(_) | Message::Error(_) | Message::Bye => true,
+        Message::VisualEdit(_) | Message::VisualState(_) => visual_valid(m),
         Message::CameraRequest(r) => cam_ok(&r.camera) && r.radius_scale > 0.0 && r.radius_scale <= 16.0,
         Message::Frame(f) => {
             let h = &f.header;
@@ -367,7 +397,8 @@ pub fn roundtrip_message(m: &Message, limits: &Limits) {
                 | WireError::BadBounds
                 | WireError::BadRadius
                 | WireError::TooManySamples { .. }
-                | WireError::TooLarge { .. },
+                | WireError::TooLarge { .. }
+                | WireError::BadVisual(_),
             ) => {}
             other => panic!("an invalid message decoded as {other:?}"),
         }

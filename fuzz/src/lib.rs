@@ -12,7 +12,10 @@ use arbitrary::{Result, Unstructured};
 use volwarp_core::camera::Camera;
 use volwarp_core::heuristics::Heuristic;
 use volwarp_core::sample::Bounds;
-use volwarp_core::wire::{ErrorMsg, Frame, FrameHeader, Hello, Message, MAX_TOKEN};
+use volwarp_core::wire::{
+    ErrorMsg, Frame, FrameHeader, Hello, Message, PresetName, TfPoints, VisualEdit, VisualState, MAX_PRESETS,
+    MAX_PRESET_NAME, MAX_TF_POINTS, MAX_TOKEN,
+};
 use volwarp_core::Vec3;
 
 /// Any bit pattern, or a small exact value (so that valid messages are common).
@@ -40,7 +43,7 @@ fn heuristic(u: &mut Unstructured) -> Result<Heuristic> {
 /// A structured message from fuzz input: every field arbitrary, floats biased towards values
 /// that validate. Frames have up to 300 samples with one color each.
 pub fn arb_message(u: &mut Unstructured) -> Result<Message> {
-    Ok(match u.int_in_range(0u8..=4)? {
+    Ok(match u.int_in_range(0u8..=6)? {
         0 => {
             let n = u.int_in_range(0..=MAX_TOKEN)?;
             let token = u.bytes(n)?;
@@ -73,6 +76,74 @@ pub fn arb_message(u: &mut Unstructured) -> Result<Message> {
             let text: &str = u.arbitrary()?;
             Message::Error(ErrorMsg::new(code, text))
         }
+        5 => Message::VisualEdit(arb_visual_edit(u)?),
+        6 => Message::VisualState(arb_visual_state(u)?),
         _ => Message::Bye,
+    })
+}
+
+fn floats<const N: usize>(u: &mut Unstructured) -> Result<[f32; N]> {
+    let mut a = [0.0; N];
+    for x in &mut a {
+        *x = float(u)?;
+    }
+    Ok(a)
+}
+
+fn preset_name(u: &mut Unstructured) -> Result<PresetName> {
+    let mut s: &str = u.arbitrary()?;
+    let mut end = s.len().min(MAX_PRESET_NAME);
+    while !s.is_char_boundary(end) {
+        end -= 1;
+    }
+    s = &s[..end];
+    let mut n = PresetName::new();
+    let _ = n.push_str(s);
+    Ok(n)
+}
+
+fn opt<T>(u: &mut Unstructured, f: impl FnOnce(&mut Unstructured) -> Result<T>) -> Result<Option<T>> {
+    Ok(if u.arbitrary::<bool>()? { Some(f(u)?) } else { None })
+}
+
+/// A structured VisualEdit: any subset of fields, up to the most points of each kind.
+pub fn arb_visual_edit(u: &mut Unstructured) -> Result<VisualEdit> {
+    Ok(VisualEdit {
+        id: u.arbitrary()?,
+        shade: opt(u, |u| u.arbitrary())?,
+        preset: opt(u, preset_name)?,
+        window_level: opt(u, floats::<2>)?,
+        opacity_scale: opt(u, float)?,
+        crop: opt(u, floats::<6>)?,
+        clip: opt(u, |u| opt(u, floats::<6>))?,
+        transfer_function: opt(u, |u| {
+            let mut t = TfPoints::default();
+            for _ in 0..u.int_in_range(0..=MAX_TF_POINTS)? {
+                let _ = t.color.push(floats::<4>(u)?);
+            }
+            for _ in 0..u.int_in_range(0..=MAX_TF_POINTS)? {
+                let _ = t.opacity.push(floats::<2>(u)?);
+            }
+            Ok(t)
+        })?,
+    })
+}
+
+/// A structured VisualState: any fields, up to the most preset names.
+pub fn arb_visual_state(u: &mut Unstructured) -> Result<VisualState> {
+    let mut presets: volwarp_core::wire::PresetNames = Default::default();
+    for _ in 0..u.int_in_range(0..=MAX_PRESETS)? {
+        let _ = presets.push(preset_name(u)?);
+    }
+    Ok(VisualState {
+        id: u.arbitrary()?,
+        shade: u.arbitrary()?,
+        preset: preset_name(u)?,
+        custom: u.arbitrary()?,
+        window_level: floats::<2>(u)?,
+        opacity_scale: float(u)?,
+        crop: floats::<6>(u)?,
+        clip: opt(u, floats::<6>)?,
+        presets,
     })
 }

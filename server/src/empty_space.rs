@@ -140,7 +140,8 @@ impl MinMaxGrid {
 
     /// Which bricks a transfer function can make visible.
     pub fn occupancy(&self, tf: &TransferFunction, spacing: Vec3) -> Occupancy {
-        let occupied: Vec<bool> = self.ranges.iter().map(|&(lo, hi)| tf.max_opacity(lo, hi) > 0.0).collect();
+        let visible = tf.visibility();
+        let occupied: Vec<bool> = self.ranges.iter().map(|&(lo, hi)| visible(lo, hi)).collect();
         let dist = chebyshev_distance(self.bricks, &occupied);
         let empty: Vec<bool> = occupied.iter().map(|&o| !o).collect();
         let visible_reach = chebyshev_distance(self.bricks, &empty);

@@ -233,8 +233,9 @@ struct NetArgs {
     /// Most clients at once.
     #[arg(long, default_value_t = 8)]
     max_clients: usize,
-    /// Largest client message payload in bytes.
-    #[arg(long, default_value_t = 260)]
+    /// Largest client message payload in bytes (1640: the largest VisualEdit, a transfer
+    /// function of 64 color and 64 opacity points).
+    #[arg(long, default_value_t = volwarp_core::wire::VISUAL_EDIT_MAX_LEN as u32)]
     max_message: u32,
     /// Seconds a client has for the Hello exchange.
     #[arg(long, default_value_t = 5.0)]
@@ -483,7 +484,9 @@ fn run(cli: Cli) -> Result<(), String> {
         Cmd::Serve => {
             let n = &cli.net;
             let config = server_config(&cli.net, cli.data.layers)?;
-            let server = Server::with_transfer_function(config, marcher, &tf).map_err(|e| e.to_string())?;
+            let server = Server::with_transfer_function(config, marcher, &tf)
+                .map_err(|e| e.to_string())?
+                .with_visual(ds.tf.clone(), visual.clone());
             println!("listening on {}", server.local_addr());
             use std::io::Write;
             let _ = std::io::stdout().flush();

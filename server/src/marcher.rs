@@ -286,11 +286,41 @@ impl Marcher {
         state: &crate::visual::VisualState,
     ) -> Result<Marcher, crate::visual::VisualError> {
         let tf = state.transfer_function(base, self.volume.value_range())?;
+        Ok(self.with_visual_tf(&tf, state))
+    }
+
+    /// [`Marcher::with_visual`] with the state's transfer function already made (`tf`, from
+    /// [`crate::visual::VisualState::transfer_function`]; the levels of detail share the one of
+    /// the volume itself): its tables and the empty-space occupancy are built, the volume and
+    /// its min/max grid are shared.
+    pub fn with_visual_tf(&self, tf: &TransferFunction, state: &crate::visual::VisualState) -> Marcher {
         let opts = MarchOptions { shading: state.shade.then_some(Shading::DEFAULT), ..self.opts };
-        let m = Marcher::with_grid_unit(self.volume.clone(), self.grid.clone(), &tf, opts, Some(self.opacity_unit))
+        let m = Marcher::with_grid_unit(self.volume.clone(), self.grid.clone(), tf, opts, Some(self.opacity_unit))
             .at_level(self.level);
         let cut = state.cut(&self.volume);
-        Ok(if cut.is_whole(self.volume.extent()) { m } else { m.with_cut(cut) })
+        if cut.is_whole(self.volume.extent()) {
+            m
+        } else {
+            m.with_cut(cut)
+        }
+    }
+
+    /// This marcher with `state`'s shading and cut and its own transfer-function tables (for a
+    /// state whose function is this marcher's, [`crate::visual::VisualState::same_function`]):
+    /// only the empty-space occupancy is made again, and only where the cut changes.
+    pub fn with_visual_cut(&self, state: &crate::visual::VisualState) -> Marcher {
+        let mut m = self.clone();
+        m.opts.shading = state.shade.then_some(Shading::DEFAULT);
+        let cut = state.cut(&self.volume).for_volume(self.volume.dims(), self.volume.spacing());
+        if cut == self.cut {
+            return m;
+        }
+        m.with_cut(cut)
+    }
+
+    /// The transfer function its tables were made of.
+    pub fn transfer_function(&self) -> &TransferFunction {
+        &self.tf
     }
 
     /// The crop box and clip plane in use.

@@ -33,10 +33,10 @@ use volwarp_core::wire::{CameraRequest, Frame};
 
 /// What makes two requests render the same frame (everything but the sequence number).
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
-struct Key([u32; 16]);
+struct Key([u32; 17]);
 
 impl Key {
-    fn of(req: &CameraRequest, layers: u32, level: u8) -> Key {
+    fn of(req: &CameraRequest, layers: u32, level: u8, generation: u32) -> Key {
         let c = &req.camera;
         Key([
             c.eye.x.to_bits(),
@@ -55,6 +55,7 @@ impl Key {
             req.radius_scale.to_bits(),
             layers.max(1),
             level as u32,
+            generation,
         ])
     }
 }
@@ -234,13 +235,29 @@ impl RenderQueue {
     /// [`RenderQueue::render_layers`] for a camera that is `moving` (it differs from the
     /// client's last request): under a [`LevelPolicy`] budget, from a coarser level of detail.
     pub fn render_view(&self, req: &CameraRequest, layers: u32, moving: bool, frame: &mut Frame) -> FrameStats {
+        self.render_view_in(&self.levels, 0, req, layers, moving, frame)
+    }
+
+    /// [`RenderQueue::render_view`] with other marchers of the same volume and levels (a
+    /// client's own visual state, [`Marcher::with_visual_tf`]), `generation` naming them: only
+    /// requests of the same generation share a frame (0: the queue's own marchers).
+    pub fn render_view_in(
+        &self,
+        levels: &[Arc<Marcher>],
+        generation: u32,
+        req: &CameraRequest,
+        layers: u32,
+        moving: bool,
+        frame: &mut Frame,
+    ) -> FrameStats {
+        let levels = if levels.is_empty() { &self.levels[..] } else { levels };
         let pixels = req.camera.width as u64 * req.camera.height as u64;
         let level = {
             let cost = self.cost.lock().unwrap_or_else(|e| e.into_inner());
             self.policy.pick(moving, pixels, &cost)
         };
-        let marcher = &self.levels[usize::from(level).min(self.levels.len() - 1)];
-        let key = Key::of(req, layers, level);
+        let marcher = &levels[usize::from(level).min(levels.len() - 1)];
+        let key = Key::of(req, layers, level, generation);
         let mut s = self.lock();
         loop {
             if let Some((k, f)) = &s.last {
@@ -275,7 +292,7 @@ impl RenderQueue {
         let turn = (pixels > SMALL_FRAME).then(|| self.gate.enter(self.gate.ticket()));
         let stats = self.pool.install(|| marcher.render_frame_layers_into(req, layers, frame));
         drop(turn);
-        if self.levels.len() > 1 {
+        if levels.len() > 1 {
             let ns = (stats.march_us + stats.compact_us) as f64 * 1e3 / pixels.max(1) as f64;
             self.cost.lock().unwrap_or_else(|e| e.into_inner())[usize::from(level)] = Some(ns);
         }

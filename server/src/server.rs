@@ -34,15 +34,19 @@
 use crate::dataset::Dataset;
 use crate::marcher::{FrameStats, Marcher};
 use crate::render_queue::{LevelPolicy, RenderCounts, RenderQueue};
+use crate::transfer_function::TransferFunction;
+use crate::visual::VisualState;
 use std::collections::HashMap;
 use std::io::{self, BufWriter, Read, Write};
 use std::net::{IpAddr, Ipv6Addr, Shutdown, SocketAddr, TcpListener, TcpStream};
-use std::sync::atomic::{AtomicBool, AtomicU64, AtomicUsize, Ordering};
+use std::sync::atomic::{AtomicBool, AtomicU32, AtomicU64, AtomicUsize, Ordering};
 use std::sync::{Arc, Condvar, Mutex};
 use std::thread::JoinHandle;
 use std::time::{Duration, Instant};
 use volwarp_core::compact_frame::Encoding;
-use volwarp_core::wire::{self, error_code, CameraRequest, ErrorMsg, Frame, Hello, Limits, Message, WireError};
+use volwarp_core::wire::{
+    self, error_code, CameraRequest, ErrorMsg, Frame, Hello, Limits, Message, VisualEdit, WireError,
+};
 use volwarp_tls::{TlsLink, TlsReader, TlsWriter};
 
 /// A server's TLS certificate chain and key, ready to serve (`--tls-cert`, `--tls-key`).
@@ -235,11 +239,23 @@ struct Shared {
     auth: Option<AuthLimiter>,
     marcher: Arc<Marcher>,
     queue: RenderQueue,
+    /// What clients' visual edits start from.
+    visual: LiveVisual,
+    /// The next id of a client's own marchers ([`RenderQueue::render_view_in`]).
+    next_generation: AtomicU32,
     stop: AtomicBool,
     active: AtomicUsize,
     next_id: AtomicU64,
     conns: Mutex<HashMap<u64, TcpStream>>,
     threads: Mutex<Vec<JoinHandle<()>>>,
+}
+
+/// What a client's visual edits apply to: the transfer function given at start (shown where
+/// the state names no preset) and the state the server started with (every client's first).
+#[derive(Clone, Debug)]
+struct LiveVisual {
+    base: TransferFunction,
+    start: VisualState,
 }
 
 /// A bound server, not yet serving.
@@ -260,7 +276,8 @@ impl Server {
     /// Checks the config, builds the marcher of `dataset` (and its levels of detail where
     /// `config.frame_budget` is set) and binds the listener.
     pub fn bind(config: ServerConfig, dataset: Dataset) -> io::Result<Server> {
-        Server::with_transfer_function(config, Marcher::from_dataset(&dataset), &dataset.tf)
+        let server = Server::with_transfer_function(config, Marcher::from_dataset(&dataset), &dataset.tf)?;
+        Ok(server.with_visual(dataset.tf.clone(), VisualState::default()))
     }
 
     /// Like [`Server::bind`] with a ready marcher of transfer function `tf`: its levels of
@@ -311,10 +328,13 @@ impl Server {
         let policy = LevelPolicy { budget: config.frame_budget };
         let auth = (config.token.is_some() && config.max_auth_failures > 0)
             .then(|| AuthLimiter::new(config.max_auth_failures));
+        let visual = LiveVisual { base: marcher.transfer_function().clone(), start: VisualState::default() };
         let shared = Arc::new(Shared {
             config,
             source: None,
             auth,
+            visual,
+            next_generation: AtomicU32::new(1),
             queue: RenderQueue::with_levels(levels, policy, pool),
             marcher,
             stop: AtomicBool::new(false),
@@ -339,6 +359,19 @@ impl Server {
             Err(_) => unreachable!("a server not yet serving holds its state alone"),
         };
         shared.source = Some(source);
+        Server { listener: self.listener, addr: self.addr, shared: Arc::new(shared) }
+    }
+
+    /// The server's visual state for clients' live edits (VisualEdit messages): `base` is the
+    /// transfer function given at start (shown where a state names no preset), `start` the
+    /// state its marchers were built with (`Marcher::with_visual`), every client's first.
+    /// Without it, edits apply over the marcher's own function from the default state.
+    pub fn with_visual(self, base: TransferFunction, start: VisualState) -> Server {
+        let mut shared = match Arc::try_unwrap(self.shared) {
+            Ok(s) => s,
+            Err(_) => unreachable!("a server not yet serving holds its state alone"),
+        };
+        shared.visual = LiveVisual { base, start };
         Server { listener: self.listener, addr: self.addr, shared: Arc::new(shared) }
     }
 
@@ -701,8 +734,49 @@ enum End {
 #[derive(Default)]
 struct Slot {
     latest: Option<CameraRequest>,
+    /// Visual edits not yet applied, in order (`Err`: a malformed one, refused with this text).
+    edits: Vec<Result<VisualEdit, String>>,
     dropped: u64,
     end: Option<End>,
+}
+
+/// Most visual edits waiting for the next frame; more end the connection (a client sends one
+/// per display frame at most, and each frame takes them all).
+const MAX_PENDING_EDITS: usize = 256;
+
+/// A client's own visual state and the marchers showing it (`None`: the server's own, the
+/// start state).
+struct ClientVisual {
+    state: VisualState,
+    levels: Option<Vec<Arc<Marcher>>>,
+    generation: u32,
+}
+
+impl ClientVisual {
+    /// Applies `state` (checked): rebuilds the transfer-function tables and the empty-space
+    /// occupancy of every level (only the occupancy, or nothing, where the function is the same);
+    /// never the volume or its min/max grid. Returns what was rebuilt.
+    fn switch(&mut self, sh: &Shared, state: VisualState) -> Result<&'static str, String> {
+        if state == sh.visual.start {
+            *self = ClientVisual { state, levels: None, generation: 0 };
+            return Ok("the start state's marchers");
+        }
+        let (levels, what) = match &self.levels {
+            Some(cur) if state.same_function(&self.state) => {
+                (cur.iter().map(|m| Arc::new(m.with_visual_cut(&state))).collect(), "shading and cut")
+            }
+            _ => {
+                let start = sh.queue.levels();
+                let tf = state
+                    .transfer_function(&sh.visual.base, start[0].volume().value_range())
+                    .map_err(|e| e.to_string())?;
+                (start.iter().map(|m| Arc::new(m.with_visual_tf(&tf, &state))).collect(), "tables and occupancy")
+            }
+        };
+        let generation = sh.next_generation.fetch_add(1, Ordering::Relaxed).max(1);
+        *self = ClientVisual { state, levels: Some(levels), generation };
+        Ok(what)
+    }
 }
 
 /// Serves one connection (`charged`: the address whose token-guessing bucket paid for this
@@ -774,12 +848,21 @@ fn serve(sh: &Shared, stream: &TcpStream, id: u64, charged: Option<IpAddr>) -> S
     let green = compact && hello.capabilities & wire::CAP_COLOR_GREEN != 0;
     // Layered frames: as many segments per pixel as the client asks, up to ours.
     let layers = hello.layers.clamp(1, cfg.layers.max(1));
+    // Live visual edits: for clients that send them, on a server whose marchers it owns.
+    let live = hello.capabilities & wire::CAP_VISUAL != 0 && sh.source.is_none();
     {
         let mut w = embedded_io_adapters::std::FromStd::new(&mut sink);
-        let caps = if compact { wire::CAP_COMPACT } else { 0 } | if green { wire::CAP_COLOR_GREEN } else { 0 };
+        let caps = if compact { wire::CAP_COMPACT } else { 0 }
+            | if green { wire::CAP_COLOR_GREEN } else { 0 }
+            | if live { wire::CAP_VISUAL } else { 0 };
         let answer = Hello::new(caps).with_layers(layers);
         if let Err(e) = wire::write_hello(&mut w, &answer) {
             return format!("cannot send Hello: {e}");
+        }
+        if live {
+            if let Err(e) = wire::write_visual_state(&mut w, &sh.visual.start.to_wire(0)) {
+                return format!("cannot send the visual state: {e}");
+            }
         }
         if let Err(e) = sink.flush() {
             return format!("cannot send Hello: {e}");
@@ -814,12 +897,15 @@ fn serve(sh: &Shared, stream: &TcpStream, id: u64, charged: Option<IpAddr>) -> S
     let mut frame = sh.marcher.empty_frame();
     // The camera of the client's last request: a different one is a moving camera.
     let mut last_camera = None;
+    // The last request rendered: rendered again after a visual edit that came alone.
+    let mut last_req: Option<CameraRequest> = None;
+    let mut visual = ClientVisual { state: sh.visual.start.clone(), levels: None, generation: 0 };
     let reason = loop {
-        let req = {
+        let (req, edits) = {
             let (lock, cv) = &*slot;
             let mut s = lock.lock().unwrap_or_else(|e| e.into_inner());
             let mut failed = None;
-            while s.latest.is_none() && s.end.is_none() {
+            while s.latest.is_none() && s.edits.is_empty() && s.end.is_none() {
                 s = match &sh.source {
                     // A source that fails tells idle clients too.
                     Some(source) => {
@@ -835,11 +921,25 @@ fn serve(sh: &Shared, stream: &TcpStream, id: u64, charged: Option<IpAddr>) -> S
             if let Some(e) = failed {
                 break End::Error(error_code::INTERNAL, e);
             }
-            match s.latest.take() {
-                Some(r) if s.end.is_none() => r,
-                _ => break s.end.take().unwrap_or(End::Gone("reader ended".into())),
+            if s.end.is_some() {
+                break s.end.take().unwrap_or(End::Gone("reader ended".into()));
             }
+            (s.latest.take(), std::mem::take(&mut s.edits))
         };
+        let applied = apply_edits(sh, id, &mut visual, edits, &mut out);
+        if let Some(state_id) = applied {
+            let mut w = embedded_io_adapters::std::FromStd::new(&mut out);
+            if let Err(e) = wire::write_visual_state(&mut w, &visual.state.to_wire(state_id)) {
+                break End::Gone(format!("cannot send the visual state: {e}"));
+            }
+        }
+        let Some(req) = req.or(last_req.filter(|_| applied.is_some())) else {
+            if let Err(e) = io::Write::flush(&mut out) {
+                break End::Gone(format!("cannot send: {e}"));
+            }
+            continue;
+        };
+        last_req = Some(req);
         if let Some(d) = cfg.frame_delay {
             std::thread::sleep(d);
         }
@@ -850,7 +950,14 @@ fn serve(sh: &Shared, stream: &TcpStream, id: u64, charged: Option<IpAddr>) -> S
                 Ok(stats) => stats,
                 Err(e) => break End::Error(error_code::INTERNAL, e),
             },
-            None => sh.queue.render_view(&req, layers as u32, moving, &mut frame),
+            None => sh.queue.render_view_in(
+                visual.levels.as_deref().unwrap_or(&[]),
+                visual.generation,
+                &req,
+                layers as u32,
+                moving,
+                &mut frame,
+            ),
         };
         let t_send = Instant::now();
         let sent = if encoding == Encoding::Compact {
@@ -903,6 +1010,58 @@ fn serve(sh: &Shared, stream: &TcpStream, id: u64, charged: Option<IpAddr>) -> S
     reason
 }
 
+/// Applies a client's visual edits in order to its state: each bad one is answered with a
+/// non-closing Error `BAD_EDIT` (the state stays as it was before it); then, if any applied, the
+/// marchers are rebuilt once. Returns the id of the last edit applied.
+fn apply_edits(
+    sh: &Shared,
+    client: u64,
+    visual: &mut ClientVisual,
+    edits: Vec<Result<VisualEdit, String>>,
+    out: &mut impl Write,
+) -> Option<u32> {
+    if edits.is_empty() {
+        return None;
+    }
+    let mut state = visual.state.clone();
+    let mut applied = None;
+    for e in edits {
+        let result = match e {
+            Ok(_) if sh.source.is_some() => Err("live visual edits are not applied across MPI ranks: give the state \
+                                                 with --preset, --window-level, --opacity-scale, --crop, --clip or --tf \
+                                                 at start, on one process"
+                .to_string()),
+            Ok(e) => state.apply(&e).map(|s| (e.id, s)).map_err(|e| e.to_string()),
+            Err(text) => Err(text),
+        };
+        match result {
+            Ok((id, s)) => {
+                state = s;
+                applied = Some(id);
+            }
+            Err(text) => {
+                log::warn!("client {client}: visual edit refused: {text}");
+                send_error(out, error_code::BAD_EDIT, &format!("visual edit refused: {text}"));
+            }
+        }
+    }
+    let id = applied?;
+    let t = Instant::now();
+    match visual.switch(sh, state) {
+        Ok(what) => {
+            log::info!(
+                "client {client}: visual state {id} applied ({what} rebuilt in {:.2} ms)",
+                t.elapsed().as_secs_f64() * 1e3
+            );
+            Some(id)
+        }
+        Err(text) => {
+            send_error(out, error_code::BAD_EDIT, &format!("visual edit refused: {text}"));
+            None
+        }
+    }
+}
+
 fn msg_name(m: &Message) -> &'static str {
     match m {
         Message::Hello(_) => "Hello",
@@ -910,7 +1069,20 @@ fn msg_name(m: &Message) -> &'static str {
         Message::Frame(_) => "Frame",
         Message::Error(_) => "Error",
         Message::Bye => "Bye",
+        Message::VisualEdit(_) => "VisualEdit",
+        Message::VisualState(_) => "VisualState",
     }
+}
+
+/// Queues a visual edit for the render loop; `Some`: too many are waiting, the connection ends.
+fn push_edit(slot: &(Mutex<Slot>, Condvar), e: Result<VisualEdit, String>) -> Option<End> {
+    let mut s = slot.0.lock().unwrap_or_else(|e| e.into_inner());
+    if s.edits.len() >= MAX_PENDING_EDITS {
+        return Some(End::Error(error_code::TOO_LARGE, format!("over {MAX_PENDING_EDITS} visual edits waiting")));
+    }
+    s.edits.push(e);
+    slot.1.notify_one();
+    None
 }
 
 /// Reads the client's messages; each must arrive complete within `idle` of the previous one.
@@ -929,6 +1101,17 @@ fn read_loop(
                     s.dropped += 1;
                 }
                 slot.1.notify_one();
+            }
+            Ok(Message::VisualEdit(e)) => {
+                if let Some(end) = push_edit(&slot, Ok(e)) {
+                    break end;
+                }
+            }
+            // A malformed edit was read whole: refuse it, keep reading.
+            Err(WireError::BadVisual(e)) => {
+                if let Some(end) = push_edit(&slot, Err(e.to_string())) {
+                    break end;
+                }
             }
             Ok(Message::Bye) => break End::Bye,
             Ok(Message::Error(e)) => break End::Gone(format!("client sent Error {}: {}", e.code, e.text)),

@@ -21,6 +21,7 @@ use crate::march_settings::Cut;
 use crate::transfer_function::{TransferFunction, LUT_SIZE};
 use crate::volume::Volume;
 use std::fmt;
+use volwarp_core::wire::{self, TfPoints, VisualEdit};
 use volwarp_core::Vec3;
 
 /// The bundled presets: name, ParaView JSON, and whether shading is on by default with it.
@@ -77,6 +78,9 @@ pub struct VisualState {
     /// Clip plane `[px, py, pz, nx, ny, nz]`: point in fractions of the box (each in
     /// `[-1, 2]`), normal (not zero) in volume coordinates; `None`: no plane.
     pub clip: Option<[f32; 6]>,
+    /// A transfer function sent by a client (ParaView-style points over fractions of the value
+    /// range), shown instead of the preset or the one given at start.
+    pub points: Option<TfPoints>,
 }
 
 impl Default for VisualState {
@@ -89,6 +93,7 @@ impl Default for VisualState {
             opacity_scale: 1.0,
             crop: [0.0, 0.0, 0.0, 1.0, 1.0, 1.0],
             clip: None,
+            points: None,
         }
     }
 }
@@ -136,7 +141,71 @@ impl VisualState {
                 return err("clip plane normal is zero");
             }
         }
+        if let Some(t) = &self.points {
+            validate_points(t)?;
+        }
         Ok(())
+    }
+
+    /// This state with `edit` applied, checked ([`VisualState::validate`]): a preset replaces a
+    /// custom function and brings its shading default unless the edit sets shading; a custom
+    /// function replaces the preset.
+    pub fn apply(&self, edit: &VisualEdit) -> Result<VisualState, VisualError> {
+        let mut s = self.clone();
+        if let Some(p) = &edit.preset {
+            s = s.with_preset(Some(p.as_str().to_string()), edit.shade);
+            s.points = None;
+        }
+        if let Some(shade) = edit.shade {
+            s.shade = shade;
+        }
+        if let Some([w, l]) = edit.window_level {
+            (s.window, s.level) = (w, l);
+        }
+        if let Some(o) = edit.opacity_scale {
+            s.opacity_scale = o;
+        }
+        if let Some(c) = edit.crop {
+            s.crop = c;
+        }
+        if let Some(c) = edit.clip {
+            s.clip = c;
+        }
+        if let Some(t) = &edit.transfer_function {
+            s.points = Some(t.clone());
+            s.preset = None;
+        }
+        s.validate()?;
+        Ok(s)
+    }
+
+    /// Whether `other` shows the same transfer function (preset or points, window, level,
+    /// opacity scale): then only the shading and the cut differ, and the tables can be kept.
+    pub fn same_function(&self, other: &VisualState) -> bool {
+        self.preset == other.preset
+            && self.points == other.points
+            && self.window == other.window
+            && self.level == other.level
+            && self.opacity_scale == other.opacity_scale
+    }
+
+    /// The state as the wire's VisualState message of edit `id`, listing the bundled presets.
+    pub fn to_wire(&self, id: u32) -> wire::VisualState {
+        let mut presets = wire::PresetNames::new();
+        for n in preset_names() {
+            let _ = presets.push(wire::preset_name(n).unwrap_or_default());
+        }
+        wire::VisualState {
+            id,
+            shade: self.shade,
+            preset: self.preset.as_deref().and_then(wire::preset_name).unwrap_or_default(),
+            custom: self.points.is_some(),
+            window_level: [self.window, self.level],
+            opacity_scale: self.opacity_scale,
+            crop: self.crop,
+            clip: self.clip,
+            presets,
+        }
     }
 
     /// The state with `preset`'s shading default (shading on for the CT and MR presets) unless
@@ -156,9 +225,14 @@ impl VisualState {
         value_range: (f32, f32),
     ) -> Result<TransferFunction, VisualError> {
         self.validate()?;
-        let tf = match &self.preset {
-            Some(p) => preset(p, value_range)?,
-            None => base.clone(),
+        let tf = match (&self.points, &self.preset) {
+            (Some(t), _) => {
+                let color: Vec<(f32, [f32; 3])> = t.color.iter().map(|p| (p[0], [p[1], p[2], p[3]])).collect();
+                let opacity: Vec<(f32, f32)> = t.opacity.iter().map(|p| (p[0], p[1])).collect();
+                TransferFunction::from_points("custom", &color, &opacity)
+            }
+            (None, Some(p)) => preset(p, value_range)?,
+            (None, None) => base.clone(),
         };
         Ok(tf.windowed(self.window, self.level, self.opacity_scale))
     }
@@ -172,6 +246,36 @@ impl VisualState {
         let plane = self.clip.map(|p| (Vec3::new(p[0], p[1], p[2]) * ext, Vec3::new(p[3], p[4], p[5]).normalize()));
         Cut::new(lo, hi, plane)
     }
+}
+
+/// Checks a client's transfer function: 1 to [`wire::MAX_TF_POINTS`] points of each kind, `x`
+/// finite, in `[0, 1]` and non-decreasing (ParaView's order; equal `x` make a step), colors and
+/// opacities in `[0, 1]`.
+pub fn validate_points(t: &TfPoints) -> Result<(), VisualError> {
+    if t.color.is_empty() || t.opacity.is_empty() {
+        return err("a transfer function needs at least one color point and one opacity point");
+    }
+    let check = |what: &str, pts: &mut dyn Iterator<Item = &[f32]>| -> Result<(), VisualError> {
+        let mut last = f32::NEG_INFINITY;
+        for (i, p) in pts.enumerate() {
+            if p.iter().any(|v| !v.is_finite()) {
+                return err(format!("{what} point {i} holds a non-finite number"));
+            }
+            if !(0.0..=1.0).contains(&p[0]) {
+                return err(format!("{what} point {i}: x {} is not in [0, 1] (a fraction of the value range)", p[0]));
+            }
+            if p[0] < last {
+                return err(format!("{what} points are not sorted: point {i} at x {} comes after x {last}", p[0]));
+            }
+            if p[1..].iter().any(|v| !(0.0..=1.0).contains(v)) {
+                return err(format!("{what} point {i}: {:?} is not in [0, 1]", &p[1..]));
+            }
+            last = p[0];
+        }
+        Ok(())
+    };
+    check("color", &mut t.color.iter().map(|p| &p[..]))?;
+    check("opacity", &mut t.opacity.iter().map(|p| &p[..]))
 }
 
 /// A bundled preset's transfer function (points in fractions of `value_range`).

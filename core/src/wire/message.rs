@@ -33,6 +33,10 @@ impl Frame {
 }
 
 /// Any message.
+// The visual messages hold their bounded points and names inline (heapless, so the codec stays
+// allocation-free on no_std); 1.7 KB is nothing beside a frame's buffers, and a message is read
+// and handled one at a time, so boxing would only add an allocation per edit.
+#[allow(clippy::large_enum_variant)]
 #[derive(Clone, Debug, PartialEq)]
 pub enum Message {
     /// Hello.
@@ -45,6 +49,10 @@ pub enum Message {
     Error(ErrorMsg),
     /// Bye.
     Bye,
+    /// VisualEdit (version 4).
+    VisualEdit(VisualEdit),
+    /// VisualState (version 4).
+    VisualState(VisualState),
 }
 
 /// Reads one whole message. Allocates at most `count × 12` bytes for a Frame, and only
@@ -75,6 +83,8 @@ pub fn read_payload<R: Read>(r: &mut R, h: &Header, limits: &Limits) -> Result<M
         }
         MsgType::Error => Message::Error(read_error(r, h)?),
         MsgType::Bye => Message::Bye,
+        MsgType::VisualEdit => Message::VisualEdit(read_visual_edit(r, h)?),
+        MsgType::VisualState => Message::VisualState(read_visual_state(r, h)?),
         MsgType::CompactFrame => {
             // The length passed the limit in `read_header`; the decoder bounds the rest.
             let mut payload = alloc::vec![0u8; h.len as usize];
@@ -97,6 +107,8 @@ pub fn write_message<W: Write>(w: &mut W, m: &Message) -> Result<(), WireError> 
         Message::Frame(f) => write_frame_layered(w, &f.header, &f.samples, &f.colors, &f.segments),
         Message::Error(e) => write_error(w, e),
         Message::Bye => write_bye(w),
+        Message::VisualEdit(e) => write_visual_edit(w, e),
+        Message::VisualState(s) => write_visual_state(w, s),
     }
 }
 
