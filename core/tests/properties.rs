@@ -316,8 +316,13 @@ fn decoder_rejects_bad_input_with_typed_errors() {
     let big = wire::encode_to_vec(&Message::Frame(frame_of(&many, b, 0.01, cam)));
     assert!(matches!(wire::read_message(&mut &big[..], &lim), Err(WireError::TooManySamples { .. })));
 
-    // A server reading requests refuses frames by size.
-    assert!(matches!(wire::read_message(&mut &big[..], &Limits::for_requests(4096)), Err(WireError::TooLarge { .. })));
+    // A server reading requests refuses frames by size (a frame larger than its largest
+    // request, a VisualEdit).
+    let requests = Limits::for_requests(4096);
+    let many: Vec<(Vec3, u32)> = (0..1000).map(|i| (Vec3::splat(i as f32 / 1000.0), 1)).collect();
+    let huge = wire::encode_to_vec(&Message::Frame(frame_of(&many, b, 0.01, cam)));
+    assert!(huge.len() > requests.max_payload as usize + wire::HEADER_LEN);
+    assert!(matches!(wire::read_message(&mut &huge[..], &requests), Err(WireError::TooLarge { .. })));
 
     // Empty input is a clean close.
     assert_eq!(wire::read_message(&mut &[][..], &lim), Err(WireError::Closed));
