@@ -2,44 +2,24 @@
 //! as it is, and every method's own draw at its frame's camera), a broken warp caught,
 //! monotonic sanity, bad input, and any raw volume by path.
 
+mod common;
+
+use common::SIZE;
 use volwarp_core::compact_frame::{encode_frame, encoded_size, EncodeOptions, Encoding};
 use volwarp_core::record::{write_entry, write_magic, Entry};
 use volwarp_core::wire::{CameraRequest, VecWriter};
 use volwarp_core::{Camera, Heuristic};
 use volwarp_eval::session::methods::{HeldFrame, Method, MethodSpec};
-use volwarp_eval::session::model::{Calibration, ClientModel, LastReceived, NetworkModel, SessionRequest};
+use volwarp_eval::session::model::{LastReceived, NetworkModel, SessionRequest};
 use volwarp_eval::session::paths::CameraPath;
 use volwarp_eval::session::report::{session_table, Run};
-use volwarp_eval::session::simulate::{run_session, SessionConfig, TruthCache};
-use volwarp_eval::session::{simulate_all, SessionOptions, Sweep};
+use volwarp_eval::session::simulate::{run_session, TruthCache};
+use volwarp_eval::session::{simulate_all, SessionOptions};
 use volwarp_server::dataset::Dataset;
 use volwarp_server::Marcher;
 
-const SIZE: u32 = 32;
-
 fn opts(scenarios: &[&str], net: NetworkModel) -> SessionOptions {
-    SessionOptions {
-        march: volwarp_server::MarchOptions::default(),
-        cfg: SessionConfig {
-            size: SIZE,
-            duration_s: 2.0,
-            net,
-            client: ClientModel { display_hz: 30.0, draw_ms: Default::default() },
-            score_every: 2,
-            heuristic: Heuristic::Threshold,
-            exact_when_still: true,
-            encoding: Encoding::Compact,
-            layers: 1,
-            resolution_cost: volwarp_eval::session::peers::ResolutionCost::MEASURED_512,
-        },
-        server_ms: None,
-        calibration: Calibration::default(),
-        scenarios: scenarios.iter().map(|s| CameraPath::parse(s).unwrap()).collect(),
-        methods: "all".into(),
-        threads: 1,
-        policy: "last-received".into(),
-        sweep: Sweep::None,
-    }
+    common::session_opts(scenarios, "all", net)
 }
 
 fn small() -> Vec<Dataset> {

@@ -3,43 +3,19 @@
 //! ratio, determinism of the new scenarios, and the default never worse than the stale frame
 //! per tick on a steady orbit.
 
-use volwarp_core::compact_frame::Encoding;
-use volwarp_core::Heuristic;
-use volwarp_eval::session::model::{Calibration, ClientModel, NetworkModel};
-use volwarp_eval::session::paths::CameraPath;
-use volwarp_eval::session::peers::{decode_jpeg, encode_jpeg, scaled_name, ResolutionCost};
+mod common;
+
+use common::SIZE;
+use volwarp_eval::session::model::NetworkModel;
+use volwarp_eval::session::peers::{decode_jpeg, encode_jpeg, scaled_name};
 use volwarp_eval::session::report::{session_table, Run};
-use volwarp_eval::session::simulate::SessionConfig;
-use volwarp_eval::session::{calibrate, simulate_all, SessionOptions, Sweep};
+use volwarp_eval::session::{calibrate, simulate_all, SessionOptions};
 use volwarp_eval::Metrics;
 use volwarp_server::dataset::Dataset;
 use volwarp_server::Marcher;
 
-const SIZE: u32 = 32;
-
 fn opts(scenarios: &[&str], methods: &str, net: NetworkModel) -> SessionOptions {
-    SessionOptions {
-        march: volwarp_server::MarchOptions::default(),
-        cfg: SessionConfig {
-            size: SIZE,
-            duration_s: 2.0,
-            net,
-            client: ClientModel { display_hz: 30.0, draw_ms: Default::default() },
-            score_every: 2,
-            heuristic: Heuristic::Threshold,
-            exact_when_still: true,
-            encoding: Encoding::Compact,
-            layers: 1,
-            resolution_cost: ResolutionCost::MEASURED_512,
-        },
-        server_ms: None,
-        calibration: Calibration::default(),
-        scenarios: scenarios.iter().map(|s| CameraPath::parse(s).unwrap()).collect(),
-        methods: methods.into(),
-        threads: 1,
-        policy: "last-received".into(),
-        sweep: Sweep::None,
-    }
+    common::session_opts(scenarios, methods, net)
 }
 
 fn head() -> Vec<Dataset> {
