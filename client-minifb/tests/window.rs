@@ -282,17 +282,9 @@ fn window_opens_and_shows_the_volume() {
     let shot = parse_xwd(&xwd.stdout).unwrap();
 
     // The window is where the renderer's background color is.
+    let (x0, y0, x1, y1) = window_region(&shot);
     let bg = volwarp_core::BACKGROUND.to_le_bytes();
     let bg = [bg[0], bg[1], bg[2]];
-    let (mut x0, mut y0, mut x1, mut y1) = (usize::MAX, usize::MAX, 0, 0);
-    for y in 0..shot.height {
-        for x in 0..shot.width {
-            if shot.rgb[y * shot.width + x] == bg {
-                (x0, y0, x1, y1) = (x0.min(x), y0.min(y), x1.max(x), y1.max(y));
-            }
-        }
-    }
-    assert!(x0 != usize::MAX, "no pixel of the background color on screen: no window");
     let (bw, bh) = (x1 + 1 - x0, y1 + 1 - y0);
     assert!(
         (w * 8 / 10..=w).contains(&bw) && (h * 8 / 10..=h).contains(&bh),
