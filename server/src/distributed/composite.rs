@@ -177,25 +177,11 @@ pub fn decode_band(bytes: &[u8], pixels: usize, k: usize) -> Result<Band, String
 /// Merges the bands every part sent for one band of the image into `k` segments per pixel
 /// (the band's owner's work, in parallel over runs of pixels), as a [`Band`].
 pub fn merge_bands(bands: &[Band], pixels: usize, k: usize, ert: f32) -> Band {
-    use rayon::prelude::*;
-    const RUN: usize = 4096;
-    let runs: Vec<(Vec<u8>, Vec<Seg>)> = (0..pixels.div_ceil(RUN))
-        .into_par_iter()
-        .map(|r| {
-            let mut count = Vec::with_capacity(RUN);
-            let mut segs = Vec::new();
-            let mut buf = Vec::new();
-            let mut lists: Vec<&[Seg]> = Vec::with_capacity(bands.len());
-            for i in r * RUN..((r + 1) * RUN).min(pixels) {
-                lists.clear();
-                lists.extend(bands.iter().map(|b| b.pixel(i)));
-                merge(&lists, k, ert, &mut buf);
-                count.push(buf.len() as u8);
-                segs.extend_from_slice(&buf);
-            }
-            (count, segs)
-        })
-        .collect();
+    let runs: Vec<(Vec<u8>, Vec<Seg>)> =
+        merge_bands_with(bands, pixels, k, ert, |_, merged, (count, segs): &mut (Vec<u8>, Vec<Seg>)| {
+            count.push(merged.len() as u8);
+            segs.extend_from_slice(merged);
+        });
     let mut out = Band { count: Vec::with_capacity(pixels), start: Vec::with_capacity(pixels), segs: Vec::new() };
     let mut at = 0u32;
     for (count, segs) in runs {
