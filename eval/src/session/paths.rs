@@ -26,9 +26,18 @@ pub const ZOOM_TO: f64 = 0.35;
 /// How long the zoom takes at speed 30, seconds.
 pub const ZOOM_S: f64 = 1.5;
 
-/// The scenarios users produce besides the four: a fast flick (180°/s for 0.5 s, then rest)
-/// and a zoom into detail (then rest).
-pub const USER_SCENARIOS: [&str; 2] = ["flick", "zoom"];
+/// When the window/level drag of `wl-drag` starts, seconds.
+pub const WL_DRAG_START_S: f64 = 1.0;
+/// How long the window/level drag lasts, seconds.
+pub const WL_DRAG_S: f64 = 1.0;
+/// Window and level (fractions of the value range) before the drag: the whole range.
+pub const WL_FROM: [f32; 2] = [1.0, 0.5];
+/// Window and level at the end of the drag (then held).
+pub const WL_TO: [f32; 2] = [0.6, 0.4];
+
+/// The scenarios users produce besides the four: a fast flick (180°/s for 0.5 s, then rest),
+/// a zoom into detail (then rest) and a window/level drag during an orbit.
+pub const USER_SCENARIOS: [&str; 3] = ["flick", "zoom", "wl-drag"];
 
 /// The largest viewport side a recorded camera may have (and the session size).
 pub const MAX_RECORDED_VIEWPORT: u32 = 4096;
@@ -51,6 +60,11 @@ pub enum PathKind {
     /// A zoom into detail: dolly in to [`ZOOM_TO`] of the distance over [`ZOOM_S`] seconds
     /// (eased in and out; at speed 30), then rest.
     Zoom,
+    /// A window/level drag during a steady orbit: the camera orbits at the speed while the
+    /// window and level move linearly from [`WL_FROM`] to [`WL_TO`] between
+    /// [`WL_DRAG_START_S`] and [`WL_DRAG_START_S`] + [`WL_DRAG_S`], then hold (what a user
+    /// does with Ctrl+drag in the window while the view turns).
+    WindowLevelDrag,
     /// Cameras recorded by the window client, `(seconds, camera)` in time order.
     Recorded(Vec<(f64, Camera)>),
 }
@@ -126,6 +140,7 @@ impl CameraPath {
             "look-around" => PathKind::LookAround,
             "flick" => PathKind::Flick,
             "zoom" => PathKind::Zoom,
+            "wl-drag" => PathKind::WindowLevelDrag,
             _ => return Err(PathError::Unknown(spec.into())),
         };
         Ok(CameraPath { name: spec.into(), kind, speed })
@@ -141,7 +156,7 @@ impl CameraPath {
         let s = self.speed as f64;
         let t = t.max(0.0);
         match &self.kind {
-            PathKind::Orbit => c0.orbit((s * t) as f32, 0.0),
+            PathKind::Orbit | PathKind::WindowLevelDrag => c0.orbit((s * t) as f32, 0.0),
             PathKind::StopAndGo => c0.orbit((s * stop_and_go_position(t)) as f32, 0.0),
             PathKind::Dolly => {
                 let u = t * s / DEFAULT_SPEED as f64;
@@ -165,6 +180,16 @@ impl CameraPath {
                 cams[i].1.with_viewport(c0.width, c0.height)
             }
         }
+    }
+
+    /// The window and level (fractions of the value range) the user has set at `t` seconds;
+    /// `None` where the path changes no visual state (every path but `wl-drag`).
+    pub fn window_level(&self, t: f64) -> Option<[f32; 2]> {
+        if self.kind != PathKind::WindowLevelDrag {
+            return None;
+        }
+        let u = ((t - WL_DRAG_START_S) / WL_DRAG_S).clamp(0.0, 1.0) as f32;
+        Some([WL_FROM[0] + (WL_TO[0] - WL_FROM[0]) * u, WL_FROM[1] + (WL_TO[1] - WL_FROM[1]) * u])
     }
 
     /// The recorded path's length in seconds (`None` for the built-in ones, which go on).
@@ -270,6 +295,22 @@ mod tests {
         assert!(dist(&z.camera(&c0(), 0.75)) < d0 && dist(&z.camera(&c0(), 0.75)) > ZOOM_TO as f32 * d0);
         assert!((dist(&z.camera(&c0(), 1.5)) / d0 - ZOOM_TO as f32).abs() < 1e-5);
         assert_eq!(z.camera(&c0(), 1.5), z.camera(&c0(), 5.0), "rests after the zoom");
+    }
+
+    #[test]
+    fn the_window_level_drag_orbits_and_moves_window_and_level_only_while_dragging() {
+        let d = CameraPath::parse("wl-drag").unwrap();
+        let o = CameraPath::parse("orbit").unwrap();
+        for t in [0.0, 0.7, 1.5, 3.0] {
+            assert_eq!(d.camera(&c0(), t), o.camera(&c0(), t), "the camera orbits as `orbit` does");
+            assert_eq!(o.window_level(t), None);
+        }
+        assert_eq!(d.window_level(0.0), Some(WL_FROM));
+        assert_eq!(d.window_level(WL_DRAG_START_S), Some(WL_FROM));
+        let mid = d.window_level(WL_DRAG_START_S + 0.5 * WL_DRAG_S).unwrap();
+        assert!(mid[0] < WL_FROM[0] && mid[0] > WL_TO[0] && mid[1] < WL_FROM[1] && mid[1] > WL_TO[1], "{mid:?}");
+        assert_eq!(d.window_level(WL_DRAG_START_S + WL_DRAG_S), Some(WL_TO));
+        assert_eq!(d.window_level(10.0), Some(WL_TO), "held after the drag");
     }
 
     #[test]

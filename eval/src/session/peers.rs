@@ -19,13 +19,12 @@
 //! ratio ([`ResolutionCost`], from `session-calibrate`).
 
 use super::model::{NetworkModel, Request, ServerPolicy};
-use super::simulate::{FrameEvent, TruthCache};
+use super::simulate::{FrameEvent, Looks, TruthCache};
 use crate::ErrorBox;
 use image::codecs::jpeg::JpegEncoder;
 use image::imageops::FilterType;
 use image::{ImageFormat, RgbImage};
 use volwarp_core::{Camera, Image};
-use volwarp_server::Marcher;
 
 /// JPEG quality of a full-resolution image (the camera rests, or `send-image`).
 pub const STILL_QUALITY: u8 = 90;
@@ -175,12 +174,13 @@ pub fn upscale(img: &Image, width: u32, height: u32, out: &mut Image) {
 /// The requests of a peer over the ticks' cameras: one at every tick the camera moved
 /// (reduced), and for a downscaling peer one at the first tick it rests (full resolution).
 /// The `bool` says whether the request is for a reduced image.
-fn requests(cams: &[Camera], tick_ms: f64, peer: ImagePeer) -> Vec<(Request, bool)> {
+fn requests(cams: &[Camera], looks: &Looks, tick_ms: f64, peer: ImagePeer) -> Vec<(Request, bool)> {
     let mut out = Vec::new();
     for k in 1..cams.len() {
         let moved = cams[k] != cams[k - 1];
         let first_still = !moved && (k < 2 || cams[k - 1] != cams[k - 2]);
-        if moved || (first_still && peer.asks_when_still()) {
+        let edited = looks.state_at(k) != looks.state_at(k - 1);
+        if moved || edited || (first_still && peer.asks_when_still()) {
             out.push((Request { tick: k, sent_ms: k as f64 * tick_ms, camera: cams[k] }, moved));
         }
     }
@@ -191,10 +191,11 @@ fn requests(cams: &[Camera], tick_ms: f64, peer: ImagePeer) -> Vec<(Request, boo
 /// (the server takes the newest request that arrived, its policy picks the camera, it renders
 /// in its time and writes the bytes to the link, blocking), but each render is the marcher's
 /// image at the request's resolution, in `net.server_ms × cost.ratio(factor)`, sent as JPEG.
-/// Full-resolution images come from the truth cache (the same marcher image).
+/// Full-resolution images come from the truth cache (the same marcher image). Each image is
+/// rendered with the visual state of the newest request it serves (`looks`).
 #[allow(clippy::too_many_arguments)]
 pub fn serve_images(
-    marcher: &Marcher,
+    looks: &Looks,
     cams: &[Camera],
     tick_ms: f64,
     net: NetworkModel,
@@ -204,33 +205,24 @@ pub fn serve_images(
     truths: &mut TruthCache,
 ) -> Result<ImageStream, ErrorBox> {
     let end_ms = (cams.len() - 1) as f64 * tick_ms;
-    let mut render = |camera: &Camera, reduced: bool| -> Result<(Image, u64), ErrorBox> {
+    let mut render = |camera: &Camera, reduced: bool, state: usize| -> Result<(Image, u64), ErrorBox> {
         let (factor, quality) =
             if reduced && peer.factor > 1 { (peer.factor, peer.moving_quality) } else { (1, peer.still_quality) };
         let bytes = if factor == 1 {
-            encode_jpeg(truths.get(marcher, camera), quality)?
+            encode_jpeg(truths.get_in(looks, state, camera), quality)?
         } else {
             let small = camera.with_viewport((camera.width / factor).max(1), (camera.height / factor).max(1));
-            encode_jpeg(&marcher.render_image(&small), quality)?
+            encode_jpeg(&looks.marcher(state).render_image(&small), quality)?
         };
         Ok((decode_jpeg(&bytes)?, bytes.len() as u64))
     };
-    let (first, first_bytes) = render(&cams[0], false)?;
+    let (first, first_bytes) = render(&cams[0], false, looks.state_at(0))?;
     let mut stream = ImageStream {
         peer,
-        frames: vec![FrameEvent {
-            seq: 0,
-            camera: cams[0],
-            view: cams[0],
-            guard_offset: (0, 0),
-            request_ms: 0.0,
-            start_ms: 0.0,
-            bytes: first_bytes,
-            arrive_ms: 0.0,
-        }],
+        frames: vec![FrameEvent::at_start(cams[0], first_bytes, looks.state_at(0))],
         held: vec![HeldImage { image: first }],
     };
-    let requests = requests(cams, tick_ms, peer);
+    let requests = requests(cams, looks, tick_ms, peer);
     let plain: Vec<Request> = requests.iter().map(|r| r.0).collect();
     let arrival = |r: &Request| r.sent_ms + net.latency_ms;
     let (mut s, mut served) = (0.0f64, 0usize);
@@ -247,11 +239,13 @@ pub fn serve_images(
         }
         let camera = policy.camera(&plain[..=j], s);
         served = j + 1;
-        let (image, bytes) = render(&camera, reduced)?;
+        let state = looks.state_at(plain[j].tick);
+        let (image, bytes) = render(&camera, reduced, state)?;
         let write_end = s + server_ms + net.transfer_ms(bytes);
         let arrive_ms = write_end + net.latency_ms;
         if arrive_ms <= end_ms {
             stream.frames.push(FrameEvent {
+                state,
                 seq: stream.frames.len(),
                 camera,
                 view: camera,

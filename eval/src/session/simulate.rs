@@ -19,11 +19,17 @@
 //!    image stays up until then. Where the camera equals the frame's camera the client shows
 //!    the frame itself (`exact_when_still`): warping starts when the camera moves.
 //! 4. **Scoring** every `score_every`-th tick: the truth (the marcher's image for that tick's
-//!    camera, cached between methods and runs) against what each method shows.
+//!    camera and visual state, cached between methods and runs) against what each method shows.
+//! 5. **Visual edits** (`wl-drag`): each tick has a visual state ([`Looks`]). A tick whose
+//!    state changed sends a request (the window sends an edit before its next camera
+//!    request); the server renders each frame with the state of the newest request it serves.
+//!    The client shows what the window client shows: the newest frame that arrived, warped,
+//!    even while its state is older than the tick's (the window says `updating…`), and never
+//!    a drawing that mixes states (older frames of another state are not drawn with it).
 
 use super::methods::{HeldFrame, Method, SessionRequest};
 use super::model::{ClientModel, NetworkModel, Request, ServerPolicy};
-use super::paths::{CameraPath, MAX_RECORDED_VIEWPORT};
+use super::paths::{CameraPath, MAX_RECORDED_VIEWPORT, WL_FROM};
 use super::peers::{self, ImageStream, ResolutionCost};
 use crate::{ErrorBox, Metrics};
 use rayon::prelude::*;
@@ -35,6 +41,7 @@ use volwarp_core::renderer::Renderer;
 use volwarp_core::wire::CameraRequest;
 use volwarp_core::{Camera, Heuristic, Image, RendererKind};
 use volwarp_server::encoding::encode_frame;
+use volwarp_server::visual::VisualState;
 use volwarp_server::Marcher;
 
 /// What a session runs with besides the dataset, the path and the methods.
@@ -85,6 +92,8 @@ impl SessionConfig {
 /// One frame the server sent.
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct FrameEvent {
+    /// The visual state it was rendered with (an index into the session's [`Looks`]).
+    pub state: usize,
     /// 0 for the frame the client holds at the start, then 1, 2, …
     pub seq: usize,
     /// The camera it was rendered for (guard band included).
@@ -101,6 +110,89 @@ pub struct FrameEvent {
     pub bytes: u64,
     /// When it arrived at the client, ms.
     pub arrive_ms: f64,
+}
+
+impl FrameEvent {
+    /// The frame the client holds at time 0: rendered for the first camera as shown, in the
+    /// first tick's visual state `state`, `bytes` long.
+    pub fn at_start(camera: Camera, bytes: u64, state: usize) -> FrameEvent {
+        FrameEvent {
+            state,
+            seq: 0,
+            camera,
+            view: camera,
+            guard_offset: (0, 0),
+            request_ms: 0.0,
+            start_ms: 0.0,
+            bytes,
+            arrive_ms: 0.0,
+        }
+    }
+}
+
+/// What the volume looks like over a session: the distinct visual states the user set (the
+/// window and level, fractions of the value range), each with its marcher, and each display
+/// tick's state. A path that edits nothing has one state, the dataset's marcher itself.
+pub struct Looks {
+    states: Vec<([f32; 2], Marcher)>,
+    at_tick: Vec<usize>,
+}
+
+impl Looks {
+    /// One state for every tick: `marcher` as it is.
+    pub fn fixed(marcher: &Marcher, ticks: usize) -> Looks {
+        Looks { states: vec![(WL_FROM, marcher.clone())], at_tick: vec![0; ticks] }
+    }
+
+    /// The states of `path` over `ticks` display ticks at `display_hz`: the marcher for each
+    /// distinct window and level is `marcher` showing them over its own transfer function,
+    /// rebuilt as the server rebuilds it for an edit (`Marcher::with_visual`; the volume and
+    /// its grid are shared).
+    pub fn of(marcher: &Marcher, path: &CameraPath, ticks: usize, display_hz: f64) -> Result<Looks, ErrorBox> {
+        let mut looks = Looks::fixed(marcher, ticks);
+        let base = marcher.transfer_function().clone();
+        for k in 0..ticks {
+            let Some(wl) = path.window_level(k as f64 / display_hz) else { continue };
+            let i = match looks.states.iter().position(|(s, _)| *s == wl) {
+                Some(i) => i,
+                None => {
+                    let state = VisualState { window: wl[0], level: wl[1], ..VisualState::default() };
+                    let m = marcher
+                        .with_visual(&base, &state)
+                        .map_err(|e| format!("scenario {}: window/level {wl:?}: {e}", path.name))?;
+                    looks.states.push((wl, m));
+                    looks.states.len() - 1
+                }
+            };
+            looks.at_tick[k] = i;
+        }
+        Ok(looks)
+    }
+
+    /// The state of display tick `tick`.
+    pub fn state_at(&self, tick: usize) -> usize {
+        self.at_tick[tick.min(self.at_tick.len() - 1)]
+    }
+
+    /// The marcher of state `state`.
+    pub fn marcher(&self, state: usize) -> &Marcher {
+        &self.states[state].1
+    }
+
+    /// The window and level of state `state`.
+    pub fn window_level(&self, state: usize) -> [f32; 2] {
+        self.states[state].0
+    }
+
+    /// Distinct states.
+    pub fn len(&self) -> usize {
+        self.states.len()
+    }
+
+    /// Never true: a session has at least its start state.
+    pub fn is_empty(&self) -> bool {
+        self.states.is_empty()
+    }
 }
 
 /// One scored tick of one method.
@@ -149,15 +241,16 @@ pub struct SessionResult {
     pub worst: Vec<Worst>,
 }
 
-/// Ground-truth images by camera (bit pattern), shared between methods and runs of one dataset.
+/// Ground-truth images by camera and window/level (bit patterns), shared between methods and
+/// runs of one dataset.
 #[derive(Default)]
 pub struct TruthCache {
-    map: HashMap<[u32; 11], Image>,
+    map: HashMap<[u32; 13], Image>,
     /// Truths rendered (misses).
     pub rendered: usize,
 }
 
-fn camera_key(c: &Camera) -> [u32; 11] {
+fn camera_key(c: &Camera, wl: [f32; 2]) -> [u32; 13] {
     let f = |v: f32| v.to_bits();
     [
         f(c.eye.x),
@@ -171,13 +264,24 @@ fn camera_key(c: &Camera) -> [u32; 11] {
         f(c.up.z),
         f(c.fov_y_deg),
         c.width ^ (c.height << 16),
+        f(wl[0]),
+        f(wl[1]),
     ]
 }
 
 impl TruthCache {
-    /// The truth for a camera (rendered on a miss).
+    /// The truth for a camera with the dataset's own transfer function (rendered on a miss).
     pub fn get(&mut self, marcher: &Marcher, camera: &Camera) -> &Image {
-        let key = camera_key(camera);
+        self.get_with(marcher, WL_FROM, camera)
+    }
+
+    /// The truth for a camera in state `state` of `looks` (rendered on a miss).
+    pub fn get_in(&mut self, looks: &Looks, state: usize, camera: &Camera) -> &Image {
+        self.get_with(looks.marcher(state), looks.window_level(state), camera)
+    }
+
+    fn get_with(&mut self, marcher: &Marcher, wl: [f32; 2], camera: &Camera) -> &Image {
+        let key = camera_key(camera, wl);
         if !self.map.contains_key(&key) {
             self.rendered += 1;
             self.map.insert(key, marcher.render_image(camera));
@@ -221,14 +325,14 @@ pub fn cadence(tick_ms: f64) -> Cadence {
 }
 
 /// The requests a client with `policy` sends over the ticks' cameras: one at every tick the
-/// request policy finds due on the simulator's [`cadence`] (the tick's camera differs from the
-/// previous tick's, or it is the first still tick of a predicting client). Their cameras are
-/// the ticks' own; [`serve`] predicts and widens them.
-fn requests(cams: &[Camera], tick_ms: f64, policy: SessionRequest) -> Vec<Request> {
+/// request policy finds due on the simulator's [`cadence`] (the tick's camera or visual state
+/// differs from the previous tick's, or it is the first still tick of a predicting client).
+/// Their cameras are the ticks' own; [`serve`] predicts and widens them.
+fn requests(cams: &[Camera], looks: &Looks, tick_ms: f64, policy: SessionRequest) -> Vec<Request> {
     let cadence = cadence(tick_ms);
     let mut out = Vec::new();
     for k in 1..cams.len() {
-        let moved = cams[k] != cams[k - 1];
+        let moved = cams[k] != cams[k - 1] || looks.state_at(k) != looks.state_at(k - 1);
         let first_still = !moved && (k < 2 || cams[k - 1] != cams[k - 2]);
         if policy.policy().due(&cadence, ViewEvents { moved, first_still, frame_arrived: false }) {
             out.push(Request { tick: k, sent_ms: k as f64 * tick_ms, camera: cams[k] });
@@ -246,9 +350,10 @@ fn requests(cams: &[Camera], tick_ms: f64, policy: SessionRequest) -> Vec<Reques
 /// [`Predictor`] expects after the [`Horizon`] the client has measured from the frames that
 /// arrived before it was sent (the predictor has observed the camera of every tick up to it,
 /// as the window client's display does); with a guard band, that camera widened
-/// (core's `guard::GuardBand`), all by core's request policy ([`cadence`]).
+/// (core's `guard::GuardBand`), all by core's request policy ([`cadence`]). Each frame is
+/// rendered with the visual state of the newest request it serves (`looks`).
 pub fn serve(
-    marcher: &Marcher,
+    looks: &Looks,
     cams: &[Camera],
     cfg: &SessionConfig,
     policy: &mut dyn ServerPolicy,
@@ -260,28 +365,18 @@ pub fn serve(
     let layers = stream_layers(cfg, request);
     // Each frame with the bytes the server sends for it: its own encoder and radius model
     // (`volwarp_server::encoding::encode_frame`).
-    let render = |camera: Camera, seq: usize| {
+    let render = |camera: Camera, seq: usize, state: usize| {
+        let marcher = looks.marcher(state);
         let req = CameraRequest { seq: seq as u64, camera, heuristic: cfg.heuristic, radius_scale: 1.0 };
         let frame = marcher.render_frame_layers(&req, layers).0;
         let bytes = encode_frame(marcher, &req, &frame, cfg.encoding).0.len() as u64;
         (frame, bytes)
     };
-    let (first, first_bytes) = render(cams[0], 0);
-    let mut out = vec![(
-        FrameEvent {
-            seq: 0,
-            camera: cams[0],
-            view: cams[0],
-            guard_offset: (0, 0),
-            request_ms: 0.0,
-            start_ms: 0.0,
-            bytes: first_bytes,
-            arrive_ms: 0.0,
-        },
-        first,
-    )];
+    let (first, first_bytes) = render(cams[0], 0, looks.state_at(0));
+    let mut out =
+        vec![(FrameEvent::at_start(cams[0], first_bytes, looks.state_at(0)), first)];
     let first_ms = 2.0 * net.latency_ms + net.server_ms + net.transfer_ms(out[0].0.bytes);
-    let mut requests = requests(cams, tick_ms, request);
+    let mut requests = requests(cams, looks, tick_ms, request);
     let cadence = cadence(tick_ms);
     // The client side: what each request asks for, in the order they are sent.
     let mut predictor = Predictor::new();
@@ -331,7 +426,8 @@ pub fn serve(
         let camera = policy.camera(&requests[..=j], s);
         served = j + 1;
         let seq = out.len();
-        let (frame, bytes) = render(camera, seq);
+        let state = looks.state_at(requests[j].tick);
+        let (frame, bytes) = render(camera, seq, state);
         let write_end = s + net.server_ms + net.transfer_ms(bytes);
         let arrive_ms = write_end + net.latency_ms;
         if arrive_ms <= end_ms {
@@ -339,6 +435,7 @@ pub fn serve(
             let guard_offset = if camera == requests[j].camera { guard_offset } else { (0, 0) };
             out.push((
                 FrameEvent {
+                    state,
                     seq,
                     camera,
                     view,
@@ -409,6 +506,7 @@ pub fn run_session(
 ) -> Result<SessionResult, ErrorBox> {
     cfg.check()?;
     let cams = tick_cameras(marcher, path, cfg)?;
+    let looks = Looks::of(marcher, path, cams.len(), cfg.client.display_hz)?;
     let tick_ms = 1e3 / cfg.client.display_hz;
     // One stream of frames per distinct request policy, one of images per peer.
     let mut streams: Vec<Stream> = Vec::new();
@@ -420,7 +518,7 @@ pub fn run_session(
                 Some(i) => i,
                 None => {
                     let s = peers::serve_images(
-                        marcher,
+                        &looks,
                         &cams,
                         tick_ms,
                         cfg.net,
@@ -440,7 +538,7 @@ pub fn run_session(
         let i = match streams.iter().position(|s| s.request == r) {
             Some(i) => i,
             None => {
-                let served = serve(marcher, &cams, cfg, policy, r);
+                let served = serve(&looks, &cams, cfg, policy, r);
                 let frames = served.iter().map(|(e, _)| *e).collect();
                 let held = served.into_iter().map(|(_, f)| HeldFrame::new(f)).collect();
                 streams.push(Stream { request: r, frames, held });
@@ -494,13 +592,18 @@ pub fn run_session(
                 let exact = if stream_layers(cfg, st.request) > 1 { &mut exact_layers } else { &mut exact_one };
                 exact_view(exact.as_mut(), &st.held[fi], &st.frames[fi], &mut images[mi], &mut tmp);
             } else {
+                // The newest frame and the older ones kept of its own state, as the window
+                // client keeps them (no drawing mixes two states).
                 let kept = m.frames_kept().max(1);
-                let held: Vec<&HeldFrame> = st.held[(fi + 1).saturating_sub(kept)..=fi].iter().collect();
+                let first = (fi + 1).saturating_sub(kept);
+                let state = st.frames[fi].state;
+                let held: Vec<&HeldFrame> =
+                    (first..=fi).filter(|&i| st.frames[i].state == state).map(|i| &st.held[i]).collect();
                 m.draw(&held, cam, &mut images[mi]);
             }
             shown_frame.push(fi);
         }
-        let truth = truths.get(marcher, &cams[j]);
+        let truth = truths.get_in(&looks, looks.state_at(j), &cams[j]);
         let metrics: Vec<Metrics> = images
             .par_iter()
             .map(|img| Metrics::of(truth, img).unwrap_or(Metrics { psnr: 0.0, ssim: 0.0, flip: 1.0 }))
