@@ -140,12 +140,29 @@ impl MinMaxGrid {
 
     /// Which bricks a transfer function can make visible.
     pub fn occupancy(&self, tf: &TransferFunction, spacing: Vec3) -> Occupancy {
+        self.occupancy_within(tf, spacing, |_| true)
+    }
+
+    /// [`MinMaxGrid::occupancy`] with every brick `keep` rejects (by brick index) invisible as
+    /// well (a crop box): one pass, its distance transforms made once.
+    pub fn occupancy_within(
+        &self,
+        tf: &TransferFunction,
+        spacing: Vec3,
+        keep: impl Fn([u32; 3]) -> bool,
+    ) -> Occupancy {
         let visible = tf.visibility();
-        let occupied: Vec<bool> = self.ranges.iter().map(|&(lo, hi)| visible(lo, hi)).collect();
-        let dist = chebyshev_distance(self.bricks, &occupied);
-        let empty: Vec<bool> = occupied.iter().map(|&o| !o).collect();
-        let visible_reach = chebyshev_distance(self.bricks, &empty);
-        Occupancy { brick: self.brick, bricks: self.bricks, occupied, dist, visible_reach, spacing }
+        let [nx, ny, _] = self.bricks;
+        let occupied: Vec<bool> = self
+            .ranges
+            .iter()
+            .enumerate()
+            .map(|(i, &(lo, hi))| {
+                let i = i as u32;
+                visible(lo, hi) && keep([i % nx, i / nx % ny, i / (nx * ny)])
+            })
+            .collect();
+        Occupancy::of_flags(self.brick, self.bricks, occupied, spacing)
     }
 }
 
@@ -163,6 +180,21 @@ pub struct Occupancy {
     /// is visible.
     visible_reach: Vec<u8>,
     spacing: Vec3,
+}
+
+impl Occupancy {
+    /// The occupancy of these visible/invisible flags: both distance transforms (to the nearest
+    /// visible and the nearest invisible brick), made side by side on two threads.
+    fn of_flags(brick: u32, bricks: [u32; 3], occupied: Vec<bool>, spacing: Vec3) -> Occupancy {
+        let (dist, visible_reach) = rayon::join(
+            || chebyshev_distance(bricks, &occupied),
+            || {
+                let empty: Vec<bool> = occupied.iter().map(|&o| !o).collect();
+                chebyshev_distance(bricks, &empty)
+            },
+        );
+        Occupancy { brick, bricks, occupied, dist, visible_reach, spacing }
+    }
 }
 
 /// Chebyshev (26-neighbour) distance of every brick to the nearest `true` one, capped at 255:
@@ -221,25 +253,6 @@ fn chebyshev_distance(bricks: [u32; 3], occupied: &[bool]) -> Vec<u8> {
 }
 
 impl Occupancy {
-    /// The occupancy with every brick `keep` refuses made invisible (a crop box: the bricks
-    /// outside it), distances recomputed.
-    pub fn restricted(&self, keep: impl Fn([u32; 3]) -> bool) -> Occupancy {
-        let [nx, ny, _] = self.bricks;
-        let occupied: Vec<bool> = self
-            .occupied
-            .iter()
-            .enumerate()
-            .map(|(i, &o)| {
-                let i = i as u32;
-                o && keep([i % nx, i / nx % ny, i / (nx * ny)])
-            })
-            .collect();
-        let dist = chebyshev_distance(self.bricks, &occupied);
-        let empty: Vec<bool> = occupied.iter().map(|&o| !o).collect();
-        let visible_reach = chebyshev_distance(self.bricks, &empty);
-        Occupancy { brick: self.brick, bricks: self.bricks, occupied, dist, visible_reach, spacing: self.spacing }
-    }
-
     /// The brick of continuous voxel coordinate `g` (clamped).
     #[inline(always)]
     pub fn brick_of(&self, g: Vec3) -> [u32; 3] {

@@ -127,6 +127,20 @@ pub struct Marcher {
     tf: TransferFunction,
 }
 
+/// The empty-space occupancy of `grid` under `tf`, with the bricks outside `cut`'s voxels (and
+/// the one voxel around them a trilinear stencil reaches) invisible too, so rays leap over them.
+fn cut_occupancy(grid: &MinMaxGrid, tf: &TransferFunction, sp: Vec3, cut: &Cut, extent: Vec3) -> Occupancy {
+    if cut.is_whole(extent) {
+        return grid.occupancy(tf, sp);
+    }
+    let e = grid.brick() as f32;
+    let (lo, hi) = ((cut.grid_lo() - 1.0).floor(), (cut.grid_hi() + 2.0).ceil());
+    grid.occupancy_within(tf, sp, |b| {
+        let b = Vec3::new(b[0] as f32, b[1] as f32, b[2] as f32);
+        (b * e).cmple(hi).all() && ((b + 1.0) * e).cmpge(lo).all()
+    })
+}
+
 impl Marcher {
     /// A marcher with default options.
     pub fn new(volume: Arc<Volume>, tf: &TransferFunction) -> Marcher {
@@ -147,18 +161,21 @@ impl Marcher {
     /// A marcher skipping empty space with `grid` (the volume's, e.g. [`MinMaxGrid::with_brick`]
     /// for another brick edge than [`MinMaxGrid::new`] picks).
     pub fn with_grid(volume: Arc<Volume>, grid: Arc<MinMaxGrid>, tf: &TransferFunction, opts: MarchOptions) -> Marcher {
-        Marcher::with_grid_unit(volume, grid, tf, opts, None)
+        Marcher::with_grid_unit(volume, grid, tf, opts, None, None)
     }
 
     /// [`Marcher::with_grid`] whose transfer function's opacities are those of a slab
     /// `opacity_unit` world units thick (`None`: one voxel of the smallest spacing, the
-    /// convention of the transfer functions; a coarser level of detail keeps its volume's).
+    /// convention of the transfer functions; a coarser level of detail keeps its volume's),
+    /// cropped and clipped by `cut` (world units, see [`Marcher::with_cut`]; `None`: the whole
+    /// volume).
     fn with_grid_unit(
         volume: Arc<Volume>,
         grid: Arc<MinMaxGrid>,
         tf: &TransferFunction,
         mut opts: MarchOptions,
         opacity_unit: Option<f32>,
+        cut: Option<Cut>,
     ) -> Marcher {
         if opts.step_voxels.is_nan() || opts.step_voxels < 0.01 {
             opts.step_voxels = 0.01;
@@ -178,10 +195,13 @@ impl Marcher {
             })
             .collect::<Vec<_>>();
         debug_assert_eq!(lut.len(), LUT_SIZE);
-        let occupancy = grid.occupancy(tf, sp);
+        let cut = match cut {
+            Some(c) => c.for_volume(volume.dims(), sp),
+            None => Cut::whole(volume.dims(), volume.extent()),
+        };
+        let occupancy = cut_occupancy(&grid, tf, sp, &cut, volume.extent());
         log::debug!("empty-space grid: {:.1} % of bricks visible", occupancy.fraction_occupied() * 100.0);
         let lut_argb = Arc::new(lut.iter().flat_map(|&[r, g, b, a]| [a, r, g, b]).collect::<Vec<f32>>());
-        let (volume_dims, extent) = (volume.dims(), volume.extent());
         let looks = Arc::new(occupancy.look_table());
         Marcher {
             volume,
@@ -195,7 +215,7 @@ impl Marcher {
             inv_spacing: 1.0 / sp,
             level: 0,
             opacity_unit,
-            cut: Cut::whole(volume_dims, extent),
+            cut,
             tf: tf.clone(),
         }
     }
@@ -226,7 +246,7 @@ impl Marcher {
         let mut out = vec![Arc::new(self.clone())];
         for (l, v) in volumes.into_iter().enumerate().skip(1) {
             let grid = Arc::new(MinMaxGrid::new(&v));
-            let m = Marcher::with_grid_unit(v, grid, tf, self.opts, Some(self.opacity_unit));
+            let m = Marcher::with_grid_unit(v, grid, tf, self.opts, Some(self.opacity_unit), None);
             let m = if self.cut.is_whole(self.volume.extent()) { m } else { m.with_cut(self.cut) };
             out.push(Arc::new(m.at_level(l as u8)));
         }
@@ -244,13 +264,9 @@ impl Marcher {
     /// The same volume and grid with another transfer function or options (no rebuild of the
     /// min/max grid).
     pub fn with_transfer_function(&self, tf: &TransferFunction, opts: MarchOptions) -> Marcher {
-        let m = Marcher::with_grid_unit(self.volume.clone(), self.grid.clone(), tf, opts, Some(self.opacity_unit))
-            .at_level(self.level);
-        if self.cut.is_whole(self.volume.extent()) {
-            m
-        } else {
-            m.with_cut(self.cut)
-        }
+        let cut = (!self.cut.is_whole(self.volume.extent())).then_some(self.cut);
+        Marcher::with_grid_unit(self.volume.clone(), self.grid.clone(), tf, opts, Some(self.opacity_unit), cut)
+            .at_level(self.level)
     }
 
     /// The marcher cropped and clipped by `cut` (world units, see [`Cut`]; its voxel range is
@@ -261,17 +277,7 @@ impl Marcher {
     pub fn with_cut(mut self, cut: Cut) -> Marcher {
         let sp = self.volume.spacing();
         self.cut = cut.for_volume(self.volume.dims(), sp);
-        let occupancy = self.grid.occupancy(&self.tf, sp);
-        self.occupancy = if self.cut.is_whole(self.volume.extent()) {
-            occupancy
-        } else {
-            let e = self.occupancy.brick() as f32;
-            let (lo, hi) = ((self.cut.grid_lo() - 1.0).floor(), (self.cut.grid_hi() + 2.0).ceil());
-            occupancy.restricted(|b| {
-                let b = Vec3::new(b[0] as f32, b[1] as f32, b[2] as f32);
-                (b * e).cmple(hi).all() && ((b + 1.0) * e).cmpge(lo).all()
-            })
-        };
+        self.occupancy = cut_occupancy(&self.grid, &self.tf, sp, &self.cut, self.volume.extent());
         self.looks = Arc::new(self.occupancy.look_table());
         self
     }
@@ -295,14 +301,10 @@ impl Marcher {
     /// its min/max grid are shared.
     pub fn with_visual_tf(&self, tf: &TransferFunction, state: &crate::visual::VisualState) -> Marcher {
         let opts = MarchOptions { shading: state.shade.then_some(Shading::DEFAULT), ..self.opts };
-        let m = Marcher::with_grid_unit(self.volume.clone(), self.grid.clone(), tf, opts, Some(self.opacity_unit))
-            .at_level(self.level);
         let cut = state.cut(&self.volume);
-        if cut.is_whole(self.volume.extent()) {
-            m
-        } else {
-            m.with_cut(cut)
-        }
+        let cut = (!cut.is_whole(self.volume.extent())).then_some(cut);
+        Marcher::with_grid_unit(self.volume.clone(), self.grid.clone(), tf, opts, Some(self.opacity_unit), cut)
+            .at_level(self.level)
     }
 
     /// This marcher with `state`'s shading and cut and its own transfer-function tables (for a
