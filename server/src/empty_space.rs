@@ -145,12 +145,7 @@ impl MinMaxGrid {
 
     /// [`MinMaxGrid::occupancy`] with every brick `keep` rejects (by brick index) invisible as
     /// well (a crop box): one pass, its distance transforms made once.
-    pub fn occupancy_within(
-        &self,
-        tf: &TransferFunction,
-        spacing: Vec3,
-        keep: impl Fn([u32; 3]) -> bool,
-    ) -> Occupancy {
+    pub fn occupancy_within(&self, tf: &TransferFunction, spacing: Vec3, keep: impl Fn([u32; 3]) -> bool) -> Occupancy {
         let visible = tf.visibility();
         let [nx, ny, _] = self.bricks;
         let occupied: Vec<bool> = self

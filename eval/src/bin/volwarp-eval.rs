@@ -252,7 +252,7 @@ enum Cmd {
 #[derive(Args, Clone)]
 struct SessionArgs {
     /// Scenarios, comma-separated: orbit, stop-and-go, dolly, look-around, flick (180°/s for
-    /// 0.5 s, then rest), zoom (into detail, then rest) (each with an optional :DEG_PER_S), or
+    /// 0.5 s, then rest), zoom (into detail, then rest), wl-drag (a window/level drag from 1 to 2 s during an orbit) (each with an optional :DEG_PER_S), or
     /// record:FILE (a `volwarp-client --record` file).
     #[arg(long, default_value = "orbit,stop-and-go,dolly,look-around")]
     scenarios: String,

@@ -373,8 +373,7 @@ pub fn serve(
         (frame, bytes)
     };
     let (first, first_bytes) = render(cams[0], 0, looks.state_at(0));
-    let mut out =
-        vec![(FrameEvent::at_start(cams[0], first_bytes, looks.state_at(0)), first)];
+    let mut out = vec![(FrameEvent::at_start(cams[0], first_bytes, looks.state_at(0)), first)];
     let first_ms = 2.0 * net.latency_ms + net.server_ms + net.transfer_ms(out[0].0.bytes);
     let mut requests = requests(cams, looks, tick_ms, request);
     let cadence = cadence(tick_ms);
