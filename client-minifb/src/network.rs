@@ -102,10 +102,12 @@ pub struct NetConfig {
 }
 
 /// The window client's side of the request policy: the display runs at about 60 Hz (a tick of
-/// ~16 ms) and a frame's arrival alone triggers a request, so the server always has work; no
-/// extra request when the view stops (the arrival of the next frame asks for the still view).
+/// ~16 ms) and a frame's arrival alone triggers a request, so the server always has work; when
+/// the view stops where the last request did not ask for it (a predicting client's overshoot),
+/// it asks for the still view at once rather than at the next frame's arrival, so the server's
+/// next frame is the exact one the display then shows as rendered (`volwarp_core::show`).
 pub const CADENCE: Cadence =
-    Cadence { display_tick_s: 1.0 / 60.0, on_frame_arrival: true, on_first_still: false, max_viewport: MAX_VIEWPORT };
+    Cadence { display_tick_s: 1.0 / 60.0, on_frame_arrival: true, on_first_still: true, max_viewport: MAX_VIEWPORT };
 
 /// How long one redial may take at most (connect, Hello, probe frame), whatever `--timeout-s`
 /// says: a server that is down answers at once, one that does not answer is tried again.
@@ -247,6 +249,11 @@ struct ViewSlot {
     view: Option<View>,
     changed: bool,
     frame_arrived: bool,
+    /// The view the last request asked for (before any guard band): where it differs from a
+    /// view that holds still (a prediction overshot), the still view is asked for once more.
+    asked: Option<Camera>,
+    /// The view held still for a display frame since the last request, which asked for another.
+    first_still: bool,
     /// Every camera the display showed, timed (so motion that starts after a still spell is
     /// measured from the last still display frame, not from the last request).
     predictor: Predictor,
@@ -476,6 +483,12 @@ impl Network {
         if g.view != Some(view) {
             g.view = Some(view);
             g.changed = true;
+            drop(g);
+            self.shared.view_cv.notify_one();
+        } else if !g.changed && g.asked.is_some_and(|a| a != view.camera) && !g.first_still {
+            // The view holds still where the last request did not ask (a prediction that
+            // overshot): ask for exactly this view, so its exact frame comes a frame sooner.
+            g.first_still = true;
             drop(g);
             self.shared.view_cv.notify_one();
         }
@@ -922,7 +935,8 @@ fn write_loop(sh: &Shared, mut stream: impl Write, request: RequestPolicy) {
                     g = lock(&sh.view);
                     continue;
                 }
-                let events = ViewEvents { moved: g.changed, first_still: false, frame_arrived: g.frame_arrived };
+                let events =
+                    ViewEvents { moved: g.changed, first_still: g.first_still, frame_arrived: g.frame_arrived };
                 if let Some(v) = g.view.filter(|_| request.due(&CADENCE, events)) {
                     let now = Instant::now();
                     match last_send.map(|t| t + THROTTLE).filter(|next| *next > now) {
@@ -933,6 +947,7 @@ fn write_loop(sh: &Shared, mut stream: impl Write, request: RequestPolicy) {
                         None => {
                             g.changed = false;
                             g.frame_arrived = false;
+                            g.first_still = false;
                             break (v, g.predictor);
                         }
                     }
@@ -942,7 +957,9 @@ fn write_loop(sh: &Shared, mut stream: impl Write, request: RequestPolicy) {
         };
         let seq = sh.seq.fetch_add(1, Ordering::SeqCst) + 1;
         let horizon = lock(&sh.horizon).0;
-        let camera = request.camera(view.camera, &predictor, &horizon, &CADENCE).camera;
+        let asks = request.camera(view.camera, &predictor, &horizon, &CADENCE);
+        lock(&sh.view).asked = Some(asks.view);
+        let camera = asks.camera;
         let req = CameraRequest { seq, camera, heuristic: view.heuristic, radius_scale: view.radius_scale };
         let now = Instant::now();
         {

@@ -8,6 +8,7 @@
 //! | [`camera`] | the pinhole camera and its primary rays (one convention for marcher, tracers and shader) |
 //! | [`sample`] | the object-space sample: quantized position + radius in 64 bits, RGBA8 color in 32 |
 //! | [`method`] | the method (renderer and levers, its default) and the request policy: when a client asks for which camera |
+//! | `show` (feature `alloc`) | the frame choice: which kept frame a client shows for the camera of now, exact, warped or unwarped |
 //! | [`prediction`] | the camera expected when a requested frame arrives (orbit-aware extrapolation) |
 //! | [`guard`] | guard bands: a wider requested view at the same pixel density |
 //! | [`warp_radius`] | sphere radii sized by how far the view moved from the frame's camera |
@@ -63,6 +64,8 @@ pub mod sample;
 #[cfg(feature = "alloc")]
 pub mod scene;
 pub mod segments;
+#[cfg(feature = "alloc")]
+pub mod show;
 pub mod sphere;
 pub mod stats;
 pub mod traversal;

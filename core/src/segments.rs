@@ -238,38 +238,41 @@ pub fn pack_colors(segs: &[Segment], ray: [f32; 4], out: &mut [u32]) {
             let last = j + 1 == n;
             let stops = acc[3] + wgt * q[3] as f32 >= OPAQUE;
             if last || stops {
-                // The last segment takes the error on its opacity too; one where the client
-                // stops keeps its opacity, so it still stops there.
+                // The last segment (or the one where the client stops) takes the error.
                 let fit_rgb = |mut q: [u8; 4]| {
                     for i in 0..3 {
                         q[i] = fit_channel(acc[i], wgt, target[i], q[i].min(q[3]), 0, q[3]);
                     }
                     q
                 };
-                if last {
-                    // Where a color channel cannot reach its target under the opacity
-                    // (premultiplied), a slightly higher opacity may still give the same pixel
-                    // over the background: the first of a few that does, else the nearest fit.
-                    let a = fit_channel(acc[3], wgt, target[3], q[3], 0, 255);
-                    let want = over_background(u32::from_le_bytes(target), BACKGROUND);
-                    let shown = |q: [u8; 4]| {
-                        let mut after = acc;
-                        composite_step(&mut after, q);
-                        over_background(crate::sample::pack_color_f32(after), BACKGROUND)
-                    };
-                    let first = fit_rgb([q[0], q[1], q[2], a]);
-                    q = first;
-                    if shown(first) != want {
-                        for d in 1..=3u8 {
-                            let c = fit_rgb([q[0], q[1], q[2], a.saturating_add(d)]);
+                // Where a color channel cannot reach its target under the opacity
+                // (premultiplied), another opacity may still give the same pixel over the
+                // background: the nearest that does (higher first), else the nearest fit. Only
+                // the pixel shown at the frame's own camera is asked of it, so an opacity far
+                // off is still right there; a few rays of faint, fuzzy volumes need one. One
+                // where the client stops keeps stopping there.
+                let a = if last { fit_channel(acc[3], wgt, target[3], q[3], 0, 255) } else { q[3] };
+                let want = over_background(u32::from_le_bytes(target), BACKGROUND);
+                let shown = |q: [u8; 4]| {
+                    let mut after = acc;
+                    composite_step(&mut after, q);
+                    over_background(crate::sample::pack_color_f32(after), BACKGROUND)
+                };
+                let first = fit_rgb([q[0], q[1], q[2], a]);
+                q = first;
+                if shown(first) != want {
+                    'search: for d in 1..=255i32 {
+                        for alpha in [a as i32 + d, a as i32 - d] {
+                            if !(0..=255).contains(&alpha) || !(last || acc[3] + wgt * alpha as f32 >= OPAQUE) {
+                                continue;
+                            }
+                            let c = fit_rgb([q[0], q[1], q[2], alpha as u8]);
                             if shown(c) == want {
                                 q = c;
-                                break;
+                                break 'search;
                             }
                         }
                     }
-                } else {
-                    q = fit_rgb(q);
                 }
                 adjusting = false;
             }
@@ -885,7 +888,8 @@ mod tests {
             }
             plain += usize::from(shown(&rounded[..k]) == want);
         }
-        assert!(exact as f64 >= 0.99 * n as f64, "{exact} of {n} exact");
+        // 99.8 % (99.2 % when the last segment's opacity could only rise by 3 levels).
+        assert!(exact as f64 >= 0.998 * n as f64, "{exact} of {n} exact");
         assert!((plain as f64) < 0.9 * exact as f64, "plain rounding: {plain} of {n}");
     }
 

@@ -16,8 +16,11 @@
 //! 3. **Client**: each method draws for the camera of a tick with the newest frame arrived by
 //!    then. A draw of `d` ms takes `ceil(d / tick)` ticks (at least one); a draw that fits in one
 //!    tick is shown at the tick it started at, a slower one is shown when done and its previous
-//!    image stays up until then. Where the camera equals the frame's camera the client shows
-//!    the frame itself (`exact_when_still`): warping starts when the camera moves.
+//!    image stays up until then. Which of the frames the method keeps it shows, and how, is
+//!    core's frame choice (`volwarp_core::show`, as the window's display loop makes it): a kept
+//!    frame whose view equals the camera is shown as rendered (`exact_when_still`; warping
+//!    starts when the camera moves), else the kept frames are warped nearest first, else
+//!    (every frame beyond `show::FALLBACK_DEG`) the nearest frame is shown as rendered.
 //! 4. **Scoring** every `score_every`-th tick: the truth (the marcher's image for that tick's
 //!    camera and visual state, cached between methods and runs) against what each method shows.
 //! 5. **Visual edits** (`wl-drag`): each tick has a visual state ([`Looks`]). A tick whose
@@ -38,6 +41,7 @@ use volwarp_core::compact_frame::Encoding;
 use volwarp_core::method::{Cadence, ViewEvents};
 use volwarp_core::prediction::{Horizon, Predictor};
 use volwarp_core::renderer::Renderer;
+use volwarp_core::show::{self, Show};
 use volwarp_core::wire::CameraRequest;
 use volwarp_core::{Camera, Heuristic, Image, RendererKind};
 use volwarp_server::encoding::encode_frame;
@@ -587,20 +591,38 @@ pub fn run_session(
             };
             let fi = st.frames.partition_point(|f| f.arrive_ms <= t_k).saturating_sub(1);
             let cam = &cams[k];
-            if cfg.exact_when_still && *cam == st.frames[fi].view {
-                let exact = if stream_layers(cfg, st.request) > 1 { &mut exact_layers } else { &mut exact_one };
-                exact_view(exact.as_mut(), &st.held[fi], &st.frames[fi], &mut images[mi], &mut tmp);
-            } else {
-                // The newest frame and the older ones kept of its own state, as the window
-                // client keeps them (no drawing mixes two states).
-                let kept = m.frames_kept().max(1);
-                let first = (fi + 1).saturating_sub(kept);
-                let state = st.frames[fi].state;
-                let held: Vec<&HeldFrame> =
-                    (first..=fi).filter(|&i| st.frames[i].state == state).map(|i| &st.held[i]).collect();
-                m.draw(&held, cam, &mut images[mi]);
+            // The kept frames, newest first, of the newest frame's visual state (the window drops
+            // older frames of another state when a frame of a new state arrives: no drawing
+            // mixes two states), and core's choice among them (as the window's display loop
+            // makes it).
+            let state = st.frames[fi].state;
+            let kept: Vec<usize> = (0..m.frames_kept().max(1).min(fi + 1))
+                .map(|d| fi - d)
+                .filter(|&i| st.frames[i].state == state)
+                .collect();
+            let views: Vec<Camera> = kept.iter().map(|&i| st.frames[i].view).collect();
+            // Always warping (`--always-warp`): no exact frame, no unwarped fallback.
+            let fallback = if cfg.exact_when_still { show::FALLBACK_DEG } else { f32::INFINITY };
+            let show = match show::choose(&views, cam, fallback) {
+                Show::Exact(i) if !cfg.exact_when_still => {
+                    Show::Warp(std::iter::once(i).chain((0..kept.len()).filter(|&j| j != i)).collect())
+                }
+                s => s,
+            };
+            match show {
+                Show::Exact(i) | Show::Unwarped(i) => {
+                    let exact = if stream_layers(cfg, st.request) > 1 { &mut exact_layers } else { &mut exact_one };
+                    let f = kept[i];
+                    exact_view(exact.as_mut(), &st.held[f], &st.frames[f], &mut images[mi], &mut tmp);
+                    shown_frame.push(f);
+                }
+                Show::Warp(order) => {
+                    // `Method::draw` takes the frames oldest first: the one to draw last.
+                    let held: Vec<&HeldFrame> = order.iter().rev().map(|&i| &st.held[kept[i]]).collect();
+                    m.draw(&held, cam, &mut images[mi]);
+                    shown_frame.push(order.first().map_or(fi, |&i| kept[i]));
+                }
             }
-            shown_frame.push(fi);
         }
         let truth = truths.get_in(&looks, looks.state_at(j), &cams[j]);
         let metrics: Vec<Metrics> = images
