@@ -125,6 +125,10 @@ pub(crate) trait Lanes: volwarp_lanes::Ops {
     /// `0 ..= data.len() − 4` first (the gather reads 4 bytes; a slice shorter than 4 gives
     /// zeros).
     fn gather_byte_pairs(data: &[u8], idx: Self::I) -> (Self, Self);
+    /// Per lane `data[idx ..= idx + 3]` as `f32` (exact), each index clamped to
+    /// `0 ..= data.len() − 4` first (a slice shorter than 4 gives zeros): the same gather as
+    /// [`Lanes::gather_byte_pairs`], all four bytes kept.
+    fn gather_byte_quads(data: &[u8], idx: Self::I) -> [Self; 4];
     /// Per lane `(data[idx], data[idx + 1])` as `f32` (exact), each index clamped to
     /// `0 ..= data.len() − 2` first (a slice shorter than 2 gives zeros).
     fn gather_short_pairs(data: &[u16], idx: Self::I) -> (Self, Self);
@@ -245,6 +249,22 @@ impl Lanes for f32x8 {
         let w = i32x8::new(i.map(|i| u16::from_le_bytes([data[i], data[i + 1]]) as i32));
         let m = i32x8::splat(255);
         ((w & m).round_float(), (w >> 8i32).round_float())
+    }
+    #[inline(always)]
+    fn gather_byte_quads(data: &[u8], idx: i32x8) -> [Self; 4] {
+        if data.len() < 4 {
+            return [f32x8::splat(0.0); 4];
+        }
+        let last = data.len() - 4;
+        let i = idx.to_array().map(|i| (i.max(0) as usize).min(last));
+        let w = i32x8::new(i.map(|i| u32::from_le_bytes([data[i], data[i + 1], data[i + 2], data[i + 3]]) as i32));
+        let m = i32x8::splat(255);
+        [
+            (w & m).round_float(),
+            ((w >> 8i32) & m).round_float(),
+            ((w >> 16i32) & m).round_float(),
+            ((w >> 24i32) & m).round_float(),
+        ]
     }
     #[inline(always)]
     fn gather_short_pairs(data: &[u16], idx: i32x8) -> (Self, Self) {
@@ -408,6 +428,12 @@ impl<L: Lanes> Lanes for X2<L> {
         (X2(a0, a1), X2(b0, b1))
     }
     #[inline(always)]
+    fn gather_byte_quads(data: &[u8], idx: Self::I) -> [Self; 4] {
+        let ([a0, b0, c0, d0], [a1, b1, c1, d1]) =
+            (L::gather_byte_quads(data, idx.0), L::gather_byte_quads(data, idx.1));
+        [X2(a0, a1), X2(b0, b1), X2(c0, c1), X2(d0, d1)]
+    }
+    #[inline(always)]
     fn sqrt(self) -> Self {
         X2(self.0.sqrt(), self.1.sqrt())
     }
@@ -509,6 +535,25 @@ mod x86 {
                     const $scale: i32 = 1;
                     let (w, m) = ($gather, $set1(255));
                     ($t::from_raw($cvt($and(w, m))), $t::from_raw($cvt($and($srli::<8>(w), m))))
+                }
+            }
+            #[inline(always)]
+            fn gather_byte_quads(data: &[u8], idx: $ti) -> [Self; 4] {
+                if data.len() < 4 {
+                    return [$t::splat($token(), 0.0); 4];
+                }
+                let $i = $clamp(idx, last_index(data.len(), 4));
+                let $p = data.as_ptr().cast::<i32>();
+                // SAFETY: as `gather_byte_pairs`: every index is in 0 ..= len − 4.
+                unsafe {
+                    const $scale: i32 = 1;
+                    let (w, m) = ($gather, $set1(255));
+                    [
+                        $t::from_raw($cvt($and(w, m))),
+                        $t::from_raw($cvt($and($srli::<8>(w), m))),
+                        $t::from_raw($cvt($and($srli::<16>(w), m))),
+                        $t::from_raw($cvt($srli::<24>(w))),
+                    ]
                 }
             }
             #[inline(always)]
@@ -818,6 +863,12 @@ mod tests {
                 let ((a0, a1), (w0, w1)) = (A::gather_byte_pairs(data, k), W::gather_byte_pairs(data, wk));
                 eq("bytes 0", a0, w0);
                 eq("bytes 1", a1, w1);
+                let (aq, wq) = (A::gather_byte_quads(data, k), W::gather_byte_quads(data, wk));
+                for (j, (a, w)) in aq.into_iter().zip(wq).enumerate() {
+                    eq(["quad 0", "quad 1", "quad 2", "quad 3"][j], a, w);
+                }
+                eq("quad 0 is pair 0", aq[0], w0);
+                eq("quad 1 is pair 1", aq[1], w1);
             }
             let shorts: Vec<u16> = (0..100u32).map(|i| i.wrapping_mul(2_654_435_761) as u16).collect();
             for data in [&shorts[..], &shorts[..1], &[]] {

@@ -47,8 +47,9 @@ pub struct MarchOptions {
 /// Gradient shading: ambient + diffuse + Blinn–Phong specular of a light fixed to the volume.
 ///
 /// The gradient is taken on the fly by central differences of the normalized, trilinear scalar
-/// one voxel either side along each axis (clamped to the volume or crop like every sample),
-/// scaled by `1 / spacing`; no gradient volume is stored. With `n = ∇s / |∇s|` (two-sided),
+/// one voxel either side along each axis ([`crate::volume::Volume::gradient_grid_in`]: the
+/// shifted samples share the sample's stencil and fractions, reads clamped to the volume or
+/// crop), scaled by `1 / spacing`; no gradient volume is stored. With `n = ∇s / |∇s|` (two-sided),
 /// `L` the light direction and `H = normalize(L − d)` the half vector of the ray `d`, a sample's
 /// premultiplied color `c` (opacity `α`) becomes
 /// `min(c·(ambient + diffuse·|n·L|) + specular·|n·H|^32·α, α)`. Where the gradient is zero the
@@ -101,7 +102,9 @@ impl Shading {
         let l = self.light;
         let ndl = gx * l.x + gy * l.y + gz * l.z;
         let ndh = gx * h.x + gy * h.y + gz * h.z;
-        let (diff, spec) = if g2 > 0.0 { (ndl.max(0.0 - ndl) / len, ndh.max(0.0 - ndh) / len) } else { (1.0, 0.0) };
+        // One division for both terms.
+        let inv = 1.0 / len;
+        let (diff, spec) = if g2 > 0.0 { (ndl.max(0.0 - ndl) * inv, ndh.max(0.0 - ndh) * inv) } else { (1.0, 0.0) };
         let s2 = spec * spec;
         let s4 = s2 * s2;
         let s8 = s4 * s4;

@@ -478,11 +478,8 @@ impl Marcher {
                 let [cr, cg, cb, ca] = match &shading {
                     None => [cr, cg, cb, ca],
                     Some(sh) => {
-                        let at = |x: f32, y: f32, z: f32| vol.sample_grid_in(Vec3::new(x, y, z), glo, ghi);
-                        let gx = (at(gp.x + 1.0, gp.y, gp.z) - at(gp.x - 1.0, gp.y, gp.z)) * isp.x;
-                        let gy = (at(gp.x, gp.y + 1.0, gp.z) - at(gp.x, gp.y - 1.0, gp.z)) * isp.y;
-                        let gz = (at(gp.x, gp.y, gp.z + 1.0) - at(gp.x, gp.y, gp.z - 1.0)) * isp.z;
-                        sh.shade([gx, gy, gz], half, [cr, cg, cb, ca])
+                        let d = vol.gradient_grid_in(gp, glo, ghi);
+                        sh.shade([d.x * isp.x, d.y * isp.y, d.z * isp.z], half, [cr, cg, cb, ca])
                     }
                 };
                 let w = 1.0 - a;

@@ -326,6 +326,24 @@ struct Sampler<'a, L: Lanes> {
     per_chunk_inv: L,
     offset: L,
     scale: L,
+    /// The gradient's voxel clamp range, `floor(lo) + 1` and `ceil(hi)`
+    /// ([`crate::volume::Volume::gradient_grid_in`]).
+    ilo1: [L; 3],
+    ihi: [L; 3],
+    half: L,
+    one: L,
+    minus_one_i: L::I,
+    /// Whether samples read 4-byte quads for the gradient where they can (shading on, 8-bit
+    /// voxels in one chunk).
+    quad_mode: bool,
+    two: L,
+    /// `BRICK_EDGE − 1.5`: above it a local coordinate is the brick's last.
+    last_local: L,
+    one_i: L::I,
+    /// Per axis, what stepping a neighbour across a brick face adds to its index.
+    cross: [L::I; 3],
+    /// Per axis, the lower neighbour's index offset where it crosses the face.
+    cross_back: [L::I; 3],
 }
 
 impl<'a, L: Lanes> Sampler<'a, L> {
@@ -336,6 +354,12 @@ impl<'a, L: Lanes> Sampler<'a, L> {
         let layout = *voxels.layout();
         let nbr = layout.bricks();
         let (offset, scale) = m.volume.normalization();
+        // A brick one over along x, y, z (within a chunk's slab), against 32 voxels along the
+        // axis in the same brick (i64: a chunk holds up to 2^31 values).
+        let (bv, span, span2) = (BRICK_VALUES as i64, i64::from(BRICK_SPAN), i64::from(BRICK_SPAN * BRICK_SPAN));
+        let cross =
+            [bv - 32, i64::from(nbr[0]) * bv - 32 * span, i64::from(nbr[0]) * i64::from(nbr[1]) * bv - 32 * span2];
+        let cross_back = [-1 - cross[0], -span - cross[1], -span2 - cross[2]];
         Sampler {
             voxels,
             lo: [L::splat(glo.x), L::splat(glo.y), L::splat(glo.z)],
@@ -351,13 +375,33 @@ impl<'a, L: Lanes> Sampler<'a, L> {
             per_chunk_inv: L::splat(1.0 / (1u32 << layout.slab_shift()) as f32),
             offset: L::splat(offset),
             scale: L::splat(scale),
+            ilo1: [L::splat(glo.x.floor() + 1.0), L::splat(glo.y.floor() + 1.0), L::splat(glo.z.floor() + 1.0)],
+            ihi: [L::splat(ghi.x.ceil()), L::splat(ghi.y.ceil()), L::splat(ghi.z.ceil())],
+            half: L::splat(0.5),
+            one: L::splat(1.0),
+            minus_one_i: L::splat_i(-1),
+            quad_mode: m.opts.shading.is_some() && matches!(voxels, Voxels::U8(_)) && layout.chunks() == 1,
+            two: L::splat(2.0),
+            last_local: L::splat(BRICK_EDGE as f32 - 1.5),
+            one_i: L::splat_i(1),
+            cross: [L::splat_i(cross[0] as i32), L::splat_i(cross[1] as i32), L::splat_i(cross[2] as i32)],
+            cross_back: [
+                L::splat_i(cross_back[0] as i32),
+                L::splat_i(cross_back[1] as i32),
+                L::splat_i(cross_back[2] as i32),
+            ],
         }
     }
 
     /// The normalized trilinear sample at continuous voxel coordinates `(px, py, pz)`, clamped
-    /// to the sampler's range: `Volume::sample_grid_in`, in lanes, bit for bit.
+    /// to the sampler's range: `Volume::sample_grid_in`, in lanes, bit for bit; and its
+    /// stencil, for the gradient ([`Sampler::gradient`]).
+    ///
+    /// With `Sampler::quad_mode` and every lane of `lanes` at a local x of 1 to
+    /// `BRICK_EDGE − 2`, the stencil's rows are read as 4-byte gathers at `x0 − 1` (the same
+    /// count as the pairs), which hold the gradient's x stencils too (`Cell::x`).
     #[inline(always)]
-    fn sample<const M: usize>(&self, px: L, py: L, pz: L) -> L {
+    fn sample<const M: usize>(&self, px: L, py: L, pz: L, lanes: L::M) -> (L, Cell<L>) {
         let gx = px.max(self.lo[0]).min(self.hi[0]);
         let gy = py.max(self.lo[1]).min(self.hi[1]);
         let gz = pz.max(self.lo[2]).min(self.hi[2]);
@@ -371,11 +415,35 @@ impl<'a, L: Lanes> Sampler<'a, L> {
         let (sbx, sby, span, span2, brick_values) = (self.sbx, self.sby, self.span, self.span2, self.brick_values);
         let (bx, by, bz) = (L::shr_i::<SHIFT>(xi), L::shr_i::<SHIFT>(yi), L::shr_i::<SHIFT>(zi));
         let (lx, ly, lz) = (L::and_i(xi, self.edge_mask), L::and_i(yi, self.edge_mask), L::and_i(zi, self.edge_mask));
-        let (c000, c100, c010, c110, c001, c101, c011, c111) = if self.chunks == 1 {
+        let mut x = None;
+        let (c000, c100, c010, c110, c001, c101, c011, c111, base, chunk, foreign) = if self.chunks == 1 {
             let brick = bx + L::mul_i(sbx, by + L::mul_i(sby, bz));
             let base = L::mul_i(brick, brick_values) + lx + L::mul_i(span, ly) + L::mul_i(span2, lz);
-            let [c0, c1, c2, c3, c4, c5, c6, c7] = corners::<L>(self.voxels, 0, base);
-            (c0, c1, c2, c3, c4, c5, c6, c7)
+            let lxf = L::int_to_float(lx);
+            let quads = lxf.simd_ge(self.one) & self.last_local.simd_gt(lxf);
+            match self.voxels {
+                Voxels::U8(grid) if self.quad_mode && !lanes.and_not(quads).any() => {
+                    let data = &grid.chunks()[0][..];
+                    let xm = base + self.minus_one_i;
+                    let [a0, c000, c100, d0] = L::gather_byte_quads(data, xm);
+                    let [a1, c010, c110, d1] = L::gather_byte_quads(data, xm + span);
+                    let [a2, c001, c101, d2] = L::gather_byte_quads(data, xm + span2);
+                    let [a3, c011, c111, d3] = L::gather_byte_quads(data, xm + span + span2);
+                    // The gradient's x stencils (`Volume::gradient_grid_in`'s order).
+                    let (l00, l10, l01, l11) =
+                        (lerp(a0, c000, fx), lerp(a1, c010, fx), lerp(a2, c001, fx), lerp(a3, c011, fx));
+                    let (h00, h10, h01, h11) =
+                        (lerp(c100, d0, fx), lerp(c110, d1, fx), lerp(c101, d2, fx), lerp(c111, d3, fx));
+                    let xlo = lerp(lerp(l00, l10, fy), lerp(l01, l11, fy), fz);
+                    let xhi = lerp(lerp(h00, h10, fy), lerp(h01, h11, fy), fz);
+                    x = Some(xhi - xlo);
+                    (c000, c100, c010, c110, c001, c101, c011, c111, base, 0, L::mask_from_bits(0))
+                }
+                _ => {
+                    let [c0, c1, c2, c3, c4, c5, c6, c7] = corners::<L>(self.voxels, 0, base);
+                    (c0, c1, c2, c3, c4, c5, c6, c7, base, 0, L::mask_from_bits(0))
+                }
+            }
         } else {
             // Several chunks of brick z-slabs: each lane's chunk and slab in it.
             let bzf = L::int_to_float(bz);
@@ -408,7 +476,12 @@ impl<'a, L: Lanes> Sampler<'a, L> {
                 }
             }
             let [c0, c1, c2, c3, c4, c5, c6, c7] = acc;
-            (c0, c1, c2, c3, c4, c5, c6, c7)
+            // Lanes outside the first lane's chunk, or whose gradient's slices may lie in
+            // another chunk (a z-neighbour across a brick slab): the gradient's gathers read
+            // the first lane's chunk only, so these lanes take the scalar gradient.
+            let lzf = L::int_to_float(lz);
+            let foreign = czf.simd_gt(c0) | czf.simd_lt(c0) | lzf.simd_lt(self.half) | lzf.simd_gt(self.last_local);
+            (c0, c1, c2, c3, c4, c5, c6, c7, base, cs[0] as usize, foreign)
         };
         let c00 = c000 + (c100 - c000) * fx;
         let c10 = c010 + (c110 - c010) * fx;
@@ -416,8 +489,188 @@ impl<'a, L: Lanes> Sampler<'a, L> {
         let c11 = c011 + (c111 - c011) * fx;
         let c0 = c00 + (c10 - c00) * fy;
         let c1 = c01 + (c11 - c01) * fy;
-        (c0 + (c1 - c0) * fz - self.offset) * self.scale
+        let v = (c0 + (c1 - c0) * fz - self.offset) * self.scale;
+        // Where the gradient's reads all lie in the clamp range (no voxel of it clamped) and in
+        // the gathered chunk.
+        let two = self.two;
+        let inside_x = xf.simd_ge(self.ilo1[0]) & self.ihi[0].simd_ge(xf + two);
+        let inside_y = yf.simd_ge(self.ilo1[1]) & self.ihi[1].simd_ge(yf + two);
+        let inside_z = zf.simd_ge(self.ilo1[2]) & self.ihi[2].simd_ge(zf + two);
+        let inside = (inside_x & inside_y & inside_z).and_not(foreign);
+        (v, Cell { fx, fy, fz, lx, ly, lz, base, chunk, inside, rows: [c00, c10, c01, c11], c0, c1, x })
     }
+
+    /// The gradient differences of [`crate::volume::Volume::gradient_grid_in`] (normalized,
+    /// before `1 / spacing`) at the sample of `cell`, bit for bit, in the lanes of
+    /// `cell.inside` (the others' lanes are garbage): sixteen gathers of voxel pairs from the
+    /// neighbour bricks, addressed from the sample's own lowest corner.
+    #[inline(always)]
+    fn gradient(&self, cell: &Cell<L>) -> (L, L, L) {
+        let (lx, ly, lz, base, chunk) = (cell.lx, cell.ly, cell.lz, cell.base, cell.chunk);
+        let (span, span2) = (self.span, self.span2);
+        // A neighbour's lowest voxel, one brick over where the step leaves the brick: `first`
+        // is 1 where the local coordinate is 0, `last` where it is BRICK_EDGE − 1 (the brick's
+        // apron holds local BRICK_EDGE, so only these cross).
+        // (No closures here: see `band`.)
+        let (em, one) = (self.edge_mask, self.one_i);
+        let [kx, ky, kz] = self.cross;
+        let [bx, by, bz] = self.cross_back;
+        // x: the pairs (x0 − 1, x0) and (x0 + 1, x0 + 2) of the four rows.
+        let xm = base + bx + L::mul_i(L::shr_i::<SHIFT>(lx + em), kx);
+        let xp = base + one + L::mul_i(L::shr_i::<SHIFT>(lx + one), kx);
+        // y: row y0 − 1 and row y0 + 2, on slices z0 and z0 + 1.
+        let ym = base + by + L::mul_i(L::shr_i::<SHIFT>(ly + em), ky);
+        let yp = base + span + span + L::mul_i(L::shr_i::<SHIFT>(ly + one), ky);
+        // z: slice z0 − 1 and slice z0 + 2, rows y0 and y0 + 1.
+        let zm = base + bz + L::mul_i(L::shr_i::<SHIFT>(lz + em), kz);
+        let zp = base + span2 + span2 + L::mul_i(L::shr_i::<SHIFT>(lz + one), kz);
+        // One copy of the blends per stored type; no arrays of lanes (copied with `memmove`
+        // when they were).
+        let (dx, dy, dz) = match self.voxels {
+            Voxels::U8(grid) => {
+                let data = &grid.chunks()[chunk.min(grid.chunks().len() - 1)][..];
+                // Where no lane's x-neighbours leave its brick (local x in 1 ..= BRICK_EDGE − 2),
+                // one 4-byte gather at x0 − 1 holds a row's x0 − 1 ..= x0 + 2: the x stencils'
+                // rows in four gathers, not eight.
+                let lxf = L::int_to_float(lx);
+                let quads = lxf.simd_ge(self.one) & self.last_local.simd_gt(lxf);
+                if let Some(dx) = cell.x {
+                    let (dy, dz) = blend_gradient_yz::<L, u8>(data, cell, [ym, yp, zm, zp], span, span2);
+                    (dx, dy, dz)
+                } else if cell.inside.and_not(quads).any() {
+                    blend_gradient::<L, u8>(data, cell, [xm, xp, ym, yp, zm, zp], span, span2)
+                } else {
+                    let (fx, fy, fz) = (cell.fx, cell.fy, cell.fz);
+                    let [l00, h00] = quad_rows::<L>(data, xm, fx);
+                    let [l10, h10] = quad_rows::<L>(data, xm + span, fx);
+                    let [l01, h01] = quad_rows::<L>(data, xm + span2, fx);
+                    let [l11, h11] = quad_rows::<L>(data, xm + span + span2, fx);
+                    let xlo = lerp(lerp(l00, l10, fy), lerp(l01, l11, fy), fz);
+                    let xhi = lerp(lerp(h00, h10, fy), lerp(h01, h11, fy), fz);
+                    let (dy, dz) = blend_gradient_yz::<L, u8>(data, cell, [ym, yp, zm, zp], span, span2);
+                    (xhi - xlo, dy, dz)
+                }
+            }
+            Voxels::U16(grid) => {
+                let data = &grid.chunks()[chunk.min(grid.chunks().len() - 1)][..];
+                blend_gradient::<L, u16>(data, cell, [xm, xp, ym, yp, zm, zp], span, span2)
+            }
+            Voxels::F32(grid) => {
+                let data = &grid.chunks()[chunk.min(grid.chunks().len() - 1)][..];
+                blend_gradient::<L, f32>(data, cell, [xm, xp, ym, yp, zm, zp], span, span2)
+            }
+        };
+        (dx * self.scale, dy * self.scale, dz * self.scale)
+    }
+}
+
+/// A sample's stencil in lanes ([`Sampler::sample`]): what its gradient reads.
+#[derive(Clone, Copy)]
+struct Cell<L: Lanes> {
+    fx: L,
+    fy: L,
+    fz: L,
+    /// The lowest corner's coordinates in its brick.
+    lx: L::I,
+    ly: L::I,
+    lz: L::I,
+    /// The lowest corner's index in its chunk.
+    base: L::I,
+    /// The chunk the gradient's gathers read.
+    chunk: usize,
+    /// Lanes whose gradient [`Sampler::gradient`] computes.
+    inside: L::M,
+    /// The stencil's rows blended along x: `[c00, c10, c01, c11]`.
+    rows: [L; 4],
+    /// Its slices blended along x and y.
+    c0: L,
+    c1: L,
+    /// The gradient's x difference (before the scale) where the sample read it already.
+    x: Option<L>,
+}
+
+/// A stored type the lanes gather in x-neighbour pairs.
+trait Pairs: Sized {
+    /// Per lane `(data[i], data[i + 1])` as `f32`.
+    fn pairs<L: Lanes>(data: &[Self], i: L::I) -> (L, L);
+}
+
+impl Pairs for u8 {
+    #[inline(always)]
+    fn pairs<L: Lanes>(data: &[u8], i: L::I) -> (L, L) {
+        L::gather_byte_pairs(data, i)
+    }
+}
+
+impl Pairs for u16 {
+    #[inline(always)]
+    fn pairs<L: Lanes>(data: &[u16], i: L::I) -> (L, L) {
+        L::gather_short_pairs(data, i)
+    }
+}
+
+impl Pairs for f32 {
+    #[inline(always)]
+    fn pairs<L: Lanes>(data: &[f32], i: L::I) -> (L, L) {
+        L::gather_pairs(data, i)
+    }
+}
+
+/// A row of voxel pairs at `i` blended along x at `fx`.
+#[inline(always)]
+fn row<L: Lanes, T: Pairs>(data: &[T], i: L::I, fx: L) -> L {
+    let (a, b) = T::pairs::<L>(data, i);
+    a + (b - a) * fx
+}
+
+/// The rows `x0 − 1, x0` and `x0 + 1, x0 + 2` of one 4-byte gather at `i` (`x0 − 1`),
+/// blended along x at `fx`.
+#[inline(always)]
+fn quad_rows<L: Lanes>(data: &[u8], i: L::I, fx: L) -> [L; 2] {
+    let [a, b, c, d] = L::gather_byte_quads(data, i);
+    [a + (b - a) * fx, c + (d - c) * fx]
+}
+
+/// [`Sampler::gradient`]'s gathers and blends from `data`, the neighbours' lowest indices
+/// `[xm, xp, ym, yp, zm, zp]` given.
+#[inline(always)]
+fn blend_gradient<L: Lanes, T: Pairs>(data: &[T], cell: &Cell<L>, n: [L::I; 6], span: L::I, span2: L::I) -> (L, L, L) {
+    let (fx, fy, fz) = (cell.fx, cell.fy, cell.fz);
+    let [xm, xp, ym, yp, zm, zp] = n;
+    // x: the stencils one voxel lower and higher, in trilinear's order.
+    let (l00, l10) = (row::<L, T>(data, xm, fx), row::<L, T>(data, xm + span, fx));
+    let (l01, l11) = (row::<L, T>(data, xm + span2, fx), row::<L, T>(data, xm + span + span2, fx));
+    let xlo = lerp(lerp(l00, l10, fy), lerp(l01, l11, fy), fz);
+    let (h00, h10) = (row::<L, T>(data, xp, fx), row::<L, T>(data, xp + span, fx));
+    let (h01, h11) = (row::<L, T>(data, xp + span2, fx), row::<L, T>(data, xp + span + span2, fx));
+    let xhi = lerp(lerp(h00, h10, fy), lerp(h01, h11, fy), fz);
+    let (dy, dz) = blend_gradient_yz::<L, T>(data, cell, [ym, yp, zm, zp], span, span2);
+    (xhi - xlo, dy, dz)
+}
+
+/// [`blend_gradient`]'s y and z differences.
+#[inline(always)]
+fn blend_gradient_yz<L: Lanes, T: Pairs>(data: &[T], cell: &Cell<L>, n: [L::I; 4], span: L::I, span2: L::I) -> (L, L) {
+    let (fx, fy, fz) = (cell.fx, cell.fy, cell.fz);
+    let [m00, m10, m01, m11] = cell.rows;
+    let [ym, yp, zm, zp] = n;
+    // y: rows y0 − 1 and y0 + 2 against the stencil's own.
+    let (a0, a1) = (row::<L, T>(data, ym, fx), row::<L, T>(data, ym + span2, fx));
+    let ylo = lerp(lerp(a0, m00, fy), lerp(a1, m01, fy), fz);
+    let (b0, b1) = (row::<L, T>(data, yp, fx), row::<L, T>(data, yp + span2, fx));
+    let yhi = lerp(lerp(m10, b0, fy), lerp(m11, b1, fy), fz);
+    // z: slices z0 − 1 and z0 + 2 against the stencil's own.
+    let e = lerp(row::<L, T>(data, zm, fx), row::<L, T>(data, zm + span, fx), fy);
+    let zlo = lerp(e, cell.c0, fz);
+    let f = lerp(row::<L, T>(data, zp, fx), row::<L, T>(data, zp + span, fx), fy);
+    let zhi = lerp(cell.c1, f, fz);
+    (yhi - ylo, zhi - zlo)
+}
+
+/// `a + (b − a)·f`: the marchers' blend.
+#[inline(always)]
+fn lerp<L: Lanes>(a: L, b: L, f: L) -> L {
+    a + (b - a) * f
 }
 
 /// The march settings the kernel reads, borrowed from a [`crate::marcher::Marcher`].
@@ -526,6 +779,7 @@ impl Kernel<'_> {
         let n = L::new(&rays.n);
         let (dtl, half, one, zero) = (L::splat(dt), L::splat(0.5), L::splat(1.0), L::splat(0.0));
         let sampler = Sampler::<L>::new(&m, self.voxels);
+        let (glo, ghi) = (m.cut.grid_lo(), m.cut.grid_hi());
         // Shading: the weights, the light, each lane's half vector and `1 / spacing`.
         let shading = opts.shading;
         let sh = shading.unwrap_or(crate::march_settings::Shading::DEFAULT);
@@ -642,7 +896,7 @@ impl Kernel<'_> {
             } else {
                 (live, px, py, pz)
             };
-            let v = sampler.sample::<M>(px, py, pz);
+            let (v, cell) = sampler.sample::<M>(px, py, pz, active);
             // TransferFunction::index, in lanes.
             let idx = (v * lut_max + half).max(zero).min(lut_max).trunc_int();
             // The table's entries are (a, r, g, b): opacity and red in one 64-bit gather.
@@ -653,29 +907,37 @@ impl Kernel<'_> {
             if vis.any() {
                 let (cg, cb) = L::gather_pairs(self.lut, q + L::splat_i(2));
                 let (cr, cg, cb) = if shading.is_some() {
-                    // Shading::shade, in lanes: central differences, then Blinn–Phong.
-                    // The six neighbours in a loop: one copy of the sampler's code, not six (no
-                    // closure: see `band`).
-                    let mut nb = [zero; 6];
-                    for (i, s) in nb.iter_mut().enumerate() {
-                        let (a, b) = (if i & 1 == 0 { one } else { zero - one }, zero);
-                        let (x, y, z) = match i >> 1 {
-                            0 => (px + a, py + b, pz + b),
-                            1 => (px + b, py + a, pz + b),
-                            _ => (px + b, py + b, pz + a),
-                        };
-                        *s = sampler.sample::<M>(x, y, z);
-                    }
-                    let gx = (nb[0] - nb[1]) * isx;
-                    let gy = (nb[2] - nb[3]) * isy;
-                    let gz = (nb[4] - nb[5]) * isz;
+                    // Shading::shade, in lanes: central differences (Volume::gradient_grid_in),
+                    // then Blinn–Phong.
+                    let (dx, dy, dz) = sampler.gradient(&cell);
+                    // Visible lanes whose gradient reads a clamped voxel or another chunk take
+                    // the scalar definition (rare: a sample at the volume's or crop's edge).
+                    let slow = vis.and_not(cell.inside);
+                    let (dx, dy, dz) = if slow.any() {
+                        let (mut ax, mut ay, mut az) = (dx.to_array::<M>(), dy.to_array::<M>(), dz.to_array::<M>());
+                        let (qx, qy, qz) = (px.to_array::<M>(), py.to_array::<M>(), pz.to_array::<M>());
+                        let mut bits = slow.to_bitmask();
+                        while bits != 0 {
+                            let l = bits.trailing_zeros() as usize;
+                            bits &= bits - 1;
+                            let d = vol.gradient_grid_in(Vec3::new(qx[l], qy[l], qz[l]), glo, ghi);
+                            (ax[l], ay[l], az[l]) = (d.x, d.y, d.z);
+                        }
+                        (L::new(&ax), L::new(&ay), L::new(&az))
+                    } else {
+                        (dx, dy, dz)
+                    };
+                    let gx = dx * isx;
+                    let gy = dy * isy;
+                    let gz = dz * isz;
                     let g2 = gx * gx + gy * gy + gz * gz;
                     let len = g2.sqrt();
                     let ndl = gx * lx + gy * ly + gz * lz;
                     let ndh = gx * hx + gy * hy + gz * hz;
                     let some = g2.simd_gt(zero);
-                    let diff = some.select(ndl.max(zero - ndl) / len, one);
-                    let spec = some.select(ndh.max(zero - ndh) / len, zero);
+                    let inv = one / len;
+                    let diff = some.select(ndl.max(zero - ndl) * inv, one);
+                    let spec = some.select(ndh.max(zero - ndh) * inv, zero);
                     let s2 = spec * spec;
                     let s4 = s2 * s2;
                     let s8 = s4 * s4;

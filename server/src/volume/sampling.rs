@@ -35,6 +35,59 @@ impl Volume {
         (trilinear(c, fx, fy, fz) - self.offset) * self.scale
     }
 
+    /// The central-difference gradient of the trilinear field at continuous voxel coordinates
+    /// `g` (clamped to `[lo, hi]` as [`Volume::sample_grid_in`] clamps), one voxel either side
+    /// along each axis: per axis `(s(g + e) − s(g − e))` in normalized units (not halved), `e`
+    /// the axis' unit voxel step. What the shading marchers take as the gradient; the packet
+    /// marcher computes the same bits in lanes.
+    ///
+    /// The six shifted samples share the fractions of `g` and the voxels of its stencil: along
+    /// x they are the trilinear blends of the stencils whose lowest corner is one voxel lower
+    /// and one voxel higher, along y and z the blends of the stencil's own rows and slices and
+    /// those one beyond, in `trilinear`'s order (x, then y, then z). Every voxel read is
+    /// clamped to `floor(lo) ..= ceil(hi)`, the voxels the samples in the range read. In the
+    /// volume's interior this is exactly the difference of the trilinear samples at `g ± e`
+    /// (up to rounding); at the clamp range's edge, as there, the read beyond the edge repeats
+    /// the edge voxel. Sharing the stencil reads 32 voxels instead of 48 and needs no second
+    /// brick lookup per sample in the packet marcher.
+    #[inline]
+    pub fn gradient_grid_in(&self, g: Vec3, lo: Vec3, hi: Vec3) -> Vec3 {
+        let gx = g.x.max(lo.x).min(hi.x); // NaN -> lo
+        let gy = g.y.max(lo.y).min(hi.y); // NaN -> lo
+        let gz = g.z.max(lo.z).min(hi.z); // NaN -> lo
+        let (x0, y0, z0) = (gx as i32, gy as i32, gz as i32);
+        let (fx, fy, fz) = (gx - x0 as f32, gy - y0 as f32, gz - z0 as f32);
+        let (ilo, ihi) = (lo.floor(), hi.ceil());
+        let (ilo, ihi) = ([ilo.x as i32, ilo.y as i32, ilo.z as i32], [ihi.x as i32, ihi.y as i32, ihi.z as i32]);
+        let at = |x: i32, y: i32, z: i32| {
+            let c = |v: i32, a: usize| v.max(ilo[a]).min(ihi[a]) as u32;
+            self.voxels.get(c(x, 0), c(y, 1), c(z, 2))
+        };
+        let lerp = |a: f32, b: f32, f: f32| a + (b - a) * f;
+        // A row along x at (y, z), blended at fx, its lowest voxel x.
+        let row = |x: i32, y: i32, z: i32| lerp(at(x, y, z), at(x + 1, y, z), fx);
+        // The stencil's own rows.
+        let (m00, m10, m01, m11) = (row(x0, y0, z0), row(x0, y0 + 1, z0), row(x0, y0, z0 + 1), row(x0, y0 + 1, z0 + 1));
+        // x: the stencils one voxel lower and higher.
+        let yz = |x: i32| {
+            let (r00, r10, r01, r11) = (row(x, y0, z0), row(x, y0 + 1, z0), row(x, y0, z0 + 1), row(x, y0 + 1, z0 + 1));
+            lerp(lerp(r00, r10, fy), lerp(r01, r11, fy), fz)
+        };
+        let dx = yz(x0 + 1) - yz(x0 - 1);
+        // y: the rows one below and two above the stencil's lowest.
+        let (a0, a1) = (row(x0, y0 - 1, z0), row(x0, y0 - 1, z0 + 1));
+        let (b0, b1) = (row(x0, y0 + 2, z0), row(x0, y0 + 2, z0 + 1));
+        let ylo = lerp(lerp(a0, m00, fy), lerp(a1, m01, fy), fz);
+        let yhi = lerp(lerp(m10, b0, fy), lerp(m11, b1, fy), fz);
+        let dy = yhi - ylo;
+        // z: the slices one below and two above the stencil's lowest.
+        let e = lerp(row(x0, y0, z0 - 1), row(x0, y0 + 1, z0 - 1), fy);
+        let f = lerp(row(x0, y0, z0 + 2), row(x0, y0 + 1, z0 + 2), fy);
+        let (c0, c1) = (lerp(m00, m10, fy), lerp(m01, m11, fy));
+        let dz = lerp(c1, f, fz) - lerp(e, c0, fz);
+        Vec3::new(dx * self.scale, dy * self.scale, dz * self.scale)
+    }
+
     /// Trilinear sample at world position `p`.
     #[inline]
     pub fn sample(&self, p: Vec3) -> f32 {
@@ -101,6 +154,44 @@ mod tests {
         assert_eq!(v.sample(Vec3::new(1.5, 0.5, 0.5)), 1.0);
         assert_eq!(v.sample(Vec3::new(2.0, 0.0, 0.0)), 1.0);
         assert_eq!(v.sample(Vec3::new(-5.0, 9.0, f32::NAN)), 0.0);
+    }
+
+    /// The shared-stencil gradient is the central difference of trilinear samples one voxel
+    /// either side (up to rounding), inside the volume, at its edges and in a crop of whole
+    /// voxels.
+    #[test]
+    fn gradient_is_the_central_difference_of_samples() {
+        let mut x = 987654u32;
+        let mut r = move || {
+            x ^= x << 13;
+            x ^= x >> 17;
+            x ^= x << 5;
+            x as f32 / u32::MAX as f32
+        };
+        for (dims, kind) in [([7, 5, 4], 0), ([33, 34, 35], 1), ([40, 3, 66], 2), ([1, 2, 1], 0)] {
+            let n = dims.iter().product::<u32>() as usize;
+            let values: Vec<f32> = (0..n)
+                .map(|i| match kind {
+                    0 => (i * 37 % 200) as f32,
+                    1 => (i * 4099 % 60_000) as f32,
+                    _ => (i as f32 * 0.37).sin(),
+                })
+                .collect();
+            let v = Volume::from_values("t", dims, Vec3::new(1.0, 2.0, 0.5), values).unwrap();
+            let whole = (Vec3::ZERO, Vec3::new((dims[0] - 1) as f32, (dims[1] - 1) as f32, (dims[2] - 1) as f32));
+            let crop = (whole.1 * 0.25).floor();
+            let crop = (crop, (whole.1 * 0.75).ceil().max(crop));
+            for (lo, hi) in [whole, crop] {
+                for _ in 0..5000 {
+                    let g = Vec3::new(r(), r(), r()) * (hi - lo + 2.0) + lo - 1.0;
+                    let d = v.gradient_grid_in(g, lo, hi);
+                    let at = |e: Vec3| v.sample_grid_in(g.clamp(lo, hi) + e, lo, hi);
+                    let want =
+                        Vec3::new(at(Vec3::X) - at(-Vec3::X), at(Vec3::Y) - at(-Vec3::Y), at(Vec3::Z) - at(-Vec3::Z));
+                    assert!((d - want).abs().max_element() <= 1e-5, "{dims:?} {g} {lo} {hi}: {d} against {want}");
+                }
+            }
+        }
     }
 
     #[test]
