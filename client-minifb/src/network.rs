@@ -898,7 +898,7 @@ fn build_loop(sh: &Shared, cfg: &NetConfig) {
 fn write_loop(sh: &Shared, mut stream: impl Write, request: RequestPolicy) {
     let mut last_send: Option<Instant> = None;
     loop {
-        let (view, predictor) = {
+        let (view, predictor, moving) = {
             let mut g = lock(&sh.view);
             loop {
                 if sh.stop.load(Ordering::SeqCst) {
@@ -931,9 +931,10 @@ fn write_loop(sh: &Shared, mut stream: impl Write, request: RequestPolicy) {
                             continue;
                         }
                         None => {
+                            let moving = g.changed;
                             g.changed = false;
                             g.frame_arrived = false;
-                            break (v, g.predictor);
+                            break (v, g.predictor, moving);
                         }
                     }
                 }
@@ -942,7 +943,8 @@ fn write_loop(sh: &Shared, mut stream: impl Write, request: RequestPolicy) {
         };
         let seq = sh.seq.fetch_add(1, Ordering::SeqCst) + 1;
         let horizon = lock(&sh.horizon).0;
-        let camera = request.camera(view.camera, &predictor, &horizon, &CADENCE).camera;
+        // While the view moves, on the coarser grid of adaptive resolution (`--coarse`).
+        let camera = request.camera_at(view.camera, moving, &predictor, &horizon, &CADENCE).camera;
         let req = CameraRequest { seq, camera, heuristic: view.heuristic, radius_scale: view.radius_scale };
         let now = Instant::now();
         {

@@ -173,6 +173,17 @@ pub struct Options {
         value_parser = parse_watertight
     )]
     pub watertight: f32,
+    /// Adaptive resolution: while the view moves, ask for frames on a pixel grid N times
+    /// coarser per axis (fewer pixels to march and send, so fresher frames, warped at display
+    /// resolution), and for the full resolution once it rests; 1 (the default) always asks for
+    /// the full resolution; 1, 2 or 4.
+    #[arg(
+        long,
+        value_name = "N",
+        default_value_t = Method::DEFAULT.coarse,
+        value_parser = clap::builder::PossibleValuesParser::new(["1", "2", "4"]).map(|s| s.parse::<u8>().unwrap_or(1))
+    )]
+    pub coarse: u8,
     /// Display frame rate limit (0: none). Default: 60 in the window, none headless.
     #[arg(long)]
     pub fps: Option<u32>,
@@ -214,6 +225,7 @@ impl Options {
             adapt: self.adapt,
             watertight: self.watertight,
             guard: self.guard,
+            coarse: self.coarse,
         }
     }
 }
