@@ -177,12 +177,7 @@ pub struct Options {
     /// coarser per axis (fewer pixels to march and send, so fresher frames, warped at display
     /// resolution), and for the full resolution once it rests; 1 (the default) always asks for
     /// the full resolution; 1, 2 or 4.
-    #[arg(
-        long,
-        value_name = "N",
-        default_value_t = Method::DEFAULT.coarse,
-        value_parser = clap::builder::PossibleValuesParser::new(["1", "2", "4"]).map(|s| s.parse::<u8>().unwrap_or(1))
-    )]
+    #[arg(long, value_name = "N", default_value_t = Method::DEFAULT.coarse, value_parser = parse_coarse)]
     pub coarse: u8,
     /// Display frame rate limit (0: none). Default: 60 in the window, none headless.
     #[arg(long)]
@@ -227,6 +222,14 @@ impl Options {
             guard: self.guard,
             coarse: self.coarse,
         }
+    }
+}
+
+/// Parses the adaptive resolution's divisor: 1, 2 or 4.
+pub fn parse_coarse(s: &str) -> Result<u8, String> {
+    match s.trim().parse::<u8>() {
+        Ok(n @ (1 | 2 | 4)) => Ok(n),
+        _ => Err(format!("--coarse `{s}`: 1, 2 or 4")),
     }
 }
 
@@ -409,6 +412,8 @@ mod tests {
     #[test]
     fn no_options_ask_for_the_default_method() {
         assert_eq!(Options::parse_from(["volwarp-client"]).method(), Method::DEFAULT);
+        assert_eq!(Options::parse_from(["volwarp-client", "--coarse", "2"]).method().request().divisor(true), 2);
+        assert!(Options::try_parse_from(["volwarp-client", "--coarse", "3"]).is_err());
         let o = Options::parse_from(["volwarp-client", "--predict", "false", "--guard", "0.1", "--keep-frames", "2"]);
         let m = o.method();
         assert_eq!((m.predict, m.guard, m.frames), (false, 0.1, 2));
