@@ -911,7 +911,7 @@ fn build_loop(sh: &Shared, cfg: &NetConfig) {
 fn write_loop(sh: &Shared, mut stream: impl Write, request: RequestPolicy) {
     let mut last_send: Option<Instant> = None;
     loop {
-        let (view, predictor) = {
+        let (view, predictor, moving) = {
             let mut g = lock(&sh.view);
             loop {
                 if sh.stop.load(Ordering::SeqCst) {
@@ -945,10 +945,11 @@ fn write_loop(sh: &Shared, mut stream: impl Write, request: RequestPolicy) {
                             continue;
                         }
                         None => {
+                            let moving = g.changed;
                             g.changed = false;
                             g.frame_arrived = false;
                             g.first_still = false;
-                            break (v, g.predictor);
+                            break (v, g.predictor, moving);
                         }
                     }
                 }
@@ -957,7 +958,9 @@ fn write_loop(sh: &Shared, mut stream: impl Write, request: RequestPolicy) {
         };
         let seq = sh.seq.fetch_add(1, Ordering::SeqCst) + 1;
         let horizon = lock(&sh.horizon).0;
-        let asks = request.camera(view.camera, &predictor, &horizon, &CADENCE);
+        // While the view moves, on the coarser grid of adaptive resolution (`--coarse`); a
+        // coarse view differs from the view at rest, so resting asks again at full resolution.
+        let asks = request.camera_at(view.camera, moving, &predictor, &horizon, &CADENCE);
         lock(&sh.view).asked = Some(asks.view);
         let camera = asks.camera;
         let req = CameraRequest { seq, camera, heuristic: view.heuristic, radius_scale: view.radius_scale };

@@ -173,6 +173,12 @@ pub struct Options {
         value_parser = parse_watertight
     )]
     pub watertight: f32,
+    /// Adaptive resolution: while the view moves, ask for frames on a pixel grid N times
+    /// coarser per axis (fewer pixels to march and send, so fresher frames, warped at display
+    /// resolution), and for the full resolution once it rests; 1 (the default) always asks for
+    /// the full resolution; 1, 2 or 4.
+    #[arg(long, value_name = "N", default_value_t = Method::DEFAULT.coarse, value_parser = parse_coarse)]
+    pub coarse: u8,
     /// Display frame rate limit (0: none). Default: 60 in the window, none headless.
     #[arg(long)]
     pub fps: Option<u32>,
@@ -214,7 +220,16 @@ impl Options {
             adapt: self.adapt,
             watertight: self.watertight,
             guard: self.guard,
+            coarse: self.coarse,
         }
+    }
+}
+
+/// Parses the adaptive resolution's divisor: 1, 2 or 4.
+pub fn parse_coarse(s: &str) -> Result<u8, String> {
+    match s.trim().parse::<u8>() {
+        Ok(n @ (1 | 2 | 4)) => Ok(n),
+        _ => Err(format!("--coarse `{s}`: 1, 2 or 4")),
     }
 }
 
@@ -397,6 +412,8 @@ mod tests {
     #[test]
     fn no_options_ask_for_the_default_method() {
         assert_eq!(Options::parse_from(["volwarp-client"]).method(), Method::DEFAULT);
+        assert_eq!(Options::parse_from(["volwarp-client", "--coarse", "2"]).method().request().divisor(true), 2);
+        assert!(Options::try_parse_from(["volwarp-client", "--coarse", "3"]).is_err());
         let o = Options::parse_from(["volwarp-client", "--predict", "false", "--guard", "0.1", "--keep-frames", "2"]);
         let m = o.method();
         assert_eq!((m.predict, m.guard, m.frames), (false, 0.1, 2));

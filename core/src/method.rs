@@ -14,6 +14,14 @@
 //! (the window client and the simulator) is explicit in a [`Cadence`]: the display tick the
 //! horizon assumes, whether a frame's arrival alone triggers a request, whether the first still
 //! display tick after motion does, and the largest viewport a guard band may widen to.
+//!
+//! **Adaptive resolution** (`coarse`): while the view moves, the client asks for its camera on
+//! a pixel grid `coarse` times coarser per axis (the same field of view, `1/coarse²` of the
+//! pixels, so the frame is marched, encoded and sent sooner) and warps it at display
+//! resolution, each segment drawn as its coarse source pixel's footprint; the first request
+//! after the view rests asks for the full resolution. The client decides, not the server: it
+//! alone knows whether its view moves (a predicting client's still request differs from its
+//! last predicted one, so a server comparing successive requests would call it moving).
 
 use crate::camera::Camera;
 use crate::guard::GuardBand;
@@ -48,7 +56,13 @@ pub struct Method {
     pub watertight: f32,
     /// Guard band: the fraction of the view added on every side of the camera asked for.
     pub guard: f32,
+    /// Adaptive resolution: the viewport divisor per axis while the view moves (1: always the
+    /// full resolution; at most [`MAX_COARSE`]).
+    pub coarse: u8,
 }
+
+/// The largest viewport divisor of adaptive resolution.
+pub const MAX_COARSE: u8 = 4;
 
 impl Method {
     /// The method a client runs by default, chosen on the session results (`docs/results.md`,
@@ -63,6 +77,7 @@ impl Method {
         adapt: true,
         watertight: WATERTIGHT,
         guard: 0.0,
+        coarse: 1,
     };
 
     /// The segments per pixel a renderer asks for unless told otherwise: the layered renderers
@@ -77,7 +92,7 @@ impl Method {
 
     /// What it asks the server for.
     pub const fn request(&self) -> RequestPolicy {
-        RequestPolicy { predict: self.predict, guard: self.guard }
+        RequestPolicy { predict: self.predict, guard: self.guard, coarse: self.coarse }
     }
 }
 
@@ -90,6 +105,8 @@ pub struct RequestPolicy {
     pub predict: bool,
     /// Guard band fraction (0: none).
     pub guard: f32,
+    /// Viewport divisor per axis while the view moves (0 and 1: always full resolution).
+    pub coarse: u8,
 }
 
 /// The caller's side of the request policy: what the policy assumes about the display and
@@ -131,7 +148,7 @@ pub struct Requested {
 
 impl RequestPolicy {
     /// Asks for the camera shown, as it is (what a send-image system does).
-    pub const NONE: RequestPolicy = RequestPolicy { predict: false, guard: 0.0 };
+    pub const NONE: RequestPolicy = RequestPolicy { predict: false, guard: 0.0, coarse: 1 };
 
     /// Whether the client sends a request now: when the view moved; when a frame arrived, if
     /// the cadence says so; and when the view holds still for the first tick after motion, if
@@ -147,15 +164,52 @@ impl RequestPolicy {
     /// (less the cadence's display tick); with a guard band, that camera widened (where it
     /// fits the cadence's largest viewport).
     pub fn camera(&self, shown: Camera, predictor: &Predictor, horizon: &Horizon, cadence: &Cadence) -> Requested {
+        self.camera_at(shown, false, predictor, horizon, cadence)
+    }
+
+    /// The viewport divisor per axis of a request: `coarse` while the view is `moving`, else 1.
+    pub fn divisor(&self, moving: bool) -> u32 {
+        if moving {
+            u32::from(self.coarse.clamp(1, MAX_COARSE))
+        } else {
+            1
+        }
+    }
+
+    /// [`RequestPolicy::camera`] for a view that is `moving` (it changed since the last
+    /// request) or not: while moving, the camera asked for (the guard band's too) is on a pixel
+    /// grid [`RequestPolicy::divisor`] times coarser per axis ([`coarse_viewport`]).
+    pub fn camera_at(
+        &self,
+        shown: Camera,
+        moving: bool,
+        predictor: &Predictor,
+        horizon: &Horizon,
+        cadence: &Cadence,
+    ) -> Requested {
         let mut view = shown;
         if self.predict {
             view = predictor.predict(horizon.seconds(cadence.display_tick_s)).unwrap_or(shown);
+        }
+        let d = self.divisor(moving);
+        if d > 1 {
+            let (w, h) = coarse_viewport(view.width, view.height, d);
+            view = view.with_viewport(w, h);
         }
         match GuardBand::new(&view, self.guard, cadence.max_viewport) {
             Ok(g) if self.guard > 0.0 => Requested { camera: g.camera, view, guard_offset: (g.x0, g.y0) },
             _ => Requested { camera: view, view, guard_offset: (0, 0) },
         }
     }
+}
+
+/// The viewport `width × height` divided by `divisor` per axis, rounded to the nearest pixel
+/// and at least 1 (the same field of view on the coarser grid; the aspect ratio is kept to
+/// within half a coarse pixel).
+pub fn coarse_viewport(width: u32, height: u32, divisor: u32) -> (u32, u32) {
+    let d = divisor.max(1);
+    let div = |v: u32| ((v + d / 2) / d).max(1);
+    (div(width), div(height))
 }
 
 #[cfg(test)]
@@ -173,7 +227,7 @@ mod tests {
         assert_eq!(d.renderer, RendererKind::SplatLayers);
         assert_eq!(d.layers as usize, DEFAULT_LAYERS);
         assert_eq!((d.frames, d.predict, d.adapt, d.guard), (4, true, true, 0.0));
-        assert_eq!(d.request(), RequestPolicy { predict: true, guard: 0.0 });
+        assert_eq!(d.request(), RequestPolicy { predict: true, guard: 0.0, coarse: 1 });
         assert_eq!(Method::layers_for(RendererKind::Splat), 1);
     }
 
@@ -199,8 +253,36 @@ mod tests {
         predictor.observe(cam, 0.0);
         let r = RequestPolicy::NONE.camera(cam, &predictor, &Horizon::new(), &CLIENT);
         assert_eq!((r.camera, r.view, r.guard_offset), (cam, cam, (0, 0)));
-        let wide = RequestPolicy { predict: false, guard: 0.25 }.camera(cam, &predictor, &Horizon::new(), &CLIENT);
+        let wide =
+            RequestPolicy { predict: false, guard: 0.25, coarse: 1 }.camera(cam, &predictor, &Horizon::new(), &CLIENT);
         assert_eq!(wide.view, cam);
         assert!(wide.camera.width > cam.width && wide.guard_offset.0 > 0);
+    }
+
+    #[test]
+    fn adaptive_resolution_is_coarse_while_moving_and_full_at_rest() {
+        let cam = Camera::look_at(glam::Vec3::new(0.0, 0.0, 3.0), glam::Vec3::ZERO, glam::Vec3::Y, 45.0, 512, 384);
+        let mut predictor = Predictor::new();
+        predictor.observe(cam, 0.0);
+        let h = Horizon::new();
+        let p = RequestPolicy { predict: false, guard: 0.0, coarse: 2 };
+        let moving = p.camera_at(cam, true, &predictor, &h, &CLIENT);
+        assert_eq!((moving.camera.width, moving.camera.height), (256, 192));
+        assert_eq!(moving.camera, cam.with_viewport(256, 192), "the same view on a coarser grid");
+        assert_eq!(moving.view, moving.camera);
+        let still = p.camera_at(cam, false, &predictor, &h, &CLIENT);
+        assert_eq!(still.camera, cam, "at rest: the full resolution");
+        assert_eq!(p.camera(cam, &predictor, &h, &CLIENT), still);
+        assert_eq!((p.divisor(true), p.divisor(false)), (2, 1));
+        assert_eq!(RequestPolicy { coarse: 9, ..p }.divisor(true), u32::from(MAX_COARSE));
+        assert_eq!(RequestPolicy { coarse: 0, ..p }.divisor(true), 1);
+        assert_eq!(Method::DEFAULT.request().divisor(true), 1, "the default stays at full resolution");
+        // A guard band on the coarse grid keeps its fraction of the coarse view.
+        let g = RequestPolicy { guard: 0.25, ..p }.camera_at(cam, true, &predictor, &h, &CLIENT);
+        assert_eq!((g.view.width, g.view.height), (256, 192));
+        assert!(g.camera.width > 256 && g.guard_offset.0 > 0 && g.guard_offset.0 < 128);
+        assert_eq!(coarse_viewport(801, 601, 2), (401, 301));
+        assert_eq!(coarse_viewport(3, 1, 4), (1, 1));
+        assert_eq!(coarse_viewport(64, 48, 1), (64, 48));
     }
 }

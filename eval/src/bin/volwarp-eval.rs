@@ -257,8 +257,10 @@ struct SessionArgs {
     #[arg(long, default_value = "orbit,stop-and-go,dolly,look-around")]
     scenarios: String,
     /// Methods, comma-separated, or `all`: each a renderer with the client's options,
-    /// `RENDERER[+predict][+guard=G][+frames=K][+adapt][+pp=L]` (e.g. `splat-fill+predict+guard=0.1+frames=2`),
-    /// or `volwarp` (the window client's default method), or an image-sending peer:
+    /// `RENDERER[+predict][+guard=G][+frames=K][+adapt][+pp=L][+layers=K][+coarse=N]` (e.g.
+    /// `splat-fill+predict+guard=0.1+frames=2`), or `volwarp` (the window client's default
+    /// method), `volwarp-adaptive` / `volwarp-adaptive=4` (it on a 1/2 or 1/4 pixel grid per
+    /// axis while the camera moves, full at rest), or an image-sending peer:
     /// `send-image` (JPEG q90), `downscale` / `downscale=4` (1/2 or 1/4 resolution at JPEG q50
     /// while moving, full at rest).
     #[arg(long, default_value = "all")]

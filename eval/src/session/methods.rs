@@ -18,10 +18,16 @@
 //! - `+pp=L`: pull-push over `L` levels into the holes left inside the silhouette (only the
 //!   `*-fill` renderers);
 //! - `+layers=K`: it asks for frames of `K` segments per pixel (drawn by
-//!   `splat-layers`), whatever the session's `--layers`.
+//!   `splat-layers`), whatever the session's `--layers`;
+//! - `+coarse=N`: adaptive resolution (core's `method::RequestPolicy::camera_at`): while the
+//!   camera moves it asks for frames on a pixel grid `N` (2 or 4) times coarser per axis, which
+//!   the server renders in its time times the marcher's measured ratio at that resolution
+//!   (`session-calibrate`'s `DATASET/N` lines, [`super::peers::ResolutionCost`]) and encodes
+//!   at that size; the full resolution at the first still tick.
 //!
 //! [`default_method`] (alias `volwarp`, core's `Method::DEFAULT`) is the method the window
-//! client runs by default.
+//! client runs by default; `volwarp-adaptive` (`volwarp-adaptive=4`) is it with `+coarse=2`
+//! (`+coarse=4`).
 //! The `stale` method never predicts nor widens: it is what a send-image system shows.
 
 use super::peers::ImagePeer;
@@ -47,15 +53,17 @@ pub struct SessionRequest {
     pub guard: f32,
     /// Segments per pixel it asks for (0: the session's `--layers`).
     pub layers: u32,
+    /// Viewport divisor per axis while the camera moves (1: always the full resolution).
+    pub coarse: u8,
 }
 
 impl SessionRequest {
     /// Asks for the camera shown (what a send-image system does).
-    pub const NONE: SessionRequest = SessionRequest { predict: false, guard: 0.0, layers: 0 };
+    pub const NONE: SessionRequest = SessionRequest { predict: false, guard: 0.0, layers: 0, coarse: 1 };
 
     /// Its request policy (core's `method::RequestPolicy`).
     pub const fn policy(&self) -> volwarp_core::method::RequestPolicy {
-        volwarp_core::method::RequestPolicy { predict: self.predict, guard: self.guard }
+        volwarp_core::method::RequestPolicy { predict: self.predict, guard: self.guard, coarse: self.coarse }
     }
 }
 
@@ -190,17 +198,30 @@ pub fn default_method() -> String {
     MethodSpec::of(&CoreMethod::DEFAULT).name()
 }
 
+/// The methods named by an alias, which sessions keep as the CSV name: `volwarp` (core's
+/// `Method::DEFAULT`), `volwarp-adaptive` (it with adaptive resolution, 1/2 per axis while the
+/// camera moves) and `volwarp-adaptive=4` (1/4); `None` for any other name.
+pub fn alias(name: &str) -> Option<MethodSpec> {
+    let coarse = match name.trim() {
+        "volwarp" => 1,
+        "volwarp-adaptive" | "volwarp-adaptive=2" => 2,
+        "volwarp-adaptive=4" => 4,
+        _ => return None,
+    };
+    Some(MethodSpec::of(&CoreMethod { coarse, ..CoreMethod::DEFAULT }))
+}
+
 /// The methods of `all`: what a send-image system shows, the 2.5D points of ZAL12, the exact
 /// sphere renderers, and volwarp's default.
 pub const ALL: [&str; 7] = ["stale", "points1", "points2", "points3", "spheres-cpu", "splat", "volwarp"];
 
 impl MethodSpec {
-    /// Parses `RENDERER[+predict][+guard=G][+frames=K][+adapt][+pp=L][+layers=K]` or the alias
-    /// `volwarp`.
+    /// Parses `RENDERER[+predict][+guard=G][+frames=K][+adapt][+pp=L][+layers=K][+coarse=N]`
+    /// or an alias ([`alias`]).
     pub fn parse(spec: &str) -> Result<MethodSpec, ErrorBox> {
         let spec = spec.trim();
-        if spec == "volwarp" {
-            return Ok(MethodSpec::of(&CoreMethod::DEFAULT));
+        if let Some(m) = alias(spec) {
+            return Ok(m);
         }
         let mut parts = spec.split('+');
         let base = parts.next().unwrap_or_default();
@@ -233,6 +254,12 @@ impl MethodSpec {
                     }
                     m.request.layers = k;
                 }
+                Some(("coarse", n)) => {
+                    m.request.coarse = match n.parse::<u8>() {
+                        Ok(n @ (1 | 2 | 4)) => n,
+                        _ => return Err(format!("{spec}: coarse=N takes N = 1, 2 or 4").into()),
+                    };
+                }
                 Some(("frames", k)) => {
                     let k: usize = k.parse().map_err(|_| format!("{spec}: frames {k:?} is not a count"))?;
                     if !(1..=MAX_FRAMES).contains(&k) {
@@ -242,7 +269,7 @@ impl MethodSpec {
                 }
                 _ => {
                     return Err(format!(
-                        "{spec}: unknown option {p:?} (predict, guard=G, frames=K, adapt, pp=L, layers=K)"
+                        "{spec}: unknown option {p:?} (predict, guard=G, frames=K, adapt, pp=L, layers=K, coarse=N)"
                     )
                     .into())
                 }
@@ -275,7 +302,7 @@ impl MethodSpec {
         let layers = if m.renderer.draws_layers() { u32::from(m.layers) } else { 0 };
         MethodSpec {
             renderer: m.renderer,
-            request: SessionRequest { predict: m.predict, guard: m.guard, layers },
+            request: SessionRequest { predict: m.predict, guard: m.guard, layers, coarse: m.coarse.max(1) },
             frames: m.frames,
             adapt: m.adapt,
             pull_push: 0,
@@ -293,6 +320,7 @@ impl MethodSpec {
             adapt: self.adapt,
             watertight: volwarp_core::method::WATERTIGHT,
             guard: self.request.guard,
+            coarse: self.request.coarse,
         }
     }
 
@@ -316,6 +344,9 @@ impl MethodSpec {
         }
         if self.request.layers > 0 {
             s.push_str(&format!("+layers={}", self.request.layers));
+        }
+        if self.request.coarse > 1 {
+            s.push_str(&format!("+coarse={}", self.request.coarse));
         }
         s
     }
@@ -350,8 +381,8 @@ impl MethodSpec {
 }
 
 /// The methods of a comma-separated list of specs (`all`: [`ALL`]) and image-sending peers
-/// (`send-image`, `downscale`, `downscale=4`: [`super::peers`]). The alias `volwarp` keeps
-/// its name in the CSV; every other spec is named canonically.
+/// (`send-image`, `downscale`, `downscale=4`: [`super::peers`]). An [`alias`] keeps its name
+/// in the CSV; every other spec is named canonically.
 pub fn make_methods(list: &str, threads: usize) -> Result<Vec<Box<dyn Method>>, ErrorBox> {
     let names: Vec<&str> = if list.trim() == "all" { ALL.to_vec() } else { list.split(',').collect() };
     let mut out: Vec<Box<dyn Method>> = Vec::new();
@@ -366,7 +397,7 @@ pub fn make_methods(list: &str, threads: usize) -> Result<Vec<Box<dyn Method>>, 
             continue;
         }
         let spec = MethodSpec::parse(n)?;
-        let name = if n.trim() == "volwarp" { "volwarp".to_string() } else { spec.name() };
+        let name = if alias(n).is_some() { n.trim().to_string() } else { spec.name() };
         if out.iter().any(|m| m.name() == name) {
             return Err(format!("method {name} is listed twice").into());
         }
@@ -383,7 +414,7 @@ mod tests {
     fn specs_parse_and_name_canonically() {
         let m = MethodSpec::parse("splat-fill+frames=3+guard=0.2+predict").unwrap();
         assert_eq!(m.renderer, RendererKind::SplatFill);
-        assert_eq!(m.request, SessionRequest { predict: true, guard: 0.2, layers: 0 });
+        assert_eq!(m.request, SessionRequest { predict: true, guard: 0.2, layers: 0, coarse: 1 });
         assert_eq!(m.frames, 3);
         assert_eq!(m.name(), "splat-fill+predict+guard=0.2+frames=3");
         let a = MethodSpec::parse("splat+adapt+predict").unwrap();
@@ -393,7 +424,7 @@ mod tests {
         assert_eq!(MethodSpec::parse("volwarp").unwrap(), MethodSpec::parse(&default_method()).unwrap());
         assert_eq!(MethodSpec::parse("points2").unwrap().request, SessionRequest::NONE);
         let l = MethodSpec::parse("splat-layers+layers=4+adapt+predict").unwrap();
-        assert_eq!(l.request, SessionRequest { predict: true, guard: 0.0, layers: 4 });
+        assert_eq!(l.request, SessionRequest { predict: true, guard: 0.0, layers: 4, coarse: 1 });
         assert_eq!(l.name(), "splat-layers+predict+adapt+layers=4");
         assert_eq!(MethodSpec::parse(&l.name()).unwrap(), l);
         let d = MethodSpec::parse("volwarp").unwrap();
@@ -402,6 +433,15 @@ mod tests {
         assert_eq!(d.name(), default_method(), "the default is written canonically");
         assert_eq!(default_method(), "splat-layers+predict+frames=4+adapt+layers=4", "the sessions' CSV name");
         assert_eq!(d.method(1), CoreMethod::DEFAULT);
+        let a = MethodSpec::parse("volwarp-adaptive").unwrap();
+        assert_eq!(a, MethodSpec { request: SessionRequest { coarse: 2, ..d.request }, ..d });
+        assert_eq!(a.name(), "splat-layers+predict+frames=4+adapt+layers=4+coarse=2");
+        assert_eq!(MethodSpec::parse(&a.name()).unwrap(), a);
+        assert_eq!(MethodSpec::parse("volwarp-adaptive=4").unwrap().request.coarse, 4);
+        assert_eq!(a.method(1).request().divisor(true), 2);
+        let names: Vec<String> =
+            make_methods("volwarp,volwarp-adaptive", 1).unwrap().iter().map(|m| m.name().to_string()).collect();
+        assert_eq!(names, ["volwarp", "volwarp-adaptive"], "aliases keep their names");
     }
 
     #[test]
@@ -426,6 +466,9 @@ mod tests {
             "splat-layers+pp=2",
             "splat-layers+frames=9",
             "points2+frames=2",
+            "splat-layers+coarse=3",
+            "splat-layers+coarse=x",
+            "stale+coarse=2",
         ] {
             assert!(MethodSpec::parse(bad).is_err(), "{bad}");
         }

@@ -203,13 +203,13 @@ impl Calibration {
 
     /// A method's draw time at a size: measured, else the default figure scaled by pixels.
     /// A method spec not measured takes its renderer's figure (the part before the first `+`;
-    /// the alias `volwarp`: its spec's).
+    /// an alias (`volwarp`, `volwarp-adaptive`): its spec's).
     pub fn draw_ms(&self, method: &str, size: u32) -> f64 {
         if let Some(ms) = self.ms.get(&("client".into(), method.into(), size)) {
             return *ms;
         }
-        let default = super::methods::default_method();
-        let spec = if method == "volwarp" { default.as_str() } else { method };
+        let aliased = super::methods::alias(method).map(|m| m.name());
+        let spec = aliased.as_deref().unwrap_or(method);
         let renderer = spec.split('+').next().unwrap_or(spec);
         if renderer != method {
             // The layered splatter draws what the newest frame did not see of each older frame

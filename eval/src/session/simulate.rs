@@ -355,7 +355,9 @@ fn requests(cams: &[Camera], looks: &Looks, tick_ms: f64, policy: SessionRequest
 /// arrived before it was sent (the predictor has observed the camera of every tick up to it,
 /// as the window client's display does); with a guard band, that camera widened
 /// (core's `guard::GuardBand`), all by core's request policy ([`cadence`]). Each frame is
-/// rendered with the visual state of the newest request it serves (`looks`).
+/// rendered with the visual state of the newest request it serves (`looks`). With adaptive
+/// resolution (`request.coarse`), a request sent at a tick the camera moved asks for a coarser
+/// viewport, rendered in `server_ms` times the measured ratio (`cfg.resolution_cost`).
 pub fn serve(
     looks: &Looks,
     cams: &[Camera],
@@ -376,6 +378,10 @@ pub fn serve(
         let bytes = encode_frame(marcher, &req, &frame, cfg.encoding).0.len() as u64;
         (frame, bytes)
     };
+    // Adaptive resolution: a request sent while the camera moved asks for a coarser grid, which
+    // the server renders in its time times the marcher's measured ratio.
+    let moving = |r: &Request| r.tick > 0 && cams[r.tick] != cams[r.tick - 1];
+    let server_ms = |r: &Request| net.server_ms * cfg.resolution_cost.ratio(request.policy().divisor(moving(r)));
     let (first, first_bytes) = render(cams[0], 0, looks.state_at(0));
     let mut out = vec![(FrameEvent::at_start(cams[0], first_bytes, looks.state_at(0)), first)];
     let first_ms = 2.0 * net.latency_ms + net.server_ms + net.transfer_ms(out[0].0.bytes);
@@ -406,7 +412,7 @@ pub fn serve(
                     horizon.observe(f.request_ms * 1e-3, f.arrive_ms * 1e-3);
                 }
             }
-            let asks = request.policy().camera(shown, &predictor, &horizon, &cadence);
+            let asks = request.policy().camera_at(shown, moving(&requests[r]), &predictor, &horizon, &cadence);
             asked[r] = Some((asks.camera, asks.view, asks.guard_offset));
             requests[r].camera = asks.camera;
         }
@@ -422,7 +428,8 @@ pub fn serve(
             j += 1;
         }
         s = s.max(arrival(&requests[j]));
-        if s + net.server_ms + net.latency_ms > end_ms {
+        let render_ms = server_ms(&requests[j]);
+        if s + render_ms + net.latency_ms > end_ms {
             break; // it would arrive after the session
         }
         let (_, view, guard_offset) = ask(j, &mut requests, &out);
@@ -431,7 +438,7 @@ pub fn serve(
         let seq = out.len();
         let state = looks.state_at(requests[j].tick);
         let (frame, bytes) = render(camera, seq, state);
-        let write_end = s + net.server_ms + net.transfer_ms(bytes);
+        let write_end = s + render_ms + net.transfer_ms(bytes);
         let arrive_ms = write_end + net.latency_ms;
         if arrive_ms <= end_ms {
             let view = if camera == requests[j].camera { view } else { camera };

@@ -1,0 +1,108 @@
+//! Adaptive resolution: a frame on a coarser pixel grid warped at display resolution has no
+//! holes, and the session simulator charges a coarse frame the server time measured at its
+//! resolution and the bytes of its own encoding.
+
+mod common;
+
+use volwarp_core::method::coarse_viewport;
+use volwarp_core::wire::CameraRequest;
+use volwarp_core::{Heuristic, Image, BACKGROUND};
+use volwarp_eval::session::methods::{make_methods, HeldFrame};
+use volwarp_eval::session::model::NetworkModel;
+use volwarp_eval::session::peers::{scaled_name, upscale};
+use volwarp_eval::session::simulate::FrameEvent;
+use volwarp_eval::session::simulate_all;
+use volwarp_eval::Metrics;
+use volwarp_server::dataset::Dataset;
+use volwarp_server::Marcher;
+
+fn layered(marcher: &Marcher, camera: volwarp_core::Camera) -> HeldFrame {
+    let req = CameraRequest { seq: 1, camera, heuristic: Heuristic::Threshold, radius_scale: 1.0 };
+    HeldFrame::new(marcher.render_frame_layers(&req, 4).0)
+}
+
+#[test]
+fn a_coarse_frame_warped_at_display_resolution_has_no_holes_at_its_own_camera() {
+    let ds = Dataset::default_bundled();
+    let marcher = Marcher::from_dataset(&ds);
+    for divisor in [2u32, 4] {
+        let cam = marcher.default_camera(128, 128).orbit(20.0, 10.0);
+        let (w, h) = coarse_viewport(cam.width, cam.height, divisor);
+        let coarse_cam = cam.with_viewport(w, h);
+        let coarse = layered(&marcher, coarse_cam);
+        let full = layered(&marcher, cam);
+        // The default method (the window client's), drawing each frame at the display camera.
+        let mut method = make_methods("volwarp", 1).unwrap().pop().unwrap();
+        let (mut warped, mut exact) = (Image::new(0, 0), Image::new(0, 0));
+        method.draw(&[&coarse], &cam, &mut warped);
+        method.draw(&[&full], &cam, &mut exact);
+        assert_eq!((warped.width, warped.height), (128, 128));
+        // Every display pixel whose coarse source pixel saw the volume is covered.
+        let coarse_image = marcher.render_image(&coarse_cam);
+        let holes = (0..128 * 128usize)
+            .filter(|&i| {
+                let (x, y) = (i as u32 % 128 / divisor, i as u32 / 128 / divisor);
+                let src = coarse_image.pixels[(y.min(h - 1) * w + x.min(w - 1)) as usize];
+                // The source pixel is clearly covered (not a faint fringe).
+                let covered = src != BACKGROUND && src.to_le_bytes()[3] > 64;
+                covered && warped.pixels[i] == BACKGROUND
+            })
+            .count();
+        assert_eq!(holes, 0, "1/{divisor}: display pixels left empty under covered coarse pixels");
+        // Against the full-resolution frame shown at the same camera: the error of a coarser
+        // grid, no more than the coarse image upscaled shows.
+        let truth = marcher.render_image(&cam);
+        let mut up = Image::new(0, 0);
+        upscale(&coarse_image, 128, 128, &mut up);
+        let f_warp = Metrics::of(&exact, &warped).unwrap().flip;
+        let f_up = Metrics::of(&truth, &up).unwrap().flip;
+        let f_truth = Metrics::of(&truth, &warped).unwrap().flip;
+        assert!(f_warp < 0.15, "1/{divisor}: FLIP {f_warp} against the full frame");
+        assert!(f_truth <= 1.25 * f_up + 0.01, "1/{divisor}: FLIP {f_truth} against upscaled {f_up}");
+    }
+}
+
+#[test]
+fn coarse_frames_cost_the_measured_server_time_at_their_resolution() {
+    // A flick (90 °/s for 0.5 s, then rest) at 128², a 500 ms server on a 1 Mbit/s link.
+    let net = NetworkModel { server_ms: 500.0, latency_ms: 20.0, mbps: 1.0 };
+    let ds = vec![Dataset::default_bundled()];
+    let run = |half_ms: f64| {
+        let mut o = common::session_opts(&["flick:90"], "volwarp-adaptive,volwarp", net);
+        o.cfg.size = 128;
+        o.cfg.duration_s = 3.0;
+        o.cfg.score_every = 3;
+        // The measured ratio from a calibration file.
+        o.calibration.ms.insert(("server".into(), ds[0].name.clone(), 128), 500.0);
+        o.calibration.ms.insert(("server".into(), scaled_name(&ds[0].name, 2), 128), half_ms);
+        o.calibration.ms.insert(("server".into(), scaled_name(&ds[0].name, 4), 128), 50.0);
+        o.server_ms = Some(500.0);
+        simulate_all(&ds, &o).unwrap()
+    };
+    let link = |f: &FrameEvent| f.bytes as f64 * 8.0 / 1e3;
+    let mut firsts = Vec::new();
+    for half_ms in [125.0, 250.0] {
+        let runs = run(half_ms);
+        let frames = &runs[0].result.frames; // volwarp-adaptive's (the first method)
+        let coarse: Vec<_> = frames.iter().skip(1).filter(|f| f.camera.width == 64).collect();
+        let full: Vec<_> = frames.iter().skip(1).filter(|f| f.camera.width == 128).collect();
+        assert_eq!(coarse.len() + full.len(), frames.len() - 1, "{frames:?}");
+        assert!(!coarse.is_empty() && !full.is_empty(), "{frames:?}");
+        for f in &coarse {
+            assert!(f.request_ms < 0.5e3 + 20.0, "coarse only while moving: {f:?}");
+            assert_eq!(f.view.height, 64);
+            assert!((f.arrive_ms - f.start_ms - half_ms - link(f) - 20.0).abs() < 1e-6, "{f:?}");
+        }
+        for f in &full {
+            assert!(f.request_ms > 0.5e3, "full resolution at rest: {f:?}");
+            assert!((f.arrive_ms - f.start_ms - 500.0 - link(f) - 20.0).abs() < 1e-6, "{f:?}");
+        }
+        let mean = |v: &[&FrameEvent]| v.iter().map(|f| f.bytes as f64).sum::<f64>() / v.len() as f64;
+        assert!(mean(&coarse) < 0.5 * mean(&full), "the encoder's bytes at a quarter of the pixels");
+        firsts.push(coarse[0].arrive_ms);
+        // The default (full resolution always) is served on its own stream, 500 ms a frame.
+        let rows: Vec<_> = runs[0].result.rows.iter().filter(|r| r.method == "volwarp-adaptive").collect();
+        assert!(!rows.is_empty() && rows.iter().all(|r| r.metrics.flip.is_finite()));
+    }
+    assert!(firsts[0] < firsts[1], "the measured ratio sets the coarse frame's time: {firsts:?}");
+}
