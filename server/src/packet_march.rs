@@ -1043,62 +1043,41 @@ impl Kernel<'_> {
         color: &mut [u32],
         packed: &mut [u64],
     ) {
-        let w = basis.eye[3] as usize;
-        let rows = (color.len() / w.max(1)) as u32;
-        let spread = pack.is_some_and(|(_, r)| r.uses_spread());
-        self.each_packet::<L, M>(basis, y0, rows, |o, rays, pixels| {
-            let (c, depth, unc) = match heuristic {
-                None => (self.march::<L, _, M>(o, rays, &mut NoFeed), [None; M], [Uncertainty::default(); M]),
-                Some(hr) => self.pick::<L, M, false>(o, rays, hr, spread),
-            };
-            for (l, i) in pixels.iter().enumerate() {
-                let Some(i) = *i else { continue };
-                let packed_color = pack_color_f32(c[l]);
-                if heuristic.is_none() {
-                    if let Some(p) = color.get_mut(i) {
-                        *p = over_background(packed_color, BACKGROUND);
-                    }
-                    continue;
-                }
-                if let Some(p) = color.get_mut(i) {
-                    *p = packed_color;
-                }
-                if let Some(p) = t.get_mut(i) {
-                    *p = depth[l].unwrap_or(f32::INFINITY);
-                }
-                if let (Some((q, radius)), Some(tl), Some(s)) = (pack, depth[l], packed.get_mut(i)) {
-                    let d = rays.d[l];
-                    *s = q.pack(o + d * tl, radius.at_ray(d, tl, &unc[l]));
-                }
-            }
-        });
-    }
-
-    /// Every packet of rays over rows `y0 .. y0 + rows` of the image, left to right and top to
-    /// bottom: `f(origin, rays, pixels)`, `pixels[l]` the index of lane `l`'s pixel within the
-    /// band (`None` for lanes past the image's right edge or the band's last row, and beyond
-    /// the lane count).
-    #[inline(always)]
-    fn each_packet<L: Lanes, const M: usize>(
-        &self,
-        basis: &RayBasis,
-        y0: u32,
-        rows: u32,
-        mut f: impl FnMut(Vec3, &Rays<M>, &[Option<usize>; M]),
-    ) {
         let o = basis.origin();
         let (w, h) = (basis.eye[3] as u32, basis.corner[3] as u32);
+        let rows = (color.len() / (w as usize).max(1)) as u32;
         for py in (y0..y0 + rows).step_by(L::N / pw(L::N)) {
             for px in (0..w).step_by(pw(L::N)) {
                 let rays = self.rays(L::N, basis, o, px, py, w, h);
-                let mut pixels = [None; M];
-                for (l, p) in pixels.iter_mut().enumerate().take(L::N) {
+                let spread = pack.is_some_and(|(_, r)| r.uses_spread());
+                let (c, depth, unc) = match heuristic {
+                    None => (self.march::<L, _, M>(o, &rays, &mut NoFeed), [None; M], [Uncertainty::default(); M]),
+                    Some(hr) => self.pick::<L, M, false>(o, &rays, hr, spread),
+                };
+                for l in 0..L::N {
                     let (x, y) = (px + (l % pw(L::N)) as u32, py + (l / pw(L::N)) as u32);
-                    if x < w && y < y0 + rows {
-                        *p = Some(((y - y0) * w + x) as usize);
+                    if x >= w || y >= y0 + rows {
+                        continue;
+                    }
+                    let i = ((y - y0) * w + x) as usize;
+                    let packed_color = pack_color_f32(c[l]);
+                    if heuristic.is_none() {
+                        if let Some(p) = color.get_mut(i) {
+                            *p = over_background(packed_color, BACKGROUND);
+                        }
+                        continue;
+                    }
+                    if let Some(p) = color.get_mut(i) {
+                        *p = packed_color;
+                    }
+                    if let Some(p) = t.get_mut(i) {
+                        *p = depth[l].unwrap_or(f32::INFINITY);
+                    }
+                    if let (Some((q, radius)), Some(tl), Some(s)) = (pack, depth[l], packed.get_mut(i)) {
+                        let d = rays.d[l];
+                        *s = q.pack(o + d * tl, radius.at_ray(d, tl, &unc[l]));
                     }
                 }
-                f(o, &rays, &pixels);
             }
         }
     }
@@ -1143,36 +1122,42 @@ impl Kernel<'_> {
         y0: u32,
         out: &mut LayerOut<'_>,
     ) {
+        let o = basis.origin();
+        let (w, h) = (basis.eye[3] as u32, basis.corner[3] as u32);
         let k = out.layers;
-        let rows = (out.count.len() / (basis.eye[3] as usize).max(1)) as u32;
+        let rows = (out.count.len() / (w as usize).max(1)) as u32;
         let step = self.m.dt;
-        self.each_packet::<L, M>(basis, y0, rows, |o, rays, pixels| {
-            let mut segs = S::new(k as u32, step);
-            let rays_color = self.march::<L, _, M>(o, rays, &mut segs);
-            for (l, i) in pixels.iter().enumerate() {
-                let Some(i) = *i else { continue };
-                if rays.t_exit[l].is_none() {
-                    continue;
-                }
-                let list = segs.finish(l);
-                if let Some(c) = out.count.get_mut(i) {
-                    *c = list.len() as u8;
-                }
-                if let Some(colors) = out.color.get_mut(i * k..i * k + list.len()) {
-                    pack_colors(list, rays_color[l], colors);
-                }
-                for (j, sgm) in list.iter().enumerate() {
-                    let slot = i * k + j;
-                    if let Some(p) = out.t.get_mut(slot) {
-                        *p = sgm.t;
+        for py in (y0..y0 + rows).step_by(L::N / pw(L::N)) {
+            for px in (0..w).step_by(pw(L::N)) {
+                let rays = self.rays(L::N, basis, o, px, py, w, h);
+                let mut segs = S::new(k as u32, step);
+                let rays_color = self.march::<L, _, M>(o, &rays, &mut segs);
+                for l in 0..L::N.min(M) {
+                    let (x, y) = (px + (l % pw(L::N)) as u32, py + (l / pw(L::N)) as u32);
+                    if x >= w || y >= y0 + rows || rays.t_exit[l].is_none() {
+                        continue;
                     }
-                    if let (Some((q, radius)), Some(s)) = (pack, out.packed.get_mut(slot)) {
-                        let d = rays.d[l];
-                        *s = q.pack(o + d * sgm.t, radius.at(d, sgm.t));
+                    let i = ((y - y0) * w + x) as usize;
+                    let list = segs.finish(l);
+                    if let Some(c) = out.count.get_mut(i) {
+                        *c = list.len() as u8;
+                    }
+                    if let Some(colors) = out.color.get_mut(i * k..i * k + list.len()) {
+                        pack_colors(list, rays_color[l], colors);
+                    }
+                    for (j, sgm) in list.iter().enumerate() {
+                        let slot = i * k + j;
+                        if let Some(p) = out.t.get_mut(slot) {
+                            *p = sgm.t;
+                        }
+                        if let (Some((q, radius)), Some(s)) = (pack, out.packed.get_mut(slot)) {
+                            let d = rays.d[l];
+                            *s = q.pack(o + d * sgm.t, radius.at(d, sgm.t));
+                        }
                     }
                 }
             }
-        });
+        }
     }
 }
 
@@ -1199,18 +1184,27 @@ impl Kernel<'_> {
             }
             return;
         }
-        let rows = (out.count.len() / (basis.eye[3] as usize).max(1)) as u32;
-        self.each_packet::<L, M>(basis, y0, rows, |o, rays, pixels| {
-            let (c, depth, _) = self.pick::<L, M, true>(o, rays, hr, false);
-            for (l, i) in pixels.iter().enumerate() {
-                let Some(i) = *i else { continue };
-                let seg = depth[l].filter(|_| c[l][3] > 0.0).map(|t| Seg { t, c: c[l] });
-                if let (Some(n), Some(s)) = (out.count.get_mut(i), out.segs.get_mut(i)) {
-                    *n = u8::from(seg.is_some());
-                    *s = seg.unwrap_or_default();
+        let o = basis.origin();
+        let (w, h) = (basis.eye[3] as u32, basis.corner[3] as u32);
+        let rows = (out.count.len() / (w as usize).max(1)) as u32;
+        for py in (y0..y0 + rows).step_by(L::N / pw(L::N)) {
+            for px in (0..w).step_by(pw(L::N)) {
+                let rays = self.rays(L::N, basis, o, px, py, w, h);
+                let (c, depth, _) = self.pick::<L, M, true>(o, &rays, hr, false);
+                for l in 0..L::N.min(M) {
+                    let (x, y) = (px + (l % pw(L::N)) as u32, py + (l / pw(L::N)) as u32);
+                    if x >= w || y >= y0 + rows {
+                        continue;
+                    }
+                    let i = ((y - y0) * w + x) as usize;
+                    let seg = depth[l].filter(|_| c[l][3] > 0.0).map(|t| Seg { t, c: c[l] });
+                    if let (Some(n), Some(s)) = (out.count.get_mut(i), out.segs.get_mut(i)) {
+                        *n = u8::from(seg.is_some());
+                        *s = seg.unwrap_or_default();
+                    }
                 }
             }
-        });
+        }
     }
 
     #[inline(always)]
@@ -1220,25 +1214,34 @@ impl Kernel<'_> {
         y0: u32,
         out: &mut PartOut<'_>,
     ) {
+        let o = basis.origin();
+        let (w, h) = (basis.eye[3] as u32, basis.corner[3] as u32);
         let k = out.k;
-        let rows = (out.count.len() / (basis.eye[3] as usize).max(1)) as u32;
+        let rows = (out.count.len() / (w as usize).max(1)) as u32;
         let step = self.m.dt;
-        self.each_packet::<L, M>(basis, y0, rows, |o, rays, pixels| {
-            let mut segs = S::new(k as u32, step);
-            self.march_in::<L, _, M, true>(o, rays, &mut segs);
-            for (l, i) in pixels.iter().enumerate() {
-                let Some(i) = *i else { continue };
-                let list = if rays.t_exit[l].is_some() { segs.finish(l) } else { &[] };
-                if let Some(c) = out.count.get_mut(i) {
-                    *c = list.len() as u8;
-                }
-                for (j, sgm) in list.iter().enumerate() {
-                    if let Some(p) = out.segs.get_mut(i * k + j) {
-                        *p = Seg { t: sgm.t, c: sgm.color };
+        for py in (y0..y0 + rows).step_by(L::N / pw(L::N)) {
+            for px in (0..w).step_by(pw(L::N)) {
+                let rays = self.rays(L::N, basis, o, px, py, w, h);
+                let mut segs = S::new(k as u32, step);
+                self.march_in::<L, _, M, true>(o, &rays, &mut segs);
+                for l in 0..L::N.min(M) {
+                    let (x, y) = (px + (l % pw(L::N)) as u32, py + (l / pw(L::N)) as u32);
+                    if x >= w || y >= y0 + rows {
+                        continue;
+                    }
+                    let i = ((y - y0) * w + x) as usize;
+                    let list = if rays.t_exit[l].is_some() { segs.finish(l) } else { &[] };
+                    if let Some(c) = out.count.get_mut(i) {
+                        *c = list.len() as u8;
+                    }
+                    for (j, sgm) in list.iter().enumerate() {
+                        if let Some(p) = out.segs.get_mut(i * k + j) {
+                            *p = Seg { t: sgm.t, c: sgm.color };
+                        }
                     }
                 }
             }
-        });
+        }
     }
 }
 
