@@ -156,28 +156,38 @@ mod tests {
         assert_eq!(v.sample(Vec3::new(-5.0, 9.0, f32::NAN)), 0.0);
     }
 
+    /// Uniform numbers in [0, 1] from a xorshift generator seeded with `seed`.
+    fn xorshift(mut x: u32) -> impl FnMut() -> f32 {
+        move || {
+            x ^= x << 13;
+            x ^= x >> 17;
+            x ^= x << 5;
+            x as f32 / u32::MAX as f32
+        }
+    }
+
+    /// A volume of `dims` with spacing (1, 2, 0.5) stored as 8-bit (`kind` 0), 16-bit (1) or
+    /// f32 (2) values.
+    fn test_volume(dims: [u32; 3], kind: u32) -> Volume {
+        let n = dims.iter().product::<u32>() as usize;
+        let values: Vec<f32> = (0..n)
+            .map(|i| match kind {
+                0 => (i * 37 % 200) as f32,
+                1 => (i * 4099 % 60_000) as f32,
+                _ => (i as f32 * 0.37).sin(),
+            })
+            .collect();
+        Volume::from_values("t", dims, Vec3::new(1.0, 2.0, 0.5), values).unwrap()
+    }
+
     /// The shared-stencil gradient is the central difference of trilinear samples one voxel
     /// either side (up to rounding), inside the volume, at its edges and in a crop of whole
     /// voxels.
     #[test]
     fn gradient_is_the_central_difference_of_samples() {
-        let mut x = 987654u32;
-        let mut r = move || {
-            x ^= x << 13;
-            x ^= x >> 17;
-            x ^= x << 5;
-            x as f32 / u32::MAX as f32
-        };
+        let mut r = xorshift(987654);
         for (dims, kind) in [([7, 5, 4], 0), ([33, 34, 35], 1), ([40, 3, 66], 2), ([1, 2, 1], 0)] {
-            let n = dims.iter().product::<u32>() as usize;
-            let values: Vec<f32> = (0..n)
-                .map(|i| match kind {
-                    0 => (i * 37 % 200) as f32,
-                    1 => (i * 4099 % 60_000) as f32,
-                    _ => (i as f32 * 0.37).sin(),
-                })
-                .collect();
-            let v = Volume::from_values("t", dims, Vec3::new(1.0, 2.0, 0.5), values).unwrap();
+            let v = test_volume(dims, kind);
             let whole = (Vec3::ZERO, Vec3::new((dims[0] - 1) as f32, (dims[1] - 1) as f32, (dims[2] - 1) as f32));
             let crop = (whole.1 * 0.25).floor();
             let crop = (crop, (whole.1 * 0.75).ceil().max(crop));
@@ -196,24 +206,11 @@ mod tests {
 
     #[test]
     fn bricked_samples_equal_the_flat_reference() {
-        let mut x = 12345u32;
-        let mut r = move || {
-            x ^= x << 13;
-            x ^= x >> 17;
-            x ^= x << 5;
-            x as f32 / u32::MAX as f32
-        };
+        let mut r = xorshift(12345);
         // Odd dims, brick edges, 8-bit, 16-bit and f32 storage.
         for (dims, kind) in [([7, 5, 4], 0), ([33, 2, 65], 1), ([65, 33, 1], 2), ([1, 1, 1], 0), ([2, 65, 3], 2)] {
             let n = dims.iter().product::<u32>() as usize;
-            let values: Vec<f32> = (0..n)
-                .map(|i| match kind {
-                    0 => (i * 37 % 200) as f32,
-                    1 => (i * 4099 % 60_000) as f32,
-                    _ => (i as f32 * 0.37).sin(),
-                })
-                .collect();
-            let v = Volume::from_values("t", dims, Vec3::new(1.0, 2.0, 0.5), values).unwrap();
+            let v = test_volume(dims, kind);
             let stored: Vec<f32> = (0..n)
                 .map(|i| {
                     let (nx, ny) = (dims[0] as usize, dims[1] as usize);
