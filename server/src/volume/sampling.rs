@@ -4,6 +4,13 @@
 use super::Volume;
 use volwarp_core::Vec3;
 
+/// `g` clamped to `[lo, hi]` per axis, a NaN coordinate to `lo`: where the samplers of a
+/// clamp range read.
+#[inline(always)]
+fn clamp_grid(g: Vec3, lo: Vec3, hi: Vec3) -> Vec3 {
+    Vec3::new(g.x.max(lo.x).min(hi.x), g.y.max(lo.y).min(hi.y), g.z.max(lo.z).min(hi.z))
+}
+
 impl Volume {
     /// The normalized value of voxel `(i, j, k)` (clamped to the volume).
     #[inline]
@@ -26,9 +33,7 @@ impl Volume {
     /// outside the crop beyond what its trilinear stencil needs at a fraction of zero.
     #[inline(always)]
     pub fn sample_grid_in(&self, g: Vec3, lo: Vec3, hi: Vec3) -> f32 {
-        let gx = g.x.max(lo.x).min(hi.x); // NaN -> lo
-        let gy = g.y.max(lo.y).min(hi.y); // NaN -> lo
-        let gz = g.z.max(lo.z).min(hi.z); // NaN -> lo
+        let Vec3 { x: gx, y: gy, z: gz } = clamp_grid(g, lo, hi);
         let (x0, y0, z0) = (gx as u32, gy as u32, gz as u32);
         let (fx, fy, fz) = (gx - x0 as f32, gy - y0 as f32, gz - z0 as f32);
         let c = self.voxels.corners(x0, y0, z0);
@@ -52,9 +57,7 @@ impl Volume {
     /// brick lookup per sample in the packet marcher.
     #[inline]
     pub fn gradient_grid_in(&self, g: Vec3, lo: Vec3, hi: Vec3) -> Vec3 {
-        let gx = g.x.max(lo.x).min(hi.x); // NaN -> lo
-        let gy = g.y.max(lo.y).min(hi.y); // NaN -> lo
-        let gz = g.z.max(lo.z).min(hi.z); // NaN -> lo
+        let Vec3 { x: gx, y: gy, z: gz } = clamp_grid(g, lo, hi);
         let (x0, y0, z0) = (gx as i32, gy as i32, gz as i32);
         let (fx, fy, fz) = (gx - x0 as f32, gy - y0 as f32, gz - z0 as f32);
         let (ilo, ihi) = (lo.floor(), hi.ceil());
