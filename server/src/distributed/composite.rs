@@ -2,7 +2,8 @@
 //! by depth, the fuse down to the client's K, and the frame rank 0 encodes.
 //!
 //! **The rule.** Per pixel, the segments of every part are merged by depth (a k-way merge of
-//! the parts' front-to-back lists; equal depths keep the parts' order), which is their
+//! the parts' front-to-back lists; equal depths keep the parts' order; lists that lie apart in
+//! depth, as disjoint parts' do, are concatenated, which is the same), which is their
 //! visibility order: parts are disjoint convex boxes, so along a ray their samples, and the
 //! segments over them, do not interleave. Front to back, once the accumulated opacity
 //! (`A += (1 − A)·α`) reaches the early-termination threshold the segments behind are dropped

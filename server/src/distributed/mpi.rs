@@ -101,7 +101,7 @@ pub struct RankStats {
     pub march_us: u64,
     /// Waiting for the slowest rank's march (the all-reduce of the rows' work), µs.
     pub wait_us: u64,
-    /// Encoding the bands and their all-to-all, µs.
+    /// The bands' all-to-all, µs.
     pub exchange_us: u64,
     /// Decoding and merging the received bands and, for a frame, assembling the band's
     /// samples, µs.
