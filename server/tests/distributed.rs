@@ -471,7 +471,7 @@ fn bands_read_in_place_merge_as_decoded_bands() {
                 let mut shifted = vec![0u8; n + 1];
                 shifted[1..].copy_from_slice(&bytemuck::cast_slice::<u32, u8>(b)[..*n]);
                 let shifted = &shifted[1..];
-                if shifted.as_ptr() as usize % 4 != 0 {
+                if !(shifted.as_ptr() as usize).is_multiple_of(4) {
                     assert!(BandView::parse(shifted, pixels, k).is_err());
                 }
                 assert_eq!(
@@ -566,7 +566,7 @@ fn bands_cover_the_rows_once() {
             let load: Vec<u64> = (0..h)
                 .map(|_| {
                     seed = seed.wrapping_mul(6364136223846793005).wrapping_add(1442695040888963407);
-                    (seed >> 54) * u64::from(seed % 3 != 0)
+                    (seed >> 54) * u64::from(!seed.is_multiple_of(3))
                 })
                 .collect();
             let b = composite::balanced_bands(&load, n);
