@@ -7,7 +7,7 @@ use std::path::PathBuf;
 use std::sync::Arc;
 use volwarp_core::wire::CameraRequest;
 use volwarp_core::{Heuristic, Vec3};
-use volwarp_server::distributed::composite::{self, merge, merge_reference, Band};
+use volwarp_server::distributed::composite::{self, merge, merge_reference, Band, BandView};
 use volwarp_server::distributed::decomposition::{combine_ranges, part_of, read_part, Decomposition};
 use volwarp_server::distributed::partial::{PartMarcher, Seg};
 use volwarp_server::distributed::{image, render_in_process, FrameGeometry};
@@ -399,6 +399,90 @@ fn the_threshold_depth_is_the_one_process_depth_where_the_nearest_part_crosses()
     assert!(crossed > 1000 && other > 0, "crossed {crossed}, over several parts {other}");
 }
 
+/// The bytes of a band in a 4-byte aligned buffer (as a rank receives them), and their length.
+fn aligned(bytes: &[u8]) -> Vec<u32> {
+    let mut out = vec![0u32; bytes.len().div_ceil(4)];
+    bytemuck::cast_slice_mut::<u32, u8>(&mut out)[..bytes.len()].copy_from_slice(bytes);
+    out
+}
+
+#[test]
+fn bands_read_in_place_merge_as_decoded_bands() {
+    // What a band owner merges: its own band read from its march (slots of K), the others'
+    // bands read in place from the receive buffer, against the decoded-and-copied bands.
+    let ds = Dataset::load(data("ct_head_quarter.nhdr"), None).unwrap();
+    let opts = MarchOptions::default();
+    let m = Marcher::with_options(ds.volume.clone(), &ds.tf, opts);
+    let (dec, parts) = parts_of_file(&data("ct_head_quarter.nhdr"), 3);
+    let pm = marchers(&ds, &dec, parts, opts);
+    for layers in [4u32, 1] {
+        let req = request(&m, 45, 40.0, Heuristic::Threshold);
+        let cam = &req.camera;
+        let frames: Vec<_> = pm.iter().map(|p| p.march(cam, layers, req.heuristic)).collect();
+        let want = render_in_process(&pm, &req, layers, 3);
+        let k = frames[0].k;
+        for (owner, want) in want.iter().enumerate() {
+            let rows = composite::band_rows(cam.height, 3, owner);
+            let pixels = (rows.end - rows.start) as usize * cam.width as usize;
+            let bytes: Vec<(Vec<u32>, usize)> = frames
+                .iter()
+                .map(|f| {
+                    let b = composite::encode_band(f, rows.clone());
+                    assert_eq!(b.len(), composite::band_len(f, rows.clone()));
+                    (aligned(&b), b.len())
+                })
+                .collect();
+            let views: Vec<BandView> = (0..3)
+                .map(|p| {
+                    if p == owner {
+                        BandView::of_part(&frames[p], rows.clone())
+                    } else {
+                        let (b, n) = &bytes[p];
+                        BandView::parse(&bytemuck::cast_slice::<u32, u8>(b)[..*n], pixels, k).unwrap()
+                    }
+                })
+                .collect();
+            let runs =
+                composite::merge_views_with(&views, pixels, k, opts.early_termination, |_, s, acc: &mut Vec<Seg>| {
+                    acc.push(Seg { t: s.len() as f32, c: [0.0; 4] });
+                    acc.extend_from_slice(s);
+                })
+                .unwrap();
+            let mut flat = Vec::new();
+            for p in 0..pixels {
+                flat.push(Seg { t: want.count[p] as f32, c: [0.0; 4] });
+                flat.extend_from_slice(want.pixel(p));
+            }
+            assert_eq!(runs.concat(), flat, "K={layers} band {owner}");
+            // A non-finite value in a received band fails the merge (and the decode).
+            let other = (owner + 1) % 3;
+            let (b, n) = &bytes[other];
+            let segs_at = composite::counts_len(pixels);
+            if *n > segs_at {
+                let mut bad = b.clone();
+                bytemuck::cast_slice_mut::<u32, u8>(&mut bad)[segs_at..segs_at + 4]
+                    .copy_from_slice(&f32::NAN.to_ne_bytes());
+                let bad_bytes = &bytemuck::cast_slice::<u32, u8>(&bad)[..*n];
+                assert!(composite::decode_band(bad_bytes, pixels, k).is_err());
+                let mut v = views.clone();
+                v[other] = BandView::parse(bad_bytes, pixels, k).unwrap();
+                assert!(composite::merge_views_with(&v, pixels, k, 0.99, |_, _, _: &mut ()| ()).is_err());
+                // Bytes that do not lie aligned are refused, not read unaligned.
+                let mut shifted = vec![0u8; n + 1];
+                shifted[1..].copy_from_slice(&bytemuck::cast_slice::<u32, u8>(b)[..*n]);
+                let shifted = &shifted[1..];
+                if !(shifted.as_ptr() as usize).is_multiple_of(4) {
+                    assert!(BandView::parse(shifted, pixels, k).is_err());
+                }
+                assert_eq!(
+                    composite::decode_band(shifted, pixels, k).unwrap(),
+                    composite::decode_band(&bytemuck::cast_slice::<u32, u8>(b)[..*n], pixels, k).unwrap()
+                );
+            }
+        }
+    }
+}
+
 fn segs() -> impl Strategy<Value = (Vec<Vec<Seg>>, usize, f32)> {
     // Up to 6 parts, each a front-to-back list inside its own depth interval; the parts in any
     // order.
@@ -472,6 +556,29 @@ fn bands_cover_the_rows_once() {
         for n in 1..=8 {
             let rows: Vec<_> = (0..n).flat_map(|b| composite::band_rows(h, n, b)).collect();
             assert_eq!(rows, (0..h).collect::<Vec<_>>());
+        }
+    }
+    // Bands cut by work: contiguous, every row once, each band's work within one row's of an
+    // even share.
+    let mut seed = 11u64;
+    for h in [0usize, 1, 5, 64, 1024] {
+        for n in 1..=8 {
+            let load: Vec<u64> = (0..h)
+                .map(|_| {
+                    seed = seed.wrapping_mul(6364136223846793005).wrapping_add(1442695040888963407);
+                    (seed >> 54) * u64::from(!seed.is_multiple_of(3))
+                })
+                .collect();
+            let b = composite::balanced_bands(&load, n);
+            assert_eq!(b.len(), n + 1);
+            assert_eq!((b[0], b[n]), (0, h as u32));
+            assert!(b.windows(2).all(|w| w[0] <= w[1]));
+            let total: u64 = load.iter().sum();
+            let max = load.iter().copied().max().unwrap_or(0);
+            for j in 0..n {
+                let work: u64 = load[b[j] as usize..b[j + 1] as usize].iter().sum();
+                assert!(work <= total / n as u64 + 2 * max + 1, "h {h} n {n} band {j}: {work} of {total}");
+            }
         }
     }
     let empty = Band::default();

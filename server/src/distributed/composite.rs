@@ -2,7 +2,8 @@
 //! by depth, the fuse down to the client's K, and the frame rank 0 encodes.
 //!
 //! **The rule.** Per pixel, the segments of every part are merged by depth (a k-way merge of
-//! the parts' front-to-back lists; equal depths keep the parts' order), which is their
+//! the parts' front-to-back lists; equal depths keep the parts' order; lists that lie apart in
+//! depth, as disjoint parts' do, are concatenated, which is the same), which is their
 //! visibility order: parts are disjoint convex boxes, so along a ray their samples, and the
 //! segments over them, do not interleave. Front to back, once the accumulated opacity
 //! (`A += (1 − A)·α`) reaches the early-termination threshold the segments behind are dropped
@@ -29,6 +30,29 @@ pub fn band_rows(height: u32, n: usize, b: usize) -> std::ops::Range<u32> {
     let start = h * b / n;
     let end = h * (b + 1) / n;
     start as u32..end as u32
+}
+
+/// The first row of each of `n` bands of rows and the end of the last (`n + 1` values), cut so
+/// the bands carry about equal work: `load[y]` is row `y`'s work (its segments over every part
+/// plus a share per pixel), the same on every rank (all-reduced), so every rank cuts alike.
+/// Contiguous, in order, covering every row once; a band may be empty. The band owners then
+/// finish their merges together, so none waits long for another in the gather.
+pub fn balanced_bands(load: &[u64], n: usize) -> Vec<u32> {
+    let total: u128 = load.iter().map(|&l| u128::from(l)).sum();
+    let mut out = Vec::with_capacity(n + 1);
+    out.push(0u32);
+    let (mut y, mut acc) = (0usize, 0u128);
+    for b in 1..n {
+        // The first row at which the bands before it reach b/n of the work.
+        let want = total * b as u128 / n as u128;
+        while y < load.len() && acc + u128::from(load[y]) <= want {
+            acc += u128::from(load[y]);
+            y += 1;
+        }
+        out.push(y as u32);
+    }
+    out.push(load.len() as u32);
+    out
 }
 
 /// Fuses two adjacent segments, front one first (see the module docs).
@@ -102,31 +126,174 @@ pub fn merge_reference(lists: &[&[Seg]], k: usize, ert: f32) -> Vec<Seg> {
 }
 
 /// Merges pixel lists and reduces them to `k` (the fast path of [`merge_reference`]).
+///
+/// Parts are disjoint convex boxes, so a pixel's non-empty lists occupy disjoint depth ranges:
+/// ordered by their first depth, each sorted and each ending strictly before the next begins,
+/// their depth merge is their concatenation in that order (no depth ties across lists, and a
+/// stable merge keeps each list's own order). That is checked per pixel (a compare per
+/// segment); lists that overlap or are out of order (bytes from a failed rank) take the k-way
+/// merge, so the result is [`merge_reference`]'s either way.
 pub fn merge(lists: &[&[Seg]], k: usize, ert: f32, out: &mut Vec<Seg>) {
-    let mut nonempty = lists.iter().filter(|l| !l.is_empty());
-    match (nonempty.next(), nonempty.next()) {
-        (None, _) => out.clear(),
-        // One part saw the pixel: its list as it is (most pixels).
-        (Some(l), None) => {
-            out.clear();
-            out.extend_from_slice(l);
+    out.clear();
+    // The non-empty lists, in order of their first depth (insertion sort: a pixel has few).
+    let mut ne: [&[Seg]; 8] = [&[]; 8];
+    let mut n = 0;
+    for l in lists.iter().filter(|l| !l.is_empty()) {
+        if n == ne.len() {
+            // More parts over one pixel than the fast path holds: the k-way merge.
+            merge_lists(lists, out);
+            reduce(out, k, ert);
+            return;
         }
-        _ => merge_lists(lists, out),
+        let mut j = n;
+        while j > 0 && ne[j - 1][0].t > l[0].t {
+            ne[j] = ne[j - 1];
+            j -= 1;
+        }
+        ne[j] = l;
+        n += 1;
+    }
+    match n {
+        0 => {}
+        // One part saw the pixel: its list as it is (most pixels).
+        1 => out.extend_from_slice(ne[0]),
+        _ => {
+            let sorted = |l: &[Seg]| l.windows(2).all(|w| w[0].t <= w[1].t);
+            let apart = ne[..n].windows(2).all(|w| w[0][w[0].len() - 1].t < w[1][0].t);
+            if apart && ne[..n].iter().all(|l| sorted(l)) {
+                for l in &ne[..n] {
+                    out.extend_from_slice(l);
+                }
+            } else {
+                merge_lists(lists, out);
+            }
+        }
     }
     reduce(out, k, ert);
 }
 
-/// A band of a [`PartFrame`] as the bytes a rank sends its band's owner: a segment count per
-/// pixel, then the segments (`t` and RGBA as `f32` in memory order, [`SEG_BYTES`] each).
-pub fn encode_band(pf: &PartFrame, rows: std::ops::Range<u32>) -> Vec<u8> {
+/// The bytes the count bytes of a band of `pixels` pixels take between ranks: padded to a
+/// multiple of 4, so the segments after them lie 4-byte aligned in an aligned buffer and are
+/// read in place.
+pub fn counts_len(pixels: usize) -> usize {
+    pixels.next_multiple_of(4)
+}
+
+/// The bytes [`encode_band_into`] writes for pixels `rows` of `pf`.
+pub fn band_len(pf: &PartFrame, rows: std::ops::Range<u32>) -> usize {
     let w = pf.width as usize;
     let (p0, p1) = (rows.start as usize * w, rows.end as usize * w);
-    let n: usize = pf.count[p0..p1].iter().map(|&c| c as usize).sum();
-    let mut out = Vec::with_capacity(p1 - p0 + n * SEG_BYTES);
-    out.extend_from_slice(&pf.count[p0..p1]);
-    for i in p0..p1 {
-        out.extend_from_slice(bytemuck::cast_slice(pf.pixel(i)));
+    counts_len(p1 - p0) + SEG_BYTES * pf.count[p0..p1].iter().map(|&c| c as usize).sum::<usize>()
+}
+
+/// Writes a band of a [`PartFrame`] into `out` (of [`band_len`] bytes) as a rank sends it to its
+/// band's owner: a segment count per pixel (zeros up to [`counts_len`]), then the segments (`t`
+/// and RGBA as `f32` in memory order, [`SEG_BYTES`] each).
+pub fn encode_band_into(pf: &PartFrame, rows: std::ops::Range<u32>, out: &mut [u8]) {
+    use rayon::prelude::*;
+    let w = pf.width as usize;
+    let (p0, p1) = (rows.start as usize * w, rows.end as usize * w);
+    let cl = counts_len(p1 - p0);
+    let (counts, mut body) = out.split_at_mut(cl);
+    counts[..p1 - p0].copy_from_slice(&pf.count[p0..p1]);
+    counts[p1 - p0..].fill(0);
+    // In parallel over blocks of pixels, each block's bytes where its segments start.
+    const BLOCK: usize = 16384;
+    let mut blocks = Vec::with_capacity((p1 - p0).div_ceil(BLOCK));
+    for b0 in (p0..p1).step_by(BLOCK) {
+        let b1 = (b0 + BLOCK).min(p1);
+        let n: usize = pf.count[b0..b1].iter().map(|&c| c as usize).sum();
+        let (c, r) = body.split_at_mut(n * SEG_BYTES);
+        blocks.push((b0..b1, c));
+        body = r;
     }
+    blocks.into_par_iter().for_each(|(px, out)| {
+        let mut at = 0;
+        for i in px {
+            let b: &[u8] = bytemuck::cast_slice(pf.pixel(i));
+            out[at..at + b.len()].copy_from_slice(b);
+            at += b.len();
+        }
+    });
+}
+
+/// A band of per-pixel segment lists, borrowed: as received from another rank (the lists one
+/// after another) or as this rank marched it (pixel `i`'s list at slot `i·k` of a
+/// [`PartFrame`]).
+#[derive(Clone, Copy, Debug)]
+pub struct BandView<'a> {
+    /// Segments per pixel.
+    pub count: &'a [u8],
+    /// The segments.
+    pub segs: &'a [Seg],
+    /// Slots per pixel where the lists are at fixed strides (a [`PartFrame`]), else `None`.
+    pub stride: Option<usize>,
+}
+
+impl<'a> BandView<'a> {
+    /// The band of pixels `rows` of a rank's own [`PartFrame`], in place.
+    pub fn of_part(pf: &'a PartFrame, rows: std::ops::Range<u32>) -> BandView<'a> {
+        let w = pf.width as usize;
+        let (p0, p1) = (rows.start as usize * w, rows.end as usize * w);
+        BandView { count: &pf.count[p0..p1], segs: &pf.segs[p0 * pf.k..p1 * pf.k], stride: Some(pf.k) }
+    }
+
+    /// A band of [`Band`]'s lists.
+    pub fn of_band(b: &'a Band) -> BandView<'a> {
+        BandView { count: &b.count, segs: &b.segs, stride: None }
+    }
+
+    /// The band [`encode_band_into`] wrote, read in place: an error for bytes that are not one
+    /// (a count above `k`, a length that does not match the counts, nonzero padding) or that
+    /// are not 4-byte aligned. The segments' values are checked by [`merge_views_with`].
+    pub fn parse(bytes: &'a [u8], pixels: usize, k: usize) -> Result<BandView<'a>, String> {
+        let cl = counts_len(pixels);
+        let (count, pad) = match (bytes.get(..pixels), bytes.get(pixels..cl)) {
+            (Some(c), Some(p)) => (c, p),
+            _ => return Err(format!("a band of {pixels} pixels needs {cl} count bytes")),
+        };
+        if pad.iter().any(|&b| b != 0) {
+            return Err("a band with nonzero padding after its counts".into());
+        }
+        if let Some(c) = count.iter().find(|&&c| c as usize > k) {
+            return Err(format!("a pixel with {c} segments (at most {k})"));
+        }
+        let n: usize = count.iter().map(|&c| c as usize).sum();
+        let body = &bytes[cl..];
+        if body.len() != n * SEG_BYTES {
+            return Err(format!("a band of {n} segments holds {} bytes, not {}", body.len(), n * SEG_BYTES));
+        }
+        let segs =
+            bytemuck::try_cast_slice(body).map_err(|e| format!("a band's segments cannot be read in place: {e}"))?;
+        Ok(BandView { count, segs, stride: None })
+    }
+
+    /// Where the list of pixel `i` starts in `segs` for each `i = r·run` (one per run of `run`
+    /// pixels), and the end of the last.
+    fn run_starts(&self, run: usize) -> Vec<usize> {
+        use rayon::prelude::*;
+        let runs = self.count.len().div_ceil(run);
+        match self.stride {
+            Some(k) => (0..=runs).map(|r| (r * run).min(self.count.len()) * k).collect(),
+            None => {
+                let sums: Vec<usize> =
+                    self.count.par_chunks(run.max(1)).map(|c| c.iter().map(|&c| c as usize).sum()).collect();
+                std::iter::once(0)
+                    .chain(sums.iter().scan(0usize, |at, &s| {
+                        *at += s;
+                        Some(*at)
+                    }))
+                    .collect()
+            }
+        }
+    }
+}
+
+/// A band of a [`PartFrame`] as the bytes a rank sends its band's owner
+/// ([`encode_band_into`]).
+pub fn encode_band(pf: &PartFrame, rows: std::ops::Range<u32>) -> Vec<u8> {
+    let mut out = vec![0u8; band_len(pf, rows.clone())];
+    encode_band_into(pf, rows, &mut out);
     out
 }
 
@@ -149,19 +316,18 @@ impl Band {
     }
 }
 
-/// Decodes a band of `pixels` pixels with at most `k` segments each; an error for bytes that
-/// are not one.
+/// Decodes a band of `pixels` pixels with at most `k` segments each (bytes at any alignment,
+/// copied); an error for bytes that are not one.
 pub fn decode_band(bytes: &[u8], pixels: usize, k: usize) -> Result<Band, String> {
-    let count = bytes.get(..pixels).ok_or_else(|| format!("a band of {pixels} pixels needs {pixels} count bytes"))?;
-    if let Some(c) = count.iter().find(|&&c| c as usize > k) {
-        return Err(format!("a pixel with {c} segments (at most {k})"));
-    }
-    let n: usize = count.iter().map(|&c| c as usize).sum();
-    let body = &bytes[pixels..];
-    if body.len() != n * SEG_BYTES {
-        return Err(format!("a band of {n} segments holds {} bytes, not {}", body.len(), n * SEG_BYTES));
-    }
-    let segs: Vec<Seg> = bytemuck::pod_collect_to_vec(body);
+    let cl = counts_len(pixels);
+    let Some(count) = bytes.get(..pixels) else {
+        return Err(format!("a band of {pixels} pixels needs {cl} count bytes"));
+    };
+    // The checks of `BandView::parse` on an aligned copy.
+    let mut aligned = vec![0u32; bytes.len().div_ceil(4)];
+    bytemuck::cast_slice_mut::<u32, u8>(&mut aligned)[..bytes.len()].copy_from_slice(bytes);
+    let view = BandView::parse(&bytemuck::cast_slice::<u32, u8>(&aligned)[..bytes.len()], pixels, k)?;
+    let segs = view.segs.to_vec();
     if segs.iter().any(|s| !s.t.is_finite() || s.c.iter().any(|v| !v.is_finite())) {
         return Err("a segment with a non-finite value".into());
     }
@@ -177,11 +343,13 @@ pub fn decode_band(bytes: &[u8], pixels: usize, k: usize) -> Result<Band, String
 /// Merges the bands every part sent for one band of the image into `k` segments per pixel
 /// (the band's owner's work, in parallel over runs of pixels), as a [`Band`].
 pub fn merge_bands(bands: &[Band], pixels: usize, k: usize, ert: f32) -> Band {
+    let views: Vec<BandView> = bands.iter().map(BandView::of_band).collect();
     let runs: Vec<(Vec<u8>, Vec<Seg>)> =
-        merge_bands_with(bands, pixels, k, ert, |_, merged, (count, segs): &mut (Vec<u8>, Vec<Seg>)| {
+        merge_views_with(&views, pixels, k, ert, |_, merged, (count, segs): &mut (Vec<u8>, Vec<Seg>)| {
             count.push(merged.len() as u8);
             segs.extend_from_slice(merged);
-        });
+        })
+        .expect("decoded bands hold finite segments");
     let mut out = Band { count: Vec::with_capacity(pixels), start: Vec::with_capacity(pixels), segs: Vec::new() };
     let mut at = 0u32;
     for (count, segs) in runs {
@@ -205,29 +373,60 @@ pub fn merge_bands_with<A: Default + Send>(
     ert: f32,
     f: impl Fn(usize, &[Seg], &mut A) + Sync,
 ) -> Vec<A> {
+    let views: Vec<BandView> = bands.iter().map(BandView::of_band).collect();
+    merge_views_with(&views, pixels, k, ert, f).expect("decoded bands hold finite segments")
+}
+
+/// [`merge_bands_with`] of bands read in place ([`BandView`]), each of `pixels` pixels. A
+/// segment with a non-finite value (bytes from a failed rank) is an error, checked as the
+/// segments are merged (no pass of its own).
+pub fn merge_views_with<A: Default + Send>(
+    bands: &[BandView],
+    pixels: usize,
+    k: usize,
+    ert: f32,
+    f: impl Fn(usize, &[Seg], &mut A) + Sync,
+) -> Result<Vec<A>, String> {
     use rayon::prelude::*;
     const RUN: usize = 4096;
+    if let Some(b) = bands.iter().find(|b| b.count.len() != pixels) {
+        return Err(format!("a band of {} pixels, not {pixels}", b.count.len()));
+    }
+    let starts: Vec<Vec<usize>> = bands.iter().map(|b| b.run_starts(RUN)).collect();
+    if let Some(b) = bands.iter().zip(&starts).find(|(b, s)| s.last().is_some_and(|&e| e > b.segs.len())) {
+        return Err(format!("a band of {} segments whose counts need more", b.0.segs.len()));
+    }
+    let finite = |l: &[Seg]| l.iter().all(|s| s.t.is_finite() && s.c.iter().all(|v| v.is_finite()));
     (0..pixels.div_ceil(RUN))
         .into_par_iter()
         .map(|r| {
             let mut acc = A::default();
-            let mut buf = Vec::new();
-            let mut lists: Vec<&[Seg]> = Vec::with_capacity(bands.len());
+            let mut buf = Vec::with_capacity(k.max(1) * bands.len());
+            let mut lists: Vec<&[Seg]> = vec![&[]; bands.len()];
+            let mut at: Vec<usize> = starts.iter().map(|s| s[r]).collect();
             for i in r * RUN..((r + 1) * RUN).min(pixels) {
-                lists.clear();
-                lists.extend(bands.iter().map(|b| b.pixel(i)));
+                for ((l, b), at) in lists.iter_mut().zip(bands).zip(at.iter_mut()) {
+                    let c = b.count[i] as usize;
+                    *l = &b.segs[*at..*at + c];
+                    *at += b.stride.unwrap_or(c);
+                }
+                if !lists.iter().all(|l| finite(l)) {
+                    return Err("a segment with a non-finite value".to_string());
+                }
                 merge(&lists, k, ert, &mut buf);
                 f(i, &buf, &mut acc);
             }
-            acc
+            Ok(acc)
         })
         .collect()
 }
 
 /// The bytes of a merged band (the same coding as [`encode_band`]).
 pub fn encode_merged(b: &Band) -> Vec<u8> {
-    let mut out = Vec::with_capacity(b.count.len() + b.segs.len() * SEG_BYTES);
+    let cl = counts_len(b.count.len());
+    let mut out = Vec::with_capacity(cl + b.segs.len() * SEG_BYTES);
     out.extend_from_slice(&b.count);
+    out.resize(cl, 0);
     out.extend_from_slice(bytemuck::cast_slice(&b.segs));
     out
 }

@@ -21,9 +21,9 @@
 //! between ranks, more ranks than the volume has bricks, a part refused for memory — is
 //! reported by rank 0 (and the rank concerned) before any frame, and every rank exits non-zero.
 
-use super::composite::{self, Band};
+use super::composite::{self, Band, BandView};
 use super::decomposition::{self, Decomposition};
-use super::partial::PartMarcher;
+use super::partial::{PartMarcher, Seg};
 use super::FrameGeometry;
 use crate::marcher::{FrameStats, MarchOptions, Marcher};
 use crate::server::{FrameSource, Server, ServerConfig};
@@ -31,6 +31,7 @@ use crate::transfer_function::TransferFunction;
 use crate::volume::LoadOptions;
 use mpi::collective::SystemOperation;
 use mpi::datatype::{Partition, PartitionMut};
+use mpi::request::{Request, Scope};
 use mpi::topology::SimpleCommunicator;
 use mpi::traits::*;
 use std::path::PathBuf;
@@ -98,17 +99,19 @@ pub enum Job {
 pub struct RankStats {
     /// Marching the part, µs.
     pub march_us: u64,
-    /// Waiting for the slowest rank's march (a barrier), µs.
+    /// Waiting for the slowest rank's march (the all-reduce of the rows' work), µs.
     pub wait_us: u64,
-    /// Encoding the bands and their all-to-all, µs.
+    /// The bands' all-to-all, µs.
     pub exchange_us: u64,
     /// Decoding and merging the received bands and, for a frame, assembling the band's
     /// samples, µs.
     pub merge_us: u64,
     /// The gather to rank 0, µs.
     pub gather_us: u64,
-    /// Of `merge_us`, decoding the received bands, µs.
+    /// Of `merge_us`, reading the received bands (their counts checked, in place), µs.
     pub decode_us: u64,
+    /// Writing the bands to send, µs.
+    pub encode_us: u64,
     /// Bytes sent to other ranks (bands and the merged band).
     pub bytes_sent: u64,
 }
@@ -157,8 +160,40 @@ impl Fault {
 }
 
 /// What a rank whose march failed sends for every band: no band decodes from it (a count
-/// above any K, or a byte too many for a band of no pixels).
-const FAILED_BAND: [u8; 1] = [0xff];
+/// above any K, or bytes too many for a band of no pixels; 4 of them, as every band's bytes
+/// are a multiple of 4 to lie aligned in the receive buffer).
+const FAILED_BAND: [u8; 4] = [0xff; 4];
+
+/// Waits for `req`, yielding the core between tests instead of MPICH's busy poll: the ranks
+/// share the cores (a rank waiting for a slower one's march or merge would otherwise take a
+/// core from it), and a test drives MPI's progress as a wait would. Every rank takes part in
+/// such a collective by its nonblocking form (a blocking collective does not match one).
+fn wait_yielding<'a, D: ?Sized, S: Scope<'a>>(mut req: Request<'a, D, S>) {
+    loop {
+        match req.test() {
+            Ok(_) => return,
+            Err(r) => req = r,
+        }
+        std::thread::yield_now();
+    }
+}
+
+/// Waits for `req` that may take long (the next frame's command): as [`wait_yielding`] for a
+/// millisecond, then testing every 100 µs asleep, so an idle rank takes no core.
+fn wait_idle<'a, D: ?Sized, S: Scope<'a>>(mut req: Request<'a, D, S>) {
+    let t = Instant::now();
+    loop {
+        match req.test() {
+            Ok(_) => return,
+            Err(r) => req = r,
+        }
+        if t.elapsed() < Duration::from_millis(1) {
+            std::thread::yield_now();
+        } else {
+            std::thread::sleep(Duration::from_micros(100));
+        }
+    }
+}
 
 const CMD_LEN: usize = 72;
 const CMD_QUIT: u8 = 0;
@@ -244,77 +279,122 @@ fn frame_collective(
     }));
     let t_marched = Instant::now();
     st.march_us = (t_marched - t0).as_micros() as u64;
-    // Direct-send: band b to rank b.
-    let mut send = Vec::new();
+    // The image's rows cut into bands of about equal work (every rank's segments per row,
+    // all-reduced; the all-reduce is where the ranks wait for the slowest march).
+    let w = cam.width as u64;
+    let mine: Vec<u64> = match &marched {
+        Ok(pf) => pf.count.chunks(cam.width.max(1) as usize).map(|r| r.iter().map(|&c| u64::from(c)).sum()).collect(),
+        Err(_) => vec![0; cam.height as usize],
+    };
+    let mut load = vec![0u64; mine.len()];
+    mpi::request::scope(|scope| {
+        wait_yielding(world.immediate_all_reduce_into(scope, &mine[..], &mut load[..], SystemOperation::sum()))
+    });
+    // A pixel costs about a quarter of a segment's merge and assembly.
+    let load: Vec<u64> = load.iter().map(|&s| s + w / 4).collect();
+    let bounds = composite::balanced_bands(&load, size);
+    let rows_of = |b: usize| bounds[b]..bounds[b + 1];
+    let t1 = Instant::now();
+    st.wait_us = (t1 - t_marched).as_micros() as u64;
+    // Direct-send: band b to rank b, each band written in place into one 4-byte aligned send
+    // buffer (in parallel); a rank's own band is not sent, it is read from its march.
     let mut scounts = vec![0i32; size];
-    let coded: Vec<Vec<u8>> = match &marched {
+    let send: Vec<u32> = match &marched {
         Ok(pf) => {
-            use rayon::prelude::*;
-            (0..size)
-                .into_par_iter()
-                .map(|b| composite::encode_band(pf, composite::band_rows(cam.height, size, b)))
-                .collect()
+            let lens: Vec<usize> =
+                (0..size).map(|b| if b == rank { 0 } else { composite::band_len(pf, rows_of(b)) }).collect();
+            let mut send = vec![0u32; lens.iter().sum::<usize>() / 4];
+            let mut rest = bytemuck::cast_slice_mut::<u32, u8>(&mut send);
+            for (b, &l) in lens.iter().enumerate() {
+                let (c, r) = rest.split_at_mut(l);
+                if b != rank {
+                    composite::encode_band_into(pf, rows_of(b), c);
+                }
+                rest = r;
+            }
+            for (c, l) in scounts.iter_mut().zip(&lens) {
+                *c = *l as i32;
+            }
+            send
         }
         Err(_) => {
             eprintln!("volwarp-server (rank {rank}): the march of this rank's part failed; the frame is failed");
-            vec![FAILED_BAND.to_vec(); size]
+            for (b, c) in scounts.iter_mut().enumerate() {
+                *c = if b == rank { 0 } else { FAILED_BAND.len() as i32 };
+            }
+            vec![u32::from_ne_bytes(FAILED_BAND); size - 1]
         }
     };
-    for (b, (c, bytes)) in scounts.iter_mut().zip(coded).enumerate() {
-        *c = bytes.len() as i32;
-        if b != rank {
-            st.bytes_sent += bytes.len() as u64;
-        }
-        send.extend_from_slice(&bytes);
-    }
-    drop(marched);
-    // The ranks wait for the slowest march here (timed apart from the exchange itself).
-    world.barrier();
-    let t1 = Instant::now();
-    st.wait_us = (t1 - t_marched).as_micros() as u64;
+    st.bytes_sent += scounts.iter().map(|&c| c as u64).sum::<u64>();
+    let t_sent = Instant::now();
+    st.encode_us = (t_sent - t1).as_micros() as u64;
     let mut rcounts = vec![0i32; size];
     world.all_to_all_into(&scounts[..], &mut rcounts[..]);
     let (sdispl, rdispl) = (prefix(&scounts), prefix(&rcounts));
-    let mut recv = vec![0u8; rcounts.iter().map(|&c| c as usize).sum()];
+    let recv_len: usize = rcounts.iter().map(|&c| c as usize).sum();
+    let mut recv = vec![0u32; recv_len.div_ceil(4)];
     {
-        let sp = Partition::new(&send[..], &scounts[..], &sdispl[..]);
-        let mut rp = PartitionMut::new(&mut recv[..], &rcounts[..], &rdispl[..]);
-        world.all_to_all_varcount_into(&sp, &mut rp);
+        let send = bytemuck::cast_slice::<u32, u8>(&send);
+        let recv = &mut bytemuck::cast_slice_mut::<u32, u8>(&mut recv)[..recv_len];
+        let sp = Partition::new(send, &scounts[..], &sdispl[..]);
+        let mut rp = PartitionMut::new(recv, &rcounts[..], &rdispl[..]);
+        mpi::request::scope(|scope| wait_yielding(world.immediate_all_to_all_varcount_into(scope, &sp, &mut rp)));
     }
     drop(send);
     let t2 = Instant::now();
-    st.exchange_us = (t2 - t1).as_micros() as u64;
-    let rows = composite::band_rows(cam.height, size, rank);
+    st.exchange_us = (t2 - t_sent).as_micros() as u64;
+    let rows = rows_of(rank);
     let pixels = (rows.end - rows.start) as usize * cam.width as usize;
-    // A band that does not decode (a failed rank's): rank 0 fails the frame.
+    // The received bands read in place, this rank's own from its march. A band that does not
+    // parse (a failed rank's): rank 0 fails the frame.
+    let recv = &bytemuck::cast_slice::<u32, u8>(&recv)[..recv_len];
     let mut broken = false;
-    let bands: Vec<Band> = (0..size)
-        .map(|r| {
+    let views: Vec<BandView> = (0..size)
+        .filter_map(|r| {
+            if r == rank {
+                return marched.as_ref().ok().map(|pf| BandView::of_part(pf, rows.clone()));
+            }
             let (a, n) = (rdispl[r] as usize, rcounts[r] as usize);
-            composite::decode_band(&recv[a..a + n], pixels, k).unwrap_or_else(|e| {
-                log::error!("rank {rank}: the band from rank {r} is broken ({e}); left out");
-                broken = true;
-                Band { count: vec![0; pixels], start: vec![0; pixels], segs: Vec::new() }
-            })
+            match BandView::parse(&recv[a..a + n], pixels, k) {
+                Ok(v) => Some(v),
+                Err(e) => {
+                    log::error!("rank {rank}: the band from rank {r} is broken ({e}); left out");
+                    broken = true;
+                    None
+                }
+            }
         })
         .collect();
-    drop(recv);
+    broken |= marched.is_err();
     st.decode_us = t2.elapsed().as_micros() as u64;
     let merged = if broken {
-        // Rank 0 learns of a broken band whoever received it.
-        FAILED_BAND.to_vec()
+        None
     } else if assemble {
         // Merged and assembled pixel by pixel: no merged band in between.
         let first = rows.start * cam.width;
         let a = geometry.assembler(req, layers);
-        let runs = composite::merge_bands_with(&bands, pixels, k, ert, |i, segs, out: &mut super::FramePart| {
+        composite::merge_views_with(&views, pixels, k, ert, |i, segs, out: &mut super::FramePart| {
             a.push(first + i as u32, segs, out)
-        });
-        super::FramePart::join_to_bytes(&runs)
+        })
+        .map(|runs| super::FramePart::join_to_bytes(&runs))
+        .ok()
     } else {
-        composite::encode_merged(&composite::merge_bands(&bands, pixels, k, ert))
+        composite::merge_views_with(&views, pixels, k, ert, |_, merged, (count, segs): &mut (Vec<u8>, Vec<Seg>)| {
+            count.push(merged.len() as u8);
+            segs.extend_from_slice(merged);
+        })
+        .map(|runs| {
+            let count: Vec<u8> = runs.iter().flat_map(|r| r.0.iter().copied()).collect();
+            let segs: Vec<Seg> = runs.iter().flat_map(|r| r.1.iter().copied()).collect();
+            composite::encode_merged(&Band { count, start: Vec::new(), segs })
+        })
+        .ok()
     };
-    drop(bands);
+    // Rank 0 learns of a broken band whoever received it.
+    let broken = broken || merged.is_none();
+    let merged = merged.unwrap_or_else(|| FAILED_BAND.to_vec());
+    drop(views);
+    drop(marched);
     let t3 = Instant::now();
     st.merge_us = (t3 - t2).as_micros() as u64;
     if rank != 0 {
@@ -324,14 +404,20 @@ fn frame_collective(
     let len = merged.len() as i32;
     let out = if rank == 0 {
         let mut lens = vec![0i32; size];
-        root.gather_into_root(&len, &mut lens[..]);
+        // Rank 0 waits here for the slowest band owner's merge: yielding the core to it.
+        mpi::request::scope(|scope| wait_yielding(root.immediate_gather_into_root(scope, &len, &mut lens[..])));
+        // Rank 0's own part stays where it is (it sends itself nothing).
+        lens[0] = 0;
         let displs = prefix(&lens);
         let mut all = vec![0u8; lens.iter().map(|&c| c as usize).sum()];
         {
             let mut rp = PartitionMut::new(&mut all[..], &lens[..], &displs[..]);
-            root.gather_varcount_into_root(&merged[..], &mut rp);
+            mpi::request::scope(|scope| {
+                wait_yielding(root.immediate_gather_varcount_into_root(scope, &merged[..0], &mut rp))
+            });
         }
-        let part = |b: usize| &all[displs[b] as usize..(displs[b] + lens[b]) as usize];
+        let part =
+            |b: usize| if b == 0 { &merged[..] } else { &all[displs[b] as usize..(displs[b] + lens[b]) as usize] };
         let failed = |b: usize, why: String| format!("rank {b} sent no valid band ({why}): a rank failed");
         let out = if broken {
             Err("a band rank 0 received was broken: a rank failed".to_string())
@@ -347,7 +433,7 @@ fn frame_collective(
         } else {
             (0..size)
                 .map(|b| {
-                    let rows = composite::band_rows(cam.height, size, b);
+                    let rows = rows_of(b);
                     let pixels = (rows.end - rows.start) as usize * cam.width as usize;
                     composite::decode_band(part(b), pixels, k).map_err(|why| failed(b, why))
                 })
@@ -356,17 +442,20 @@ fn frame_collective(
         };
         Some(out)
     } else {
-        root.gather_into(&len);
-        root.gather_varcount_into(&merged[..]);
+        mpi::request::scope(|scope| {
+            wait_yielding(root.immediate_gather_into(scope, &len));
+            wait_yielding(root.immediate_gather_varcount_into(scope, &merged[..]));
+        });
         None
     };
     st.gather_us = t3.elapsed().as_micros() as u64;
-    let mine = [st.march_us, st.wait_us, st.exchange_us, st.merge_us, st.gather_us, st.bytes_sent, st.decode_us];
+    let mine =
+        [st.march_us, st.wait_us, st.exchange_us, st.merge_us, st.gather_us, st.bytes_sent, st.decode_us, st.encode_us];
     if rank == 0 {
-        let mut all = vec![0u64; 7 * size];
+        let mut all = vec![0u64; 8 * size];
         root.gather_into_root(&mine[..], &mut all[..]);
         let stats = all
-            .chunks_exact(7)
+            .chunks_exact(8)
             .map(|s| RankStats {
                 march_us: s[0],
                 wait_us: s[1],
@@ -375,6 +464,7 @@ fn frame_collective(
                 gather_us: s[4],
                 bytes_sent: s[5],
                 decode_us: s[6],
+                encode_us: s[7],
             })
             .collect();
         out.map(|o| o.map(|o| (o, stats)))
@@ -584,7 +674,7 @@ pub fn run(launch: Launch, job: Job) -> Result<(), String> {
         let mut frames = 0u64;
         loop {
             let mut cmd = [0u8; CMD_LEN];
-            root.broadcast_into(&mut cmd[..]);
+            mpi::request::scope(|scope| wait_idle(root.immediate_broadcast_into(scope, &mut cmd[..])));
             match decode_cmd(&cmd) {
                 Some((req, layers, assemble)) => {
                     frames += 1;
@@ -614,7 +704,9 @@ pub fn run(launch: Launch, job: Job) -> Result<(), String> {
         let t0 = Instant::now();
         watchdog.start();
         let mut cmd = encode_cmd(req, layers, assemble);
-        root.broadcast_into(&mut cmd[..]);
+        // Nonblocking, as the other ranks wait for it (a blocking collective does not match a
+        // nonblocking one).
+        mpi::request::scope(|scope| wait_yielding(root.immediate_broadcast_into(scope, &mut cmd[..])));
         let (collected, stats) = match frame_collective(&world, &part, &geometry, (req, layers, assemble), None) {
             Some(Ok(r)) => r,
             Some(Err(e)) => watchdog.fail(e),
@@ -630,13 +722,14 @@ pub fn run(launch: Launch, job: Job) -> Result<(), String> {
         let ms = |us: u64| us as f64 / 1e3;
         log::info!(
             "mpi frame {}x{} K={layers}: ranks={size} total_ms={:.1} march_max_ms={:.1} march_min_ms={:.1} \
-             exchange_ms={:.1} merge_ms={:.1} decode_ms={:.1} gather_ms={:.1} bytes_per_rank_max={bytes_max} \
-             bytes_per_rank_mean={bytes_mean}",
+             encode_ms={:.1} exchange_ms={:.1} merge_ms={:.1} decode_ms={:.1} gather_ms={:.1} \
+             bytes_per_rank_max={bytes_max} bytes_per_rank_mean={bytes_mean}",
             req.camera.width,
             req.camera.height,
             ms(total),
             ms(march),
             ms(march_min),
+            ms(slowest(|s| s.encode_us)),
             ms(slowest(|s| s.exchange_us)),
             ms(slowest(|s| s.merge_us)),
             ms(slowest(|s| s.decode_us)),
@@ -723,6 +816,6 @@ pub fn run(launch: Launch, job: Job) -> Result<(), String> {
         })(),
     };
     let mut quit = [CMD_QUIT; CMD_LEN];
-    root.broadcast_into(&mut quit[..]);
+    mpi::request::scope(|scope| wait_yielding(root.immediate_broadcast_into(scope, &mut quit[..])));
     result
 }
