@@ -21,8 +21,8 @@ use volwarp_core::Vec3;
 /// Brick edge in voxels of volumes up to [`BIG_VOXELS`] voxels.
 pub const BRICK: u32 = 4;
 
-/// Brick edge in voxels of bigger volumes (the grids then take 1/8 of the memory: about 0.03
-/// bytes per voxel instead of 0.23).
+/// Brick edge in voxels of bigger volumes (the grids then take 1/8 of the memory: about 0.04
+/// bytes per voxel instead of 0.3).
 pub const BRICK_BIG: u32 = 8;
 
 /// Volumes of more voxels than this get [`BRICK_BIG`] bricks.
@@ -48,6 +48,10 @@ pub struct MinMaxGrid {
     brick: u32,
     bricks: [u32; 3],
     ranges: Vec<(f32, f32)>,
+    /// Per brick, the transfer-function table entries of its range's ends
+    /// ([`TransferFunction::index`] of the low and the high end): made once, so a live edit's
+    /// occupancy is two look-ups in a prefix count per brick, no arithmetic.
+    spans: Vec<[u16; 2]>,
 }
 
 /// The voxels brick `b` of edge `e` records along one axis of `n` voxels: one before it to two
@@ -120,7 +124,11 @@ impl MinMaxGrid {
             Voxels::U16(g) => ranges_of(g, brick, bricks, volume.normalization()),
             Voxels::F32(g) => ranges_of(g, brick, bricks, volume.normalization()),
         };
-        MinMaxGrid { brick, bricks, ranges }
+        let spans = ranges
+            .iter()
+            .map(|&(lo, hi)| [TransferFunction::index(lo.min(hi)) as u16, TransferFunction::index(hi.max(lo)) as u16])
+            .collect();
+        MinMaxGrid { brick, bricks, ranges, spans }
     }
 
     /// The brick edge in voxels.
@@ -146,17 +154,19 @@ impl MinMaxGrid {
     /// [`MinMaxGrid::occupancy`] with every brick `keep` rejects (by brick index) invisible as
     /// well (a crop box): one pass, its distance transforms made once.
     pub fn occupancy_within(&self, tf: &TransferFunction, spacing: Vec3, keep: impl Fn([u32; 3]) -> bool) -> Occupancy {
-        let visible = tf.visibility();
-        let [nx, ny, _] = self.bricks;
-        let occupied: Vec<bool> = self
-            .ranges
-            .iter()
-            .enumerate()
-            .map(|(i, &(lo, hi))| {
-                let i = i as u32;
-                visible(lo, hi) && keep([i % nx, i / nx % ny, i / (nx * ny)])
-            })
-            .collect();
+        // `TransferFunction::visibility` with each brick's table entries made at build time.
+        let visible = tf.visible_counts();
+        let [nx, ny, nz] = self.bricks;
+        let mut occupied = Vec::with_capacity(self.spans.len());
+        let mut spans = self.spans.iter();
+        for z in 0..nz {
+            for y in 0..ny {
+                for x in 0..nx {
+                    let Some(&[a, b]) = spans.next() else { break };
+                    occupied.push(visible[b as usize + 1] > visible[a as usize] && keep([x, y, z]));
+                }
+            }
+        }
         Occupancy::of_flags(self.brick, self.bricks, occupied, spacing)
     }
 }
@@ -192,59 +202,111 @@ impl Occupancy {
     }
 }
 
-/// Chebyshev (26-neighbour) distance of every brick to the nearest `true` one, capped at 255:
-/// Rosenfeld and Pfaltz's two raster passes with unit weights on the 3×3×3 neighbourhood,
-/// exact for the chessboard distance. The forward pass takes each brick's 13 neighbours before
-/// it in x-fastest order, the backward pass the 13 after it; no queue, memory in order (a
-/// breadth-first search from every visible brick gives the same distances 4–5× slower).
-fn chebyshev_distance(bricks: [u32; 3], occupied: &[bool]) -> Vec<u8> {
+/// Chebyshev (26-neighbour) distance of every brick to the nearest `true` one, capped at 255,
+/// in sweeps one axis at a time, each a vector operation over whole planes or rows:
+///
+/// 1. along z, forward then backward: each plane takes the minimum of itself and its
+///    predecessor's 3×3 window minimum plus one (a step in z may move x and y by one too);
+/// 2. along y in every plane, forward then backward: each row takes its predecessor's 3-wide
+///    window minimum plus one;
+/// 3. along x in every row, forward then backward: `d[x] = min(d[x], d[x ∓ 1] + 1)`.
+///
+/// Exact for the chessboard distance: a shortest chessboard path from a `true` brick to a
+/// target with offsets `(dx, dy, dz)` takes `|dz|` steps along z that also cover up to `|dz|`
+/// of x and y, then the y steps left (covering x too), then the x steps left: `max(|dx|, |dy|,
+/// |dz|)` steps in the sweeps' order, and every sweep only adds steps of one (so nothing is
+/// lower than the distance). A live edit remakes two of these; Rosenfeld and Pfaltz's two
+/// raster passes over the 13 neighbours before each brick, row by row, took 3–4× as long on the
+/// MRI's 46×55×46 bricks (`docs/perf.md`).
+pub fn chebyshev_distance(bricks: [u32; 3], occupied: &[bool]) -> Vec<u8> {
     let [nx, ny, nz] = bricks.map(|b| b as usize);
     let mut d: Vec<u8> = occupied.iter().map(|&o| if o { 0 } else { 255 }).collect();
-    if d.is_empty() {
+    let plane = nx * ny;
+    if d.is_empty() || d.len() != plane * nz {
         return d;
     }
-    // The neighbour rows of row (y, z) visited before it in each pass: (dy, dz).
-    const BEFORE: [(isize, isize); 4] = [(-1, 0), (-1, -1), (0, -1), (1, -1)];
-    // The elementwise minimum of those rows, then its minimum over x − 1 ..= x + 1.
-    let (mut acc, mut win) = (vec![255u8; nx], vec![255u8; nx]);
+    // 1. Along z.
+    let (mut rows, mut win) = (vec![255u8; plane], vec![255u8; plane]);
     for backward in [false, true] {
-        let sign = if backward { -1 } else { 1 };
-        for zi in 0..nz {
-            let z = if backward { nz - 1 - zi } else { zi };
-            for yi in 0..ny {
-                let y = if backward { ny - 1 - yi } else { yi };
-                let row = (y + ny * z) * nx;
-                acc.fill(255);
-                for (dy, dz) in BEFORE {
-                    let (y2, z2) = (y as isize + sign * dy, z as isize + sign * dz);
-                    if y2 < 0 || z2 < 0 || y2 >= ny as isize || z2 >= nz as isize {
-                        continue;
-                    }
-                    let other = (y2 as usize + ny * z2 as usize) * nx;
-                    for (a, &o) in acc.iter_mut().zip(&d[other..other + nx]) {
-                        *a = (*a).min(o);
-                    }
-                }
-                for (x, w) in win.iter_mut().enumerate() {
-                    *w = acc[x.saturating_sub(1)].min(acc[x]).min(acc[(x + 1).min(nx - 1)]);
-                }
-                for (v, &w) in d[row..row + nx].iter_mut().zip(&win) {
-                    *v = (*v).min(w.saturating_add(1));
-                }
-                // Along the row itself, in the pass's direction.
-                if backward {
-                    for x in (0..nx.saturating_sub(1)).rev() {
-                        d[row + x] = d[row + x].min(d[row + x + 1].saturating_add(1));
-                    }
-                } else {
-                    for x in 1..nx {
-                        d[row + x] = d[row + x].min(d[row + x - 1].saturating_add(1));
-                    }
-                }
+        for zi in 1..nz {
+            let (z, prev) = if backward { (nz - 1 - zi, nz - zi) } else { (zi, zi - 1) };
+            window_3x3(&d[prev * plane..(prev + 1) * plane], nx, &mut rows, &mut win);
+            step_into(&mut d[z * plane..(z + 1) * plane], &win);
+        }
+    }
+    // 2. Along y.
+    let mut w3 = vec![255u8; nx];
+    for p in d.chunks_exact_mut(plane) {
+        for backward in [false, true] {
+            for yi in 1..ny {
+                let (y, prev) = if backward { (ny - 1 - yi, ny - yi) } else { (yi, yi - 1) };
+                window_3(&p[prev * nx..(prev + 1) * nx], &mut w3);
+                step_into(&mut p[y * nx..(y + 1) * nx], &w3);
             }
         }
     }
+    // 3. Along x.
+    for row in d.chunks_exact_mut(nx) {
+        for x in 1..nx {
+            row[x] = row[x].min(row[x - 1].saturating_add(1));
+        }
+        for x in (0..nx - 1).rev() {
+            row[x] = row[x].min(row[x + 1].saturating_add(1));
+        }
+    }
     d
+}
+
+/// `d = min(d, w + 1)` (saturating).
+#[inline]
+fn step_into(d: &mut [u8], w: &[u8]) {
+    for (v, &w) in d.iter_mut().zip(w) {
+        *v = (*v).min(w.saturating_add(1));
+    }
+}
+
+/// `out[x] = min(src[x − 1 ..= x + 1])` within the row (the ends take the two they have).
+#[inline]
+fn window_3(src: &[u8], out: &mut [u8]) {
+    let n = src.len();
+    if n < 2 {
+        out.copy_from_slice(src);
+        return;
+    }
+    for (((o, &a), &b), &c) in out[1..n - 1].iter_mut().zip(src).zip(&src[1..]).zip(&src[2..]) {
+        *o = a.min(b).min(c);
+    }
+    out[0] = src[0].min(src[1]);
+    out[n - 1] = src[n - 2].min(src[n - 1]);
+}
+
+/// The 3×3 window minimum of a plane of rows of `nx` (the edges take what they have) into
+/// `win`, `rows` the rows' own 3-wide minima: both over the whole plane at once, then the
+/// row ends fixed.
+#[inline]
+fn window_3x3(src: &[u8], nx: usize, rows: &mut [u8], win: &mut [u8]) {
+    let n = src.len();
+    if nx < 2 {
+        rows.copy_from_slice(src);
+    } else {
+        // Across the plane as one row, then each row's first and last brick.
+        window_3(src, rows);
+        for (r, s) in rows.chunks_exact_mut(nx).zip(src.chunks_exact(nx)) {
+            r[0] = s[0].min(s[1]);
+            r[nx - 1] = s[nx - 2].min(s[nx - 1]);
+        }
+    }
+    if n <= nx {
+        win.copy_from_slice(rows);
+        return;
+    }
+    for (((o, &a), &b), &c) in win[nx..n - nx].iter_mut().zip(rows.iter()).zip(&rows[nx..]).zip(&rows[2 * nx..]) {
+        *o = a.min(b).min(c);
+    }
+    for x in 0..nx {
+        win[x] = rows[x].min(rows[nx + x]);
+        win[n - nx + x] = rows[n - 2 * nx + x].min(rows[n - nx + x]);
+    }
 }
 
 impl Occupancy {
@@ -320,11 +382,11 @@ impl Occupancy {
     /// Per brick, x fastest, the look's result as one number for the packet marcher's gathers:
     /// the distance `r` of an invisible brick, minus the reach of a visible one (with the slack).
     pub fn look_table(&self) -> Vec<f32> {
-        (0..self.dist.len())
-            .map(|i| match self.look_at(i) {
-                (0, reach) => -(reach as f32),
-                (r, _) => r as f32,
-            })
+        // `Occupancy::look_at` of every index, brick by brick in one pass (it vectorizes).
+        self.dist
+            .iter()
+            .zip(&self.visible_reach)
+            .map(|(&r, &v)| if r > 0 { r as f32 } else { -(v.max(1).saturating_add(VISIBLE_SLACK) as f32) })
             .collect()
     }
 
@@ -469,8 +531,54 @@ mod tests {
         dist
     }
 
+    /// What a live edit rebuilds (the occupancy of a windowed function under a crop, both
+    /// distance transforms and the packet marcher's look table) equals its definition brick by
+    /// brick: the flags from each range and `TransferFunction::visibility`, the distances by
+    /// breadth-first search, the table from `Occupancy::look_at`.
     #[test]
-    fn raster_passes_equal_the_breadth_first_distances() {
+    fn an_edits_occupancy_equals_its_definition() {
+        let dims = [70, 45, 83];
+        let v = Volume::from_fn("e", dims, Vec3::new(1.0, 0.8, 1.2), |p| {
+            let q = p / Vec3::new(70.0, 36.0, 99.6) - 0.5;
+            ((1.0 - 2.0 * q.length()) * 180.0 + 40.0 * (p.x * 0.3).sin() * (p.z * 0.2).cos()).clamp(0.0, 255.0).round()
+        })
+        .unwrap();
+        for brick in [BRICK, BRICK_BIG] {
+            let g = MinMaxGrid::with_brick(&v, brick);
+            let [nx, ny, _] = g.bricks();
+            for (window, level, crop) in [(1.0, 0.5, false), (0.3, 0.6, false), (0.5, 0.35, true), (0.05, 0.9, true)] {
+                let tf = TransferFunction::grey_ramp().windowed(window, level, 1.0);
+                let keep = |b: [u32; 3]| !crop || (b[0] % 3 != 1 && b[2] > 1 && b[1] < ny - 1);
+                let occ = g.occupancy_within(&tf, Vec3::ONE, keep);
+                let visible = tf.visibility();
+                let flags: Vec<bool> = g
+                    .ranges()
+                    .iter()
+                    .enumerate()
+                    .map(|(i, &(lo, hi))| {
+                        let i = i as u32;
+                        visible(lo, hi) && keep([i % nx, i / nx % ny, i / (nx * ny)])
+                    })
+                    .collect();
+                let what = format!("brick {brick} window {window} level {level} crop {crop}");
+                assert!(flags.iter().any(|&f| f) && flags.iter().any(|&f| !f), "{what}: a trivial case");
+                assert_eq!(occ.occupied, flags, "{what}");
+                assert_eq!(occ.dist, chebyshev_reference(g.bricks(), &flags), "{what}");
+                let empty: Vec<bool> = flags.iter().map(|&f| !f).collect();
+                assert_eq!(occ.visible_reach, chebyshev_reference(g.bricks(), &empty), "{what}");
+                let looks: Vec<f32> = (0..flags.len())
+                    .map(|i| match occ.look_at(i) {
+                        (0, reach) => -(reach as f32),
+                        (r, _) => r as f32,
+                    })
+                    .collect();
+                assert_eq!(occ.look_table(), looks, "{what}");
+            }
+        }
+    }
+
+    #[test]
+    fn sweeps_equal_the_breadth_first_distances() {
         let mut seed = 0x9e37_79b9_7f4a_7c15u64;
         let mut next = move || {
             seed ^= seed << 13;
@@ -478,14 +586,25 @@ mod tests {
             seed ^= seed << 17;
             seed
         };
-        for bricks in [[1, 1, 1], [7, 1, 1], [1, 9, 4], [13, 11, 7], [30, 3, 40], [5, 64, 5], [300, 1, 2]] {
+        for bricks in [
+            [1, 1, 1],
+            [7, 1, 1],
+            [1, 9, 4],
+            [13, 11, 7],
+            [30, 3, 40],
+            [5, 64, 5],
+            [300, 1, 2],
+            [2, 2, 2],
+            [1, 1, 9],
+            [3, 300, 2],
+        ] {
             let n = bricks.iter().product::<u32>() as usize;
             // Empty, full, one brick, and sparse to dense random sets.
             let mut sets = vec![vec![false; n], vec![true; n]];
             let mut one = vec![false; n];
             one[(next() % n as u64) as usize] = true;
             sets.push(one);
-            for per_mille in [2u64, 20, 300, 900] {
+            for per_mille in [1u64, 2, 20, 300, 900] {
                 sets.push((0..n).map(|_| next() % 1000 < per_mille).collect());
             }
             for occupied in sets {

@@ -329,6 +329,10 @@ struct Sampler<'a, L: Lanes> {
     /// The gradient's voxel clamp range, `floor(lo) + 1` and `ceil(hi)`
     /// ([`crate::volume::Volume::gradient_grid_in`]).
     ilo1: [L; 3],
+    /// `floor(lo)`: the clamp range's low end itself.
+    ilo: [L; 3],
+    /// Per axis, what one brick further along it adds to an index (x: a brick's values).
+    brick_stride: [L::I; 3],
     ihi: [L; 3],
     half: L,
     one: L,
@@ -376,6 +380,13 @@ impl<'a, L: Lanes> Sampler<'a, L> {
             offset: L::splat(offset),
             scale: L::splat(scale),
             ilo1: [L::splat(glo.x.floor() + 1.0), L::splat(glo.y.floor() + 1.0), L::splat(glo.z.floor() + 1.0)],
+            ilo: [L::splat(glo.x.floor()), L::splat(glo.y.floor()), L::splat(glo.z.floor())],
+            // Only read with one chunk (`Sampler::gradient_clamped`), whose indices fit `i32`.
+            brick_stride: [
+                L::splat_i(bv as i32),
+                L::splat_i((i64::from(nbr[0]) * bv) as i32),
+                L::splat_i((i64::from(nbr[0]) * i64::from(nbr[1]) * bv) as i32),
+            ],
             ihi: [L::splat(ghi.x.ceil()), L::splat(ghi.y.ceil()), L::splat(ghi.z.ceil())],
             half: L::splat(0.5),
             one: L::splat(1.0),
@@ -562,6 +573,131 @@ impl<'a, L: Lanes> Sampler<'a, L> {
         };
         (dx * self.scale, dy * self.scale, dz * self.scale)
     }
+}
+
+impl<'a, L: Lanes> Sampler<'a, L> {
+    /// The index offset of voxel coordinate `c` (per lane, `c` in the clamp range) along axis
+    /// `a`: its brick's stride and its place in the brick.
+    #[inline(always)]
+    fn axis_offset(&self, c: L, a: usize, local_stride: L::I) -> L::I {
+        let c = c.trunc_int();
+        L::mul_i(L::shr_i::<SHIFT>(c), self.brick_stride[a]) + L::mul_i(L::and_i(c, self.edge_mask), local_stride)
+    }
+
+    /// [`crate::volume::Volume::gradient_grid_in`] in lanes, bit for bit, scaled as
+    /// [`Sampler::gradient`]'s, for every lane at `(px, py, pz)` ([`Sampler::gradient_clamped`]);
+    /// `None` with several chunks (the scalar definition serves those lanes).
+    #[inline(always)]
+    fn gradient_edge(&self, px: L, py: L, pz: L) -> Option<(L, L, L)> {
+        if self.chunks != 1 {
+            return None;
+        }
+        let (dx, dy, dz) = match self.voxels {
+            Voxels::U8(grid) => self.gradient_clamped::<u8>(&grid.chunks()[0][..], px, py, pz),
+            Voxels::U16(grid) => self.gradient_clamped::<u16>(&grid.chunks()[0][..], px, py, pz),
+            Voxels::F32(grid) => self.gradient_clamped::<f32>(&grid.chunks()[0][..], px, py, pz),
+        };
+        Some((dx * self.scale, dy * self.scale, dz * self.scale))
+    }
+
+    /// [`crate::volume::Volume::gradient_grid_in`] in lanes, bit for bit, for every lane
+    /// (before the scale, as [`Sampler::gradient`]), each voxel read at its clamped
+    /// coordinates: what the lanes at the volume's or crop's edge take. One chunk only (the
+    /// indices address the first).
+    ///
+    /// The stencil's 32 voxels are single gathers (the low value of a pair gather at the
+    /// clamped voxel's index: the brick's apron keeps the pair inside the brick), the blends
+    /// are the scalar definition's in its order.
+    #[inline(always)]
+    fn gradient_clamped<T: Pairs>(&self, data: &[T], px: L, py: L, pz: L) -> (L, L, L) {
+        let gx = px.max(self.lo[0]).min(self.hi[0]);
+        let gy = py.max(self.lo[1]).min(self.hi[1]);
+        let gz = pz.max(self.lo[2]).min(self.hi[2]);
+        let (x0, y0, z0) =
+            (L::int_to_float(gx.trunc_int()), L::int_to_float(gy.trunc_int()), L::int_to_float(gz.trunc_int()));
+        let (fx, fy, fz) = (gx - x0, gy - y0, gz - z0);
+        let (m1, one, two) = (L::splat(-1.0), self.one, self.two);
+        // The clamped coordinates x0 − 1 ..= x0 + 2 per axis as index offsets.
+        // (No closures here: see `band`.)
+        let (lo, hi) = (self.ilo, self.ihi);
+        let unit = self.one_i;
+        let ox = [
+            self.axis_offset((x0 + m1).max(lo[0]).min(hi[0]), 0, unit),
+            self.axis_offset(x0.max(lo[0]).min(hi[0]), 0, unit),
+            self.axis_offset((x0 + one).max(lo[0]).min(hi[0]), 0, unit),
+            self.axis_offset((x0 + two).max(lo[0]).min(hi[0]), 0, unit),
+        ];
+        let oy = [
+            self.axis_offset((y0 + m1).max(lo[1]).min(hi[1]), 1, self.span),
+            self.axis_offset(y0.max(lo[1]).min(hi[1]), 1, self.span),
+            self.axis_offset((y0 + one).max(lo[1]).min(hi[1]), 1, self.span),
+            self.axis_offset((y0 + two).max(lo[1]).min(hi[1]), 1, self.span),
+        ];
+        let oz = [
+            self.axis_offset((z0 + m1).max(lo[2]).min(hi[2]), 2, self.span2),
+            self.axis_offset(z0.max(lo[2]).min(hi[2]), 2, self.span2),
+            self.axis_offset((z0 + one).max(lo[2]).min(hi[2]), 2, self.span2),
+            self.axis_offset((z0 + two).max(lo[2]).min(hi[2]), 2, self.span2),
+        ];
+        // The voxels x0 − 1 ..= x0 + 2 of the stencil's own four rows, x0 and x0 + 1 of the
+        // rows around them (inline functions, no closures: see `band`).
+        let [r00, r10, r01, r11] = [oy[1] + oz[1], oy[2] + oz[1], oy[1] + oz[2], oy[2] + oz[2]];
+        let q00 = voxel_quad::<L, T>(data, &ox, r00);
+        let q10 = voxel_quad::<L, T>(data, &ox, r10);
+        let q01 = voxel_quad::<L, T>(data, &ox, r01);
+        let q11 = voxel_quad::<L, T>(data, &ox, r11);
+        // The stencil's own rows, and the rows one voxel lower and higher along x.
+        let (m00, m10, m01, m11) =
+            (lerp(q00[1], q00[2], fx), lerp(q10[1], q10[2], fx), lerp(q01[1], q01[2], fx), lerp(q11[1], q11[2], fx));
+        let xlo = lerp(
+            lerp(lerp(q00[0], q00[1], fx), lerp(q10[0], q10[1], fx), fy),
+            lerp(lerp(q01[0], q01[1], fx), lerp(q11[0], q11[1], fx), fy),
+            fz,
+        );
+        let xhi = lerp(
+            lerp(lerp(q00[2], q00[3], fx), lerp(q10[2], q10[3], fx), fy),
+            lerp(lerp(q01[2], q01[3], fx), lerp(q11[2], q11[3], fx), fy),
+            fz,
+        );
+        // y: rows y0 − 1 and y0 + 2 on slices z0 and z0 + 1.
+        let a0 = clamped_row::<L, T>(data, &ox, oy[0] + oz[1], fx);
+        let a1 = clamped_row::<L, T>(data, &ox, oy[0] + oz[2], fx);
+        let b0 = clamped_row::<L, T>(data, &ox, oy[3] + oz[1], fx);
+        let b1 = clamped_row::<L, T>(data, &ox, oy[3] + oz[2], fx);
+        let ylo = lerp(lerp(a0, m00, fy), lerp(a1, m01, fy), fz);
+        let yhi = lerp(lerp(m10, b0, fy), lerp(m11, b1, fy), fz);
+        // z: slices z0 − 1 and z0 + 2, rows y0 and y0 + 1.
+        let e = lerp(
+            clamped_row::<L, T>(data, &ox, oy[1] + oz[0], fx),
+            clamped_row::<L, T>(data, &ox, oy[2] + oz[0], fx),
+            fy,
+        );
+        let f = lerp(
+            clamped_row::<L, T>(data, &ox, oy[1] + oz[3], fx),
+            clamped_row::<L, T>(data, &ox, oy[2] + oz[3], fx),
+            fy,
+        );
+        let (c0, c1) = (lerp(m00, m10, fy), lerp(m01, m11, fy));
+        (xhi - xlo, yhi - ylo, lerp(c1, f, fz) - lerp(e, c0, fz))
+    }
+}
+
+/// Per lane the voxels at `ox[i] + yz`, `i` = 0 ..= 3 ([`Sampler::gradient_clamped`]).
+#[inline(always)]
+fn voxel_quad<L: Lanes, T: Pairs>(data: &[T], ox: &[L::I; 4], yz: L::I) -> [L; 4] {
+    [
+        T::pairs::<L>(data, ox[0] + yz).0,
+        T::pairs::<L>(data, ox[1] + yz).0,
+        T::pairs::<L>(data, ox[2] + yz).0,
+        T::pairs::<L>(data, ox[3] + yz).0,
+    ]
+}
+
+/// Per lane the row of voxels `ox[1] + yz` and `ox[2] + yz` (x0 and x0 + 1, clamped) blended
+/// at `fx` ([`Sampler::gradient_clamped`]).
+#[inline(always)]
+fn clamped_row<L: Lanes, T: Pairs>(data: &[T], ox: &[L::I; 4], yz: L::I, fx: L) -> L {
+    lerp(T::pairs::<L>(data, ox[1] + yz).0, T::pairs::<L>(data, ox[2] + yz).0, fx)
 }
 
 /// A sample's stencil in lanes ([`Sampler::sample`]): what its gradient reads.
@@ -910,10 +1046,22 @@ impl Kernel<'_> {
                     // Shading::shade, in lanes: central differences (Volume::gradient_grid_in),
                     // then Blinn–Phong.
                     let (dx, dy, dz) = sampler.gradient(&cell);
-                    // Visible lanes whose gradient reads a clamped voxel or another chunk take
-                    // the scalar definition (rare: a sample at the volume's or crop's edge).
+                    // Visible lanes whose gradient reads a clamped voxel take the definition with
+                    // every read clamped, in lanes; with several chunks (a lane whose gradient
+                    // may read another chunk), the scalar definition. Rare: a sample at the
+                    // volume's, crop's or chunk's edge.
                     let slow = vis.and_not(cell.inside);
-                    let (dx, dy, dz) = if slow.any() {
+                    let (dx, dy, dz) = if !slow.any() {
+                        (dx, dy, dz)
+                    } else if sampler.chunks == 1 {
+                        // Out of line: 32 gathers inlined into every instance of this loop
+                        // made the crate take minutes longer to compile (see `edge_gradient`).
+                        let q = [px.to_array::<EDGE_LANES>(), py.to_array(), pz.to_array()];
+                        let mut e = [[0.0; EDGE_LANES]; 3];
+                        edge_gradient(self, L::N, &q, &mut e);
+                        let (ex, ey, ez) = (L::new(&e[0]), L::new(&e[1]), L::new(&e[2]));
+                        (slow.select(ex, dx), slow.select(ey, dy), slow.select(ez, dz))
+                    } else {
                         let (mut ax, mut ay, mut az) = (dx.to_array::<M>(), dy.to_array::<M>(), dz.to_array::<M>());
                         let (qx, qy, qz) = (px.to_array::<M>(), py.to_array::<M>(), pz.to_array::<M>());
                         let mut bits = slow.to_bitmask();
@@ -924,8 +1072,6 @@ impl Kernel<'_> {
                             (ax[l], ay[l], az[l]) = (d.x, d.y, d.z);
                         }
                         (L::new(&ax), L::new(&ay), L::new(&az))
-                    } else {
-                        (dx, dy, dz)
                     };
                     let gx = dx * isx;
                     let gy = dy * isy;
@@ -1243,6 +1389,46 @@ impl Kernel<'_> {
             }
         }
     }
+}
+
+/// The most lanes a packet has: [`edge_gradient`]'s arrays.
+const EDGE_LANES: usize = 64;
+
+#[inline(always)]
+fn edge_gradient_kernel<L: Lanes, const M: usize>(
+    k: &Kernel<'_>,
+    lanes: usize,
+    p: &[[f32; EDGE_LANES]; 3],
+    out: &mut [[f32; EDGE_LANES]; 3],
+) {
+    let sampler = Sampler::<L>::new(&k.m, k.voxels);
+    // As many packets of this kind as cover the caller's lanes (its kind may have more lanes
+    // where the lane limit changed meanwhile: a test's `limit_lanes`).
+    for c in (0..lanes.min(EDGE_LANES)).step_by(L::N) {
+        let (x, y, z) = (L::new(&p[0][c..]), L::new(&p[1][c..]), L::new(&p[2][c..]));
+        if let Some((dx, dy, dz)) = sampler.gradient_edge(x, y, z) {
+            dx.store(&mut out[0][c..]);
+            dy.store(&mut out[1][c..]);
+            dz.store(&mut out[2][c..]);
+        }
+    }
+}
+
+dispatch! {
+    /// The gradient of [`crate::volume::Volume::gradient_grid_in`] with every read clamped, at
+    /// the positions `p` (continuous voxel coordinates, x, y and z arrays; the first `lanes`
+    /// are read, a multiple of this CPU's kind's lanes up to 64) into `out`, bit for bit, in lanes ([`Sampler::gradient_edge`]);
+    /// one chunk only (`out` is left as it is with several). What the packet marcher's lanes
+    /// at the volume's or crop's edge take: a function of its own, so these 32 gathers are
+    /// compiled once per lane kind, not into every instance of [`Kernel::march_in`]. The lanes
+    /// compute the same values whatever their kind, so a caller of another kind gets the same
+    /// result.
+    fn edge_gradient / edge_gradient_avx2 / edge_gradient_avx512 => edge_gradient_kernel(
+        k: &Kernel<'_>,
+        lanes: usize,
+        p: &[[f32; EDGE_LANES]; 3],
+        out: &mut [[f32; EDGE_LANES]; 3],
+    )
 }
 
 #[inline(always)]

@@ -147,15 +147,22 @@ impl TransferFunction {
     /// The empty-space occupancy asks it of every brick, and a live edit remakes the occupancy:
     /// scanning the table per brick took 22 ms on the MRI's bricks (`docs/perf.md`).
     pub fn visibility(&self) -> impl Fn(f32, f32) -> bool + '_ {
+        let prefix = self.visible_counts();
+        move |lo: f32, hi: f32| {
+            let (a, b) = (Self::index(lo.min(hi)), Self::index(hi.max(lo)));
+            prefix[b + 1] > prefix[a]
+        }
+    }
+
+    /// The prefix count of the visible table entries: entry `i + 1` counts those of `0..=i`
+    /// (so some entry of `a..=b` is visible where `counts[b + 1] > counts[a]`).
+    pub fn visible_counts(&self) -> Vec<u32> {
         let mut prefix = Vec::with_capacity(self.lut.len() + 1);
         prefix.push(0u32);
         for e in &self.lut {
             prefix.push(prefix[prefix.len() - 1] + u32::from(e[3] > 0.0));
         }
-        move |lo: f32, hi: f32| {
-            let (a, b) = (Self::index(lo.min(hi)), Self::index(hi.max(lo)));
-            prefix[b + 1] > prefix[a]
-        }
+        prefix
     }
 
     /// The largest opacity any value in `lo..=hi` (normalized) can look up.

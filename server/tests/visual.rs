@@ -167,3 +167,40 @@ fn bad_states_are_refused_by_the_marcher() {
         assert!(e.contains(want), "{e:?}");
     }
 }
+
+/// What the server makes for a live edit (`Marcher::with_visual` of the marcher showing the
+/// state before: its tables and occupancy rebuilt, the distance sweeps of `empty_space`)
+/// renders the frame of a marcher built from scratch for that state (its own min/max grid),
+/// and of one that skips no empty space: window/level drags, an opacity fade and a crop, shaded and not.
+#[test]
+fn an_edits_rebuild_renders_the_full_builds_frame() {
+    let ds = Dataset::load(data("data/mri_colin27.nrrd"), None).unwrap();
+    let before = Marcher::from_dataset(&ds)
+        .with_visual(&ds.tf, &VisualState { window: 0.9, level: 0.5, ..VisualState::default() })
+        .unwrap();
+    let plain_opts = MarchOptions { skip_empty: false, ..MarchOptions::default() };
+    let states = [
+        VisualState { window: 0.8, level: 0.45, ..VisualState::default() },
+        VisualState { window: 0.3, level: 0.62, shade: true, ..VisualState::default() },
+        VisualState { opacity_scale: 0.4, crop: [0.0, 0.3, 0.1, 1.0, 0.9, 1.0], ..VisualState::default() },
+    ];
+    for state in states {
+        let edited = before.with_visual(&ds.tf, &state).unwrap();
+        let tf = state.transfer_function(&ds.tf, ds.volume.value_range()).unwrap();
+        // From scratch: a new min/max grid, the state's function, shading and cut.
+        let shading = state.shade.then_some(volwarp_server::marcher::Shading::DEFAULT);
+        let opts = MarchOptions { shading, ..MarchOptions::default() };
+        let fresh = Marcher::with_options(ds.volume.clone(), &tf, opts).with_cut(state.cut(&ds.volume));
+        let plain = Marcher::with_options(ds.volume.clone(), &tf, MarchOptions { shading, ..plain_opts })
+            .with_cut(state.cut(&ds.volume));
+        assert!(edited.occupancy().fraction_occupied() < 1.0, "{state:?}: nothing to skip");
+        assert_eq!(edited.occupancy().distances(), fresh.occupancy().distances(), "{state:?}");
+        for (yaw, pitch) in [(0.0, 0.0), (70.0, 15.0), (210.0, -35.0)] {
+            let cam = edited.default_camera(64, 64).orbit(yaw, pitch);
+            let img = edited.render_image(&cam);
+            assert!(img.pixels.iter().any(|&p| p != img.pixels[0]), "{state:?}: an empty image");
+            assert!(img.pixels == fresh.render_image(&cam).pixels, "{state:?} {yaw},{pitch}: against a fresh build");
+            assert!(img.pixels == plain.render_image(&cam).pixels, "{state:?} {yaw},{pitch}: against no skipping");
+        }
+    }
+}
