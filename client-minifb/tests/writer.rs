@@ -72,6 +72,9 @@ fn a_moving_view_asks_for_the_hellos_layers_and_the_view_at_rest_for_one_sample(
     let addr = fake_server(move |mut s| {
         assert!(matches!(read_msg(&mut s), Some(Message::Hello(_))));
         s.write_all(&encode(&Message::Hello(Hello::new(0).with_layers(4)))).unwrap();
+        // The connection's probe.
+        assert!(matches!(read_msg(&mut s), Some(Message::CameraRequest(_))));
+        s.write_all(&encode(&empty_frame(0))).unwrap();
         // Every request as it comes, on its own thread (no read timeouts that could split one).
         let mut reader = s.try_clone().unwrap();
         std::thread::spawn(move || {
