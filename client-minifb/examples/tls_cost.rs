@@ -58,6 +58,7 @@ fn round(conn: &mut Connection, size: u32, secs: f64, seq: &mut u64) -> Round {
             camera: home.orbit(*seq as f32 * 2.0, 10.0),
             heuristic: Heuristic::Threshold,
             radius_scale: 1.0,
+            layers: 0,
         };
         let msg = match &mut conn.tls {
             Some(t) => {

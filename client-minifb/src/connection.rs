@@ -334,7 +334,8 @@ pub fn connect_secure(
 
     // The negotiated maximum: a frame with more segments per pixel is a typed error.
     limits = limits.with_layers(server_hello.layers.min(limits.max_layers));
-    let probe = CameraRequest { seq: 0, camera: probe_camera(), heuristic: Heuristic::Threshold, radius_scale: 1.0 };
+    let probe =
+        CameraRequest { seq: 0, camera: probe_camera(), heuristic: Heuristic::Threshold, radius_scale: 1.0, layers: 0 };
     send_request(&mut io, &probe).map_err(|e| io_err("sending the probe request", &e))?;
     // A server that applies live edits sends its visual state first.
     let mut visual = None;

@@ -226,6 +226,7 @@ impl Display {
                 camera: view.camera,
                 heuristic: view.heuristic,
                 radius_scale: view.radius_scale,
+                layers: 0,
             });
         }
         let gen1 = self.net.work_generation();

@@ -56,7 +56,7 @@ pub fn prerender(o: &PrerenderOptions) -> Result<Prerendered, ClientError> {
     for k in 0..o.count.max(1) {
         let seq = k as u64 + 1;
         let camera = home.orbit(k as f32 * o.step_deg, 0.0);
-        let req = CameraRequest { seq, camera, heuristic: o.heuristic, radius_scale: o.radius_scale };
+        let req = CameraRequest { seq, camera, heuristic: o.heuristic, radius_scale: o.radius_scale, layers: 0 };
         send_request(&mut conn.stream, &req).map_err(|e| ClientError::Io(format!("prerender: {e}")))?;
         loop {
             match read_message_bytes(&mut conn.stream, &conn.limits, "prerendering")?.1 {

@@ -963,7 +963,14 @@ fn write_loop(sh: &Shared, mut stream: impl Write, request: RequestPolicy) {
         let asks = request.camera_at(view.camera, moving, &predictor, &horizon, &CADENCE);
         lock(&sh.view).asked = Some(asks.view);
         let camera = asks.camera;
-        let req = CameraRequest { seq, camera, heuristic: view.heuristic, radius_scale: view.radius_scale };
+        // At rest, the segments per pixel of `--rest-layers` (a one-sample frame by default).
+        let req = CameraRequest {
+            seq,
+            camera,
+            heuristic: view.heuristic,
+            radius_scale: view.radius_scale,
+            layers: asks.layers,
+        };
         let now = Instant::now();
         {
             let mut s = lock(&sh.sent);

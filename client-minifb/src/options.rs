@@ -179,6 +179,11 @@ pub struct Options {
     /// the full resolution; 1, 2 or 4.
     #[arg(long, value_name = "N", default_value_t = Method::DEFAULT.coarse, value_parser = parse_coarse)]
     pub coarse: u8,
+    /// Segments per pixel to ask for once the view rests, 0–16 (0, the default: as many as
+    /// `--layers`, as while it moves). 1 is the server's own image for the resting view: exact
+    /// there, and it arrives sooner than a layered frame, but the next move warps it.
+    #[arg(long, value_name = "K", default_value_t = Method::DEFAULT.rest_layers, value_parser = clap::value_parser!(u8).range(0..=16))]
+    pub rest_layers: u8,
     /// Display frame rate limit (0: none). Default: 60 in the window, none headless.
     #[arg(long)]
     pub fps: Option<u32>,
@@ -221,6 +226,7 @@ impl Options {
             watertight: self.watertight,
             guard: self.guard,
             coarse: self.coarse,
+            rest_layers: self.rest_layers,
         }
     }
 }
@@ -414,6 +420,10 @@ mod tests {
         assert_eq!(Options::parse_from(["volwarp-client"]).method(), Method::DEFAULT);
         assert_eq!(Options::parse_from(["volwarp-client", "--coarse", "2"]).method().request().divisor(true), 2);
         assert!(Options::try_parse_from(["volwarp-client", "--coarse", "3"]).is_err());
+        assert_eq!(Options::parse_from(["volwarp-client"]).method().request().layers(false), 0, "the Hello's");
+        let one = Options::parse_from(["volwarp-client", "--rest-layers", "1"]).method().request();
+        assert_eq!((one.layers(false), one.layers(true)), (1, 0), "one sample at rest, the Hello's while moving");
+        assert!(Options::try_parse_from(["volwarp-client", "--rest-layers", "17"]).is_err());
         let o = Options::parse_from(["volwarp-client", "--predict", "false", "--guard", "0.1", "--keep-frames", "2"]);
         let m = o.method();
         assert_eq!((m.predict, m.guard, m.frames), (false, 0.1, 2));

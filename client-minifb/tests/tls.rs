@@ -78,7 +78,7 @@ fn serve(s: &Setup, port: u16, tls: bool, max_clients: usize) -> ServerHandle {
 }
 
 fn request(seq: u64, camera: volwarp_core::Camera) -> CameraRequest {
-    CameraRequest { seq, camera, heuristic: Heuristic::Threshold, radius_scale: 1.0 }
+    CameraRequest { seq, camera, heuristic: Heuristic::Threshold, radius_scale: 1.0, layers: 0 }
 }
 
 /// One frame for `req` on an open connection (through its TLS halves where it has them).

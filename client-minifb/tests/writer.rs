@@ -9,7 +9,7 @@ use std::time::{Duration, Instant};
 use volwarp_client::connection::connect;
 use volwarp_client::controls::home_camera;
 use volwarp_client::network::{Network, View, THROTTLE};
-use volwarp_core::wire::{Hello, Message};
+use volwarp_core::wire::{CameraRequest, Hello, Message};
 use volwarp_core::Heuristic;
 
 #[test]
@@ -61,4 +61,71 @@ fn writer_sends_only_the_newest_camera_throttled() {
     assert_eq!((r.heuristic, r.radius_scale), (Heuristic::Peak, 2.0));
     assert!(r.camera != home, "the newest camera is sent, not the first");
     let _ = last;
+}
+
+#[test]
+fn a_moving_view_asks_for_the_hellos_layers_and_the_view_at_rest_for_one_sample() {
+    // The default's rest request: while the view moves the requests carry layers 0 (the
+    // Hello's); once it rests, the request a frame's arrival triggers carries 1.
+    let (tx, rx) = mpsc::channel();
+    let (still_tx, still_rx) = mpsc::channel::<()>();
+    let addr = fake_server(move |mut s| {
+        assert!(matches!(read_msg(&mut s), Some(Message::Hello(_))));
+        s.write_all(&encode(&Message::Hello(Hello::new(0).with_layers(4)))).unwrap();
+        // The connection's probe.
+        assert!(matches!(read_msg(&mut s), Some(Message::CameraRequest(_))));
+        s.write_all(&encode(&empty_frame(0))).unwrap();
+        // Every request as it comes, on its own thread (no read timeouts that could split one).
+        let mut reader = s.try_clone().unwrap();
+        std::thread::spawn(move || {
+            while let Some(m) = read_msg(&mut reader) {
+                if let Message::CameraRequest(r) = m {
+                    if tx.send(r).is_err() {
+                        break;
+                    }
+                }
+            }
+        });
+        // Once the view holds still, a frame arrives: the client asks again, for the view at rest.
+        if still_rx.recv_timeout(Duration::from_secs(30)).is_ok() {
+            s.write_all(&encode(&empty_frame(0))).unwrap();
+        }
+        std::thread::sleep(Duration::from_secs(2));
+    });
+    let conn = connect(&addr, None, Duration::from_secs(10)).unwrap();
+    let home = home_camera(&conn.bounds, 32, 32);
+    let request = volwarp_core::method::RequestPolicy { rest_layers: 1, ..volwarp_core::method::RequestPolicy::NONE };
+    let net = Network::start(conn, volwarp_client::network::NetConfig { request, ..net_config() }, None).unwrap();
+    let view = |c| View { camera: c, heuristic: Heuristic::Peak, radius_scale: 1.0 };
+    let t0 = Instant::now();
+    let mut i = 0;
+    while t0.elapsed() < Duration::from_millis(400) {
+        net.set_view(view(home.orbit(i as f32 * 0.5, 0.0)));
+        i += 1;
+        std::thread::sleep(Duration::from_millis(5));
+    }
+    let rest = home.orbit((i - 1) as f32 * 0.5, 0.0);
+    // Once the writer has sent the last moving camera (throttled; later under load), the view
+    // is still: then the frame arrives.
+    let mut got = Vec::new();
+    let deadline = Instant::now() + Duration::from_secs(30);
+    while let Ok(r) = rx.recv_timeout(deadline.saturating_duration_since(Instant::now())) {
+        got.push(r);
+        if r.camera == rest && got.len() > 1 {
+            break;
+        }
+    }
+    still_tx.send(()).unwrap();
+    while let Ok(r) = rx.recv_timeout(deadline.saturating_duration_since(Instant::now())) {
+        got.push(r);
+        if r.layers != 0 {
+            break;
+        }
+    }
+    net.shutdown();
+    let (moving, resting): (Vec<&CameraRequest>, Vec<&CameraRequest>) = got.iter().partition(|r| r.layers == 0);
+    assert!(moving.len() >= 2, "requests while moving: {got:?}");
+    assert!(moving.iter().all(|r| r.layers == 0));
+    let last = resting.last().unwrap_or_else(|| panic!("no request at rest: {got:?}"));
+    assert_eq!((last.layers, last.camera), (1, rest), "the view at rest, one sample per pixel");
 }

@@ -22,6 +22,13 @@
 //! after the view rests asks for the full resolution. The client decides, not the server: it
 //! alone knows whether its view moves (a predicting client's still request differs from its
 //! last predicted one, so a server comparing successive requests would call it moving).
+//!
+//! **Exact at rest** (`rest_layers`): the request for a view at rest may ask for `rest_layers`
+//! segments per pixel (the CameraRequest's byte 57, wire version 5): 1, a one-sample frame, is
+//! the server's own image at its camera, exact when shown there, and a fifth to a third of a
+//! layered frame's bytes, so it arrives sooner; requests while the view moves ask for the
+//! Hello's `layers`. The default asks for the Hello's at rest too ([`REST_LAYERS`]): the next
+//! move warps the rest frame, and a one-sample frame warps worse.
 
 use crate::camera::Camera;
 use crate::guard::GuardBand;
@@ -59,10 +66,18 @@ pub struct Method {
     /// Adaptive resolution: the viewport divisor per axis while the view moves (1: always the
     /// full resolution; at most [`MAX_COARSE`]).
     pub coarse: u8,
+    /// Segments per pixel asked for the view at rest (0: `layers`, as while it moves).
+    pub rest_layers: u8,
 }
 
 /// The largest viewport divisor of adaptive resolution.
 pub const MAX_COARSE: u8 = 4;
+
+/// The segments per pixel the default method asks for the view at rest: 0, the Hello's, as
+/// while it moves. Measured against 1 (`docs/results.md`, "Against the image-sending peers",
+/// 20 sessions at 512²): the one-sample rest frame arrives sooner and is exact, but the next move
+/// warps it, and the pooled p95 ꟻLIP rose from 0.0357 to 0.0385 at 100 Mbit/s (equal at 20).
+pub const REST_LAYERS: u8 = 0;
 
 impl Method {
     /// The method a client runs by default, chosen on the session results (`docs/results.md`,
@@ -78,6 +93,7 @@ impl Method {
         watertight: WATERTIGHT,
         guard: 0.0,
         coarse: 1,
+        rest_layers: REST_LAYERS,
     };
 
     /// The segments per pixel a renderer asks for unless told otherwise: the layered renderers
@@ -92,7 +108,7 @@ impl Method {
 
     /// What it asks the server for.
     pub const fn request(&self) -> RequestPolicy {
-        RequestPolicy { predict: self.predict, guard: self.guard, coarse: self.coarse }
+        RequestPolicy { predict: self.predict, guard: self.guard, coarse: self.coarse, rest_layers: self.rest_layers }
     }
 }
 
@@ -107,6 +123,8 @@ pub struct RequestPolicy {
     pub guard: f32,
     /// Viewport divisor per axis while the view moves (0 and 1: always full resolution).
     pub coarse: u8,
+    /// Segments per pixel asked for the view at rest (0: the Hello's, as while it moves).
+    pub rest_layers: u8,
 }
 
 /// The caller's side of the request policy: what the policy assumes about the display and
@@ -144,11 +162,13 @@ pub struct Requested {
     pub view: Camera,
     /// Where `view`'s pixels start in `camera`'s (`(0, 0)` without a guard band).
     pub guard_offset: (u32, u32),
+    /// Segments per pixel asked for (the CameraRequest's `layers`; 0: the Hello's).
+    pub layers: u8,
 }
 
 impl RequestPolicy {
     /// Asks for the camera shown, as it is (what a send-image system does).
-    pub const NONE: RequestPolicy = RequestPolicy { predict: false, guard: 0.0, coarse: 1 };
+    pub const NONE: RequestPolicy = RequestPolicy { predict: false, guard: 0.0, coarse: 1, rest_layers: 0 };
 
     /// Whether the client sends a request now: when the view moved; when a frame arrived, if
     /// the cadence says so; and when the view holds still for the first tick after motion, if
@@ -178,7 +198,8 @@ impl RequestPolicy {
 
     /// [`RequestPolicy::camera`] for a view that is `moving` (it changed since the last
     /// request) or not: while moving, the camera asked for (the guard band's too) is on a pixel
-    /// grid [`RequestPolicy::divisor`] times coarser per axis ([`coarse_viewport`]).
+    /// grid [`RequestPolicy::divisor`] times coarser per axis ([`coarse_viewport`]); at rest it
+    /// asks for [`RequestPolicy::layers`] segments per pixel.
     pub fn camera_at(
         &self,
         shown: Camera,
@@ -196,9 +217,20 @@ impl RequestPolicy {
             let (w, h) = coarse_viewport(view.width, view.height, d);
             view = view.with_viewport(w, h);
         }
+        let layers = self.layers(moving);
         match GuardBand::new(&view, self.guard, cadence.max_viewport) {
-            Ok(g) if self.guard > 0.0 => Requested { camera: g.camera, view, guard_offset: (g.x0, g.y0) },
-            _ => Requested { camera: view, view, guard_offset: (0, 0) },
+            Ok(g) if self.guard > 0.0 => Requested { camera: g.camera, view, guard_offset: (g.x0, g.y0), layers },
+            _ => Requested { camera: view, view, guard_offset: (0, 0), layers },
+        }
+    }
+
+    /// The segments per pixel a request asks for (the CameraRequest's `layers`, 0: the
+    /// Hello's): `rest_layers` when the view is not `moving`, else 0.
+    pub fn layers(&self, moving: bool) -> u8 {
+        if moving {
+            0
+        } else {
+            self.rest_layers.min(crate::wire::MAX_LAYERS as u8)
         }
     }
 }
@@ -227,7 +259,7 @@ mod tests {
         assert_eq!(d.renderer, RendererKind::SplatLayers);
         assert_eq!(d.layers as usize, DEFAULT_LAYERS);
         assert_eq!((d.frames, d.predict, d.adapt, d.guard), (4, true, true, 0.0));
-        assert_eq!(d.request(), RequestPolicy { predict: true, guard: 0.0, coarse: 1 });
+        assert_eq!(d.request(), RequestPolicy { predict: true, guard: 0.0, coarse: 1, rest_layers: 0 });
         assert_eq!(Method::layers_for(RendererKind::Splat), 1);
     }
 
@@ -252,9 +284,13 @@ mod tests {
         let mut predictor = Predictor::new();
         predictor.observe(cam, 0.0);
         let r = RequestPolicy::NONE.camera(cam, &predictor, &Horizon::new(), &CLIENT);
-        assert_eq!((r.camera, r.view, r.guard_offset), (cam, cam, (0, 0)));
-        let wide =
-            RequestPolicy { predict: false, guard: 0.25, coarse: 1 }.camera(cam, &predictor, &Horizon::new(), &CLIENT);
+        assert_eq!((r.camera, r.view, r.guard_offset, r.layers), (cam, cam, (0, 0), 0));
+        let wide = RequestPolicy { predict: false, guard: 0.25, coarse: 1, rest_layers: 0 }.camera(
+            cam,
+            &predictor,
+            &Horizon::new(),
+            &CLIENT,
+        );
         assert_eq!(wide.view, cam);
         assert!(wide.camera.width > cam.width && wide.guard_offset.0 > 0);
     }
@@ -265,7 +301,7 @@ mod tests {
         let mut predictor = Predictor::new();
         predictor.observe(cam, 0.0);
         let h = Horizon::new();
-        let p = RequestPolicy { predict: false, guard: 0.0, coarse: 2 };
+        let p = RequestPolicy { predict: false, guard: 0.0, coarse: 2, rest_layers: 0 };
         let moving = p.camera_at(cam, true, &predictor, &h, &CLIENT);
         assert_eq!((moving.camera.width, moving.camera.height), (256, 192));
         assert_eq!(moving.camera, cam.with_viewport(256, 192), "the same view on a coarser grid");
@@ -284,5 +320,24 @@ mod tests {
         assert_eq!(coarse_viewport(801, 601, 2), (401, 301));
         assert_eq!(coarse_viewport(3, 1, 4), (1, 1));
         assert_eq!(coarse_viewport(64, 48, 1), (64, 48));
+    }
+
+    #[test]
+    fn a_view_at_rest_may_ask_for_one_sample_and_a_moving_view_asks_for_the_hellos_layers() {
+        let cam = Camera::look_at(glam::Vec3::new(0.0, 0.0, 3.0), glam::Vec3::ZERO, glam::Vec3::Y, 45.0, 64, 48);
+        let mut predictor = Predictor::new();
+        predictor.observe(cam, 0.0);
+        let h = Horizon::new();
+        let p = RequestPolicy { rest_layers: 1, ..Method::DEFAULT.request() };
+        assert_eq!(p.camera_at(cam, false, &predictor, &h, &SIMULATOR).layers, 1, "at rest: a one-sample frame");
+        assert_eq!(p.camera_at(cam, true, &predictor, &h, &SIMULATOR).layers, 0, "moving: the Hello's layers");
+        assert_eq!(p.camera(cam, &predictor, &h, &CLIENT).layers, 1);
+        let layered = Method::DEFAULT.request();
+        assert_eq!(
+            layered.camera_at(cam, false, &predictor, &h, &SIMULATOR).layers,
+            0,
+            "the default: the Hello's, at rest too"
+        );
+        assert_eq!(RequestPolicy { rest_layers: 200, ..p }.layers(false), crate::wire::MAX_LAYERS as u8);
     }
 }

@@ -22,12 +22,15 @@ pub use visual::*;
 
 /// The four magic bytes that start every message.
 pub const MAGIC: [u8; 4] = *b"VWRP";
-/// The protocol version this crate speaks (and writes in every header). Version 4 added the live
+/// The protocol version this crate speaks (and writes in every header). Version 5 gave a
+/// CameraRequest's byte 57 (reserved before, always written 0) a meaning: the segments per pixel
+/// the client wants for this request, 0 for the Hello's ([`CameraRequest::layers`]); every
+/// version-1 to -4 request reads as before (0). Version 4 added the live
 /// visual state: the VisualEdit (type 8) and VisualState (type 9) messages, the [`CAP_VISUAL`]
 /// bit and the non-closing Error [`error_code::BAD_EDIT`]. Version 3 added layered frames: a
 /// layer count in a Frame's byte 57 and a segment-index plane after its colors, the
 /// LayeredCompactFrame message (type 7) and the layer count in the Hello.
-pub const VERSION: u16 = 4;
+pub const VERSION: u16 = 5;
 /// The oldest version a receiver accepts: version 2 only added the CompactFrame message and the
 /// [`CAP_COMPACT`] bit, so every version-1 message is read as it was (old record files replay).
 pub const MIN_VERSION: u16 = 1;
@@ -317,6 +320,10 @@ pub struct CameraRequest {
     /// Sphere radius as a multiple of the server's radius model (by default a pixel
     /// diagonal at the sample's depth), in (0, 16].
     pub radius_scale: f32,
+    /// Segments per pixel wanted for this request (version 5, byte 57): 0 for the count the
+    /// Hello negotiated; otherwise 1 to [`MAX_LAYERS`], which the server caps at the Hello's
+    /// (e.g. 1, a one-sample frame, exact at its own camera, for a view at rest).
+    pub layers: u8,
 }
 
 /// The fixed part of a Frame.
@@ -500,7 +507,7 @@ pub fn write_camera_request<W: Write>(w: &mut W, r: &CameraRequest) -> Result<()
     let mut o = Out::<CAMERA_REQUEST_LEN>::new();
     o.put(&r.seq.to_le_bytes());
     encode_camera(&mut o, &r.camera);
-    o.put(&[r.heuristic.code(), 0, 0, 0]);
+    o.put(&[r.heuristic.code(), r.layers, 0, 0]);
     o.put(&r.radius_scale.to_le_bytes());
     write_header(w, MsgType::CameraRequest, CAMERA_REQUEST_LEN as u32)?;
     w.write_all(o.bytes()).map_err(io)
@@ -683,12 +690,16 @@ pub fn read_camera_request<R: Read>(r: &mut R, h: &Header, limits: &Limits) -> R
     let camera = decode_camera(&mut c, limits)?;
     let hcode = c.u8();
     let heuristic = Heuristic::from_code(hcode).ok_or(WireError::BadHeuristic(hcode))?;
-    let _ = c.take::<3>();
+    // Byte 57: the layers wanted (version 5; reserved and 0 before, which reads as the Hello's).
+    let [layers, _, _] = c.take::<3>();
+    if usize::from(layers) > MAX_LAYERS {
+        return Err(WireError::Layers(LayerError::TooManyLayers { layers, limit: MAX_LAYERS as u8 }));
+    }
     let radius_scale = c.f32();
     if !(radius_scale > 0.0 && radius_scale <= 16.0) {
         return Err(WireError::BadRadius);
     }
-    Ok(CameraRequest { seq, camera, heuristic, radius_scale })
+    Ok(CameraRequest { seq, camera, heuristic, radius_scale, layers })
 }
 
 /// Reads the fixed part of a one-sample-per-pixel Frame payload (after its header), checking it

@@ -89,8 +89,8 @@ fn message() -> impl Strategy<Value = Message> {
                 Hello { version, capabilities: caps, token: Default::default(), layers: 1 }.with_token(&token).unwrap(),
             )
         }),
-        (any::<u64>(), camera(), heuristic(), float())
-            .prop_map(|(seq, cam, h, rs)| checks::camera_request(seq, cam, h, rs)),
+        (any::<u64>(), camera(), heuristic(), float(), 0u8..=20)
+            .prop_map(|(seq, cam, h, rs, layers)| checks::camera_request(seq, cam, h, rs, layers)),
         frame().prop_map(Message::Frame),
         (any::<u16>(), ".{0,80}").prop_map(|(code, text)| Message::Error(ErrorMsg::new(code, &text))),
         Just(Message::Bye),

@@ -130,8 +130,8 @@ proptest! {
     }
 
     #[test]
-    fn camera_request_round_trips(cam in camera(), seq in any::<u64>(), h in 0u8..8, rs in 0.01f32..16.0) {
-        let m = Message::CameraRequest(CameraRequest { seq, camera: cam, heuristic: Heuristic::from_code(h).unwrap(), radius_scale: rs });
+    fn camera_request_round_trips(cam in camera(), seq in any::<u64>(), h in 0u8..8, rs in 0.01f32..16.0, layers in 0u8..=16) {
+        let m = Message::CameraRequest(CameraRequest { seq, camera: cam, heuristic: Heuristic::from_code(h).unwrap(), radius_scale: rs, layers });
         let bytes = wire::encode_to_vec(&m);
         let back = wire::read_message(&mut &bytes[..], &Limits::default()).unwrap();
         prop_assert_eq!(back, m);
@@ -360,6 +360,7 @@ fn record_entries_round_trip() {
                 camera: cam.orbit(5.0, 0.0),
                 heuristic: Heuristic::Peak,
                 radius_scale: 1.0,
+                layers: 0,
             },
         },
     ];
@@ -377,4 +378,28 @@ fn record_entries_round_trip() {
     }
     assert_eq!(back, entries);
     assert_eq!(record::read_magic(&mut &b"VWRECXXX"[..]), Err(record::RecordError::BadMagic));
+}
+
+#[test]
+fn a_requests_layers_wanted_sit_in_byte_57_and_older_requests_read_as_the_hellos() {
+    let cam = Camera::look_at(Vec3::new(0.0, 0.0, 3.0), Vec3::ZERO, Vec3::Y, 40.0, 64, 48);
+    let req = CameraRequest { seq: 3, camera: cam, heuristic: Heuristic::Threshold, radius_scale: 1.0, layers: 1 };
+    let mut bytes = wire::encode_to_vec(&Message::CameraRequest(req));
+    assert_eq!(bytes.len(), wire::HEADER_LEN + wire::CAMERA_REQUEST_LEN);
+    assert_eq!(u16::from_le_bytes([bytes[4], bytes[5]]), 5, "written as version 5");
+    let at = wire::HEADER_LEN + 57;
+    assert_eq!((bytes[at - 1], bytes[at], bytes[at + 1], bytes[at + 2]), (Heuristic::Threshold.code(), 1, 0, 0));
+    let read = |b: &[u8]| wire::read_message(&mut &b[..], &Limits::default());
+    assert_eq!(read(&bytes).unwrap(), Message::CameraRequest(req));
+    // A version-4 request (byte 57 reserved, written 0) reads as asking for the Hello's count.
+    bytes[4] = 4;
+    bytes[at] = 0;
+    assert_eq!(read(&bytes).unwrap(), Message::CameraRequest(CameraRequest { layers: 0, ..req }));
+    bytes[4] = 1;
+    assert!(read(&bytes).is_ok(), "version 1 still reads");
+    // More than the wire's most segments per pixel is refused, not clamped.
+    bytes[at] = wire::MAX_LAYERS as u8 + 1;
+    assert!(matches!(read(&bytes), Err(WireError::Layers(_))), "{:?}", read(&bytes));
+    bytes[at] = wire::MAX_LAYERS as u8;
+    assert!(read(&bytes).is_ok());
 }

@@ -79,7 +79,7 @@ fn main() {
     for ds in &datasets {
         let m = Marcher::from_dataset(ds);
         let c0 = m.default_camera(size, size);
-        let req = CameraRequest { seq: 1, camera: c0, heuristic: Heuristic::Threshold, radius_scale: 1.0 };
+        let req = CameraRequest { seq: 1, camera: c0, heuristic: Heuristic::Threshold, radius_scale: 1.0, layers: 0 };
         let one = unbuilt_scene(&m.render_frame(&req).0);
         let lay = unbuilt_scene(&m.render_frame_layers(&req, layers).0);
         let cam = orbit(&c0, 10.0);

@@ -91,7 +91,7 @@ fn main() {
     for ds in &datasets {
         let m = Marcher::from_dataset(ds);
         let c0 = m.default_camera(size, size);
-        let req = CameraRequest { seq: 1, camera: c0, heuristic: h, radius_scale: 1.0 };
+        let req = CameraRequest { seq: 1, camera: c0, heuristic: h, radius_scale: 1.0, layers: 0 };
         let one = m.render_frame(&req).0;
         let mut frames = vec![(1u32, one.clone())];
         frames.extend(layers.iter().map(|&k| (k, m.render_frame_layers(&req, k).0)));

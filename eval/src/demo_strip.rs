@@ -164,7 +164,7 @@ mod tests {
     fn the_stale_view_of_a_layered_frame_fits_any_display() {
         let m = Marcher::from_dataset(&Dataset::marschner_lobb(24));
         let fc = m.default_camera(40, 30);
-        let req = CameraRequest { seq: 1, camera: fc, heuristic: Heuristic::Threshold, radius_scale: 1.0 };
+        let req = CameraRequest { seq: 1, camera: fc, heuristic: Heuristic::Threshold, radius_scale: 1.0, layers: 0 };
         let scene = volwarp_cpu_tracer::route::unbuilt_scene(&m.render_frame_layers(&req, 4).0);
         let mut r = LayerSplat::with_options(1, LayerOptions { fill: false, ..LayerOptions::DEFAULT });
         let (mut own, mut out) = (Image::new(0, 0), Image::new(0, 0));

@@ -111,7 +111,7 @@ pub struct DatasetResult {
 
 /// The frame the server sends for `camera` with `heuristic` (radius ×1).
 pub fn frame_for(marcher: &Marcher, camera: &Camera, heuristic: Heuristic) -> Frame {
-    marcher.render_frame(&CameraRequest { seq: 1, camera: *camera, heuristic, radius_scale: 1.0 }).0
+    marcher.render_frame(&CameraRequest { seq: 1, camera: *camera, heuristic, radius_scale: 1.0, layers: 0 }).0
 }
 
 /// Median ms of `runs` renders after one warm-up.

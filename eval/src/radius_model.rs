@@ -71,7 +71,7 @@ pub fn study(ds: &Dataset, heuristic: Heuristic, size: u32, runs: usize) -> Vec<
     let mut out = Vec::new();
     for (model, scale) in VARIANTS {
         let m = base.with_transfer_function(&ds.tf, MarchOptions { radius: model, ..base.options() });
-        let frame = m.render_frame(&CameraRequest { seq: 1, camera: c0, heuristic, radius_scale: scale }).0;
+        let frame = m.render_frame(&CameraRequest { seq: 1, camera: c0, heuristic, radius_scale: scale, layers: 0 }).0;
         let scene = Scene::build(&frame);
         let metrics: Vec<Metrics> = ANGLES
             .iter()

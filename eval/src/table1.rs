@@ -80,7 +80,7 @@ pub fn measure(ds: &Dataset, heuristic: Heuristic, size: u32, runs: usize, threa
     let runs = runs.max(1);
     log::info!("table1: marching view 1 of {} at {size}² ({})", ds.name, heuristic.name());
     let t = Instant::now();
-    let req = CameraRequest { seq: 1, camera: cams[0], heuristic, radius_scale: 1.0 };
+    let req = CameraRequest { seq: 1, camera: cams[0], heuristic, radius_scale: 1.0, layers: 0 };
     let (frame, stats) = marcher.render_frame(&req);
     let march_ms = t.elapsed().as_secs_f64() * 1e3;
     // The uncompacted buffer, as the server has it before compaction.

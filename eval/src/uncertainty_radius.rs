@@ -83,7 +83,7 @@ pub fn study(ds: &Dataset, heuristic: Heuristic, size: u32, variants: &[Variant]
     let c0 = base.default_camera(size, size);
     log::info!("{}: truth for {} angles at {size}²", ds.name, ANGLES.len());
     let truths: Vec<Image> = ANGLES.iter().map(|&a| base.render_image(&orbit(&c0, a))).collect();
-    let req = CameraRequest { seq: 1, camera: c0, heuristic, radius_scale: 1.0 };
+    let req = CameraRequest { seq: 1, camera: c0, heuristic, radius_scale: 1.0, layers: 0 };
     let mut img = Image::new(0, 0);
     let mut rows = Vec::new();
     let score = |truth: &Image, img: &Image| Metrics::of(truth, img).map_or(1.0, |m| m.flip);

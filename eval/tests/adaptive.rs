@@ -17,7 +17,7 @@ use volwarp_server::dataset::Dataset;
 use volwarp_server::Marcher;
 
 fn layered(marcher: &Marcher, camera: volwarp_core::Camera) -> HeldFrame {
-    let req = CameraRequest { seq: 1, camera, heuristic: Heuristic::Threshold, radius_scale: 1.0 };
+    let req = CameraRequest { seq: 1, camera, heuristic: Heuristic::Threshold, radius_scale: 1.0, layers: 0 };
     HeldFrame::new(marcher.render_frame_layers(&req, 4).0)
 }
 

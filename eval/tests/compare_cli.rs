@@ -29,6 +29,7 @@ fn compare_replays_a_record_file() {
             camera: cam.orbit(yaw, 3.0),
             heuristic: volwarp_core::Heuristic::Threshold,
             radius_scale: 1.0,
+            layers: 0,
         };
         write_entry(&mut w, &Entry::Camera { t_us: 1000 * (i as u64 + 1), request }).unwrap();
     }
@@ -75,7 +76,7 @@ fn compare_replays_a_record_file() {
 }
 
 fn request(seq: u64, camera: volwarp_core::Camera, heuristic: Heuristic) -> CameraRequest {
-    CameraRequest { seq, camera, heuristic, radius_scale: 1.0 }
+    CameraRequest { seq, camera, heuristic, radius_scale: 1.0, layers: 0 }
 }
 
 #[test]

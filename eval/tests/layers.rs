@@ -39,6 +39,7 @@ fn request(m: &Marcher, yaw: f32) -> CameraRequest {
         camera: orbit(&m.default_camera(SIZE, SIZE), yaw),
         heuristic: Heuristic::Threshold,
         radius_scale: 1.0,
+        layers: 0,
     }
 }
 

@@ -167,6 +167,7 @@ fn frames_are_charged_their_real_encoded_bytes() {
         camera: m.default_camera(SIZE, SIZE),
         heuristic: Heuristic::Threshold,
         radius_scale: 1.0,
+        layers: 0,
     };
     let frame = m.render_frame(&req).0;
     assert!(frame.header.count > 0);
@@ -214,8 +215,13 @@ fn bad_input_is_a_clear_error() {
         let mut v = Vec::new();
         write_magic(&mut VecWriter(&mut v)).unwrap();
         for (i, c) in cams.iter().enumerate() {
-            let request =
-                CameraRequest { seq: i as u64, camera: *c, heuristic: Heuristic::Threshold, radius_scale: 1.0 };
+            let request = CameraRequest {
+                seq: i as u64,
+                camera: *c,
+                heuristic: Heuristic::Threshold,
+                radius_scale: 1.0,
+                layers: 0,
+            };
             write_entry(&mut VecWriter(&mut v), &Entry::Camera { t_us: i as u64 * 33_000, request }).unwrap();
         }
         v

@@ -159,6 +159,31 @@ fn after_a_flick_rests_the_default_shows_the_resting_frame_exactly() {
 }
 
 #[test]
+fn the_view_at_rest_is_asked_for_one_sample_and_shown_exactly_once_it_arrived() {
+    // Stop-and-go on the bundled CT head at 64², a 300 ms server, every tick scored: the camera
+    // turns for 1.5 s and rests for 1 s. With `+rest=1` the default asks for the rest view with
+    // one sample per pixel (core's `RequestPolicy::layers`): the server's own image, exact at its
+    // camera, and fewer bytes than the layered frames.
+    const REST1: &str = "splat-layers+predict+frames=4+adapt+layers=4+rest=1";
+    let net = NetworkModel { server_ms: 300.0, latency_ms: 50.0, mbps: 100.0 };
+    let mut o = opts(&["stop-and-go"], &format!("{REST1},stale"), net);
+    o.cfg.size = 64;
+    o.cfg.duration_s = 2.5;
+    o.cfg.score_every = 1;
+    let runs = simulate_all(&head(), &o).unwrap();
+    let frames = &runs[0].result.frames; // the first method's stream
+    let rest = frames.iter().find(|f| f.request_ms > 1500.0).expect("a frame asked for at rest");
+    let moving = frames.iter().filter(|f| f.request_ms > 0.0 && f.request_ms < 1500.0).map(|f| f.bytes).min().unwrap();
+    assert!(rest.bytes * 3 < moving * 2, "the one-sample frame {} B, the smallest layered {moving} B", rest.bytes);
+    assert!(rest.arrive_ms < 2400.0, "it arrives while the camera rests: {} ms", rest.arrive_ms);
+    let resting: Vec<_> = rows(&runs, REST1).filter(|r| r.time_s * 1e3 >= rest.arrive_ms && r.time_s < 2.5).collect();
+    assert!(!resting.is_empty());
+    for r in resting {
+        assert_eq!(r.metrics.flip, 0.0, "tick {} at rest, after the exact frame arrived", r.tick);
+    }
+}
+
+#[test]
 fn the_bundled_recorded_drag_replays_deterministically() {
     let rec = format!("record:{}/../data/drag_ct_head.vwrec", env!("CARGO_MANIFEST_DIR"));
     let mut o = opts(&[rec.as_str()], "volwarp,stale", NetworkModel { server_ms: 300.0, latency_ms: 50.0, mbps: 50.0 });

@@ -41,7 +41,7 @@ fn main() {
     let cam = Camera::look_at(Vec3::new(0.0, 0.0, 3.0), Vec3::ZERO, Vec3::Y, 45.0, 64, 64);
     let hello = Message::Hello(Hello::new(CAP_GPU));
     let hello_tok = Message::Hello(Hello::new(0).with_token(&[b'k'; 64]).unwrap());
-    let req = volwarp_fuzz::checks::camera_request(7, cam, Heuristic::EnExMean, 1.0);
+    let req = volwarp_fuzz::checks::camera_request(7, cam, Heuristic::EnExMean, 1.0, 1);
     let err = Message::Error(ErrorMsg::new(error_code::UNAUTHORIZED, "wrong token ✗"));
     let mut tf = TfPoints::default();
     for i in 0..4 {

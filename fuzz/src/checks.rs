@@ -190,6 +190,7 @@ pub fn check_message(m: &Message, limits: &Limits) {
         Message::CameraRequest(r) => {
             check_camera(&r.camera, limits);
             assert!(r.radius_scale > 0.0 && r.radius_scale <= 16.0, "radius scale {}", r.radius_scale);
+            assert!(usize::from(r.layers) <= wire::MAX_LAYERS, "layers wanted {}", r.layers);
         }
         Message::Frame(f) => check_frame(&f.header, &f.samples, &f.colors, limits),
         Message::Error(e) => assert!(e.text.len() <= MAX_ERROR_TEXT),
@@ -362,7 +363,12 @@ pub fn expected_valid(m: &Message, limits: &Limits) -> bool {
     match m {
         Message::Hello(_) | Message::Error(_) | Message::Bye => true,
         Message::VisualEdit(_) | Message::VisualState(_) => visual_valid(m),
-        Message::CameraRequest(r) => cam_ok(&r.camera) && r.radius_scale > 0.0 && r.radius_scale <= 16.0,
+        Message::CameraRequest(r) => {
+            cam_ok(&r.camera)
+                && r.radius_scale > 0.0
+                && r.radius_scale <= 16.0
+                && usize::from(r.layers) <= wire::MAX_LAYERS
+        }
         Message::Frame(f) => {
             let h = &f.header;
             let n = f.samples.len() as u64;
@@ -398,6 +404,7 @@ pub fn roundtrip_message(m: &Message, limits: &Limits) {
                 | WireError::BadRadius
                 | WireError::TooManySamples { .. }
                 | WireError::TooLarge { .. }
+                | WireError::Layers(volwarp_core::segments::LayerError::TooManyLayers { .. })
                 | WireError::BadVisual(_),
             ) => {}
             other => panic!("an invalid message decoded as {other:?}"),
@@ -624,8 +631,8 @@ pub fn check_scene(frame: &Frame) {
 }
 
 /// A CameraRequest with the given fields (convenience for the structured generators).
-pub fn camera_request(seq: u64, camera: Camera, heuristic: Heuristic, radius_scale: f32) -> Message {
-    Message::CameraRequest(CameraRequest { seq, camera, heuristic, radius_scale })
+pub fn camera_request(seq: u64, camera: Camera, heuristic: Heuristic, radius_scale: f32, layers: u8) -> Message {
+    Message::CameraRequest(CameraRequest { seq, camera, heuristic, radius_scale, layers })
 }
 
 // ---------------------------------------------------------------- target 5: compact_decode

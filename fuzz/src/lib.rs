@@ -50,7 +50,7 @@ pub fn arb_message(u: &mut Unstructured) -> Result<Message> {
             let h = Hello { version: u.arbitrary()?, capabilities: u.arbitrary()?, token: Default::default(), layers: 1 };
             Message::Hello(h.with_token(token).map_err(|_| arbitrary::Error::IncorrectFormat)?)
         }
-        1 => checks::camera_request(u.arbitrary()?, camera(u)?, heuristic(u)?, float(u)?),
+        1 => checks::camera_request(u.arbitrary()?, camera(u)?, heuristic(u)?, float(u)?, u.int_in_range(0u8..=20)?),
         2 => {
             let n = u.int_in_range(0..=300usize)?;
             let mut samples = Vec::with_capacity(n);

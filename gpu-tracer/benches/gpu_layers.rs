@@ -43,7 +43,7 @@ fn main() {
     };
     let marcher = Marcher::from_dataset(&ds);
     let cam = marcher.default_camera(512, 512);
-    let req = CameraRequest { seq: 1, camera: cam, heuristic: Heuristic::Threshold, radius_scale: 1.0 };
+    let req = CameraRequest { seq: 1, camera: cam, heuristic: Heuristic::Threshold, radius_scale: 1.0, layers: 0 };
     let frame = marcher.render_frame_layers(&req, 4).0;
     let scene = unbuilt_scene(&frame);
     let view = cam.orbit(10.0, 0.0);

@@ -143,6 +143,7 @@ fn main() {
             camera: cam,
             heuristic: Heuristic::Threshold,
             radius_scale: 1.0,
+            layers: 0,
         };
         let frame = marcher.render_frame(&req).0;
         bench(&mut gpu, &mut splat, "MRI (colin27), threshold heuristic", &frame, &cam.orbit(10.0, 0.0), reps);

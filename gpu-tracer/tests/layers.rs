@@ -87,7 +87,7 @@ fn compare(cpu: &mut LayerSplat, gpu: &mut GpuLayerSplat, what: &str, scene: &Sc
 }
 
 fn request(seq: u64, camera: Camera) -> CameraRequest {
-    CameraRequest { seq, camera, heuristic: Heuristic::Threshold, radius_scale: 1.0 }
+    CameraRequest { seq, camera, heuristic: Heuristic::Threshold, radius_scale: 1.0, layers: 0 }
 }
 
 fn data(name: &str) -> std::path::PathBuf {

@@ -20,7 +20,7 @@ fn skip() -> bool {
 }
 
 fn request(seq: u64, camera: Camera, heuristic: Heuristic) -> CameraRequest {
-    CameraRequest { seq, camera, heuristic, radius_scale: 1.0 }
+    CameraRequest { seq, camera, heuristic, radius_scale: 1.0, layers: 0 }
 }
 
 /// Frames of the marcher for a few views and heuristics.

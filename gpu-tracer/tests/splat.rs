@@ -108,7 +108,7 @@ fn gpu_splat_bad_input_is_a_clear_error_and_a_background_image() {
 }
 
 fn request(seq: u64, camera: Camera, heuristic: Heuristic) -> CameraRequest {
-    CameraRequest { seq, camera, heuristic, radius_scale: 1.0 }
+    CameraRequest { seq, camera, heuristic, radius_scale: 1.0, layers: 0 }
 }
 
 #[test]

@@ -32,7 +32,7 @@ fn client(addr: SocketAddr, m: Arc<Marcher>, id: usize, size: u32, until: Instan
             break;
         }
         let camera = m.default_camera(size, size).orbit(20.0 + id as f32 * 7.0 + seq as f32 * 0.5, 10.0).dolly(0.68);
-        let req = CameraRequest { seq, camera, heuristic: Heuristic::Threshold, radius_scale: 1.0 };
+        let req = CameraRequest { seq, camera, heuristic: Heuristic::Threshold, radius_scale: 1.0, layers: 0 };
         wire::write_message(&mut FromStd::new(&mut s), &Message::CameraRequest(req)).expect("request");
         match wire::read_message(&mut FromStd::new(&mut s), &limits) {
             Ok(Message::Frame(_)) => frames += 1,

@@ -23,7 +23,7 @@ const ZOOM: f32 = 0.68;
 
 fn request(m: &Marcher, size: u32) -> CameraRequest {
     let camera = m.default_camera(size, size).orbit(20.0, 10.0).dolly(ZOOM);
-    CameraRequest { seq: 0, camera, heuristic: Heuristic::Threshold, radius_scale: 1.0 }
+    CameraRequest { seq: 0, camera, heuristic: Heuristic::Threshold, radius_scale: 1.0, layers: 0 }
 }
 
 fn benches(c: &mut Criterion) {

@@ -46,7 +46,7 @@ fn env_usize(name: &str, default: usize) -> usize {
 
 fn request(m: &Marcher, size: u32) -> CameraRequest {
     let camera = m.default_camera(size, size).orbit(20.0, 10.0).dolly(0.68);
-    CameraRequest { seq: 0, camera, heuristic: Heuristic::Threshold, radius_scale: 1.0 }
+    CameraRequest { seq: 0, camera, heuristic: Heuristic::Threshold, radius_scale: 1.0, layers: 0 }
 }
 
 /// Median frame time in ms and the sample count.

@@ -88,7 +88,7 @@ fn main() {
         let name = f.file_stem().unwrap().to_string_lossy().split('_').take(2).collect::<Vec<_>>().join("_");
         for &size in &sizes {
             let camera = m.default_camera(size, size);
-            let req = CameraRequest { seq: 0, camera, heuristic: Heuristic::Threshold, radius_scale: 1.0 };
+            let req = CameraRequest { seq: 0, camera, heuristic: Heuristic::Threshold, radius_scale: 1.0, layers: 0 };
             let (frame, _) = m.render_frame(&req);
             let n = frame.samples.len().max(1) as f64;
             let raw = wire::encode_to_vec(&Message::Frame(frame.clone()));

@@ -83,6 +83,7 @@ fn main() {
         camera: view(yaw),
         heuristic: Heuristic::Threshold,
         radius_scale: 1.0,
+        layers: 0,
     };
     let mut rest = Vec::new();
     for i in 0..3 {

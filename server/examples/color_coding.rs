@@ -48,7 +48,7 @@ fn main() {
             path.file_stem().and_then(|s| s.to_str()).unwrap_or("?").split('_').take(2).collect::<Vec<_>>().join("_");
         for &size in &sizes {
             let camera = m.default_camera(size, size).orbit(20.0, 10.0);
-            let req = CameraRequest { seq: 1, camera, heuristic: Heuristic::Threshold, radius_scale: 1.0 };
+            let req = CameraRequest { seq: 1, camera, heuristic: Heuristic::Threshold, radius_scale: 1.0, layers: 0 };
             for k in [1u32, 4] {
                 let frame = if k > 1 { m.render_frame_layers(&req, k).0 } else { m.render_frame(&req).0 };
                 let mut bytes = [0usize; 2];

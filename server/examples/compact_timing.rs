@@ -56,7 +56,7 @@ fn main() {
     };
     let m = Marcher::from_dataset(&ds);
     let camera = m.default_camera(1024, 1024).orbit(20.0, 10.0).dolly(0.68);
-    let req = CameraRequest { seq: 0, camera, heuristic: Heuristic::Threshold, radius_scale: 1.0 };
+    let req = CameraRequest { seq: 0, camera, heuristic: Heuristic::Threshold, radius_scale: 1.0, layers: 0 };
     let (frame, _) = m.render_frame(&req);
     let n = frame.samples.len();
     let opts = encode_options(&m, &req);

@@ -110,6 +110,7 @@ fn main() {
                 camera: base.orbit(deg, 0.0),
                 heuristic: Heuristic::Threshold,
                 radius_scale: 1.0,
+                layers: 0,
             };
             let mut seq = 0;
             let (mut server_us, mut camera, mut edit) = (Vec::new(), Vec::new(), Vec::new());

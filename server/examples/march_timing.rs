@@ -46,7 +46,7 @@ fn main() {
     let camera = plain.default_camera(size, size).orbit(20.0, 10.0).dolly(0.68);
     // `VOLWARP_MARCH_LAYERS=K` (K > 1): the layered frame of K segments per pixel instead.
     let layers: u32 = std::env::var("VOLWARP_MARCH_LAYERS").ok().and_then(|s| s.parse().ok()).unwrap_or(1);
-    let req0 = CameraRequest { seq: 1, camera, heuristic: Heuristic::Threshold, radius_scale: 1.0 };
+    let req0 = CameraRequest { seq: 1, camera, heuristic: Heuristic::Threshold, radius_scale: 1.0, layers: 0 };
     let mut frame = plain.render_frame(&req0).0;
     let mut wall = vec![Vec::new(); marchers.len()];
     let mut cpu = vec![Vec::new(); marchers.len()];

@@ -521,7 +521,7 @@ fn run(cli: Cli) -> Result<(), String> {
         }
         Cmd::Dump { cam, out, encoding } => {
             let cam = camera(&ds, &cam)?;
-            let req = CameraRequest { seq: 0, camera: cam, heuristic, radius_scale: cli.data.radius_scale };
+            let req = CameraRequest { seq: 0, camera: cam, heuristic, radius_scale: cli.data.radius_scale, layers: 0 };
             if !(req.radius_scale > 0.0 && req.radius_scale <= 16.0) {
                 return Err("--radius-scale must be in (0, 16]".into());
             }
@@ -602,7 +602,9 @@ fn run_mpi(cli: Cli) -> Result<(), String> {
             }
             let (cam, out) = (clone_cam(cam), out.clone());
             Job::Dump(
-                Box::new(move |d| Ok(CameraRequest { seq: 0, camera: camera_from(d, &cam)?, heuristic, radius_scale })),
+                Box::new(move |d| {
+                    Ok(CameraRequest { seq: 0, camera: camera_from(d, &cam)?, heuristic, radius_scale, layers: 0 })
+                }),
                 layers,
                 *encoding,
                 Box::new(move |_, bytes, got, stats| write_dump(&out, &bytes, stats.samples, got, "")),

@@ -818,6 +818,7 @@ impl Marcher {
             camera: self.default_camera(1, 1),
             heuristic: Heuristic::Threshold,
             radius_scale: 1.0,
+            layers: 0,
         };
         Frame { header: self.empty_header(&req), samples: Vec::new(), colors: Vec::new(), segments: Vec::new() }
     }

@@ -945,8 +945,10 @@ fn serve(sh: &Shared, stream: &TcpStream, id: u64, charged: Option<IpAddr>) -> S
         }
         let moving = last_camera.is_some_and(|c| c != req.camera);
         last_camera = Some(req.camera);
+        // The request's own segment count (wire version 5), capped at the Hello's; 0: the Hello's.
+        let wanted = if req.layers > 0 { req.layers.min(layers) } else { layers };
         let stats = match &sh.source {
-            Some(source) => match source.render(&req, layers as u32, &mut frame) {
+            Some(source) => match source.render(&req, wanted as u32, &mut frame) {
                 Ok(stats) => stats,
                 Err(e) => break End::Error(error_code::INTERNAL, e),
             },
@@ -954,7 +956,7 @@ fn serve(sh: &Shared, stream: &TcpStream, id: u64, charged: Option<IpAddr>) -> S
                 visual.levels.as_deref().unwrap_or(&[]),
                 visual.generation,
                 &req,
-                layers as u32,
+                wanted as u32,
                 moving,
                 &mut frame,
             ),

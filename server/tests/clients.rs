@@ -43,6 +43,7 @@ fn two_busy_clients_each_receive_frames() {
                         camera,
                         heuristic: Heuristic::Threshold,
                         radius_scale: 1.0,
+                        layers: 0,
                     }));
                     let f = frame(&mut c);
                     assert_eq!(f.header.seq, seq);
@@ -67,7 +68,7 @@ fn two_busy_clients_each_receive_frames() {
 fn two_clients_asking_for_the_same_camera_get_one_render() {
     let (server, m) = start();
     let camera = m.default_camera(96, 80).orbit(30.0, 15.0);
-    let req = |seq| CameraRequest { seq, camera, heuristic: Heuristic::Midpoint, radius_scale: 1.0 };
+    let req = |seq| CameraRequest { seq, camera, heuristic: Heuristic::Midpoint, radius_scale: 1.0, layers: 0 };
     let (mut a, mut b) = (Client::hello(server.local_addr(), None), Client::hello(server.local_addr(), None));
     a.send(&Message::CameraRequest(req(5)));
     b.send(&Message::CameraRequest(req(9)));

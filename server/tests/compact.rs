@@ -54,6 +54,7 @@ fn a_client_that_asks_gets_compact_frames_equal_to_the_12_byte_form() {
         camera: m.default_camera(192, 160).orbit(25.0, 10.0),
         heuristic: Heuristic::RelThreshold,
         radius_scale: 1.0,
+        layers: 0,
     };
     c.send(&Message::CameraRequest(req));
     let bytes = recv_bytes(&mut c);
@@ -90,6 +91,7 @@ fn clients_that_do_not_ask_and_servers_that_refuse_send_12_byte_frames() {
             camera: m.default_camera(32, 32),
             heuristic: Heuristic::Threshold,
             radius_scale: 1.0,
+            layers: 0,
         };
         c.send(&Message::CameraRequest(req));
         let bytes = recv_bytes(&mut c);
@@ -119,6 +121,7 @@ fn colors_are_coded_against_green_only_for_clients_that_read_it() {
         camera: m.default_camera(160, 128).orbit(20.0, 10.0),
         heuristic: Heuristic::Threshold,
         radius_scale: 1.0,
+        layers: 0,
     };
     let mut frames = Vec::new();
     for caps in [wire::CAP_COMPACT | wire::CAP_COLOR_GREEN, wire::CAP_COMPACT] {

@@ -21,7 +21,7 @@ fn check(m: &Marcher, name: &str) {
         (200, 170.0, 40.0, 0.5, Heuristic::Threshold),
     ] {
         let camera = m.default_camera(size, size * 3 / 4).orbit(yaw, pitch).dolly(dolly);
-        let req = CameraRequest { seq: 1, camera, heuristic, radius_scale: 1.0 };
+        let req = CameraRequest { seq: 1, camera, heuristic, radius_scale: 1.0, layers: 0 };
         let (frame, _) = m.render_frame(&req);
         assert!(frame.samples.len() > 1000, "{name}: a real frame");
         let opts = encode_options(m, &req);
@@ -67,7 +67,7 @@ fn fast_codec_equals_the_reference_on_the_mri() {
 fn layered_frames_encode_in_parallel_as_in_sequence() {
     let m = Marcher::from_dataset(&Dataset::default_bundled());
     let camera = m.default_camera(256, 192).orbit(30.0, 10.0);
-    let req = CameraRequest { seq: 3, camera, heuristic: Heuristic::Threshold, radius_scale: 1.0 };
+    let req = CameraRequest { seq: 3, camera, heuristic: Heuristic::Threshold, radius_scale: 1.0, layers: 0 };
     let (frame, _) = m.render_frame_layers(&req, 4);
     assert!(frame.layers() >= 2, "a layered frame");
     let opts = encode_options(&m, &req);

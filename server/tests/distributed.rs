@@ -182,7 +182,13 @@ fn marchers(ds: &Dataset, dec: &Arc<Decomposition>, parts: Vec<Volume>, opts: Ma
 }
 
 fn request(m: &Marcher, size: u32, yaw: f32, heuristic: Heuristic) -> CameraRequest {
-    CameraRequest { seq: 3, camera: m.default_camera(size, size).orbit(yaw, 20.0), heuristic, radius_scale: 1.0 }
+    CameraRequest {
+        seq: 3,
+        camera: m.default_camera(size, size).orbit(yaw, 20.0),
+        heuristic,
+        radius_scale: 1.0,
+        layers: 0,
+    }
 }
 
 #[test]

@@ -25,7 +25,8 @@ fn displayed_region_of_a_guard_frame_is_the_plain_frame() {
         // voxel boundary at the step's rounding.
         assert!(d.identical_share() > 0.99, "{size}² g={g}: {d:?}");
         assert!(d.max_channel_diff <= 8, "{size}² g={g}: {d:?}");
-        let req = |camera| CameraRequest { seq: 1, camera, heuristic: Heuristic::Threshold, radius_scale: 1.0 };
+        let req =
+            |camera| CameraRequest { seq: 1, camera, heuristic: Heuristic::Threshold, radius_scale: 1.0, layers: 0 };
         let (n_plain, n_wide) =
             (m.render_frame(&req(c)).0.samples.len(), m.render_frame(&req(gb.camera)).0.samples.len());
         assert!(n_wide >= n_plain, "{n_wide} < {n_plain}");

@@ -102,6 +102,7 @@ fn request(m: &Marcher, seq: u64, size: u32) -> CameraRequest {
         camera: m.default_camera(size, size).orbit(seq as f32 * 17.0, 10.0),
         heuristic: h,
         radius_scale: 1.0,
+        layers: 0,
     }
 }
 

@@ -32,6 +32,7 @@ fn request(m: &Marcher, size: u32, yaw: f32) -> CameraRequest {
         camera: m.default_camera(size, size).orbit(yaw, 10.0),
         heuristic: Heuristic::Threshold,
         radius_scale: 1.0,
+        layers: 0,
     }
 }
 

@@ -45,7 +45,7 @@ fn live_client(addr: std::net::SocketAddr) -> (Client, wire::VisualState) {
 
 fn request(seq: u64, m: &Marcher) -> CameraRequest {
     let camera = m.default_camera(64, 56).orbit(30.0, 15.0);
-    CameraRequest { seq, camera, heuristic: Heuristic::Threshold, radius_scale: 1.0 }
+    CameraRequest { seq, camera, heuristic: Heuristic::Threshold, radius_scale: 1.0, layers: 0 }
 }
 
 fn frame(c: &mut Client) -> Frame {

@@ -108,8 +108,13 @@ fn orbit(addr: SocketAddr, id: usize, size: u32, stop: Arc<AtomicBool>) -> Resul
         if stop.load(Ordering::SeqCst) {
             break;
         }
-        let req =
-            CameraRequest { seq, camera: camera(id, seq, size), heuristic: Heuristic::Threshold, radius_scale: 1.0 };
+        let req = CameraRequest {
+            seq,
+            camera: camera(id, seq, size),
+            heuristic: Heuristic::Threshold,
+            radius_scale: 1.0,
+            layers: 0,
+        };
         send(&mut s, &Message::CameraRequest(req)).map_err(|e| format!("client {id}: request: {e}"))?;
         match wire::read_message(&mut embedded_io_adapters::std::FromStd::new(&mut s), &limits) {
             Ok(Message::Frame(f)) if f.header.seq == seq && f.samples.len() == f.header.count as usize => frames += 1,
@@ -215,6 +220,7 @@ fn never_reading(n: usize, size: u32, requests: u64, secs: f64, extra: &[&str]) 
                 camera: camera(id, seq, size),
                 heuristic: Heuristic::Threshold,
                 radius_scale: 1.0,
+                layers: 0,
             };
             if send(&mut s, &Message::CameraRequest(req)).is_err() {
                 break;

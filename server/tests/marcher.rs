@@ -148,7 +148,7 @@ fn frame_samples_sit_on_their_rays() {
         (Heuristic::RelThreshold, 0.5, RadiusModel::Uncertainty),
     ] {
         let m = base.with_transfer_function(&ds.tf, MarchOptions { radius: model, ..MarchOptions::default() });
-        let req = CameraRequest { seq: 3, camera: cam, heuristic: h, radius_scale: scale };
+        let req = CameraRequest { seq: 3, camera: cam, heuristic: h, radius_scale: scale, layers: 0 };
         let (frame, stats) = m.render_frame(&req);
         let pb = m.march(&cam, h);
         // The frame equals quantizing every pixel, then compacting serially.

@@ -162,7 +162,7 @@ fn a_client_over_loopback_gets_the_composited_frames() {
         assert!(matches!(c.recv(), Ok(Message::Hello(h)) if h.layers == 4));
         for (seq, yaw, layers) in [(1u64, 0.0f32, 4), (2, 45.0, 4)] {
             let camera = m.default_camera(64, 48).orbit(yaw, 10.0);
-            let req = CameraRequest { seq, camera, heuristic: Heuristic::Threshold, radius_scale: 1.0 };
+            let req = CameraRequest { seq, camera, heuristic: Heuristic::Threshold, radius_scale: 1.0, layers: 0 };
             c.send(&Message::CameraRequest(req));
             let Ok(Message::Frame(f)) = c.recv() else { panic!("expected a frame") };
             let want = geo.frame(&req, layers, &render_in_process(&parts, &req, layers, n), f.header.render_us);
@@ -183,6 +183,7 @@ fn a_client_over_loopback_gets_the_composited_frames() {
             camera,
             heuristic: Heuristic::Threshold,
             radius_scale: 1.0,
+            layers: 0,
         }));
         match big.recv() {
             Ok(Message::Error(e)) => assert!(e.text.contains("too large for the exchange"), "{}", e.text),
@@ -194,7 +195,7 @@ fn a_client_over_loopback_gets_the_composited_frames() {
         assert!(matches!(one.recv(), Ok(Message::Hello(h)) if h.layers == 1));
         let camera = m.default_camera(32, 32);
         for (seq, heuristic) in [(1, Heuristic::Threshold), (2, Heuristic::Peak)] {
-            one.send(&Message::CameraRequest(CameraRequest { seq, camera, heuristic, radius_scale: 1.0 }));
+            one.send(&Message::CameraRequest(CameraRequest { seq, camera, heuristic, radius_scale: 1.0, layers: 0 }));
             match (heuristic, one.recv()) {
                 (Heuristic::Threshold, Ok(Message::Frame(f))) => assert!(f.samples.len() > 100),
                 (Heuristic::Peak, Ok(Message::Error(e))) => {
@@ -262,7 +263,7 @@ fn fault_mid_frame(what: &str, extra: &[&str]) -> Fault {
     hello(&mut c);
     let ds = volwarp_server::Dataset::load(data("ct_head_quarter.nhdr"), None).unwrap();
     let camera = volwarp_server::default_camera(&ds.volume, 64, 64);
-    let req = |seq| CameraRequest { seq, camera, heuristic: Heuristic::Threshold, radius_scale: 1.0 };
+    let req = |seq| CameraRequest { seq, camera, heuristic: Heuristic::Threshold, radius_scale: 1.0, layers: 0 };
     c.send(&Message::CameraRequest(req(1)));
     assert!(matches!(c.recv(), Ok(Message::Frame(_))), "the first frame arrives");
     let t = Instant::now();

@@ -21,7 +21,7 @@ fn start(cfg: ServerConfig) -> (ServerHandle, Arc<Marcher>) {
 }
 
 fn request(m: &Marcher, seq: u64, heuristic: Heuristic, yaw: f32) -> CameraRequest {
-    CameraRequest { seq, camera: m.default_camera(64, 48).orbit(yaw, 10.0), heuristic, radius_scale: 1.0 }
+    CameraRequest { seq, camera: m.default_camera(64, 48).orbit(yaw, 10.0), heuristic, radius_scale: 1.0, layers: 0 }
 }
 
 fn wait_for_clients(server: &ServerHandle, n: usize) {

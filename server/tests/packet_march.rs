@@ -164,6 +164,7 @@ fn packet_frames_equal_scalar_frames() {
                 camera: fast.default_camera(57, 43).orbit(25.0, 15.0),
                 heuristic: h,
                 radius_scale: 1.5,
+                layers: 0,
             };
             let (a, _) = fast.render_frame(&req);
             let (b, _) = slow.render_frame(&req);

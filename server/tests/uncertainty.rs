@@ -26,8 +26,13 @@ fn marcher(ds: &Dataset, radius: RadiusModel, uncertainty: UncertaintyParams, ke
 }
 
 fn frame(m: &Marcher, heuristic: Heuristic, size: u32) -> (Frame, CameraRequest) {
-    let req =
-        CameraRequest { seq: 1, camera: m.default_camera(size, size).orbit(20.0, 10.0), heuristic, radius_scale: 1.0 };
+    let req = CameraRequest {
+        seq: 1,
+        camera: m.default_camera(size, size).orbit(20.0, 10.0),
+        heuristic,
+        radius_scale: 1.0,
+        layers: 0,
+    };
     (m.render_frame(&req).0, req)
 }
 

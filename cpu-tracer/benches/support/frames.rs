@@ -35,7 +35,7 @@ pub fn mri_frame_with(res: u32, model: RadiusModel) -> Option<(Frame, String)> {
     let m = Marcher::from_dataset(&ds)
         .with_transfer_function(&ds.tf, MarchOptions { radius: model, ..MarchOptions::default() });
     let camera = m.default_camera(res, res).orbit(20.0, 10.0).dolly(0.66);
-    let req = CameraRequest { seq: 0, camera, heuristic: Heuristic::Threshold, radius_scale: 1.0 };
+    let req = CameraRequest { seq: 0, camera, heuristic: Heuristic::Threshold, radius_scale: 1.0, layers: 0 };
     let (frame, _) = m.render_frame(&req);
     let what = format!(
         "server render of the MRI at {res}² (threshold heuristic, {model} radius), {} samples",

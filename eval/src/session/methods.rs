@@ -19,6 +19,8 @@
 //!   `*-fill` renderers);
 //! - `+layers=K`: it asks for frames of `K` segments per pixel (drawn by
 //!   `splat-layers`), whatever the session's `--layers`;
+//! - `+rest=K`: it asks for `K` segments per pixel for the view at rest (core's
+//!   `method::RequestPolicy::layers`; without it, as many as while the camera moves);
 //! - `+coarse=N`: adaptive resolution (core's `method::RequestPolicy::camera_at`): while the
 //!   camera moves it asks for frames on a pixel grid `N` (2 or 4) times coarser per axis, which
 //!   the server renders in its time times the marcher's measured ratio at that resolution
@@ -55,15 +57,23 @@ pub struct SessionRequest {
     pub layers: u32,
     /// Viewport divisor per axis while the camera moves (1: always the full resolution).
     pub coarse: u8,
+    /// Segments per pixel it asks for the view at rest (0: as while it moves).
+    pub rest_layers: u8,
 }
 
 impl SessionRequest {
     /// Asks for the camera shown (what a send-image system does).
-    pub const NONE: SessionRequest = SessionRequest { predict: false, guard: 0.0, layers: 0, coarse: 1 };
+    pub const NONE: SessionRequest =
+        SessionRequest { predict: false, guard: 0.0, layers: 0, coarse: 1, rest_layers: 0 };
 
     /// Its request policy (core's `method::RequestPolicy`).
     pub const fn policy(&self) -> volwarp_core::method::RequestPolicy {
-        volwarp_core::method::RequestPolicy { predict: self.predict, guard: self.guard, coarse: self.coarse }
+        volwarp_core::method::RequestPolicy {
+            predict: self.predict,
+            guard: self.guard,
+            coarse: self.coarse,
+            rest_layers: self.rest_layers,
+        }
     }
 }
 
@@ -254,6 +264,13 @@ impl MethodSpec {
                     }
                     m.request.layers = k;
                 }
+                Some(("rest", k)) => {
+                    let k: u8 = k.parse().map_err(|_| format!("{spec}: rest {k:?} is not a count"))?;
+                    if usize::from(k) > MAX_LAYERS {
+                        return Err(format!("{spec}: rest must be within 0..={MAX_LAYERS}").into());
+                    }
+                    m.request.rest_layers = k;
+                }
                 Some(("coarse", n)) => {
                     m.request.coarse = match n.parse::<u8>() {
                         Ok(n @ (1 | 2 | 4)) => n,
@@ -269,7 +286,7 @@ impl MethodSpec {
                 }
                 _ => {
                     return Err(format!(
-                        "{spec}: unknown option {p:?} (predict, guard=G, frames=K, adapt, pp=L, layers=K, coarse=N)"
+                        "{spec}: unknown option {p:?} (predict, guard=G, frames=K, adapt, pp=L, layers=K, rest=K, coarse=N)"
                     )
                     .into())
                 }
@@ -300,9 +317,16 @@ impl MethodSpec {
     /// pixel are written for the layered renderers only).
     pub fn of(m: &CoreMethod) -> MethodSpec {
         let layers = if m.renderer.draws_layers() { u32::from(m.layers) } else { 0 };
+        let rest_layers = if m.renderer.draws_layers() { m.rest_layers } else { 0 };
         MethodSpec {
             renderer: m.renderer,
-            request: SessionRequest { predict: m.predict, guard: m.guard, layers, coarse: m.coarse.max(1) },
+            request: SessionRequest {
+                predict: m.predict,
+                guard: m.guard,
+                layers,
+                coarse: m.coarse.max(1),
+                rest_layers,
+            },
             frames: m.frames,
             adapt: m.adapt,
             pull_push: 0,
@@ -321,6 +345,7 @@ impl MethodSpec {
             watertight: volwarp_core::method::WATERTIGHT,
             guard: self.request.guard,
             coarse: self.request.coarse,
+            rest_layers: self.request.rest_layers,
         }
     }
 
@@ -344,6 +369,9 @@ impl MethodSpec {
         }
         if self.request.layers > 0 {
             s.push_str(&format!("+layers={}", self.request.layers));
+        }
+        if self.request.rest_layers > 0 {
+            s.push_str(&format!("+rest={}", self.request.rest_layers));
         }
         if self.request.coarse > 1 {
             s.push_str(&format!("+coarse={}", self.request.coarse));
@@ -414,7 +442,7 @@ mod tests {
     fn specs_parse_and_name_canonically() {
         let m = MethodSpec::parse("splat-fill+frames=3+guard=0.2+predict").unwrap();
         assert_eq!(m.renderer, RendererKind::SplatFill);
-        assert_eq!(m.request, SessionRequest { predict: true, guard: 0.2, layers: 0, coarse: 1 });
+        assert_eq!(m.request, SessionRequest { predict: true, guard: 0.2, layers: 0, coarse: 1, rest_layers: 0 });
         assert_eq!(m.frames, 3);
         assert_eq!(m.name(), "splat-fill+predict+guard=0.2+frames=3");
         let a = MethodSpec::parse("splat+adapt+predict").unwrap();
@@ -424,7 +452,7 @@ mod tests {
         assert_eq!(MethodSpec::parse("volwarp").unwrap(), MethodSpec::parse(&default_method()).unwrap());
         assert_eq!(MethodSpec::parse("points2").unwrap().request, SessionRequest::NONE);
         let l = MethodSpec::parse("splat-layers+layers=4+adapt+predict").unwrap();
-        assert_eq!(l.request, SessionRequest { predict: true, guard: 0.0, layers: 4, coarse: 1 });
+        assert_eq!(l.request, SessionRequest { predict: true, guard: 0.0, layers: 4, coarse: 1, rest_layers: 0 });
         assert_eq!(l.name(), "splat-layers+predict+adapt+layers=4");
         assert_eq!(MethodSpec::parse(&l.name()).unwrap(), l);
         let d = MethodSpec::parse("volwarp").unwrap();
@@ -439,6 +467,11 @@ mod tests {
         assert_eq!(MethodSpec::parse(&a.name()).unwrap(), a);
         assert_eq!(MethodSpec::parse("volwarp-adaptive=4").unwrap().request.coarse, 4);
         assert_eq!(a.method(1).request().divisor(true), 2);
+        let r = MethodSpec::parse("splat-layers+predict+layers=4+rest=1").unwrap();
+        assert_eq!((r.request.rest_layers, r.method(4).request().layers(false)), (1, 1));
+        assert_eq!(r.name(), "splat-layers+predict+layers=4+rest=1");
+        assert_eq!(MethodSpec::parse("splat-layers+rest=2").unwrap().name(), "splat-layers+rest=2");
+        assert!(MethodSpec::parse("splat-layers+rest=17").is_err());
         let names: Vec<String> =
             make_methods("volwarp,volwarp-adaptive", 1).unwrap().iter().map(|m| m.name().to_string()).collect();
         assert_eq!(names, ["volwarp", "volwarp-adaptive"], "aliases keep their names");

@@ -211,7 +211,8 @@ pub fn calibrate(
             }
             let k = method.request().layers;
             if k > 1 && !layered.iter().any(|(n, _)| *n == k) {
-                let req = CameraRequest { seq: 1, camera: c0, heuristic: Heuristic::Threshold, radius_scale: 1.0 };
+                let req =
+                    CameraRequest { seq: 1, camera: c0, heuristic: Heuristic::Threshold, radius_scale: 1.0, layers: 0 };
                 layered.push((k, methods::HeldFrame::new(marcher.render_frame_layers(&req, k).0)));
             }
             let held = layered.iter().find(|(n, _)| *n == k).map_or(&held, |(_, f)| f);
@@ -225,6 +226,7 @@ pub fn calibrate(
                         camera: c0.orbit(-5.0 * i as f32, 0.0),
                         heuristic: Heuristic::Threshold,
                         radius_scale: 1.0,
+                        layers: 0,
                     };
                     let f = if k > 1 { marcher.render_frame_layers(&req, k).0 } else { marcher.render_frame(&req).0 };
                     methods::HeldFrame::new(f)

@@ -371,10 +371,14 @@ pub fn serve(
     let layers = stream_layers(cfg, request);
     // Each frame with the bytes the server sends for it: its own encoder and radius model
     // (`volwarp_server::encoding::encode_frame`).
-    let render = |camera: Camera, seq: usize, state: usize| {
+    // `wanted`: the request's segments per pixel (core's `Requested::layers`; 0: the stream's),
+    // capped at the stream's as the server caps them at the Hello's.
+    let render = |camera: Camera, seq: usize, state: usize, wanted: u8| {
         let marcher = looks.marcher(state);
-        let req = CameraRequest { seq: seq as u64, camera, heuristic: cfg.heuristic, radius_scale: 1.0 };
-        let frame = marcher.render_frame_layers(&req, layers).0;
+        let k = if wanted > 0 { u32::from(wanted).min(layers) } else { layers };
+        let req =
+            CameraRequest { seq: seq as u64, camera, heuristic: cfg.heuristic, radius_scale: 1.0, layers: wanted };
+        let frame = marcher.render_frame_layers(&req, k).0;
         let bytes = encode_frame(marcher, &req, &frame, cfg.encoding).0.len() as u64;
         (frame, bytes)
     };
@@ -382,7 +386,9 @@ pub fn serve(
     // the server renders in its time times the marcher's measured ratio.
     let moving = |r: &Request| r.tick > 0 && cams[r.tick] != cams[r.tick - 1];
     let server_ms = |r: &Request| net.server_ms * cfg.resolution_cost.ratio(request.policy().divisor(moving(r)));
-    let (first, first_bytes) = render(cams[0], 0, looks.state_at(0));
+    // The first frame is layered: the first moves warp it (one sample per pixel there raised
+    // the MRI orbit's p95 from 0.044 to 0.065).
+    let (first, first_bytes) = render(cams[0], 0, looks.state_at(0), 0);
     let mut out = vec![(FrameEvent::at_start(cams[0], first_bytes, looks.state_at(0)), first)];
     let first_ms = 2.0 * net.latency_ms + net.server_ms + net.transfer_ms(out[0].0.bytes);
     let mut requests = requests(cams, looks, tick_ms, request);
@@ -391,7 +397,7 @@ pub fn serve(
     let mut predictor = Predictor::new();
     let mut observed = 0usize; // ticks the predictor has seen
                                // Per request once asked: the camera sent, the view it shows exactly, the guard offset.
-    type Asked = (Camera, Camera, (u32, u32));
+    type Asked = (Camera, Camera, (u32, u32), u8);
     let mut asked: Vec<Option<Asked>> = vec![None; requests.len()];
     let mut ask = |i: usize, requests: &mut [Request], out: &[(FrameEvent, volwarp_core::wire::Frame)]| {
         // Requests are asked in order; catch the predictor up to request i.
@@ -413,7 +419,7 @@ pub fn serve(
                 }
             }
             let asks = request.policy().camera_at(shown, moving(&requests[r]), &predictor, &horizon, &cadence);
-            asked[r] = Some((asks.camera, asks.view, asks.guard_offset));
+            asked[r] = Some((asks.camera, asks.view, asks.guard_offset, asks.layers));
             requests[r].camera = asks.camera;
         }
         asked[i].expect("asked above")
@@ -432,12 +438,13 @@ pub fn serve(
         if s + render_ms + net.latency_ms > end_ms {
             break; // it would arrive after the session
         }
-        let (_, view, guard_offset) = ask(j, &mut requests, &out);
+        let (_, view, guard_offset, wanted) = ask(j, &mut requests, &out);
         let camera = policy.camera(&requests[..=j], s);
         served = j + 1;
         let seq = out.len();
         let state = looks.state_at(requests[j].tick);
-        let (frame, bytes) = render(camera, seq, state);
+        let wanted = if camera == requests[j].camera { wanted } else { 0 };
+        let (frame, bytes) = render(camera, seq, state, wanted);
         let write_end = s + render_ms + net.transfer_ms(bytes);
         let arrive_ms = write_end + net.latency_ms;
         if arrive_ms <= end_ms {
@@ -618,8 +625,10 @@ pub fn run_session(
             };
             match show {
                 Show::Exact(i) | Show::Unwarped(i) => {
-                    let exact = if stream_layers(cfg, st.request) > 1 { &mut exact_layers } else { &mut exact_one };
+                    // As rendered: a layered frame's segments composited, a one-sample frame (the
+                    // rest request's) its samples' colors.
                     let f = kept[i];
+                    let exact = if st.held[f].frame.segments.is_empty() { &mut exact_one } else { &mut exact_layers };
                     exact_view(exact.as_mut(), &st.held[f], &st.frames[f], &mut images[mi], &mut tmp);
                     shown_frame.push(f);
                 }

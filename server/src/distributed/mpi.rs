@@ -236,6 +236,7 @@ fn decode_cmd(b: &[u8; CMD_LEN]) -> Option<(CameraRequest, u32, bool)> {
         camera,
         heuristic: Heuristic::from_code(b[2]).unwrap_or(Heuristic::Threshold),
         radius_scale: f(56),
+        layers: 0,
     };
     Some((req, u32::from(b[1]), b[3] != 0))
 }
@@ -756,7 +757,8 @@ pub fn run(launch: Launch, job: Job) -> Result<(), String> {
     let result = match job {
         Job::Render(camera, write) => (|| {
             let cam = camera(default_camera)?;
-            let req = CameraRequest { seq: 0, camera: cam, heuristic: Heuristic::Threshold, radius_scale: 1.0 };
+            let req =
+                CameraRequest { seq: 0, camera: cam, heuristic: Heuristic::Threshold, radius_scale: 1.0, layers: 0 };
             let Collected::Bands(bands) = frame(&req, volwarp_core::segments::DEFAULT_LAYERS as u32, false)?.0 else {
                 return Err("rank 0 gathered no bands".into());
             };

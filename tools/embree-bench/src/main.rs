@@ -52,7 +52,7 @@ fn mri_frame_with(res: u32, model: RadiusModel) -> Frame {
     let m = Marcher::from_dataset(&ds)
         .with_transfer_function(&ds.tf, MarchOptions { radius: model, ..MarchOptions::default() });
     let camera = m.default_camera(res, res).orbit(20.0, 10.0).dolly(0.66);
-    let req = CameraRequest { seq: 0, camera, heuristic: Heuristic::Threshold, radius_scale: 1.0 };
+    let req = CameraRequest { seq: 0, camera, heuristic: Heuristic::Threshold, radius_scale: 1.0, layers: 0 };
     m.render_frame(&req).0
 }
 
