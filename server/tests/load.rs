@@ -99,6 +99,11 @@ fn camera(id: usize, seq: u64, size: u32) -> Camera {
     volwarp_server::default_camera(&ds.volume, size, size).orbit(id as f32 * 37.0 + seq as f32 * 3.0, 10.0)
 }
 
+/// Client `id`'s request `seq` (threshold heuristic, the Hello's layer count).
+fn request(id: usize, seq: u64, size: u32) -> CameraRequest {
+    CameraRequest { seq, camera: camera(id, seq, size), heuristic: Heuristic::Threshold, radius_scale: 1.0, layers: 0 }
+}
+
 /// One orbiting client until `stop`: frames received, or the first error.
 fn orbit(addr: SocketAddr, id: usize, size: u32, stop: Arc<AtomicBool>) -> Result<u64, String> {
     let mut s = hello(addr)?;
@@ -108,13 +113,7 @@ fn orbit(addr: SocketAddr, id: usize, size: u32, stop: Arc<AtomicBool>) -> Resul
         if stop.load(Ordering::SeqCst) {
             break;
         }
-        let req = CameraRequest {
-            seq,
-            camera: camera(id, seq, size),
-            heuristic: Heuristic::Threshold,
-            radius_scale: 1.0,
-            layers: 0,
-        };
+        let req = request(id, seq, size);
         send(&mut s, &Message::CameraRequest(req)).map_err(|e| format!("client {id}: request: {e}"))?;
         match wire::read_message(&mut embedded_io_adapters::std::FromStd::new(&mut s), &limits) {
             Ok(Message::Frame(f)) if f.header.seq == seq && f.samples.len() == f.header.count as usize => frames += 1,
@@ -215,13 +214,7 @@ fn never_reading(n: usize, size: u32, requests: u64, secs: f64, extra: &[&str]) 
     for id in 0..n {
         let mut s = hello(server.addr).expect("greeting");
         for seq in 1..=requests {
-            let req = CameraRequest {
-                seq,
-                camera: camera(id, seq, size),
-                heuristic: Heuristic::Threshold,
-                radius_scale: 1.0,
-                layers: 0,
-            };
+            let req = request(id, seq, size);
             if send(&mut s, &Message::CameraRequest(req)).is_err() {
                 break;
             }
