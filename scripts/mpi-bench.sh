@@ -1,8 +1,11 @@
 #!/usr/bin/env bash
-# The server across MPI ranks: per-frame times and bytes per rank of `dump` (one frame per
+# The server across MPI ranks: per-frame times and bytes per rank of `dump` (one timed frame per
 # launch, the median over RUNS launches), beside the one-process server's frame.
 #
-#   scripts/mpi-bench.sh VOLUME [SIZE=1024x1024] [LAYERS=4] [RUNS=3] [RANKS="2 4 8"]
+#   scripts/mpi-bench.sh VOLUME [SIZE=1024x1024] [LAYERS=4] [RUNS=3] [RANKS="2 4 8"] [FRAMES=1]
+#
+# FRAMES > 1 renders the frame that many times per launch and times the last (`dump --frames`):
+# the steady state of a serving server, whose buffers' memory was touched by earlier frames.
 #
 # Needs a release build with the feature: cargo build --release -p volwarp-server --features mpi
 # Prints a Markdown table (times in ms; bytes sent per rank per frame, the largest). The frame is
@@ -18,6 +21,7 @@ size=${2:-1024x1024}
 layers=${3:-4}
 runs=${4:-3}
 ranks=${5:-"2 4 8"}
+frames=${6:-1}
 bin="${CARGO_TARGET_DIR:-target}/release/volwarp-server"
 out=$(mktemp -d)
 trap 'rm -rf "$out"' EXIT
@@ -27,14 +31,14 @@ field() { grep -o "$1=[0-9.]*" | cut -d= -f2; }
 echo "| ranks | frame | march (slowest rank) | march (fastest rank) | exchange | merge | gather | assembly | compositing share | encode | bytes sent per rank (max) |"
 echo "|---|---|---|---|---|---|---|---|---|---|---|"
 for _ in $(seq "$runs"); do
-  RUST_LOG=info "$bin" dump --volume "$vol" --size "$size" --layers "$layers" --encoding compact --out "$out/one.vwf" 2>&1 |
-    grep -o "march [0-9.]* ms, compact [0-9.]* ms" | awk '{print $2 + $5}'
+  RUST_LOG=info "$bin" dump --volume "$vol" --size "$size" --layers "$layers" --encoding compact --frames "$frames" --out "$out/one.vwf" 2>&1 |
+    grep -o "march [0-9.]* ms, compact [0-9.]* ms" | tail -n 1 | awk '{print $2 + $5}'
 done | median | awk '{printf "| 1 process (packet marcher) | %.0f | | | | | | | | | |\n", $1}'
 for n in $ranks; do
   for _ in $(seq "$runs"); do
     RUST_LOG=info mpiexec -n "$n" "$bin" dump --volume "$vol" --size "$size" --layers "$layers" \
-      --encoding compact --out "$out/mpi.vwf" > "$out/log" 2>&1
-    line=$(grep "mpi frame .*ranks=" "$out/log")
+      --encoding compact --frames "$frames" --out "$out/mpi.vwf" > "$out/log" 2>&1
+    line=$(grep "mpi frame .*ranks=" "$out/log" | tail -n 1)
     asm=$(grep "assembly_ms" "$out/log")
     echo "$(echo "$line" | field total_ms) $(echo "$line" | field march_max_ms) $(echo "$line" | field march_min_ms)" \
       "$(echo "$line" | field exchange_ms) $(echo "$line" | field merge_ms) $(echo "$line" | field gather_ms)" \

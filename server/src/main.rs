@@ -66,6 +66,11 @@ enum Cmd {
         /// Wire encoding: `raw12` (message type 3, 12 bytes per sample) or `compact` (type 6).
         #[arg(long, default_value = "raw12", value_parser = parse_encoding)]
         encoding: Encoding,
+        /// Render the frame this many times (1–100), logging each, and write the last: the
+        /// first frame of a process pays for touching its buffers' memory, later ones are what
+        /// a serving server takes per frame.
+        #[arg(long, default_value_t = 1, value_parser = clap::value_parser!(u32).range(1..=100))]
+        frames: u32,
     },
     /// Print what a volume file (or folder of slices) holds: format, dims, voxel type,
     /// spacing, value range, the orientation applied, bytes. Nothing is rendered.
@@ -519,19 +524,26 @@ fn run(cli: Cli) -> Result<(), String> {
             println!("wrote {}", out.display());
             Ok(())
         }
-        Cmd::Dump { cam, out, encoding } => {
+        Cmd::Dump { cam, out, encoding, frames } => {
             let cam = camera(&ds, &cam)?;
             let req = CameraRequest { seq: 0, camera: cam, heuristic, radius_scale: cli.data.radius_scale, layers: 0 };
             if !(req.radius_scale > 0.0 && req.radius_scale <= 16.0) {
                 return Err("--radius-scale must be in (0, 16]".into());
             }
-            let (frame, stats) = marcher.render_frame_layers(&req, cli.data.layers.unwrap_or(1) as u32);
-            log::info!(
-                "frame: {} samples, march {:.1} ms, compact {:.2} ms",
-                stats.samples,
-                stats.march_us as f64 / 1e3,
-                stats.compact_us as f64 / 1e3
-            );
+            let render = || {
+                let (frame, stats) = marcher.render_frame_layers(&req, cli.data.layers.unwrap_or(1) as u32);
+                log::info!(
+                    "frame: {} samples, march {:.1} ms, compact {:.2} ms",
+                    stats.samples,
+                    stats.march_us as f64 / 1e3,
+                    stats.compact_us as f64 / 1e3
+                );
+                (frame, stats)
+            };
+            let (mut frame, mut stats) = render();
+            for _ in 1..frames {
+                (frame, stats) = render();
+            }
             let t = Instant::now();
             let (bytes, got) = volwarp_server::encoding::encode_frame(&marcher, &req, &frame, encoding);
             let encode_ms = t.elapsed().as_secs_f64() * 1e3;
@@ -596,7 +608,7 @@ fn run_mpi(cli: Cli) -> Result<(), String> {
                 }),
             )
         }
-        Cmd::Dump { cam, out, encoding } => {
+        Cmd::Dump { cam, out, encoding, frames } => {
             if !(radius_scale > 0.0 && radius_scale <= 16.0) {
                 return Err("--radius-scale must be in (0, 16]".into());
             }
@@ -606,6 +618,7 @@ fn run_mpi(cli: Cli) -> Result<(), String> {
                     Ok(CameraRequest { seq: 0, camera: camera_from(d, &cam)?, heuristic, radius_scale, layers: 0 })
                 }),
                 layers,
+                *frames,
                 *encoding,
                 Box::new(move |_, bytes, got, stats| write_dump(&out, &bytes, stats.samples, got, "")),
             )

@@ -90,8 +90,9 @@ pub enum Job {
         Box<dyn FnOnce(Image) -> Result<(), String> + Send>,
     ),
     /// Render one frame for a request (given the default camera), with `layers` segments per
-    /// pixel, encoded in `Encoding`, and hand its bytes over.
-    Dump(Box<dyn FnOnce(Camera) -> Result<CameraRequest, String> + Send>, u32, Encoding, WriteFrame),
+    /// pixel, as many times as the second count says (the last is kept: the earlier ones time
+    /// the steady state), encoded in `Encoding`, and hand its bytes over.
+    Dump(Box<dyn FnOnce(Camera) -> Result<CameraRequest, String> + Send>, u32, u32, Encoding, WriteFrame),
 }
 
 /// Per-rank timings and bytes of one frame.
@@ -764,8 +765,12 @@ pub fn run(launch: Launch, job: Job) -> Result<(), String> {
             };
             write(super::image(cam.width, cam.height, &bands))
         })(),
-        Job::Dump(request, layers, encoding, write) => (|| {
+        Job::Dump(request, layers, frames, encoding, write) => (|| {
             let req = request(default_camera)?;
+            // Earlier frames (`--frames`) only time the steady state; the last is written.
+            for _ in 1..frames {
+                frame(&req, layers, true)?;
+            }
             let (Collected::Frame(mut f), stats) = frame(&req, layers, true)? else {
                 return Err("rank 0 gathered no frame".into());
             };
