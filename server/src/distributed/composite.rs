@@ -328,7 +328,7 @@ pub fn decode_band(bytes: &[u8], pixels: usize, k: usize) -> Result<Band, String
     bytemuck::cast_slice_mut::<u32, u8>(&mut aligned)[..bytes.len()].copy_from_slice(bytes);
     let view = BandView::parse(&bytemuck::cast_slice::<u32, u8>(&aligned)[..bytes.len()], pixels, k)?;
     let segs = view.segs.to_vec();
-    if segs.iter().any(|s| !s.t.is_finite() || s.c.iter().any(|v| !v.is_finite())) {
+    if !segs.iter().all(Seg::is_finite) {
         return Err("a segment with a non-finite value".into());
     }
     let mut start = Vec::with_capacity(pixels);
@@ -396,7 +396,7 @@ pub fn merge_views_with<A: Default + Send>(
     if let Some(b) = bands.iter().zip(&starts).find(|(b, s)| s.last().is_some_and(|&e| e > b.segs.len())) {
         return Err(format!("a band of {} segments whose counts need more", b.0.segs.len()));
     }
-    let finite = |l: &[Seg]| l.iter().all(|s| s.t.is_finite() && s.c.iter().all(|v| v.is_finite()));
+    let finite = |l: &[Seg]| l.iter().all(Seg::is_finite);
     (0..pixels.div_ceil(RUN))
         .into_par_iter()
         .map(|r| {
