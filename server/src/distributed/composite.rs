@@ -21,7 +21,7 @@
 //! the tail after early termination differ from the one-process frame by rounding and by the
 //! cuts at part faces: the composited image stays within a few 8-bit levels of it (tested).
 
-use super::partial::{PartFrame, Seg, ASSEMBLED, SATURATED, SEG_BYTES};
+use super::partial::{PartFrame, Seg, SEG_BYTES};
 
 /// The rows of band `b` of `n` bands of an image `height` rows high (contiguous, the first
 /// bands one row longer where `height` is not a multiple).
@@ -135,79 +135,41 @@ pub fn merge_reference(lists: &[&[Seg]], k: usize, ert: f32) -> Vec<Seg> {
 /// merge, so the result is [`merge_reference`]'s either way.
 pub fn merge(lists: &[&[Seg]], k: usize, ert: f32, out: &mut Vec<Seg>) {
     out.clear();
-    match apart_order(lists) {
-        Some((order, n)) => {
-            for &l in &order[..n] {
-                out.extend_from_slice(lists[l as usize]);
-            }
-        }
-        None => merge_lists(lists, out),
-    }
-    reduce(out, k, ert);
-}
-
-/// The most non-empty lists of a pixel [`merge`] concatenates (more take the k-way merge).
-const MAX_APART: usize = 8;
-
-/// The non-empty lists of a pixel in order of their first depth (their indices in `lists` and
-/// how many), where their depth merge is their concatenation in that order: one list, or lists
-/// each sorted and each ending strictly before the next begins. `None` where it is not (lists
-/// that overlap or are out of order, or more than [`MAX_APART`] of them): the k-way merge.
-fn apart_order(lists: &[&[Seg]]) -> Option<([u8; MAX_APART], usize)> {
-    // Insertion sort by first depth (a pixel has few lists; equal first depths keep the
-    // lists' order).
-    let mut order = [0u8; MAX_APART];
+    // The non-empty lists, in order of their first depth (insertion sort: a pixel has few).
+    let mut ne: [&[Seg]; 8] = [&[]; 8];
     let mut n = 0;
-    for (i, l) in lists.iter().enumerate().filter(|(_, l)| !l.is_empty()) {
-        if n == MAX_APART || i > usize::from(u8::MAX) {
-            return None;
+    for l in lists.iter().filter(|l| !l.is_empty()) {
+        if n == ne.len() {
+            // More parts over one pixel than the fast path holds: the k-way merge.
+            merge_lists(lists, out);
+            reduce(out, k, ert);
+            return;
         }
         let mut j = n;
-        while j > 0 && lists[order[j - 1] as usize][0].t > l[0].t {
-            order[j] = order[j - 1];
+        while j > 0 && ne[j - 1][0].t > l[0].t {
+            ne[j] = ne[j - 1];
             j -= 1;
         }
-        order[j] = i as u8;
+        ne[j] = l;
         n += 1;
     }
-    if n >= 2 {
-        let sorted = |l: &[Seg]| l.windows(2).all(|w| w[0].t <= w[1].t);
-        let apart = order[..n].windows(2).all(|w| {
-            let (a, b) = (lists[w[0] as usize], lists[w[1] as usize]);
-            a[a.len() - 1].t < b[0].t
-        });
-        if !(apart && order[..n].iter().all(|&l| sorted(lists[l as usize]))) {
-            return None;
+    match n {
+        0 => {}
+        // One part saw the pixel: its list as it is (most pixels).
+        1 => out.extend_from_slice(ne[0]),
+        _ => {
+            let sorted = |l: &[Seg]| l.windows(2).all(|w| w[0].t <= w[1].t);
+            let apart = ne[..n].windows(2).all(|w| w[0][w[0].len() - 1].t < w[1][0].t);
+            if apart && ne[..n].iter().all(|l| sorted(l)) {
+                for l in &ne[..n] {
+                    out.extend_from_slice(l);
+                }
+            } else {
+                merge_lists(lists, out);
+            }
         }
     }
-    Some((order, n))
-}
-
-/// Which list [`merge`] passes through as it is, where the pixel's lists lie apart in depth
-/// ([`merge`]'s concatenation): the nearest non-empty list's index, and whether any other
-/// list is non-empty (then the merge keeps the nearest list alone only where its own opacity
-/// reaches the early-termination threshold, which drops the lists behind it). `None` for a
-/// pixel without segments or whose lists take the k-way merge.
-pub fn front_list(lists: &[&[Seg]]) -> Option<(usize, bool)> {
-    match apart_order(lists)? {
-        (_, 0) => None,
-        (order, n) => Some((order[0] as usize, n > 1)),
-    }
-}
-
-/// Whether [`reduce`] leaves `list` (a rank's own list of at most `k` segments, front to
-/// back) as it is when it is a pixel's whole merged list, and whether the list's opacity,
-/// accumulated as [`reduce`] accumulates it, reaches `ert` (then [`reduce`] drops every
-/// segment behind it): `(unchanged, saturated)`.
-pub fn reduce_keeps(list: &[Seg], k: usize, ert: f32) -> (bool, bool) {
-    let mut a = 0.0f32;
-    for s in list {
-        if a >= ert {
-            return (false, true);
-        }
-        a += (1.0 - a) * s.c[3];
-    }
-    (list.len() <= k.max(1), a >= ert)
+    reduce(out, k, ert);
 }
 
 /// The bytes the count bytes of a band of `pixels` pixels take between ranks: padded to a
@@ -308,7 +270,7 @@ impl<'a> BandView<'a> {
 
     /// Where the list of pixel `i` starts in `segs` for each `i = r·run` (one per run of `run`
     /// pixels), and the end of the last.
-    pub(crate) fn run_starts(&self, run: usize) -> Vec<usize> {
+    fn run_starts(&self, run: usize) -> Vec<usize> {
         use rayon::prelude::*;
         let runs = self.count.len().div_ceil(run);
         match self.stride {
@@ -324,134 +286,6 @@ impl<'a> BandView<'a> {
                     .collect()
             }
         }
-    }
-}
-
-/// The pixels of `rows` of a part frame `width` pixels wide.
-fn pixel_range(width: u32, rows: &std::ops::Range<u32>) -> std::ops::Range<usize> {
-    let w = width as usize;
-    rows.start as usize * w..rows.end as usize * w
-}
-
-/// The segments of the assembled pixels of `pf` in `pixels`.
-fn assembled_count(pf: &PartFrame, pixels: std::ops::Range<usize>) -> usize {
-    let flags = &pf.assembled.flags[pixels.clone()];
-    pf.count[pixels].iter().zip(flags).map(|(&c, &f)| if f & ASSEMBLED != 0 { c as usize } else { 0 }).sum()
-}
-
-/// The bytes [`encode_assembled_band_into`] writes for pixels `rows` of `pf` (a multiple of 8).
-pub fn assembled_band_len(pf: &PartFrame, rows: std::ops::Range<u32>) -> usize {
-    let px = pixel_range(pf.width, &rows);
-    let m = assembled_count(pf, px.clone());
-    band_len(pf, rows).next_multiple_of(8) + px.len().next_multiple_of(8) + 12 * m.next_multiple_of(2)
-}
-
-/// Writes a band of a [`PartFrame`] marched with its pixels assembled
-/// ([`super::partial::PartMarcher::march_assembled`]) into `out` (of [`assembled_band_len`]
-/// bytes): the band as [`encode_band_into`] writes it, zeros up to a multiple of 8, a flag byte
-/// per pixel ([`ASSEMBLED`], [`SATURATED`]; zeros up to a multiple of 8), then the assembled
-/// pixels' packed samples (`u64`) and colors (`u32`), in pixel order (zeros up to a multiple
-/// of 8). In an 8-byte aligned buffer, at 8-byte aligned offsets, every part is read in place.
-pub fn encode_assembled_band_into(pf: &PartFrame, rows: std::ops::Range<u32>, out: &mut [u8]) {
-    let px = pixel_range(pf.width, &rows);
-    let m = assembled_count(pf, px.clone());
-    let bl = band_len(pf, rows.clone());
-    let (band, rest) = out.split_at_mut(bl.next_multiple_of(8));
-    encode_band_into(pf, rows, &mut band[..bl]);
-    band[bl..].fill(0);
-    let (flags, rest) = rest.split_at_mut(px.len().next_multiple_of(8));
-    flags[..px.len()].copy_from_slice(&pf.assembled.flags[px.clone()]);
-    flags[px.len()..].fill(0);
-    let (samples, rest) = rest.split_at_mut(8 * m);
-    let (colors, pad) = rest.split_at_mut(4 * m);
-    pad.fill(0);
-    let k = pf.k;
-    let mut at = 0;
-    for i in px {
-        if pf.assembled.flags[i] & ASSEMBLED != 0 {
-            let c = pf.count[i] as usize;
-            samples[8 * at..8 * (at + c)]
-                .copy_from_slice(bytemuck::cast_slice(&pf.assembled.samples[i * k..i * k + c]));
-            colors[4 * at..4 * (at + c)].copy_from_slice(bytemuck::cast_slice(&pf.assembled.colors[i * k..i * k + c]));
-            at += c;
-        }
-    }
-}
-
-/// A band of per-pixel segment lists with the pixels its part assembled in its march: as
-/// received from another rank ([`encode_assembled_band_into`]) or as this rank marched it.
-#[derive(Clone, Copy, Debug)]
-pub struct AssembledView<'a> {
-    /// The segment lists.
-    pub band: BandView<'a>,
-    /// Per pixel [`ASSEMBLED`] and [`SATURATED`].
-    pub flags: &'a [u8],
-    /// The assembled pixels' packed samples: in pixel order, or at the band's slots where it
-    /// has them (`band.stride`).
-    pub samples: &'a [u64],
-    /// Their packed colors, the same way.
-    pub colors: &'a [u32],
-}
-
-impl<'a> AssembledView<'a> {
-    /// The band of pixels `rows` of a rank's own [`PartFrame`] (marched with its pixels
-    /// assembled), in place.
-    pub fn of_part(pf: &'a PartFrame, rows: std::ops::Range<u32>) -> AssembledView<'a> {
-        let px = pixel_range(pf.width, &rows);
-        let k = pf.k;
-        AssembledView {
-            band: BandView::of_part(pf, rows),
-            flags: &pf.assembled.flags[px.clone()],
-            samples: pf.assembled.samples.get(px.start * k..px.end * k).unwrap_or(&[]),
-            colors: pf.assembled.colors.get(px.start * k..px.end * k).unwrap_or(&[]),
-        }
-    }
-
-    /// The band [`encode_assembled_band_into`] wrote, read in place: an error for bytes that
-    /// are not one ([`BandView::parse`]'s checks, flags other than [`ASSEMBLED`] and
-    /// [`SATURATED`], lengths that do not match, nonzero padding) or that are not 8-byte
-    /// aligned.
-    pub fn parse(bytes: &'a [u8], pixels: usize, k: usize) -> Result<AssembledView<'a>, String> {
-        let cl = counts_len(pixels);
-        let Some(count) = bytes.get(..pixels) else {
-            return Err(format!("a band of {pixels} pixels needs {cl} count bytes"));
-        };
-        if let Some(c) = count.iter().find(|&&c| c as usize > k) {
-            return Err(format!("a pixel with {c} segments (at most {k})"));
-        }
-        let n: usize = count.iter().map(|&c| c as usize).sum();
-        let bl = cl + n * SEG_BYTES;
-        let fl = pixels.next_multiple_of(8);
-        let (Some(band), Some(pad), Some(flags)) = (
-            bytes.get(..bl),
-            bytes.get(bl..bl.next_multiple_of(8)),
-            bytes.get(bl.next_multiple_of(8)..).and_then(|r| r.get(..fl)),
-        ) else {
-            return Err(format!("a band of {n} segments is shorter than its counts and flags"));
-        };
-        let band = BandView::parse(band, pixels, k)?;
-        let (flags, flag_pad) = flags.split_at(pixels);
-        if pad.iter().chain(flag_pad).any(|&b| b != 0) {
-            return Err("a band with nonzero padding".into());
-        }
-        if flags.iter().any(|&f| f & !(ASSEMBLED | SATURATED) != 0) {
-            return Err("a band with an unknown pixel flag".into());
-        }
-        let m: usize = count.iter().zip(flags).map(|(&c, &f)| if f & ASSEMBLED != 0 { c as usize } else { 0 }).sum();
-        let rest = &bytes[bl.next_multiple_of(8) + fl..];
-        if rest.len() != 12 * m.next_multiple_of(2) {
-            return Err(format!("a band of {m} assembled samples holds {} bytes for them", rest.len()));
-        }
-        let (samples, rest) = rest.split_at(8 * m);
-        let (colors, pad) = rest.split_at(4 * m);
-        if pad.iter().any(|&b| b != 0) {
-            return Err("a band with nonzero padding".into());
-        }
-        let samples = bytemuck::try_cast_slice(samples)
-            .map_err(|e| format!("a band's assembled samples cannot be read in place: {e}"))?;
-        let colors = bytemuck::try_cast_slice(colors)
-            .map_err(|e| format!("a band's assembled colors cannot be read in place: {e}"))?;
-        Ok(AssembledView { band, flags, samples, colors })
     }
 }
 

@@ -242,23 +242,6 @@ impl Assembler {
         if segs.is_empty() {
             return;
         }
-        let at = out.samples.len();
-        out.samples.resize(at + segs.len(), 0);
-        out.colors.resize(at + segs.len(), 0);
-        self.pack(i, segs, &mut out.samples[at..], &mut out.colors[at..]);
-        if self.layered {
-            out.segments.extend((0..segs.len()).map(|j| j as u8));
-        }
-    }
-
-    /// Writes image pixel `i`'s packed samples and colors, its merged segments `segs` front to
-    /// back, into `samples` and `colors` (`segs.len()` of each; what [`Assembler::push`]
-    /// appends). A segment's index in a layered frame is its place in `segs`.
-    #[inline]
-    pub fn pack(&self, i: u32, segs: &[partial::Seg], samples: &mut [u64], colors: &mut [u32]) {
-        if segs.is_empty() {
-            return;
-        }
         let d = self.basis.dir(i % self.w, i / self.w);
         // Layered: the segments' colors rounded so their composite is the ray's own pixel
         // (core's `pack_colors`, as the one-process marcher packs them).
@@ -271,17 +254,15 @@ impl Assembler {
             }
             pack_colors(&list[..n], composite(segs), &mut packed[..n]);
         }
-        for (j, ((s, sample), color)) in segs.iter().zip(samples.iter_mut()).zip(colors.iter_mut()).enumerate() {
+        for (j, s) in segs.iter().enumerate() {
             let r =
                 if self.layered { self.radius.at(d, s.t) } else { self.radius.at_ray(d, s.t, &Uncertainty::default()) };
-            *sample = self.q.pack(self.o + d * s.t, r);
-            *color = if self.layered && j < n { packed[j] } else { pack_color_f32(s.c) };
+            out.samples.push(self.q.pack(self.o + d * s.t, r));
+            out.colors.push(if self.layered && j < n { packed[j] } else { pack_color_f32(s.c) });
+            if self.layered {
+                out.segments.push(j as u8);
+            }
         }
-    }
-
-    /// Whether the frame is layered (segment indices beside the samples).
-    pub fn layered(&self) -> bool {
-        self.layered
     }
 }
 
@@ -351,111 +332,6 @@ impl FramePart {
     }
 }
 
-/// A band owner's frame samples of its band (pixel `first` of the image on), in runs of
-/// pixels in parallel: of the bands every part sent for it, with the pixels each part
-/// assembled in its march ([`composite::AssembledView`]). A pixel whose merge passes one
-/// part's list through as it is ([`composite::front_list`]: the only list, or the nearest one
-/// where it saturates) and that the part assembled is copied; the others are merged
-/// ([`composite::merge`]) and assembled ([`Assembler::push`]), so the samples are those of
-/// [`composite::merge_views_with`] and [`Assembler::push`] bit for bit. A segment with a
-/// non-finite value (bytes from a failed rank) is an error.
-pub fn assemble_views(
-    bands: &[composite::AssembledView],
-    pixels: usize,
-    (k, ert): (usize, f32),
-    asm: &Assembler,
-    first: u32,
-) -> Result<Vec<FramePart>, String> {
-    const RUN: usize = 4096;
-    if let Some(b) = bands.iter().find(|b| b.band.count.len() != pixels || b.flags.len() != pixels) {
-        return Err(format!("a band of {} pixels, not {pixels}", b.band.count.len()));
-    }
-    let seg_starts: Vec<Vec<usize>> = bands.iter().map(|b| b.band.run_starts(RUN)).collect();
-    if let Some(b) = bands.iter().zip(&seg_starts).find(|(b, s)| s.last().is_some_and(|&e| e > b.band.segs.len())) {
-        return Err(format!("a band of {} segments whose counts need more", b.0.band.segs.len()));
-    }
-    // Where each run's assembled samples start: at the segments' slots in a band read in
-    // place, else after the assembled pixels before the run.
-    let assembled = |b: &composite::AssembledView, i: usize| {
-        if b.flags[i] & partial::ASSEMBLED != 0 {
-            b.band.count[i] as usize
-        } else {
-            0
-        }
-    };
-    let packed_starts: Vec<Vec<usize>> = bands
-        .iter()
-        .zip(&seg_starts)
-        .map(|(b, s)| match b.band.stride {
-            Some(_) => s.clone(),
-            None => {
-                let sums: Vec<usize> = (0..pixels.div_ceil(RUN))
-                    .into_par_iter()
-                    .map(|r| (r * RUN..((r + 1) * RUN).min(pixels)).map(|i| assembled(b, i)).sum())
-                    .collect();
-                std::iter::once(0)
-                    .chain(sums.iter().scan(0usize, |at, &s| {
-                        *at += s;
-                        Some(*at)
-                    }))
-                    .collect()
-            }
-        })
-        .collect();
-    // (A band read in place has every assembled pixel's slots.)
-    if let Some(b) = bands
-        .iter()
-        .zip(&packed_starts)
-        .filter(|(b, _)| b.band.stride.is_none())
-        .find(|(b, s)| s.last().is_some_and(|&e| e > b.samples.len() || e > b.colors.len()))
-    {
-        return Err(format!("a band of {} assembled samples whose flags need more", b.0.samples.len()));
-    }
-    let finite = |l: &[partial::Seg]| l.iter().all(partial::Seg::is_finite);
-    (0..pixels.div_ceil(RUN))
-        .into_par_iter()
-        .map(|r| {
-            let mut out = FramePart::default();
-            let mut buf = Vec::with_capacity(k.max(1) * bands.len());
-            let mut lists: Vec<&[partial::Seg]> = vec![&[]; bands.len()];
-            let mut packed: Vec<usize> = vec![0; bands.len()];
-            let mut at: Vec<usize> = seg_starts.iter().map(|s| s[r]).collect();
-            let mut pat: Vec<usize> = packed_starts.iter().map(|s| s[r]).collect();
-            for i in r * RUN..((r + 1) * RUN).min(pixels) {
-                for (j, b) in bands.iter().enumerate() {
-                    let c = b.band.count[i] as usize;
-                    lists[j] = &b.band.segs[at[j]..at[j] + c];
-                    at[j] += b.band.stride.unwrap_or(c);
-                    packed[j] = pat[j];
-                    pat[j] += b.band.stride.unwrap_or_else(|| assembled(b, i));
-                }
-                if !lists.iter().all(|l| finite(l)) {
-                    return Err("a segment with a non-finite value".to_string());
-                }
-                let copy = composite::front_list(&lists).filter(|&(j, others)| {
-                    let f = bands[j].flags[i];
-                    f & partial::ASSEMBLED != 0 && (!others || f & partial::SATURATED != 0)
-                });
-                match copy {
-                    Some((j, _)) => {
-                        let (c, p) = (lists[j].len(), packed[j]);
-                        out.samples.extend_from_slice(&bands[j].samples[p..p + c]);
-                        out.colors.extend_from_slice(&bands[j].colors[p..p + c]);
-                        if asm.layered() {
-                            out.segments.extend((0..c).map(|s| s as u8));
-                        }
-                    }
-                    None => {
-                        composite::merge(&lists, k, ert, &mut buf);
-                        asm.push(first + i as u32, &buf, &mut out);
-                    }
-                }
-            }
-            Ok(out)
-        })
-        .collect()
-}
-
 /// A pixel's merged segments composited front to back (premultiplied).
 fn composite(segs: &[partial::Seg]) -> [f32; 4] {
     segs.iter().fold([0.0f32; 4], |acc, s| {
@@ -498,47 +374,4 @@ pub fn render_in_process(parts: &[PartMarcher], req: &CameraRequest, layers: u32
             composite::merge_bands(&sent, pixels, k, ert)
         })
         .collect()
-}
-
-/// Every part marched with its pixels assembled and the frame composited in one process, as
-/// `parts.len()` ranks make it: part `b` owns band `b` of the rows (read in place from its
-/// march), the others' bands go through their bytes ([`composite::encode_assembled_band_into`],
-/// [`composite::AssembledView::parse`]), each owner copies or assembles its band's samples
-/// ([`assemble_views`]) and the bands are joined. The frame equals [`FrameGeometry::frame`] of
-/// [`render_in_process`]'s bands bit for bit (tested).
-pub fn frame_in_process(
-    parts: &[PartMarcher],
-    geometry: &FrameGeometry,
-    req: &CameraRequest,
-    layers: u32,
-) -> Result<Frame, String> {
-    let cam = &req.camera;
-    let k = layers.clamp(1, MAX_LAYERS as u32) as usize;
-    let ert = parts.first().map_or(0.99, |p| p.options().early_termination);
-    let asm = geometry.assembler(req, layers);
-    let frames: Vec<_> = parts.iter().map(|p| p.march_assembled(cam, layers, req.heuristic, &asm)).collect();
-    let n = parts.len();
-    let mut out = Vec::with_capacity(n);
-    for b in 0..n {
-        let rows = composite::band_rows(cam.height, n, b);
-        let pixels = (rows.end - rows.start) as usize * cam.width as usize;
-        // 8-byte aligned copies of the bands the others send.
-        let sent: Vec<Vec<u64>> = frames
-            .iter()
-            .map(|f| {
-                let mut v = vec![0u64; composite::assembled_band_len(f, rows.clone()) / 8];
-                composite::encode_assembled_band_into(f, rows.clone(), bytemuck::cast_slice_mut(&mut v));
-                v
-            })
-            .collect();
-        let views = (0..n)
-            .map(|r| match r == b {
-                true => Ok(composite::AssembledView::of_part(&frames[r], rows.clone())),
-                false => composite::AssembledView::parse(bytemuck::cast_slice(&sent[r]), pixels, k),
-            })
-            .collect::<Result<Vec<_>, _>>()?;
-        let runs = assemble_views(&views, pixels, (k, ert), &asm, rows.start * cam.width)?;
-        out.push(FramePart::join(&runs));
-    }
-    Ok(geometry.frame_of_parts(req, &out, 0))
 }

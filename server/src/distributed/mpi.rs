@@ -21,7 +21,7 @@
 //! between ranks, more ranks than the volume has bricks, a part refused for memory — is
 //! reported by rank 0 (and the rank concerned) before any frame, and every rank exits non-zero.
 
-use super::composite::{self, AssembledView, Band, BandView};
+use super::composite::{self, Band, BandView};
 use super::decomposition::{self, Decomposition};
 use super::partial::{PartMarcher, Seg};
 use super::FrameGeometry;
@@ -161,28 +161,21 @@ impl Fault {
 }
 
 /// What a rank whose march failed sends for every band: no band decodes from it (a count
-/// above any K, or bytes too many for a band of no pixels; 8 of them, as every band's bytes
-/// are a multiple of 8 to lie aligned in the receive buffer).
-const FAILED_BAND: [u8; 8] = [0xff; 8];
+/// above any K, or bytes too many for a band of no pixels; 4 of them, as every band's bytes
+/// are a multiple of 4 to lie aligned in the receive buffer).
+const FAILED_BAND: [u8; 4] = [0xff; 4];
 
 /// Waits for `req`, yielding the core between tests instead of MPICH's busy poll: the ranks
 /// share the cores (a rank waiting for a slower one's march or merge would otherwise take a
 /// core from it), and a test drives MPI's progress as a wait would. Every rank takes part in
 /// such a collective by its nonblocking form (a blocking collective does not match one).
 fn wait_yielding<'a, D: ?Sized, S: Scope<'a>>(mut req: Request<'a, D, S>) {
-    // Yielding for 200 µs, then testing every 50 µs asleep: a yielding loop still takes a
-    // share of a core from the rank still marching or merging when it waits long.
-    let t = Instant::now();
     loop {
         match req.test() {
             Ok(_) => return,
             Err(r) => req = r,
         }
-        if t.elapsed() < Duration::from_micros(200) {
-            std::thread::yield_now();
-        } else {
-            std::thread::sleep(Duration::from_micros(50));
-        }
+        std::thread::yield_now();
     }
 }
 
@@ -207,13 +200,12 @@ const CMD_LEN: usize = 72;
 const CMD_QUIT: u8 = 0;
 const CMD_FRAME: u8 = 1;
 
-fn encode_cmd(req: &CameraRequest, layers: u32, assemble: bool, in_march: bool) -> [u8; CMD_LEN] {
+fn encode_cmd(req: &CameraRequest, layers: u32, assemble: bool) -> [u8; CMD_LEN] {
     let mut b = [0u8; CMD_LEN];
     b[0] = CMD_FRAME;
     b[1] = layers.min(255) as u8;
     b[2] = req.heuristic.code();
     b[3] = u8::from(assemble);
-    b[4] = u8::from(in_march);
     b[64..72].copy_from_slice(&req.seq.to_le_bytes());
     let c = &req.camera;
     let f = [c.eye.x, c.eye.y, c.eye.z, c.target.x, c.target.y, c.target.z, c.up.x, c.up.y, c.up.z, c.fov_y_deg];
@@ -226,7 +218,7 @@ fn encode_cmd(req: &CameraRequest, layers: u32, assemble: bool, in_march: bool) 
     b
 }
 
-fn decode_cmd(b: &[u8; CMD_LEN]) -> Option<(CameraRequest, u32, bool, bool)> {
+fn decode_cmd(b: &[u8; CMD_LEN]) -> Option<(CameraRequest, u32, bool)> {
     if b[0] != CMD_FRAME {
         return None;
     }
@@ -247,7 +239,7 @@ fn decode_cmd(b: &[u8; CMD_LEN]) -> Option<(CameraRequest, u32, bool, bool)> {
         radius_scale: f(56),
         layers: 0,
     };
-    Some((req, u32::from(b[1]), b[3] != 0, b[4] != 0))
+    Some((req, u32::from(b[1]), b[3] != 0))
 }
 
 fn prefix(counts: &[i32]) -> Vec<i32> {
@@ -268,7 +260,7 @@ fn frame_collective(
     world: &SimpleCommunicator,
     part: &PartMarcher,
     geometry: &FrameGeometry,
-    (req, layers, assemble, in_march): (&CameraRequest, u32, bool, bool),
+    (req, layers, assemble): (&CameraRequest, u32, bool),
     fault: Option<Fault>,
 ) -> Option<Result<Gathered, String>> {
     let size = world.size() as usize;
@@ -281,18 +273,7 @@ fn frame_collective(
     // A march that fails (a panic) still takes part in the collectives, sending bands that do
     // not decode: the others go on, rank 0 fails the frame and ends the job.
     let marched = std::panic::catch_unwind(std::panic::AssertUnwindSafe(|| {
-        // A frame to send: each pixel's samples assembled in the march where the merge may
-        // pass its list through (copied by the band's owner); an image: the segments only.
-        let pf = if assemble && in_march {
-            part.march_assembled(cam, layers, req.heuristic, &geometry.assembler(req, layers))
-        } else if assemble {
-            // Every pixel assembled by its band's owner.
-            let mut pf = part.march(cam, layers, req.heuristic);
-            pf.assembled.flags = vec![0; pf.count.len()];
-            pf
-        } else {
-            part.march(cam, layers, req.heuristic)
-        };
+        let pf = part.march(cam, layers, req.heuristic);
         if let Some(f) = fault {
             f.strike(rank);
         }
@@ -317,27 +298,18 @@ fn frame_collective(
     let rows_of = |b: usize| bounds[b]..bounds[b + 1];
     let t1 = Instant::now();
     st.wait_us = (t1 - t_marched).as_micros() as u64;
-    // Direct-send: band b to rank b, each band written in place into one 8-byte aligned send
-    // buffer (in parallel, and with its assembled pixels for a frame); a rank's own band is
-    // not sent, it is read from its march.
+    // Direct-send: band b to rank b, each band written in place into one 4-byte aligned send
+    // buffer (in parallel); a rank's own band is not sent, it is read from its march.
     let mut scounts = vec![0i32; size];
-    let band_len = |pf, rows| {
-        if assemble {
-            composite::assembled_band_len(pf, rows)
-        } else {
-            composite::band_len(pf, rows)
-        }
-    };
-    let send: Vec<u64> = match &marched {
+    let send: Vec<u32> = match &marched {
         Ok(pf) => {
-            let lens: Vec<usize> = (0..size).map(|b| if b == rank { 0 } else { band_len(pf, rows_of(b)) }).collect();
-            let mut send = vec![0u64; lens.iter().sum::<usize>().div_ceil(8)];
-            let mut rest = bytemuck::cast_slice_mut::<u64, u8>(&mut send);
+            let lens: Vec<usize> =
+                (0..size).map(|b| if b == rank { 0 } else { composite::band_len(pf, rows_of(b)) }).collect();
+            let mut send = vec![0u32; lens.iter().sum::<usize>() / 4];
+            let mut rest = bytemuck::cast_slice_mut::<u32, u8>(&mut send);
             for (b, &l) in lens.iter().enumerate() {
                 let (c, r) = rest.split_at_mut(l);
-                if b != rank && assemble {
-                    composite::encode_assembled_band_into(pf, rows_of(b), c);
-                } else if b != rank {
+                if b != rank {
                     composite::encode_band_into(pf, rows_of(b), c);
                 }
                 rest = r;
@@ -352,7 +324,7 @@ fn frame_collective(
             for (b, c) in scounts.iter_mut().enumerate() {
                 *c = if b == rank { 0 } else { FAILED_BAND.len() as i32 };
             }
-            vec![u64::from_ne_bytes(FAILED_BAND); size - 1]
+            vec![u32::from_ne_bytes(FAILED_BAND); size - 1]
         }
     };
     st.bytes_sent += scounts.iter().map(|&c| c as u64).sum::<u64>();
@@ -362,10 +334,10 @@ fn frame_collective(
     world.all_to_all_into(&scounts[..], &mut rcounts[..]);
     let (sdispl, rdispl) = (prefix(&scounts), prefix(&rcounts));
     let recv_len: usize = rcounts.iter().map(|&c| c as usize).sum();
-    let mut recv = vec![0u64; recv_len.div_ceil(8)];
+    let mut recv = vec![0u32; recv_len.div_ceil(4)];
     {
-        let send = bytemuck::cast_slice::<u64, u8>(&send);
-        let recv = &mut bytemuck::cast_slice_mut::<u64, u8>(&mut recv)[..recv_len];
+        let send = bytemuck::cast_slice::<u32, u8>(&send);
+        let recv = &mut bytemuck::cast_slice_mut::<u32, u8>(&mut recv)[..recv_len];
         let sp = Partition::new(send, &scounts[..], &sdispl[..]);
         let mut rp = PartitionMut::new(recv, &rcounts[..], &rdispl[..]);
         mpi::request::scope(|scope| wait_yielding(world.immediate_all_to_all_varcount_into(scope, &sp, &mut rp)));
@@ -377,43 +349,37 @@ fn frame_collective(
     let pixels = (rows.end - rows.start) as usize * cam.width as usize;
     // The received bands read in place, this rank's own from its march. A band that does not
     // parse (a failed rank's): rank 0 fails the frame.
-    let recv = &bytemuck::cast_slice::<u64, u8>(&recv)[..recv_len];
+    let recv = &bytemuck::cast_slice::<u32, u8>(&recv)[..recv_len];
     let mut broken = false;
-    // A frame's bands with their assembled pixels; an image's, the segments only.
-    let mut assembled: Vec<AssembledView> = Vec::new();
-    let mut views: Vec<BandView> = Vec::new();
-    for r in 0..size {
-        if r == rank {
-            if let Ok(pf) = &marched {
-                match assemble {
-                    true => assembled.push(AssembledView::of_part(pf, rows.clone())),
-                    false => views.push(BandView::of_part(pf, rows.clone())),
+    let views: Vec<BandView> = (0..size)
+        .filter_map(|r| {
+            if r == rank {
+                return marched.as_ref().ok().map(|pf| BandView::of_part(pf, rows.clone()));
+            }
+            let (a, n) = (rdispl[r] as usize, rcounts[r] as usize);
+            match BandView::parse(&recv[a..a + n], pixels, k) {
+                Ok(v) => Some(v),
+                Err(e) => {
+                    log::error!("rank {rank}: the band from rank {r} is broken ({e}); left out");
+                    broken = true;
+                    None
                 }
             }
-            continue;
-        }
-        let (a, n) = (rdispl[r] as usize, rcounts[r] as usize);
-        let bytes = &recv[a..a + n];
-        let parsed = match assemble {
-            true => AssembledView::parse(bytes, pixels, k).map(|v| assembled.push(v)),
-            false => BandView::parse(bytes, pixels, k).map(|v| views.push(v)),
-        };
-        if let Err(e) = parsed {
-            log::error!("rank {rank}: the band from rank {r} is broken ({e}); left out");
-            broken = true;
-        }
-    }
+        })
+        .collect();
     broken |= marched.is_err();
     st.decode_us = t2.elapsed().as_micros() as u64;
     let merged = if broken {
         None
     } else if assemble {
-        // Most pixels' samples copied as their part assembled them, the rest merged and
-        // assembled pixel by pixel: no merged band in between.
+        // Merged and assembled pixel by pixel: no merged band in between.
         let first = rows.start * cam.width;
-        super::assemble_views(&assembled, pixels, (k, ert), &geometry.assembler(req, layers), first)
-            .map(|runs| super::FramePart::join_to_bytes(&runs))
-            .ok()
+        let a = geometry.assembler(req, layers);
+        composite::merge_views_with(&views, pixels, k, ert, |i, segs, out: &mut super::FramePart| {
+            a.push(first + i as u32, segs, out)
+        })
+        .map(|runs| super::FramePart::join_to_bytes(&runs))
+        .ok()
     } else {
         composite::merge_views_with(&views, pixels, k, ert, |_, merged, (count, segs): &mut (Vec<u8>, Vec<Seg>)| {
             count.push(merged.len() as u8);
@@ -430,7 +396,6 @@ fn frame_collective(
     let broken = broken || merged.is_none();
     let merged = merged.unwrap_or_else(|| FAILED_BAND.to_vec());
     drop(views);
-    drop(assembled);
     drop(marched);
     let t3 = Instant::now();
     st.merge_us = (t3 - t2).as_micros() as u64;
@@ -713,19 +678,16 @@ pub fn run(launch: Launch, job: Job) -> Result<(), String> {
             let mut cmd = [0u8; CMD_LEN];
             mpi::request::scope(|scope| wait_idle(root.immediate_broadcast_into(scope, &mut cmd[..])));
             match decode_cmd(&cmd) {
-                Some((req, layers, assemble, in_march)) => {
+                Some((req, layers, assemble)) => {
                     frames += 1;
                     let fault = fault.filter(|f| f.frame == frames);
-                    frame_collective(&world, &part, &geometry, (&req, layers, assemble, in_march), fault);
+                    frame_collective(&world, &part, &geometry, (&req, layers, assemble), fault);
                 }
                 None => return Ok(()),
             }
         }
     }
     let watchdog = Watchdog::spawn(launch.rank_timeout);
-    // `VOLWARP_MPI_MARCH_ASSEMBLY=0`: every pixel assembled by its band's owner after the
-    // merge, none by the nearest part in its march (to measure one against the other).
-    let in_march = std::env::var("VOLWARP_MPI_MARCH_ASSEMBLY").map_or(true, |v| v != "0");
     let root = world.process_at_rank(0);
     let frame = |req: &CameraRequest, layers: u32, assemble: bool| -> Result<(Collected, FrameStats), String> {
         if layers <= 1 {
@@ -743,16 +705,15 @@ pub fn run(launch: Launch, job: Job) -> Result<(), String> {
         }
         let t0 = Instant::now();
         watchdog.start();
-        let mut cmd = encode_cmd(req, layers, assemble, in_march);
+        let mut cmd = encode_cmd(req, layers, assemble);
         // Nonblocking, as the other ranks wait for it (a blocking collective does not match a
         // nonblocking one).
         mpi::request::scope(|scope| wait_yielding(root.immediate_broadcast_into(scope, &mut cmd[..])));
-        let (collected, stats) =
-            match frame_collective(&world, &part, &geometry, (req, layers, assemble, in_march), None) {
-                Some(Ok(r)) => r,
-                Some(Err(e)) => watchdog.fail(e),
-                None => watchdog.fail("rank 0 got no frame".into()),
-            };
+        let (collected, stats) = match frame_collective(&world, &part, &geometry, (req, layers, assemble), None) {
+            Some(Ok(r)) => r,
+            Some(Err(e)) => watchdog.fail(e),
+            None => watchdog.fail("rank 0 got no frame".into()),
+        };
         watchdog.done();
         let total = t0.elapsed().as_micros() as u64;
         let march = stats.iter().map(|s| s.march_us).max().unwrap_or(0);

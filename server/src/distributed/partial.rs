@@ -66,57 +66,6 @@ pub struct PartFrame {
     pub count: Vec<u8>,
     /// Segment slots.
     pub segs: Vec<Seg>,
-    /// The pixels' frame samples as this part alone would give them, where the march assembled
-    /// them ([`PartMarcher::march_assembled`]); else empty.
-    pub assembled: Assembled,
-}
-
-/// A part's pixels assembled as frame samples in its march, as if each pixel's list were its
-/// merged list ([`super::Assembler::pack`]): where it is (the list is the whole merged list, or
-/// the nearest list and opaque enough to hide the others), the band's owner copies them
-/// instead of assembling the pixel after the merge.
-#[derive(Clone, Debug, Default, PartialEq)]
-pub struct Assembled {
-    /// Per pixel: [`ASSEMBLED`] where its samples were assembled, with [`SATURATED`] where its
-    /// list alone reaches the early-termination threshold.
-    pub flags: Vec<u8>,
-    /// Packed samples, pixel `i`'s at slots `i·k ..` (as the segments); empty where no pixel
-    /// was assembled.
-    pub samples: Vec<u64>,
-    /// Packed colors, at the same slots.
-    pub colors: Vec<u32>,
-}
-
-/// A pixel's flag: its list is unchanged by the merge's early termination and fuse when it is
-/// the pixel's whole merged list, and its frame samples are assembled.
-pub const ASSEMBLED: u8 = 1;
-/// A pixel's flag: its list's opacity reaches the early-termination threshold (the merge drops
-/// every list behind it).
-pub const SATURATED: u8 = 2;
-
-/// Assembles the pixels of a run of a part frame (`count` and `segs` from pixel `first` of the
-/// image, `k` slots each) whose lists the merge passes through as they are whatever the parts
-/// behind hold (lists unchanged by the merge's early termination and fuse whose opacity reaches
-/// the threshold), and flags them.
-fn assemble_run(
-    asm: &super::Assembler,
-    (k, ert): (usize, f32),
-    first: usize,
-    (count, segs): (&[u8], &[Seg]),
-    (flags, samples, colors): (&mut [u8], &mut [u64], &mut [u32]),
-) {
-    for (i, (&c, f)) in count.iter().zip(flags.iter_mut()).enumerate() {
-        let c = c as usize;
-        *f = 0;
-        if c == 0 {
-            continue;
-        }
-        let list = &segs[i * k..i * k + c];
-        if super::composite::reduce_keeps(list, k, ert) == (true, true) {
-            asm.pack((first + i) as u32, list, &mut samples[i * k..i * k + c], &mut colors[i * k..i * k + c]);
-            *f = ASSEMBLED | SATURATED;
-        }
-    }
 }
 
 impl PartFrame {
@@ -291,84 +240,22 @@ impl PartMarcher {
 
     /// Marches every pixel of `camera` (parallel over rows).
     pub fn march(&self, camera: &Camera, layers: u32, heuristic: Heuristic) -> PartFrame {
-        self.march_impl(camera, layers, heuristic, None)
-    }
-
-    /// [`PartMarcher::march`], assembling as it goes the frame samples of the pixels whose
-    /// list the merge passes through as it is ([`Assembled`]; `asm` is the frame's
-    /// [`super::Assembler`]): the work the one-process marcher does in its march, done while
-    /// the rows' segments are at hand and before the exchange, so the band's owner copies those
-    /// pixels' samples instead of assembling them after the merge.
-    ///
-    /// Only the part nearest the eye assembles (its pixels' lists whose opacity reaches the
-    /// early-termination threshold, which hide every part behind it: most pixels of an opaque
-    /// volume). A part behind another cannot tell, before the exchange, whether a nearer part
-    /// covers its pixel; assembling its lists anyway doubled the work (measured).
-    pub fn march_assembled(
-        &self,
-        camera: &Camera,
-        layers: u32,
-        heuristic: Heuristic,
-        asm: &super::Assembler,
-    ) -> PartFrame {
-        self.march_impl(camera, layers, heuristic, Some(asm))
-    }
-
-    fn march_impl(
-        &self,
-        camera: &Camera,
-        layers: u32,
-        heuristic: Heuristic,
-        asm: Option<&super::Assembler>,
-    ) -> PartFrame {
         let k = layers.clamp(1, MAX_LAYERS as u32) as usize;
         let (w, h) = (camera.width as usize, camera.height as usize);
         let basis = camera.ray_basis();
         let o = basis.origin();
         let mut count = vec![0u8; w * h];
         let mut segs = vec![Seg::default(); w * h * k];
-        // Whether this part is the nearest to the eye (it alone assembles, see
-        // `march_assembled`).
-        let nearest = asm.is_some() && self.dec.order(camera.eye * self.inv_spacing).first() == Some(&self.part);
         if self.opts.kernel == MarchKernel::Packet {
             // Bands of rows a multiple of every lane kind's packet height.
             let rows = 8;
             let kernel = self.m.part_kernel(&self.win);
-            let band = w.max(1) * rows;
-            let ert = self.opts.early_termination;
-            let (mut flags, mut samples, mut colors) = match asm {
-                Some(_) if nearest => (vec![0u8; w * h], vec![0u64; w * h * k], vec![0u32; w * h * k]),
-                Some(_) => (vec![0u8; w * h], Vec::new(), Vec::new()),
-                None => Default::default(),
-            };
-            // Without assembly the assembled chunks are empty (and not visited).
-            let mut out_chunks: Vec<(&mut [u8], &mut [u64], &mut [u32])> = flags
-                .chunks_mut(band)
-                .zip(samples.chunks_mut(band * k))
-                .zip(colors.chunks_mut(band * k))
-                .map(|((f, s), c)| (f, s, c))
-                .collect();
-            out_chunks.resize_with(count.len().div_ceil(band), || (&mut [], &mut [], &mut []));
-            count
-                .par_chunks_mut(band)
-                .zip(segs.par_chunks_mut(band * k))
-                .zip(out_chunks.into_par_iter())
-                .enumerate()
-                .for_each(|(b, ((count, segs), assembled))| {
+            count.par_chunks_mut(w.max(1) * rows).zip(segs.par_chunks_mut(w.max(1) * rows * k)).enumerate().for_each(
+                |(b, (count, segs))| {
                     let mut out = crate::packet_march::PartOut { k, count, segs };
                     crate::packet_march::march_band_part(&kernel, &basis, heuristic, (b * rows) as u32, &mut out);
-                    if let (Some(asm), true) = (asm, nearest) {
-                        assemble_run(asm, (k, ert), b * band, (&*out.count, &*out.segs), assembled);
-                    }
-                });
-            return PartFrame {
-                width: camera.width,
-                height: camera.height,
-                k,
-                count,
-                segs,
-                assembled: Assembled { flags, samples, colors },
-            };
+                },
+            );
         } else {
             count.par_chunks_mut(w.max(1)).zip(segs.par_chunks_mut(w.max(1) * k)).enumerate().for_each(
                 |(y, (c, s))| {
@@ -379,25 +266,6 @@ impl PartMarcher {
                 },
             );
         }
-        // The scalar kernel (the reference) assembles after its march.
-        let mut assembled = Assembled::default();
-        if let (Some(asm), true) = (asm, nearest) {
-            let ert = self.opts.early_termination;
-            assembled =
-                Assembled { flags: vec![0u8; w * h], samples: vec![0u64; w * h * k], colors: vec![0u32; w * h * k] };
-            let row = w.max(1);
-            assembled
-                .flags
-                .par_chunks_mut(row)
-                .zip(assembled.samples.par_chunks_mut(row * k))
-                .zip(assembled.colors.par_chunks_mut(row * k))
-                .zip(count.par_chunks(row).zip(segs.par_chunks(row * k)))
-                .enumerate()
-                .for_each(|(y, (((f, s), c), run))| assemble_run(asm, (k, ert), y * row, run, (f, s, c)));
-        }
-        if asm.is_some() && !nearest {
-            assembled.flags = vec![0u8; w * h];
-        }
-        PartFrame { width: camera.width, height: camera.height, k, count, segs, assembled }
+        PartFrame { width: camera.width, height: camera.height, k, count, segs }
     }
 }
