@@ -1056,11 +1056,28 @@ impl Kernel<'_> {
                     } else if sampler.chunks == 1 {
                         // Out of line: 32 gathers inlined into every instance of this loop
                         // made the crate take minutes longer to compile (see `edge_gradient`).
-                        let q = [px.to_array::<EDGE_LANES>(), py.to_array(), pz.to_array()];
+                        // The slow lanes packed first: usually a few, one vector of the kind's
+                        // single width (their gathers are per vector, not per lane).
+                        let (qx, qy, qz) = (px.to_array::<M>(), py.to_array::<M>(), pz.to_array::<M>());
+                        let mut q = [[0.0; EDGE_LANES]; 3];
+                        let (mut n, mut bits) = (0, slow.to_bitmask());
+                        while bits != 0 {
+                            let l = bits.trailing_zeros() as usize;
+                            bits &= bits - 1;
+                            (q[0][n], q[1][n], q[2][n]) = (qx[l], qy[l], qz[l]);
+                            n += 1;
+                        }
                         let mut e = [[0.0; EDGE_LANES]; 3];
-                        edge_gradient(self, L::N, &q, &mut e);
-                        let (ex, ey, ez) = (L::new(&e[0]), L::new(&e[1]), L::new(&e[2]));
-                        (slow.select(ex, dx), slow.select(ey, dy), slow.select(ez, dz))
+                        edge_gradient(self, n, &q, &mut e);
+                        let (mut ax, mut ay, mut az) = (dx.to_array::<M>(), dy.to_array::<M>(), dz.to_array::<M>());
+                        let (mut i, mut bits) = (0, slow.to_bitmask());
+                        while bits != 0 {
+                            let l = bits.trailing_zeros() as usize;
+                            bits &= bits - 1;
+                            (ax[l], ay[l], az[l]) = (e[0][i], e[1][i], e[2][i]);
+                            i += 1;
+                        }
+                        (L::new(&ax), L::new(&ay), L::new(&az))
                     } else {
                         let (mut ax, mut ay, mut az) = (dx.to_array::<M>(), dy.to_array::<M>(), dz.to_array::<M>());
                         let (qx, qy, qz) = (px.to_array::<M>(), py.to_array::<M>(), pz.to_array::<M>());
@@ -1143,7 +1160,12 @@ impl Kernel<'_> {
         } else {
             None
         };
-        let pickers: [DepthPicker; M] = core::array::from_fn(|l| DepthPicker::new(hr, first.map(|f| f[l])));
+        // A one-pass heuristic's pickers all start alike: one call, copied (a call per lane, each
+        // result moved through the stack, was 4 % of a shaded frame at 512²).
+        let pickers: [DepthPicker; M] = match &first {
+            None => [DepthPicker::new(hr, None); M],
+            Some(f) => core::array::from_fn(|l| DepthPicker::new(hr, Some(f[l]))),
+        };
         let c = if spread {
             let mut ps = PickSpread { pickers, spread: [RaySpread::new(); M] };
             let c = self.march_in::<L, _, M, P>(o, rays, &mut ps);
@@ -1402,8 +1424,7 @@ fn edge_gradient_kernel<L: Lanes, const M: usize>(
     out: &mut [[f32; EDGE_LANES]; 3],
 ) {
     let sampler = Sampler::<L>::new(&k.m, k.voxels);
-    // As many packets of this kind as cover the caller's lanes (its kind may have more lanes
-    // where the lane limit changed meanwhile: a test's `limit_lanes`).
+    // As many vectors as cover the caller's packed lanes.
     for c in (0..lanes.min(EDGE_LANES)).step_by(L::N) {
         let (x, y, z) = (L::new(&p[0][c..]), L::new(&p[1][c..]), L::new(&p[2][c..]));
         if let Some((dx, dy, dz)) = sampler.gradient_edge(x, y, z) {
@@ -1414,21 +1435,25 @@ fn edge_gradient_kernel<L: Lanes, const M: usize>(
     }
 }
 
-dispatch! {
+volwarp_lanes::dispatch! {
     /// The gradient of [`crate::volume::Volume::gradient_grid_in`] with every read clamped, at
-    /// the positions `p` (continuous voxel coordinates, x, y and z arrays; the first `lanes`
-    /// are read, a multiple of this CPU's kind's lanes up to 64) into `out`, bit for bit, in lanes ([`Sampler::gradient_edge`]);
+    /// the positions `p` (continuous voxel coordinates, x, y and z arrays; the first `lanes`, up
+    /// to 64, are computed, in vectors of the kind's single width, 8 or 16 lanes: the caller
+    /// packs the lanes it needs first) into `out`, bit for bit, in lanes ([`Sampler::gradient_edge`]);
     /// one chunk only (`out` is left as it is with several). What the packet marcher's lanes
     /// at the volume's or crop's edge take: a function of its own, so these 32 gathers are
     /// compiled once per lane kind, not into every instance of [`Kernel::march_in`]. The lanes
     /// compute the same values whatever their kind, so a caller of another kind gets the same
     /// result.
-    fn edge_gradient / edge_gradient_avx2 / edge_gradient_avx512 => edge_gradient_kernel(
+    pub(crate) fn edge_gradient / edge_gradient_avx2 / edge_gradient_avx512 => edge_gradient_kernel(
         k: &Kernel<'_>,
         lanes: usize,
         p: &[[f32; EDGE_LANES]; 3],
         out: &mut [[f32; EDGE_LANES]; 3],
-    )
+    );
+    portable = [wide::f32x8, 8],
+    avx2 = [crate::lanes::Avx2, 8],
+    avx512 = [crate::lanes::Avx512, 16]
 }
 
 #[inline(always)]
