@@ -202,9 +202,10 @@ fn fit_channel(acc: f32, wgt: f32, target: u8, start: u8, lo: u8, hi: u8) -> u8 
     start.clamp(lo, hi)
 }
 
-/// How many segments before the last [`pack_colors`] tries fitting with it (one at a time)
-/// where the last alone cannot give the pixel: the default K = 4 reaches them all; each try is
-/// at most 7 × 33 opacity pairs × 3 channels × 7 values × one bisection.
+/// How many segments before the last [`pack_colors`] tries fitting with it (one at a time,
+/// those that weigh most in the client's composite) where the last alone cannot give the
+/// pixel: the default K = 4 reaches them all; each try is at most 7 × 33 opacity pairs ×
+/// 3 channels × 7 values × one bisection.
 const PAIR_REACH: usize = 4;
 
 /// The first `q` in `0..=hi` with `f(q) ≥ v` (`hi + 1` where none), `f` non-decreasing.
@@ -411,10 +412,17 @@ pub fn pack_colors(segs: &[Segment], ray: [f32; 4], out: &mut [u32]) {
                     } else {
                         // Nearly opaque before it (a weight under one level), the last cannot
                         // undo the rounding carried from before: it and an earlier segment
-                        // together, the nearest first (at most `PAIR_REACH` back, which bounds
-                        // the search where no colors can give the pixel).
+                        // together: the `PAIR_REACH` that weigh most in the client's composite
+                        // (whose rounding is the most), the heaviest first, which bounds the
+                        // search where no colors can give the pixel.
                         let may_stop = |a1: f32, w1: f32, alpha: u8| last || a1 + w1 * alpha as f32 >= OPAQUE;
-                        for p in (j.saturating_sub(PAIR_REACH)..j).rev() {
+                        let mut order = [0usize; MAX_LAYERS];
+                        for (i, o) in order.iter_mut().enumerate().take(j) {
+                            *o = i;
+                        }
+                        let weight = |p: usize| (1.0 - before[p][3]) * (out[p] >> 24) as f32;
+                        order[..j].sort_by(|&x, &y| weight(y).total_cmp(&weight(x)).then(y.cmp(&x)));
+                        for &p in order[..j].iter().take(PAIR_REACH) {
                             let prev = out[p].to_le_bytes();
                             if let Some((pc, c)) =
                                 fit_shown_pair(before[p], want, prev, &out[p + 1..j], first, may_stop)
