@@ -403,3 +403,41 @@ fn a_requests_layers_wanted_sit_in_byte_57_and_older_requests_read_as_the_hellos
     bytes[at] = wire::MAX_LAYERS as u8;
     assert!(read(&bytes).is_ok());
 }
+
+/// A ray's segments as the marcher makes them: premultiplied colors, opacities from faint to
+/// nearly opaque (`scale` shrinks a whole ray's opacities, as in faint, fuzzy volumes).
+fn segment_list() -> impl Strategy<Value = Vec<volwarp_core::segments::Segment>> {
+    let seg = (0.0f32..=1.0, 0.0f32..=1.0, 0.0f32..=1.0, 0.0f32..=1.0, 0.0f32..=1.0);
+    (proptest::collection::vec(seg, 1..=16), prop_oneof![Just(1.0f32), 0.0f32..0.1]).prop_map(|(v, scale)| {
+        v.into_iter()
+            .enumerate()
+            .map(|(j, (a, sat, r, g, b))| {
+                let a = a * scale;
+                let ch = |x: f32| a * (sat + (1.0 - sat) * x);
+                volwarp_core::segments::Segment { t: j as f32, color: [ch(r), ch(g), ch(b), a] }
+            })
+            .collect()
+    })
+}
+
+proptest! {
+    #![proptest_config(ProptestConfig { cases: 2048, ..ProptestConfig::default() })]
+
+    /// At the frame's own camera a client compositing the packed segment colors shows the
+    /// ray's own pixel (the server's image) over the background, and the colors stay
+    /// premultiplied.
+    #[test]
+    fn packed_segments_show_the_rays_pixel(segs in segment_list()) {
+        use volwarp_core::segments::{composite, composite_packed, pack_colors};
+        let ray = composite(segs.iter().map(|s| s.color));
+        let mut packed = vec![0u32; segs.len()];
+        pack_colors(&segs, ray, &mut packed);
+        for c in &packed {
+            let [r, g, b, a] = c.to_le_bytes();
+            prop_assert!(r <= a && g <= a && b <= a, "premultiplied: {:08x}", c);
+        }
+        let shown = sample::over_background(sample::pack_color_f32(composite_packed(&packed)), volwarp_core::BACKGROUND);
+        let want = sample::over_background(sample::pack_color_f32(ray), volwarp_core::BACKGROUND);
+        prop_assert_eq!(shown, want, "packed {:08x?}", packed);
+    }
+}
