@@ -1,12 +1,14 @@
 //! `cargo bench -p volwarp-core`: the serial LBVH build over 623,584 samples from a
-//! depth-image-like surface on a 1024×1024 grid (the paper's count), and wire encode/decode
-//! throughput.
+//! depth-image-like surface on a 1024×1024 grid (the paper's count), wire encode/decode
+//! throughput, and the packing of layered colors (`segments::pack_colors`) over 100,000
+//! pseudo-random rays of 1–4 segments.
 
 use criterion::{criterion_group, criterion_main, BenchmarkId, Criterion, Throughput};
 use std::hint::black_box;
 use volwarp_core::camera::Camera;
 use volwarp_core::heuristics::Heuristic;
 use volwarp_core::sample::{pack_color, Bounds, Quantizer};
+use volwarp_core::segments::{pack_colors, Segment};
 use volwarp_core::wire::{self, Frame, FrameHeader, Limits, Message};
 use volwarp_core::{Scene, Vec3};
 
@@ -56,7 +58,51 @@ fn depth_image_frame() -> Frame {
     }
 }
 
+/// `n` pseudo-random rays of 1–4 segments (premultiplied colors) and their composites.
+fn random_rays(n: usize) -> Vec<(Vec<Segment>, [f32; 4])> {
+    let mut state = 0x2545_F491_4F6C_DD1Du64;
+    let mut next = || {
+        state ^= state << 13;
+        state ^= state >> 7;
+        state ^= state << 17;
+        (state >> 40) as f32 / (1u64 << 24) as f32
+    };
+    (0..n)
+        .map(|_| {
+            let k = 1 + (next() * 4.0) as usize % 4;
+            let segs: Vec<Segment> = (0..k)
+                .map(|j| {
+                    let a = next();
+                    Segment { t: j as f32, color: [next() * a, next() * a, next() * a, a] }
+                })
+                .collect();
+            let ray = segs.iter().fold([0.0f32; 4], |acc, s| {
+                let keep = 1.0 - acc[3];
+                [0, 1, 2, 3].map(|i| acc[i] + keep * s.color[i])
+            });
+            (segs, ray)
+        })
+        .collect()
+}
+
 fn bench(c: &mut Criterion) {
+    let rays = random_rays(100_000);
+    let mut g = c.benchmark_group("pack_colors");
+    g.sample_size(20);
+    g.throughput(Throughput::Elements(rays.len() as u64));
+    g.bench_function("rays_1_to_4_segments", |b| {
+        let mut out = [0u32; 4];
+        b.iter(|| {
+            let mut sum = 0u32;
+            for (segs, ray) in &rays {
+                pack_colors(black_box(segs), *ray, &mut out[..segs.len()]);
+                sum = sum.wrapping_add(out[0]);
+            }
+            black_box(sum)
+        })
+    });
+    g.finish();
+
     let frame = depth_image_frame();
     eprintln!("samples: {}", frame.samples.len());
     let mut g = c.benchmark_group("lbvh");

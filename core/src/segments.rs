@@ -178,6 +178,23 @@ pub fn composite_packed(colors: &[u32]) -> [f32; 4] {
     acc
 }
 
+/// `libm::roundf(x).clamp(lo, hi) as i32` (a NaN gives 0), without the software round, which
+/// the packing loop calls for every channel of every segment: `x + 0.5` truncated is the
+/// rounded value or, where the addition rounded up past the next integer (`x = 0.5 − 2⁻²⁵`, odd
+/// integers from 2²³), one more, which the exact comparison with `r − 0.5` takes back. Below
+/// zero it may differ from `roundf` by one, which the clamp at `lo ≥ 0` hides.
+#[inline(always)]
+fn round_clamp(x: f32, lo: i32, hi: i32) -> i32 {
+    if x.is_nan() {
+        return 0;
+    }
+    let mut r = (x + 0.5) as i32;
+    if r as f32 - 0.5 > x {
+        r = r.saturating_sub(1);
+    }
+    r.clamp(lo, hi)
+}
+
 /// 8-bit rounding of one channel, as [`crate::sample::pack_color_f32`] rounds.
 #[inline(always)]
 fn round8(v: f32) -> u8 {
@@ -192,7 +209,7 @@ fn fit_channel(acc: f32, wgt: f32, target: u8, start: u8, lo: u8, hi: u8) -> u8 
     }
     let hits = |q: u8| round8(acc + wgt * q as f32) == target;
     // The value that lands on the target's centre, then its neighbours.
-    let ideal = libm::roundf((target as f32 / 255.0 - acc) / wgt).clamp(lo as f32, hi as f32) as i32;
+    let ideal = round_clamp((target as f32 / 255.0 - acc) / wgt, lo as i32, hi as i32);
     for d in [0, -1, 1, -2, 2] {
         let q = (ideal + d).clamp(lo as i32, hi as i32) as u8;
         if hits(q) {
@@ -374,7 +391,7 @@ pub fn pack_colors(segs: &[Segment], ray: [f32; 4], out: &mut [u32]) {
         if adjusting {
             let wgt = (1.0 - acc[3]) * (1.0 / 255.0);
             if wgt > 0.0 {
-                let follow = |i: usize, hi: u8| libm::roundf((real[i] - acc[i]) / wgt).clamp(0.0, hi as f32) as u8;
+                let follow = |i: usize, hi: u8| round_clamp((real[i] - acc[i]) / wgt, 0, hi as i32) as u8;
                 q[3] = follow(3, 255);
                 for i in 0..3 {
                     q[i] = follow(i, q[3]);
@@ -1013,6 +1030,34 @@ mod tests {
     /// ([`composite_packed`]) over the background.
     fn shown(cols: &[u32]) -> u32 {
         over_background(crate::sample::pack_color_f32(composite_packed(cols)), BACKGROUND)
+    }
+
+    #[test]
+    fn fast_round_is_libms_round_clamped() {
+        // Every f32 bit pattern in steps of 251 (both signs, NaNs and infinities among them),
+        // and every value within 64 ulps of each half-integer and integer up to 300.
+        let reference = |x: f32, lo: i32, hi: i32| libm::roundf(x).clamp(lo as f32, hi as f32) as i32;
+        let check = |x: f32| {
+            for (lo, hi) in [(0, 255), (0, 7), (3, 200), (255, 255)] {
+                assert_eq!(round_clamp(x, lo, hi), reference(x, lo, hi), "x = {x:e} ({:#x}), {lo}..={hi}", x.to_bits());
+            }
+        };
+        let mut bits = 0u32;
+        while let Some(next) = bits.checked_add(251) {
+            check(f32::from_bits(bits));
+            bits = next;
+        }
+        for k in 0..600 {
+            let c = (k as f32 * 0.5).to_bits();
+            for d in 0..64 {
+                check(f32::from_bits(c + d));
+                check(f32::from_bits(c.saturating_sub(d)));
+                check(-f32::from_bits(c + d));
+            }
+        }
+        for x in [0.5 - 2f32.powi(-25), 8_388_609.0, f32::NAN, f32::INFINITY, f32::NEG_INFINITY, -0.5, 0.5, 254.5] {
+            check(x);
+        }
     }
 
     #[test]
