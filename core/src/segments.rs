@@ -438,7 +438,7 @@ pub fn pack_colors(segs: &[Segment], ray: [f32; 4], out: &mut [u32]) {
                             *o = i;
                         }
                         let weight = |p: usize| (1.0 - before[p][3]) * (out[p] >> 24) as f32;
-                        order[..j].sort_by(|&x, &y| weight(y).total_cmp(&weight(x)).then(y.cmp(&x)));
+                        order[..j].sort_unstable_by(|&x, &y| weight(y).total_cmp(&weight(x)).then(y.cmp(&x)));
                         for &p in order[..j].iter().take(PAIR_REACH) {
                             let prev = out[p].to_le_bytes();
                             if let Some((pc, c)) =
