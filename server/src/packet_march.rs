@@ -75,7 +75,7 @@ trait Feed<const M: usize> {
     fn set_chosen(&mut self, _bits: u64, _chosen: &[f32; M]) {}
 }
 
-/// Calls `f(lane)` for every set bit of `bits` (lanes 0..16), lowest first.
+/// Calls `f(lane)` for every set bit of `bits` (lanes 0..64), lowest first.
 #[inline(always)]
 fn for_lanes(mut bits: u64, mut f: impl FnMut(usize)) {
     while bits != 0 {
@@ -1053,40 +1053,32 @@ impl Kernel<'_> {
                     let slow = vis.and_not(cell.inside);
                     let (dx, dy, dz) = if !slow.any() {
                         (dx, dy, dz)
-                    } else if sampler.chunks == 1 {
-                        // Out of line: 32 gathers inlined into every instance of this loop
-                        // made the crate take minutes longer to compile (see `edge_gradient`).
-                        // The slow lanes packed first: usually a few, one vector of the kind's
-                        // single width (their gathers are per vector, not per lane).
-                        let (qx, qy, qz) = (px.to_array::<M>(), py.to_array::<M>(), pz.to_array::<M>());
-                        let mut q = [[0.0; EDGE_LANES]; 3];
-                        let (mut n, mut bits) = (0, slow.to_bitmask());
-                        while bits != 0 {
-                            let l = bits.trailing_zeros() as usize;
-                            bits &= bits - 1;
-                            (q[0][n], q[1][n], q[2][n]) = (qx[l], qy[l], qz[l]);
-                            n += 1;
-                        }
-                        let mut e = [[0.0; EDGE_LANES]; 3];
-                        edge_gradient(self, n, &q, &mut e);
-                        let (mut ax, mut ay, mut az) = (dx.to_array::<M>(), dy.to_array::<M>(), dz.to_array::<M>());
-                        let (mut i, mut bits) = (0, slow.to_bitmask());
-                        while bits != 0 {
-                            let l = bits.trailing_zeros() as usize;
-                            bits &= bits - 1;
-                            (ax[l], ay[l], az[l]) = (e[0][i], e[1][i], e[2][i]);
-                            i += 1;
-                        }
-                        (L::new(&ax), L::new(&ay), L::new(&az))
                     } else {
-                        let (mut ax, mut ay, mut az) = (dx.to_array::<M>(), dy.to_array::<M>(), dz.to_array::<M>());
                         let (qx, qy, qz) = (px.to_array::<M>(), py.to_array::<M>(), pz.to_array::<M>());
-                        let mut bits = slow.to_bitmask();
-                        while bits != 0 {
-                            let l = bits.trailing_zeros() as usize;
-                            bits &= bits - 1;
-                            let d = vol.gradient_grid_in(Vec3::new(qx[l], qy[l], qz[l]), glo, ghi);
-                            (ax[l], ay[l], az[l]) = (d.x, d.y, d.z);
+                        let (mut ax, mut ay, mut az) = (dx.to_array::<M>(), dy.to_array::<M>(), dz.to_array::<M>());
+                        let slow = slow.to_bitmask();
+                        if sampler.chunks == 1 {
+                            // Out of line: 32 gathers inlined into every instance of this loop
+                            // made the crate take minutes longer to compile (see `edge_gradient`).
+                            // The slow lanes packed first: usually a few, one vector of the kind's
+                            // single width (their gathers are per vector, not per lane).
+                            let (mut q, mut n) = ([[0.0; EDGE_LANES]; 3], 0);
+                            for_lanes(slow, |l| {
+                                (q[0][n], q[1][n], q[2][n]) = (qx[l], qy[l], qz[l]);
+                                n += 1;
+                            });
+                            let mut e = [[0.0; EDGE_LANES]; 3];
+                            edge_gradient(self, n, &q, &mut e);
+                            let mut i = 0;
+                            for_lanes(slow, |l| {
+                                (ax[l], ay[l], az[l]) = (e[0][i], e[1][i], e[2][i]);
+                                i += 1;
+                            });
+                        } else {
+                            for_lanes(slow, |l| {
+                                let d = vol.gradient_grid_in(Vec3::new(qx[l], qy[l], qz[l]), glo, ghi);
+                                (ax[l], ay[l], az[l]) = (d.x, d.y, d.z);
+                            });
                         }
                         (L::new(&ax), L::new(&ay), L::new(&az))
                     };
