@@ -8,7 +8,7 @@ use std::hint::black_box;
 use volwarp_core::camera::Camera;
 use volwarp_core::heuristics::Heuristic;
 use volwarp_core::sample::{pack_color, Bounds, Quantizer};
-use volwarp_core::segments::{pack_colors, Segment};
+use volwarp_core::segments::{composite, pack_colors, Segment};
 use volwarp_core::wire::{self, Frame, FrameHeader, Limits, Message};
 use volwarp_core::{Scene, Vec3};
 
@@ -76,10 +76,7 @@ fn random_rays(n: usize) -> Vec<(Vec<Segment>, [f32; 4])> {
                     Segment { t: j as f32, color: [next() * a, next() * a, next() * a, a] }
                 })
                 .collect();
-            let ray = segs.iter().fold([0.0f32; 4], |acc, s| {
-                let keep = 1.0 - acc[3];
-                [0, 1, 2, 3].map(|i| acc[i] + keep * s.color[i])
-            });
+            let ray = composite(segs.iter().map(|s| s.color));
             (segs, ray)
         })
         .collect()

@@ -428,7 +428,7 @@ proptest! {
     /// premultiplied.
     #[test]
     fn packed_segments_show_the_rays_pixel(segs in segment_list()) {
-        use volwarp_core::segments::{composite, composite_packed, pack_colors};
+        use volwarp_core::segments::{composite, pack_colors, shown_pixel};
         let ray = composite(segs.iter().map(|s| s.color));
         let mut packed = vec![0u32; segs.len()];
         pack_colors(&segs, ray, &mut packed);
@@ -436,7 +436,7 @@ proptest! {
             let [r, g, b, a] = c.to_le_bytes();
             prop_assert!(r <= a && g <= a && b <= a, "premultiplied: {:08x}", c);
         }
-        let shown = sample::over_background(sample::pack_color_f32(composite_packed(&packed)), volwarp_core::BACKGROUND);
+        let shown = shown_pixel(&packed);
         let want = sample::over_background(sample::pack_color_f32(ray), volwarp_core::BACKGROUND);
         prop_assert_eq!(shown, want, "packed {:08x?}", packed);
     }

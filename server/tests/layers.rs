@@ -116,12 +116,7 @@ fn inexact_pixels(truth: &[u32], lb: &volwarp_server::LayerBuffer) -> Vec<usize>
     (0..truth.len())
         .filter(|&i| {
             let cols: Vec<u32> = lb.pixel(i).map(|(_, c)| c).collect();
-            let shown = if cols.is_empty() {
-                BACKGROUND
-            } else {
-                over_background(pack_color_f32(volwarp_core::segments::composite_packed(&cols)), BACKGROUND)
-            };
-            shown != truth[i]
+            volwarp_core::segments::shown_pixel(&cols) != truth[i]
         })
         .collect()
 }

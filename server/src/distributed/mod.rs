@@ -332,12 +332,9 @@ impl FramePart {
     }
 }
 
-/// A pixel's merged segments composited front to back (premultiplied).
+/// A pixel's merged segments composited front to back (premultiplied), as core composites them.
 fn composite(segs: &[partial::Seg]) -> [f32; 4] {
-    segs.iter().fold([0.0f32; 4], |acc, s| {
-        let keep = 1.0 - acc[3];
-        [0, 1, 2, 3].map(|j| acc[j] + keep * s.c[j])
-    })
+    volwarp_core::segments::composite(segs.iter().map(|s| s.c))
 }
 
 /// The composited image of merged bands (each pixel's segments over [`BACKGROUND`], as the
