@@ -34,9 +34,13 @@
 //! lines `docs/results.md` traced). A segment takes its shared corners only where their
 //! footprint covers at least [`LayerOptions::water_ratio`] of the plane footprint's area on
 //! screen (a slab seen ever more edge-on thins to a sliver where the volume it stands for does
-//! not), and only if it does not grow (adaptive sizing below). At the frame's own camera a
-//! shared corner projects onto its pixel corner at any depth, so the frame is still reproduced
-//! there.
+//! not), and only if it does not grow (adaptive sizing below). There its color is drawn with
+//! its optical depth scaled by the plane footprint's area over the slab's
+//! ([`LayerOptions::opacity_limit`], `footprints::drawn_color`): seen from the new eye a slab
+//! turned away is crossed along a longer path and looks more opaque, one turned towards the eye
+//! less (without it, the overlapping planes' double counting was what added that opacity, in
+//! bands). At the frame's own camera a shared corner projects onto its pixel corner at any
+//! depth and the areas are equal, so the frame is still reproduced there.
 //!
 //! **Hole filling** ([`LayerOptions::fill`]): pixels no segment covers,
 //! inside the covered pixels' row and column spans, take the frame's own composited image for
@@ -126,6 +130,8 @@ pub struct LayerSplat {
     older: OlderFrames,
     /// Which tiles of the image still hold an unfilled pixel (see `Holes`).
     tiles: Vec<u8>,
+    /// Per sample its color as drawn (see `footprints::drawn_color`).
+    drawn: Vec<u32>,
 }
 
 impl LayerSplat {
@@ -151,6 +157,7 @@ impl LayerSplat {
             own: OwnPass::default(),
             older: OlderFrames::default(),
             tiles: Vec::new(),
+            drawn: Vec::new(),
         }
     }
 

@@ -4,7 +4,7 @@
 //! | module | step |
 //! |---|---|
 //! | `options` | options, limits and work sizes ([`LayerOptions`], [`LIST`], [`OPAQUE`], [`MAX_FRAMES`]) |
-//! | `footprints` | per sample its source pixel's footprint in the new camera ([`Setup`], [`Proj`]) |
+//! | `footprints` | per sample its source pixel's footprint in the new camera and its color as drawn ([`Setup`], [`Proj`], [`drawn_color`]) |
 //! | `own_pass` | a frame's samples grouped by source pixel in its own camera |
 //! | `slabs` | watertight slabs: the corners neighbouring segments share ([`SlabCorners`]) |
 //! | `older` | older frames: what the newest frame did not see ([`OlderSets`], [`Sight`]) |

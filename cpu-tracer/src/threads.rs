@@ -65,6 +65,36 @@ impl Threads {
         }
     }
 
+    /// [`Threads::for_each_chunk_pair`] for three slices taken side by side (`b` and `c` as
+    /// long as `a`).
+    pub fn for_each_chunk_triple<T: Send, U: Send, V: Send, F>(
+        &self,
+        a: &mut [T],
+        b: &mut [U],
+        c: &mut [V],
+        chunk_len: usize,
+        f: F,
+    ) where
+        F: Fn(usize, &mut [T], &mut [U], &mut [V]) + Sync + Send,
+    {
+        let chunk_len = chunk_len.max(1);
+        match &self.pool {
+            Some(pool) => pool.install(|| {
+                a.par_chunks_mut(chunk_len)
+                    .zip(b.par_chunks_mut(chunk_len))
+                    .zip(c.par_chunks_mut(chunk_len))
+                    .enumerate()
+                    .for_each(|(i, ((x, y), z))| f(i, x, y, z))
+            }),
+            None => a
+                .chunks_mut(chunk_len)
+                .zip(b.chunks_mut(chunk_len))
+                .zip(c.chunks_mut(chunk_len))
+                .enumerate()
+                .for_each(|(i, ((x, y), z))| f(i, x, y, z)),
+        }
+    }
+
     /// Calls `f(range)` for consecutive ranges of `0..n` at most `grain` long, in parallel on
     /// the pool or serially on the caller's thread.
     pub fn for_each_range<F>(&self, n: usize, grain: usize, f: F)

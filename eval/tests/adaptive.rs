@@ -64,18 +64,18 @@ fn a_coarse_frame_warped_at_display_resolution_has_no_holes_at_its_own_camera() 
 
 #[test]
 fn coarse_frames_cost_the_measured_server_time_at_their_resolution() {
-    // A flick (90 °/s for 0.5 s, then rest) at 128², a 500 ms server on a 1 Mbit/s link.
+    // A flick (90 °/s for 0.5 s, then rest) at 256², a 500 ms server on a 1 Mbit/s link.
     let net = NetworkModel { server_ms: 500.0, latency_ms: 20.0, mbps: 1.0 };
     let ds = vec![Dataset::default_bundled()];
     let run = |half_ms: f64| {
         let mut o = common::session_opts(&["flick:90"], "volwarp-adaptive,volwarp", net);
-        o.cfg.size = 128;
+        o.cfg.size = 256;
         o.cfg.duration_s = 3.0;
         o.cfg.score_every = 3;
         // The measured ratio from a calibration file.
-        o.calibration.ms.insert(("server".into(), ds[0].name.clone(), 128), 500.0);
-        o.calibration.ms.insert(("server".into(), scaled_name(&ds[0].name, 2), 128), half_ms);
-        o.calibration.ms.insert(("server".into(), scaled_name(&ds[0].name, 4), 128), 50.0);
+        o.calibration.ms.insert(("server".into(), ds[0].name.clone(), 256), 500.0);
+        o.calibration.ms.insert(("server".into(), scaled_name(&ds[0].name, 2), 256), half_ms);
+        o.calibration.ms.insert(("server".into(), scaled_name(&ds[0].name, 4), 256), 50.0);
         o.server_ms = Some(500.0);
         simulate_all(&ds, &o).unwrap()
     };
@@ -84,13 +84,13 @@ fn coarse_frames_cost_the_measured_server_time_at_their_resolution() {
     for half_ms in [125.0, 250.0] {
         let runs = run(half_ms);
         let frames = &runs[0].result.frames; // volwarp-adaptive's (the first method)
-        let coarse: Vec<_> = frames.iter().skip(1).filter(|f| f.camera.width == 64).collect();
-        let full: Vec<_> = frames.iter().skip(1).filter(|f| f.camera.width == 128).collect();
+        let coarse: Vec<_> = frames.iter().skip(1).filter(|f| f.camera.width == 128).collect();
+        let full: Vec<_> = frames.iter().skip(1).filter(|f| f.camera.width == 256).collect();
         assert_eq!(coarse.len() + full.len(), frames.len() - 1, "{frames:?}");
         assert!(!coarse.is_empty() && !full.is_empty(), "{frames:?}");
         for f in &coarse {
             assert!(f.request_ms < 0.5e3 + 20.0, "coarse only while moving: {f:?}");
-            assert_eq!(f.view.height, 64);
+            assert_eq!(f.view.height, 128);
             assert!((f.arrive_ms - f.start_ms - half_ms - link(f) - 20.0).abs() < 1e-6, "{f:?}");
         }
         for f in &full {
@@ -100,7 +100,7 @@ fn coarse_frames_cost_the_measured_server_time_at_their_resolution() {
         let mean = |v: &[&FrameEvent]| v.iter().map(|f| f.bytes as f64).sum::<f64>() / v.len() as f64;
         assert!(mean(&coarse) < 0.5 * mean(&full), "the encoder's bytes at a quarter of the pixels");
         firsts.push(coarse[0].arrive_ms);
-        // The default (full resolution always) is served on its own stream, 500 ms a frame.
+        // The default (adaptive too) is served on its own stream.
         let rows: Vec<_> = runs[0].result.rows.iter().filter(|r| r.method == "volwarp-adaptive").collect();
         assert!(!rows.is_empty() && rows.iter().all(|r| r.metrics.flip.is_finite()));
     }

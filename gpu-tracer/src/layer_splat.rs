@@ -100,7 +100,7 @@ pub(crate) struct LayerParams {
     pub off_spans: u32,
     pub off_sums: u32,
     pub only_empty: u32,
-    pub pad2: u32,
+    pub opacity_limit: f32,
 }
 
 fn v4(v: Vec3) -> [f32; 4] {
@@ -196,7 +196,7 @@ fn params(
         off_spans,
         off_sums,
         only_empty: 0,
-        pad2: 0,
+        opacity_limit: opts.opacity_limit,
     }
 }
 

@@ -41,13 +41,14 @@
 @group(0) @binding(9) var<storage, read> shared_z: array<vec4<f32>>;
 
 // A footprint: edge functions (a·px + b·py + c ≥ 0 inside) as a, b, c over the four edges,
-// the key (hi: dist² bits, lo: id), the pixel bounds x0 | x1 << 16, y0 | y1 << 16.
+// the key's high word (dist² bits; its low word is the id), the sample's color as drawn (the
+// CPU's `footprints::drawn_color`), the pixel bounds x0 | x1 << 16, y0 | y1 << 16.
 struct Quad {
     a: vec4<f32>,
     b: vec4<f32>,
     c: vec4<f32>,
     key_hi: u32,
-    key_lo: u32,
+    color: u32,
     xb: u32,
     yb: u32,
 }
@@ -118,6 +119,50 @@ fn quad_area(q0: vec2<f32>, q1: vec2<f32>, q2: vec2<f32>, q3: vec2<f32>) -> f32 
     return max(a, -a);
 }
 
+// `footprints::log2_poly`, the same operations in the same order.
+fn log2_poly(x: f32) -> f32 {
+    let bits = bitcast<u32>(x);
+    let e = i32((bits >> 23u) & 0xffu) - 127;
+    let m = bitcast<f32>((bits & 0x007fffffu) | 0x3f800000u);
+    let s = (m - 1.0) / (m + 1.0);
+    let s2 = s * s;
+    let p = s * (2.88539 + s2 * (0.9617967 + s2 * (0.577078 + s2 * (0.4121985 + s2 * 0.3205988))));
+    return f32(e) + p;
+}
+
+// `footprints::exp2_poly`, the same operations in the same order.
+fn exp2_poly(y_in: f32) -> f32 {
+    if !(y_in >= -126.0) {
+        return 0.0;
+    }
+    let y = min(y_in, 127.0);
+    let n = floor(y);
+    let f = y - n;
+    let p = 1.0
+        + f * (0.6931472
+            + f * (0.2402265
+                + f * (0.05550411 + f * (0.009618129 + f * (0.001333355 + f * (0.0001540353 + f * 0.00001525273))))));
+    return p * bitcast<f32>(u32(i32(n) + 127) << 23u);
+}
+
+// `footprints::drawn_color`: color `c` with its optical depth scaled by `depth` (clamped to
+// [1/limit, limit]), each channel rounded to the nearest level.
+fn drawn_color(c: u32, depth: f32, limit: f32) -> u32 {
+    let a8 = c >> 24u;
+    if !(limit > 1.0) || depth == 1.0 || !finite(depth) || a8 == 0u || a8 == 255u {
+        return c;
+    }
+    let d = clamp(depth, 1.0 / limit, limit);
+    let a = f32(a8) * (1.0 / 255.0);
+    let scale = (1.0 - exp2_poly(d * log2_poly(1.0 - a))) / a;
+    var out = 0u;
+    for (var k = 0u; k < 4u; k++) {
+        let x = f32((c >> (8u * k)) & 0xffu);
+        out |= u32(min(x * scale + 0.5, 255.0)) << (8u * k);
+    }
+    return out;
+}
+
 // The footprint of sample `id` (the CPU's step 1).
 fn footprint(id: u32) -> Quad {
     let c = sample_center(samples[id], P.deq_min, P.deq_step);
@@ -152,6 +197,7 @@ fn footprint(id: u32) -> Quad {
     // The slab's shared corners (the CPU's choice: where their footprint covers at least
     // P.k2.z of the plane's area, or the plane has none).
     var water_ok = false;
+    var depth = 1.0;
     if P.k2.w == 1.0 && r == 1.0 {
         let z = shared_z[id];
         if finite(z.x) || finite(z.y) || finite(z.z) || finite(z.w) {
@@ -160,8 +206,15 @@ fn footprint(id: u32) -> Quad {
             let w2 = shared_corner(z.z, an, un, vn, edge_on, num, ba, r, r);
             let w3 = shared_corner(z.w, an, un, vn, edge_on, num, ba, -r, r);
             if w0.ok && w1.ok && w2.ok && w3.ok {
-                if !plane_ok || quad_area(w0.p, w1.p, w2.p, w3.p) >= quad_area(q0, q1, q2, q3) * P.k2.z {
+                let aw = quad_area(w0.p, w1.p, w2.p, w3.p);
+                let ap = quad_area(q0, q1, q2, q3);
+                if !plane_ok || aw >= ap * P.k2.z {
                     water_ok = true;
+                    // The slab's optical depth over its footprint's area (the plane's over
+                    // the slab's; 1 where the plane has none).
+                    if plane_ok {
+                        depth = ap / aw;
+                    }
                     q0 = w0.p;
                     q1 = w1.p;
                     q2 = w2.p;
@@ -205,7 +258,7 @@ fn footprint(id: u32) -> Quad {
     }
     let bx = u32(xa) | (u32(xb) << 16u);
     let by = u32(ya) | (u32(yb) << 16u);
-    return Quad(ea, eb, ec, bitcast<u32>(dist2), id, bx, by);
+    return Quad(ea, eb, ec, bitcast<u32>(dist2), drawn_color(colors[id], depth, P.opacity_limit), bx, by);
 }
 
 @compute @workgroup_size(64)
@@ -449,7 +502,7 @@ fn raster(@builtin(global_invocation_id) gid: vec3<u32>) {
     }
     var acc = vec4<f32>(0.0);
     for (var i = 0u; i < n; i++) {
-        let c = colors[keys[i].y];
+        let c = quads[keys[i].y].color;
         let wgt = (1.0 - acc.w) * P.k.w;
         acc.x += wgt * f32(c & 0xffu);
         acc.y += wgt * f32((c >> 8u) & 0xffu);

@@ -134,7 +134,7 @@ mod tests {
             size_of::<LayerParams>(),
             fields!(LayerParams: eye, u, v, w, src_eye, src_w, su, sv, bu, bv, e, proj, deq_min, deq_step, basis,
                 f_eye, f_u, f_v, f_w, f_proj, k, k2, width, height, n, min_alpha, f_width, f_height, background, cap,
-                off_spans, off_sums, only_empty, pad2),
+                off_spans, off_sums, only_empty, opacity_limit),
         );
         // The packed sample: one little-endian u64 read as two u32 words.
         let aliases: Vec<&str> = PRELUDE.lines().filter(|l| l.starts_with("alias PackedSample")).collect();

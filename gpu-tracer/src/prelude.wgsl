@@ -200,5 +200,7 @@ struct LayerParams {
     // no earlier draw of this image covered (`count` 0) are counted, listed and composited,
     // and the spans are kept; 0 for the newest frame and the frame's own composite.
     only_empty: u32,
-    pad2: u32,
+    // The most a sample's optical depth is scaled on its slab's shared corners (the CPU's
+    // `LayerOptions::opacity_limit`; at most 1: not scaled).
+    opacity_limit: f32,
 }

@@ -314,7 +314,8 @@ fn the_fill_matches_the_cpu_on_the_pixels_it_fills() {
             filled_total += filled.len();
         }
     }
-    assert!(filled_total > 100, "the views should open holes for the fill ({filled_total})");
+    // (Watertight slabs leave few holes at these turns: 84 at a tolerance of 5 source pixels.)
+    assert!(filled_total > 50, "the views should open holes for the fill ({filled_total})");
 }
 
 /// The multi-frame filling on the GPU: `render_set` with older frames draws the CPU's

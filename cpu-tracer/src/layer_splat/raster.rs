@@ -25,7 +25,12 @@ impl LayerSplat {
         self.count.resize(w * h, 0);
         let mut setup = Setup::new(camera, &scene.header.camera, deq, own, grown, self.opts.grow_min_alpha);
         setup.water_ratio = self.opts.water_ratio;
+        setup.opacity_limit = self.opts.opacity_limit;
         let colors = &scene.colors[..];
+        // Each sample's color as drawn (its optical depth scaled with its footprint's area
+        // where it takes its slab's shared corners, `drawn_color`).
+        let mut drawn = core::mem::take(&mut self.drawn);
+        drawn.resize(scene.samples.len(), 0);
         // 1. Every sample's footprint in the new image (in parallel over samples, eight at a
         // time in SIMD lanes). Every footprint is written (NONE where there is none): no
         // clearing pass.
@@ -39,14 +44,15 @@ impl LayerSplat {
             self.bands.resize(n, NO_BANDS);
         }
         let samples = &scene.samples[..];
-        self.threads.for_each_chunk_pair(
+        self.threads.for_each_chunk_triple(
             &mut self.quads[..n],
             &mut self.bands[..n],
+            &mut drawn[..n],
             QUAD_CHUNK,
-            |chunk, quads, bands| {
+            |chunk, quads, bands, drawn| {
                 let first = chunk * QUAD_CHUNK;
                 let sh = shared.get(first..(first + quads.len()).min(shared.len())).unwrap_or(&[]);
-                footprints(&setup, &samples[first..first + quads.len()], colors, sh, first, quads);
+                footprints(&setup, &samples[first..first + quads.len()], colors, sh, first, quads, drawn);
                 if let Some(holes) = only {
                     for q in quads.iter_mut().filter(|q| q.x[0] <= q.x[1] && !holes.near(q)) {
                         *q = Quad::NONE;
@@ -87,6 +93,7 @@ impl LayerSplat {
         // keep the nearest keys whatever the order, so the image does not depend on it). The
         // lists live in a band-sized buffer per thread, not one for the whole image.
         let (quads, bins) = (&self.quads[..], &self.bins[..]);
+        let colors = &drawn[..];
         let band = |b: usize, px: &mut [u32], count: &mut [u8]| {
             // A band no footprint touches keeps its pixels (their counts are 0): an older
             // frame's few samples touch few bands.
@@ -127,6 +134,7 @@ impl LayerSplat {
         };
         let count = &mut self.count[..];
         self.threads.for_each_chunk_pair(&mut out.pixels, count, RASTER_BAND * w, band);
+        self.drawn = drawn;
     }
 }
 

@@ -85,30 +85,42 @@ fn lanes_match_the_scalar_footprints() {
             })
             .map(|c| if rng.next_u64().is_multiple_of(4) { [f32::NAN; 4] } else { c })
             .collect();
-        for (shared, ratio) in [(&none, 1.0), (&some, 1.0), (&some, 0.0), (&some, 1.5)] {
+        for (shared, ratio, limit) in [(&none, 1.0, 4.0), (&some, 1.0, 1.0), (&some, 0.0, 4.0), (&some, 1.5, 4.0)] {
             setup.water_ratio = ratio;
-            let reference: Vec<Quad> = samples
-                .iter()
-                .enumerate()
-                .map(|(i, &smp)| setup.quad(smp, &colors, i, shared.get(i).copied()))
-                .collect();
+            setup.opacity_limit = limit;
+            let (reference, colored): (Vec<Quad>, Vec<u32>) =
+                samples.iter().enumerate().map(|(i, &smp)| setup.quad(smp, &colors, i, shared.get(i).copied())).unzip();
             drawn += reference.iter().filter(|q| q.x[0] <= q.x[1]).count();
             let mut portable = vec![Quad::NONE; samples.len()];
-            footprint_lanes::<wide::f32x8>(&setup, &samples, &colors, shared, 0, &mut portable);
+            let mut portable_colors = vec![0u32; samples.len()];
+            footprint_lanes::<wide::f32x8>(&setup, &samples, &colors, shared, 0, &mut portable, &mut portable_colors);
             assert!(reference.iter().zip(&portable).all(|(a, b)| same(a, b)), "portable lanes differ at {deg}°");
+            assert!(colored == portable_colors, "portable lanes draw other colors at {deg}°");
             #[cfg(target_arch = "x86_64")]
             if lanes::use_avx2() {
                 let mut avx = vec![Quad::NONE; samples.len()];
+                let mut avx_colors = vec![0u32; samples.len()];
                 // SAFETY: the CPU has AVX2 (`use_avx2`).
-                unsafe { footprints_avx2_for_tests(&setup, &samples, &colors, shared, 0, &mut avx) };
+                unsafe { footprints_avx2_for_tests(&setup, &samples, &colors, shared, 0, &mut avx, &mut avx_colors) };
                 assert!(reference.iter().zip(&avx).all(|(a, b)| same(a, b)), "AVX2 lanes differ at {deg}°");
+                assert!(colored == avx_colors, "AVX2 lanes draw other colors at {deg}°");
+            }
+            // Colors change only on shared corners, and only with a limit above 1.
+            let recolored = colored.iter().zip(&colors).filter(|(a, b)| a != b).count();
+            if shared.is_empty() || limit <= 1.0 || deg == 0.0 {
+                assert_eq!(recolored, 0, "colors changed without shared corners at {deg}°");
+            } else if ratio <= 1.0 && deg < 90.0 {
+                // (With a ratio of 1.5 the slab's corners are taken only where they cover far
+                // more than the plane, which these corners, each within 2 % of the sample's
+                // depth, seldom do.)
+                assert!(recolored > 0, "no color scaled at {deg}° (area ratio {ratio})");
             }
             if shared.is_empty() {
                 continue;
             }
             // The shared corners change footprints (else this compares nothing new).
             let plain: Vec<Quad> =
-                samples.iter().enumerate().map(|(i, &smp)| setup.quad(smp, &colors, i, None)).collect();
+                samples.iter().enumerate().map(|(i, &smp)| setup.quad(smp, &colors, i, None).0).collect();
             let changed = plain.iter().zip(&reference).filter(|(a, b)| !same(a, b)).count();
             assert!(ratio > 1.0 || changed > samples.len() / 10, "{changed} footprints changed at {deg}°");
         }
@@ -411,4 +423,43 @@ fn a_crowded_pixel_shares_only_its_nearest_slabs() {
     let cam = frame.header.camera.orbit(10.0, 0.0);
     LayerSplat::new(1).render(&scene, &cam, &mut img);
     assert!(img.pixels.iter().any(|&p| p != BACKGROUND));
+}
+
+/// The optical-depth scaling's own log2 and 2^y follow the standard ones closely enough for
+/// 8-bit colors, and the drawn colors behave: unchanged at depth 1, more opaque for a slab
+/// crossed along a longer path, less for a shorter one, premultiplied throughout, clamped to
+/// the limit, and transparent or opaque samples untouched.
+#[test]
+fn drawn_colors_scale_the_optical_depth() {
+    use crate::layered::{drawn_color, exp2_poly, log2_poly};
+    for a8 in 1..=254u32 {
+        let x = 1.0 - a8 as f32 / 255.0;
+        assert!((log2_poly(x) - x.log2()).abs() < 2e-6, "log2 at {x}");
+    }
+    for k in 0..=4000 {
+        let y = -40.0 + k as f32 * 0.01;
+        let want = y.exp2();
+        assert!((exp2_poly(y) - want).abs() <= 1e-6 * want, "2^{y}");
+    }
+    assert_eq!(exp2_poly(-200.0), 0.0);
+    assert_eq!(exp2_poly(f32::NAN), 0.0);
+    for a8 in [1u8, 30, 64, 128, 200, 254] {
+        let c = u32::from_le_bytes([a8 / 2, a8 / 3, a8, a8]);
+        assert_eq!(drawn_color(c, 1.0, 4.0), c);
+        assert_eq!(drawn_color(c, 2.0, 1.0), c, "a limit of 1 scales nothing");
+        assert_eq!(drawn_color(c, f32::NAN, 4.0), c);
+        let (thick, thin) = (drawn_color(c, 2.0, 4.0).to_le_bytes(), drawn_color(c, 0.5, 4.0).to_le_bytes());
+        // 1 − (1 − α)², and 1 − (1 − α)^½, to the nearest level.
+        let a = a8 as f64 / 255.0;
+        assert!((thick[3] as f64 - 255.0 * (1.0 - (1.0 - a).powi(2))).abs() <= 0.5 + 1e-3, "{a8}: {thick:?}");
+        assert!((thin[3] as f64 - 255.0 * (1.0 - (1.0 - a).sqrt())).abs() <= 0.5 + 1e-3, "{a8}: {thin:?}");
+        assert!(thick[3] >= a8 && thin[3] <= a8);
+        for q in [thick, thin] {
+            assert!(q[0] <= q[3] && q[1] <= q[3] && q[2] <= q[3], "{q:?} is not premultiplied");
+        }
+        assert_eq!(drawn_color(c, 100.0, 4.0), drawn_color(c, 4.0, 4.0), "clamped to the limit");
+    }
+    for c in [0u32, 0x00ff_ffff, 0xff10_2030] {
+        assert_eq!(drawn_color(c, 3.0, 4.0), c, "transparent and opaque samples stay");
+    }
 }

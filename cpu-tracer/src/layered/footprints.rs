@@ -169,6 +169,9 @@ pub struct Setup {
     /// A sample takes its slab's shared corners where their footprint covers at least this
     /// share of the plane footprint's area on screen.
     pub water_ratio: f32,
+    /// The most a sample's optical depth is scaled where it takes its slab's shared corners
+    /// ([`drawn_color`]; at most 1: not scaled).
+    pub opacity_limit: f32,
     /// The largest pixel index along x.
     pub last_x: f32,
     /// The largest pixel index along y.
@@ -212,6 +215,7 @@ impl Setup {
             grow_ratio,
             min_alpha,
             water_ratio: 1.0,
+            opacity_limit: 1.0,
             last_x: camera.width as f32 - 1.0,
             last_y: camera.height as f32 - 1.0,
             view,
@@ -230,10 +234,12 @@ impl Setup {
         }
     }
 
-    /// The footprint of sample `id` (packed `sample`), one at a time: the reference the lanes
-    /// kernel [`footprint_group`] computes eight at a time, bit for bit.
+    /// The footprint of sample `id` (packed `sample`) and the color it is drawn with, one at a
+    /// time: the reference the lanes kernel [`footprint_group`] computes eight at a time, bit
+    /// for bit.
     #[cfg(test)]
-    pub(crate) fn quad(&self, sample: u64, colors: &[u32], id: usize, shared: Option<[f32; 4]>) -> Quad {
+    pub(crate) fn quad(&self, sample: u64, colors: &[u32], id: usize, shared: Option<[f32; 4]>) -> (Quad, u32) {
+        let color = colors.get(id).copied().unwrap_or(0);
         let view = &self.view;
         let c = self.deq.center(sample);
         let rel = c - self.src_eye;
@@ -242,7 +248,7 @@ impl Setup {
         let n = c - view.eye;
         let dist2 = n.length_squared();
         if !(z > 0.0 && dist2 > 0.0) {
-            return Quad::NONE;
+            return (Quad::NONE, color);
         }
         // The source pixel's frustum (the ray through the centre, ± half a pixel per axis)
         // cut by the plane through the centre facing the new eye: corner
@@ -301,14 +307,15 @@ impl Setup {
             let a = (q[2].0 - q[0].0) * (q[3].1 - q[1].1) - (q[3].0 - q[1].0) * (q[2].1 - q[0].1);
             a.max(-a)
         };
-        let chosen = match (water, plane) {
-            (Some(w), Some(p)) if area(&w) >= area(&p) * self.water_ratio => Some(w),
-            (Some(w), None) => Some(w),
-            (_, p) => p,
+        let (chosen, depth) = match (water, plane) {
+            (Some(w), Some(p)) if area(&w) >= area(&p) * self.water_ratio => (Some(w), area(&p) / area(&w)),
+            (Some(w), None) => (Some(w), 1.0),
+            (_, p) => (p, 1.0),
         };
+        let color = drawn_color(color, depth, self.opacity_limit);
         // Its corners, in order around it, in the new camera's image.
         let Some([q0, q1, q2, q3]) = chosen else {
-            return Quad::NONE;
+            return (Quad::NONE, color);
         };
         let x0 = q0.0.min(q1.0).min(q2.0).min(q3.0);
         let x1 = q0.0.max(q1.0).max(q2.0).max(q3.0);
@@ -318,22 +325,24 @@ impl Setup {
         let (xa, xb) = ((x0 - 0.5).ceil().max(0.0), (x1 - 0.5).floor().min(self.last_x));
         let (ya, yb) = ((y0 - 0.5).ceil().max(0.0), (y1 - 0.5).floor().min(self.last_y));
         if !(xa <= xb && ya <= yb) {
-            return Quad::NONE;
+            return (Quad::NONE, color);
         }
         // Squared distance: the same order, no square root. (Bounds are within the viewport,
         // at most `MAX_VIEWPORT` < 2¹⁶.)
-        Quad {
+        let quad = Quad {
             edges: coefficient_major(edges_of([q0, q1, q2, q3])),
             key: key(dist2, id as u32),
             x: [xa as u16, xb as u16],
             y: [ya as u16, yb as u16],
-        }
+        };
+        (quad, color)
     }
 }
 
 /// [`Setup::quad`] for eight samples at once: the same operations in the same order on lanes,
-/// so the same footprints bit for bit (the test `lanes_match_the_scalar_footprints`). `first`
-/// is the id of `samples[0]`; `samples` holds at most eight.
+/// so the same footprints and drawn colors bit for bit (the test
+/// `lanes_match_the_scalar_footprints`). `first` is the id of `samples[0]`; `samples` holds at
+/// most eight; each one's color as drawn goes to `drawn`.
 #[inline(always)]
 pub(crate) fn footprint_group<L: Lanes>(
     s: &Setup,
@@ -342,6 +351,7 @@ pub(crate) fn footprint_group<L: Lanes>(
     shared: &[[f32; 4]],
     first: usize,
     out: &mut [Quad],
+    drawn: &mut [u32],
 ) {
     // The centres, decoded as the tile splatter's bound pass does (`Lanes::decode8`, the
     // scalar `Dequantizer::center` values; less a zero eye, which changes no bit).
@@ -430,6 +440,12 @@ pub(crate) fn footprint_group<L: Lanes>(
         xs[k] = use_w.select(wxs[k], xs[k]);
         ys[k] = use_w.select(wys[k], ys[k]);
     }
+    // On its slab's shared corners a sample carries its optical depth over the footprint's
+    // area on screen: the plane's area over the slab's (1 where it is drawn on the plane).
+    let depth = (use_w & okp).select(ap / aw, sp(1.0)).to_array();
+    for (i, a) in drawn.iter_mut().enumerate().take(samples.len().min(8)) {
+        *a = drawn_color(colors.get(first + i).copied().unwrap_or(0), depth[i], s.opacity_limit);
+    }
     ok = use_w | okp;
     let x0 = xs[0].min(xs[1]).min(xs[2]).min(xs[3]);
     let x1 = xs[0].max(xs[1]).max(xs[2]).max(xs[3]);
@@ -464,7 +480,8 @@ pub(crate) fn footprint_group<L: Lanes>(
     }
 }
 
-/// Every footprint of `samples` (ids from `first`) into `out`, eight at a time.
+/// Every footprint of `samples` (ids from `first`) into `out` and its color as drawn into
+/// `drawn`, eight at a time.
 #[inline(always)]
 pub(crate) fn footprint_lanes<L: Lanes>(
     s: &Setup,
@@ -473,10 +490,11 @@ pub(crate) fn footprint_lanes<L: Lanes>(
     shared: &[[f32; 4]],
     first: usize,
     out: &mut [Quad],
+    drawn: &mut [u32],
 ) {
-    for (g, (smp, q)) in samples.chunks(8).zip(out.chunks_mut(8)).enumerate() {
+    for (g, ((smp, q), d)) in samples.chunks(8).zip(out.chunks_mut(8)).zip(drawn.chunks_mut(8)).enumerate() {
         let sh = shared.get(8 * g..(8 * g + smp.len()).min(shared.len())).unwrap_or(&[]);
-        footprint_group::<L>(s, smp, colors, sh, first + 8 * g, q);
+        footprint_group::<L>(s, smp, colors, sh, first + 8 * g, q, d);
     }
 }
 
@@ -489,6 +507,7 @@ lanes::dispatch! {
         shared: &[[f32; 4]],
         first: usize,
         out: &mut [Quad],
+        drawn: &mut [u32],
     )
 }
 
@@ -503,8 +522,65 @@ pub(crate) fn footprints(
     shared: &[[f32; 4]],
     first: usize,
     out: &mut [Quad],
+    drawn: &mut [u32],
 ) {
-    footprints_on_best_lanes(s, samples, colors, shared, first, out)
+    footprints_on_best_lanes(s, samples, colors, shared, first, out, drawn)
+}
+
+/// `log2(x)` of a positive normal `x` with additions, multiplications and one division only
+/// (the GPU layered splatter computes it with the same operations in the same order, so both
+/// draw the same colors; within 2·10⁻⁶ of `log2`): the exponent from the bits, the mantissa
+/// `m` in `[1, 2)` by `2/ln 2 · atanh((m − 1)/(m + 1))`, its series to the ninth power.
+pub fn log2_poly(x: f32) -> f32 {
+    let bits = x.to_bits();
+    let e = ((bits >> 23) & 0xff) as i32 - 127;
+    let m = f32::from_bits((bits & 0x007f_ffff) | 0x3f80_0000);
+    let s = (m - 1.0) / (m + 1.0);
+    let s2 = s * s;
+    let p = s * (2.885_39 + s2 * (0.961_796_7 + s2 * (0.577_078 + s2 * (0.412_198_5 + s2 * 0.320_598_8))));
+    e as f32 + p
+}
+
+/// `2^y` with additions and multiplications only ([`log2_poly`]'s counterpart, the same on the
+/// GPU, whose shader spells `ln 2` as the literal 0.6931472, the same `f32`; within 10⁻⁶
+/// relative): the integer part into the exponent bits, the fraction by the series of
+/// `e^(f·ln 2)` to the seventh power; 0 below the smallest normal.
+pub fn exp2_poly(y: f32) -> f32 {
+    if !(y >= -126.0) {
+        return 0.0;
+    }
+    let y = y.min(127.0);
+    let n = y.floor();
+    let f = y - n;
+    let p = 1.0
+        + f * (core::f32::consts::LN_2
+            + f * (0.240_226_5
+                + f * (0.055_504_11
+                    + f * (0.009_618_129 + f * (0.001_333_355 + f * (0.000_154_035_3 + f * 0.000_015_252_73))))));
+    p * f32::from_bits(((n as i32 + 127) as u32) << 23)
+}
+
+/// The color sample color `c` (premultiplied RGBA8) is drawn with where its footprint stands
+/// for `depth` times the optical depth of its own ray: a slab seen more edge-on than from the
+/// frame's camera is crossed along a longer path (its footprint on the shared corners covers
+/// less of the screen than the plane's, and `depth` = the plane's area over the slab's is more
+/// than 1), one turned towards the eye along a shorter one. The opacity `α` becomes
+/// `1 − (1 − α)^depth`, `depth` clamped to `[1/limit, limit]`, and the color channels scale
+/// with it (premultiplied, so each stays at most the opacity; rounded to the nearest level, so
+/// a `depth` within a rounding error of 1 changes nothing). `depth` 1, a limit of at most 1,
+/// or a transparent or opaque sample: `c` itself, so a frame drawn at its own camera is its own
+/// image.
+pub fn drawn_color(c: u32, depth: f32, limit: f32) -> u32 {
+    let b = c.to_le_bytes();
+    if !(limit > 1.0) || depth == 1.0 || !depth.is_finite() || b[3] == 0 || b[3] == 255 {
+        return c;
+    }
+    let d = depth.clamp(1.0 / limit, limit);
+    let a = b[3] as f32 * (1.0 / 255.0);
+    let scale = (1.0 - exp2_poly(d * log2_poly(1.0 - a))) / a;
+    // Rounded to the nearest level; a premultiplied channel (at most the opacity) stays so.
+    let level = |x: u8| (x as f32 * scale + 0.5).min(255.0) as u8;
+    u32::from_le_bytes(b.map(level))
 }
 
 /// The AVX2 kernel of [`footprints`], for the tests that hold it against the portable lanes.
@@ -519,7 +595,8 @@ pub(crate) unsafe fn footprints_avx2_for_tests(
     shared: &[[f32; 4]],
     first: usize,
     out: &mut [Quad],
+    drawn: &mut [u32],
 ) {
     // SAFETY: the caller guarantees AVX2.
-    unsafe { footprints_avx2(s, samples, colors, shared, first, out) }
+    unsafe { footprints_avx2(s, samples, colors, shared, first, out, drawn) }
 }

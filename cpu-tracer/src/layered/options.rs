@@ -65,13 +65,18 @@ pub struct LayerOptions {
     /// Watertight slabs: neighbouring pixels' segments of the same slab share their
     /// footprints' corners where their depths differ by at most this many source pixels (0:
     /// every footprint is its own plane). Only with footprints of the source pixel's size.
-    /// Measured (`docs/results.md`, "Watertight slabs"): 1–3 all lower the sessions' ꟻLIP,
-    /// 1.5 the most.
+    /// Measured (`docs/results.md`, "Watertight slabs"): with the optical depth scaled by
+    /// area ([`LayerOptions::opacity_limit`]) 5, with planes alone 1.5.
     pub watertight: f32,
     /// A segment takes its slab's shared corners only where their footprint covers at least
     /// this share of the plane footprint's area on screen: a slab seen ever more edge-on
     /// thins to a sliver where the volume it stands for does not (measured, `docs/results.md`).
     pub water_ratio: f32,
+    /// On its slab's shared corners a segment's optical depth is scaled by the plane
+    /// footprint's area over the slab's (the longer or shorter path through a slab seen from
+    /// the new eye), by at most this factor either way (at most 1: not scaled; see
+    /// `footprints::drawn_color`). Measured (`docs/results.md`, "Watertight slabs").
+    pub opacity_limit: f32,
 }
 
 impl LayerOptions {
@@ -84,6 +89,7 @@ impl LayerOptions {
         max_own: MAX_OWN,
         watertight: WATERTIGHT,
         water_ratio: 1.0,
+        opacity_limit: 4.0,
     };
 
     /// Whether at the frame's own camera every footprint is exactly its source pixel (half

@@ -27,9 +27,9 @@
 //!   (`session-calibrate`'s `DATASET/N` lines, [`super::peers::ResolutionCost`]) and encodes
 //!   at that size; the full resolution at the first still tick.
 //!
-//! [`default_method`] (alias `volwarp`, core's `Method::DEFAULT`) is the method the window
-//! client runs by default; `volwarp-adaptive` (`volwarp-adaptive=4`) is it with `+coarse=2`
-//! (`+coarse=4`).
+//! [`default_method`] (alias `volwarp`, core's `Method::DEFAULT`, which has `+coarse=2`) is the
+//! method the window client runs by default; `volwarp-adaptive` is the same and
+//! `volwarp-adaptive=4` it with `+coarse=4`.
 //! The `stale` method never predicts nor widens: it is what a send-image system shows.
 
 use super::peers::ImagePeer;
@@ -203,17 +203,19 @@ pub struct MethodSpec {
 }
 
 /// The method the window client runs by default and the sessions' `volwarp` alias (core's
-/// `Method::DEFAULT`), as a spec: `splat-layers+predict+frames=4+adapt+layers=4`.
+/// `Method::DEFAULT`), as a spec: `splat-layers+predict+frames=4+adapt+layers=4+coarse=2`.
+/// Without adaptive resolution it is `splat-layers+predict+frames=4+adapt+layers=4`.
 pub fn default_method() -> String {
     MethodSpec::of(&CoreMethod::DEFAULT).name()
 }
 
 /// The methods named by an alias, which sessions keep as the CSV name: `volwarp` (core's
-/// `Method::DEFAULT`), `volwarp-adaptive` (it with adaptive resolution, 1/2 per axis while the
-/// camera moves) and `volwarp-adaptive=4` (1/4); `None` for any other name.
+/// `Method::DEFAULT`, with its adaptive resolution: 1/2 per axis while the camera moves),
+/// `volwarp-adaptive` (the same, by its older name) and `volwarp-adaptive=4` (1/4); `None` for
+/// any other name.
 pub fn alias(name: &str) -> Option<MethodSpec> {
     let coarse = match name.trim() {
-        "volwarp" => 1,
+        "volwarp" => CoreMethod::DEFAULT.coarse,
         "volwarp-adaptive" | "volwarp-adaptive=2" => 2,
         "volwarp-adaptive=4" => 4,
         _ => return None,
@@ -459,7 +461,7 @@ mod tests {
         assert_eq!((d.renderer, d.frames, d.adapt), (RendererKind::SplatLayers, 4, true));
         assert_eq!(MethodSpec::parse(&d.name()).unwrap(), d);
         assert_eq!(d.name(), default_method(), "the default is written canonically");
-        assert_eq!(default_method(), "splat-layers+predict+frames=4+adapt+layers=4", "the sessions' CSV name");
+        assert_eq!(default_method(), "splat-layers+predict+frames=4+adapt+layers=4+coarse=2", "the sessions' CSV name");
         assert_eq!(d.method(1), CoreMethod::DEFAULT);
         let a = MethodSpec::parse("volwarp-adaptive").unwrap();
         assert_eq!(a, MethodSpec { request: SessionRequest { coarse: 2, ..d.request }, ..d });

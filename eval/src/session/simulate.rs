@@ -385,7 +385,9 @@ pub fn serve(
     // Adaptive resolution: a request sent while the camera moved asks for a coarser grid, which
     // the server renders in its time times the marcher's measured ratio.
     let moving = |r: &Request| r.tick > 0 && cams[r.tick] != cams[r.tick - 1];
-    let server_ms = |r: &Request| net.server_ms * cfg.resolution_cost.ratio(request.policy().divisor(moving(r)));
+    let server_ms = |r: &Request| {
+        net.server_ms * cfg.resolution_cost.ratio(request.policy().divisor_for(moving(r), cfg.size, cfg.size))
+    };
     // The first frame is layered: the first moves warp it (one sample per pixel there raised
     // the MRI orbit's p95 from 0.044 to 0.065).
     let (first, first_bytes) = render(cams[0], 0, looks.state_at(0), 0);
