@@ -218,7 +218,7 @@ impl RequestPolicy {
 
     /// [`RequestPolicy::camera`] for a view that is `moving` (it changed since the last
     /// request) or not: while moving, the camera asked for (the guard band's too) is on a pixel
-    /// grid [`RequestPolicy::divisor`] times coarser per axis ([`coarse_viewport`]); at rest it
+    /// grid [`RequestPolicy::divisor_for`] times coarser per axis ([`coarse_viewport`]); at rest it
     /// asks for [`RequestPolicy::layers`] segments per pixel.
     pub fn camera_at(
         &self,
