@@ -270,6 +270,38 @@ fn packet_parts_equal_scalar_parts_bit_for_bit() {
     }
 }
 
+/// Each pixel's segments (the slots its count covers), as bits.
+fn pixel_bits(f: &volwarp_server::distributed::partial::PartFrame) -> Vec<Vec<u32>> {
+    (0..f.count.len())
+        .map(|i| {
+            f.pixel(i)
+                .iter()
+                .flat_map(|s| [s.t.to_bits(), s.c[0].to_bits(), s.c[1].to_bits(), s.c[2].to_bits(), s.c[3].to_bits()])
+                .collect()
+        })
+        .collect()
+}
+
+#[test]
+fn a_part_reusing_its_last_frames_buffers_marches_as_a_fresh_one() {
+    let ds = Dataset::load(data("mri_colin27.nrrd"), None).unwrap();
+    let m = Marcher::new(ds.volume.clone(), &ds.tf);
+    let (dec, parts) = parts_of_file(&data("mri_colin27.nrrd"), 2);
+    let reused = marchers(&ds, &dec, parts, MarchOptions::default());
+    // Larger frames first, then smaller and fewer segments: the kept slots hold old segments.
+    for (size, layers, yaw) in [(48, 4, 30.0), (48, 4, 120.0), (33, 2, 200.0), (40, 3, 75.0), (20, 1, 10.0)] {
+        let cam = request(&m, size, yaw, Heuristic::Threshold).camera;
+        for p in &reused {
+            let fresh = p.clone().march(&cam, layers, Heuristic::Threshold);
+            let got = p.march(&cam, layers, Heuristic::Threshold);
+            assert_eq!(got.count, fresh.count, "part {} size {size} K={layers}", p.part());
+            assert!(got.count.iter().any(|&c| c > 0), "part {} saw nothing", p.part());
+            assert!(pixel_bits(&got) == pixel_bits(&fresh), "part {} size {size} K={layers}", p.part());
+            p.recycle(got);
+        }
+    }
+}
+
 #[test]
 fn band_owners_assemble_the_frame_rank_0_would() {
     use volwarp_server::distributed::FramePart;

@@ -253,12 +253,21 @@ fn prefix(counts: &[i32]) -> Vec<i32> {
         .collect()
 }
 
+/// A rank's exchange buffers, kept from frame to frame: allocated anew, a 1024² frame's 10–20 MB
+/// of bands cost a page fault per 4 KiB every frame.
+#[derive(Default)]
+struct Buffers {
+    send: Vec<u32>,
+    recv: Vec<u32>,
+}
+
 /// One frame on every rank (collective): march, direct-send by bands, merge, (with `assemble`)
 /// each band's samples assembled by its owner, gather. Rank 0 gets the merged bands or the
 /// frame, and every rank's stats.
 fn frame_collective(
     world: &SimpleCommunicator,
     part: &PartMarcher,
+    bufs: &mut Buffers,
     geometry: &FrameGeometry,
     (req, layers, assemble): (&CameraRequest, u32, bool),
     fault: Option<Fault>,
@@ -305,7 +314,9 @@ fn frame_collective(
         Ok(pf) => {
             let lens: Vec<usize> =
                 (0..size).map(|b| if b == rank { 0 } else { composite::band_len(pf, rows_of(b)) }).collect();
-            let mut send = vec![0u32; lens.iter().sum::<usize>() / 4];
+            let mut send = std::mem::take(&mut bufs.send);
+            send.clear();
+            send.resize(lens.iter().sum::<usize>() / 4, 0);
             let mut rest = bytemuck::cast_slice_mut::<u32, u8>(&mut send);
             for (b, &l) in lens.iter().enumerate() {
                 let (c, r) = rest.split_at_mut(l);
@@ -334,7 +345,9 @@ fn frame_collective(
     world.all_to_all_into(&scounts[..], &mut rcounts[..]);
     let (sdispl, rdispl) = (prefix(&scounts), prefix(&rcounts));
     let recv_len: usize = rcounts.iter().map(|&c| c as usize).sum();
-    let mut recv = vec![0u32; recv_len.div_ceil(4)];
+    let mut recv = std::mem::take(&mut bufs.recv);
+    recv.clear();
+    recv.resize(recv_len.div_ceil(4), 0);
     {
         let send = bytemuck::cast_slice::<u32, u8>(&send);
         let recv = &mut bytemuck::cast_slice_mut::<u32, u8>(&mut recv)[..recv_len];
@@ -342,14 +355,16 @@ fn frame_collective(
         let mut rp = PartitionMut::new(recv, &rcounts[..], &rdispl[..]);
         mpi::request::scope(|scope| wait_yielding(world.immediate_all_to_all_varcount_into(scope, &sp, &mut rp)));
     }
-    drop(send);
+    if send.capacity() * 4 <= super::partial::KEEP_BYTES {
+        bufs.send = send;
+    }
     let t2 = Instant::now();
     st.exchange_us = (t2 - t_sent).as_micros() as u64;
     let rows = rows_of(rank);
     let pixels = (rows.end - rows.start) as usize * cam.width as usize;
     // The received bands read in place, this rank's own from its march. A band that does not
     // parse (a failed rank's): rank 0 fails the frame.
-    let recv = &bytemuck::cast_slice::<u32, u8>(&recv)[..recv_len];
+    let received = &bytemuck::cast_slice::<u32, u8>(&recv)[..recv_len];
     let mut broken = false;
     let views: Vec<BandView> = (0..size)
         .filter_map(|r| {
@@ -357,7 +372,7 @@ fn frame_collective(
                 return marched.as_ref().ok().map(|pf| BandView::of_part(pf, rows.clone()));
             }
             let (a, n) = (rdispl[r] as usize, rcounts[r] as usize);
-            match BandView::parse(&recv[a..a + n], pixels, k) {
+            match BandView::parse(&received[a..a + n], pixels, k) {
                 Ok(v) => Some(v),
                 Err(e) => {
                     log::error!("rank {rank}: the band from rank {r} is broken ({e}); left out");
@@ -396,7 +411,12 @@ fn frame_collective(
     let broken = broken || merged.is_none();
     let merged = merged.unwrap_or_else(|| FAILED_BAND.to_vec());
     drop(views);
-    drop(marched);
+    if recv.capacity() * 4 <= super::partial::KEEP_BYTES {
+        bufs.recv = recv;
+    }
+    if let Ok(pf) = marched {
+        part.recycle(pf);
+    }
     let t3 = Instant::now();
     st.merge_us = (t3 - t2).as_micros() as u64;
     if rank != 0 {
@@ -674,6 +694,7 @@ pub fn run(launch: Launch, job: Job) -> Result<(), String> {
         let root = world.process_at_rank(0);
         let fault = Fault::from_env(rank);
         let mut frames = 0u64;
+        let mut bufs = Buffers::default();
         loop {
             let mut cmd = [0u8; CMD_LEN];
             mpi::request::scope(|scope| wait_idle(root.immediate_broadcast_into(scope, &mut cmd[..])));
@@ -681,7 +702,7 @@ pub fn run(launch: Launch, job: Job) -> Result<(), String> {
                 Some((req, layers, assemble)) => {
                     frames += 1;
                     let fault = fault.filter(|f| f.frame == frames);
-                    frame_collective(&world, &part, &geometry, (&req, layers, assemble), fault);
+                    frame_collective(&world, &part, &mut bufs, &geometry, (&req, layers, assemble), fault);
                 }
                 None => return Ok(()),
             }
@@ -689,6 +710,7 @@ pub fn run(launch: Launch, job: Job) -> Result<(), String> {
     }
     let watchdog = Watchdog::spawn(launch.rank_timeout);
     let root = world.process_at_rank(0);
+    let bufs = std::cell::RefCell::new(Buffers::default());
     let frame = |req: &CameraRequest, layers: u32, assemble: bool| -> Result<(Collected, FrameStats), String> {
         if layers <= 1 {
             super::one_sample_heuristic(req.heuristic)?;
@@ -709,11 +731,12 @@ pub fn run(launch: Launch, job: Job) -> Result<(), String> {
         // Nonblocking, as the other ranks wait for it (a blocking collective does not match a
         // nonblocking one).
         mpi::request::scope(|scope| wait_yielding(root.immediate_broadcast_into(scope, &mut cmd[..])));
-        let (collected, stats) = match frame_collective(&world, &part, &geometry, (req, layers, assemble), None) {
-            Some(Ok(r)) => r,
-            Some(Err(e)) => watchdog.fail(e),
-            None => watchdog.fail("rank 0 got no frame".into()),
-        };
+        let (collected, stats) =
+            match frame_collective(&world, &part, &mut bufs.borrow_mut(), &geometry, (req, layers, assemble), None) {
+                Some(Ok(r)) => r,
+                Some(Err(e)) => watchdog.fail(e),
+                None => watchdog.fail("rank 0 got no frame".into()),
+            };
         watchdog.done();
         let total = t0.elapsed().as_micros() as u64;
         let march = stats.iter().map(|s| s.march_us).max().unwrap_or(0);

@@ -90,6 +90,24 @@ pub struct PartMarcher {
     inv_spacing: Vec3,
     /// Where the part lies in the whole volume.
     win: PartWindow,
+    /// The segment slots of the last frame given back ([`PartMarcher::recycle`]), reused by the
+    /// next march: a 1024² frame's slots are 84 MB at K = 4, which allocated anew every frame
+    /// cost the march a page fault per 4 KiB and the merge their unmapping.
+    spare: Spare,
+}
+
+/// The largest buffer a rank keeps from one frame to the next (a 1024² frame's segment slots at
+/// K = 4 take 84 MB).
+pub const KEEP_BYTES: usize = 256 << 20;
+
+/// [`PartMarcher`]'s buffer kept between frames; a clone starts without one.
+#[derive(Debug, Default)]
+struct Spare(std::sync::Mutex<Vec<Seg>>);
+
+impl Clone for Spare {
+    fn clone(&self) -> Self {
+        Spare::default()
+    }
 }
 
 impl PartMarcher {
@@ -114,7 +132,18 @@ impl PartMarcher {
         let sp = volume.spacing();
         let win = PartWindow::new(dec.dims, p.lo, p.hi, p.held_lo, sp);
         let opts = m.options();
-        Ok(PartMarcher { volume, dec, part, lut, opts, dt: m.step(), inv_spacing: 1.0 / sp, m, win })
+        Ok(PartMarcher {
+            volume,
+            dec,
+            part,
+            lut,
+            opts,
+            dt: m.step(),
+            inv_spacing: 1.0 / sp,
+            m,
+            win,
+            spare: Spare::default(),
+        })
     }
 
     /// The march options.
@@ -238,6 +267,14 @@ impl PartMarcher {
         s.len()
     }
 
+    /// Gives a marched frame's buffers back for the next [`PartMarcher::march`] to reuse (kept
+    /// up to [`KEEP_BYTES`]: one huge frame does not pin its memory).
+    pub fn recycle(&self, frame: PartFrame) {
+        if frame.segs.capacity() * SEG_BYTES <= KEEP_BYTES {
+            *self.spare.0.lock().unwrap_or_else(|e| e.into_inner()) = frame.segs;
+        }
+    }
+
     /// Marches every pixel of `camera` (parallel over rows).
     pub fn march(&self, camera: &Camera, layers: u32, heuristic: Heuristic) -> PartFrame {
         let k = layers.clamp(1, MAX_LAYERS as u32) as usize;
@@ -245,7 +282,9 @@ impl PartMarcher {
         let basis = camera.ray_basis();
         let o = basis.origin();
         let mut count = vec![0u8; w * h];
-        let mut segs = vec![Seg::default(); w * h * k];
+        // Slots past a pixel's count are never read, so the last frame's need no clearing.
+        let mut segs = std::mem::take(&mut *self.spare.0.lock().unwrap_or_else(|e| e.into_inner()));
+        segs.resize(w * h * k, Seg::default());
         if self.opts.kernel == MarchKernel::Packet {
             // Bands of rows a multiple of every lane kind's packet height.
             let rows = 8;
