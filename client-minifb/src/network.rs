@@ -241,6 +241,8 @@ struct Pending {
     frame: Frame,
     state: u32,
     requested_at: Option<Instant>,
+    /// Asked for on the coarser grid of adaptive resolution (its horizon is measured apart).
+    coarse: bool,
     received_at: Instant,
 }
 
@@ -283,7 +285,7 @@ struct Shared {
     pending_cv: Condvar,
     ready: Mutex<Option<ReadyScene>>,
     recycle: Mutex<Option<Scene>>,
-    sent: Mutex<VecDeque<(u64, Instant)>>,
+    sent: Mutex<VecDeque<(u64, Instant, bool)>>,
     error: Mutex<Option<ClientError>>,
     /// The link's state and the current connection's end, and its wake-ups.
     link: Mutex<LinkSlot>,
@@ -773,7 +775,8 @@ fn read_loop(sh: &Shared, mut stream: impl Read, limits: Limits, recorder: Optio
         match msg {
             Message::Frame(frame) => {
                 let received_at = Instant::now();
-                let requested_at = lock(&sh.sent).iter().rev().find(|(s, _)| *s == frame.header.seq).map(|(_, t)| *t);
+                let asked = lock(&sh.sent).iter().rev().find(|(s, ..)| *s == frame.header.seq).map(|&(_, t, c)| (t, c));
+                let (requested_at, coarse) = (asked.map(|a| a.0), asked.is_some_and(|a| a.1));
                 if let Some(r) = recorder {
                     r.frame(bytes);
                 }
@@ -784,7 +787,7 @@ fn read_loop(sh: &Shared, mut stream: impl Read, limits: Limits, recorder: Optio
                         q.pop_front();
                     }
                     let state = sh.state_id.load(Ordering::SeqCst);
-                    q.push_back(Pending { frame, state, requested_at, received_at });
+                    q.push_back(Pending { frame, state, requested_at, coarse, received_at });
                 }
                 sh.pending_cv.notify_one();
                 lock(&sh.view).frame_arrived = true;
@@ -883,7 +886,7 @@ fn build_loop(sh: &Shared, cfg: &NetConfig) {
             let mut h = lock(&sh.horizon);
             let t0 = h.1;
             let secs = |t: Instant| t.saturating_duration_since(t0).as_secs_f64();
-            h.0.observe(secs(r), secs(Instant::now()));
+            h.0.observe(secs(r), secs(Instant::now()), p.coarse);
         }
         log::debug!("built scene seq {} ({} samples) in {build_ms:.1} ms", scene.header.seq, scene.samples.len());
         let ready = ReadyScene {
@@ -977,7 +980,7 @@ fn write_loop(sh: &Shared, mut stream: impl Write, request: RequestPolicy) {
             if s.len() >= MAX_SENT {
                 s.pop_front();
             }
-            s.push_back((seq, now));
+            s.push_back((seq, now, asks.view.width < view.camera.width));
         }
         last_send = Some(now);
         if let Err(e) = send_request(&mut stream, &req) {

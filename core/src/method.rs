@@ -229,10 +229,10 @@ impl RequestPolicy {
         cadence: &Cadence,
     ) -> Requested {
         let mut view = shown;
+        let d = self.divisor_for(moving, shown.width, shown.height);
         if self.predict {
-            view = predictor.predict(horizon.seconds(cadence.display_tick_s)).unwrap_or(shown);
+            view = predictor.predict(horizon.seconds(cadence.display_tick_s, d)).unwrap_or(shown);
         }
-        let d = self.divisor_for(moving, view.width, view.height);
         if d > 1 {
             let (w, h) = coarse_viewport(view.width, view.height, d);
             view = view.with_viewport(w, h);

@@ -164,11 +164,34 @@ impl Predictor {
 /// Both terms are exponential moving averages (weight [`Horizon::WEIGHT`] for the newest
 /// measurement); before the first frame the horizon is 0 (no prediction). A client measures its
 /// first frame too (the one it shows before the camera moves), so it predicts from the start.
+///
+/// Frames at full resolution and frames on the coarser grid of adaptive resolution are measured
+/// apart: a coarse frame is marched and sent in a fraction of a full one's time. Until a coarse
+/// frame has arrived, a coarse request's horizon is the full frames' scaled by its share of the
+/// pixels (`1/d²` for a divisor `d` per axis): the march and the transfer scale with the pixels,
+/// the round trip does not, so this errs short, and the first coarse frame corrects it. Taken
+/// as it is, the full frame's horizon made the first coarse frames of a turn overshoot by about
+/// twice the time they took to come.
 #[derive(Clone, Copy, Debug, Default, PartialEq)]
 pub struct Horizon {
+    /// Request-to-arrival and interval averages: of full-resolution frames, of coarse frames.
+    classes: [Spans; 2],
+    last_arrival_s: Option<f64>,
+}
+
+/// One class of frames' moving averages (0: nothing measured).
+#[derive(Clone, Copy, Debug, Default, PartialEq)]
+struct Spans {
     request_to_arrival_s: f64,
     interval_s: f64,
-    last_arrival_s: Option<f64>,
+}
+
+impl Spans {
+    const NONE: Spans = Spans { request_to_arrival_s: 0.0, interval_s: 0.0 };
+
+    fn measured(&self) -> bool {
+        self.request_to_arrival_s > 0.0 || self.interval_s > 0.0
+    }
 }
 
 impl Horizon {
@@ -177,21 +200,23 @@ impl Horizon {
 
     /// Nothing measured yet.
     pub const fn new() -> Self {
-        Horizon { request_to_arrival_s: 0.0, interval_s: 0.0, last_arrival_s: None }
+        Horizon { classes: [Spans::NONE; 2], last_arrival_s: None }
     }
 
     /// Records a frame whose request was sent at `requested_s` and that arrived (is ready to
-    /// show) at `arrived_s`, on any clock in seconds. Non-finite or negative spans are ignored.
-    pub fn observe(&mut self, requested_s: f64, arrived_s: f64) {
+    /// show) at `arrived_s`, on any clock in seconds; `coarse`: a frame on the coarser grid of
+    /// adaptive resolution. Non-finite or negative spans are ignored.
+    pub fn observe(&mut self, requested_s: f64, arrived_s: f64, coarse: bool) {
         let ema = |old: f64, new: f64| if old == 0.0 { new } else { old + (new - old) * Self::WEIGHT };
+        let c = &mut self.classes[usize::from(coarse)];
         let span = arrived_s - requested_s;
         if span.is_finite() && span >= 0.0 {
-            self.request_to_arrival_s = ema(self.request_to_arrival_s, span);
+            c.request_to_arrival_s = ema(c.request_to_arrival_s, span);
         }
         if let Some(last) = self.last_arrival_s {
             let gap = arrived_s - last;
             if gap.is_finite() && gap > 0.0 {
-                self.interval_s = ema(self.interval_s, gap);
+                c.interval_s = ema(c.interval_s, gap);
             }
         }
         if arrived_s.is_finite() {
@@ -199,17 +224,29 @@ impl Horizon {
         }
     }
 
-    /// The horizon in seconds for a display that shows a new image every `display_s` seconds
-    /// (clamped to [`MAX_HORIZON_S`]): a frame is on screen at the display ticks from its
-    /// arrival until the next frame's, on average `(interval − display_s) / 2` after its
-    /// arrival (0 when frames come at least once per tick). Until two frames have arrived the
-    /// interval is taken to be the request-to-arrival time (a server that renders one frame at
-    /// a time delivers them about that far apart, less the round trip).
-    pub fn seconds(&self, display_s: f32) -> f32 {
-        let interval = if self.interval_s > 0.0 { self.interval_s } else { self.request_to_arrival_s };
+    /// The horizon in seconds of a request on a grid `divisor` times coarser per axis (1: full
+    /// resolution) for a display that shows a new image every `display_s` seconds (clamped to
+    /// [`MAX_HORIZON_S`]): a frame is on screen at the display ticks from its arrival until the
+    /// next frame's, on average `(interval − display_s) / 2` after its arrival (0 when frames
+    /// come at least once per tick). Until two frames of the class have arrived the interval is
+    /// taken to be the request-to-arrival time (a server that renders one frame at a time
+    /// delivers them about that far apart, less the round trip).
+    pub fn seconds(&self, display_s: f32, divisor: u32) -> f32 {
+        let coarse = divisor > 1;
+        let own = self.classes[usize::from(coarse)];
+        let (spans, scale) = if own.measured() {
+            (own, 1.0)
+        } else if coarse {
+            let d = f64::from(divisor);
+            (self.classes[0], 1.0 / (d * d))
+        } else {
+            (self.classes[1], 1.0)
+        };
+        let span = spans.request_to_arrival_s * scale;
+        let interval = if spans.interval_s > 0.0 { spans.interval_s * scale } else { span };
         let display = if display_s.is_finite() { display_s.max(0.0) as f64 } else { 0.0 };
         let shown = 0.5 * (interval - display).max(0.0);
-        ((self.request_to_arrival_s + shown) as f32).clamp(0.0, MAX_HORIZON_S)
+        ((span + shown) as f32).clamp(0.0, MAX_HORIZON_S)
     }
 }
 
@@ -315,27 +352,50 @@ mod tests {
     #[test]
     fn horizon_is_request_to_arrival_plus_half_the_interval() {
         let mut h = Horizon::new();
-        assert_eq!(h.seconds(0.0), 0.0);
+        assert_eq!(h.seconds(0.0, 1), 0.0);
         // One frame: its request-to-arrival stands in for the interval too.
-        h.observe(-0.6, 0.0);
-        assert!((h.seconds(0.0) - 0.9).abs() < 1e-6, "{}", h.seconds(0.0));
-        assert!((h.seconds(0.2) - 0.8).abs() < 1e-6, "{}", h.seconds(0.2));
+        h.observe(-0.6, 0.0, false);
+        assert!((h.seconds(0.0, 1) - 0.9).abs() < 1e-6, "{}", h.seconds(0.0, 1));
+        assert!((h.seconds(0.2, 1) - 0.8).abs() < 1e-6, "{}", h.seconds(0.2, 1));
         let mut h = Horizon::new();
         // Frames requested every 0.5 s, each arriving 0.6 s later: 0.6 + 0.25.
         for k in 0..40 {
             let t = k as f64 * 0.5;
-            h.observe(t, t + 0.6);
+            h.observe(t, t + 0.6, false);
         }
-        assert!((h.seconds(0.0) - 0.85).abs() < 1e-4, "{}", h.seconds(0.0));
+        assert!((h.seconds(0.0, 1) - 0.85).abs() < 1e-4, "{}", h.seconds(0.0, 1));
         // Frames at least once per display tick: request-to-arrival only.
-        assert!((h.seconds(0.5) - 0.6).abs() < 1e-4, "{}", h.seconds(0.5));
-        assert!((h.seconds(f32::NAN) - 0.85).abs() < 1e-4);
+        assert!((h.seconds(0.5, 1) - 0.6).abs() < 1e-4, "{}", h.seconds(0.5, 1));
+        assert!((h.seconds(f32::NAN, 1) - 0.85).abs() < 1e-4);
         // Garbage is ignored, and a huge latency is clamped.
-        h.observe(f64::NAN, 1.0);
-        h.observe(5.0, 4.0);
-        assert!(h.seconds(0.0).is_finite());
+        h.observe(f64::NAN, 1.0, false);
+        h.observe(5.0, 4.0, false);
+        assert!(h.seconds(0.0, 1).is_finite());
         let mut slow = Horizon::new();
-        slow.observe(0.0, 30.0);
-        assert_eq!(slow.seconds(0.016), MAX_HORIZON_S);
+        slow.observe(0.0, 30.0, false);
+        assert_eq!(slow.seconds(0.016, 1), MAX_HORIZON_S);
+    }
+
+    #[test]
+    fn coarse_frames_have_their_own_horizon() {
+        let mut h = Horizon::new();
+        // The first frame at full resolution: 0.6 s from request to arrival.
+        h.observe(-0.6, 0.0, false);
+        // A coarse request before any coarse frame: the full frame's time over d² (0.15 s,
+        // interval alike), plus half the interval.
+        assert!((h.seconds(0.0, 2) - 0.225).abs() < 1e-6, "{}", h.seconds(0.0, 2));
+        assert!((h.seconds(0.0, 4) - 0.05625).abs() < 1e-6, "{}", h.seconds(0.0, 4));
+        assert!((h.seconds(0.0, 1) - 0.9).abs() < 1e-6);
+        // Coarse frames measured: their own figures, the full frames' unchanged.
+        for k in 1..40 {
+            let t = k as f64 * 0.2;
+            h.observe(t - 0.3, t, true);
+        }
+        assert!((h.seconds(0.0, 2) - 0.4).abs() < 1e-3, "{}", h.seconds(0.0, 2));
+        assert!((h.seconds(0.0, 1) - 0.9).abs() < 1e-6, "{}", h.seconds(0.0, 1));
+        // Only coarse frames measured: a full request takes theirs.
+        let mut c = Horizon::new();
+        c.observe(0.0, 0.3, true);
+        assert!((c.seconds(0.0, 1) - 0.45).abs() < 1e-6);
     }
 }

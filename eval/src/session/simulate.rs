@@ -415,9 +415,11 @@ pub fn serve(
                 }
                 observed = observed.max(requests[r].tick + 1);
                 // The first frame: requested one round trip, render and transfer before 0.
-                horizon.observe(-first_ms * 1e-3, 0.0);
+                horizon.observe(-first_ms * 1e-3, 0.0, false);
                 for (f, _) in out.iter().skip(1).filter(|(f, _)| f.arrive_ms <= sent) {
-                    horizon.observe(f.request_ms * 1e-3, f.arrive_ms * 1e-3);
+                    // A frame on the coarser grid of adaptive resolution: fewer pixels than shown.
+                    let coarse = f.view.width < cams[0].width;
+                    horizon.observe(f.request_ms * 1e-3, f.arrive_ms * 1e-3, coarse);
                 }
             }
             let asks = request.policy().camera_at(shown, moving(&requests[r]), &predictor, &horizon, &cadence);
