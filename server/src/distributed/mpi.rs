@@ -23,7 +23,7 @@
 
 use super::composite::{self, Band, BandView};
 use super::decomposition::{self, Decomposition};
-use super::partial::{PartMarcher, Seg};
+use super::partial::{keep_for_next_frame, PartMarcher, Seg};
 use super::FrameGeometry;
 use crate::marcher::{FrameStats, MarchOptions, Marcher};
 use crate::server::{FrameSource, Server, ServerConfig};
@@ -355,9 +355,7 @@ fn frame_collective(
         let mut rp = PartitionMut::new(recv, &rcounts[..], &rdispl[..]);
         mpi::request::scope(|scope| wait_yielding(world.immediate_all_to_all_varcount_into(scope, &sp, &mut rp)));
     }
-    if send.capacity() * 4 <= super::partial::KEEP_BYTES {
-        bufs.send = send;
-    }
+    keep_for_next_frame(&mut bufs.send, send);
     let t2 = Instant::now();
     st.exchange_us = (t2 - t_sent).as_micros() as u64;
     let rows = rows_of(rank);
@@ -411,9 +409,7 @@ fn frame_collective(
     let broken = broken || merged.is_none();
     let merged = merged.unwrap_or_else(|| FAILED_BAND.to_vec());
     drop(views);
-    if recv.capacity() * 4 <= super::partial::KEEP_BYTES {
-        bufs.recv = recv;
-    }
+    keep_for_next_frame(&mut bufs.recv, recv);
     if let Ok(pf) = marched {
         part.recycle(pf);
     }

@@ -100,6 +100,14 @@ pub struct PartMarcher {
 /// K = 4 take 84 MB).
 pub const KEEP_BYTES: usize = 256 << 20;
 
+/// Puts `buf` in `slot` for the next frame to reuse, unless it holds more than [`KEEP_BYTES`]
+/// (one huge frame does not pin its memory).
+pub fn keep_for_next_frame<T>(slot: &mut Vec<T>, buf: Vec<T>) {
+    if buf.capacity() * std::mem::size_of::<T>() <= KEEP_BYTES {
+        *slot = buf;
+    }
+}
+
 /// [`PartMarcher`]'s buffer kept between frames; a clone starts without one.
 #[derive(Debug, Default)]
 struct Spare(std::sync::Mutex<Vec<Seg>>);
@@ -267,12 +275,10 @@ impl PartMarcher {
         s.len()
     }
 
-    /// Gives a marched frame's buffers back for the next [`PartMarcher::march`] to reuse (kept
-    /// up to [`KEEP_BYTES`]: one huge frame does not pin its memory).
+    /// Gives a marched frame's buffers back for the next [`PartMarcher::march`] to reuse
+    /// ([`keep_for_next_frame`]).
     pub fn recycle(&self, frame: PartFrame) {
-        if frame.segs.capacity() * SEG_BYTES <= KEEP_BYTES {
-            *self.spare.0.lock().unwrap_or_else(|e| e.into_inner()) = frame.segs;
-        }
+        keep_for_next_frame(&mut self.spare.0.lock().unwrap_or_else(|e| e.into_inner()), frame.segs);
     }
 
     /// Marches every pixel of `camera` (parallel over rows).
