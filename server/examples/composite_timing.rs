@@ -1,9 +1,10 @@
 //! `cargo run --release -p volwarp-server --example composite_timing -- [N] [SIZE] [PARTS]`:
 //! the MRI benchmark view split into PARTS parts (in one process), each marched once; then the
 //! first band of rows (what rank 0 owns) merged N times: alone, with the positions of its frame
-//! samples (direction, radius, quantized position: what the one-process marcher computes in
-//! lanes), and with the whole assembly (`FrameGeometry::assembler`: those and the colors packed
-//! by core's `pack_colors`); the median wall ms of each is printed, with the share of the
+//! samples (direction, radius, quantized position: the position step of `Assembler::push`,
+//! written out here to time it apart; the one-process marcher runs the same scalar code per
+//! segment), and with the whole assembly (`FrameGeometry::assembler`: those and the colors
+//! packed by core's `pack_colors`); the median wall ms of each is printed, with the share of the
 //! band's non-empty pixels that one part alone saw. `RAYON_NUM_THREADS=1` times one core.
 
 use std::sync::Arc;
@@ -84,7 +85,7 @@ fn main() {
             composite::merge_views_with(&views, pixels, k, ert, |i, s, out: &mut FramePart| a.push(i as u32, s, out))
                 .unwrap();
         let bytes = FramePart::join_to_bytes(&runs);
-        samples = (bytes.len() - 4) / 13;
+        samples = FramePart::check(&bytes, true).expect("the assembled band's bytes");
         asm_ms.push(t.elapsed().as_secs_f64() * 1e3);
     }
     println!(
