@@ -1,14 +1,15 @@
 //! `cargo bench -p volwarp-core`: the serial LBVH build over 623,584 samples from a
 //! depth-image-like surface on a 1024×1024 grid (the paper's count), wire encode/decode
-//! throughput, and the packing of layered colors (`segments::pack_colors`) over 100,000
-//! pseudo-random rays of 1–4 segments.
+//! throughput, and the packing of layered colors over 100,000 pseudo-random rays of 1–4
+//! segments, one ray at a time (`segments::pack_colors`) and eight side by side
+//! (`segments::pack_colors_lanes`, the same colors).
 
 use criterion::{criterion_group, criterion_main, BenchmarkId, Criterion, Throughput};
 use std::hint::black_box;
 use volwarp_core::camera::Camera;
 use volwarp_core::heuristics::Heuristic;
 use volwarp_core::sample::{pack_color, Bounds, Quantizer};
-use volwarp_core::segments::{composite, pack_colors, Segment};
+use volwarp_core::segments::{composite, pack_colors, pack_colors_lanes, Segment, MAX_LAYERS};
 use volwarp_core::wire::{self, Frame, FrameHeader, Limits, Message};
 use volwarp_core::{Scene, Vec3};
 
@@ -96,6 +97,15 @@ fn bench(c: &mut Criterion) {
                 sum = sum.wrapping_add(out[0]);
             }
             black_box(sum)
+        })
+    });
+    g.bench_function("rays_1_to_4_segments_lanes", |b| {
+        let lists: Vec<&[Segment]> = rays.iter().map(|(s, _)| &s[..]).collect();
+        let colors: Vec<[f32; 4]> = rays.iter().map(|(_, r)| *r).collect();
+        let mut out = vec![[0u32; MAX_LAYERS]; rays.len()];
+        b.iter(|| {
+            pack_colors_lanes(black_box(&lists), &colors, &mut out);
+            black_box(out[0][0])
         })
     });
     g.finish();

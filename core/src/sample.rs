@@ -131,6 +131,48 @@ impl Quantizer {
         let r = self.radius_code(radius) as u64;
         x | y << POS_BITS | z << (2 * POS_BITS) | r << (3 * POS_BITS)
     }
+
+    /// [`Quantizer::pack`] of eight positions (`p[axis][lane]`) and radii, bit for bit: in
+    /// AVX2 lanes where the lane level allows it (the scalar code's float-to-integer casts
+    /// saturate, which the compiler does not vectorize), else one at a time.
+    pub fn pack8(&self, p: &[[f32; 8]; 3], radius: &[f32; 8]) -> [u64; 8] {
+        #[cfg(all(feature = "std", target_arch = "x86_64"))]
+        if let (Some(t), true) = (volwarp_lanes::Avx2Token::new(), self.radius_unit > 0.0) {
+            // SAFETY: the token proves the CPU has AVX2 (and the lane level allows it).
+            return unsafe { pack8_avx2(t, self, p, radius) };
+        }
+        core::array::from_fn(|l| self.pack(Vec3::new(p[0][l], p[1][l], p[2][l]), radius[l]))
+    }
+}
+
+/// [`Quantizer::pack8`] in AVX2 lanes, for `q.radius_unit > 0`: per axis `(v − min)·scale +
+/// 0.5` truncated within `0..=POS_MAX` (`maxps` returns its second operand for a NaN, so a
+/// NaN gives 0 as the scalar code's comparisons do); the radius code `r / unit + 0.5`
+/// truncated within `1..=RADIUS_MAX`, 0 where the radius is not above 0.
+#[cfg(all(feature = "std", target_arch = "x86_64"))]
+#[target_feature(enable = "avx2")]
+fn pack8_avx2(t: volwarp_lanes::Avx2Token, q: &Quantizer, p: &[[f32; 8]; 3], radius: &[f32; 8]) -> [u64; 8] {
+    use volwarp_lanes::Avx2;
+    // No closures: a closure is not compiled with its function's target features.
+    let (min, scale) = (q.min.to_array(), q.scale.to_array());
+    let mut axes = [[0i32; 8]; 3];
+    for a in 0..3 {
+        let f = (Avx2::load(t, &p[a]) - Avx2::splat(t, min[a])) * Avx2::splat(t, scale[a]) + Avx2::splat(t, 0.5);
+        let f = f.fast_max(Avx2::splat(t, 0.0)).fast_min(Avx2::splat(t, POS_MAX as f32));
+        axes[a] = f.trunc_int().to_array();
+    }
+    let r = Avx2::load(t, radius);
+    let f = r / Avx2::splat(t, q.radius_unit) + Avx2::splat(t, 0.5);
+    let code = f.fast_max(Avx2::splat(t, 1.0)).fast_min(Avx2::splat(t, RADIUS_MAX as f32)).trunc_int().to_float();
+    let code = r.simd_gt(Avx2::splat(t, 0.0)).select(code, Avx2::splat(t, 0.0)).trunc_int().to_array();
+    let mut out = [0u64; 8];
+    for l in 0..8 {
+        out[l] = axes[0][l] as u64
+            | (axes[1][l] as u64) << POS_BITS
+            | (axes[2][l] as u64) << (2 * POS_BITS)
+            | (code[l] as u64) << (3 * POS_BITS);
+    }
+    out
 }
 
 /// Turns packed samples back into positions and radii: the one decode every tracer mirrors
@@ -228,6 +270,43 @@ pub fn over_background(c: u32, bg: u32) -> u32 {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn eight_at_once_pack_as_one_at_a_time() {
+        // Positions inside, on and outside the bounds, radii of every code, and odd values.
+        let b = Bounds::new(Vec3::new(-1.0, 2.0, 3.0), Vec3::new(5.0, 2.5, 100.0));
+        let mut state = 0x853C_49E6_748F_EA9Bu64;
+        let mut next = || {
+            state ^= state << 13;
+            state ^= state >> 7;
+            state ^= state << 17;
+            (state >> 40) as f32 / (1u64 << 24) as f32
+        };
+        let odd = [f32::NAN, f32::INFINITY, -f32::INFINITY, 0.0, -0.0, 1e30, -1e30, f32::MIN_POSITIVE];
+        for unit in [0.01f32, 1e-6, 3.0, 0.0, -1.0] {
+            let q = Quantizer::new(b, unit);
+            for round in 0..20_000 {
+                let mut p = [[0.0f32; 8]; 3];
+                let mut r = [0.0f32; 8];
+                for l in 0..8 {
+                    for (a, lo, hi) in [(0, -1.0f32, 5.0f32), (1, 2.0, 2.5), (2, 3.0, 100.0)] {
+                        p[a][l] = lo + (hi - lo) * (next() * 1.2 - 0.1);
+                    }
+                    r[l] = next() * unit.abs() * 1100.0 - unit.abs() * 2.0;
+                    if round % 7 == 0 {
+                        let v = odd[(next() * 8.0) as usize % 8];
+                        if next() < 0.5 {
+                            r[l] = v;
+                        } else {
+                            p[(next() * 3.0) as usize % 3][l] = v;
+                        }
+                    }
+                }
+                let want: [u64; 8] = core::array::from_fn(|l| q.pack(Vec3::new(p[0][l], p[1][l], p[2][l]), r[l]));
+                assert_eq!(q.pack8(&p, &r), want, "unit {unit}: {p:?} {r:?}");
+            }
+        }
+    }
 
     #[test]
     fn bounds_corners_are_exact() {
