@@ -35,7 +35,7 @@ use crate::radius::{FrameRadius, RaySpread, Uncertainty};
 use crate::volume::bricks::{BRICK_EDGE, BRICK_SHIFT, BRICK_SPAN, BRICK_VALUES};
 use crate::volume::Voxels;
 use volwarp_core::sample::{over_background, pack_color_f32, Quantizer};
-use volwarp_core::segments::{pack_colors, Segment, Segmenter, SegmenterLanes};
+use volwarp_core::segments::{PackLanes, Segment, Segmenter, SegmenterLanes};
 use volwarp_core::{DepthPicker, FirstPassAccumulator, Heuristic, RayBasis, Vec3, BACKGROUND};
 
 /// Pixels per packet along x for `lanes` lanes (the packet is `pw × (lanes / pw)` pixels).
@@ -89,6 +89,8 @@ fn for_lanes(mut bits: u64, mut f: impl FnMut(usize)) {
 trait LayerFeed<const M: usize>: Feed<M> {
     /// Segmenters for at most `k` segments per ray, sampled every `step`.
     fn new(k: u32, step: f32) -> Self;
+    /// Ready for the next packet, as [`LayerFeed::new`] with the same `k` and step.
+    fn reset(&mut self);
     /// Lane `l`'s segments, the last one closed.
     fn finish(&mut self, l: usize) -> &[Segment];
 }
@@ -113,6 +115,12 @@ impl<const M: usize> LayerFeed<M> for [Segmenter; M] {
         [Segmenter::new(k, step); M]
     }
     #[inline(always)]
+    fn reset(&mut self) {
+        for s in self {
+            s.reset();
+        }
+    }
+    #[inline(always)]
     fn finish(&mut self, l: usize) -> &[Segment] {
         self.get_mut(l).map_or(&[], |s| s.finish())
     }
@@ -134,6 +142,10 @@ impl<const M: usize> Feed<M> for SegmenterLanes<M> {
 impl<const M: usize> LayerFeed<M> for SegmenterLanes<M> {
     fn new(k: u32, step: f32) -> Self {
         SegmenterLanes::new(k, step)
+    }
+    #[inline(always)]
+    fn reset(&mut self) {
+        SegmenterLanes::reset(self);
     }
     #[inline(always)]
     fn finish(&mut self, l: usize) -> &[Segment] {
@@ -1287,10 +1299,13 @@ impl Kernel<'_> {
         let k = out.layers;
         let rows = (out.count.len() / (w as usize).max(1)) as u32;
         let step = self.m.dt;
+        let mut colors = PackLanes::new();
+        // One set of segmenters for every packet (reset per packet, not built anew).
+        let mut segs = S::new(k as u32, step);
         for py in (y0..y0 + rows).step_by(L::N / pw(L::N)) {
             for px in (0..w).step_by(pw(L::N)) {
                 let rays = self.rays(L::N, basis, o, px, py, w, h);
-                let mut segs = S::new(k as u32, step);
+                segs.reset();
                 let rays_color = self.march::<L, _, M>(o, &rays, &mut segs);
                 for l in 0..L::N.min(M) {
                     let (x, y) = (px + (l % pw(L::N)) as u32, py + (l / pw(L::N)) as u32);
@@ -1302,9 +1317,8 @@ impl Kernel<'_> {
                     if let Some(c) = out.count.get_mut(i) {
                         *c = list.len() as u8;
                     }
-                    if let Some(colors) = out.color.get_mut(i * k..i * k + list.len()) {
-                        pack_colors(list, rays_color[l], colors);
-                    }
+                    // Packed with the packet's other rays, in lanes (core's `PackLanes`).
+                    colors.push(list.iter().map(|s| s.color), rays_color[l], i * k, out.color);
                     for (j, sgm) in list.iter().enumerate() {
                         let slot = i * k + j;
                         if let Some(p) = out.t.get_mut(slot) {
@@ -1316,6 +1330,7 @@ impl Kernel<'_> {
                         }
                     }
                 }
+                colors.flush(out.color);
             }
         }
     }
@@ -1379,10 +1394,12 @@ impl Kernel<'_> {
         let k = out.k;
         let rows = (out.count.len() / (w as usize).max(1)) as u32;
         let step = self.m.dt;
+        // One set of segmenters for every packet (reset per packet, not built anew).
+        let mut segs = S::new(k as u32, step);
         for py in (y0..y0 + rows).step_by(L::N / pw(L::N)) {
             for px in (0..w).step_by(pw(L::N)) {
                 let rays = self.rays(L::N, basis, o, px, py, w, h);
-                let mut segs = S::new(k as u32, step);
+                segs.reset();
                 self.march_in::<L, _, M, true>(o, &rays, &mut segs);
                 for l in 0..L::N.min(M) {
                     let (x, y) = (px + (l % pw(L::N)) as u32, py + (l / pw(L::N)) as u32);
