@@ -244,8 +244,9 @@ impl<'a> BandView<'a> {
     }
 
     /// The band [`encode_band_into`] wrote, read in place: an error for bytes that are not one
-    /// (a count above `k`, a length that does not match the counts, nonzero padding) or that
-    /// are not 4-byte aligned. The segments' values are checked by [`merge_views_with`].
+    /// (a count above `k`, a length that does not match the counts, nonzero padding, a
+    /// segment with a non-finite value: bytes from a failed rank) or that are not 4-byte
+    /// aligned.
     pub fn parse(bytes: &'a [u8], pixels: usize, k: usize) -> Result<BandView<'a>, String> {
         let cl = counts_len(pixels);
         let (count, pad) = match (bytes.get(..pixels), bytes.get(pixels..cl)) {
@@ -263,8 +264,11 @@ impl<'a> BandView<'a> {
         if body.len() != n * SEG_BYTES {
             return Err(format!("a band of {n} segments holds {} bytes, not {}", body.len(), n * SEG_BYTES));
         }
-        let segs =
+        let segs: &[Seg] =
             bytemuck::try_cast_slice(body).map_err(|e| format!("a band's segments cannot be read in place: {e}"))?;
+        if !all_finite(segs) {
+            return Err("a segment with a non-finite value".into());
+        }
         Ok(BandView { count, segs, stride: None })
     }
 
@@ -316,6 +320,15 @@ impl Band {
     }
 }
 
+/// Whether every value of `segs` is finite: one pass over their bits in parallel blocks, with
+/// no early exit (the compiler vectorizes it).
+fn all_finite(segs: &[Seg]) -> bool {
+    use rayon::prelude::*;
+    let bits: &[u32] = bytemuck::cast_slice(segs);
+    let exp = 0x7F80_0000;
+    bits.par_chunks(1 << 16).all(|c| c.iter().fold(true, |ok, &b| ok & (b & exp != exp)))
+}
+
 /// Decodes a band of `pixels` pixels with at most `k` segments each (bytes at any alignment,
 /// copied); an error for bytes that are not one.
 pub fn decode_band(bytes: &[u8], pixels: usize, k: usize) -> Result<Band, String> {
@@ -328,9 +341,6 @@ pub fn decode_band(bytes: &[u8], pixels: usize, k: usize) -> Result<Band, String
     bytemuck::cast_slice_mut::<u32, u8>(&mut aligned)[..bytes.len()].copy_from_slice(bytes);
     let view = BandView::parse(&bytemuck::cast_slice::<u32, u8>(&aligned)[..bytes.len()], pixels, k)?;
     let segs = view.segs.to_vec();
-    if !segs.iter().all(Seg::is_finite) {
-        return Err("a segment with a non-finite value".into());
-    }
     let mut start = Vec::with_capacity(pixels);
     let mut at = 0u32;
     for &c in count {
@@ -377,9 +387,8 @@ pub fn merge_bands_with<A: Default + Send>(
     merge_views_with(&views, pixels, k, ert, f).expect("decoded bands hold finite segments")
 }
 
-/// [`merge_bands_with`] of bands read in place ([`BandView`]), each of `pixels` pixels. A
-/// segment with a non-finite value (bytes from a failed rank) is an error, checked as the
-/// segments are merged (no pass of its own).
+/// [`merge_bands_with`] of bands read in place ([`BandView`]), each of `pixels` pixels (whose
+/// values [`BandView::parse`] checked where they came from another rank).
 pub fn merge_views_with<A: Default + Send>(
     bands: &[BandView],
     pixels: usize,
@@ -396,8 +405,7 @@ pub fn merge_views_with<A: Default + Send>(
     if let Some(b) = bands.iter().zip(&starts).find(|(b, s)| s.last().is_some_and(|&e| e > b.segs.len())) {
         return Err(format!("a band of {} segments whose counts need more", b.0.segs.len()));
     }
-    let finite = |l: &[Seg]| l.iter().all(Seg::is_finite);
-    (0..pixels.div_ceil(RUN))
+    Ok((0..pixels.div_ceil(RUN))
         .into_par_iter()
         .map(|r| {
             let mut acc = A::default();
@@ -410,15 +418,12 @@ pub fn merge_views_with<A: Default + Send>(
                     *l = &b.segs[*at..*at + c];
                     *at += b.stride.unwrap_or(c);
                 }
-                if !lists.iter().all(|l| finite(l)) {
-                    return Err("a segment with a non-finite value".to_string());
-                }
                 merge(&lists, k, ert, &mut buf);
                 f(i, &buf, &mut acc);
             }
-            Ok(acc)
+            acc
         })
-        .collect()
+        .collect())
 }
 
 /// The bytes of a merged band (the same coding as [`encode_band`]).

@@ -27,7 +27,7 @@ use partial::PartMarcher;
 use rayon::prelude::*;
 use volwarp_core::compact_frame::{EncodeOptions, Encoding, RadiusPrediction};
 use volwarp_core::sample::{pack_color_f32, Bounds, Quantizer};
-use volwarp_core::segments::{pack_colors, Segment, MAX_LAYERS};
+use volwarp_core::segments::{PackLanes, MAX_LAYERS};
 use volwarp_core::wire::{self, CameraRequest, Frame, FrameHeader, Message};
 use volwarp_core::{Heuristic, Image, Vec3, BACKGROUND};
 
@@ -119,11 +119,11 @@ impl FrameGeometry {
         range: std::ops::Range<usize>,
     ) -> FramePart {
         let a = self.assembler(req, layers);
-        let mut out = FramePart::default();
+        let mut out = PartBuilder::default();
         for p in range {
             a.push(first + p as u32, band.pixel(p), &mut out);
         }
-        out
+        a.finish(out)
     }
 
     /// What assembles a frame's samples pixel by pixel ([`Assembler::push`]).
@@ -236,34 +236,78 @@ pub struct Assembler {
 }
 
 impl Assembler {
-    /// Appends image pixel `i`'s samples: its merged segments `segs`, front to back.
+    /// Appends image pixel `i`'s samples: its merged segments `segs`, front to back. Their
+    /// positions are quantized eight samples at a time and a layered frame's colors packed
+    /// eight pixels at a time, in lanes (core's `Quantizer::pack8` and `PackLanes`, as the
+    /// one-process marcher does); [`Assembler::finish`] does the rest.
     #[inline]
-    pub fn push(&self, i: u32, segs: &[partial::Seg], out: &mut FramePart) {
+    pub fn push(&self, i: u32, segs: &[partial::Seg], out: &mut PartBuilder) {
         if segs.is_empty() {
             return;
         }
         let d = self.basis.dir(i % self.w, i / self.w);
-        // Layered: the segments' colors rounded so their composite is the ray's own pixel
-        // (core's `pack_colors`, as the one-process marcher packs them).
-        let n = segs.len().min(MAX_LAYERS);
-        let mut packed = [0u32; MAX_LAYERS];
         if self.layered {
-            let mut list = [Segment::default(); MAX_LAYERS];
-            for (l, s) in list.iter_mut().zip(segs) {
-                *l = Segment { t: s.t, color: s.c };
-            }
-            pack_colors(&list[..n], composite(segs), &mut packed[..n]);
+            // The segments' colors rounded so their composite is the ray's own pixel.
+            let part = &mut out.part;
+            let n = segs.len().min(MAX_LAYERS);
+            let at = part.colors.len();
+            part.colors.resize(at + n, 0);
+            part.colors.extend(segs[n..].iter().map(|s| pack_color_f32(s.c)));
+            out.colors.push(segs[..n].iter().map(|s| s.c), composite(segs), at, &mut part.colors);
         }
         for (j, s) in segs.iter().enumerate() {
             let r =
                 if self.layered { self.radius.at(d, s.t) } else { self.radius.at_ray(d, s.t, &Uncertainty::default()) };
-            out.samples.push(self.q.pack(self.o + d * s.t, r));
-            out.colors.push(if self.layered && j < n { packed[j] } else { pack_color_f32(s.c) });
+            let p = self.o + d * s.t;
+            let l = out.queued;
+            for (a, v) in p.to_array().into_iter().enumerate() {
+                out.position[a][l] = v;
+            }
+            out.radius[l] = r;
+            out.queued += 1;
+            out.part.samples.push(0);
+            if out.queued == 8 {
+                self.flush_positions(out);
+            }
             if self.layered {
-                out.segments.push(j as u8);
+                out.part.segments.push(j as u8);
+            } else {
+                out.part.colors.push(pack_color_f32(s.c));
             }
         }
     }
+
+    /// The part `b` was building, every sample's position and color filled in.
+    pub fn finish(&self, mut b: PartBuilder) -> FramePart {
+        self.flush_positions(&mut b);
+        b.colors.flush(&mut b.part.colors);
+        b.part
+    }
+
+    /// Fills in the queued samples' positions (the last `queued` samples of the part).
+    fn flush_positions(&self, b: &mut PartBuilder) {
+        let n = b.queued;
+        if n == 0 {
+            return;
+        }
+        let packed = self.q.pack8(&b.position, &b.radius);
+        let len = b.part.samples.len();
+        b.part.samples[len - n..].copy_from_slice(&packed[..n]);
+        b.queued = 0;
+    }
+}
+
+/// A [`FramePart`] being assembled ([`Assembler::push`], then [`Assembler::finish`]): the
+/// part, the samples whose positions wait to be quantized together and the pixels whose
+/// colors wait to be packed together.
+#[derive(Default)]
+pub struct PartBuilder {
+    part: FramePart,
+    /// Per axis and lane the queued samples' positions, and their radii.
+    position: [[f32; 8]; 3],
+    radius: [f32; 8],
+    queued: usize,
+    colors: PackLanes,
 }
 
 /// A run of a frame's samples, in pixel order: packed positions and radii, colors and (layered

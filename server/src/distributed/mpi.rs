@@ -388,10 +388,10 @@ fn frame_collective(
         // Merged and assembled pixel by pixel: no merged band in between.
         let first = rows.start * cam.width;
         let a = geometry.assembler(req, layers);
-        composite::merge_views_with(&views, pixels, k, ert, |i, segs, out: &mut super::FramePart| {
+        composite::merge_views_with(&views, pixels, k, ert, |i, segs, out: &mut super::PartBuilder| {
             a.push(first + i as u32, segs, out)
         })
-        .map(|runs| super::FramePart::join_to_bytes(&runs))
+        .map(|runs| super::FramePart::join_to_bytes(&runs.into_iter().map(|b| a.finish(b)).collect::<Vec<_>>()))
         .ok()
     } else {
         composite::merge_views_with(&views, pixels, k, ert, |_, merged, (count, segs): &mut (Vec<u8>, Vec<Seg>)| {
