@@ -359,7 +359,7 @@ pub fn merge_bands(bands: &[Band], pixels: usize, k: usize, ert: f32) -> Band {
             count.push(merged.len() as u8);
             segs.extend_from_slice(merged);
         })
-        .expect("decoded bands hold finite segments");
+        .expect("decoded bands hold the segments their counts need");
     let mut out = Band { count: Vec::with_capacity(pixels), start: Vec::with_capacity(pixels), segs: Vec::new() };
     let mut at = 0u32;
     for (count, segs) in runs {
@@ -384,7 +384,7 @@ pub fn merge_bands_with<A: Default + Send>(
     f: impl Fn(usize, &[Seg], &mut A) + Sync,
 ) -> Vec<A> {
     let views: Vec<BandView> = bands.iter().map(BandView::of_band).collect();
-    merge_views_with(&views, pixels, k, ert, f).expect("decoded bands hold finite segments")
+    merge_views_with(&views, pixels, k, ert, f).expect("decoded bands hold the segments their counts need")
 }
 
 /// [`merge_bands_with`] of bands read in place ([`BandView`]), each of `pixels` pixels (whose

@@ -43,13 +43,6 @@ pub struct Seg {
     pub c: [f32; 4],
 }
 
-impl Seg {
-    /// Whether its depth and every channel are finite (what a band from another rank must hold).
-    pub fn is_finite(&self) -> bool {
-        self.t.is_finite() && self.c.iter().all(|v| v.is_finite())
-    }
-}
-
 /// Bytes of one [`Seg`] between ranks.
 pub const SEG_BYTES: usize = 20;
 
