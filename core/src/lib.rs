@@ -91,6 +91,19 @@ pub use traversal::Hit;
 
 pub use glam::Vec3;
 
+/// The tests' pseudo-random numbers in `[0, 1)`: xorshift64 from `seed` (nonzero), the top 24
+/// bits of each state as the fraction.
+#[cfg(test)]
+pub(crate) fn test_unit_rng(seed: u64) -> impl FnMut() -> f32 {
+    let mut state = seed;
+    move || {
+        state ^= state << 13;
+        state ^= state >> 7;
+        state ^= state << 17;
+        (state >> 40) as f32 / (1u64 << 24) as f32
+    }
+}
+
 /// Whether this build of the crate has the `std` feature (tests check which build they run on:
 /// the no_std + alloc build takes other code paths, ruzstd and libm among them).
 pub const BUILT_WITH_STD: bool = cfg!(feature = "std");

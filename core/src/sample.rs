@@ -275,13 +275,7 @@ mod tests {
     fn eight_at_once_pack_as_one_at_a_time() {
         // Positions inside, on and outside the bounds, radii of every code, and odd values.
         let b = Bounds::new(Vec3::new(-1.0, 2.0, 3.0), Vec3::new(5.0, 2.5, 100.0));
-        let mut state = 0x853C_49E6_748F_EA9Bu64;
-        let mut next = || {
-            state ^= state << 13;
-            state ^= state >> 7;
-            state ^= state << 17;
-            (state >> 40) as f32 / (1u64 << 24) as f32
-        };
+        let mut next = crate::test_unit_rng(0x853C_49E6_748F_EA9B);
         let odd = [f32::NAN, f32::INFINITY, -f32::INFINITY, 0.0, -0.0, 1e30, -1e30, f32::MIN_POSITIVE];
         for unit in [0.01f32, 1e-6, 3.0, 0.0, -1.0] {
             let q = Quantizer::new(b, unit);

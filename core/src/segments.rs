@@ -1094,6 +1094,18 @@ mod tests {
         }
     }
 
+    /// Fills `segs` with pseudo-random premultiplied segments at depths 0, 1, …: each an
+    /// opacity below `amax` and color channels between a random saturation of it and it (the
+    /// packing tests' rays).
+    pub(super) fn random_segments(next: &mut impl FnMut() -> f32, amax: f32, segs: &mut [Segment]) {
+        for (j, sg) in segs.iter_mut().enumerate() {
+            let a = next() * amax;
+            let sat = next();
+            let mut ch = || a * (sat + (1.0 - sat) * next());
+            *sg = Segment { t: j as f32, color: [ch(), ch(), ch(), a] };
+        }
+    }
+
     #[test]
     fn packed_segments_composite_to_the_rays_own_pixel() {
         // Pseudo-random rays: the client's composite of the packed colors over the background is
@@ -1101,13 +1113,7 @@ mod tests {
         // segment is not. Families: any opacity (nearly opaque rays, where the last segments
         // weigh less than a level and an earlier one must carry the rounding), faint and fuzzy
         // (the iron protein: low opacity, up to 16 segments, saturated colors) and mid.
-        let mut state = 0x2545_F491_4F6C_DD1Du64;
-        let mut next = || {
-            state ^= state << 13;
-            state ^= state >> 7;
-            state ^= state << 17;
-            (state >> 40) as f32 / (1u64 << 24) as f32
-        };
+        let mut next = crate::test_unit_rng(0x2545_F491_4F6C_DD1D);
         for (family, amax, kmax) in
             [("any", 1.0f32, 4usize), ("faint", 0.05, 4), ("faint16", 0.05, 16), ("tiny", 0.005, 4), ("mid", 0.3, 8)]
         {
@@ -1115,12 +1121,7 @@ mod tests {
             for _ in 0..n {
                 let k = 1 + (next() * kmax as f32) as usize % kmax;
                 let mut segs = [Segment::default(); MAX_LAYERS];
-                for (j, sg) in segs.iter_mut().enumerate().take(k) {
-                    let a = next() * amax;
-                    let sat = next();
-                    let mut ch = || a * (sat + (1.0 - sat) * next());
-                    *sg = Segment { t: j as f32, color: [ch(), ch(), ch(), a] };
-                }
+                random_segments(&mut next, amax, &mut segs[..k]);
                 let segs = &segs[..k];
                 let ray = composite(segs.iter().map(|s| s.color));
                 let want = over_background(crate::sample::pack_color_f32(ray), BACKGROUND);

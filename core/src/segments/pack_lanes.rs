@@ -304,27 +304,17 @@ mod tests {
     /// segments, more than [`MAX_LAYERS`], colors above their opacity or out of range, NaN and
     /// infinite values. Each is `(segments, how many, the ray's color)`.
     fn ray_source(seed: u64) -> impl FnMut() -> ([Segment; 20], usize, [f32; 4]) {
-        let mut state = seed;
-        let mut next = move || {
-            state ^= state << 13;
-            state ^= state >> 7;
-            state ^= state << 17;
-            (state >> 40) as f32 / (1u64 << 24) as f32
-        };
+        let mut next = crate::test_unit_rng(seed);
         move || {
             let family = (next() * 8.0) as usize % 8;
             let (amax, kmax) =
                 [(1.0f32, 4usize), (0.05, 4), (0.05, 16), (0.005, 4), (0.3, 8), (1.0, 20), (1.0, 4), (1.0, 4)][family];
             let k = (next() * (kmax + 1) as f32) as usize % (kmax + 1);
             let mut segs = [Segment::default(); 20];
-            for (j, sg) in segs.iter_mut().enumerate().take(k) {
-                let a = next() * amax;
-                let sat = next();
-                let mut ch = || a * (sat + (1.0 - sat) * next());
-                sg.t = j as f32;
-                sg.color = [ch(), ch(), ch(), a];
-                if family == 6 {
-                    // Not premultiplied, or out of range.
+            crate::segments::tests::random_segments(&mut next, amax, &mut segs[..k]);
+            if family == 6 {
+                // Not premultiplied, or out of range.
+                for sg in &mut segs[..k] {
                     sg.color = [next() * 1.5 - 0.2, next(), next() * 2.0, next() * 1.2 - 0.1];
                 }
             }
