@@ -1,5 +1,5 @@
 #!/usr/bin/env bash
-# Runs the cargo-fuzz targets of fuzz/ briefly on nightly (default 30 s each), starting from
+# Runs the cargo-fuzz targets of fuzz/ briefly on nightly (default 20 s each), starting from
 # the committed seeds (fuzz/seeds/<target>/; new inputs go to the ignored fuzz/corpus/).
 # Fails on the first finding; the crash input is left under fuzz/artifacts/<target>/.
 #
@@ -10,8 +10,15 @@
 # The libFuzzer seed is fixed (VOLWARP_FUZZ_SEED, default 1) so that a CI failure reproduces;
 # long campaigns with random seeds are run by hand (docs/fuzzing.md).
 # Needs: a nightly toolchain and `cargo install cargo-fuzz --locked` (scripts/setup.sh).
+#
+# A smoke run is mostly its clean sanitizer build, so it builds at opt-level 1 with line tables
+# (VOLWARP_FUZZ_OPT, default 1) rather than the fuzz crate's release profile (opt-level 3), which
+# long campaigns keep: the build takes about half as long, and 20 s still replay every seed and
+# run tens of thousands of new inputs per target.
 set -euo pipefail
-secs="${1:-30}"
+secs="${1:-20}"
+export CARGO_PROFILE_RELEASE_OPT_LEVEL="${VOLWARP_FUZZ_OPT:-1}"
+export CARGO_PROFILE_RELEASE_DEBUG=line-tables-only
 cd "$(dirname "$0")/../fuzz"
 targets=(wire_decode_chunked frame_decode roundtrip lbvh compact_decode)
 features=()
