@@ -304,7 +304,7 @@ fn a_part_reusing_its_last_frames_buffers_marches_as_a_fresh_one() {
 
 #[test]
 fn band_owners_assemble_the_frame_rank_0_would() {
-    use volwarp_server::distributed::FramePart;
+    use volwarp_server::distributed::{FramePart, FrameSlots};
     let ds = Dataset::load(data("ct_head_quarter.nhdr"), None).unwrap();
     let opts = MarchOptions::default();
     let m = Marcher::with_options(ds.volume.clone(), &ds.tf, opts);
@@ -315,9 +315,10 @@ fn band_owners_assemble_the_frame_rank_0_would() {
         let req = request(&m, 50, 20.0, heuristic);
         let bands = render_in_process(&pm, &req, layers, 3);
         let want = geo.frame(&req, layers, &bands, 7);
-        // Each band's owner assembles its pixels in runs; rank 0 joins the bytes.
+        // Each band's owner assembles its pixels in runs; rank 0 fills them into the frame in
+        // place (its own band copied, the others' received: here copied too).
         let mut first = 0u32;
-        let bytes: Vec<Vec<u8>> = bands
+        let owners: Vec<Vec<FramePart>> = bands
             .iter()
             .map(|b| {
                 let n = b.count.len();
@@ -325,15 +326,26 @@ fn band_owners_assemble_the_frame_rank_0_would() {
                     .map(|r| geo.frame_part(&req, layers, b, first, r * 300..((r + 1) * 300).min(n)))
                     .collect();
                 first += n as u32;
-                FramePart::join(&runs).to_bytes()
+                runs
             })
             .collect();
-        let parts: Vec<&[u8]> = bytes.iter().map(|b| &b[..]).collect();
-        assert_eq!(geo.frame_of_bytes(&req, layers, &parts, 7).unwrap(), want, "K={layers}");
-        // Bytes that are not a part are an error (a failed rank's one byte, a short part).
-        for bad in [&[0xffu8][..], &bytes[0][..bytes[0].len() - 1]] {
-            assert!(geo.frame_of_bytes(&req, layers, &[bad], 7).is_err());
+        let counts: Vec<usize> = owners.iter().map(|r| r.iter().map(|p| p.samples.len()).sum()).collect();
+        let mut got = geo.frame_of_count(&req, layers, counts.iter().sum(), 7);
+        let slots = FrameSlots::split(&mut got, &counts).expect("counts that add up");
+        for (mut slot, (b, runs)) in slots.into_iter().zip(owners.iter().enumerate()) {
+            // A sender's runs joined into one fill the same slot.
+            let runs = if b == 1 { vec![FramePart::join(runs)] } else { runs.clone() };
+            assert!(slot.fill(&runs), "K={layers} band {b}");
         }
+        assert_eq!(got, want, "K={layers}");
+        // Counts that do not add up, and runs that do not fit their slot, are refused.
+        let mut f = geo.frame_of_count(&req, layers, counts.iter().sum(), 7);
+        let mut short = counts.clone();
+        short[0] -= 1;
+        assert!(FrameSlots::split(&mut f, &short).is_none());
+        let mut slots = FrameSlots::split(&mut f, &counts).unwrap();
+        assert!(!slots[0].fill(&owners[1]), "K={layers}: band 1's runs in band 0's slot");
+        assert!(!slots[0].fill(&[]));
     }
 }
 

@@ -112,6 +112,7 @@ impl PackLanes {
     /// The queued rays packed in lanes, and the lanes (bits) to pack with [`pack_colors`]:
     /// every lane without AVX2.
     fn pack_lanes(&self) -> ([[u32; PACK_LANES]; MAX_LAYERS], u32) {
+        #[cfg_attr(not(all(feature = "std", target_arch = "x86_64")), allow(unused_mut))]
         let mut packed = [[0u32; PACK_LANES]; MAX_LAYERS];
         #[cfg(all(feature = "std", target_arch = "x86_64"))]
         if let Some(t) = volwarp_lanes::Avx2Token::new() {

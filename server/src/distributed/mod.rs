@@ -140,39 +140,19 @@ impl FrameGeometry {
         }
     }
 
-    /// The frame of its parts as bytes ([`FramePart::to_bytes`]), in image order; an error for
-    /// bytes that are not parts.
-    pub fn frame_of_bytes(
-        &self,
-        req: &CameraRequest,
-        layers: u32,
-        parts: &[&[u8]],
-        render_us: u32,
-    ) -> Result<Frame, String> {
-        let counts = parts.iter().map(|b| FramePart::check(b, layers > 1)).collect::<Result<Vec<usize>, _>>()?;
-        let n: usize = counts.iter().sum();
+    /// A frame for `req` of `n` samples, all zero, to be filled in place ([`FrameSlots`]): how
+    /// rank 0 receives the band owners' samples straight into the frame it sends.
+    pub fn frame_of_count(&self, req: &CameraRequest, layers: u32, n: usize, render_us: u32) -> Frame {
         let mut frame = Frame {
             header: self.header(req),
             samples: vec![0; n],
             colors: vec![0; n],
             segments: vec![0; if layers > 1 { n } else { 0 }],
         };
-        // Straight copies of the bytes into the frame's vectors (any alignment).
-        let mut at = 0;
-        for (b, &m) in parts.iter().zip(&counts) {
-            let (s, rest) = b[4..].split_at(8 * m);
-            let (c, g) = rest.split_at(4 * m);
-            bytemuck::cast_slice_mut::<u64, u8>(&mut frame.samples[at..at + m]).copy_from_slice(s);
-            bytemuck::cast_slice_mut::<u32, u8>(&mut frame.colors[at..at + m]).copy_from_slice(c);
-            if layers > 1 {
-                frame.segments[at..at + m].copy_from_slice(g);
-            }
-            at += m;
-        }
         frame.header.radius_unit = self.frame_radius(req).unit();
-        frame.header.count = frame.samples.len() as u32;
+        frame.header.count = n as u32;
         frame.header.render_us = render_us;
-        Ok(frame)
+        frame
     }
 
     /// The frame of its parts, in image order (see [`FrameGeometry::frame`]).
@@ -323,18 +303,6 @@ pub struct FramePart {
 }
 
 impl FramePart {
-    /// The part as bytes between ranks: the sample count (`u32`), the samples, the colors, the
-    /// segment indices (each in memory order: the ranks of one job share one byte order).
-    pub fn to_bytes(&self) -> Vec<u8> {
-        let n = self.samples.len();
-        let mut out = Vec::with_capacity(4 + 12 * n + self.segments.len());
-        out.extend_from_slice(&(n as u32).to_ne_bytes());
-        out.extend_from_slice(bytemuck::cast_slice(&self.samples));
-        out.extend_from_slice(bytemuck::cast_slice(&self.colors));
-        out.extend_from_slice(&self.segments);
-        out
-    }
-
     /// The parts joined, in order.
     pub fn join(parts: &[FramePart]) -> FramePart {
         let mut out = FramePart::default();
@@ -345,34 +313,66 @@ impl FramePart {
         }
         out
     }
+}
 
-    /// [`FramePart::to_bytes`] of the parts joined (without joining them first).
-    pub fn join_to_bytes(parts: &[FramePart]) -> Vec<u8> {
-        let n: usize = parts.iter().map(|p| p.samples.len()).sum();
-        let g: usize = parts.iter().map(|p| p.segments.len()).sum();
-        let mut out = Vec::with_capacity(4 + 12 * n + g);
-        out.extend_from_slice(&(n as u32).to_ne_bytes());
-        for p in parts {
-            out.extend_from_slice(bytemuck::cast_slice(&p.samples));
+/// A frame's sample arrays cut in consecutive runs, as bytes, to be filled in place: by a copy
+/// of a band owner's [`FramePart`]s or by a receive from its rank (the ranks of one job share
+/// one byte order).
+#[derive(Debug)]
+pub struct FrameSlots<'a> {
+    /// The run's packed samples.
+    pub samples: &'a mut [u8],
+    /// The run's packed colors.
+    pub colors: &'a mut [u8],
+    /// The run's segment indices (empty for one sample per pixel).
+    pub segments: &'a mut [u8],
+}
+
+impl<'a> FrameSlots<'a> {
+    /// `frame`'s samples cut into runs of `counts` samples each, in order; `None` if they do not
+    /// add up to the frame's samples.
+    pub fn split(frame: &'a mut Frame, counts: &[usize]) -> Option<Vec<FrameSlots<'a>>> {
+        let (n, layered) = (frame.samples.len(), !frame.segments.is_empty());
+        if counts.iter().sum::<usize>() != n || frame.colors.len() != n || (layered && frame.segments.len() != n) {
+            return None;
         }
-        for p in parts {
-            out.extend_from_slice(bytemuck::cast_slice(&p.colors));
+        let mut s = bytemuck::cast_slice_mut::<u64, u8>(&mut frame.samples);
+        let mut c = bytemuck::cast_slice_mut::<u32, u8>(&mut frame.colors);
+        let mut g = &mut frame.segments[..];
+        let mut out = Vec::with_capacity(counts.len());
+        for &n in counts {
+            let (a, rest) = std::mem::take(&mut s).split_at_mut(8 * n);
+            s = rest;
+            let (b, rest) = std::mem::take(&mut c).split_at_mut(4 * n);
+            c = rest;
+            let (d, rest) = std::mem::take(&mut g).split_at_mut(if layered { n } else { 0 });
+            g = rest;
+            out.push(FrameSlots { samples: a, colors: b, segments: d });
         }
-        for p in parts {
-            out.extend_from_slice(&p.segments);
-        }
-        out
+        Some(out)
     }
 
-    /// The sample count of bytes [`FramePart::to_bytes`] wrote, of a layered frame or not; an
-    /// error for bytes that are not a part.
-    pub fn check(b: &[u8], layered: bool) -> Result<usize, String> {
-        let n = b.get(..4).map(|c| u32::from_ne_bytes([c[0], c[1], c[2], c[3]]) as u64).ok_or("no sample count")?;
-        let want = 4 + n * (12 + u64::from(layered));
-        if b.len() as u64 != want {
-            return Err(format!("a part of {n} samples holds {} bytes, not {want}", b.len()));
+    /// Copies `runs` into the slots, in order; false (and nothing copied) if they do not hold
+    /// exactly as many samples (and segment indices) as the slots.
+    pub fn fill(&mut self, runs: &[FramePart]) -> bool {
+        let n: usize = runs.iter().map(|p| p.samples.len()).sum();
+        let g: usize = runs.iter().map(|p| p.segments.len()).sum();
+        if 8 * n != self.samples.len()
+            || runs.iter().any(|p| p.colors.len() != p.samples.len())
+            || g != self.segments.len()
+        {
+            return false;
         }
-        Ok(n as usize)
+        let (mut at, mut ag) = (0, 0);
+        for p in runs {
+            let m = p.samples.len();
+            self.samples[8 * at..8 * (at + m)].copy_from_slice(bytemuck::cast_slice(&p.samples));
+            self.colors[4 * at..4 * (at + m)].copy_from_slice(bytemuck::cast_slice(&p.colors));
+            self.segments[ag..ag + p.segments.len()].copy_from_slice(&p.segments);
+            at += m;
+            ag += p.segments.len();
+        }
+        true
     }
 }
 

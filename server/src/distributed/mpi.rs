@@ -24,13 +24,14 @@
 use super::composite::{self, Band, BandView};
 use super::decomposition::{self, Decomposition};
 use super::partial::{keep_for_next_frame, PartMarcher, Seg};
-use super::FrameGeometry;
+use super::{FrameGeometry, FramePart, FrameSlots};
 use crate::marcher::{FrameStats, MarchOptions, Marcher};
 use crate::server::{FrameSource, Server, ServerConfig};
 use crate::transfer_function::TransferFunction;
 use crate::volume::LoadOptions;
 use mpi::collective::SystemOperation;
 use mpi::datatype::{Partition, PartitionMut};
+use mpi::point_to_point::Source as _;
 use mpi::request::{Request, Scope};
 use mpi::topology::SimpleCommunicator;
 use mpi::traits::*;
@@ -382,7 +383,9 @@ fn frame_collective(
         .collect();
     broken |= marched.is_err();
     st.decode_us = t2.elapsed().as_micros() as u64;
-    let merged = if broken {
+    // What this band owner hands rank 0: its band's frame samples, assembled in runs (a
+    // frame), or its merged band's bytes (an image). `None`: a band was broken.
+    let merged: Option<Merged> = if broken {
         None
     } else if assemble {
         // Merged and assembled pixel by pixel: no merged band in between.
@@ -391,7 +394,7 @@ fn frame_collective(
         composite::merge_views_with(&views, pixels, k, ert, |i, segs, out: &mut super::PartBuilder| {
             a.push(first + i as u32, segs, out)
         })
-        .map(|runs| super::FramePart::join_to_bytes(&runs.into_iter().map(|b| a.finish(b)).collect::<Vec<_>>()))
+        .map(|runs| Merged::Runs(runs.into_iter().map(|b| a.finish(b)).collect()))
         .ok()
     } else {
         composite::merge_views_with(&views, pixels, k, ert, |_, merged, (count, segs): &mut (Vec<u8>, Vec<Seg>)| {
@@ -401,13 +404,10 @@ fn frame_collective(
         .map(|runs| {
             let count: Vec<u8> = runs.iter().flat_map(|r| r.0.iter().copied()).collect();
             let segs: Vec<Seg> = runs.iter().flat_map(|r| r.1.iter().copied()).collect();
-            composite::encode_merged(&Band { count, start: Vec::new(), segs })
+            Merged::Bytes(composite::encode_merged(&Band { count, start: Vec::new(), segs }))
         })
         .ok()
     };
-    // Rank 0 learns of a broken band whoever received it.
-    let broken = broken || merged.is_none();
-    let merged = merged.unwrap_or_else(|| FAILED_BAND.to_vec());
     drop(views);
     keep_for_next_frame(&mut bufs.recv, recv);
     if let Ok(pf) = marched {
@@ -415,56 +415,60 @@ fn frame_collective(
     }
     let t3 = Instant::now();
     st.merge_us = (t3 - t2).as_micros() as u64;
-    if rank != 0 {
-        st.bytes_sent += merged.len() as u64;
-    }
+    // The most samples band b may hold (its pixels times K).
+    let most = |b: usize| (rows_of(b).len() * cam.width as usize * k) as u64;
     let root = world.process_at_rank(0);
-    let len = merged.len() as i32;
-    let out = if rank == 0 {
-        let mut lens = vec![0i32; size];
-        // Rank 0 waits here for the slowest band owner's merge: yielding the core to it.
-        mpi::request::scope(|scope| wait_yielding(root.immediate_gather_into_root(scope, &len, &mut lens[..])));
-        // Rank 0's own part stays where it is (it sends itself nothing).
-        lens[0] = 0;
-        let displs = prefix(&lens);
-        let mut all = vec![0u8; lens.iter().map(|&c| c as usize).sum()];
-        {
-            let mut rp = PartitionMut::new(&mut all[..], &lens[..], &displs[..]);
-            mpi::request::scope(|scope| {
-                wait_yielding(root.immediate_gather_varcount_into_root(scope, &merged[..0], &mut rp))
-            });
-        }
-        let part =
-            |b: usize| if b == 0 { &merged[..] } else { &all[displs[b] as usize..(displs[b] + lens[b]) as usize] };
-        let failed = |b: usize, why: String| format!("rank {b} sent no valid band ({why}): a rank failed");
-        let out = if broken {
-            Err("a band rank 0 received was broken: a rank failed".to_string())
-        } else if assemble {
-            // A failed rank's part is one byte: named before the parts are read.
-            match (0..size).find_map(|b| super::FramePart::check(part(b), layers > 1).err().map(|e| (b, e))) {
-                Some((b, why)) => Err(failed(b, why)),
-                None => {
-                    let parts: Vec<&[u8]> = (0..size).map(part).collect();
-                    geometry.frame_of_bytes(req, layers, &parts, 0).map(Collected::Frame)
-                }
-            }
-        } else {
-            (0..size)
-                .map(|b| {
-                    let rows = rows_of(b);
-                    let pixels = (rows.end - rows.start) as usize * cam.width as usize;
-                    composite::decode_band(part(b), pixels, k).map_err(|why| failed(b, why))
-                })
-                .collect::<Result<Vec<Band>, String>>()
-                .map(Collected::Bands)
-        };
-        Some(out)
-    } else {
-        mpi::request::scope(|scope| {
-            wait_yielding(root.immediate_gather_into(scope, &len));
-            wait_yielding(root.immediate_gather_varcount_into(scope, &merged[..]));
+    let out = if assemble {
+        let runs = merged.map(|m| match m {
+            Merged::Runs(r) => r,
+            Merged::Bytes(_) => unreachable!("a frame's band owners assemble runs"),
         });
-        None
+        if rank == 0 {
+            Some(gather_frame_root(world, geometry, (req, layers), runs, &(0..size).map(most).collect::<Vec<_>>()))
+        } else {
+            st.bytes_sent += send_frame_part(world, runs, most(rank), layers > 1);
+            None
+        }
+    } else {
+        let merged = match merged {
+            Some(Merged::Bytes(b)) => b,
+            _ => FAILED_BAND.to_vec(),
+        };
+        let len = merged.len() as i32;
+        if rank == 0 {
+            let mut lens = vec![0i32; size];
+            // Rank 0 waits here for the slowest band owner's merge: yielding the core to it.
+            mpi::request::scope(|scope| wait_yielding(root.immediate_gather_into_root(scope, &len, &mut lens[..])));
+            // Rank 0's own band stays where it is (it sends itself nothing).
+            lens[0] = 0;
+            let displs = prefix(&lens);
+            let mut all = vec![0u8; lens.iter().map(|&c| c as usize).sum()];
+            {
+                let mut rp = PartitionMut::new(&mut all[..], &lens[..], &displs[..]);
+                mpi::request::scope(|scope| {
+                    wait_yielding(root.immediate_gather_varcount_into_root(scope, &merged[..0], &mut rp))
+                });
+            }
+            let band =
+                |b: usize| if b == 0 { &merged[..] } else { &all[displs[b] as usize..(displs[b] + lens[b]) as usize] };
+            Some(
+                (0..size)
+                    .map(|b| {
+                        let pixels = rows_of(b).len() * cam.width as usize;
+                        composite::decode_band(band(b), pixels, k)
+                            .map_err(|why| format!("rank {b} sent no valid band ({why}): a rank failed"))
+                    })
+                    .collect::<Result<Vec<Band>, String>>()
+                    .map(Collected::Bands),
+            )
+        } else {
+            st.bytes_sent += merged.len() as u64;
+            mpi::request::scope(|scope| {
+                wait_yielding(root.immediate_gather_into(scope, &len));
+                wait_yielding(root.immediate_gather_varcount_into(scope, &merged[..]));
+            });
+            None
+        }
     };
     st.gather_us = t3.elapsed().as_micros() as u64;
     let mine =
@@ -490,6 +494,93 @@ fn frame_collective(
         root.gather_into(&mine[..]);
         None
     }
+}
+
+/// What a band owner hands rank 0 (see [`frame_collective`]).
+enum Merged {
+    /// Its band's frame samples, in runs of pixels.
+    Runs(Vec<FramePart>),
+    /// Its merged band's bytes ([`composite::encode_merged`]).
+    Bytes(Vec<u8>),
+}
+
+/// The message tags of a band's frame samples sent to rank 0: samples, colors, segment indices.
+const TAG_SAMPLES: i32 = 1;
+const TAG_COLORS: i32 = 2;
+const TAG_SEGMENTS: i32 = 3;
+
+/// Rank 0's end of a frame's gather, straight into the frame it sends: every band owner's
+/// sample count (−1: a band it received was broken) gathered, the frame allocated once, the
+/// other owners' samples, colors and segment indices received in place while rank 0 copies its
+/// own band's runs in (no bytes in between, no second copy). An error names a failed rank.
+fn gather_frame_root(
+    world: &SimpleCommunicator,
+    geometry: &FrameGeometry,
+    (req, layers): (&CameraRequest, u32),
+    mine: Option<Vec<FramePart>>,
+    most: &[u64],
+) -> Result<Collected, String> {
+    let size = world.size() as usize;
+    let root = world.process_at_rank(0);
+    let n_mine = mine.as_ref().map_or(-1, |runs| runs.iter().map(|p| p.samples.len() as i64).sum());
+    let mut counts = vec![0i64; size];
+    // Rank 0 waits here for the slowest band owner's merge: yielding the core to it.
+    mpi::request::scope(|scope| wait_yielding(root.immediate_gather_into_root(scope, &n_mine, &mut counts[..])));
+    // A band owner that sends nothing: one that received a broken band (or a count its band
+    // cannot hold, which owners never send).
+    let sent: Vec<bool> = counts.iter().zip(most).map(|(&c, &m)| c >= 0 && c as u64 <= m).collect();
+    let counts: Vec<usize> = counts.iter().zip(&sent).map(|(&c, &ok)| if ok { c as usize } else { 0 }).collect();
+    let mut frame = geometry.frame_of_count(req, layers, counts.iter().sum(), 0);
+    let layered = layers > 1;
+    let mut slots = FrameSlots::split(&mut frame, &counts).expect("the counts add up to the frame's samples");
+    let mut own = slots.remove(0);
+    mpi::request::scope(|scope| {
+        let mut reqs = Vec::with_capacity(3 * size);
+        for (b, slot) in (1..size).zip(slots).filter(|&(b, _)| sent[b]) {
+            let p = world.process_at_rank(b as i32);
+            reqs.push(p.immediate_receive_into_with_tag(scope, slot.samples, TAG_SAMPLES));
+            reqs.push(p.immediate_receive_into_with_tag(scope, slot.colors, TAG_COLORS));
+            if layered {
+                reqs.push(p.immediate_receive_into_with_tag(scope, slot.segments, TAG_SEGMENTS));
+            }
+        }
+        // Rank 0's own band copied in while the others' arrive.
+        if let Some(runs) = &mine {
+            let filled = own.fill(runs);
+            debug_assert!(filled, "rank 0's count is its runs' samples");
+        }
+        for r in reqs {
+            wait_yielding(r);
+        }
+    });
+    match sent.iter().position(|&ok| !ok) {
+        Some(0) => Err("a band rank 0 received was broken: a rank failed".into()),
+        Some(b) => Err(format!("rank {b} sent no frame samples (a band it received was broken): a rank failed")),
+        None => Ok(Collected::Frame(frame)),
+    }
+}
+
+/// A band owner's end of a frame's gather ([`gather_frame_root`]): its sample count, then its
+/// samples, colors and (layered frames) segment indices, joined into one run. Returns the bytes
+/// sent.
+fn send_frame_part(world: &SimpleCommunicator, runs: Option<Vec<FramePart>>, most: u64, layered: bool) -> u64 {
+    let root = world.process_at_rank(0);
+    let part = runs.map(|r| FramePart::join(&r)).filter(|p| p.samples.len() as u64 <= most);
+    let n = part.as_ref().map_or(-1, |p| p.samples.len() as i64);
+    mpi::request::scope(|scope| {
+        wait_yielding(root.immediate_gather_into(scope, &n));
+        if let Some(p) = &part {
+            let s = root.immediate_send_with_tag(scope, bytemuck::cast_slice::<u64, u8>(&p.samples), TAG_SAMPLES);
+            let c = root.immediate_send_with_tag(scope, bytemuck::cast_slice::<u32, u8>(&p.colors), TAG_COLORS);
+            let g = layered.then(|| root.immediate_send_with_tag(scope, &p.segments[..], TAG_SEGMENTS));
+            wait_yielding(s);
+            wait_yielding(c);
+            if let Some(g) = g {
+                wait_yielding(g);
+            }
+        }
+    });
+    part.map_or(8, |p| (8 + 12 * p.samples.len() + p.segments.len()) as u64)
 }
 
 /// The watchdog of rank 0: a frame in flight longer than the timeout is a failed rank.
