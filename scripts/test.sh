@@ -60,8 +60,13 @@ stage "aarch64 under qemu-user (scripts/aarch64.sh)"
 scripts/aarch64.sh
 
 if [ "${VOLWARP_NO_FUZZ:-0}" != 1 ]; then
+  # The five volwarp-core targets (wire format, frames, round trip, LBVH, compact codec). The
+  # two volume targets' sanitizer build instruments all of the server's dependencies (about 20
+  # of the 2-core machine's minutes against 2 for the core targets); their checks run in
+  # `cargo test` above (server/tests/hardening.rs feeds the same functions their seeds and
+  # mutations). VOLWARP_FUZZ_VOLUME=1 fuzzes them here too.
   stage "fuzz smoke (scripts/fuzz-smoke.sh)"
-  scripts/fuzz-smoke.sh "${VOLWARP_FUZZ_SECONDS:-20}"
+  VOLWARP_FUZZ_VOLUME="${VOLWARP_FUZZ_VOLUME:-0}" scripts/fuzz-smoke.sh "${VOLWARP_FUZZ_SECONDS:-20}"
 fi
 stage "done"
 echo "== stage times"
