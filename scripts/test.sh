@@ -61,8 +61,9 @@ scripts/aarch64.sh
 
 if [ "${VOLWARP_NO_FUZZ:-0}" != 1 ]; then
   # The five volwarp-core targets (wire format, frames, round trip, LBVH, compact codec). The
-  # two volume targets' sanitizer build instruments all of the server's dependencies (about 20
-  # of the 2-core machine's minutes against 2 for the core targets); their checks run in
+  # two volume targets' sanitizer build instruments all of the server's dependencies (32 minutes
+  # for all seven on the 2-core machine beside another build, 2 for the core targets alone,
+  # idle: docs/fuzzing.md); their checks run in
   # `cargo test` above (server/tests/hardening.rs feeds the same functions their seeds and
   # mutations). VOLWARP_FUZZ_VOLUME=1 fuzzes them here too.
   stage "fuzz smoke (scripts/fuzz-smoke.sh)"

@@ -143,23 +143,19 @@ impl FrameGeometry {
     /// A frame for `req` of `n` samples, all zero, to be filled in place ([`FrameSlots`]): how
     /// rank 0 receives the band owners' samples straight into the frame it sends.
     pub fn frame_of_count(&self, req: &CameraRequest, layers: u32, n: usize, render_us: u32) -> Frame {
-        let mut frame = Frame {
-            header: self.header(req),
+        Frame {
+            header: self.header(req, n, render_us),
             samples: vec![0; n],
             colors: vec![0; n],
             segments: vec![0; if layers > 1 { n } else { 0 }],
-        };
-        frame.header.radius_unit = self.frame_radius(req).unit();
-        frame.header.count = n as u32;
-        frame.header.render_us = render_us;
-        frame
+        }
     }
 
     /// The frame of its parts, in image order (see [`FrameGeometry::frame`]).
     pub fn frame_of_parts(&self, req: &CameraRequest, parts: &[FramePart], render_us: u32) -> Frame {
         let n: usize = parts.iter().map(|p| p.samples.len()).sum();
         let mut frame = Frame {
-            header: self.header(req),
+            header: self.header(req, n, render_us),
             samples: Vec::with_capacity(n),
             colors: Vec::with_capacity(n),
             segments: Vec::new(),
@@ -169,22 +165,20 @@ impl FrameGeometry {
             frame.colors.extend_from_slice(&p.colors);
             frame.segments.extend_from_slice(&p.segments);
         }
-        frame.header.radius_unit = self.frame_radius(req).unit();
-        frame.header.count = frame.samples.len() as u32;
-        frame.header.render_us = render_us;
         frame
     }
 
-    fn header(&self, req: &CameraRequest) -> FrameHeader {
+    /// The header of a frame of `n` samples for `req`.
+    fn header(&self, req: &CameraRequest, n: usize, render_us: u32) -> FrameHeader {
         FrameHeader {
             seq: req.seq,
             camera: req.camera,
             heuristic: req.heuristic,
             bounds: self.bounds(),
-            radius_unit: 0.5 * self.spacing.length() / RADIUS_CODE,
-            render_us: 0,
+            radius_unit: self.frame_radius(req).unit(),
+            render_us,
             level: 0,
-            count: 0,
+            count: n as u32,
         }
     }
 
