@@ -106,3 +106,36 @@ fn coarse_frames_cost_the_measured_server_time_at_their_resolution() {
     }
     assert!(firsts[0] < firsts[1], "the measured ratio sets the coarse frame's time: {firsts:?}");
 }
+
+#[test]
+fn a_preempting_server_drops_the_render_a_turn_makes_stale() {
+    // Stop-and-go (1.5 s moving, then 1 s at rest) at 256² (half resolution while moving: 128²), a 500 ms server whose half-resolution
+    // frames take 250 ms, on a 5 Mbit/s link.
+    let net = NetworkModel { server_ms: 500.0, latency_ms: 20.0, mbps: 5.0 };
+    let ds = vec![Dataset::default_bundled()];
+    let spec = "splat-layers+predict+frames=4+adapt+layers=4+coarse=2";
+    let run = |methods: &str| {
+        let mut o = common::session_opts(&["stop-and-go"], methods, net);
+        o.cfg.size = 256;
+        o.cfg.duration_s = 3.0;
+        o.cfg.score_every = 6;
+        o.calibration.ms.insert(("server".into(), ds[0].name.clone(), 256), 500.0);
+        o.calibration.ms.insert(("server".into(), scaled_name(&ds[0].name, 2), 256), 250.0);
+        o.calibration.ms.insert(("server".into(), scaled_name(&ds[0].name, 4), 256), 125.0);
+        o.server_ms = Some(500.0);
+        simulate_all(&ds, &o).unwrap().remove(0).result.frames
+    };
+    let (plain, preempt) = (run(spec), run(&format!("{spec}+preempt")));
+    let moving = |f: &FrameEvent| f.camera.width < 256;
+    let rest = |frames: &[FrameEvent]| {
+        frames.iter().skip(1).find(|f| !moving(f)).cloned().unwrap_or_else(|| panic!("no rest frame: {frames:?}"))
+    };
+    // The plain server finishes the half-resolution render in flight when the view comes to
+    // rest; the preempting one drops it and starts the resting view's at once.
+    let (a, b) = (rest(&plain), rest(&preempt));
+    assert_eq!(a.request_ms, b.request_ms, "the same rest request: {a:?} {b:?}");
+    assert!(b.start_ms < a.start_ms, "preempted: {b:?}, finished first: {a:?}");
+    assert_eq!(b.start_ms, b.request_ms + net.latency_ms, "rendered as it arrived: {b:?}");
+    // The rest frame arrives that much earlier, and the ticks at rest show it sooner.
+    assert!(b.arrive_ms < a.arrive_ms, "{b:?} {a:?}");
+}

@@ -2,8 +2,9 @@
 //!
 //! A method is a CPU renderer of the registry (`stale`, `points2`, `splat`, `splat-fill`, …)
 //! plus what the client asks the server for and how many frames it keeps, written as a **method
-//! spec**: `RENDERER[+predict][+guard=G][+frames=K][+adapt][+pp=L][+layers=K]`, e.g.
-//! `splat-fill+predict+guard=0.1+frames=2` or `splat-layers+predict+adapt+layers=4`.
+//! spec**:
+//! `RENDERER[+predict][+guard=G][+frames=K][+adapt][+pp=L][+layers=K][+rest=K][+coarse=N][+preempt]`,
+//! e.g. `splat-fill+predict+guard=0.1+frames=2` or `splat-layers+predict+adapt+layers=4`.
 //!
 //! - `+predict`: the client asks for the camera it expects to show when the frame is on screen
 //!   (core's `prediction`, horizon from core's `prediction::Horizon`);
@@ -26,6 +27,10 @@
 //!   the server renders in its time times the marcher's measured ratio at that resolution
 //!   (`session-calibrate`'s `DATASET/N` lines, [`super::peers::ResolutionCost`]) and encodes
 //!   at that size; the full resolution at the first still tick.
+//! - `+preempt`: the server drops the render in progress when a request arrives for a view
+//!   that rests where the rendered one moved, or moves where it rested (the first move after a
+//!   stop need not wait for the resting frame's render; simulated only, the real server
+//!   finishes every render it starts).
 //!
 //! [`default_method`] (alias `volwarp`, core's `Method::DEFAULT`, which has `+coarse=2`) is the
 //! method the window client runs by default; `volwarp-adaptive` is the same and
@@ -59,12 +64,16 @@ pub struct SessionRequest {
     pub coarse: u8,
     /// Segments per pixel it asks for the view at rest (0: as while it moves).
     pub rest_layers: u8,
+    /// The server drops the render in progress when a request arrives whose camera rests where
+    /// the rendered one's moved, or moves where it rested (simulated only: the real server
+    /// finishes every render it starts).
+    pub preempt: bool,
 }
 
 impl SessionRequest {
     /// Asks for the camera shown (what a send-image system does).
     pub const NONE: SessionRequest =
-        SessionRequest { predict: false, guard: 0.0, layers: 0, coarse: 1, rest_layers: 0 };
+        SessionRequest { predict: false, guard: 0.0, layers: 0, coarse: 1, rest_layers: 0, preempt: false };
 
     /// Its request policy (core's `method::RequestPolicy`).
     pub const fn policy(&self) -> volwarp_core::method::RequestPolicy {
@@ -245,6 +254,7 @@ impl MethodSpec {
             match p.split_once('=') {
                 None if p == "predict" => m.request.predict = true,
                 None if p == "adapt" => m.adapt = true,
+                None if p == "preempt" => m.request.preempt = true,
                 Some(("guard", g)) => {
                     let g: f32 = g.parse().map_err(|_| format!("{spec}: guard {g:?} is not a number"))?;
                     if !(0.0..=MAX_GUARD).contains(&g) {
@@ -288,7 +298,7 @@ impl MethodSpec {
                 }
                 _ => {
                     return Err(format!(
-                        "{spec}: unknown option {p:?} (predict, guard=G, frames=K, adapt, pp=L, layers=K, rest=K, coarse=N)"
+                        "{spec}: unknown option {p:?} (predict, guard=G, frames=K, adapt, pp=L, layers=K, rest=K, coarse=N, preempt)"
                     )
                     .into())
                 }
@@ -328,6 +338,7 @@ impl MethodSpec {
                 layers,
                 coarse: m.coarse.max(1),
                 rest_layers,
+                preempt: false,
             },
             frames: m.frames,
             adapt: m.adapt,
@@ -377,6 +388,9 @@ impl MethodSpec {
         }
         if self.request.coarse > 1 {
             s.push_str(&format!("+coarse={}", self.request.coarse));
+        }
+        if self.request.preempt {
+            s.push_str("+preempt");
         }
         s
     }
@@ -444,7 +458,10 @@ mod tests {
     fn specs_parse_and_name_canonically() {
         let m = MethodSpec::parse("splat-fill+frames=3+guard=0.2+predict").unwrap();
         assert_eq!(m.renderer, RendererKind::SplatFill);
-        assert_eq!(m.request, SessionRequest { predict: true, guard: 0.2, layers: 0, coarse: 1, rest_layers: 0 });
+        assert_eq!(
+            m.request,
+            SessionRequest { predict: true, guard: 0.2, layers: 0, coarse: 1, rest_layers: 0, preempt: false }
+        );
         assert_eq!(m.frames, 3);
         assert_eq!(m.name(), "splat-fill+predict+guard=0.2+frames=3");
         let a = MethodSpec::parse("splat+adapt+predict").unwrap();
@@ -454,7 +471,10 @@ mod tests {
         assert_eq!(MethodSpec::parse("volwarp").unwrap(), MethodSpec::parse(&default_method()).unwrap());
         assert_eq!(MethodSpec::parse("points2").unwrap().request, SessionRequest::NONE);
         let l = MethodSpec::parse("splat-layers+layers=4+adapt+predict").unwrap();
-        assert_eq!(l.request, SessionRequest { predict: true, guard: 0.0, layers: 4, coarse: 1, rest_layers: 0 });
+        assert_eq!(
+            l.request,
+            SessionRequest { predict: true, guard: 0.0, layers: 4, coarse: 1, rest_layers: 0, preempt: false }
+        );
         assert_eq!(l.name(), "splat-layers+predict+adapt+layers=4");
         assert_eq!(MethodSpec::parse(&l.name()).unwrap(), l);
         let d = MethodSpec::parse("volwarp").unwrap();

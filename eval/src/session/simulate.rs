@@ -443,6 +443,20 @@ pub fn serve(
             break; // it would arrive after the session
         }
         let (_, view, guard_offset, wanted) = ask(j, &mut requests, &out);
+        // Preemption: a request for a resting view where this one moves (or the reverse) that
+        // arrives while it renders ends the render there; the server takes the newest request.
+        if request.preempt {
+            let turn = requests[j + 1..]
+                .iter()
+                .map(arrival)
+                .zip(&requests[j + 1..])
+                .find(|&(a, r)| a > s && a < s + render_ms && moving(r) != moving(&requests[j]));
+            if let Some((a, _)) = turn {
+                served = j + 1;
+                s = a;
+                continue;
+            }
+        }
         let camera = policy.camera(&requests[..=j], s);
         served = j + 1;
         let seq = out.len();
