@@ -477,6 +477,10 @@ mod tests {
         );
         assert_eq!(l.name(), "splat-layers+predict+adapt+layers=4");
         assert_eq!(MethodSpec::parse(&l.name()).unwrap(), l);
+        let p = MethodSpec::parse(&format!("{}+preempt", default_method())).unwrap();
+        assert!(p.request.preempt && !MethodSpec::parse("volwarp").unwrap().request.preempt);
+        assert_eq!(p.name(), format!("{}+preempt", default_method()));
+        assert_eq!(MethodSpec::parse(&p.name()).unwrap(), p);
         let d = MethodSpec::parse("volwarp").unwrap();
         assert_eq!((d.renderer, d.frames, d.adapt), (RendererKind::SplatLayers, 4, true));
         assert_eq!(MethodSpec::parse(&d.name()).unwrap(), d);
