@@ -109,11 +109,12 @@ fn coarse_frames_cost_the_measured_server_time_at_their_resolution() {
 
 #[test]
 fn a_preempting_server_drops_the_render_a_turn_makes_stale() {
-    // Stop-and-go (1.5 s moving, then 1 s at rest) at 256² (half resolution while moving: 128²), a 500 ms server whose half-resolution
-    // frames take 250 ms, on a 5 Mbit/s link.
+    // Stop-and-go (1.5 s moving, then 1 s at rest) at 256² (half resolution while moving:
+    // 128²), a 500 ms server whose half-resolution frames take 250 ms, on a 5 Mbit/s link.
     let net = NetworkModel { server_ms: 500.0, latency_ms: 20.0, mbps: 5.0 };
     let ds = vec![Dataset::default_bundled()];
-    let spec = "splat-layers+predict+frames=4+adapt+layers=4+coarse=2";
+    // The default method (with its adaptive resolution), without and with preemption.
+    let spec = volwarp_eval::session::methods::default_method();
     let run = |methods: &str| {
         let mut o = common::session_opts(&["stop-and-go"], methods, net);
         o.cfg.size = 256;
@@ -125,7 +126,7 @@ fn a_preempting_server_drops_the_render_a_turn_makes_stale() {
         o.server_ms = Some(500.0);
         simulate_all(&ds, &o).unwrap().remove(0).result.frames
     };
-    let (plain, preempt) = (run(spec), run(&format!("{spec}+preempt")));
+    let (plain, preempt) = (run(&spec), run(&format!("{spec}+preempt")));
     let moving = |f: &FrameEvent| f.camera.width < 256;
     let rest = |frames: &[FrameEvent]| {
         frames.iter().skip(1).find(|f| !moving(f)).cloned().unwrap_or_else(|| panic!("no rest frame: {frames:?}"))

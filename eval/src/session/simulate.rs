@@ -446,14 +446,13 @@ pub fn serve(
         // Preemption: a request for a resting view where this one moves (or the reverse) that
         // arrives while it renders ends the render there; the server takes the newest request.
         if request.preempt {
-            let turn = requests[j + 1..]
-                .iter()
-                .map(arrival)
-                .zip(&requests[j + 1..])
-                .find(|&(a, r)| a > s && a < s + render_ms && moving(r) != moving(&requests[j]));
-            if let Some((a, _)) = turn {
+            let turn = requests[j + 1..].iter().find(|r| {
+                let a = arrival(r);
+                a > s && a < s + render_ms && moving(r) != moving(&requests[j])
+            });
+            if let Some(r) = turn {
                 served = j + 1;
-                s = a;
+                s = arrival(r);
                 continue;
             }
         }
