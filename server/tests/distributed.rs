@@ -588,6 +588,35 @@ proptest! {
     }
 
     #[test]
+    fn band_merges_equal_the_reference_pixel_by_pixel(pixels in prop::collection::vec(segs(), 1..24)) {
+        // Bands of up to 6 parts over random pixels (no list, one part's, several; lists longer
+        // than K too): every pixel's merged segments as merge_reference gives them.
+        let (k, ert) = (pixels[0].1, pixels[0].2);
+        let bands: Vec<Band> = (0..6)
+            .map(|p| {
+                let mut b = Band::default();
+                for (lists, _, _) in &pixels {
+                    let l = lists.get(p).map_or(&[][..], |l| l.as_slice());
+                    b.start.push(b.segs.len() as u32);
+                    b.count.push(l.len() as u8);
+                    b.segs.extend_from_slice(l);
+                }
+                b
+            })
+            .collect();
+        let got = composite::merge_bands_with(&bands, pixels.len(), k, ert, |i, s, acc: &mut Vec<(usize, Vec<Seg>)>| {
+            acc.push((i, s.to_vec()))
+        });
+        let got: Vec<(usize, Vec<Seg>)> = got.into_iter().flatten().collect();
+        prop_assert_eq!(got.len(), pixels.len());
+        for (i, (lists, _, _)) in pixels.iter().enumerate() {
+            let refs: Vec<&[Seg]> = lists.iter().map(|l| l.as_slice()).collect();
+            prop_assert_eq!(got[i].0, i);
+            prop_assert_eq!(&got[i].1, &merge_reference(&refs, k, ert));
+        }
+    }
+
+    #[test]
     fn bands_decode_what_they_encode_and_refuse_garbage(bytes in prop::collection::vec(any::<u8>(), 0..200), pixels in 0usize..40) {
         // Never a panic, and a band that decodes holds at most K segments per pixel.
         if let Ok(b) = composite::decode_band(&bytes, pixels, 4) {

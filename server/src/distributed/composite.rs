@@ -69,14 +69,7 @@ pub fn fuse(a: Seg, b: Seg) -> Seg {
 /// Applies early termination at `ert` and fuses `segs` (front to back) down to `k` segments.
 /// `k` = 1 composites them all at the nearest segment's depth (the heuristic rule).
 pub fn reduce(segs: &mut Vec<Seg>, k: usize, ert: f32) {
-    let mut a = 0.0f32;
-    for (i, s) in segs.iter().enumerate() {
-        if a >= ert {
-            segs.truncate(i);
-            break;
-        }
-        a += (1.0 - a) * s.c[3];
-    }
+    segs.truncate(kept(segs, ert));
     if k <= 1 {
         if let Some(&first) = segs.first() {
             let mut all = segs.iter().skip(1).fold(first, |acc, &s| fuse(acc, s));
@@ -96,6 +89,20 @@ pub fn reduce(segs: &mut Vec<Seg>, k: usize, ert: f32) {
         segs[best] = fuse(segs[best], segs[best + 1]);
         segs.remove(best + 1);
     }
+}
+
+/// How many of `segs` (front to back) early termination at `ert` keeps: those before the
+/// accumulated opacity (`A += (1 − A)·α` from an empty pixel) reaches `ert`.
+#[inline]
+fn kept(segs: &[Seg], ert: f32) -> usize {
+    let mut a = 0.0f32;
+    for (i, s) in segs.iter().enumerate() {
+        if a >= ert {
+            return i;
+        }
+        a += (1.0 - a) * s.c[3];
+    }
+    segs.len()
 }
 
 /// Merges front-to-back lists by depth (k-way; equal depths keep the lists' order) into `out`.
@@ -413,13 +420,26 @@ pub fn merge_views_with<A: Default + Send>(
             let mut lists: Vec<&[Seg]> = vec![&[]; bands.len()];
             let mut at: Vec<usize> = starts.iter().map(|s| s[r]).collect();
             for i in r * RUN..((r + 1) * RUN).min(pixels) {
+                let (mut seen, mut only): (usize, &[Seg]) = (0, &[]);
                 for ((l, b), at) in lists.iter_mut().zip(bands).zip(at.iter_mut()) {
                     let c = b.count[i] as usize;
                     *l = &b.segs[*at..*at + c];
                     *at += b.stride.unwrap_or(c);
+                    if c > 0 {
+                        seen += 1;
+                        only = l;
+                    }
                 }
-                merge(&lists, k, ert, &mut buf);
-                f(i, &buf, &mut acc);
+                match seen {
+                    // What `merge` gives a pixel no part saw, and a pixel one part alone saw with
+                    // at most K segments (its list up to early termination), without its copy.
+                    0 => f(i, &[], &mut acc),
+                    1 if only.len() <= k => f(i, &only[..kept(only, ert)], &mut acc),
+                    _ => {
+                        merge(&lists, k, ert, &mut buf);
+                        f(i, &buf, &mut acc);
+                    }
+                }
             }
             acc
         })
