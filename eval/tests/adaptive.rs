@@ -126,7 +126,7 @@ fn a_preempting_server_drops_the_render_a_turn_makes_stale() {
         o.server_ms = Some(500.0);
         simulate_all(&ds, &o).unwrap().remove(0).result.frames
     };
-    let (plain, preempt) = (run(&spec), run(&format!("{spec}+preempt")));
+    let (plain, preempt) = (run(&format!("{spec}+no-preempt")), run(&spec));
     let moving = |f: &FrameEvent| f.camera.width < 256;
     let rest = |frames: &[FrameEvent]| {
         frames.iter().skip(1).find(|f| !moving(f)).cloned().unwrap_or_else(|| panic!("no rest frame: {frames:?}"))

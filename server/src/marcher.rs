@@ -26,8 +26,12 @@ use crate::radius::{FrameRadius, RaySpread, Uncertainty};
 use crate::transfer_function::{TransferFunction, LUT_SIZE};
 use crate::volume::Volume;
 use rayon::prelude::*;
+use std::sync::atomic::{AtomicBool, Ordering};
 use std::sync::Arc;
 use std::time::Instant;
+
+/// The stop flag of a render that runs to its end (never set).
+static NEVER: AtomicBool = AtomicBool::new(false);
 use volwarp_core::sample::{over_background, pack_color_f32, Quantizer};
 use volwarp_core::segments::{pack_colors, Segment, Segmenter, MAX_LAYERS};
 use volwarp_core::wire::{CameraRequest, Frame, FrameHeader};
@@ -548,10 +552,18 @@ impl Marcher {
     /// Marches every pixel of `camera` into at most `layers` segments each (parallel over row
     /// bands, the options' kernel).
     pub fn march_layers(&self, camera: &Camera, layers: u32) -> LayerBuffer {
-        self.march_layers_impl(camera, layers, None)
+        self.march_layers_impl(camera, layers, None, &NEVER)
     }
 
-    fn march_layers_impl(&self, camera: &Camera, layers: u32, pack: Option<(&Quantizer, FrameRadius)>) -> LayerBuffer {
+    /// The march of every pixel into at most `layers` segments; once `stop` is set the row bands
+    /// not yet started are left empty.
+    fn march_layers_impl(
+        &self,
+        camera: &Camera,
+        layers: u32,
+        pack: Option<(&Quantizer, FrameRadius)>,
+        stop: &AtomicBool,
+    ) -> LayerBuffer {
         let k = layers.clamp(1, MAX_LAYERS as u32) as usize;
         let (w, h) = (camera.width as usize, camera.height as usize);
         let basis = camera.ray_basis();
@@ -572,6 +584,9 @@ impl Marcher {
             .zip(packed_bands.into_par_iter())
             .enumerate()
             .for_each(|(b, (((cb, tb), colb), sb))| {
+                if stop.load(Ordering::Relaxed) {
+                    return;
+                }
                 if self.opts.kernel == MarchKernel::Packet {
                     let y0 = (b * BAND_ROWS) as u32;
                     let mut out =
@@ -598,16 +613,18 @@ impl Marcher {
 
     /// Marches every pixel of `camera` with `heuristic` (parallel over row bands).
     pub fn march(&self, camera: &Camera, heuristic: Heuristic) -> PixelBuffer {
-        self.march_impl(camera, heuristic, None).0
+        self.march_impl(camera, heuristic, None, &NEVER).0
     }
 
     /// Marches every pixel and, with `pack`, also packs each non-empty pixel's sample (the same
-    /// values as [`Marcher::quantize`], computed while the ray direction is at hand).
+    /// values as [`Marcher::quantize`], computed while the ray direction is at hand); once
+    /// `stop` is set the row bands not yet started are left empty.
     fn march_impl(
         &self,
         camera: &Camera,
         heuristic: Heuristic,
         pack: Option<(&Quantizer, FrameRadius)>,
+        stop: &AtomicBool,
     ) -> (PixelBuffer, Vec<u64>) {
         let (w, h) = (camera.width as usize, camera.height as usize);
         let basis = camera.ray_basis();
@@ -622,6 +639,9 @@ impl Marcher {
         let kernel = self.kernel();
         t.par_chunks_mut(band).zip(color.par_chunks_mut(band)).zip(packed_bands.into_par_iter()).enumerate().for_each(
             |(b, ((tb, cb), sb))| {
+                if stop.load(Ordering::Relaxed) {
+                    return;
+                }
                 if self.opts.kernel == MarchKernel::Packet {
                     let y0 = (b * BAND_ROWS) as u32;
                     crate::packet_march::march_band(&kernel, &basis, Some(heuristic), pack, y0, tb, cb, sb);
@@ -726,14 +746,29 @@ impl Marcher {
 
     /// [`Marcher::render_frame_layers`] into an existing frame, reusing its memory.
     pub fn render_frame_layers_into(&self, req: &CameraRequest, layers: u32, frame: &mut Frame) -> FrameStats {
+        self.render_frame_layers_until(req, layers, frame, &NEVER).unwrap_or_default()
+    }
+
+    /// [`Marcher::render_frame_layers_into`] that gives up once `stop` is set (tested before
+    /// each row band is marched): `None`, and `frame` holds no frame to send.
+    pub fn render_frame_layers_until(
+        &self,
+        req: &CameraRequest,
+        layers: u32,
+        frame: &mut Frame,
+        stop: &AtomicBool,
+    ) -> Option<FrameStats> {
         frame.segments.clear();
         if layers <= 1 {
-            return self.render_frame_into(req, frame);
+            return self.render_frame_until(req, frame, stop);
         }
         let t0 = Instant::now();
         let (q, radius) = self.quantizer(req);
         let radius_unit = radius.unit();
-        let lb = self.march_layers_impl(&req.camera, layers, Some((&q, radius)));
+        let lb = self.march_layers_impl(&req.camera, layers, Some((&q, radius)), stop);
+        if stop.load(Ordering::Relaxed) {
+            return None;
+        }
         let t1 = Instant::now();
         let k = lb.layers as usize;
         frame.samples.clear();
@@ -747,21 +782,29 @@ impl Marcher {
         }
         let n = frame.samples.len();
         let t2 = Instant::now();
-        self.finish_frame(req, frame, radius_unit, [t0, t1, t2], n, lb.count.len())
+        Some(self.finish_frame(req, frame, radius_unit, [t0, t1, t2], n, lb.count.len()))
     }
 
     /// [`Marcher::render_frame`] into an existing frame, reusing the memory of its sample and
     /// color vectors (a server keeps one frame per client).
     pub fn render_frame_into(&self, req: &CameraRequest, frame: &mut Frame) -> FrameStats {
+        self.render_frame_until(req, frame, &NEVER).unwrap_or_default()
+    }
+
+    /// [`Marcher::render_frame_into`] that gives up once `stop` is set (`None`).
+    fn render_frame_until(&self, req: &CameraRequest, frame: &mut Frame, stop: &AtomicBool) -> Option<FrameStats> {
         frame.segments.clear();
         let t0 = Instant::now();
         let (q, radius) = self.quantizer(req);
         let radius_unit = radius.unit();
-        let (pb, packed) = self.march_impl(&req.camera, req.heuristic, Some((&q, radius)));
+        let (pb, packed) = self.march_impl(&req.camera, req.heuristic, Some((&q, radius)), stop);
+        if stop.load(Ordering::Relaxed) {
+            return None;
+        }
         let t1 = Instant::now();
         let n = compaction::compact_into_vecs(&packed, &pb.color, &mut frame.samples, &mut frame.colors);
         let t2 = Instant::now();
-        self.finish_frame(req, frame, radius_unit, [t0, t1, t2], n, pb.t.len())
+        Some(self.finish_frame(req, frame, radius_unit, [t0, t1, t2], n, pb.t.len()))
     }
 
     /// Fills the header of a frame whose `n` samples are in place and says what rendering it

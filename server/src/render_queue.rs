@@ -26,7 +26,7 @@
 //! and the next frame's measurement corrects it both ways).
 
 use crate::marcher::{FrameStats, Marcher};
-use std::sync::atomic::{AtomicU64, Ordering};
+use std::sync::atomic::{AtomicBool, AtomicU64, Ordering};
 use std::sync::{Arc, Condvar, Mutex, MutexGuard};
 use std::time::Duration;
 use volwarp_core::wire::{CameraRequest, Frame};
@@ -75,6 +75,8 @@ pub struct RenderCounts {
     pub rendered: u64,
     /// Requests answered with a copy of an identical request's frame.
     pub shared: u64,
+    /// Renders stopped part-way ([`RenderQueue::render_view_until`]) and not published.
+    pub stopped: u64,
 }
 
 /// Frames of at most this many pixels do not take a turn at the [`Gate`] (128², a thumbnail or
@@ -173,6 +175,7 @@ pub struct RenderQueue {
     done: Condvar,
     rendered: AtomicU64,
     shared: AtomicU64,
+    stopped: AtomicU64,
 }
 
 /// Ends a key's flight when dropped (also when the render panics), waking its waiters.
@@ -206,6 +209,7 @@ impl RenderQueue {
             done: Condvar::new(),
             rendered: AtomicU64::new(0),
             shared: AtomicU64::new(0),
+            stopped: AtomicU64::new(0),
         }
     }
 
@@ -250,6 +254,25 @@ impl RenderQueue {
         moving: bool,
         frame: &mut Frame,
     ) -> FrameStats {
+        static NEVER: AtomicBool = AtomicBool::new(false);
+        self.render_view_until(levels, generation, req, layers, moving, frame, &NEVER).unwrap_or_default()
+    }
+
+    /// [`RenderQueue::render_view_in`] that gives up once `stop` is set, while it waits for its
+    /// turn or marches ([`Marcher::render_frame_layers_until`]): `None`, `frame` holds nothing
+    /// to send, and nothing is published for identical requests (one waiting for this render
+    /// renders itself).
+    #[allow(clippy::too_many_arguments)]
+    pub fn render_view_until(
+        &self,
+        levels: &[Arc<Marcher>],
+        generation: u32,
+        req: &CameraRequest,
+        layers: u32,
+        moving: bool,
+        frame: &mut Frame,
+        stop: &AtomicBool,
+    ) -> Option<FrameStats> {
         let levels = if levels.is_empty() { &self.levels[..] } else { levels };
         let pixels = req.camera.width as u64 * req.camera.height as u64;
         let level = {
@@ -273,11 +296,11 @@ impl RenderQueue {
                     frame.colors.extend_from_slice(&f.colors);
                     frame.segments.clear();
                     frame.segments.extend_from_slice(&f.segments);
-                    return FrameStats {
+                    return Some(FrameStats {
                         samples: f.samples.len(),
                         pixels: f.header.camera.width as usize * f.header.camera.height as usize,
                         ..FrameStats::default()
-                    };
+                    });
                 }
             }
             if !s.in_flight.contains(&key) {
@@ -290,8 +313,12 @@ impl RenderQueue {
         drop(s);
         let flight = Flight(self, key);
         let turn = (pixels > SMALL_FRAME).then(|| self.gate.enter(self.gate.ticket()));
-        let stats = self.pool.install(|| marcher.render_frame_layers_into(req, layers, frame));
+        let stats = self.pool.install(|| marcher.render_frame_layers_until(req, layers, frame, stop));
         drop(turn);
+        let Some(stats) = stats else {
+            self.stopped.fetch_add(1, Ordering::Relaxed);
+            return None;
+        };
         if levels.len() > 1 {
             let ns = (stats.march_us + stats.compact_us) as f64 * 1e3 / pixels.max(1) as f64;
             self.cost.lock().unwrap_or_else(|e| e.into_inner())[usize::from(level)] = Some(ns);
@@ -315,12 +342,16 @@ impl RenderQueue {
         };
         self.lock().last = Some((key, copy));
         drop(flight);
-        stats
+        Some(stats)
     }
 
-    /// Frames rendered and requests answered with a copy so far.
+    /// Frames rendered, requests answered with a copy and renders stopped so far.
     pub fn counts(&self) -> RenderCounts {
-        RenderCounts { rendered: self.rendered.load(Ordering::Relaxed), shared: self.shared.load(Ordering::Relaxed) }
+        RenderCounts {
+            rendered: self.rendered.load(Ordering::Relaxed),
+            shared: self.shared.load(Ordering::Relaxed),
+            stopped: self.stopped.load(Ordering::Relaxed),
+        }
     }
 
     fn lock(&self) -> MutexGuard<'_, State> {
@@ -349,6 +380,33 @@ mod tests {
         assert_eq!(p.pick(true, px, &[None, None]), 0);
         assert_eq!(LevelPolicy::default().pick(true, px, &cost), 0);
         assert_eq!(p.pick(true, px, &[Some(9e3)]), 0, "one level only");
+    }
+
+    /// A stopped render gives no frame and publishes none: an identical request afterwards
+    /// is marched, not copied, and its frame is the one-process render.
+    #[test]
+    fn a_stopped_render_is_not_published() {
+        let marcher = Arc::new(Marcher::from_dataset(&crate::Dataset::default_bundled()));
+        let pool = rayon::ThreadPoolBuilder::new().num_threads(2).build().unwrap();
+        let queue = RenderQueue::new(marcher.clone(), pool);
+        let req = CameraRequest {
+            seq: 1,
+            camera: marcher.default_camera(200, 150),
+            heuristic: volwarp_core::Heuristic::Threshold,
+            radius_scale: 1.0,
+            layers: 0,
+        };
+        let mut frame = marcher.empty_frame();
+        let stop = AtomicBool::new(true);
+        for layers in [1, 4] {
+            assert_eq!(queue.render_view_until(&[], 0, &req, layers, false, &mut frame, &stop), None);
+        }
+        assert_eq!(queue.counts(), RenderCounts { rendered: 0, shared: 0, stopped: 2 });
+        let stats = queue.render_view_until(&[], 0, &req, 4, false, &mut frame, &AtomicBool::new(false));
+        assert!(stats.is_some_and(|s| s.samples > 0));
+        assert_eq!(queue.counts(), RenderCounts { rendered: 1, shared: 0, stopped: 2 });
+        let (one, _) = marcher.render_frame_layers(&req, 4);
+        assert_eq!((frame.samples, frame.colors, frame.segments), (one.samples, one.colors, one.segments));
     }
 
     /// Tickets are served in the order they were handed out, whatever order their holders

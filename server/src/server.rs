@@ -7,6 +7,16 @@
 //! one it has (latest wins: no queue of stale work, so a client's memory stays at about two
 //! frames). Bye ends the connection.
 //!
+//! **A render the view's turn makes stale is dropped.** A client with adaptive resolution asks
+//! for a coarser viewport while its view moves and the full one at rest, so a request whose
+//! viewport differs from the one being rendered says the view has come to rest or started
+//! moving: the reader sets the render's stop flag, the marcher leaves its remaining row bands
+//! (and a `--server-delay-ms` wait ends), nothing of it is sent or published, and the newest
+//! request is rendered at once. The render after a dropped one is never dropped, so a client
+//! whose view flips between moving and still at every tick still gets every other frame. A
+//! frame already being written is sent whole. (One-process server; MPI ranks finish every
+//! frame.)
+//!
 //! **Several clients** share one marcher thread pool through a [`RenderQueue`]: each frame is
 //! one job in the pool's first-in-first-out queue (no client starves another), and a request
 //! identical to one being (or just) rendered gets a copy of that frame instead of a second
@@ -734,6 +744,8 @@ enum End {
 #[derive(Default)]
 struct Slot {
     latest: Option<CameraRequest>,
+    /// The viewport of the render under way, where a request for another one stops it.
+    rendering: Option<(u32, u32)>,
     /// Visual edits not yet applied, in order (`Err`: a malformed one, refused with this text).
     edits: Vec<Result<VisualEdit, String>>,
     dropped: u64,
@@ -876,8 +888,11 @@ fn serve(sh: &Shared, stream: &TcpStream, id: u64, charged: Option<IpAddr>) -> S
     let _ = stream.set_read_timeout(Some(cfg.idle_timeout.max(Duration::from_millis(1))));
 
     let slot = Arc::new((Mutex::new(Slot::default()), Condvar::new()));
+    // Set by the reader to drop the render under way (see the module docs).
+    let stop = Arc::new(AtomicBool::new(false));
     let reader = {
         let slot = slot.clone();
+        let stop = stop.clone();
         let Ok(rs) = stream.try_clone() else { return "cannot clone the socket".into() };
         let idle = cfg.idle_timeout.max(Duration::from_millis(1));
         let Ok(raw) = rs.try_clone() else { return "cannot clone the socket".into() };
@@ -888,7 +903,7 @@ fn serve(sh: &Shared, stream: &TcpStream, id: u64, charged: Option<IpAddr>) -> S
         };
         std::thread::Builder::new()
             .name(format!("volwarp-read-{id}"))
-            .spawn(move || read_loop(rs, src, limits, idle, slot))
+            .spawn(move || read_loop(rs, src, limits, idle, slot, stop))
     };
     let Ok(reader) = reader else { return "cannot spawn the reader thread".into() };
 
@@ -900,6 +915,8 @@ fn serve(sh: &Shared, stream: &TcpStream, id: u64, charged: Option<IpAddr>) -> S
     // The last request rendered: rendered again after a visual edit that came alone.
     let mut last_req: Option<CameraRequest> = None;
     let mut visual = ClientVisual { state: sh.visual.start.clone(), levels: None, generation: 0 };
+    // Whether the last render was dropped: the next one runs to its end.
+    let mut stopped_last = false;
     let reason = loop {
         let (req, edits) = {
             let (lock, cv) = &*slot;
@@ -940,8 +957,24 @@ fn serve(sh: &Shared, stream: &TcpStream, id: u64, charged: Option<IpAddr>) -> S
             continue;
         };
         last_req = Some(req);
-        if let Some(d) = cfg.frame_delay {
-            std::thread::sleep(d);
+        let viewport = (req.camera.width, req.camera.height);
+        {
+            let mut s = slot.0.lock().unwrap_or_else(|e| e.into_inner());
+            let stoppable = sh.source.is_none() && !stopped_last;
+            s.rendering = stoppable.then_some(viewport);
+            // A request for another viewport that came in since this one was taken.
+            let turned = s.latest.is_some_and(|l| (l.camera.width, l.camera.height) != viewport);
+            stop.store(stoppable && turned, Ordering::Relaxed);
+            if let Some(d) = cfg.frame_delay {
+                // The slowed server's wait, which a stop ends too.
+                let until = Instant::now() + d;
+                while !stop.load(Ordering::Relaxed) {
+                    let Some(left) = until.checked_duration_since(Instant::now()).filter(|l| !l.is_zero()) else {
+                        break;
+                    };
+                    s = slot.1.wait_timeout(s, left).unwrap_or_else(|e| e.into_inner()).0;
+                }
+            }
         }
         let moving = last_camera.is_some_and(|c| c != req.camera);
         last_camera = Some(req.camera);
@@ -952,14 +985,32 @@ fn serve(sh: &Shared, stream: &TcpStream, id: u64, charged: Option<IpAddr>) -> S
                 Ok(stats) => stats,
                 Err(e) => break End::Error(error_code::INTERNAL, e),
             },
-            None => sh.queue.render_view_in(
-                visual.levels.as_deref().unwrap_or(&[]),
-                visual.generation,
-                &req,
-                wanted as u32,
-                moving,
-                &mut frame,
-            ),
+            None => {
+                let stats = match stop.load(Ordering::Relaxed) {
+                    true => None,
+                    false => sh.queue.render_view_until(
+                        visual.levels.as_deref().unwrap_or(&[]),
+                        visual.generation,
+                        &req,
+                        wanted as u32,
+                        moving,
+                        &mut frame,
+                        &stop,
+                    ),
+                };
+                slot.0.lock().unwrap_or_else(|e| e.into_inner()).rendering = None;
+                stopped_last = stats.is_none();
+                let Some(stats) = stats else {
+                    log::info!(
+                        "client {id}: frame seq {} {}x{} dropped: the view's turn made it stale",
+                        req.seq,
+                        viewport.0,
+                        viewport.1
+                    );
+                    continue;
+                };
+                stats
+            }
         };
         let t_send = Instant::now();
         let sent = if encoding == Encoding::Compact {
@@ -1094,11 +1145,15 @@ fn read_loop(
     limits: Limits,
     idle: Duration,
     slot: Arc<(Mutex<Slot>, Condvar)>,
+    stop: Arc<AtomicBool>,
 ) {
     let end = loop {
         match wire::read_message(&mut SocketReader::until(&stream, &mut src, Instant::now() + idle), &limits) {
             Ok(Message::CameraRequest(r)) => {
                 let mut s = slot.0.lock().unwrap_or_else(|e| e.into_inner());
+                if s.rendering.is_some_and(|v| v != (r.camera.width, r.camera.height)) {
+                    stop.store(true, Ordering::Relaxed);
+                }
                 if s.latest.replace(r).is_some() {
                     s.dropped += 1;
                 }

@@ -111,6 +111,58 @@ fn latest_request_wins() {
     server.shutdown();
 }
 
+/// The seqs of the frames that arrive until one for `last` has (and none after it, within
+/// 800 ms).
+fn frames_until(c: &mut Client, last: u64) -> Vec<(u64, u32)> {
+    let mut got = Vec::new();
+    while got.last().map(|&(s, _)| s) != Some(last) {
+        let f = expect_frame(c);
+        got.push((f.header.seq, f.header.camera.width));
+    }
+    c.stream.set_read_timeout(Some(Duration::from_millis(800))).unwrap();
+    assert!(matches!(c.recv(), Err(WireError::Io(_))), "no further frame after {got:?}");
+    c.stream.set_read_timeout(None).unwrap();
+    got
+}
+
+/// A request for another viewport (the view came to rest or started moving, with adaptive
+/// resolution) drops the render under way: no frame of it is sent. The render after a dropped
+/// one runs to its end, and a request for the same viewport never drops one.
+#[test]
+fn a_request_for_another_viewport_drops_the_render_under_way() {
+    let (server, m) = start(ServerConfig { frame_delay: Some(Duration::from_millis(1500)), ..config() });
+    let mut c = Client::hello(server.local_addr(), None);
+    let full = |seq, yaw| request(&m, seq, Heuristic::Threshold, yaw);
+    let coarse = |seq, yaw| {
+        let r: CameraRequest = full(seq, yaw);
+        CameraRequest { camera: r.camera.with_viewport(32, 24), ..r }
+    };
+    // (The pauses let the server take each request before the next one comes; on a machine
+    // too slow for that the newest request wins anyway and the seqs are the same.)
+    let pause = || std::thread::sleep(Duration::from_millis(300));
+
+    // Full, then coarse while the full one renders: only the coarse one arrives.
+    c.send(&Message::CameraRequest(full(1, 0.0)));
+    pause();
+    c.send(&Message::CameraRequest(coarse(2, 5.0)));
+    assert_eq!(frames_until(&mut c, 2), vec![(2, 32)]);
+
+    // Full, coarse, full: the coarse render follows a dropped one, so it is not dropped.
+    c.send(&Message::CameraRequest(full(3, 10.0)));
+    pause();
+    c.send(&Message::CameraRequest(coarse(4, 15.0)));
+    pause();
+    c.send(&Message::CameraRequest(full(5, 20.0)));
+    assert_eq!(frames_until(&mut c, 5), vec![(4, 32), (5, 64)]);
+
+    // The same viewport, another camera: the render under way is finished and sent.
+    c.send(&Message::CameraRequest(full(6, 25.0)));
+    pause();
+    c.send(&Message::CameraRequest(full(7, 30.0)));
+    assert_eq!(frames_until(&mut c, 7), vec![(6, 64), (7, 64)]);
+    server.shutdown();
+}
+
 #[test]
 fn bad_clients_do_not_disturb_a_good_one() {
     let (server, m) = start(config());

@@ -3,7 +3,7 @@
 //! A method is a CPU renderer of the registry (`stale`, `points2`, `splat`, `splat-fill`, …)
 //! plus what the client asks the server for and how many frames it keeps, written as a **method
 //! spec**:
-//! `RENDERER[+predict][+guard=G][+frames=K][+adapt][+pp=L][+layers=K][+rest=K][+coarse=N][+preempt]`,
+//! `RENDERER[+predict][+guard=G][+frames=K][+adapt][+pp=L][+layers=K][+rest=K][+coarse=N][+no-preempt]`,
 //! e.g. `splat-fill+predict+guard=0.1+frames=2` or `splat-layers+predict+adapt+layers=4`.
 //!
 //! - `+predict`: the client asks for the camera it expects to show when the frame is on screen
@@ -27,10 +27,10 @@
 //!   the server renders in its time times the marcher's measured ratio at that resolution
 //!   (`session-calibrate`'s `DATASET/N` lines, [`super::peers::ResolutionCost`]) and encodes
 //!   at that size; the full resolution at the first still tick.
-//! - `+preempt`: the server drops the render in progress when a request arrives for a view
-//!   that rests where the rendered one moved, or moves where it rested (the first move after a
-//!   stop need not wait for the resting frame's render; simulated only, the real server
-//!   finishes every render it starts).
+//! - `+no-preempt`: the server finishes every render it starts. By default it drops the render
+//!   in progress when a request for another viewport arrives (with adaptive resolution: the
+//!   view came to rest or started moving), as the real server does, though never two renders
+//!   in a row (`volwarp_server::server`'s module docs).
 //!
 //! [`default_method`] (alias `volwarp`, core's `Method::DEFAULT`, which has `+coarse=2`) is the
 //! method the window client runs by default; `volwarp-adaptive` is the same and
@@ -64,16 +64,15 @@ pub struct SessionRequest {
     pub coarse: u8,
     /// Segments per pixel it asks for the view at rest (0: as while it moves).
     pub rest_layers: u8,
-    /// The server drops the render in progress when a request arrives whose camera rests where
-    /// the rendered one's moved, or moves where it rested (simulated only: the real server
-    /// finishes every render it starts).
+    /// The server drops the render in progress when a request for another viewport arrives
+    /// (the real server's rule; `false`: `+no-preempt`, every render finished).
     pub preempt: bool,
 }
 
 impl SessionRequest {
     /// Asks for the camera shown (what a send-image system does).
     pub const NONE: SessionRequest =
-        SessionRequest { predict: false, guard: 0.0, layers: 0, coarse: 1, rest_layers: 0, preempt: false };
+        SessionRequest { predict: false, guard: 0.0, layers: 0, coarse: 1, rest_layers: 0, preempt: true };
 
     /// Its request policy (core's `method::RequestPolicy`).
     pub const fn policy(&self) -> volwarp_core::method::RequestPolicy {
@@ -254,7 +253,7 @@ impl MethodSpec {
             match p.split_once('=') {
                 None if p == "predict" => m.request.predict = true,
                 None if p == "adapt" => m.adapt = true,
-                None if p == "preempt" => m.request.preempt = true,
+                None if p == "no-preempt" => m.request.preempt = false,
                 Some(("guard", g)) => {
                     let g: f32 = g.parse().map_err(|_| format!("{spec}: guard {g:?} is not a number"))?;
                     if !(0.0..=MAX_GUARD).contains(&g) {
@@ -298,7 +297,7 @@ impl MethodSpec {
                 }
                 _ => {
                     return Err(format!(
-                        "{spec}: unknown option {p:?} (predict, guard=G, frames=K, adapt, pp=L, layers=K, rest=K, coarse=N, preempt)"
+                        "{spec}: unknown option {p:?} (predict, guard=G, frames=K, adapt, pp=L, layers=K, rest=K, coarse=N, no-preempt)"
                     )
                     .into())
                 }
@@ -338,7 +337,7 @@ impl MethodSpec {
                 layers,
                 coarse: m.coarse.max(1),
                 rest_layers,
-                preempt: false,
+                preempt: true,
             },
             frames: m.frames,
             adapt: m.adapt,
@@ -389,8 +388,8 @@ impl MethodSpec {
         if self.request.coarse > 1 {
             s.push_str(&format!("+coarse={}", self.request.coarse));
         }
-        if self.request.preempt {
-            s.push_str("+preempt");
+        if !self.request.preempt {
+            s.push_str("+no-preempt");
         }
         s
     }
@@ -460,7 +459,7 @@ mod tests {
         assert_eq!(m.renderer, RendererKind::SplatFill);
         assert_eq!(
             m.request,
-            SessionRequest { predict: true, guard: 0.2, layers: 0, coarse: 1, rest_layers: 0, preempt: false }
+            SessionRequest { predict: true, guard: 0.2, layers: 0, coarse: 1, rest_layers: 0, preempt: true }
         );
         assert_eq!(m.frames, 3);
         assert_eq!(m.name(), "splat-fill+predict+guard=0.2+frames=3");
@@ -473,13 +472,13 @@ mod tests {
         let l = MethodSpec::parse("splat-layers+layers=4+adapt+predict").unwrap();
         assert_eq!(
             l.request,
-            SessionRequest { predict: true, guard: 0.0, layers: 4, coarse: 1, rest_layers: 0, preempt: false }
+            SessionRequest { predict: true, guard: 0.0, layers: 4, coarse: 1, rest_layers: 0, preempt: true }
         );
         assert_eq!(l.name(), "splat-layers+predict+adapt+layers=4");
         assert_eq!(MethodSpec::parse(&l.name()).unwrap(), l);
-        let p = MethodSpec::parse(&format!("{}+preempt", default_method())).unwrap();
-        assert!(p.request.preempt && !MethodSpec::parse("volwarp").unwrap().request.preempt);
-        assert_eq!(p.name(), format!("{}+preempt", default_method()));
+        let p = MethodSpec::parse(&format!("{}+no-preempt", default_method())).unwrap();
+        assert!(!p.request.preempt && MethodSpec::parse("volwarp").unwrap().request.preempt);
+        assert_eq!(p.name(), format!("{}+no-preempt", default_method()));
         assert_eq!(MethodSpec::parse(&p.name()).unwrap(), p);
         let d = MethodSpec::parse("volwarp").unwrap();
         assert_eq!((d.renderer, d.frames, d.adapt), (RendererKind::SplatLayers, 4, true));

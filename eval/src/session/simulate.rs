@@ -431,6 +431,7 @@ pub fn serve(
     let arrival = |r: &Request| r.sent_ms + net.latency_ms;
     let mut s = 0.0f64;
     let mut served = 0usize; // requests[..served] were seen by the server
+    let mut dropped_last = false; // the last render was dropped
     while served < requests.len() {
         // The newest request arrived by `s`, else wait for the next one.
         let mut j = served;
@@ -443,19 +444,24 @@ pub fn serve(
             break; // it would arrive after the session
         }
         let (_, view, guard_offset, wanted) = ask(j, &mut requests, &out);
-        // Preemption: a request for a resting view where this one moves (or the reverse) that
-        // arrives while it renders ends the render there; the server takes the newest request.
-        if request.preempt {
+        // Preemption, the real server's rule: a request for another viewport (adaptive
+        // resolution's, the view came to rest or started moving) that arrives while this one
+        // renders ends the render there, unless the render before was dropped; the server takes
+        // the newest request.
+        if request.preempt && !dropped_last {
+            let viewport = |r: &Request| request.policy().divisor_for(moving(r), cfg.size, cfg.size);
             let turn = requests[j + 1..].iter().find(|r| {
                 let a = arrival(r);
-                a > s && a < s + render_ms && moving(r) != moving(&requests[j])
+                a > s && a < s + render_ms && viewport(r) != viewport(&requests[j])
             });
             if let Some(r) = turn {
                 served = j + 1;
                 s = arrival(r);
+                dropped_last = true;
                 continue;
             }
         }
+        dropped_last = false;
         let camera = policy.camera(&requests[..=j], s);
         served = j + 1;
         let seq = out.len();
