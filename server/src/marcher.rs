@@ -29,13 +29,13 @@ use rayon::prelude::*;
 use std::sync::atomic::{AtomicBool, Ordering};
 use std::sync::Arc;
 use std::time::Instant;
-
-/// The stop flag of a render that runs to its end (never set).
-static NEVER: AtomicBool = AtomicBool::new(false);
 use volwarp_core::sample::{over_background, pack_color_f32, Quantizer};
 use volwarp_core::segments::{pack_colors, Segment, Segmenter, MAX_LAYERS};
 use volwarp_core::wire::{CameraRequest, Frame, FrameHeader};
 use volwarp_core::{Camera, DepthPicker, FirstPassAccumulator, Heuristic, Image, Vec3, BACKGROUND};
+
+/// The stop flag of a render that runs to its end (never set).
+pub(crate) static NEVER: AtomicBool = AtomicBool::new(false);
 
 /// Rows per parallel task (a multiple of the packet marcher's packet height).
 const BAND_ROWS: usize = 8;

@@ -239,29 +239,15 @@ impl RenderQueue {
     /// [`RenderQueue::render_layers`] for a camera that is `moving` (it differs from the
     /// client's last request): under a [`LevelPolicy`] budget, from a coarser level of detail.
     pub fn render_view(&self, req: &CameraRequest, layers: u32, moving: bool, frame: &mut Frame) -> FrameStats {
-        self.render_view_in(&self.levels, 0, req, layers, moving, frame)
+        self.render_view_until(&self.levels, 0, req, layers, moving, frame, &crate::marcher::NEVER).unwrap_or_default()
     }
 
     /// [`RenderQueue::render_view`] with other marchers of the same volume and levels (a
     /// client's own visual state, [`Marcher::with_visual_tf`]), `generation` naming them: only
-    /// requests of the same generation share a frame (0: the queue's own marchers).
-    pub fn render_view_in(
-        &self,
-        levels: &[Arc<Marcher>],
-        generation: u32,
-        req: &CameraRequest,
-        layers: u32,
-        moving: bool,
-        frame: &mut Frame,
-    ) -> FrameStats {
-        static NEVER: AtomicBool = AtomicBool::new(false);
-        self.render_view_until(levels, generation, req, layers, moving, frame, &NEVER).unwrap_or_default()
-    }
-
-    /// [`RenderQueue::render_view_in`] that gives up once `stop` is set, while it waits for its
-    /// turn or marches ([`Marcher::render_frame_layers_until`]): `None`, `frame` holds nothing
-    /// to send, and nothing is published for identical requests (one waiting for this render
-    /// renders itself).
+    /// requests of the same generation share a frame (0: the queue's own marchers). It gives up
+    /// once `stop` is set, while it waits for its turn or marches
+    /// ([`Marcher::render_frame_layers_until`]): `None`, `frame` holds nothing to send, and
+    /// nothing is published for identical requests (one waiting for this render renders itself).
     #[allow(clippy::too_many_arguments)]
     pub fn render_view_until(
         &self,

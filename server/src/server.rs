@@ -251,7 +251,7 @@ struct Shared {
     queue: RenderQueue,
     /// What clients' visual edits start from.
     visual: LiveVisual,
-    /// The next id of a client's own marchers ([`RenderQueue::render_view_in`]).
+    /// The next id of a client's own marchers ([`RenderQueue::render_view_until`]).
     next_generation: AtomicU32,
     stop: AtomicBool,
     active: AtomicUsize,
