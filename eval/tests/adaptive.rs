@@ -140,3 +140,29 @@ fn a_preempting_server_drops_the_render_a_turn_makes_stale() {
     // The rest frame arrives that much earlier, and the ticks at rest show it sooner.
     assert!(b.arrive_ms < a.arrive_ms, "{b:?} {a:?}");
 }
+
+#[test]
+fn a_view_that_flips_between_moving_and_still_still_gets_every_other_render() {
+    // At 256² (coarse 128² while moving) the view moves for two ticks and holds for two, over
+    // 3 s, against a 500 ms server: every render in flight sees a request for the other
+    // viewport. The server drops one, never two in a row, so frames keep coming.
+    let marcher = Marcher::from_dataset(&Dataset::default_bundled());
+    let home = marcher.default_camera(256, 256);
+    let cams: Vec<_> = (0..91).map(|t| home.orbit((t / 4 * 2 + (t % 4).min(2)) as f32 * 2.0, 0.0)).collect();
+    assert!(cams[1] != cams[0] && cams[3] == cams[2] && cams[5] != cams[4], "moves two ticks, holds two");
+    let looks = volwarp_eval::session::simulate::Looks::fixed(&marcher, cams.len());
+    let mut o = common::session_opts(&[], "volwarp", NetworkModel { server_ms: 500.0, latency_ms: 20.0, mbps: 100.0 });
+    o.cfg.size = 256;
+    let serve = |spec: &str| {
+        let request = volwarp_eval::session::methods::MethodSpec::parse(spec).unwrap().request;
+        let mut policy = volwarp_eval::session::model::LastReceived;
+        volwarp_eval::session::simulate::serve(&looks, &cams, &o.cfg, &mut policy, request)
+    };
+    let spec = volwarp_eval::session::methods::default_method();
+    let (finished, dropping) = (serve(&format!("{spec}+no-preempt")), serve(&spec));
+    // The first frame comes before any request; then at least one render in two completes.
+    assert!(finished.len() >= 4, "{}", finished.len());
+    assert!(2 * (dropping.len() - 1) >= finished.len() - 1, "{} frames against {}", dropping.len(), finished.len());
+    let starts: Vec<f64> = dropping.iter().skip(1).map(|(f, _)| f.start_ms).collect();
+    assert!(starts.windows(2).all(|w| w[1] - w[0] < 3.0 * 500.0), "no gap of three renders: {starts:?}");
+}
