@@ -236,7 +236,7 @@ pub fn alias(name: &str) -> Option<MethodSpec> {
 pub const ALL: [&str; 7] = ["stale", "points1", "points2", "points3", "spheres-cpu", "splat", "volwarp"];
 
 impl MethodSpec {
-    /// Parses `RENDERER[+predict][+guard=G][+frames=K][+adapt][+pp=L][+layers=K][+coarse=N]`
+    /// Parses `RENDERER[+predict][+guard=G][+frames=K][+adapt][+pp=L][+layers=K][+rest=K][+coarse=N][+no-preempt]`
     /// or an alias ([`alias`]).
     pub fn parse(spec: &str) -> Result<MethodSpec, ErrorBox> {
         let spec = spec.trim();
