@@ -10,6 +10,7 @@
 # Needs Xvfb, xdotool and python3 (scripts/setup.sh installs them) and a release build of
 # volwarp-client in $CARGO_TARGET_DIR (default target/).
 set -eu
+. "$(dirname "$0")/x11.sh"
 root=$(cd "$(dirname "$0")/.." && pwd)
 target=${CARGO_TARGET_DIR:-$root/target}
 export VOLWARP_SERVER=$(realpath "${1:-$target/release/volwarp-server}")
@@ -26,12 +27,7 @@ RUST_LOG=info "$target/release/volwarp-client" --size 512x512 --volume "$root/da
   --server-delay-ms 300 --fps 60 2>&1 |
   python3 -u -c 'import sys, time
 for l in sys.stdin: print(f"{time.time():.3f} {l}", end="")' >"$out/log" &
-for _ in $(seq 60); do
-  id=$(xdotool search --name '^volwarp' 2>/dev/null | head -n 1 || true)
-  [ -n "$id" ] && break
-  sleep 0.5
-done
-[ -n "$id" ] || { cat "$out/log"; echo "no volwarp window" >&2; exit 1; }
+wait_window "$out/log"
 sleep 4
 xdotool mousemove --window "$id" 256 256
 sleep 1

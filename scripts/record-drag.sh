@@ -13,6 +13,7 @@
 # The record file holds every displayed camera with its time; the frames (megabytes) are
 # dropped by `scripts/record_cameras.py`, which keeps the magic and the camera entries.
 set -eu
+. "$(dirname "$0")/x11.sh"
 out=${1:-data/drag_ct_head.vwrec}
 target=${CARGO_TARGET_DIR:-target}
 client="$target/release/volwarp-client"
@@ -26,12 +27,7 @@ sleep 1
 "$client" --size 512x512 --server-delay-ms 300 --fps 60 --record "$tmp/full.vwrec" >"$tmp/log" 2>&1 &
 client_pid=$!
 # Wait for the window and its first frame.
-for _ in $(seq 60); do
-  id=$(xdotool search --name '^volwarp' 2>/dev/null | head -n 1 || true)
-  [ -n "$id" ] && break
-  sleep 0.5
-done
-[ -n "$id" ] || { cat "$tmp/log"; echo "no volwarp window" >&2; exit 1; }
+wait_window "$tmp/log"
 sleep 3
 moves() { # n dx dy: n relative moves of (dx, dy) px, 25 ms apart
   i=0
