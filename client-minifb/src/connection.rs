@@ -101,39 +101,64 @@ pub fn read_message_bytes(
     read_message_bytes_marked(stream, limits, what, || ())
 }
 
-/// [`read_message_bytes`], calling `mark` once the header has arrived and keeping what it
-/// returns (e.g. a "decoding" guard) alive until the payload is read and decoded.
+/// [`read_message_bytes`], calling `mark` once the first header has arrived and keeping what it
+/// returns (e.g. a "decoding" guard) alive until the message is read and decoded. A frame sent
+/// in parts (wire version 6) is reassembled (core's `wire::take_part`): its bytes are the whole
+/// frame message's, as if it had come whole, and a frame the server dropped part-way is skipped.
 pub fn read_message_bytes_marked<G>(
     stream: &mut impl Read,
     limits: &Limits,
     what: &str,
     mark: impl FnOnce() -> G,
 ) -> Result<(Vec<u8>, Message), ClientError> {
-    let mut head = [0u8; HEADER_LEN];
-    let mut got = 0;
-    while got < HEADER_LEN {
-        match stream.read(&mut head[got..]) {
-            Ok(0) => return Err(ClientError::Gone(format!("the server closed the connection while {what}"))),
-            Ok(n) => got += n,
-            Err(e) if e.kind() == io::ErrorKind::Interrupted => {}
-            Err(e) => return Err(io_err(what, &e)),
+    let mut mark = Some(mark);
+    let mut _guard = None;
+    let mut parts = wire::Assembly::new();
+    let (bytes, h) = loop {
+        let mut head = [0u8; HEADER_LEN];
+        let mut got = 0;
+        while got < HEADER_LEN {
+            match stream.read(&mut head[got..]) {
+                Ok(0) if parts.is_empty() => {
+                    return Err(ClientError::Gone(format!("the server closed the connection while {what}")))
+                }
+                Ok(0) => {
+                    return Err(ClientError::Gone(format!(
+                        "the server closed the connection inside a frame while {what}"
+                    )))
+                }
+                Ok(n) => got += n,
+                Err(e) if e.kind() == io::ErrorKind::Interrupted => {}
+                Err(e) => return Err(io_err(what, &e)),
+            }
+            if got >= 4 && head[..4] != wire::MAGIC {
+                return Err(wire_err(WireError::BadMagic([head[0], head[1], head[2], head[3]])));
+            }
         }
-        if got >= 4 && head[..4] != wire::MAGIC {
-            return Err(wire_err(WireError::BadMagic([head[0], head[1], head[2], head[3]])));
+        let h = wire::parse_header(&head, limits).map_err(wire_err)?;
+        if let Some(m) = mark.take() {
+            _guard = Some(m());
         }
-    }
-    let h = wire::parse_header(&head, limits).map_err(wire_err)?;
-    let _guard = mark();
-    let mut bytes = Vec::new();
-    bytes.try_reserve_exact(HEADER_LEN + h.len as usize).map_err(|_| ClientError::Protocol("out of memory".into()))?;
-    bytes.extend_from_slice(&head);
-    bytes.resize(HEADER_LEN + h.len as usize, 0);
-    stream.read_exact(&mut bytes[HEADER_LEN..]).map_err(|e| io_err(what, &e))?;
+        let mut r = embedded_io_adapters::std::FromStd::new(&mut *stream);
+        if let Some(whole) = wire::take_part(&mut r, &h, limits, &mut parts).map_err(wire_err)? {
+            break whole;
+        }
+        if matches!(h.ty, wire::MsgType::FramePart | wire::MsgType::FrameDropped) {
+            continue;
+        }
+        let mut bytes = Vec::new();
+        bytes
+            .try_reserve_exact(HEADER_LEN + h.len as usize)
+            .map_err(|_| ClientError::Protocol("out of memory".into()))?;
+        bytes.extend_from_slice(&head);
+        bytes.resize(HEADER_LEN + h.len as usize, 0);
+        stream.read_exact(&mut bytes[HEADER_LEN..]).map_err(|e| io_err(what, &e))?;
+        break (bytes, h);
+    };
     let msg = if h.ty == wire::MsgType::LayeredCompactFrame {
         Message::Frame(decode_layered_parallel(&bytes[HEADER_LEN..], limits).map_err(wire_err)?)
     } else {
-        let mut payload: &[u8] = &bytes[HEADER_LEN..];
-        wire::read_payload(&mut payload, &h, limits).map_err(wire_err)?
+        wire::decode_message(&bytes, &h, limits).map_err(wire_err)?
     };
     Ok((bytes, msg))
 }
@@ -309,6 +334,7 @@ pub fn connect_secure(
         wire::CAP_COMPACT
             | wire::CAP_COLOR_GREEN
             | wire::CAP_VISUAL
+            | wire::CAP_PARTS
             | if cfg!(feature = "gpu") { wire::CAP_GPU } else { 0 },
     )
     .with_layers(layers);

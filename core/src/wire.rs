@@ -22,7 +22,9 @@ pub use visual::*;
 
 /// The four magic bytes that start every message.
 pub const MAGIC: [u8; 4] = *b"VWRP";
-/// The protocol version this crate speaks (and writes in every header). Version 5 gave a
+/// The protocol version this crate speaks (and writes in every header). Version 6 added frames
+/// in parts: the FramePart (type 10) and FrameDropped (type 11) messages and the [`CAP_PARTS`]
+/// bit (`parts`). Version 5 gave a
 /// CameraRequest's byte 57 (reserved before, always written 0) a meaning: the segments per pixel
 /// the client wants for this request, 0 for the Hello's ([`CameraRequest::layers`]); every
 /// version-1 to -4 request reads as before (0). Version 4 added the live
@@ -30,7 +32,7 @@ pub const MAGIC: [u8; 4] = *b"VWRP";
 /// bit and the non-closing Error [`error_code::BAD_EDIT`]. Version 3 added layered frames: a
 /// layer count in a Frame's byte 57 and a segment-index plane after its colors, the
 /// LayeredCompactFrame message (type 7) and the layer count in the Hello.
-pub const VERSION: u16 = 5;
+pub const VERSION: u16 = 6;
 /// The oldest version a receiver accepts: version 2 only added the CompactFrame message and the
 /// [`CAP_COMPACT`] bit, so every version-1 message is read as it was (old record files replay).
 pub const MIN_VERSION: u16 = 1;
@@ -61,6 +63,11 @@ pub const CAP_COMPACT: u32 = 2;
 /// green's (`compact_frame::ColorCoding::AgainstGreen`, byte 113); a sender uses that coding
 /// only with peers that announced it (older receivers would misread the colors).
 pub const CAP_COLOR_GREEN: u32 = 4;
+/// Capability bit (version 6): in a client's Hello, "I reassemble frames sent in parts"; in the
+/// server's answer, "I send them so" (FramePart, FrameDropped; `parts`).
+pub const CAP_PARTS: u32 = 16;
+/// Most bytes a FramePart carries (a server writes parts of this size; the last is shorter).
+pub const PART_LEN: usize = 32 * 1024;
 
 /// Message types.
 #[repr(u8)]
@@ -86,6 +93,10 @@ pub enum MsgType {
     /// Server to client: the visual state the following frames are rendered with, and the
     /// presets (version 4; [`VisualState`]).
     VisualState = 9,
+    /// Server to client: the next bytes of a frame message sent in parts (version 6; `parts`).
+    FramePart = 10,
+    /// Server to client: the frame whose parts came so far is dropped (version 6; empty).
+    FrameDropped = 11,
 }
 
 impl MsgType {
@@ -101,6 +112,8 @@ impl MsgType {
             7 => MsgType::LayeredCompactFrame,
             8 => MsgType::VisualEdit,
             9 => MsgType::VisualState,
+            10 => MsgType::FramePart,
+            11 => MsgType::FrameDropped,
             _ => return None,
         })
     }
@@ -229,6 +242,8 @@ pub enum WireError {
     /// A VisualEdit or VisualState is malformed (version 4). The whole payload was read: the
     /// stream is at the next message.
     BadVisual(VisualWireError),
+    /// Frame parts that do not make one frame message (version 6): what is wrong.
+    BadParts(&'static str),
 }
 
 impl core::fmt::Display for WireError {
@@ -256,6 +271,7 @@ impl core::fmt::Display for WireError {
             WireError::Compact(e) => write!(f, "{e}"),
             WireError::Layers(e) => write!(f, "{e}"),
             WireError::BadVisual(e) => write!(f, "{e}"),
+            WireError::BadParts(e) => write!(f, "bad frame parts: {e}"),
         }
     }
 }
@@ -603,6 +619,12 @@ pub fn write_bye<W: Write>(w: &mut W) -> Result<(), WireError> {
 /// Reads and checks a message header. A stream that ends before the first byte gives
 /// [`WireError::Closed`].
 pub fn read_header<R: Read>(r: &mut R, limits: &Limits) -> Result<Header, WireError> {
+    parse_header(&read_raw_header(r)?, limits)
+}
+
+/// Reads a message header's 12 bytes, checking only the magic. A stream that ends before the
+/// first byte gives [`WireError::Closed`].
+pub fn read_raw_header<R: Read>(r: &mut R) -> Result<[u8; HEADER_LEN], WireError> {
     let mut h = [0u8; HEADER_LEN];
     // Tell a clean close (0 bytes) from a truncated header.
     let mut got = 0;
@@ -616,7 +638,7 @@ pub fn read_header<R: Read>(r: &mut R, limits: &Limits) -> Result<Header, WireEr
             return Err(WireError::BadMagic([h[0], h[1], h[2], h[3]]));
         }
     }
-    parse_header(&h, limits)
+    Ok(h)
 }
 
 /// Checks a 12-byte header already in memory.
@@ -644,6 +666,8 @@ pub fn parse_header(h: &[u8; HEADER_LEN], limits: &Limits) -> Result<Header, Wir
         MsgType::LayeredCompactFrame => len >= FRAME_FIXED_LEN as u32,
         MsgType::VisualEdit => (VISUAL_EDIT_FIXED_LEN as u32..=VISUAL_EDIT_MAX_LEN as u32).contains(&len),
         MsgType::VisualState => (VISUAL_STATE_FIXED_LEN as u32..=VISUAL_STATE_MAX_LEN as u32).contains(&len),
+        MsgType::FramePart => (1..=PART_LEN as u32).contains(&len),
+        MsgType::FrameDropped => len == 0,
     };
     if len > limits.max_payload {
         return Err(WireError::TooLarge { len, limit: limits.max_payload });
@@ -868,3 +892,7 @@ pub fn skip_payload<R: Read>(r: &mut R, h: &Header) -> Result<(), WireError> {
 mod message;
 #[cfg(feature = "alloc")]
 pub use message::*;
+#[cfg(feature = "alloc")]
+mod parts;
+#[cfg(feature = "alloc")]
+pub use parts::*;

@@ -386,7 +386,7 @@ fn a_requests_layers_wanted_sit_in_byte_57_and_older_requests_read_as_the_hellos
     let req = CameraRequest { seq: 3, camera: cam, heuristic: Heuristic::Threshold, radius_scale: 1.0, layers: 1 };
     let mut bytes = wire::encode_to_vec(&Message::CameraRequest(req));
     assert_eq!(bytes.len(), wire::HEADER_LEN + wire::CAMERA_REQUEST_LEN);
-    assert_eq!(u16::from_le_bytes([bytes[4], bytes[5]]), 5, "written as version 5");
+    assert_eq!(u16::from_le_bytes([bytes[4], bytes[5]]), wire::VERSION, "written as the current version");
     let at = wire::HEADER_LEN + 57;
     assert_eq!((bytes[at - 1], bytes[at], bytes[at + 1], bytes[at + 2]), (Heuristic::Threshold.code(), 1, 0, 0));
     let read = |b: &[u8]| wire::read_message(&mut &b[..], &Limits::default());
@@ -440,4 +440,94 @@ proptest! {
         let want = sample::over_background(sample::pack_color_f32(ray), volwarp_core::BACKGROUND);
         prop_assert_eq!(shown, want, "packed {:08x?}", packed);
     }
+}
+
+/// A frame message written as FrameParts of the given sizes (cycled; each at most PART_LEN).
+fn in_parts(message: &[u8], sizes: &[usize]) -> Vec<u8> {
+    let mut out = Vec::new();
+    let (mut at, mut i) = (0, 0);
+    while at < message.len() {
+        let n = sizes[i % sizes.len()].clamp(1, wire::PART_LEN).min(message.len() - at);
+        wire::write_frame_part(&mut wire::VecWriter(&mut out), &message[at..at + n]).unwrap();
+        at += n;
+        i += 1;
+    }
+    out
+}
+
+proptest! {
+    #![proptest_config(ProptestConfig { cases: 64, .. ProptestConfig::default() })]
+
+    /// A frame sent in parts of any sizes, after a frame dropped part-way, reads as the frame
+    /// sent whole, byte for byte; a message between parts, a part past the frame's end and a
+    /// stream ending inside the parts are typed errors.
+    #[test]
+    fn a_frame_in_parts_reads_as_the_frame_sent_whole(
+        b in bounds(),
+        n in 1usize..6000,
+        sizes in prop::collection::vec(1usize..40_000, 1..6),
+        cut in 1usize..100_000,
+    ) {
+        let cam = Camera::look_at(Vec3::new(0.0, 0.0, 3.0), Vec3::ZERO, Vec3::Y, 40.0, 100, 100);
+        let points: Vec<(Vec3, u32)> =
+            (0..n).map(|i| (b.min() + (b.max() - b.min()) * (i as f32 / n as f32), i as u32)).collect();
+        let frame = frame_of(&points, b, 0.01, cam);
+        let whole = wire::encode_to_vec(&Message::Frame(frame.clone()));
+        let limits = Limits::for_frames(100);
+        let parts = in_parts(&whole, &sizes);
+        // A dropped frame first: some of its parts, then FrameDropped.
+        let cut = cut % whole.len();
+        let mut stream = if cut > 0 { in_parts(&whole[..cut], &sizes) } else { Vec::new() };
+        wire::write_frame_dropped(&mut wire::VecWriter(&mut stream)).unwrap();
+        stream.extend_from_slice(&parts);
+        let mut bye = Vec::new();
+        wire::write_bye(&mut wire::VecWriter(&mut bye)).unwrap();
+        stream.extend_from_slice(&bye);
+        let mut r = &stream[..];
+        prop_assert_eq!(wire::read_message(&mut r, &limits).unwrap(), Message::Frame(frame.clone()));
+        prop_assert_eq!(wire::read_message(&mut r, &limits).unwrap(), Message::Bye);
+        let mut r = &stream[..];
+        let (bytes, h) = wire::read_message_bytes(&mut r, &limits).unwrap();
+        prop_assert_eq!(&bytes, &whole);
+        prop_assert_eq!(wire::decode_message(&bytes, &h, &limits).unwrap(), Message::Frame(frame));
+        // Cut short inside the parts: the stream ended inside a message.
+        if cut > 0 && cut < parts.len() {
+            prop_assert!(matches!(
+                wire::read_message(&mut &parts[..cut.max(wire::HEADER_LEN + 1)], &limits),
+                Err(WireError::UnexpectedEof)
+            ));
+        }
+        // Bye between two parts.
+        let first = parts.len().min(wire::HEADER_LEN + sizes[0].min(wire::PART_LEN).min(whole.len()));
+        if first < parts.len() {
+            let mut bad = parts[..first].to_vec();
+            bad.extend_from_slice(&bye);
+            bad.extend_from_slice(&parts[first..]);
+            prop_assert!(matches!(wire::read_message(&mut &bad[..], &limits), Err(WireError::BadParts(_))));
+        }
+    }
+}
+
+#[test]
+fn frame_parts_carry_only_frames_within_the_limits() {
+    let limits = Limits::for_frames(64);
+    let mut hello = Vec::new();
+    wire::write_hello(&mut wire::VecWriter(&mut hello), &Hello::new(0)).unwrap();
+    let parts = in_parts(&hello, &[5]);
+    assert!(matches!(wire::read_message(&mut &parts[..], &limits), Err(WireError::BadParts(_))));
+    // A frame over the receiver's limit is refused at its header, before more is held.
+    let cam = Camera::look_at(Vec3::new(0.0, 0.0, 3.0), Vec3::ZERO, Vec3::Y, 40.0, 100, 100);
+    let b = Bounds::new(Vec3::ZERO, Vec3::ONE);
+    let big: Vec<(Vec3, u32)> = (0..5000).map(|i| (Vec3::splat(i as f32 / 5000.0), 7)).collect();
+    let whole = wire::encode_to_vec(&Message::Frame(frame_of(&big, b, 0.01, cam)));
+    let parts = in_parts(&whole, &[wire::PART_LEN]);
+    assert!(matches!(wire::read_message(&mut &parts[..], &limits), Err(WireError::TooLarge { .. })));
+    // Empty and oversized parts are refused at their header; a part read alone is refused.
+    let mut empty = Vec::new();
+    wire::write_header(&mut wire::VecWriter(&mut empty), wire::MsgType::FramePart, 0).unwrap();
+    assert!(matches!(wire::read_message(&mut &empty[..], &limits), Err(WireError::BadLength { .. })));
+    assert!(wire::write_frame_part(&mut wire::VecWriter(&mut Vec::new()), &vec![0; wire::PART_LEN + 1]).is_err());
+    let one = in_parts(&whole[..100], &[100]);
+    let h = wire::read_header(&mut &one[..], &Limits::for_frames(100)).unwrap();
+    assert!(matches!(wire::read_payload(&mut &one[wire::HEADER_LEN..], &h, &limits), Err(WireError::BadParts(_))));
 }

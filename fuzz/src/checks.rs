@@ -34,10 +34,12 @@ pub const ALLOC_SLACK: usize = 4096;
 
 /// What one `read_message` may allocate: the payload limit and [`ALLOC_SLACK`] for the 12-byte
 /// messages, or the compact decoder's stated bound (a CompactFrame also holds its decompressed
-/// body and zstd's window while it builds the frame).
+/// body and zstd's window while it builds the frame); a frame sent in parts (version 6) also
+/// holds its reassembled bytes and one part while it is decoded.
 pub fn decode_alloc_limit(limits: &Limits) -> usize {
     let plain = limits.max_payload as usize + ALLOC_SLACK;
-    plain.max(volwarp_core::compact_frame::decode_alloc_bound(limits) as usize)
+    let whole = plain.max(volwarp_core::compact_frame::decode_alloc_bound(limits) as usize);
+    whole + HEADER_LEN + limits.max_payload as usize + wire::PART_LEN
 }
 
 // ---------------------------------------------------------------- allocation accounting

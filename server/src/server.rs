@@ -13,9 +13,18 @@
 //! moving: the reader sets the render's stop flag, the marcher leaves its remaining row bands
 //! (and a `--server-delay-ms` wait ends), nothing of it is sent or published, and the newest
 //! request is rendered at once. The render after a dropped one is never dropped, so a client
-//! whose view flips between moving and still at every tick still gets every other frame. A
-//! frame already being written is sent whole. (One-process server; MPI ranks finish every
-//! frame.)
+//! whose view flips between moving and still at every tick still gets every other frame.
+//! (One-process server; MPI ranks finish every frame.)
+//!
+//! **So is a frame on the link when the view starts moving.** A client that reassembles frames
+//! sent in parts (wire version 6, `CAP_PARTS`) gets each frame as parts of [`wire::PART_LEN`]
+//! bytes; a request for a coarser viewport (the view started moving) that arrives while a
+//! frame is written ends it after the part under way with FrameDropped, also right after a
+//! dropped render: the coarse frame asked for is never dropped on the link (no request is
+//! coarser), so frames keep coming however often the view turns. The socket keeps at most
+//! [`NOTSENT_LOWAT`] bytes not yet sent (Linux's `TCP_NOTSENT_LOWAT`), so what the link still
+//! carries of a dropped frame is that, the part and a round trip's bytes in flight: on a slow
+//! link a full-resolution frame's megabytes no longer hold up the first frame of the move.
 //!
 //! **Several clients** share one marcher thread pool through a [`RenderQueue`]: each frame is
 //! one job in the pool's first-in-first-out queue (no client starves another), and a request
@@ -752,6 +761,75 @@ struct Slot {
     end: Option<End>,
 }
 
+/// Most bytes the socket of a client that takes frames in parts keeps unsent (Linux's
+/// `TCP_NOTSENT_LOWAT`; bytes in flight do not count): a write blocks until the queue is below
+/// it, so the server sees a turn after a part while the rest of a stale frame is still its own.
+pub const NOTSENT_LOWAT: usize = 64 * 1024;
+
+/// Keeps at most `bytes` unsent in the socket's queue (Linux; elsewhere the kernel's buffer
+/// size applies and a dropped frame's buffered bytes still travel).
+fn limit_unsent(stream: &TcpStream, bytes: usize) -> io::Result<()> {
+    #[cfg(target_os = "linux")]
+    {
+        use std::os::fd::AsRawFd;
+        let v = bytes as libc::c_int;
+        // SAFETY: a valid socket and a c_int option value of the size given.
+        let r = unsafe {
+            libc::setsockopt(
+                stream.as_raw_fd(),
+                libc::IPPROTO_TCP,
+                libc::TCP_NOTSENT_LOWAT,
+                (&v as *const libc::c_int).cast(),
+                std::mem::size_of::<libc::c_int>() as libc::socklen_t,
+            )
+        };
+        if r != 0 {
+            return Err(io::Error::last_os_error());
+        }
+    }
+    #[cfg(not(target_os = "linux"))]
+    let _ = (stream, bytes);
+    Ok(())
+}
+
+/// How a frame's write ended.
+enum Written {
+    /// Every byte was written.
+    Whole,
+    /// A turn stopped it after this many of its bytes (FrameDropped sent).
+    Dropped(usize),
+}
+
+/// Writes a frame message (`bytes`, header included) to `out`: whole, or for a client that
+/// takes parts as FrameParts, flushed one by one, ending with FrameDropped once `stale()` says
+/// so before a part.
+fn write_frame_message(
+    out: &mut impl Write,
+    bytes: &[u8],
+    parts: bool,
+    stale: impl Fn() -> bool,
+) -> io::Result<Written> {
+    let wire_io = |e: WireError| io::Error::other(e.to_string());
+    if !parts {
+        out.write_all(bytes)?;
+        out.flush()?;
+        return Ok(Written::Whole);
+    }
+    let mut sent = 0;
+    for part in bytes.chunks(wire::PART_LEN) {
+        let mut w = embedded_io_adapters::std::FromStd::new(&mut *out);
+        if stale() {
+            wire::write_frame_dropped(&mut w).map_err(wire_io)?;
+            out.flush()?;
+            return Ok(Written::Dropped(sent));
+        }
+        wire::write_frame_part(&mut w, part).map_err(wire_io)?;
+        out.flush()?;
+        sent += part.len();
+    }
+    Ok(Written::Whole)
+}
+
 /// Most visual edits waiting for the next frame; more end the connection (a client sends one
 /// per display frame at most, and each frame takes them all).
 const MAX_PENDING_EDITS: usize = 256;
@@ -862,11 +940,19 @@ fn serve(sh: &Shared, stream: &TcpStream, id: u64, charged: Option<IpAddr>) -> S
     let layers = hello.layers.clamp(1, cfg.layers.max(1));
     // Live visual edits: for clients that send them, on a server whose marchers it owns.
     let live = hello.capabilities & wire::CAP_VISUAL != 0 && sh.source.is_none();
+    // Frames in parts, which a turn can stop: for clients that reassemble them.
+    let parts = hello.capabilities & wire::CAP_PARTS != 0;
+    if parts {
+        if let Err(e) = limit_unsent(stream, NOTSENT_LOWAT) {
+            log::warn!("client {id}: cannot limit the socket's unsent bytes ({e}): a dropped frame's queue still goes");
+        }
+    }
     {
         let mut w = embedded_io_adapters::std::FromStd::new(&mut sink);
         let caps = if compact { wire::CAP_COMPACT } else { 0 }
             | if green { wire::CAP_COLOR_GREEN } else { 0 }
-            | if live { wire::CAP_VISUAL } else { 0 };
+            | if live { wire::CAP_VISUAL } else { 0 }
+            | if parts { wire::CAP_PARTS } else { 0 };
         let answer = Hello::new(caps).with_layers(layers);
         if let Err(e) = wire::write_hello(&mut w, &answer) {
             return format!("cannot send Hello: {e}");
@@ -1013,20 +1099,44 @@ fn serve(sh: &Shared, stream: &TcpStream, id: u64, charged: Option<IpAddr>) -> S
             }
         };
         let t_send = Instant::now();
-        let sent = if encoding == Encoding::Compact {
-            let (bytes, _) = match &sh.source {
-                Some(source) => source.encode(&req, &frame, encoding, green),
-                None => crate::encoding::encode_frame_for(&sh.marcher, &req, &frame, encoding, green),
-            };
-            io::Write::write_all(&mut out, &bytes).map_err(|e| e.to_string())
+        let bytes = if encoding == Encoding::Compact {
+            match &sh.source {
+                Some(source) => source.encode(&req, &frame, encoding, green).0,
+                None => crate::encoding::encode_frame_for(&sh.marcher, &req, &frame, encoding, green).0,
+            }
         } else {
-            let mut w = embedded_io_adapters::std::FromStd::new(&mut out);
-            wire::write_frame_layered(&mut w, &frame.header, &frame.samples, &frame.colors, &frame.segments)
-                .map_err(|e| e.to_string())
+            let mut bytes = Vec::new();
+            let _ = wire::write_frame_layered(
+                &mut wire::VecWriter(&mut bytes),
+                &frame.header,
+                &frame.samples,
+                &frame.colors,
+                &frame.segments,
+            );
+            bytes
         };
-        let sent = sent.and_then(|_| io::Write::flush(&mut out).map_err(|e| e.to_string()));
-        if let Err(e) = sent {
-            break End::Gone(format!("cannot send frame: {e}"));
+        // A frame written in parts is dropped before a part once the newest request is for a
+        // coarser viewport (the view started moving; also after a dropped render: the coarse
+        // frame asked for is never dropped on the link, so frames keep coming).
+        let pixels = |c: &volwarp_core::Camera| u64::from(c.width) * u64::from(c.height);
+        let stale = || {
+            let s = slot.0.lock().unwrap_or_else(|e| e.into_inner());
+            sh.source.is_none() && s.latest.is_some_and(|l| pixels(&l.camera) < pixels(&req.camera))
+        };
+        match write_frame_message(&mut out, &bytes, parts, stale) {
+            Err(e) => break End::Gone(format!("cannot send frame: {e}")),
+            Ok(Written::Dropped(at)) => {
+                stopped_last = true;
+                log::info!(
+                    "client {id}: frame seq {} {}x{} dropped on the link after {at} of {} bytes: the view's turn made it stale",
+                    req.seq,
+                    viewport.0,
+                    viewport.1,
+                    bytes.len()
+                );
+                continue;
+            }
+            Ok(Written::Whole) => {}
         }
         let dropped = std::mem::take(&mut slot.0.lock().unwrap_or_else(|e| e.into_inner()).dropped);
         log::info!(

@@ -163,6 +163,76 @@ fn a_request_for_another_viewport_drops_the_render_under_way() {
     server.shutdown();
 }
 
+/// What a client taking frames in parts reads up to the next whole frame, message by message:
+/// the bytes of each frame's parts, whether a FrameDropped came, and the frame.
+fn read_parts(c: &mut Client) -> (Vec<usize>, bool, volwarp_core::wire::Frame) {
+    use embedded_io_adapters::std::FromStd;
+    use volwarp_core::wire::{self, Limits, MsgType};
+    let limits = Limits::for_frames(4096);
+    let mut r = FromStd::new(&mut c.stream);
+    let (mut sizes, mut dropped, mut parts) = (Vec::new(), false, wire::Assembly::new());
+    loop {
+        let h = wire::read_header(&mut r, &limits).unwrap();
+        match h.ty {
+            MsgType::FramePart => sizes.push(h.len as usize),
+            MsgType::FrameDropped => dropped = true,
+            other => panic!("a {other:?} between frame parts"),
+        }
+        if let Some((bytes, h)) = wire::take_part(&mut r, &h, &limits, &mut parts).unwrap() {
+            match wire::decode_message(&bytes, &h, &limits).unwrap() {
+                Message::Frame(f) => return (sizes, dropped, f),
+                other => panic!("parts of a {other:?}"),
+            }
+        }
+    }
+}
+
+/// For a client that takes frames in parts, the same request for another viewport that arrives
+/// while a frame is written ends it after the part under way (FrameDropped), and the next frame
+/// comes whole; a frame not dropped reassembles to the frame a whole-frame client gets.
+#[test]
+fn a_request_for_another_viewport_drops_the_frame_on_the_link() {
+    let (server, m) = start(config());
+    let mut c = Client::connect(server.local_addr());
+    c.send(&Message::Hello(Hello::new(volwarp_core::wire::CAP_PARTS)));
+    match c.recv() {
+        Ok(Message::Hello(h)) => assert_ne!(h.capabilities & volwarp_core::wire::CAP_PARTS, 0, "parts granted"),
+        other => panic!("expected Hello, got {other:?}"),
+    }
+    // About 1024² × 12 bytes at most: more than the socket holds while the client reads nothing.
+    let full =
+        |seq| CameraRequest { camera: m.default_camera(1024, 1024), ..request(&m, seq, Heuristic::Threshold, 0.0) };
+    c.send(&Message::CameraRequest(full(1)));
+    // Its first part has come: the render is done and the frame is being written. The client
+    // reads nothing for a while (the server's writes block), then the view starts moving.
+    let mut b = [0u8; 1];
+    assert_eq!(c.stream.peek(&mut b).unwrap(), 1);
+    std::thread::sleep(Duration::from_millis(300));
+    let coarse = CameraRequest { camera: m.default_camera(64, 64), ..request(&m, 2, Heuristic::Threshold, 5.0) };
+    c.send(&Message::CameraRequest(coarse));
+    std::thread::sleep(Duration::from_millis(300));
+    let (sizes, dropped, f) = read_parts(&mut c);
+    assert!(dropped, "the full frame was dropped on the link");
+    assert_eq!((f.header.seq, f.header.camera.width), (2, 64), "the coarse frame came next, whole");
+    let message_len =
+        |f: &volwarp_core::wire::Frame| volwarp_core::wire::HEADER_LEN + 96 + 12 * f.header.count as usize;
+    let sent = sizes.iter().sum::<usize>() - message_len(&f);
+    assert!(sizes.iter().all(|&n| n <= volwarp_core::wire::PART_LEN));
+
+    // The render after a dropped frame is not dropped; its parts make the frame a whole-frame
+    // client gets for the same request.
+    c.send(&Message::CameraRequest(full(3)));
+    let (sizes, dropped, f) = read_parts(&mut c);
+    assert!(!dropped && sizes.len() > 1, "{} parts", sizes.len());
+    let mut whole = Client::hello(server.local_addr(), None);
+    whole.send(&Message::CameraRequest(full(3)));
+    assert_eq!(expect_frame(&mut whole), f);
+    let full_len = message_len(&f);
+    assert!(sent < full_len / 2, "{sent} of the dropped frame's {full_len} bytes went out");
+    eprintln!("{sent} of the dropped frame's {full_len} bytes went out");
+    server.shutdown();
+}
+
 #[test]
 fn bad_clients_do_not_disturb_a_good_one() {
     let (server, m) = start(config());

@@ -58,8 +58,20 @@ pub enum Message {
 /// Reads one whole message. Allocates at most `count × 12` bytes for a Frame, and only
 /// after its header passed the limits.
 pub fn read_message<R: Read>(r: &mut R, limits: &Limits) -> Result<Message, WireError> {
-    let h = read_header(r, limits)?;
-    read_payload(r, &h, limits)
+    let mut parts = Assembly::new();
+    loop {
+        let h = match read_header(r, limits) {
+            Err(WireError::Closed) if !parts.is_empty() => return Err(WireError::UnexpectedEof),
+            h => h?,
+        };
+        // A frame sent in parts (version 6) is decoded once its last part is in.
+        if let Some((bytes, h)) = take_part(r, &h, limits, &mut parts)? {
+            return decode_message(&bytes, &h, limits);
+        }
+        if !matches!(h.ty, MsgType::FramePart | MsgType::FrameDropped) {
+            return read_payload(r, &h, limits);
+        }
+    }
 }
 
 /// Reads the payload of a message whose header was read already.
@@ -96,6 +108,8 @@ pub fn read_payload<R: Read>(r: &mut R, h: &Header, limits: &Limits) -> Result<M
             r.read_exact(&mut payload)?;
             Message::Frame(crate::segments::decode_layered_payload(&payload, limits)?)
         }
+        // Read through `read_message` or `read_message_bytes`, which reassemble them.
+        MsgType::FramePart | MsgType::FrameDropped => return Err(WireError::BadParts("a frame part read alone")),
     })
 }
 
