@@ -167,11 +167,13 @@ impl Predictor {
 ///
 /// Frames at full resolution and frames on the coarser grid of adaptive resolution are measured
 /// apart: a coarse frame is marched and sent in a fraction of a full one's time. Until a coarse
-/// frame has arrived, a coarse request's horizon is the full frames' scaled by its share of the
-/// pixels (`1/d²` for a divisor `d` per axis): the march and the transfer scale with the pixels,
-/// the round trip does not, so this errs short, and the first coarse frame corrects it. Taken
-/// as it is, the full frame's horizon made the first coarse frames of a turn overshoot by about
-/// twice the time they took to come.
+/// frame has arrived, a coarse request's horizon is the full frames' over `d` (a divisor `d`
+/// per axis), and the first coarse frame corrects it. The march and the transfer scale with the
+/// pixels (`1/d²`), the round trip and the marcher's fixed costs do not (a 256² frame takes
+/// 0.22–0.47 of a 512² one's march): over `d²` the first coarse frames of a session were
+/// predicted too short and warped up to 10° on a steady turn, while the full frame's horizon
+/// as it is made them overshoot by about twice the time they took to come
+/// (`docs/results.md`, "Adaptive resolution").
 #[derive(Clone, Copy, Debug, Default, PartialEq)]
 pub struct Horizon {
     /// Request-to-arrival and interval averages: of full-resolution frames, of coarse frames.
@@ -238,7 +240,7 @@ impl Horizon {
             (own, 1.0)
         } else if coarse {
             let d = f64::from(divisor);
-            (self.classes[0], 1.0 / (d * d))
+            (self.classes[0], 1.0 / d)
         } else {
             (self.classes[1], 1.0)
         };
@@ -381,10 +383,10 @@ mod tests {
         let mut h = Horizon::new();
         // The first frame at full resolution: 0.6 s from request to arrival.
         h.observe(-0.6, 0.0, false);
-        // A coarse request before any coarse frame: the full frame's time over d² (0.15 s,
+        // A coarse request before any coarse frame: the full frame's time over d (0.3 s,
         // interval alike), plus half the interval.
-        assert!((h.seconds(0.0, 2) - 0.225).abs() < 1e-6, "{}", h.seconds(0.0, 2));
-        assert!((h.seconds(0.0, 4) - 0.05625).abs() < 1e-6, "{}", h.seconds(0.0, 4));
+        assert!((h.seconds(0.0, 2) - 0.45).abs() < 1e-6, "{}", h.seconds(0.0, 2));
+        assert!((h.seconds(0.0, 4) - 0.225).abs() < 1e-6, "{}", h.seconds(0.0, 4));
         assert!((h.seconds(0.0, 1) - 0.9).abs() < 1e-6);
         // Coarse frames measured: their own figures, the full frames' unchanged.
         for k in 1..40 {
