@@ -107,26 +107,33 @@ fn coarse_frames_cost_the_measured_server_time_at_their_resolution() {
     assert!(firsts[0] < firsts[1], "the measured ratio sets the coarse frame's time: {firsts:?}");
 }
 
-#[test]
-fn a_preempting_server_drops_the_render_a_turn_makes_stale() {
-    // Stop-and-go (1.5 s moving, then 1 s at rest) at 256² (half resolution while moving:
-    // 128²), a 500 ms server whose half-resolution frames take 250 ms, on a 5 Mbit/s link.
-    let net = NetworkModel { server_ms: 500.0, latency_ms: 20.0, mbps: 5.0 };
+/// The frames of the default method's stop-and-go at 256² (128² while moving) over `net` for
+/// `duration_s`, served by a server finishing every render and write, and by the default one;
+/// the server's half-resolution frames take 250 ms.
+fn stop_and_go_frames(net: NetworkModel, duration_s: f64) -> (Vec<FrameEvent>, Vec<FrameEvent>) {
     let ds = vec![Dataset::default_bundled()];
-    // The default method (with its adaptive resolution), without and with preemption.
     let spec = volwarp_eval::session::methods::default_method();
     let run = |methods: &str| {
         let mut o = common::session_opts(&["stop-and-go"], methods, net);
         o.cfg.size = 256;
-        o.cfg.duration_s = 3.0;
-        o.cfg.score_every = 6;
+        o.cfg.duration_s = duration_s;
+        o.cfg.score_every = 9;
         o.calibration.ms.insert(("server".into(), ds[0].name.clone(), 256), 500.0);
         o.calibration.ms.insert(("server".into(), scaled_name(&ds[0].name, 2), 256), 250.0);
         o.calibration.ms.insert(("server".into(), scaled_name(&ds[0].name, 4), 256), 125.0);
         o.server_ms = Some(500.0);
         simulate_all(&ds, &o).unwrap().remove(0).result.frames
     };
-    let (plain, preempt) = (run(&format!("{spec}+no-preempt")), run(&spec));
+    (run(&format!("{spec}+no-preempt")), run(&spec))
+}
+
+#[test]
+fn a_preempting_server_drops_the_render_a_turn_makes_stale() {
+    // Stop-and-go (1.5 s moving, then 1 s at rest) at 256² (half resolution while moving:
+    // 128²), a 500 ms server whose half-resolution frames take 250 ms, on a 5 Mbit/s link.
+    let net = NetworkModel { server_ms: 500.0, latency_ms: 20.0, mbps: 5.0 };
+    // The default method (with its adaptive resolution), without and with preemption.
+    let (plain, preempt) = stop_and_go_frames(net, 3.0);
     let moving = |f: &FrameEvent| f.camera.width < 256;
     let rest = |frames: &[FrameEvent]| {
         frames.iter().skip(1).find(|f| !moving(f)).cloned().unwrap_or_else(|| panic!("no rest frame: {frames:?}"))
@@ -139,6 +146,25 @@ fn a_preempting_server_drops_the_render_a_turn_makes_stale() {
     assert_eq!(b.start_ms, b.request_ms + net.latency_ms, "rendered as it arrived: {b:?}");
     // The rest frame arrives that much earlier, and the ticks at rest show it sooner.
     assert!(b.arrive_ms < a.arrive_ms, "{b:?} {a:?}");
+}
+
+#[test]
+fn a_preempting_server_drops_the_frame_a_turn_makes_stale_on_the_link() {
+    // Stop-and-go at 256² on a 2 Mbit/s link: the full-resolution rest frame (about 150 KB,
+    // 0.6 s) is still being written when the move back begins at 2.5 s.
+    let net = NetworkModel { server_ms: 500.0, latency_ms: 20.0, mbps: 2.0 };
+    let (plain, dropping) = stop_and_go_frames(net, 3.6);
+    let turn = 2500.0 + net.latency_ms;
+    // The server writing every frame whole: the rest frame is on the link as the move begins.
+    let rest = plain.iter().skip(1).find(|f| f.camera.width == 256).expect("a rest frame");
+    let link_ms = rest.bytes as f64 * 8.0 / (net.mbps * 1e3);
+    assert!(rest.arrive_ms - net.latency_ms - link_ms < turn && turn < rest.arrive_ms, "{rest:?}");
+    // The dropping one stops writing it, and the move's first frame comes sooner.
+    assert!(dropping.iter().all(|f| f.request_ms != rest.request_ms), "the rest frame was dropped: {dropping:?}");
+    let first_back =
+        |frames: &[FrameEvent]| frames.iter().find(|f| f.request_ms >= 2500.0).cloned().expect("a frame of the move");
+    let (a, b) = (first_back(&plain), first_back(&dropping));
+    assert!(b.arrive_ms + 100.0 < a.arrive_ms, "dropping: {b:?}, writing whole: {a:?}");
 }
 
 #[test]

@@ -258,8 +258,8 @@ struct SessionArgs {
     scenarios: String,
     /// Methods, comma-separated, or `all`: each a renderer with the client's options,
     /// `RENDERER[+predict][+guard=G][+frames=K][+adapt][+pp=L][+layers=K][+coarse=N][+no-preempt]`
-    /// (`+no-preempt`: the server finishes every render, where by default, as the real server,
-    /// it drops one when a request for another viewport arrives) (e.g.
+    /// (`+no-preempt`: the server finishes every render and write, where by default, as the
+    /// real server, it drops one when a request for another viewport arrives) (e.g.
     /// `splat-fill+predict+guard=0.1+frames=2`), or `volwarp` (the window client's default
     /// method), `volwarp-adaptive` / `volwarp-adaptive=4` (it on a 1/2 or 1/4 pixel grid per
     /// axis while the camera moves, full at rest), or an image-sending peer:

@@ -27,10 +27,11 @@
 //!   the server renders in its time times the marcher's measured ratio at that resolution
 //!   (`session-calibrate`'s `DATASET/N` lines, [`super::peers::ResolutionCost`]) and encodes
 //!   at that size; the full resolution at the first still tick.
-//! - `+no-preempt`: the server finishes every render it starts. By default it drops the render
-//!   in progress when a request for another viewport arrives (with adaptive resolution: the
-//!   view came to rest or started moving), as the real server does, though never two renders
-//!   in a row (`volwarp_server::server`'s module docs).
+//! - `+no-preempt`: the server finishes every render it starts and every frame it writes. By
+//!   default, as the real server does, it drops the render in progress when a request for
+//!   another viewport arrives (with adaptive resolution: the view came to rest or started
+//!   moving), though never two in a row, and the frame being written, after the part under
+//!   way, when one for a coarser viewport arrives (`volwarp_server::server`'s module docs).
 //!
 //! [`default_method`] (alias `volwarp`, core's `Method::DEFAULT`, which has `+coarse=2`) is the
 //! method the window client runs by default; `volwarp-adaptive` is the same and
@@ -64,8 +65,9 @@ pub struct SessionRequest {
     pub coarse: u8,
     /// Segments per pixel it asks for the view at rest (0: as while it moves).
     pub rest_layers: u8,
-    /// The server drops the render in progress when a request for another viewport arrives
-    /// (the real server's rule; `false`: `+no-preempt`, every render finished).
+    /// The server drops the render in progress, or the frame being written, when a request for
+    /// another viewport arrives (the real server's rule; `false`: `+no-preempt`, every render
+    /// finished and every frame written whole).
     pub preempt: bool,
 }
 

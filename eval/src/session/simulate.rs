@@ -42,7 +42,7 @@ use volwarp_core::method::{Cadence, ViewEvents};
 use volwarp_core::prediction::{Horizon, Predictor};
 use volwarp_core::renderer::Renderer;
 use volwarp_core::show::{self, Show};
-use volwarp_core::wire::CameraRequest;
+use volwarp_core::wire::{self, CameraRequest};
 use volwarp_core::{Camera, Heuristic, Image, RendererKind};
 use volwarp_server::encoding::encode_frame;
 use volwarp_server::visual::VisualState;
@@ -431,7 +431,8 @@ pub fn serve(
     let arrival = |r: &Request| r.sent_ms + net.latency_ms;
     let mut s = 0.0f64;
     let mut served = 0usize; // requests[..served] were seen by the server
-    let mut dropped_last = false; // the last render was dropped
+    let mut dropped_last = false; // the last render or write was dropped
+    let mut link_free = 0.0f64; // when the link has sent what the server wrote
     while served < requests.len() {
         // The newest request arrived by `s`, else wait for the next one.
         let mut j = served;
@@ -446,29 +447,47 @@ pub fn serve(
         let (_, view, guard_offset, wanted) = ask(j, &mut requests, &out);
         // Preemption, the real server's rule: a request for another viewport (adaptive
         // resolution's, the view came to rest or started moving) that arrives while this one
-        // renders ends the render there, unless the render before was dropped; the server takes
-        // the newest request.
-        if request.preempt && !dropped_last {
-            let viewport = |r: &Request| request.policy().divisor_for(moving(r), cfg.size, cfg.size);
-            let turn = requests[j + 1..].iter().find(|r| {
-                let a = arrival(r);
-                a > s && a < s + render_ms && viewport(r) != viewport(&requests[j])
-            });
-            if let Some(r) = turn {
-                served = j + 1;
-                s = arrival(r);
-                dropped_last = true;
-                continue;
-            }
+        // renders ends the render there, unless the one before was dropped; one for a coarser
+        // viewport (the view started moving) that arrives while it is written ends the write.
+        // The server takes the newest request. `turn(from, to, coarser)`: the arrival of such a
+        // request in that span.
+        let viewport = |r: &Request| request.policy().divisor_for(moving(r), cfg.size, cfg.size);
+        let turn = |from: f64, to: f64, coarser: bool| {
+            let this = viewport(&requests[j]);
+            let found =
+                requests[j + 1..].iter().map(arrival).zip(&requests[j + 1..]).find(|(a, r)| {
+                    *a > from && *a < to && if coarser { viewport(r) > this } else { viewport(r) != this }
+                });
+            found.map(|(a, _)| a).filter(|_| request.preempt)
+        };
+        if let Some(a) = turn(s, s + render_ms, false).filter(|_| !dropped_last) {
+            served = j + 1;
+            s = a;
+            dropped_last = true;
+            continue;
         }
-        dropped_last = false;
         let camera = policy.camera(&requests[..=j], s);
         served = j + 1;
         let seq = out.len();
         let state = looks.state_at(requests[j].tick);
         let wanted = if camera == requests[j].camera { wanted } else { 0 };
         let (frame, bytes) = render(camera, seq, state, wanted);
-        let write_end = s + render_ms + net.transfer_ms(bytes);
+        let write_start = (s + render_ms).max(link_free);
+        let write_end = write_start + net.transfer_ms(bytes);
+        // While the frame is written (in parts) the server stops after the part under way, and
+        // the link still carries what the kernel holds: the part, the unsent bytes the socket
+        // keeps and a round trip of bytes in flight. (The coarse frame asked for next is never
+        // dropped on the link, so frames keep coming however often the view turns.)
+        if let Some(a) = turn(write_start, write_end, true) {
+            s = a;
+            let in_flight = net.mbps * 1e6 / 8.0 * 2.0 * net.latency_ms * 1e-3;
+            let tail = (wire::PART_LEN + volwarp_server::server::NOTSENT_LOWAT) as f64 + in_flight;
+            link_free = write_end.min(s + net.transfer_ms(tail as u64));
+            dropped_last = true;
+            continue;
+        }
+        dropped_last = false;
+        link_free = write_end;
         let arrive_ms = write_end + net.latency_ms;
         if arrive_ms <= end_ms {
             let view = if camera == requests[j].camera { view } else { camera };
