@@ -21,14 +21,14 @@ use embedded_io::{Read, Write};
 #[derive(Clone, Debug, Default)]
 pub struct Assembly {
     bytes: Vec<u8>,
-    /// The whole message's length once its header is in.
-    total: Option<usize>,
+    /// The frame message's header, once its 12 bytes are in and checked.
+    header: Option<Header>,
 }
 
 impl Assembly {
     /// An empty assembly.
     pub const fn new() -> Self {
-        Assembly { bytes: Vec::new(), total: None }
+        Assembly { bytes: Vec::new(), header: None }
     }
 
     /// Whether no part of a frame is held.
@@ -39,7 +39,7 @@ impl Assembly {
     /// Throws away the parts held (the sender dropped the frame).
     pub fn clear(&mut self) {
         self.bytes.clear();
-        self.total = None;
+        self.header = None;
     }
 
     /// Adds a part; the whole frame message (header included) and its header once the last
@@ -48,7 +48,7 @@ impl Assembly {
         let r = self.push_inner(part, limits);
         if !matches!(r, Ok(None)) {
             // Done or failed: start afresh (a finished message is handed over whole).
-            self.total = None;
+            self.header = None;
         }
         if r.is_err() {
             self.bytes = Vec::new();
@@ -61,7 +61,7 @@ impl Assembly {
             return Err(WireError::BadParts("a part of 0 or more than PART_LEN bytes"));
         }
         let mut part = part;
-        if self.total.is_none() {
+        if self.header.is_none() {
             // The frame message's header, which may itself come in pieces.
             let k = (HEADER_LEN - self.bytes.len()).min(part.len());
             self.bytes.extend_from_slice(&part[..k]);
@@ -75,14 +75,12 @@ impl Assembly {
             if !matches!(h.ty, MsgType::Frame | MsgType::CompactFrame | MsgType::LayeredCompactFrame) {
                 return Err(WireError::BadParts("the parts carry no frame"));
             }
-            let total = HEADER_LEN + h.len as usize;
             // The header passed the limits: at most one frame the receiver allows.
-            self.bytes
-                .try_reserve_exact(total - self.bytes.len())
-                .map_err(|_| WireError::BadParts("no memory for the frame"))?;
-            self.total = Some(total);
+            self.bytes.try_reserve_exact(h.len as usize).map_err(|_| WireError::BadParts("no memory for the frame"))?;
+            self.header = Some(h);
         }
-        let total = self.total.unwrap_or(HEADER_LEN);
+        let Some(h) = self.header else { return Ok(None) };
+        let total = HEADER_LEN + h.len as usize;
         if self.bytes.len() + part.len() > total {
             return Err(WireError::BadParts("a part runs past the frame's end"));
         }
@@ -90,9 +88,6 @@ impl Assembly {
         if self.bytes.len() < total {
             return Ok(None);
         }
-        let mut head = [0u8; HEADER_LEN];
-        head.copy_from_slice(&self.bytes[..HEADER_LEN]);
-        let h = parse_header(&head, limits)?;
         Ok(Some((core::mem::take(&mut self.bytes), h)))
     }
 }
