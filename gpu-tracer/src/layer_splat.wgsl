@@ -115,7 +115,7 @@ fn shared_corner(z: f32, an: f32, un: f32, vn: f32, edge_on: f32, num: f32, ba: 
 
 // Twice the area of the quadrilateral q0 q1 q2 q3 (absolute).
 fn quad_area(q0: vec2<f32>, q1: vec2<f32>, q2: vec2<f32>, q3: vec2<f32>) -> f32 {
-    let a = (q2.x - q0.x) * (q3.y - q1.y) - (q3.x - q1.x) * (q2.y - q0.y);
+    let a = rounded((q2.x - q0.x) * (q3.y - q1.y)) - rounded((q3.x - q1.x) * (q2.y - q0.y));
     return max(a, -a);
 }
 
@@ -238,7 +238,7 @@ fn footprint(id: u32) -> Quad {
         return none_quad();
     }
     // `Quad::edges`, signed by the orientation.
-    let area = (q1.x - q0.x) * (q2.y - q0.y) - (q2.x - q0.x) * (q1.y - q0.y);
+    let area = rounded((q1.x - q0.x) * (q2.y - q0.y)) - rounded((q2.x - q0.x) * (q1.y - q0.y));
     var sign = 1.0;
     if area < 0.0 {
         sign = -1.0;
@@ -254,7 +254,7 @@ fn footprint(id: u32) -> Quad {
         let ey = (b.y - a.y) * sign;
         ea[k] = -ey;
         eb[k] = ex;
-        ec[k] = ey * a.x - ex * a.y;
+        ec[k] = rounded(ey * a.x) - rounded(ex * a.y);
     }
     let bx = u32(xa) | (u32(xb) << 16u);
     let by = u32(ya) | (u32(yb) << 16u);
@@ -295,12 +295,24 @@ fn open(x: u32, y: u32) -> bool {
     return P.only_empty == 0u || count[y * P.width + x] == 0u;
 }
 
-// The CPU's rasterization test: the pixel centre inside all four edges.
+// `x` itself, rounded as it stands (`as_rounded` of one value; P.deq_min.w is 0.0): the
+// compiler can neither fuse it into the next operation nor reassociate across it. The edge
+// functions, the areas and the coverage test round every product so: lavapipe fuses a
+// product and an add into an fma otherwise, and on a sliver footprint (two corners of a
+// slab's shared corners nearly one point) an edge's value is mostly rounding, so a pixel's
+// coverage flipped (1 pixel of 7,680 in the older frames' test with footprints taking shared
+// corners down to half the plane's area).
+fn rounded(x: f32) -> f32 {
+    return bitcast<f32>(bitcast<u32>(x) ^ bitcast<u32>(P.deq_min.w));
+}
+
+// The CPU's rasterization test: the pixel centre inside all four edges, `(A·px + B·py) + C`
+// with both products rounded (`QuadRow::covers`).
 fn covers(q: Quad, x: u32, y: u32) -> bool {
     let px = f32(x) + 0.5;
     let py = f32(y) + 0.5;
     for (var e = 0u; e < 4u; e++) {
-        if !(q.a[e] * px + q.b[e] * py + q.c[e] >= 0.0) {
+        if !(rounded(rounded(q.a[e] * px) + rounded(q.b[e] * py)) + q.c[e] >= 0.0) {
             return false;
         }
     }
