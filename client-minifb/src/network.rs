@@ -250,6 +250,10 @@ struct Pending {
 struct ViewSlot {
     view: Option<View>,
     changed: bool,
+    /// The view the display published last differs from the one before it (the display
+    /// publishes its view every display frame): a request a frame's arrival triggers between two
+    /// display frames of a moving view is for a moving view too.
+    moving: bool,
     frame_arrived: bool,
     /// The view the last request asked for (before any guard band): where it differs from a
     /// view that holds still (a prediction overshot), the still view is asked for once more.
@@ -475,14 +479,16 @@ impl Network {
         self.shared.reconnects.load(Ordering::Relaxed)
     }
 
-    /// Publishes the view the display shows now; the writer sends it (throttled) if it
-    /// differs from the last one. Never waits on the network.
+    /// Publishes the view the display shows now, once per display frame (whether the view
+    /// moves is read from successive calls); the writer sends it (throttled) if it differs from
+    /// the last one. Never waits on the network.
     pub fn set_view(&self, view: View) {
         let mut g = lock(&self.shared.view);
         let now = Instant::now();
         let t0 = *g.t0.get_or_insert(now);
         g.predictor.observe(view.camera, now.saturating_duration_since(t0).as_secs_f64());
-        if g.view != Some(view) {
+        g.moving = g.view != Some(view);
+        if g.moving {
             g.view = Some(view);
             g.changed = true;
             drop(g);
@@ -948,7 +954,10 @@ fn write_loop(sh: &Shared, mut stream: impl Write, request: RequestPolicy) {
                             continue;
                         }
                         None => {
-                            let moving = g.changed;
+                            // Moving: it changed since the last request, or it changed at the
+                            // last display frame (the request a frame's arrival triggers
+                            // between two display frames of an orbit or a drag).
+                            let moving = g.changed || g.moving;
                             g.changed = false;
                             g.frame_arrived = false;
                             g.first_still = false;

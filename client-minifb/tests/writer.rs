@@ -105,6 +105,8 @@ fn a_moving_view_asks_for_the_hellos_layers_and_the_view_at_rest_for_one_sample(
         std::thread::sleep(Duration::from_millis(5));
     }
     let rest = home.orbit((i - 1) as f32 * 0.5, 0.0);
+    // The display shows the still view for a frame (it publishes its view every frame).
+    net.set_view(view(rest));
     // Once the writer has sent the last moving camera (throttled; later under load), the view
     // is still: then the frame arrives.
     let mut got = Vec::new();
@@ -128,4 +130,38 @@ fn a_moving_view_asks_for_the_hellos_layers_and_the_view_at_rest_for_one_sample(
     assert!(moving.iter().all(|r| r.layers == 0));
     let last = resting.last().unwrap_or_else(|| panic!("no request at rest: {got:?}"));
     assert_eq!((last.layers, last.camera), (1, rest), "the view at rest, one sample per pixel");
+}
+
+#[test]
+fn a_frame_arriving_between_two_display_frames_of_a_moving_view_asks_for_the_coarse_grid() {
+    // Adaptive resolution with a display slower than the writer's throttle (30 frames/s, as the
+    // headless demo): a frame arrives after a request and before the next display frame, and the
+    // request its arrival triggers is for a view that still moves, so on the coarse grid (a
+    // full-resolution one would be dropped by the server at the next display frame).
+    let (tx, rx) = mpsc::channel();
+    let addr = fake_server(move |mut s| {
+        assert!(matches!(read_msg(&mut s), Some(Message::Hello(_))));
+        s.write_all(&encode(&Message::Hello(Hello::new(0)))).unwrap();
+        // Every request (the connection's probe first) is answered with a frame at once.
+        while let Some(m) = read_msg(&mut s) {
+            if let Message::CameraRequest(r) = m {
+                if tx.send(r).is_err() || s.write_all(&encode(&empty_frame(r.seq))).is_err() {
+                    break;
+                }
+            }
+        }
+    });
+    let conn = connect(&addr, None, Duration::from_secs(10)).unwrap();
+    let home = home_camera(&conn.bounds, 512, 512);
+    let request = volwarp_core::method::RequestPolicy { coarse: 2, ..volwarp_core::method::RequestPolicy::NONE };
+    let net = Network::start(conn, volwarp_client::network::NetConfig { request, ..net_config() }, None).unwrap();
+    for i in 0..30 {
+        net.set_view(View { camera: home.orbit(i as f32, 0.0), heuristic: Heuristic::Peak, radius_scale: 1.0 });
+        std::thread::sleep(Duration::from_millis(33));
+    }
+    net.shutdown();
+    let got: Vec<CameraRequest> = rx.try_iter().filter(|r| r.camera.width > 1).collect();
+    let widths: Vec<u32> = got.iter().map(|r| r.camera.width).collect();
+    assert!(got.len() >= 10, "a request per display frame and per arrival: {widths:?}");
+    assert!(widths.iter().all(|&w| w == 256), "every request of the moving view on the coarse grid: {widths:?}");
 }
