@@ -44,6 +44,12 @@ use volwarp_cpu_tracer::MAX_VIEWPORT;
 
 /// Shortest time between two camera requests.
 pub const THROTTLE: Duration = Duration::from_millis(30);
+
+/// Display frames a view must hold still before it counts as at rest (adaptive resolution asks
+/// for the full resolution, and a predicting client for the still view): 2, so one display
+/// frame without a mouse event in a drag does not count, and at 60 frames/s about the
+/// simulator's display tick (1/30 s).
+pub const STILL_AFTER: u32 = 2;
 /// Most received frames waiting for their latency to pass (older ones are dropped).
 const MAX_PENDING: usize = 32;
 /// Request send times kept to compute frame ages.
@@ -250,15 +256,15 @@ struct Pending {
 struct ViewSlot {
     view: Option<View>,
     changed: bool,
-    /// The view the display published last differs from the one before it (the display
-    /// publishes its view every display frame): a request a frame's arrival triggers between two
-    /// display frames of a moving view is for a moving view too.
-    moving: bool,
+    /// Display frames the view has held still since it last changed (the display publishes
+    /// its view every frame; the first view counts as still): it moves until [`STILL_AFTER`].
+    still_frames: u32,
     frame_arrived: bool,
     /// The view the last request asked for (before any guard band): where it differs from a
     /// view that holds still (a prediction overshot), the still view is asked for once more.
     asked: Option<Camera>,
-    /// The view held still for a display frame since the last request, which asked for another.
+    /// The view came to rest ([`STILL_AFTER`] display frames still) since the last request,
+    /// which asked for another.
     first_still: bool,
     /// Every camera the display showed, timed (so motion that starts after a still spell is
     /// measured from the last still display frame, not from the last request).
@@ -487,13 +493,22 @@ impl Network {
         let now = Instant::now();
         let t0 = *g.t0.get_or_insert(now);
         g.predictor.observe(view.camera, now.saturating_duration_since(t0).as_secs_f64());
-        g.moving = g.view != Some(view);
-        if g.moving {
+        let changed = g.view != Some(view);
+        g.still_frames = match g.view {
+            None => STILL_AFTER,
+            Some(_) if changed => 0,
+            Some(_) => g.still_frames.saturating_add(1),
+        };
+        if changed {
             g.view = Some(view);
             g.changed = true;
             drop(g);
             self.shared.view_cv.notify_one();
-        } else if !g.changed && g.asked.is_some_and(|a| a != view.camera) && !g.first_still {
+        } else if !g.changed
+            && g.still_frames >= STILL_AFTER
+            && g.asked.is_some_and(|a| a != view.camera)
+            && !g.first_still
+        {
             // The view holds still where the last request did not ask (a prediction that
             // overshot): ask for exactly this view, so its exact frame comes a frame sooner.
             g.first_still = true;
@@ -954,10 +969,11 @@ fn write_loop(sh: &Shared, mut stream: impl Write, request: RequestPolicy) {
                             continue;
                         }
                         None => {
-                            // Moving: it changed since the last request, or it changed at the
-                            // last display frame (the request a frame's arrival triggers
-                            // between two display frames of an orbit or a drag).
-                            let moving = g.changed || g.moving;
+                            // Moving until it has held still for `STILL_AFTER` display frames
+                            // (so the request a frame's arrival triggers between two display
+                            // frames of an orbit or a drag is coarse too); the request for the
+                            // view come to rest asks for that view.
+                            let moving = !g.first_still && g.still_frames < STILL_AFTER;
                             g.changed = false;
                             g.frame_arrived = false;
                             g.first_still = false;

@@ -105,8 +105,11 @@ fn a_moving_view_asks_for_the_hellos_layers_and_the_view_at_rest_for_one_sample(
         std::thread::sleep(Duration::from_millis(5));
     }
     let rest = home.orbit((i - 1) as f32 * 0.5, 0.0);
-    // The display shows the still view for a frame (it publishes its view every frame).
-    net.set_view(view(rest));
+    // The display shows the still view for the frames that make it rest (it publishes its view
+    // every frame).
+    for _ in 0..volwarp_client::network::STILL_AFTER {
+        net.set_view(view(rest));
+    }
     // Once the writer has sent the last moving camera (throttled; later under load), the view
     // is still: then the frame arrives.
     let mut got = Vec::new();
@@ -137,7 +140,8 @@ fn a_frame_arriving_between_two_display_frames_of_a_moving_view_asks_for_the_coa
     // Adaptive resolution with a display slower than the writer's throttle (30 frames/s, as the
     // headless demo): a frame arrives after a request and before the next display frame, and the
     // request its arrival triggers is for a view that still moves, so on the coarse grid (a
-    // full-resolution one would be dropped by the server at the next display frame).
+    // full-resolution one would be dropped by the server at the next display frame). The first
+    // view, shown before anything moved it, is at rest.
     let (tx, rx) = mpsc::channel();
     let addr = fake_server(move |mut s| {
         assert!(matches!(read_msg(&mut s), Some(Message::Hello(_))));
@@ -162,6 +166,12 @@ fn a_frame_arriving_between_two_display_frames_of_a_moving_view_asks_for_the_coa
     net.shutdown();
     let got: Vec<CameraRequest> = rx.try_iter().filter(|r| r.camera.width > 1).collect();
     let widths: Vec<u32> = got.iter().map(|r| r.camera.width).collect();
-    assert!(got.len() >= 10, "a request per display frame and per arrival: {widths:?}");
-    assert!(widths.iter().all(|&w| w == 256), "every request of the moving view on the coarse grid: {widths:?}");
+    // The first view, before the orbit moves it, is at rest: full resolution.
+    assert_eq!(widths.first(), Some(&512), "the first view at rest: {widths:?}");
+    let moves = widths.iter().position(|&w| w != 512).unwrap_or(widths.len());
+    assert!(widths.len() - moves >= 10, "a request per display frame and per arrival: {widths:?}");
+    assert!(
+        widths[moves..].iter().all(|&w| w == 256),
+        "every request of the moving view on the coarse grid: {widths:?}"
+    );
 }
