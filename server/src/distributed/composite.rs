@@ -132,9 +132,7 @@ pub fn merge_reference(lists: &[&[Seg]], k: usize, ert: f32) -> Vec<Seg> {
     all
 }
 
-/// Merges pixel lists and reduces them to `k` (the fast path of [`merge_reference`]): the
-/// merged segments, in `out` or, where one list alone is not empty and holds at most `k`
-/// segments (most pixels), that list up to early termination without a copy.
+/// Merges pixel lists and reduces them to `k` (the fast path of [`merge_reference`]).
 ///
 /// Parts are disjoint convex boxes, so a pixel's non-empty lists occupy disjoint depth ranges:
 /// ordered by their first depth, each sorted and each ending strictly before the next begins,
@@ -142,17 +140,17 @@ pub fn merge_reference(lists: &[&[Seg]], k: usize, ert: f32) -> Vec<Seg> {
 /// stable merge keeps each list's own order). That is checked per pixel (a compare per
 /// segment); lists that overlap or are out of order (bytes from a failed rank) take the k-way
 /// merge, so the result is [`merge_reference`]'s either way.
-pub fn merge<'a>(lists: &[&'a [Seg]], k: usize, ert: f32, out: &'a mut Vec<Seg>) -> &'a [Seg] {
+pub fn merge(lists: &[&[Seg]], k: usize, ert: f32, out: &mut Vec<Seg>) {
     out.clear();
     // The non-empty lists, in order of their first depth (insertion sort: a pixel has few).
-    let mut ne: [&'a [Seg]; 8] = [&[]; 8];
+    let mut ne: [&[Seg]; 8] = [&[]; 8];
     let mut n = 0;
     for l in lists.iter().filter(|l| !l.is_empty()) {
         if n == ne.len() {
             // More parts over one pixel than the fast path holds: the k-way merge.
             merge_lists(lists, out);
             reduce(out, k, ert);
-            return out;
+            return;
         }
         let mut j = n;
         while j > 0 && ne[j - 1][0].t > l[0].t {
@@ -164,9 +162,7 @@ pub fn merge<'a>(lists: &[&'a [Seg]], k: usize, ert: f32, out: &'a mut Vec<Seg>)
     }
     match n {
         0 => {}
-        // One part saw the pixel (most pixels): its list, which `reduce` only cuts at early
-        // termination when it holds at most `k`.
-        1 if ne[0].len() <= k => return &ne[0][..kept(ne[0], ert)],
+        // One part saw the pixel: its list as it is (most pixels).
         1 => out.extend_from_slice(ne[0]),
         _ => {
             let sorted = |l: &[Seg]| l.windows(2).all(|w| w[0].t <= w[1].t);
@@ -181,7 +177,6 @@ pub fn merge<'a>(lists: &[&'a [Seg]], k: usize, ert: f32, out: &'a mut Vec<Seg>)
         }
     }
     reduce(out, k, ert);
-    out
 }
 
 /// The bytes the count bytes of a band of `pixels` pixels take between ranks: padded to a
@@ -425,12 +420,26 @@ pub fn merge_views_with<A: Default + Send>(
             let mut lists: Vec<&[Seg]> = vec![&[]; bands.len()];
             let mut at: Vec<usize> = starts.iter().map(|s| s[r]).collect();
             for i in r * RUN..((r + 1) * RUN).min(pixels) {
+                let (mut seen, mut only): (usize, &[Seg]) = (0, &[]);
                 for ((l, b), at) in lists.iter_mut().zip(bands).zip(at.iter_mut()) {
                     let c = b.count[i] as usize;
                     *l = &b.segs[*at..*at + c];
                     *at += b.stride.unwrap_or(c);
+                    if c > 0 {
+                        seen += 1;
+                        only = l;
+                    }
                 }
-                f(i, merge(&lists, k, ert, &mut buf), &mut acc);
+                match seen {
+                    // What `merge` gives a pixel no part saw, and a pixel one part alone saw with
+                    // at most K segments (its list up to early termination), without its copy.
+                    0 => f(i, &[], &mut acc),
+                    1 if only.len() <= k => f(i, &only[..kept(only, ert)], &mut acc),
+                    _ => {
+                        merge(&lists, k, ert, &mut buf);
+                        f(i, &buf, &mut acc);
+                    }
+                }
             }
             acc
         })
