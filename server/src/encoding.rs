@@ -13,7 +13,7 @@
 use crate::marcher::Marcher;
 use rayon::prelude::*;
 use volwarp_core::compact_frame::{self, Coder, EncodeOptions, Encoding, RadiusPrediction};
-use volwarp_core::wire::{self, CameraRequest, Frame, FrameHeader, Message};
+use volwarp_core::wire::{self, CameraRequest, Frame, FrameHeader};
 
 /// The zstd level of the compact body (1: fastest; higher levels gain little on residuals).
 pub const ZSTD_LEVEL: i32 = 1;
@@ -72,5 +72,20 @@ pub fn encode_frame_for(
             return (b, Encoding::Compact);
         }
     }
-    (wire::encode_to_vec(&Message::Frame(frame.clone())), Encoding::Raw12)
+    (raw12_bytes(frame), Encoding::Raw12)
+}
+
+/// The message bytes (header included) of `frame` in the 12-byte form (a Frame message),
+/// written from the frame as it is (no copy of its arrays).
+pub fn raw12_bytes(frame: &Frame) -> Vec<u8> {
+    let mut bytes = Vec::new();
+    // Writing to a Vec cannot fail.
+    let _ = wire::write_frame_layered(
+        &mut wire::VecWriter(&mut bytes),
+        &frame.header,
+        &frame.samples,
+        &frame.colors,
+        &frame.segments,
+    );
+    bytes
 }

@@ -1099,21 +1099,9 @@ fn serve(sh: &Shared, stream: &TcpStream, id: u64, charged: Option<IpAddr>) -> S
             }
         };
         let t_send = Instant::now();
-        let bytes = if encoding == Encoding::Compact {
-            match &sh.source {
-                Some(source) => source.encode(&req, &frame, encoding, green).0,
-                None => crate::encoding::encode_frame_for(&sh.marcher, &req, &frame, encoding, green).0,
-            }
-        } else {
-            let mut bytes = Vec::new();
-            let _ = wire::write_frame_layered(
-                &mut wire::VecWriter(&mut bytes),
-                &frame.header,
-                &frame.samples,
-                &frame.colors,
-                &frame.segments,
-            );
-            bytes
+        let bytes = match &sh.source {
+            Some(source) => source.encode(&req, &frame, encoding, green).0,
+            None => crate::encoding::encode_frame_for(&sh.marcher, &req, &frame, encoding, green).0,
         };
         // A frame written in parts is dropped before a part once the newest request is for a
         // coarser viewport (the view started moving; also after a dropped render: the coarse

@@ -28,7 +28,7 @@ use rayon::prelude::*;
 use volwarp_core::compact_frame::{EncodeOptions, Encoding, RadiusPrediction};
 use volwarp_core::sample::{pack_color_f32, Bounds, Quantizer};
 use volwarp_core::segments::{PackLanes, MAX_LAYERS};
-use volwarp_core::wire::{self, CameraRequest, Frame, FrameHeader, Message};
+use volwarp_core::wire::{CameraRequest, Frame, FrameHeader};
 use volwarp_core::{Heuristic, Image, Vec3, BACKGROUND};
 
 /// Whether frames of one sample per pixel (K = 1) with `heuristic` are composited across ranks,
@@ -195,7 +195,7 @@ impl FrameGeometry {
                 return (b, Encoding::Compact);
             }
         }
-        (wire::encode_to_vec(&Message::Frame(frame.clone())), Encoding::Raw12)
+        (crate::encoding::raw12_bytes(frame), Encoding::Raw12)
     }
 }
 
