@@ -453,12 +453,16 @@ pub fn serve(
         // request in that span.
         let viewport = |r: &Request| request.policy().divisor_for(moving(r), cfg.size, cfg.size);
         let turn = |from: f64, to: f64, coarser: bool| {
+            if !request.preempt {
+                return None;
+            }
             let this = viewport(&requests[j]);
-            let found =
-                requests[j + 1..].iter().map(arrival).zip(&requests[j + 1..]).find(|(a, r)| {
-                    *a > from && *a < to && if coarser { viewport(r) > this } else { viewport(r) != this }
-                });
-            found.map(|(a, _)| a).filter(|_| request.preempt)
+            let other = |v: u32| if coarser { v > this } else { v != this };
+            requests[j + 1..]
+                .iter()
+                .map(|r| (arrival(r), r))
+                .find(|&(a, r)| a > from && a < to && other(viewport(r)))
+                .map(|(a, _)| a)
         };
         if let Some(a) = turn(s, s + render_ms, false).filter(|_| !dropped_last) {
             served = j + 1;
