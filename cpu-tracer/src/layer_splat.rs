@@ -51,6 +51,11 @@
 //! by source pixel once (`OwnPass`), and each hole composites the pixel it looks up on the
 //! spot; the whole image is composited only when the frame's own camera is drawn.
 //!
+//! **Cracks** ([`LayerOptions::close_cracks`]): last, away from the frame's own camera, runs of
+//! one or two pixels along a row or column that show the background through between two
+//! like, solid pixels take what those cover (`layered::close_cracks`): a surface the frame saw
+//! edge-on and the new camera sees broadside, whose footprints parted.
+//!
 //! **Older frames** ([`Renderer::render_set`], the multi-frame filling; the client keeps
 //! 4 frames by default): pixels no segment of the newest frame covers first take the older
 //! frames' segments, newest first, before the hole filling above. Only what the newest frame did
@@ -132,6 +137,8 @@ pub struct LayerSplat {
     tiles: Vec<u8>,
     /// Per sample its color as drawn (see `footprints::drawn_color`).
     drawn: Vec<u32>,
+    /// The image as drawn while its cracks are closed (`close_cracks`).
+    cracks: Vec<u32>,
 }
 
 impl LayerSplat {
@@ -158,6 +165,7 @@ impl LayerSplat {
             older: OlderFrames::default(),
             tiles: Vec::new(),
             drawn: Vec::new(),
+            cracks: Vec::new(),
         }
     }
 
@@ -236,6 +244,7 @@ impl Renderer for LayerSplat {
         self.draw(scene, camera, grown, &shared, out, None);
         self.own.shared = shared;
         if !fill && older.is_empty() {
+            self.close_cracks(camera, &fc, out);
             return;
         }
         let (w, h) = (camera.width as usize, camera.height as usize);
@@ -301,10 +310,20 @@ impl Renderer for LayerSplat {
                 }
             }
         });
+        self.close_cracks(camera, &fc, out);
     }
 }
 
 impl LayerSplat {
+    /// Closes the cracks of the drawn image (with [`LayerOptions::close_cracks`], away from
+    /// the frame's own camera `fc`).
+    fn close_cracks(&mut self, camera: &Camera, fc: &Camera, out: &mut Image) {
+        if self.opts.close_cracks && camera != fc {
+            let (w, h) = (out.width as usize, out.height as usize);
+            close_cracks(&mut out.pixels, w, h, &mut self.cracks, &self.threads);
+        }
+    }
+
     /// Makes [`LayerSplat::frame`] the frame's own composited image, unless it already is.
     fn cache_own_image(&mut self, scene: &Scene) {
         if self.frame_of == Some(SceneId::of(scene)) {

@@ -8,15 +8,18 @@
 //! | `own_pass` | a frame's samples grouped by source pixel in its own camera |
 //! | `slabs` | watertight slabs: the corners neighbouring segments share ([`SlabCorners`]) |
 //! | `older` | older frames: what the newest frame did not see ([`OlderSets`], [`Sight`]) |
+//! | `cracks` | the cracks a warp opens between footprints, closed on the drawn image ([`close_cracks`]) |
 //!
 //! The algorithm as a whole is described in [`crate::layer_splat`].
 
+mod cracks;
 mod footprints;
 mod older;
 mod options;
 mod own_pass;
 mod slabs;
 
+pub use cracks::*;
 pub use footprints::*;
 pub use older::*;
 pub use options::*;

@@ -20,7 +20,9 @@
 //! (hole filling and warp-grown footprints, `LayerSplat::new` + adaptive sizing). With
 //! `--threads 1` the figures are the measuring thread's on-CPU time (`CLOCK_THREAD_CPUTIME_ID`:
 //! robust on a machine other builds keep busy), otherwise wall time; medians of `--runs`, the
-//! two renderers alternated draw by draw so load changes hit both alike.
+//! two renderers alternated draw by draw so load changes hit both alike. The crack pass
+//! (`layered::close_cracks`, part of every volwarp draw away from the frame's camera) is also
+//! timed alone on the drawn image.
 
 use std::path::Path;
 use std::time::Instant;
@@ -72,9 +74,9 @@ fn main() {
         if cpu { "on-CPU" } else { "wall" }
     );
     println!(
-        "| dataset | samples K=1 | samples K={layers} | splat ms | volwarp ms | ratio | volwarp, {frames} frames kept, ms | arrival adds, 1 / {frames} frames, ms |"
+        "| dataset | samples K=1 | samples K={layers} | splat ms | volwarp ms | of which cracks ms | ratio | volwarp, {frames} frames kept, ms | arrival adds, 1 / {frames} frames, ms |"
     );
-    println!("|---|---|---|---|---|---|---|---|");
+    println!("|---|---|---|---|---|---|---|---|---|");
     let mut ratios = Vec::new();
     for ds in &datasets {
         let m = Marcher::from_dataset(ds);
@@ -109,6 +111,16 @@ fn main() {
                 tc.push(ms(cpu, || kept.render_set(&set, &cam, &mut c)));
             }
         }
+        // The crack pass alone (`layered::close_cracks`, part of the volwarp draw) on the drawn
+        // image, the same thread count.
+        let crack_threads = volwarp_cpu_tracer::Threads::new(threads);
+        let (mut scratch, mut td) = (Vec::new(), Vec::new());
+        for _ in 0..runs {
+            let mut px = b.pixels.clone();
+            let (w, h) = (b.width as usize, b.height as usize);
+            td.push(ms(cpu, || volwarp_cpu_tracer::layered::close_cracks(&mut px, w, h, &mut scratch, &crack_threads)));
+        }
+        let cracks = median(&mut td).unwrap_or(f64::NAN);
         let (sa, sb) = (median(&mut ta).unwrap_or(f64::NAN), median(&mut tb).unwrap_or(f64::NAN));
         let sc = if frames > 1 { median(&mut tc).unwrap_or(f64::NAN) } else { sb };
         // Arrivals: each draw has another newest frame.
@@ -125,7 +137,7 @@ fn main() {
         let (a1, ak) = (median(&mut t1).unwrap_or(f64::NAN), median(&mut tk).unwrap_or(f64::NAN));
         ratios.push(sb / sa);
         println!(
-            "| {} | {} | {} | {sa:.2} | {sb:.2} | {:.2}× | {sc:.2} | {a1:.2} / {ak:.2} |",
+            "| {} | {} | {} | {sa:.2} | {sb:.2} | {cracks:.2} | {:.2}× | {sc:.2} | {a1:.2} / {ak:.2} |",
             ds.name,
             one.samples.len(),
             lay.samples.len(),

@@ -16,7 +16,7 @@
 //! cargo run --release -p volwarp-eval --example layers -- ../shared/data --layers 2,4,8 --time
 //! ```
 //!
-//! Footprint options of the layered renderer: `--own`, `--no-fill`, `--grow`, `--grow-alpha`,
+//! Footprint options of the layered renderer: `--own`, `--no-fill`, `--no-cracks`, `--grow`, `--grow-alpha`,
 //! `--max-own`, `--watertight T` (0: off), `--water-ratio R`; `--png DIR` writes each layered
 //! image, the truth and the ꟻLIP map.
 
@@ -55,6 +55,9 @@ fn main() {
     let mut lopts = volwarp_cpu_tracer::layer_splat::LayerOptions::default();
     if let Some(v) = arg(&args, "--own") {
         lopts.own = v.parse().expect("a distance");
+    }
+    if args.iter().any(|a| a == "--no-cracks") {
+        lopts.close_cracks = false;
     }
     if args.iter().any(|a| a == "--no-fill") {
         lopts.fill = false;

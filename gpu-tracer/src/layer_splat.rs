@@ -28,6 +28,11 @@
 //! CPU with the CPU's own code (`SlabCorners`, once per uploaded scene) and uploaded beside the
 //! samples; `setup` chooses between them and the plane with the CPU's area rule.
 //!
+//! Cracks: the CPU's own pass (`layered::close_cracks`) runs on the image read back, away from
+//! the frame's own camera, on the CPU's threads (it reads each pixel's neighbours as finished:
+//! on the GPU a second dispatch over the whole image, for about 1 ms of CPU work per 512²
+//! image on one thread).
+//!
 //! Memory on the GPU: 64 bytes per sample (footprints) + 12 (sample, color) + 16 (shared
 //! corners), 4 per list entry (a sample per pixel it covers), 24 per output pixel (pixel,
 //! count, list count and offset, readback) plus the frame's composite. The scan is
@@ -42,8 +47,10 @@ use std::time::{Duration, Instant};
 use volwarp_core::renderer::{Image, Renderer, BACKGROUND};
 use volwarp_core::warp_radius::warp_angle_deg;
 use volwarp_core::{Camera, RayBasis, RendererKind, Scene, Vec3};
+use volwarp_cpu_tracer::layered::close_cracks;
 pub use volwarp_cpu_tracer::layered::{LayerOptions, LIST, OPAQUE};
 use volwarp_cpu_tracer::layered::{OlderSets, Setup, SlabCorners, MAX_FRAMES};
+use volwarp_cpu_tracer::Threads;
 
 /// Words at the start of the work buffer before the pixels' counts (`COUNTS` in the shader).
 const COUNTS: u32 = 16;
@@ -245,6 +252,9 @@ pub struct GpuLayerSplat {
     older: Vec<OlderBuffers>,
     /// Per older frame drawn in the last call its bind group (uniform slot `2 + i`).
     older_groups: Vec<wgpu::BindGroup>,
+    /// The CPU threads and scratch image of the crack pass.
+    crack_threads: Threads,
+    cracks: Vec<u32>,
 }
 
 /// One older frame's samples and colors on the GPU.
@@ -391,6 +401,8 @@ impl GpuLayerSplat {
             older_sets: Some(OlderSets::new(0)),
             older: Vec::new(),
             older_groups: Vec::new(),
+            crack_threads: Threads::new(0),
+            cracks: Vec::new(),
             ctx,
         })
     }
@@ -709,6 +721,10 @@ impl GpuLayerSplat {
             if total <= self.cap {
                 if plan.fill {
                     self.frame_of = Some((SceneKey::of(scene), scene.header.camera));
+                }
+                if plan.draw_view && self.opts.close_cracks && *camera != scene.header.camera {
+                    let (w, h) = (camera.width as usize, camera.height as usize);
+                    close_cracks(&mut out.pixels, w, h, &mut self.cracks, &self.crack_threads);
                 }
                 return Ok(());
             }

@@ -78,6 +78,9 @@ pub struct LayerOptions {
     /// the new eye), by at most this factor either way (at most 1: not scaled; see
     /// `footprints::drawn_color`). Measured (`docs/results.md`, "Watertight slabs").
     pub opacity_limit: f32,
+    /// Close the cracks a warp opens between footprints on the drawn image (`cracks`:
+    /// [`crate::layered::close_cracks`]); never at the frame's own camera.
+    pub close_cracks: bool,
 }
 
 impl LayerOptions {
@@ -91,6 +94,7 @@ impl LayerOptions {
         watertight: WATERTIGHT,
         water_ratio: 0.5,
         opacity_limit: 4.0,
+        close_cracks: true,
     };
 
     /// Whether at the frame's own camera every footprint is exactly its source pixel (half
