@@ -195,11 +195,29 @@ pub fn calibrate(
                 .collect();
             crate::median(&mut t).unwrap_or(0.0)
         };
-        let full = image_ms(size);
+        // The same for a layered frame (K = 4, the default's coarse frames): logged beside the
+        // image's ratio, which the simulator charges (a layered frame's is at most it).
+        let layered_ms = |side: u32| {
+            let camera = marcher.default_camera(side.max(1), side.max(1));
+            let req = CameraRequest { seq: 1, camera, heuristic: Heuristic::Threshold, radius_scale: 1.0, layers: 0 };
+            let mut t: Vec<f64> = (0..runs.max(1))
+                .map(|_| {
+                    let s = Instant::now();
+                    std::hint::black_box(marcher.render_frame_layers(&req, 4));
+                    s.elapsed().as_secs_f64() * 1e3
+                })
+                .collect();
+            crate::median(&mut t).unwrap_or(0.0)
+        };
+        let (full, full_layered) = (image_ms(size), layered_ms(size));
         for f in [2u32, 4] {
             let ratio = if full > 0.0 { image_ms(size / f) / full } else { 1.0 };
+            let layered = if full_layered > 0.0 { layered_ms(size / f) / full_layered } else { 1.0 };
             cal.ms.insert(("server".into(), peers::scaled_name(&ds.name, f), size), server * ratio);
-            log::info!("{}: server at 1/{f} of {size}²: {ratio:.3} of the full resolution's time", ds.name);
+            log::info!(
+                "{}: server at 1/{f} of {size}²: {ratio:.3} of the full resolution's time (a layered frame: {layered:.3})",
+                ds.name
+            );
         }
         let held = methods::HeldFrame::new(frame.ok_or("no frame")?);
         // Methods that ask for layered frames draw one, K segments per pixel.
