@@ -3,7 +3,7 @@
 //! every bundled dataset:
 //!
 //! ```sh
-//! cargo run --release -p volwarp-eval --example layer_time -- ../shared/data [--size 512] [--runs 15] [--threads 1] [--only NAME] [--frames K]
+//! cargo run --release -p volwarp-eval --example layer_time -- ../shared/data [--size 512] [--runs 15] [--threads 1] [--only NAME] [--frames K] [--water-ratio R] [--watertight T] [--no-cracks]
 //! ```
 //!
 //! With `--frames K` (the multi-frame filling) it also times the layered default keeping
@@ -65,6 +65,18 @@ fn main() {
     let layers: u32 = arg(&args, "--layers").map_or(4, |s| s.parse().expect("a layer count"));
     let frames: usize = arg(&args, "--frames").map_or(1, |s| s.parse().expect("a frame count"));
     let cpu = threads == 1;
+    // Footprint options other than the default's, to time a lever: `--water-ratio R`,
+    // `--watertight T`, `--no-cracks`.
+    let mut lopts = volwarp_cpu_tracer::layered::LayerOptions::DEFAULT;
+    if let Some(v) = arg(&args, "--water-ratio") {
+        lopts.water_ratio = v.parse().expect("a ratio");
+    }
+    if let Some(v) = arg(&args, "--watertight") {
+        lopts.watertight = v.parse().expect("a tolerance");
+    }
+    if args.iter().any(|a| a == "--no-cracks") {
+        lopts.close_cracks = false;
+    }
     let mut datasets = volwarp_eval::report::shared_datasets(Path::new(dir)).expect("datasets");
     if let Some(only) = arg(&args, "--only") {
         datasets.retain(|d| d.name.contains(only));
@@ -92,12 +104,12 @@ fn main() {
             })
             .collect();
         let set: Vec<_> = core::iter::once(&lay).chain(older.iter()).collect();
-        let mut kept = LayerSplat::new(threads);
+        let mut kept = LayerSplat::with_options(threads, lopts);
         kept.set_adaptive_radius(true);
         let mut c = Image::new(0, 0);
         kept.render_set(&set, &cam, &mut c);
         let mut splat = create(RendererKind::Splat, threads).expect("the CPU splatter");
-        let mut volwarp = LayerSplat::new(threads);
+        let mut volwarp = LayerSplat::with_options(threads, lopts);
         volwarp.set_adaptive_radius(true);
         let (mut a, mut b) = (Image::new(0, 0), Image::new(0, 0));
         // Warm-up: the layered renderer composites the frame's own image once per frame.

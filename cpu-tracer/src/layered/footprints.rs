@@ -531,7 +531,7 @@ pub(crate) fn footprints(
 /// (the GPU layered splatter computes it with the same operations in the same order, so both
 /// draw the same colors; within 2·10⁻⁶ of `log2`): the exponent from the bits, the mantissa
 /// `m` in `[1, 2)` by `2/ln 2 · atanh((m − 1)/(m + 1))`, its series to the ninth power.
-pub fn log2_poly(x: f32) -> f32 {
+pub const fn log2_poly(x: f32) -> f32 {
     let bits = x.to_bits();
     let e = ((bits >> 23) & 0xff) as i32 - 127;
     let m = f32::from_bits((bits & 0x007f_ffff) | 0x3f80_0000);
@@ -550,7 +550,10 @@ pub fn exp2_poly(y: f32) -> f32 {
         return 0.0;
     }
     let y = y.min(127.0);
-    let n = y.floor();
+    // `y.floor()` without the library call (the baseline x86-64 has no rounding instruction):
+    // the same value for every `y` in [−126, 127].
+    let t = y as i32 as f32;
+    let n = if t > y { t - 1.0 } else { t };
     let f = y - n;
     let p = 1.0
         + f * (core::f32::consts::LN_2
@@ -559,6 +562,18 @@ pub fn exp2_poly(y: f32) -> f32 {
                     + f * (0.009_618_129 + f * (0.001_333_355 + f * (0.000_154_035_3 + f * 0.000_015_252_73))))));
     p * f32::from_bits(((n as i32 + 127) as u32) << 23)
 }
+
+/// Per 8-bit opacity `o`, [`log2_poly`] of the transmittance `1 − o/255` ([`drawn_color`]'s
+/// first step, the same `f32` operations evaluated once at compile time: the same values).
+const LOG2_TRANSMITTANCE: [f32; 256] = {
+    let mut t = [0.0f32; 256];
+    let mut o = 1;
+    while o < 255 {
+        t[o] = log2_poly(1.0 - o as f32 * (1.0 / 255.0));
+        o += 1;
+    }
+    t
+};
 
 /// The color sample color `c` (premultiplied RGBA8) is drawn with where its footprint stands
 /// for `depth` times the optical depth of its own ray: a slab seen more edge-on than from the
@@ -577,10 +592,11 @@ pub fn drawn_color(c: u32, depth: f32, limit: f32) -> u32 {
     }
     let d = depth.clamp(1.0 / limit, limit);
     let a = b[3] as f32 * (1.0 / 255.0);
-    let scale = (1.0 - exp2_poly(d * log2_poly(1.0 - a))) / a;
+    let scale = (1.0 - exp2_poly(d * LOG2_TRANSMITTANCE[b[3] as usize])) / a;
     // Rounded to the nearest level; a premultiplied channel (at most the opacity) stays so.
-    let level = |x: u8| (x as f32 * scale + 0.5).min(255.0) as u8;
-    u32::from_le_bytes(b.map(level))
+    // (Channel by channel in plain registers: as a byte array the compiler shuffled lanes.)
+    let level = |k: u32| ((((c >> (8 * k)) & 0xff) as f32 * scale + 0.5).min(255.0) as u32) << (8 * k);
+    level(0) | level(1) | level(2) | level(3)
 }
 
 /// The AVX2 kernel of [`footprints`], for the tests that hold it against the portable lanes.
@@ -599,4 +615,79 @@ pub(crate) unsafe fn footprints_avx2_for_tests(
 ) {
     // SAFETY: the caller guarantees AVX2.
     unsafe { footprints_avx2(s, samples, colors, shared, first, out, drawn) }
+}
+
+#[cfg(test)]
+mod drawn_color_tests {
+    use super::*;
+
+    #[test]
+    fn the_transmittance_table_holds_log2_polys_values() {
+        for o in 1..255u32 {
+            let want = log2_poly(1.0 - o as f32 * (1.0 / 255.0));
+            assert_eq!(LOG2_TRANSMITTANCE[o as usize].to_bits(), want.to_bits(), "opacity {o}");
+        }
+    }
+
+    /// [`exp2_poly`] as first written, with the library's `floor`.
+    fn exp2_with_floor(y: f32) -> f32 {
+        if !(y >= -126.0) {
+            return 0.0;
+        }
+        let y = y.min(127.0);
+        let n = y.floor();
+        let f = y - n;
+        let p = 1.0
+            + f * (core::f32::consts::LN_2
+                + f * (0.240_226_5
+                    + f * (0.055_504_11
+                        + f * (0.009_618_129 + f * (0.001_333_355 + f * (0.000_154_035_3 + f * 0.000_015_252_73))))));
+        p * f32::from_bits(((n as i32 + 127) as u32) << 23)
+    }
+
+    /// [`drawn_color`] as first written: `log2_poly` per call, `floor`, the channels as bytes.
+    fn drawn_color_reference(c: u32, depth: f32, limit: f32) -> u32 {
+        let b = c.to_le_bytes();
+        if !(limit > 1.0) || depth == 1.0 || !depth.is_finite() || b[3] == 0 || b[3] == 255 {
+            return c;
+        }
+        let d = depth.clamp(1.0 / limit, limit);
+        let a = b[3] as f32 * (1.0 / 255.0);
+        let scale = (1.0 - exp2_with_floor(d * log2_poly(1.0 - a))) / a;
+        let level = |x: u8| (x as f32 * scale + 0.5).min(255.0) as u8;
+        u32::from_le_bytes(b.map(level))
+    }
+
+    #[test]
+    fn drawn_colors_are_the_references() {
+        for alpha in 0..=255u32 {
+            for depth in [0.1, 0.25, 0.5, 0.9, 0.999_9, 1.0, 1.000_1, 1.3, 2.0, 3.7, 4.0, 9.0, f32::NAN] {
+                for ch in [0, 1, alpha / 3, alpha / 2, alpha.saturating_sub(1), alpha] {
+                    let c = ch | (alpha / 2) << 8 | alpha << 16 | alpha << 24;
+                    for limit in [1.0, 2.0, 4.0] {
+                        assert_eq!(
+                            drawn_color(c, depth, limit),
+                            drawn_color_reference(c, depth, limit),
+                            "{c:08x} {depth}"
+                        );
+                    }
+                }
+            }
+        }
+    }
+
+    #[test]
+    fn exp2_poly_floors_as_the_library_does() {
+        let mut y = -130.0f32;
+        while y < 130.0 {
+            for v in [y, y + f32::EPSILON, y - 1e-7, -y] {
+                assert_eq!(exp2_poly(v).to_bits(), exp2_with_floor(v).to_bits(), "{v}");
+            }
+            y += 0.013;
+        }
+        for v in [-126.0, -125.999_99, -0.0, 0.0, -1e-30, 1e-30, -1.0, -0.5, 126.999_99, 127.0, f32::NAN, f32::INFINITY]
+        {
+            assert_eq!(exp2_poly(v).to_bits(), exp2_with_floor(v).to_bits(), "{v}");
+        }
+    }
 }
