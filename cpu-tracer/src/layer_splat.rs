@@ -137,8 +137,8 @@ pub struct LayerSplat {
     tiles: Vec<u8>,
     /// Per sample its color as drawn (see `footprints::drawn_color`).
     drawn: Vec<u32>,
-    /// The image as drawn while its cracks are closed (`close_cracks`).
-    cracks: Vec<u32>,
+    /// The crack pass's per-pixel distances and found pixels (`close_cracks`).
+    cracks: CrackScratch,
 }
 
 impl LayerSplat {
@@ -165,7 +165,7 @@ impl LayerSplat {
             older: OlderFrames::default(),
             tiles: Vec::new(),
             drawn: Vec::new(),
-            cracks: Vec::new(),
+            cracks: CrackScratch::default(),
         }
     }
 

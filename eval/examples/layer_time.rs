@@ -126,7 +126,7 @@ fn main() {
         // The crack pass alone (`layered::close_cracks`, part of the volwarp draw) on the drawn
         // image, the same thread count.
         let crack_threads = volwarp_cpu_tracer::Threads::new(threads);
-        let (mut scratch, mut td) = (Vec::new(), Vec::new());
+        let (mut scratch, mut td) = (volwarp_cpu_tracer::layered::CrackScratch::default(), Vec::new());
         for _ in 0..runs {
             let mut px = b.pixels.clone();
             let (w, h) = (b.width as usize, b.height as usize);

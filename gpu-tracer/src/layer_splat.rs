@@ -47,7 +47,7 @@ use std::time::{Duration, Instant};
 use volwarp_core::renderer::{Image, Renderer, BACKGROUND};
 use volwarp_core::warp_radius::warp_angle_deg;
 use volwarp_core::{Camera, RayBasis, RendererKind, Scene, Vec3};
-use volwarp_cpu_tracer::layered::close_cracks;
+use volwarp_cpu_tracer::layered::{close_cracks, CrackScratch};
 pub use volwarp_cpu_tracer::layered::{LayerOptions, LIST, OPAQUE};
 use volwarp_cpu_tracer::layered::{OlderSets, Setup, SlabCorners, MAX_FRAMES};
 use volwarp_cpu_tracer::Threads;
@@ -252,9 +252,9 @@ pub struct GpuLayerSplat {
     older: Vec<OlderBuffers>,
     /// Per older frame drawn in the last call its bind group (uniform slot `2 + i`).
     older_groups: Vec<wgpu::BindGroup>,
-    /// The CPU threads and scratch image of the crack pass.
+    /// The CPU threads and scratch of the crack pass.
     crack_threads: Threads,
-    cracks: Vec<u32>,
+    cracks: CrackScratch,
 }
 
 /// One older frame's samples and colors on the GPU.
@@ -402,7 +402,7 @@ impl GpuLayerSplat {
             older: Vec::new(),
             older_groups: Vec::new(),
             crack_threads: Threads::new(0),
-            cracks: Vec::new(),
+            cracks: CrackScratch::default(),
             ctx,
         })
     }

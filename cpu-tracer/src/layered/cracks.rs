@@ -16,9 +16,9 @@
 //! Only the image is read, so the CPU and the GPU splatters run the same pass on what they
 //! drew (the GPU one on the image it reads back). It never runs at the frame's own camera,
 //! which is the server's image exactly. Work: one pass for each pixel's squared distance from
-//! the background, then a pixel is looked at only where it is under [`CRACK_ALPHA`]² of the
-//! largest such distance within [`CRACK_RUN`] pixels along its row and column (which every
-//! crack pixel is); 4 bytes per pixel and a copy of the image. Measured (`docs/results.md`,
+//! the background, then a pixel is looked at only where it is under half the largest such
+//! distance within [`CRACK_RUN`] pixels along its row and column (which every crack pixel is);
+//! 4 bytes per pixel, and 8 per pixel closed. Measured (`docs/results.md`,
 //! "Closing cracks"; `docs/perf.md` for its time).
 
 use crate::threads::Threads;
@@ -53,6 +53,13 @@ fn dot(a: [i32; 3], b: [i32; 3]) -> i32 {
     a[0] * b[0] + a[1] * b[1] + a[2] * b[2]
 }
 
+/// A pixel's squared distance from the background (an integer, exact in `f32`: at most 3·255²).
+#[inline]
+fn distance2(c: u32) -> f32 {
+    let r = rel(c);
+    dot(r, r) as f32
+}
+
 /// The sum of the two pixels bounding a crack at `a` and `b` (twice their mean), if they are
 /// solid and alike.
 #[inline]
@@ -71,15 +78,15 @@ fn bounds(a: u32, b: u32) -> Option<[i32; 3]> {
 /// Whether a pixel at squared distance `e` from the background lies nearer it than
 /// [`CRACK_ALPHA`] of the mean `s / 2`'s distance.
 #[inline]
-fn low(e: u32, s: [i32; 3]) -> bool {
-    // e < α²·|s/2|²  ⇔  400·e < 100·α²·|s|².
+fn low(e: f32, s: [i32; 3]) -> bool {
+    // e < α²·|s/2|²  ⇔  400·e < 100·α²·|s|² (integers).
     (400 * e as i64) < ALPHA2_PERCENT * dot(s, s) as i64
 }
 
-/// The sum of the pixels bounding the crack pixel `(x, y)` of `src` (`w × h`, squared
+/// The sum of the pixels bounding the crack pixel `(x, y)` of `px` (`w × h`, squared
 /// distances from the background in `dist`) lies in, if it lies in one: rows first, then
 /// columns, the shortest run first.
-fn crack_at(src: &[u32], dist: &[u32], w: usize, h: usize, x: usize, y: usize) -> Option<[i32; 3]> {
+fn crack_at(px: &[u32], dist: &[f32], w: usize, h: usize, x: usize, y: usize) -> Option<[i32; 3]> {
     for along_row in [true, false] {
         let (pos, len) = if along_row { (x, w) } else { (y, h) };
         let index = |i: usize| if along_row { y * w + i } else { i * w + x };
@@ -90,7 +97,7 @@ fn crack_at(src: &[u32], dist: &[u32], w: usize, h: usize, x: usize, y: usize) -
                     continue;
                 }
                 let (a, b) = (pos - start - 1, pos + run - start);
-                let Some(s) = bounds(src[index(a)], src[index(b)]) else { continue };
+                let Some(s) = bounds(px[index(a)], px[index(b)]) else { continue };
                 if (a + 1..b).all(|i| low(dist[index(i)], s)) {
                     return Some(s);
                 }
@@ -113,57 +120,65 @@ fn closed(c: u32, s: [i32; 3]) -> u32 {
     ch(0, br) | ch(1, bg) << 8 | ch(2, bb) << 16 | (c & 0xff00_0000)
 }
 
-/// Closes the cracks of the `w × h` image `pixels` (see the module docs); `scratch` holds a
-/// copy of it and each pixel's squared distance from the background while the pass runs (the
-/// pass reads the image as drawn, so the result does not depend on the order of the pixels).
-/// In parallel over bands of rows.
-pub fn close_cracks(pixels: &mut [u32], w: usize, h: usize, scratch: &mut Vec<u32>, threads: &Threads) {
+/// What [`close_cracks`] keeps between calls: per pixel its squared distance from the
+/// background, per band of rows the pixels it closes.
+#[derive(Debug, Default)]
+pub struct CrackScratch {
+    dist: Vec<f32>,
+    changes: Vec<Vec<(u32, u32)>>,
+}
+
+/// Closes the cracks of the `w × h` image `pixels` (see the module docs). Every band of rows
+/// finds its cracks in the image as drawn and the closed pixels are written afterwards, so the
+/// result does not depend on the order of the pixels. In parallel over bands of rows.
+pub fn close_cracks(pixels: &mut [u32], w: usize, h: usize, scratch: &mut CrackScratch, threads: &Threads) {
     let n = w * h;
     if n == 0 || pixels.len() < n {
         return;
     }
-    scratch.clear();
-    scratch.resize(2 * n, 0);
-    let (src, dist) = scratch.split_at_mut(n);
-    threads.for_each_chunk_pair(src, dist, CRACK_ROWS * w, |band, src, dist| {
+    let CrackScratch { dist, changes } = scratch;
+    dist.resize(n, 0.0);
+    threads.for_each_chunk(&mut dist[..n], CRACK_ROWS * w, |band, dist| {
         let first = band * CRACK_ROWS * w;
-        for ((s, d), &p) in src.iter_mut().zip(dist.iter_mut()).zip(&pixels[first..]) {
-            *s = p;
-            let r = rel(p);
-            *d = dot(r, r) as u32;
+        for (d, &p) in dist.iter_mut().zip(&pixels[first..]) {
+            *d = distance2(p);
         }
     });
-    let (src, dist) = (&*src, &*dist);
-    threads.for_each_chunk(&mut pixels[..n], CRACK_ROWS * w, |band, out| {
-        let y0 = band * CRACK_ROWS;
+    let (px, dist) = (&pixels[..n], &dist[..n]);
+    changes.resize_with(h.div_ceil(CRACK_ROWS), Vec::new);
+    threads.for_each_chunk(changes, 1, |band, found| {
+        let found = &mut found[0];
+        found.clear();
         let mut look = Vec::new();
-        for (dy, row) in out.chunks_mut(w).enumerate() {
-            let y = y0 + dy;
+        for y in band * CRACK_ROWS..((band + 1) * CRACK_ROWS).min(h) {
             look_at(dist, w, h, y, &mut look);
-            for (x, p) in row.iter_mut().enumerate().filter(|(x, _)| look[*x]) {
-                if let Some(s) = crack_at(src, dist, w, h, x, y) {
-                    *p = closed(src[y * w + x], s);
+            for x in (0..w).filter(|&x| look[x]) {
+                if let Some(s) = crack_at(px, dist, w, h, x, y) {
+                    let j = y * w + x;
+                    found.push((j as u32, closed(px[j], s)));
                 }
             }
         }
     });
+    for &(j, c) in changes.iter().flatten() {
+        pixels[j as usize] = c;
+    }
 }
 
-/// Whether pixel `(x, y)` at squared distance `d` from the background can lie in a crack whose
+/// Whether a pixel at squared distance `d` from the background can lie in a crack whose
 /// bounding pixels are at most `far` from it (the farthest within [`CRACK_RUN`] along its row
 /// and column): the mean of two bounding pixels is no farther from the background than the
-/// farther of them, and a crack's pixels lie under [`CRACK_ALPHA`]² of it. (The pixel's own
-/// distance in `far` fails the second test alone, as it should.)
+/// farther of them, and a crack's pixels lie under [`CRACK_ALPHA`]² (0.49) of it, so under
+/// half of `far` (`f32` products exact: `d`, `far` are integers under 2²⁴, halving is exact).
+/// The pixel's own distance in `far` fails the second test alone, as it should.
 #[inline]
-fn may_crack(d: u32, far: u32) -> bool {
-    let solid = (CRACK_SOLID * CRACK_SOLID) as u32;
-    // d ≤ 3·255² and far ≤ 3·255²: 100·d and 49·far fit a u32.
-    far >= solid && 100 * d < ALPHA2_PERCENT as u32 * far
+fn may_crack(d: f32, far: f32) -> bool {
+    far >= (CRACK_SOLID * CRACK_SOLID) as f32 && d < 0.5 * far
 }
 
-/// Per pixel of row `y` whether it [`may_crack`] (into `look`): away from the image's edges,
-/// eight pixels at a time where the compiler vectorizes it.
-fn look_at(dist: &[u32], w: usize, h: usize, y: usize, look: &mut Vec<bool>) {
+/// Per pixel of row `y` whether it [`may_crack`] (into `look`): away from the image's edges
+/// with `f32` maxima, which the compiler vectorizes on every x86-64 (`maxps`).
+fn look_at(dist: &[f32], w: usize, h: usize, y: usize, look: &mut Vec<bool>) {
     const R: usize = CRACK_RUN;
     // The rows' and columns' neighbours below are written out for runs of two.
     const _: () = assert!(R == 2);
@@ -172,7 +187,7 @@ fn look_at(dist: &[u32], w: usize, h: usize, y: usize, look: &mut Vec<bool>) {
     let row = |yy: usize| &dist[yy * w..(yy + 1) * w];
     let edge = |x: usize| {
         let j = y * w + x;
-        let mut far = 0u32;
+        let mut far = 0.0f32;
         for k in 1..=R {
             if x >= k {
                 far = far.max(dist[j - k]);
@@ -199,8 +214,10 @@ fn look_at(dist: &[u32], w: usize, h: usize, y: usize, look: &mut Vec<bool>) {
     let r = row(y);
     let (l2, l1, c, r1, r2) = (&r[0..m], &r[1..m + 1], &r[2..m + 2], &r[3..m + 3], &r[4..m + 4]);
     let (u2, u1, d1, d2) = (&row(y - 2)[R..m + R], &row(y - 1)[R..m + R], &row(y + 1)[R..m + R], &row(y + 2)[R..m + R]);
+    // `maxps`: the distances are never NaN.
+    let max = |a: f32, b: f32| if a > b { a } else { b };
     for (i, l) in look[R..R + m].iter_mut().enumerate() {
-        let far = l2[i].max(l1[i]).max(r1[i]).max(r2[i]).max(u2[i]).max(u1[i]).max(d1[i]).max(d2[i]);
+        let far = max(max(max(l2[i], l1[i]), max(r1[i], r2[i])), max(max(u2[i], u1[i]), max(d1[i], d2[i])));
         *l = may_crack(c[i], far);
     }
     for x in (0..R).chain(w - R..w) {
@@ -220,7 +237,7 @@ mod tests {
     }
 
     fn run(px: &mut [u32], w: usize, h: usize) {
-        close_cracks(px, w, h, &mut Vec::new(), &Threads::new(2));
+        close_cracks(px, w, h, &mut CrackScratch::default(), &Threads::new(2));
     }
 
     #[test]
@@ -275,7 +292,7 @@ mod tests {
 
     /// Every pixel looked at, without the pass's pre-test.
     fn reference(px: &[u32], w: usize, h: usize) -> Vec<u32> {
-        let dist: Vec<u32> = px.iter().map(|&p| dot(rel(p), rel(p)) as u32).collect();
+        let dist: Vec<f32> = px.iter().map(|&p| distance2(p)).collect();
         (0..w * h).map(|j| crack_at(px, &dist, w, h, j % w, j / w).map_or(px[j], |s| closed(px[j], s))).collect()
     }
 
@@ -319,8 +336,8 @@ mod tests {
             .map(|_| if (rnd() >> 16) % 4 == 0 { BACKGROUND } else { SKIN ^ ((rnd() >> 8) & 0x000f_0f0f) })
             .collect();
         let (mut a, mut b) = (px.clone(), px.clone());
-        close_cracks(&mut a, w, h, &mut Vec::new(), &Threads::new(1));
-        close_cracks(&mut b, w, h, &mut Vec::new(), &Threads::new(3));
+        close_cracks(&mut a, w, h, &mut CrackScratch::default(), &Threads::new(1));
+        close_cracks(&mut b, w, h, &mut CrackScratch::default(), &Threads::new(3));
         assert_eq!(a, b);
         assert_ne!(a, px, "random holes in a surface are closed");
         for (w, h) in [(0, 0), (1, 1), (2, 1), (1, 3)] {
