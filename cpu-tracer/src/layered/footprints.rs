@@ -554,13 +554,17 @@ pub fn exp2_poly(y: f32) -> f32 {
     // the same value for every `y` in [−126, 127].
     let t = y as i32 as f32;
     let n = if t > y { t - 1.0 } else { t };
-    let f = y - n;
-    let p = 1.0
-        + f * (core::f32::consts::LN_2
+    exp2_series(y - n) * f32::from_bits(((n as i32 + 127) as u32) << 23)
+}
+
+/// `2^f` for `f` in [0, 1): the series of `e^(f·ln 2)` to the seventh power ([`exp2_poly`]'s).
+#[inline]
+fn exp2_series(f: f32) -> f32 {
+    1.0 + f
+        * (core::f32::consts::LN_2
             + f * (0.240_226_5
                 + f * (0.055_504_11
-                    + f * (0.009_618_129 + f * (0.001_333_355 + f * (0.000_154_035_3 + f * 0.000_015_252_73))))));
-    p * f32::from_bits(((n as i32 + 127) as u32) << 23)
+                    + f * (0.009_618_129 + f * (0.001_333_355 + f * (0.000_154_035_3 + f * 0.000_015_252_73))))))
 }
 
 /// Per 8-bit opacity `o`, [`log2_poly`] of the transmittance `1 − o/255` ([`drawn_color`]'s
@@ -629,20 +633,14 @@ mod drawn_color_tests {
         }
     }
 
-    /// [`exp2_poly`] as first written, with the library's `floor`.
+    /// [`exp2_poly`] with the library's `floor` (the series is shared).
     fn exp2_with_floor(y: f32) -> f32 {
         if !(y >= -126.0) {
             return 0.0;
         }
         let y = y.min(127.0);
         let n = y.floor();
-        let f = y - n;
-        let p = 1.0
-            + f * (core::f32::consts::LN_2
-                + f * (0.240_226_5
-                    + f * (0.055_504_11
-                        + f * (0.009_618_129 + f * (0.001_333_355 + f * (0.000_154_035_3 + f * 0.000_015_252_73))))));
-        p * f32::from_bits(((n as i32 + 127) as u32) << 23)
+        exp2_series(y - n) * f32::from_bits(((n as i32 + 127) as u32) << 23)
     }
 
     /// [`drawn_color`] as first written: `log2_poly` per call, `floor`, the channels as bytes.
