@@ -37,7 +37,7 @@ pub const CRACK_SOLID: i32 = 60;
 /// Rows per task of the passes.
 const CRACK_ROWS: usize = 32;
 
-/// [`CRACK_ALPHA`]² in hundredths (the tests compare integers).
+/// [`CRACK_ALPHA`]² in hundredths (the run test compares integers).
 const ALPHA2_PERCENT: i64 = (CRACK_ALPHA * CRACK_ALPHA * 100.0 + 0.5) as i64;
 
 /// A pixel's RGB less the background's.
