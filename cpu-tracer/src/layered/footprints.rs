@@ -442,9 +442,43 @@ pub(crate) fn footprint_group<L: Lanes>(
     }
     // On its slab's shared corners a sample carries its optical depth over the footprint's
     // area on screen: the plane's area over the slab's (1 where it is drawn on the plane).
-    let depth = (use_w & okp).select(ap / aw, sp(1.0)).to_array();
-    for (i, a) in drawn.iter_mut().enumerate().take(samples.len().min(8)) {
-        *a = drawn_color(colors.get(first + i).copied().unwrap_or(0), depth[i], s.opacity_limit);
+    let depth = (use_w & okp).select(ap / aw, sp(1.0));
+    // The colors as drawn, `drawn_color`'s operations on lanes (its `2^n` and the cases it
+    // returns the color unchanged lane by lane).
+    let n = samples.len().min(8);
+    let (mut c8, mut a8, mut t8) = ([0u32; 8], [1.0f32; 8], [0.0f32; 8]);
+    for i in 0..n {
+        let c = colors.get(first + i).copied().unwrap_or(0);
+        c8[i] = c;
+        a8[i] = (c >> 24) as f32 * (1.0 / 255.0);
+        t8[i] = LOG2_TRANSMITTANCE[(c >> 24) as usize];
+    }
+    let limit = s.opacity_limit;
+    let lo = 1.0 / limit;
+    let y = depth.max(sp(lo)).min(sp(limit)) * L::new(t8);
+    let below = y.to_array();
+    let y = y.min(sp(127.0));
+    let whole = y.floor();
+    let series = exp2_series_lanes(y - whole).to_array();
+    let (whole, d) = (whole.to_array(), depth.to_array());
+    let mut e8 = [0.0f32; 8];
+    for i in 0..n {
+        e8[i] =
+            if below[i] >= -126.0 { series[i] * f32::from_bits(((whole[i] as i32 + 127) as u32) << 23) } else { 0.0 };
+    }
+    let scale = (sp(1.0) - L::new(e8)) / L::new(a8);
+    let mut levels = [[0u32; 8]; 4];
+    for (k, level) in levels.iter_mut().enumerate() {
+        let ch = L::new(core::array::from_fn(|i| ((c8[i] >> (8 * k)) & 0xff) as f32));
+        let v = (ch * scale + sp(0.5)).min(sp(255.0)).to_array();
+        for i in 0..n {
+            level[i] = (v[i] as u32) << (8 * k);
+        }
+    }
+    for (i, a) in drawn.iter_mut().enumerate().take(n) {
+        let (c, o) = (c8[i], c8[i] >> 24);
+        let same = !(limit > 1.0) || d[i] == 1.0 || !d[i].is_finite() || o == 0 || o == 255;
+        *a = if same { c } else { levels[0][i] | levels[1][i] | levels[2][i] | levels[3][i] };
     }
     ok = use_w | okp;
     let x0 = xs[0].min(xs[1]).min(xs[2]).min(xs[3]);
@@ -555,6 +589,18 @@ pub fn exp2_poly(y: f32) -> f32 {
     let t = y as i32 as f32;
     let n = if t > y { t - 1.0 } else { t };
     exp2_series(y - n) * f32::from_bits(((n as i32 + 127) as u32) << 23)
+}
+
+/// [`exp2_series`] on lanes: the same operations in the same order.
+#[inline(always)]
+fn exp2_series_lanes<L: Lanes>(f: L) -> L {
+    let sp = L::splat;
+    sp(1.0)
+        + f * (sp(core::f32::consts::LN_2)
+            + f * (sp(0.240_226_5)
+                + f * (sp(0.055_504_11)
+                    + f * (sp(0.009_618_129)
+                        + f * (sp(0.001_333_355) + f * (sp(0.000_154_035_3) + f * sp(0.000_015_252_73)))))))
 }
 
 /// `2^f` for `f` in [0, 1): the series of `e^(f·ln 2)` to the seventh power ([`exp2_poly`]'s).
