@@ -172,42 +172,26 @@ pub fn calibrate(
     for ds in datasets {
         let marcher = Marcher::from_dataset(ds);
         let c0 = marcher.default_camera(size, size);
-        let mut ms = Vec::new();
         let mut frame = None;
-        for _ in 0..runs.max(1) {
-            let t = Instant::now();
-            frame = Some(crate::quality::frame_for(&marcher, &c0, Heuristic::Threshold));
-            ms.push(t.elapsed().as_secs_f64() * 1e3);
-        }
-        let server = crate::median(&mut ms).unwrap_or(0.0);
+        let server = median_ms(runs, || frame = Some(crate::quality::frame_for(&marcher, &c0, Heuristic::Threshold)));
         cal.ms.insert(("server".into(), ds.name.clone(), size), server);
         log::info!("{}: server {server:.1} ms per frame at {size}²", ds.name);
         // The marcher's image at 1/2 and 1/4 of the resolution against the full one (the
         // downscaling peers' and coarse frames' server time): the frame's time times the ratio.
         let image_ms = |side: u32| {
             let cam = marcher.default_camera(side.max(1), side.max(1));
-            let mut t: Vec<f64> = (0..runs.max(1))
-                .map(|_| {
-                    let s = Instant::now();
-                    std::hint::black_box(marcher.render_image(&cam));
-                    s.elapsed().as_secs_f64() * 1e3
-                })
-                .collect();
-            crate::median(&mut t).unwrap_or(0.0)
+            median_ms(runs, || {
+                std::hint::black_box(marcher.render_image(&cam));
+            })
         };
         // The same for a layered frame (K = 4, the default's coarse frames): logged beside the
         // image's ratio, which the simulator charges (a layered frame's is at most it).
         let layered_ms = |side: u32| {
             let camera = marcher.default_camera(side.max(1), side.max(1));
             let req = CameraRequest { seq: 1, camera, heuristic: Heuristic::Threshold, radius_scale: 1.0, layers: 0 };
-            let mut t: Vec<f64> = (0..runs.max(1))
-                .map(|_| {
-                    let s = Instant::now();
-                    std::hint::black_box(marcher.render_frame_layers(&req, 4));
-                    s.elapsed().as_secs_f64() * 1e3
-                })
-                .collect();
-            crate::median(&mut t).unwrap_or(0.0)
+            median_ms(runs, || {
+                std::hint::black_box(marcher.render_frame_layers(&req, 4));
+            })
         };
         let (full, full_layered) = (image_ms(size), layered_ms(size));
         for f in [2u32, 4] {
@@ -253,14 +237,7 @@ pub fn calibrate(
             let set: Vec<&methods::HeldFrame> = older.iter().chain(core::iter::once(held)).collect();
             let mut img = Image::new(0, 0);
             method.draw(&set, &cam, &mut img);
-            let mut t: Vec<f64> = (0..runs.max(1))
-                .map(|_| {
-                    let s = Instant::now();
-                    method.draw(&set, &cam, &mut img);
-                    s.elapsed().as_secs_f64() * 1e3
-                })
-                .collect();
-            let med = crate::median(&mut t).unwrap_or(0.0);
+            let med = median_ms(runs, || method.draw(&set, &cam, &mut img));
             match draw.iter_mut().find(|(n, _)| n == method.name()) {
                 Some((_, v)) => v.push(med),
                 None => draw.push((method.name().into(), vec![med])),
@@ -273,4 +250,16 @@ pub fn calibrate(
         cal.ms.insert(("client".into(), name, size), med);
     }
     Ok(cal)
+}
+
+/// The median wall time of `runs` (at least one) calls of `f`, in ms.
+fn median_ms(runs: usize, mut f: impl FnMut()) -> f64 {
+    let mut t: Vec<f64> = (0..runs.max(1))
+        .map(|_| {
+            let s = Instant::now();
+            f();
+            s.elapsed().as_secs_f64() * 1e3
+        })
+        .collect();
+    crate::median(&mut t).unwrap_or(0.0)
 }
