@@ -463,8 +463,7 @@ pub(crate) fn footprint_group<L: Lanes>(
     let (whole, d) = (whole.to_array(), depth.to_array());
     let mut e8 = [0.0f32; 8];
     for i in 0..n {
-        e8[i] =
-            if below[i] >= -126.0 { series[i] * f32::from_bits(((whole[i] as i32 + 127) as u32) << 23) } else { 0.0 };
+        e8[i] = if below[i] >= -126.0 { series[i] * pow2(whole[i]) } else { 0.0 };
     }
     let scale = (sp(1.0) - L::new(e8)) / L::new(a8);
     let mut levels = [[0u32; 8]; 4];
@@ -476,9 +475,9 @@ pub(crate) fn footprint_group<L: Lanes>(
         }
     }
     for (i, a) in drawn.iter_mut().enumerate().take(n) {
-        let (c, o) = (c8[i], c8[i] >> 24);
-        let same = !(limit > 1.0) || d[i] == 1.0 || !d[i].is_finite() || o == 0 || o == 255;
-        *a = if same { c } else { levels[0][i] | levels[1][i] | levels[2][i] | levels[3][i] };
+        let c = c8[i];
+        *a =
+            if drawn_unchanged(c, d[i], limit) { c } else { levels[0][i] | levels[1][i] | levels[2][i] | levels[3][i] };
     }
     ok = use_w | okp;
     let x0 = xs[0].min(xs[1]).min(xs[2]).min(xs[3]);
@@ -588,7 +587,13 @@ pub fn exp2_poly(y: f32) -> f32 {
     // the same value for every `y` in [−126, 127].
     let t = y as i32 as f32;
     let n = if t > y { t - 1.0 } else { t };
-    exp2_series(y - n) * f32::from_bits(((n as i32 + 127) as u32) << 23)
+    exp2_series(y - n) * pow2(n)
+}
+
+/// `2^n` for a whole `n` in [−126, 127], from the exponent bits.
+#[inline]
+fn pow2(n: f32) -> f32 {
+    f32::from_bits(((n as i32 + 127) as u32) << 23)
 }
 
 /// [`exp2_series`] on lanes: the same operations in the same order.
@@ -625,6 +630,14 @@ const LOG2_TRANSMITTANCE: [f32; 256] = {
     t
 };
 
+/// Where [`drawn_color`] returns the color as it is: `depth` 1 or not finite, a limit of at most
+/// 1, a transparent or opaque sample.
+#[inline]
+fn drawn_unchanged(c: u32, depth: f32, limit: f32) -> bool {
+    let o = c >> 24;
+    !(limit > 1.0) || depth == 1.0 || !depth.is_finite() || o == 0 || o == 255
+}
+
 /// The color sample color `c` (premultiplied RGBA8) is drawn with where its footprint stands
 /// for `depth` times the optical depth of its own ray: a slab seen more edge-on than from the
 /// frame's camera is crossed along a longer path (its footprint on the shared corners covers
@@ -637,7 +650,7 @@ const LOG2_TRANSMITTANCE: [f32; 256] = {
 /// image.
 pub fn drawn_color(c: u32, depth: f32, limit: f32) -> u32 {
     let b = c.to_le_bytes();
-    if !(limit > 1.0) || depth == 1.0 || !depth.is_finite() || b[3] == 0 || b[3] == 255 {
+    if drawn_unchanged(c, depth, limit) {
         return c;
     }
     let d = depth.clamp(1.0 / limit, limit);
@@ -686,7 +699,7 @@ mod drawn_color_tests {
         }
         let y = y.min(127.0);
         let n = y.floor();
-        exp2_series(y - n) * f32::from_bits(((n as i32 + 127) as u32) << 23)
+        exp2_series(y - n) * pow2(n)
     }
 
     /// [`drawn_color`] as first written: `log2_poly` per call, `floor`, the channels as bytes.
