@@ -890,6 +890,8 @@ fn build_loop(sh: &Shared, cfg: &NetConfig) {
         let Some(p) = next else { continue };
         let busy = Busy::new(&sh.work_gen);
         let t0 = Instant::now();
+        // The server's own time for the frame, which splits the prediction horizon's span.
+        let render_s = f64::from(p.frame.header.render_us) * 1e-6;
         let scene = if cfg.lazy_build {
             volwarp_cpu_tracer::route::into_unbuilt_scene(p.frame)
         } else {
@@ -907,7 +909,7 @@ fn build_loop(sh: &Shared, cfg: &NetConfig) {
             let mut h = lock(&sh.horizon);
             let t0 = h.1;
             let secs = |t: Instant| t.saturating_duration_since(t0).as_secs_f64();
-            h.0.observe(secs(r), secs(Instant::now()), p.coarse);
+            h.0.observe(secs(r), secs(Instant::now()), render_s, p.coarse);
         }
         log::debug!("built scene seq {} ({} samples) in {build_ms:.1} ms", scene.header.seq, scene.samples.len());
         let ready = ReadyScene {

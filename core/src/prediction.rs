@@ -165,18 +165,30 @@ impl Predictor {
 /// measurement); before the first frame the horizon is 0 (no prediction). A client measures its
 /// first frame too (the one it shows before the camera moves), so it predicts from the start.
 ///
+/// Each frame also carries the server's own time for it (the frame header's `render_us`), which
+/// splits a span into the render and the rest: the round trip and the transfer, taken to be
+/// half each (the client cannot tell them apart from one frame).
+///
+/// The interval is measured between arrivals whose later frame was asked for before the
+/// earlier arrived (the server had it in hand). Until such a pair of a class has arrived, the
+/// interval is taken to be the render plus the transfer (a server that renders the newest
+/// request as soon as the last frame is written delivers them that far apart):
+/// `render + (span − render) / 2`, or the whole span where no render time was reported.
+///
 /// Frames at full resolution and frames on the coarser grid of adaptive resolution are measured
 /// apart: a coarse frame is marched and sent in a fraction of a full one's time. Until a coarse
-/// frame has arrived, a coarse request's horizon is the full frames' over `d` (a divisor `d`
-/// per axis), and the first coarse frame corrects it. The march and the transfer scale with the
-/// pixels (`1/d²`), the round trip and the marcher's fixed costs do not (a 256² frame takes
-/// 0.22–0.47 of a 512² one's march): over `d²` the first coarse frames of a session were
-/// predicted too short and warped up to 10° on a steady turn, while the full frame's horizon
-/// as it is made them overshoot by about twice the time they took to come
+/// frame has arrived, a coarse request's horizon comes from the full frames': with a divisor `d`
+/// per axis, the render and the transfer scale with the pixels (`1/d²`), the round trip does
+/// not, and the first coarse frame corrects it. Without a reported render time, the full
+/// frames' span and interval over `d` stand in. Over `d`, the fast flick's first coarse frame
+/// (512², server 500 ms, 100 Mbit/s) was predicted 0.47 s ahead where it took 0.26 s to come
+/// and was shown for 0.16 s, and overshot the flick's end; over `d²` for everything, the first
+/// coarse frames were predicted too short and warped up to 10° on a steady turn
 /// (`docs/results.md`, "Adaptive resolution").
 #[derive(Clone, Copy, Debug, Default, PartialEq)]
 pub struct Horizon {
-    /// Request-to-arrival and interval averages: of full-resolution frames, of coarse frames.
+    /// Request-to-arrival, interval and render averages: of full-resolution frames, of coarse
+    /// frames.
     classes: [Spans; 2],
     last_arrival_s: Option<f64>,
 }
@@ -186,13 +198,44 @@ pub struct Horizon {
 struct Spans {
     request_to_arrival_s: f64,
     interval_s: f64,
+    /// The server's own time per frame (0: not reported).
+    render_s: f64,
 }
 
 impl Spans {
-    const NONE: Spans = Spans { request_to_arrival_s: 0.0, interval_s: 0.0 };
+    const NONE: Spans = Spans { request_to_arrival_s: 0.0, interval_s: 0.0, render_s: 0.0 };
 
     fn measured(&self) -> bool {
         self.request_to_arrival_s > 0.0 || self.interval_s > 0.0
+    }
+
+    /// The render time, where one was reported and it fits in the span.
+    fn render(&self) -> Option<f64> {
+        (self.render_s > 0.0 && self.render_s <= self.request_to_arrival_s).then_some(self.render_s)
+    }
+
+    /// `(request to arrival, interval)`, the interval estimated where it was not measured.
+    fn span_and_interval(&self) -> (f64, f64) {
+        let span = self.request_to_arrival_s;
+        let interval =
+            if self.interval_s > 0.0 { self.interval_s } else { self.render().map_or(span, |r| r + 0.5 * (span - r)) };
+        (span, interval)
+    }
+
+    /// A class on a grid `divisor` times coarser per axis estimated from this one's (see
+    /// [`Horizon`]).
+    fn coarser(&self, divisor: u32) -> (f64, f64) {
+        let d = f64::from(divisor.max(1));
+        let (span, interval) = self.span_and_interval();
+        match self.render() {
+            Some(r) => {
+                let pixels = 1.0 / (d * d);
+                let rest = span - r;
+                // The round trip (half the rest) stays; the render and the transfer scale.
+                (r * pixels + rest * 0.5 * (1.0 + pixels), (r + 0.5 * rest) * pixels)
+            }
+            None => (span / d, interval / d),
+        }
     }
 }
 
@@ -206,16 +249,22 @@ impl Horizon {
     }
 
     /// Records a frame whose request was sent at `requested_s` and that arrived (is ready to
-    /// show) at `arrived_s`, on any clock in seconds; `coarse`: a frame on the coarser grid of
-    /// adaptive resolution. Non-finite or negative spans are ignored.
-    pub fn observe(&mut self, requested_s: f64, arrived_s: f64, coarse: bool) {
+    /// show) at `arrived_s`, on any clock in seconds, which the server reported rendering in
+    /// `render_s` seconds (the header's `render_us`; 0: not reported); `coarse`: a frame on the
+    /// coarser grid of adaptive resolution. Non-finite or negative spans and times are ignored.
+    pub fn observe(&mut self, requested_s: f64, arrived_s: f64, render_s: f64, coarse: bool) {
         let ema = |old: f64, new: f64| if old == 0.0 { new } else { old + (new - old) * Self::WEIGHT };
         let c = &mut self.classes[usize::from(coarse)];
         let span = arrived_s - requested_s;
         if span.is_finite() && span >= 0.0 {
             c.request_to_arrival_s = ema(c.request_to_arrival_s, span);
+            if render_s.is_finite() && render_s > 0.0 {
+                c.render_s = ema(c.render_s, render_s);
+            }
         }
-        if let Some(last) = self.last_arrival_s {
+        // The gap since the last arrival is an interval only if this frame's request was out
+        // before it: otherwise it counts time the client asked for nothing (a view at rest).
+        if let Some(last) = self.last_arrival_s.filter(|&last| requested_s < last) {
             let gap = arrived_s - last;
             if gap.is_finite() && gap > 0.0 {
                 c.interval_s = ema(c.interval_s, gap);
@@ -230,22 +279,18 @@ impl Horizon {
     /// resolution) for a display that shows a new image every `display_s` seconds (clamped to
     /// [`MAX_HORIZON_S`]): a frame is on screen at the display ticks from its arrival until the
     /// next frame's, on average `(interval − display_s) / 2` after its arrival (0 when frames
-    /// come at least once per tick). Until two frames of the class have arrived the interval is
-    /// taken to be the request-to-arrival time (a server that renders one frame at a time
-    /// delivers them about that far apart, less the round trip).
+    /// come at least once per tick). Where the class's interval or the class itself was not
+    /// measured yet, they are estimated as [`Horizon`] says.
     pub fn seconds(&self, display_s: f32, divisor: u32) -> f32 {
         let coarse = divisor > 1;
         let own = self.classes[usize::from(coarse)];
-        let (spans, scale) = if own.measured() {
-            (own, 1.0)
+        let (span, interval) = if own.measured() {
+            own.span_and_interval()
         } else if coarse {
-            let d = f64::from(divisor);
-            (self.classes[0], 1.0 / d)
+            self.classes[0].coarser(divisor)
         } else {
-            (self.classes[1], 1.0)
+            self.classes[1].span_and_interval()
         };
-        let span = spans.request_to_arrival_s * scale;
-        let interval = if spans.interval_s > 0.0 { spans.interval_s * scale } else { span };
         let display = if display_s.is_finite() { display_s.max(0.0) as f64 } else { 0.0 };
         let shown = 0.5 * (interval - display).max(0.0);
         ((span + shown) as f32).clamp(0.0, MAX_HORIZON_S)
@@ -356,25 +401,31 @@ mod tests {
         let mut h = Horizon::new();
         assert_eq!(h.seconds(0.0, 1), 0.0);
         // One frame: its request-to-arrival stands in for the interval too.
-        h.observe(-0.6, 0.0, false);
+        h.observe(-0.6, 0.0, 0.0, false);
         assert!((h.seconds(0.0, 1) - 0.9).abs() < 1e-6, "{}", h.seconds(0.0, 1));
         assert!((h.seconds(0.2, 1) - 0.8).abs() < 1e-6, "{}", h.seconds(0.2, 1));
         let mut h = Horizon::new();
         // Frames requested every 0.5 s, each arriving 0.6 s later: 0.6 + 0.25.
         for k in 0..40 {
             let t = k as f64 * 0.5;
-            h.observe(t, t + 0.6, false);
+            h.observe(t, t + 0.6, 0.0, false);
         }
         assert!((h.seconds(0.0, 1) - 0.85).abs() < 1e-4, "{}", h.seconds(0.0, 1));
         // Frames at least once per display tick: request-to-arrival only.
         assert!((h.seconds(0.5, 1) - 0.6).abs() < 1e-4, "{}", h.seconds(0.5, 1));
         assert!((h.seconds(f32::NAN, 1) - 0.85).abs() < 1e-4);
         // Garbage is ignored, and a huge latency is clamped.
-        h.observe(f64::NAN, 1.0, false);
-        h.observe(5.0, 4.0, false);
+        h.observe(f64::NAN, 1.0, f64::NAN, false);
+        h.observe(5.0, 4.0, -1.0, false);
         assert!(h.seconds(0.0, 1).is_finite());
+        // A frame asked for after the last one arrived (the view rested in between): its gap
+        // is not an interval.
+        let mut idle = Horizon::new();
+        idle.observe(-0.6, 0.0, 0.0, false);
+        idle.observe(5.0, 5.6, 0.0, false);
+        assert!((idle.seconds(0.0, 1) - 0.9).abs() < 1e-6, "{}", idle.seconds(0.0, 1));
         let mut slow = Horizon::new();
-        slow.observe(0.0, 30.0, false);
+        slow.observe(0.0, 30.0, 0.0, false);
         assert_eq!(slow.seconds(0.016, 1), MAX_HORIZON_S);
     }
 
@@ -382,7 +433,7 @@ mod tests {
     fn coarse_frames_have_their_own_horizon() {
         let mut h = Horizon::new();
         // The first frame at full resolution: 0.6 s from request to arrival.
-        h.observe(-0.6, 0.0, false);
+        h.observe(-0.6, 0.0, 0.0, false);
         // A coarse request before any coarse frame: the full frame's time over d (0.3 s,
         // interval alike), plus half the interval.
         assert!((h.seconds(0.0, 2) - 0.45).abs() < 1e-6, "{}", h.seconds(0.0, 2));
@@ -391,13 +442,38 @@ mod tests {
         // Coarse frames measured: their own figures, the full frames' unchanged.
         for k in 1..40 {
             let t = k as f64 * 0.2;
-            h.observe(t - 0.3, t, true);
+            h.observe(t - 0.3, t, 0.0, true);
         }
         assert!((h.seconds(0.0, 2) - 0.4).abs() < 1e-3, "{}", h.seconds(0.0, 2));
         assert!((h.seconds(0.0, 1) - 0.9).abs() < 1e-6, "{}", h.seconds(0.0, 1));
         // Only coarse frames measured: a full request takes theirs.
         let mut c = Horizon::new();
-        c.observe(0.0, 0.3, true);
+        c.observe(0.0, 0.3, 0.0, true);
         assert!((c.seconds(0.0, 1) - 0.45).abs() < 1e-6);
+    }
+
+    #[test]
+    fn a_reported_render_time_splits_the_span() {
+        // The first frame: 0.656 s from request to arrival, 0.5 s of it the server's render.
+        let mut h = Horizon::new();
+        h.observe(-0.656, 0.0, 0.5, false);
+        // Its own class: the interval is the render and half the rest (the transfer).
+        let full = 0.656 + 0.5 * (0.5 + 0.078);
+        assert!((h.seconds(0.0, 1) - full as f32).abs() < 1e-6, "{}", h.seconds(0.0, 1));
+        // A coarse request (d = 2): the render and the transfer at a quarter, the round trip
+        // (half the rest) whole: span 0.125 + 0.078 + 0.0195, interval 0.125 + 0.0195.
+        let (span, interval) = (0.125 + 0.078 + 0.0195, 0.125 + 0.0195);
+        let want = span + 0.5 * (interval - 1.0 / 30.0);
+        assert!((h.seconds(1.0 / 30.0, 2) - want as f32).abs() < 1e-6, "{} vs {want}", h.seconds(1.0 / 30.0, 2));
+        // Shorter than the full frame's span over d, which overshot a fast flick's end.
+        let mut plain = Horizon::new();
+        plain.observe(-0.656, 0.0, 0.0, false);
+        assert!(h.seconds(1.0 / 30.0, 2) < plain.seconds(1.0 / 30.0, 2) - 0.1);
+        // A render time longer than the span, or not finite, is not used.
+        for bad in [0.9, f64::NAN, f64::INFINITY] {
+            let mut b = Horizon::new();
+            b.observe(-0.656, 0.0, bad, false);
+            assert_eq!(b.seconds(1.0 / 30.0, 2), plain.seconds(1.0 / 30.0, 2), "{bad}");
+        }
     }
 }

@@ -219,7 +219,7 @@ pub fn serve_images(
     let (first, first_bytes) = render(&cams[0], false, looks.state_at(0))?;
     let mut stream = ImageStream {
         peer,
-        frames: vec![FrameEvent::at_start(cams[0], first_bytes, looks.state_at(0))],
+        frames: vec![FrameEvent::at_start(cams[0], net.server_ms, first_bytes, looks.state_at(0))],
         held: vec![HeldImage { image: first }],
     };
     let requests = requests(cams, looks, tick_ms, peer);
@@ -252,6 +252,7 @@ pub fn serve_images(
                 guard_offset: (0, 0),
                 request_ms: plain[j].sent_ms,
                 start_ms: s,
+                render_ms: server_ms,
                 bytes,
                 arrive_ms,
             });

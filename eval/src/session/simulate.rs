@@ -110,6 +110,8 @@ pub struct FrameEvent {
     pub request_ms: f64,
     /// When rendering started, ms.
     pub start_ms: f64,
+    /// The server's time for it, ms (what its header reports as `render_us`).
+    pub render_ms: f64,
     /// Encoded bytes on the wire.
     pub bytes: u64,
     /// When it arrived at the client, ms.
@@ -118,8 +120,8 @@ pub struct FrameEvent {
 
 impl FrameEvent {
     /// The frame the client holds at time 0: rendered for the first camera as shown, in the
-    /// first tick's visual state `state`, `bytes` long.
-    pub fn at_start(camera: Camera, bytes: u64, state: usize) -> FrameEvent {
+    /// first tick's visual state `state`, in `render_ms`, `bytes` long.
+    pub fn at_start(camera: Camera, render_ms: f64, bytes: u64, state: usize) -> FrameEvent {
         FrameEvent {
             state,
             seq: 0,
@@ -128,6 +130,7 @@ impl FrameEvent {
             guard_offset: (0, 0),
             request_ms: 0.0,
             start_ms: 0.0,
+            render_ms,
             bytes,
             arrive_ms: 0.0,
         }
@@ -391,7 +394,7 @@ pub fn serve(
     // The first frame is layered: the first moves warp it (one sample per pixel there raised
     // the MRI orbit's p95 from 0.044 to 0.065).
     let (first, first_bytes) = render(cams[0], 0, looks.state_at(0), 0);
-    let mut out = vec![(FrameEvent::at_start(cams[0], first_bytes, looks.state_at(0)), first)];
+    let mut out = vec![(FrameEvent::at_start(cams[0], net.server_ms, first_bytes, looks.state_at(0)), first)];
     let first_ms = 2.0 * net.latency_ms + net.server_ms + net.transfer_ms(out[0].0.bytes);
     let mut requests = requests(cams, looks, tick_ms, request);
     let cadence = cadence(tick_ms);
@@ -415,11 +418,11 @@ pub fn serve(
                 }
                 observed = observed.max(requests[r].tick + 1);
                 // The first frame: requested one round trip, render and transfer before 0.
-                horizon.observe(-first_ms * 1e-3, 0.0, false);
+                horizon.observe(-first_ms * 1e-3, 0.0, net.server_ms * 1e-3, false);
                 for (f, _) in out.iter().skip(1).filter(|(f, _)| f.arrive_ms <= sent) {
                     // A frame on the coarser grid of adaptive resolution: fewer pixels than shown.
                     let coarse = f.view.width < cams[0].width;
-                    horizon.observe(f.request_ms * 1e-3, f.arrive_ms * 1e-3, coarse);
+                    horizon.observe(f.request_ms * 1e-3, f.arrive_ms * 1e-3, f.render_ms * 1e-3, coarse);
                 }
             }
             let asks = request.policy().camera_at(shown, moving(&requests[r]), &predictor, &horizon, &cadence);
@@ -505,6 +508,7 @@ pub fn serve(
                     guard_offset,
                     request_ms: requests[j].sent_ms,
                     start_ms: s,
+                    render_ms,
                     bytes,
                     arrive_ms,
                 },
