@@ -18,7 +18,8 @@
 //!
 //! Footprint options of the layered renderer: `--own`, `--no-fill`, `--no-cracks`, `--grow`, `--grow-alpha`,
 //! `--max-own`, `--watertight T` (0: off), `--water-ratio R`; `--png DIR` writes each layered
-//! image, the truth and the ꟻLIP map.
+//! image, the truth and the ꟻLIP map; `--angles A,B,…` warps to other angles, `--only NAME`
+//! takes one dataset.
 
 use std::path::Path;
 use std::time::Instant;
@@ -31,6 +32,7 @@ use volwarp_eval::camera_paths::orbit;
 use volwarp_eval::{median, Metrics};
 use volwarp_server::Marcher;
 
+/// The default warps, degrees along the orbit (`--angles A,B,…` sets others).
 const ANGLES: [f32; 6] = [0.0, 2.5, 5.0, 10.0, 20.0, 30.0];
 
 fn arg<'a>(args: &'a [String], name: &str) -> Option<&'a str> {
@@ -80,7 +82,13 @@ fn main() {
         lopts.water_ratio = v.parse().expect("an area ratio");
     }
     let adapt = lopts.grow_per_degree > 0.0;
-    let datasets = volwarp_eval::report::shared_datasets(Path::new(dir)).expect("datasets");
+    let angles: Vec<f32> = arg(&args, "--angles")
+        .map_or(ANGLES.to_vec(), |v| v.split(',').map(|a| a.parse().expect("an angle in degrees")).collect());
+    let mut datasets = volwarp_eval::report::shared_datasets(Path::new(dir)).expect("datasets");
+    // `--only NAME`: one dataset of the folder.
+    if let Some(only) = arg(&args, "--only") {
+        datasets.retain(|d| d.name == only);
+    }
     let h = Heuristic::Threshold;
     let base =
         [RendererKind::Stale, RendererKind::Points1, RendererKind::Points2, RendererKind::Points3, RendererKind::Splat];
@@ -88,7 +96,7 @@ fn main() {
     names.push("splat-layers K=1".into());
     names.extend(layers.iter().map(|k| format!("splat-layers K={k}")));
     println!("dataset,method,angle,psnr,flip,ssim");
-    let mut sums = vec![[(0.0f64, 0.0f64); ANGLES.len()]; names.len()];
+    let mut sums = vec![vec![(0.0f64, 0.0f64); angles.len()]; names.len()];
     let mut budget = Vec::new();
     let mut times = Vec::new();
     for ds in &datasets {
@@ -126,7 +134,7 @@ fn main() {
         let mut plain: Vec<Box<dyn Renderer + Send>> = base.iter().map(|&k| create(k, 0).unwrap()).collect();
         let mut layered = volwarp_cpu_tracer::LayerSplat::with_options(0, lopts);
         layered.set_adaptive_radius(adapt);
-        for (ai, &a) in ANGLES.iter().enumerate() {
+        for (ai, &a) in angles.iter().enumerate() {
             let cam = orbit(&c0, a);
             let truth = m.render_image(&cam);
             let mut img = Image::new(0, 0);
@@ -188,10 +196,13 @@ fn main() {
         }
     }
     println!("\nmean over {} datasets, PSNR dB / ꟻLIP", datasets.len());
-    println!("| method | {} |", ANGLES.map(|a| format!("{a}°")).join(" | "));
-    println!("|---|{}", "---|".repeat(ANGLES.len()));
+    println!("| method | {} |", angles.iter().map(|a| format!("{a}°")).collect::<Vec<_>>().join(" | "));
+    println!("|---|{}", "---|".repeat(angles.len()));
     for (i, n) in names.iter().enumerate() {
-        println!("| {n} | {} |", sums[i].map(|(p, f)| format!("{p:.1} / {f:.4}")).join(" | "));
+        println!(
+            "| {n} | {} |",
+            sums[i].iter().map(|(p, f)| format!("{p:.1} / {f:.4}")).collect::<Vec<_>>().join(" | ")
+        );
     }
     let march = if time { " server march ms |" } else { "" };
     println!("\n| dataset | K | samples | × K=1 | raw12 bytes | compact bytes | compact B/sample |{march}");
