@@ -73,8 +73,9 @@
 //!
 //! **Warp-sized footprints** ([`Renderer::set_adaptive_radius`]): a surface seen from a new
 //! direction spreads its pixels' footprints apart at grazing angles; with adaptive sizing on,
-//! the half side grows by [`LayerOptions::grow_per_degree`] per degree of warp (core's
-//! `warp_radius::warp_angle_deg`) up to [`MAX_OWN`]; at the frame's own camera it is
+//! the half side grows by [`LayerOptions::grow_per_degree`] of the display's pixels per degree
+//! of warp (core's `warp_radius::warp_angle_deg`; [`LayerOptions::grown`]) up to [`MAX_OWN`]
+//! source pixels; at the frame's own camera it is
 //! [`LayerOptions::own`], so the frame is still reproduced there.
 //!
 //! Work: the footprints are set up in parallel over samples (four projections per sample, in
@@ -97,7 +98,6 @@ use crate::route::SceneId;
 use crate::threads::Threads;
 use crate::{begin_frame_unbuilt_ok, MAX_VIEWPORT};
 use volwarp_core::renderer::{Image, Renderer};
-use volwarp_core::warp_radius::warp_angle_deg;
 use volwarp_core::{Camera, RendererKind, Scene, BACKGROUND};
 
 mod raster;
@@ -231,7 +231,7 @@ impl Renderer for LayerSplat {
                 return;
             }
         }
-        let grown = if self.adaptive { self.opts.own_at(warp_angle_deg(&fc, camera)) } else { self.opts.own };
+        let grown = if self.adaptive { self.opts.grown(&fc, camera) } else { self.opts.own };
         // Watertight slabs: the newest frame's corners shared between neighbouring pixels.
         let shared = if self.opts.shares_corners() {
             if self.own.prepare(scene, &self.threads) {
@@ -273,7 +273,7 @@ impl Renderer for LayerSplat {
             let oc = o.header.camera;
             // Older frames grow with their own warp too (measured: without it the MRI's
             // stop-and-go p95 rose from 0.0489 to 0.0545).
-            let g = if self.adaptive { self.opts.own_at(warp_angle_deg(&oc, camera)) } else { self.opts.own };
+            let g = if self.adaptive { self.opts.grown(&oc, camera) } else { self.opts.own };
             let state = core::mem::take(&mut self.state);
             self.draw(o, camera, g, &[], &mut scratch, Some(Holes { state: &state, tiles: &tiles, tiles_w }));
             self.state = state;

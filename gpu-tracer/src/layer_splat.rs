@@ -45,7 +45,6 @@ use crate::{GpuContext, GpuError};
 use bytemuck::{Pod, Zeroable};
 use std::time::{Duration, Instant};
 use volwarp_core::renderer::{Image, Renderer, BACKGROUND};
-use volwarp_core::warp_radius::warp_angle_deg;
 use volwarp_core::{Camera, RayBasis, RendererKind, Scene, Vec3};
 use volwarp_cpu_tracer::layered::{close_cracks, CrackScratch};
 pub use volwarp_cpu_tracer::layered::{LayerOptions, LIST, OPAQUE};
@@ -484,7 +483,7 @@ impl GpuLayerSplat {
         let draw_frame = fill && self.frame_of != Some((key, fc));
         let plan = Plan { draw_frame, draw_view: !at_frame, fill };
 
-        let grown = if self.adaptive { self.opts.own_at(warp_angle_deg(&fc, camera)) } else { self.opts.own };
+        let grown = if self.adaptive { self.opts.grown(&fc, camera) } else { self.opts.own };
         let size = std::mem::size_of::<LayerParams>();
         let mut slots = [0u8; 2 * SLOT as usize];
         if draw_frame {
@@ -558,7 +557,7 @@ impl GpuLayerSplat {
             }
             // Older frames grow with their own warp, and never share corners (the CPU's rule).
             let oc = o.header.camera;
-            let g = if self.adaptive { self.opts.own_at(warp_angle_deg(&oc, camera)) } else { self.opts.own };
+            let g = if self.adaptive { self.opts.grown(&oc, camera) } else { self.opts.own };
             let p = LayerParams { only_empty: 1, ..params(o, camera, &oc, &self.opts, g, self.cap, false) };
             let slot = 2 + i as u64;
             self.ctx.queue.write_buffer(&self.params, slot * SLOT, bytemuck::bytes_of(&p));

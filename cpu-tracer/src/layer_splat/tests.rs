@@ -43,6 +43,33 @@ fn the_row_test_is_the_pixel_test() {
     assert!(tested[0] > 10_000 && tested[1] > 10_000, "{tested:?}");
 }
 
+/// Warp-grown footprints grow by the display's pixels: a frame on the half-resolution grid of
+/// adaptive resolution grows half as many of its own pixels per degree, a full-resolution one
+/// (with or without a guard band) as many.
+#[test]
+fn footprints_grow_by_the_displays_pixels() {
+    use crate::layered::source_pixel_scale;
+    let fc = crate::synthetic::depth_image_frame(64, 1.0, 7).header.camera;
+    let cam = fc.orbit(10.0, 0.0);
+    let coarse = fc.with_viewport(fc.width / 2, fc.height / 2);
+    assert!((source_pixel_scale(&coarse, &cam) - 2.0).abs() < 1e-5);
+    assert_eq!(source_pixel_scale(&fc, &cam), 1.0);
+    // A guard band: more pixels over a wider field of view, at the same pitch.
+    let half = (fc.fov_y_deg.to_radians() * 0.5).tan() * 1.25;
+    let guard = Camera { fov_y_deg: (2.0 * half.atan()).to_degrees(), height: fc.height * 5 / 4, ..fc };
+    assert!((source_pixel_scale(&guard, &cam) - 1.0).abs() < 1e-5);
+    // A finer frame grows in its own pixels, and nothing yields NaN.
+    assert_eq!(source_pixel_scale(&fc.with_viewport(fc.width * 2, fc.height * 2), &cam), 1.0);
+    assert_eq!(source_pixel_scale(&Camera { fov_y_deg: f32::NAN, ..fc }, &cam), 1.0);
+    let o = LayerOptions::DEFAULT;
+    let deg = volwarp_core::warp_radius::warp_angle_deg(&fc, &cam);
+    assert!((deg - 10.0).abs() < 0.5, "{deg}");
+    assert!((o.grown(&fc, &cam) - o.own_at(deg)).abs() < 1e-6);
+    assert!((o.grown(&coarse, &cam) - o.own_at(deg / 2.0)).abs() < 1e-4);
+    assert!(o.grown(&coarse, &cam) < o.grown(&fc, &cam));
+    assert_eq!(o.grown(&fc, &fc), o.own, "the frame's own camera: its own pixels");
+}
+
 /// The footprints of a synthetic surface (plus random samples, some behind the eye, some
 /// degenerate) for `frame_camera`, set up for `camera` by the scalar reference and by the
 /// lanes kernel on both lane types: the same quads bit for bit.

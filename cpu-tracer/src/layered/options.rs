@@ -4,6 +4,8 @@
 
 pub use crate::key_list::{LIST, OPAQUE};
 pub use volwarp_core::method::MAX_FRAMES;
+use volwarp_core::warp_radius::warp_angle_deg;
+use volwarp_core::Camera;
 
 /// How far (in source pixels) beyond its own pixel a sample's footprint reaches. 0: a margin
 /// against rounding cracks (0.05 in the first version) counts semi-transparent segments
@@ -110,11 +112,36 @@ impl LayerOptions {
         self.watertight > 0.0 && self.own_pixels()
     }
 
-    /// The half side of the footprint for a warp of `deg` degrees (adaptive sizing on).
+    /// The half side of the footprints of a frame rendered for `frame` drawn for `camera`
+    /// (adaptive sizing on): [`LayerOptions::own_at`] the warp's degrees (core's
+    /// `warp_radius::warp_angle_deg`) over [`source_pixel_scale`]. The growth per degree is in
+    /// the display's pixels: a frame on the coarser grid of adaptive resolution, whose pixel
+    /// spans two of the display's, grows half as many of its own pixels (growing as many blurred
+    /// its small warps: the 512² sessions' pooled mean was 4–7 % higher, `docs/results.md`, "The
+    /// layered levers"). Full-resolution frames grow as before.
+    pub fn grown(&self, frame: &Camera, camera: &Camera) -> f32 {
+        self.own_at(warp_angle_deg(frame, camera) / source_pixel_scale(frame, camera))
+    }
+
+    /// The half side of the footprint for a warp of `deg` degrees (adaptive sizing on), in
+    /// source pixels.
     pub fn own_at(&self, deg: f32) -> f32 {
         let grow = if self.grow_per_degree.is_finite() { self.grow_per_degree.max(0.0) } else { 0.0 };
         let cap = if self.max_own.is_finite() { self.max_own.min(4.0) } else { MAX_OWN };
         (self.own + grow * deg).min(cap.max(self.own))
+    }
+}
+
+/// How many of `camera`'s pixels one pixel of `frame` spans: the ratio of their pixels'
+/// angular sizes, at least 1 (2 for a frame on the half-resolution grid of adaptive
+/// resolution; 1 for a full-resolution frame, with or without a guard band).
+pub fn source_pixel_scale(frame: &Camera, camera: &Camera) -> f32 {
+    let pitch = |c: &Camera| (c.fov_y_deg.to_radians() * 0.5).tan() / c.height.max(1) as f32;
+    let s = pitch(frame) / pitch(camera);
+    if s.is_finite() {
+        s.max(1.0)
+    } else {
+        1.0
     }
 }
 
