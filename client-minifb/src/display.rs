@@ -256,15 +256,23 @@ impl Display {
 /// Draws the kept frames (`scenes`, newest first) for `camera` as core's frame choice says
 /// ([`volwarp_core::show`], the choice the session simulator scores): a frame rendered for
 /// exactly this camera alone, as rendered; else the frames warped, the nearest first; else,
-/// beyond the fallback angle, the nearest frame as rendered (core's choice warps a frame without
-/// the view's pixels instead: a coarse frame, a resized window). Frames the current renderer does not keep
+/// beyond the fallback angle, the nearest frame as rendered, resized where it has other pixels
+/// than the view (a coarse frame, a resized window). Frames the current renderer does not keep
 /// are not drawn ([`Renderers::render_set`] draws the first alone).
 pub fn draw_kept(renderers: &mut Renderers, scenes: &[&volwarp_core::Scene], camera: &Camera, out: &mut Image) {
     let kept = if renderers.keeps_frames() { scenes.len() } else { scenes.len().min(1) };
     let views: Vec<Camera> = scenes[..kept].iter().map(|s| s.header.camera).collect();
     match show::choose(&views, camera, show::FALLBACK_DEG) {
         Show::Exact(i) => renderers.render_set(&[scenes[i]], camera, out),
-        Show::Unwarped(i) => renderers.render_set(&[scenes[i]], &views[i], out),
+        Show::Unwarped(i) if (views[i].width, views[i].height) == (camera.width, camera.height) => {
+            renderers.render_set(&[scenes[i]], &views[i], out)
+        }
+        Show::Unwarped(i) => {
+            // A coarse frame (or one for another window size): as rendered, resized.
+            let mut own = Image::new(0, 0);
+            renderers.render_set(&[scenes[i]], &views[i], &mut own);
+            own.resize_into(camera.width, camera.height, out);
+        }
         Show::Warp(order) => {
             let ordered: Vec<&volwarp_core::Scene> = order.iter().map(|&i| scenes[i]).collect();
             renderers.render_set(&ordered, camera, out)

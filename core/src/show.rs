@@ -12,9 +12,9 @@
 //!    order, newest first.
 //! 3. **Unwarped**: where even the nearest frame lies more than [`FALLBACK_DEG`] away (a
 //!    turn beyond what any frame saw), the warp shows mostly holes and stretched slabs; the
-//!    nearest frame is shown as it was rendered instead, if it has the view's pixels (a frame
-//!    on the coarser grid of adaptive resolution is warped: as rendered it would not fill the
-//!    view).
+//!    nearest frame is shown as it was rendered instead, resized to the view where its pixels
+//!    differ (a frame on the coarser grid of adaptive resolution: warped that far it shows
+//!    shreds and scored worse than the stale frame).
 //!
 //! Everything here is what the client knows: the cameras of the frames it holds and the camera
 //! it shows; never the truth.
@@ -36,7 +36,7 @@ pub enum Show {
     /// others fill what it does not cover.
     Warp(Vec<usize>),
     /// Show kept frame `i` as rendered although the camera differs: every frame lies beyond
-    /// [`FALLBACK_DEG`], and this one has the camera's pixels.
+    /// [`FALLBACK_DEG`]; resized to the camera's viewport where its own differs.
     Unwarped(usize),
 }
 
@@ -52,11 +52,7 @@ pub fn choose(views: &[Camera], camera: &Camera, fallback_deg: f32) -> Show {
     // Stable: equally near frames stay newest first (`warp_angle_deg` is never NaN).
     order.sort_by(|&a, &b| angles[a].total_cmp(&angles[b]));
     match order.first() {
-        // Shown as rendered only where it has the view's pixels: a frame on the coarser grid of
-        // adaptive resolution (or for another window size) is warped at any angle.
-        Some(&i) if angles[i] > fallback_deg && (views[i].width, views[i].height) == (camera.width, camera.height) => {
-            Show::Unwarped(i)
-        }
+        Some(&i) if angles[i] > fallback_deg => Show::Unwarped(i),
         _ => Show::Warp(order),
     }
 }
@@ -97,10 +93,10 @@ mod tests {
         let views = [c.orbit(-90.0, 0.0), c.orbit(-70.0, 0.0)];
         assert_eq!(choose(&views, &c, FALLBACK_DEG), Show::Unwarped(1));
         assert_eq!(choose(&views, &c, f32::INFINITY), Show::Warp(vec![1, 0]));
-        // A nearest frame with other pixels (adaptive resolution's coarse grid) is warped: as
-        // rendered it would not fill the view.
+        // A nearest frame with other pixels (adaptive resolution's coarse grid) too: the client
+        // shows it resized to the view.
         let coarse = [c.orbit(-90.0, 0.0), c.orbit(-70.0, 0.0).with_viewport(32, 32)];
-        assert_eq!(choose(&coarse, &c, FALLBACK_DEG), Show::Warp(vec![1, 0]));
+        assert_eq!(choose(&coarse, &c, FALLBACK_DEG), Show::Unwarped(1));
         // A degenerate view counts as 180° away, never as near.
         let bad = Camera { eye: Vec3::NAN, ..c };
         assert_eq!(choose(&[bad, c.orbit(2.0, 0.0)], &c, FALLBACK_DEG), Show::Warp(vec![1, 0]));

@@ -9,7 +9,7 @@ use volwarp_core::wire::CameraRequest;
 use volwarp_core::{Heuristic, Image, BACKGROUND};
 use volwarp_eval::session::methods::{make_methods, HeldFrame};
 use volwarp_eval::session::model::NetworkModel;
-use volwarp_eval::session::peers::{scaled_name, upscale};
+use volwarp_eval::session::peers::scaled_name;
 use volwarp_eval::session::simulate::FrameEvent;
 use volwarp_eval::session::simulate_all;
 use volwarp_eval::Metrics;
@@ -53,7 +53,7 @@ fn a_coarse_frame_warped_at_display_resolution_has_no_holes_at_its_own_camera() 
         // grid, no more than the coarse image upscaled shows.
         let truth = marcher.render_image(&cam);
         let mut up = Image::new(0, 0);
-        upscale(&coarse_image, 128, 128, &mut up);
+        coarse_image.resize_into(128, 128, &mut up);
         let f_warp = Metrics::of(&exact, &warped).unwrap().flip;
         let f_up = Metrics::of(&truth, &up).unwrap().flip;
         let f_truth = Metrics::of(&truth, &warped).unwrap().flip;

@@ -22,7 +22,6 @@ use super::model::{NetworkModel, Request, ServerPolicy};
 use super::simulate::{FrameEvent, Looks, TruthCache};
 use crate::ErrorBox;
 use image::codecs::jpeg::JpegEncoder;
-use image::imageops::FilterType;
 use image::{ImageFormat, RgbImage};
 use volwarp_core::{Camera, Image};
 
@@ -157,20 +156,6 @@ fn from_rgb(rgb: &RgbImage) -> Image {
     Image { width: rgb.width(), height: rgb.height(), pixels }
 }
 
-/// `img` resized bilinearly to `width × height` (`image`'s triangle filter, which is bilinear
-/// interpolation when enlarging); a copy where the size is already right.
-pub fn upscale(img: &Image, width: u32, height: u32, out: &mut Image) {
-    if (img.width, img.height) == (width, height) {
-        out.clone_from(img);
-        return;
-    }
-    let rgb = RgbImage::from_fn(img.width, img.height, |x, y| {
-        let b = img.pixels[(y * img.width + x) as usize].to_le_bytes();
-        image::Rgb([b[0], b[1], b[2]])
-    });
-    *out = from_rgb(&image::imageops::resize(&rgb, width, height, FilterType::Triangle));
-}
-
 /// The requests of a peer over the ticks' cameras: one at every tick the camera moved
 /// (reduced), and for a downscaling peer one at the first tick it rests (full resolution).
 /// The `bool` says whether the request is for a reduced image.
@@ -265,7 +250,7 @@ pub fn serve_images(
 
 /// What a peer shows for `camera`: its newest image `held`, upscaled bilinearly to the viewport.
 pub fn show(held: &HeldImage, camera: &Camera, out: &mut Image) {
-    upscale(&held.image, camera.width, camera.height, out);
+    held.image.resize_into(camera.width, camera.height, out);
 }
 
 #[cfg(test)]
@@ -313,18 +298,5 @@ mod tests {
         assert!(back.pixels.iter().all(|p| p.to_le_bytes()[3] == 255));
         assert!(decode_jpeg(&q90[..q90.len() / 3]).is_err() || decode_jpeg(b"not a jpeg").is_err());
         assert!(decode_jpeg(b"not a jpeg").is_err());
-    }
-
-    #[test]
-    fn upscaling_is_bilinear() {
-        // A 2×1 image black | white enlarged to 8×1: a ramp, monotone, ends near the sources.
-        let img = Image { width: 2, height: 1, pixels: vec![0xFF00_0000, 0xFFFF_FFFF] };
-        let mut out = Image::new(0, 0);
-        upscale(&img, 8, 1, &mut out);
-        let r: Vec<u8> = out.pixels.iter().map(|p| p.to_le_bytes()[0]).collect();
-        assert!(r.windows(2).all(|w| w[0] <= w[1]), "{r:?}");
-        assert!(r[0] < 40 && r[7] > 215 && r[3] > 40 && r[3] < 215, "{r:?}");
-        upscale(&img, 2, 1, &mut out);
-        assert_eq!(out.pixels, img.pixels, "same size: a copy");
     }
 }

@@ -676,10 +676,15 @@ pub fn run_session(
             match show {
                 Show::Exact(i) | Show::Unwarped(i) => {
                     // As rendered: a layered frame's segments composited, a one-sample frame (the
-                    // rest request's) its samples' colors.
+                    // rest request's) its samples' colors; a coarse frame resized to the view
+                    // (as the window client shows it).
                     let f = kept[i];
                     let exact = if st.held[f].frame.segments.is_empty() { &mut exact_one } else { &mut exact_layers };
                     exact_view(exact.as_mut(), &st.held[f], &st.frames[f], &mut images[mi], &mut tmp);
+                    if (images[mi].width, images[mi].height) != (cam.width, cam.height) {
+                        tmp.clone_from(&images[mi]);
+                        tmp.resize_into(cam.width, cam.height, &mut images[mi]);
+                    }
                     shown_frame.push(f);
                 }
                 Show::Warp(order) => {
