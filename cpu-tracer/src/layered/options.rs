@@ -117,7 +117,7 @@ impl LayerOptions {
     /// `warp_radius::warp_angle_deg`) over [`source_pixel_scale`]. The growth per degree is in
     /// the display's pixels: a frame on the coarser grid of adaptive resolution, whose pixel
     /// spans two of the display's, grows half as many of its own pixels (growing as many blurred
-    /// its small warps: the 512² sessions' pooled mean was 4–7 % higher, `docs/results.md`, "The
+    /// its small warps: the 512² sessions' pooled mean was 5–7 % higher, `docs/results.md`, "The
     /// layered levers"). Full-resolution frames grow as before.
     pub fn grown(&self, frame: &Camera, camera: &Camera) -> f32 {
         self.own_at(warp_angle_deg(frame, camera) / source_pixel_scale(frame, camera))
