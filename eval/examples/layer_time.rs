@@ -31,12 +31,9 @@ use volwarp_core::wire::CameraRequest;
 use volwarp_core::{Heuristic, Image, RendererKind, Scene};
 use volwarp_cpu_tracer::{create, route::unbuilt_scene, LayerSplat};
 use volwarp_eval::camera_paths::orbit;
+use volwarp_eval::example_args::{arg, layer_options};
 use volwarp_eval::median;
 use volwarp_server::Marcher;
-
-fn arg<'a>(args: &'a [String], name: &str) -> Option<&'a str> {
-    args.iter().position(|a| a == name).and_then(|i| args.get(i + 1)).map(|s| s.as_str())
-}
 
 /// Nanoseconds this thread has run (`CLOCK_THREAD_CPUTIME_ID`), if the clock exists.
 fn cpu_ns() -> Option<u64> {
@@ -65,18 +62,9 @@ fn main() {
     let layers: u32 = arg(&args, "--layers").map_or(4, |s| s.parse().expect("a layer count"));
     let frames: usize = arg(&args, "--frames").map_or(1, |s| s.parse().expect("a frame count"));
     let cpu = threads == 1;
-    // Footprint options other than the default's, to time a lever: `--water-ratio R`,
-    // `--watertight T`, `--no-cracks`.
-    let mut lopts = volwarp_cpu_tracer::layered::LayerOptions::DEFAULT;
-    if let Some(v) = arg(&args, "--water-ratio") {
-        lopts.water_ratio = v.parse().expect("a ratio");
-    }
-    if let Some(v) = arg(&args, "--watertight") {
-        lopts.watertight = v.parse().expect("a tolerance");
-    }
-    if args.iter().any(|a| a == "--no-cracks") {
-        lopts.close_cracks = false;
-    }
+    // Footprint options other than the default's, to time a lever (`layers`' flags:
+    // `--water-ratio R`, `--watertight T`, `--no-cracks`, …).
+    let lopts = layer_options(&args).expect("footprint options");
     let mut datasets = volwarp_eval::report::shared_datasets(Path::new(dir)).expect("datasets");
     if let Some(only) = arg(&args, "--only") {
         datasets.retain(|d| d.name.contains(only));

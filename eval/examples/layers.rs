@@ -29,15 +29,12 @@ use volwarp_core::wire::{CameraRequest, Frame};
 use volwarp_core::{Heuristic, Image, RendererKind, Scene};
 use volwarp_cpu_tracer::{build_scene, create};
 use volwarp_eval::camera_paths::orbit;
+use volwarp_eval::example_args::{arg, layer_options};
 use volwarp_eval::{median, Metrics};
 use volwarp_server::Marcher;
 
 /// The default warps, degrees along the orbit (`--angles A,B,…` sets others).
 const ANGLES: [f32; 6] = [0.0, 2.5, 5.0, 10.0, 20.0, 30.0];
-
-fn arg<'a>(args: &'a [String], name: &str) -> Option<&'a str> {
-    args.iter().position(|a| a == name).and_then(|i| args.get(i + 1)).map(|s| s.as_str())
-}
 
 fn bytes(m: &Marcher, req: &CameraRequest, f: &Frame) -> (usize, usize) {
     let raw = volwarp_server::encoding::encode_frame(m, req, f, Encoding::Raw12).0.len();
@@ -54,33 +51,7 @@ fn main() {
     let runs: usize = arg(&args, "--runs").map_or(9, |s| s.parse().expect("a run count"));
     let size: u32 = arg(&args, "--size").map_or(512, |s| s.parse().expect("a size"));
     let time = args.iter().any(|a| a == "--time");
-    let mut lopts = volwarp_cpu_tracer::layer_splat::LayerOptions::default();
-    if let Some(v) = arg(&args, "--own") {
-        lopts.own = v.parse().expect("a distance");
-    }
-    if args.iter().any(|a| a == "--no-cracks") {
-        lopts.close_cracks = false;
-    }
-    if args.iter().any(|a| a == "--no-fill") {
-        lopts.fill = false;
-    }
-    // `--grow G`: footprints grow by G source pixels per degree of warp; `--grow 0`: fixed.
-    if let Some(v) = arg(&args, "--grow") {
-        lopts.grow_per_degree = v.parse().expect("a growth per degree");
-    }
-    if let Some(v) = arg(&args, "--grow-alpha") {
-        lopts.grow_min_alpha = v.parse().expect("an 8-bit alpha");
-    }
-    if let Some(v) = arg(&args, "--max-own") {
-        lopts.max_own = v.parse().expect("a half side");
-    }
-    // `--watertight T`: neighbouring segments of a slab share corners within T source pixels.
-    if let Some(v) = arg(&args, "--watertight") {
-        lopts.watertight = v.parse().expect("a tolerance in source pixels");
-    }
-    if let Some(v) = arg(&args, "--water-ratio") {
-        lopts.water_ratio = v.parse().expect("an area ratio");
-    }
+    let lopts = layer_options(&args).expect("footprint options");
     let adapt = lopts.grow_per_degree > 0.0;
     let angles: Vec<f32> = arg(&args, "--angles")
         .map_or(ANGLES.to_vec(), |v| v.split(',').map(|a| a.parse().expect("an angle in degrees")).collect());

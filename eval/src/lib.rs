@@ -28,6 +28,7 @@ pub mod camera_paths;
 pub mod charts;
 pub mod csv;
 pub mod demo_strip;
+pub mod example_args;
 pub mod failure_modes;
 pub mod image_io;
 pub mod metrics;

@@ -1,0 +1,56 @@
+//! The command-line flags the layered examples (`layers`, `layer_time`) share: `--name value`
+//! lookups and the layered renderer's footprint options, parsed in one place.
+
+use volwarp_cpu_tracer::layered::LayerOptions;
+
+/// The value after the flag `name` in `args`, if both are there.
+pub fn arg<'a>(args: &'a [String], name: &str) -> Option<&'a str> {
+    args.iter().position(|a| a == name).and_then(|i| args.get(i + 1)).map(|s| s.as_str())
+}
+
+/// The default [`LayerOptions`] with the flags `args` sets: `--own H` (half side, source
+/// pixels), `--no-fill`, `--no-cracks`, `--grow G` (source pixels per degree of warp; 0:
+/// fixed), `--grow-alpha A`, `--max-own H`, `--watertight T` (source pixels; 0: off),
+/// `--water-ratio R`. A value that does not parse is an error naming its flag.
+pub fn layer_options(args: &[String]) -> Result<LayerOptions, String> {
+    fn set<T: core::str::FromStr>(args: &[String], name: &str, what: &str, v: &mut T) -> Result<(), String> {
+        if let Some(s) = arg(args, name) {
+            *v = s.parse().map_err(|_| format!("{name} {s:?}: not {what}"))?;
+        }
+        Ok(())
+    }
+    let flag = |name: &str| args.iter().any(|a| a == name);
+    let mut o = LayerOptions::DEFAULT;
+    set(args, "--own", "a distance", &mut o.own)?;
+    o.fill &= !flag("--no-fill");
+    o.close_cracks &= !flag("--no-cracks");
+    set(args, "--grow", "a growth per degree", &mut o.grow_per_degree)?;
+    set(args, "--grow-alpha", "an 8-bit alpha", &mut o.grow_min_alpha)?;
+    set(args, "--max-own", "a half side", &mut o.max_own)?;
+    set(args, "--watertight", "a tolerance in source pixels", &mut o.watertight)?;
+    set(args, "--water-ratio", "an area ratio", &mut o.water_ratio)?;
+    Ok(o)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn args(s: &str) -> Vec<String> {
+        s.split_whitespace().map(String::from).collect()
+    }
+
+    #[test]
+    fn flags_set_the_footprint_options_and_bad_values_are_errors() {
+        assert_eq!(layer_options(&args("prog dir")).unwrap(), LayerOptions::DEFAULT);
+        let o = layer_options(&args("prog dir --no-cracks --watertight 0 --water-ratio 0.25 --grow 0")).unwrap();
+        assert!(!o.close_cracks && o.fill);
+        assert_eq!((o.watertight, o.water_ratio, o.grow_per_degree), (0.0, 0.25, 0.0));
+        let o = layer_options(&args("prog --no-fill --own 0.7 --grow-alpha 128 --max-own 1.5")).unwrap();
+        assert_eq!((o.fill, o.own, o.grow_min_alpha, o.max_own), (false, 0.7, 128, 1.5));
+        let e = layer_options(&args("prog --grow-alpha 300")).unwrap_err();
+        assert!(e.contains("--grow-alpha"), "{e}");
+        assert!(layer_options(&args("prog --watertight x")).is_err());
+        assert_eq!(arg(&args("prog --size"), "--size"), None);
+    }
+}
