@@ -231,7 +231,7 @@ impl Renderer for LayerSplat {
                 return;
             }
         }
-        let grown = if self.adaptive { self.opts.grown(&fc, camera) } else { self.opts.own };
+        let grown = self.opts.half_side(self.adaptive, &fc, camera);
         // Watertight slabs: the newest frame's corners shared between neighbouring pixels.
         let shared = if self.opts.shares_corners() {
             if self.own.prepare(scene, &self.threads) {
@@ -244,7 +244,7 @@ impl Renderer for LayerSplat {
         self.draw(scene, camera, grown, &shared, out, None);
         self.own.shared = shared;
         if !fill && older.is_empty() {
-            self.close_cracks(camera, &fc, out);
+            close_cracks_of(&self.opts, &fc, camera, out, &mut self.cracks, &self.threads);
             return;
         }
         let (w, h) = (camera.width as usize, camera.height as usize);
@@ -273,7 +273,7 @@ impl Renderer for LayerSplat {
             let oc = o.header.camera;
             // Older frames grow with their own warp too (measured: without it the MRI's
             // stop-and-go p95 rose from 0.0489 to 0.0545).
-            let g = if self.adaptive { self.opts.grown(&oc, camera) } else { self.opts.own };
+            let g = self.opts.half_side(self.adaptive, &oc, camera);
             let state = core::mem::take(&mut self.state);
             self.draw(o, camera, g, &[], &mut scratch, Some(Holes { state: &state, tiles: &tiles, tiles_w }));
             self.state = state;
@@ -310,20 +310,11 @@ impl Renderer for LayerSplat {
                 }
             }
         });
-        self.close_cracks(camera, &fc, out);
+        close_cracks_of(&self.opts, &fc, camera, out, &mut self.cracks, &self.threads);
     }
 }
 
 impl LayerSplat {
-    /// Closes the cracks of the drawn image (with [`LayerOptions::close_cracks`], away from
-    /// the frame's own camera `fc`).
-    fn close_cracks(&mut self, camera: &Camera, fc: &Camera, out: &mut Image) {
-        if self.opts.close_cracks && camera != fc {
-            let (w, h) = (out.width as usize, out.height as usize);
-            close_cracks(&mut out.pixels, w, h, &mut self.cracks, &self.threads);
-        }
-    }
-
     /// Makes [`LayerSplat::frame`] the frame's own composited image, unless it already is.
     fn cache_own_image(&mut self, scene: &Scene) {
         if self.frame_of == Some(SceneId::of(scene)) {

@@ -46,7 +46,7 @@ use bytemuck::{Pod, Zeroable};
 use std::time::{Duration, Instant};
 use volwarp_core::renderer::{Image, Renderer, BACKGROUND};
 use volwarp_core::{Camera, RayBasis, RendererKind, Scene, Vec3};
-use volwarp_cpu_tracer::layered::{close_cracks, CrackScratch};
+use volwarp_cpu_tracer::layered::{close_cracks_of, CrackScratch};
 pub use volwarp_cpu_tracer::layered::{LayerOptions, LIST, OPAQUE};
 use volwarp_cpu_tracer::layered::{OlderSets, Setup, SlabCorners, MAX_FRAMES};
 use volwarp_cpu_tracer::Threads;
@@ -483,7 +483,7 @@ impl GpuLayerSplat {
         let draw_frame = fill && self.frame_of != Some((key, fc));
         let plan = Plan { draw_frame, draw_view: !at_frame, fill };
 
-        let grown = if self.adaptive { self.opts.grown(&fc, camera) } else { self.opts.own };
+        let grown = self.opts.half_side(self.adaptive, &fc, camera);
         let size = std::mem::size_of::<LayerParams>();
         let mut slots = [0u8; 2 * SLOT as usize];
         if draw_frame {
@@ -557,7 +557,7 @@ impl GpuLayerSplat {
             }
             // Older frames grow with their own warp, and never share corners (the CPU's rule).
             let oc = o.header.camera;
-            let g = if self.adaptive { self.opts.grown(&oc, camera) } else { self.opts.own };
+            let g = self.opts.half_side(self.adaptive, &oc, camera);
             let p = LayerParams { only_empty: 1, ..params(o, camera, &oc, &self.opts, g, self.cap, false) };
             let slot = 2 + i as u64;
             self.ctx.queue.write_buffer(&self.params, slot * SLOT, bytemuck::bytes_of(&p));
@@ -721,9 +721,9 @@ impl GpuLayerSplat {
                 if plan.fill {
                     self.frame_of = Some((SceneKey::of(scene), scene.header.camera));
                 }
-                if plan.draw_view && self.opts.close_cracks && *camera != scene.header.camera {
-                    let (w, h) = (camera.width as usize, camera.height as usize);
-                    close_cracks(&mut out.pixels, w, h, &mut self.cracks, &self.crack_threads);
+                if plan.draw_view {
+                    let fc = scene.header.camera;
+                    close_cracks_of(&self.opts, &fc, camera, out, &mut self.cracks, &self.crack_threads);
                 }
                 return Ok(());
             }

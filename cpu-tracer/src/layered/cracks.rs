@@ -21,8 +21,9 @@
 //! 4 bytes per pixel, and 8 per pixel closed. Measured (`docs/results.md`,
 //! "Closing cracks"; `docs/perf.md` for its time).
 
+use super::options::LayerOptions;
 use crate::threads::Threads;
-use volwarp_core::BACKGROUND;
+use volwarp_core::{Camera, Image, BACKGROUND};
 
 /// The longest run of pixels along a row or column closed as a crack.
 pub const CRACK_RUN: usize = 2;
@@ -126,6 +127,23 @@ fn closed(c: u32, s: [i32; 3]) -> u32 {
 pub struct CrackScratch {
     dist: Vec<f32>,
     changes: Vec<Vec<(u32, u32)>>,
+}
+
+/// Closes the cracks of `image`, drawn for `camera` from a frame rendered for `frame`, where
+/// `opts` closes them ([`LayerOptions::close_cracks`]) and the camera is not the frame's own
+/// (whose image is the server's exactly): the step both layered splatters end with.
+pub fn close_cracks_of(
+    opts: &LayerOptions,
+    frame: &Camera,
+    camera: &Camera,
+    image: &mut Image,
+    scratch: &mut CrackScratch,
+    threads: &Threads,
+) {
+    if opts.close_cracks && camera != frame {
+        let (w, h) = (image.width as usize, image.height as usize);
+        close_cracks(&mut image.pixels, w, h, scratch, threads);
+    }
 }
 
 /// Closes the cracks of the `w × h` image `pixels` (see the module docs). Every band of rows

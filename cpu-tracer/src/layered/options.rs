@@ -112,6 +112,16 @@ impl LayerOptions {
         self.watertight > 0.0 && self.own_pixels()
     }
 
+    /// The half side of the footprints of a frame rendered for `frame` drawn for `camera`:
+    /// [`LayerOptions::grown`] with `adaptive` sizing on, else [`LayerOptions::own`].
+    pub fn half_side(&self, adaptive: bool, frame: &Camera, camera: &Camera) -> f32 {
+        if adaptive {
+            self.grown(frame, camera)
+        } else {
+            self.own
+        }
+    }
+
     /// The half side of the footprints of a frame rendered for `frame` drawn for `camera`
     /// (adaptive sizing on): [`LayerOptions::own_at`] the warp's degrees (core's
     /// `warp_radius::warp_angle_deg`) over [`source_pixel_scale`]. The growth per degree is in
