@@ -682,7 +682,7 @@ pub fn run_session(
                     let exact = if st.held[f].frame.segments.is_empty() { &mut exact_one } else { &mut exact_layers };
                     exact_view(exact.as_mut(), &st.held[f], &st.frames[f], &mut images[mi], &mut tmp);
                     if (images[mi].width, images[mi].height) != (cam.width, cam.height) {
-                        tmp.clone_from(&images[mi]);
+                        std::mem::swap(&mut tmp, &mut images[mi]);
                         tmp.resize_into(cam.width, cam.height, &mut images[mi]);
                     }
                     shown_frame.push(f);
