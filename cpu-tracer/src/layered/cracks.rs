@@ -5,19 +5,21 @@
 //! the surface but its segments' footprints are one source pixel wide: they part, and the
 //! background shows through in streaks one or two pixels wide, either uncovered (the fill's
 //! lookup finds background there too) or under a thin, semi-transparent footprint of a deeper
-//! slab. On the image (RGBA8, composited over the background) a crack is a run of at most
+//! slab; and where one semi-transparent slab's footprints part over deeper ones, the pixels
+//! between show those alone, a thin dark speck. On the image (RGBA8, composited over the background) a crack is a run of at most
 //! [`CRACK_RUN`] pixels along a row or a column whose two bounding pixels are solid (at least
 //! [`CRACK_SOLID`] from the background) and alike (their difference at most half their mean's
 //! distance from the background), every pixel of the run nearer the background than
-//! [`CRACK_ALPHA`] of that mean's distance. Each pixel of the run, read as the background plus
+//! [`CRACK_ALPHA`] of that mean's distance, or than [`SPECK_ALPHA`] of it where the pixel is
+//! the mean's own color dimmed (within [`SPECK_HUE`]). Each pixel of the run, read as the background plus
 //! a share α of the mean (its projection on it), takes the missing `1 − α` of the mean over
 //! what it has: the footprints parted there, so what covers the pixels either side covers it.
 //!
 //! Only the image is read, so the CPU and the GPU splatters run the same pass on what they
 //! drew (the GPU one on the image it reads back). It never runs at the frame's own camera,
 //! which is the server's image exactly. Work: one pass for each pixel's squared distance from
-//! the background, then a pixel is looked at only where it is under half the largest such
-//! distance within [`CRACK_RUN`] pixels along its row and column (which every crack pixel is);
+//! the background, then a pixel is looked at only where it is under three quarters of the
+//! largest such distance within [`CRACK_RUN`] pixels along its row and column (which every crack pixel is);
 //! 4 bytes per pixel, and 8 per pixel closed. Measured (`docs/results.md`,
 //! "Closing cracks"; `docs/perf.md` for its time).
 
@@ -29,8 +31,21 @@ use volwarp_core::{Camera, Image, BACKGROUND};
 pub const CRACK_RUN: usize = 2;
 
 /// A crack's pixels lie nearer the background than this share of their bounding pixels'
-/// mean's distance from it. Measured (single warps, five datasets, 512²; `docs/results.md`).
+/// mean's distance from it, whatever their color. Measured (single warps, five datasets, 512²;
+/// `docs/results.md`).
 pub const CRACK_ALPHA: f32 = 0.7;
+
+/// Up to this share a crack's pixels may also lie where they are the mean's own color, only
+/// dimmer ([`SPECK_HUE`]): one semi-transparent slab's footprints parted over deeper ones, so
+/// the pixels between show those alone, a thin dark speck at a share of 0.78–0.85 of their
+/// neighbours (hundreds of them at depth edges in the demo strip's frames). Measured
+/// (`docs/results.md`, "Closing cracks").
+pub const SPECK_ALPHA: f32 = 0.85;
+
+/// A speck's color lies within this share of its distance from the background off the line
+/// from the background to its bounding pixels' mean (the specks measured lie within 0.05; a
+/// darker detail of another hue, a vessel drawn red on bone, stays).
+pub const SPECK_HUE: f32 = 0.1;
 
 /// How far (Euclidean, 8-bit RGB) from the background a pixel bounding a crack must be.
 pub const CRACK_SOLID: i32 = 60;
@@ -38,8 +53,11 @@ pub const CRACK_SOLID: i32 = 60;
 /// Rows per task of the passes.
 const CRACK_ROWS: usize = 32;
 
-/// [`CRACK_ALPHA`]² in hundredths (the run test compares integers).
+/// [`CRACK_ALPHA`]² and [`SPECK_ALPHA`]² in hundredths, and 1 − [`SPECK_HUE`]² in
+/// ten-thousandths (the run test compares integers).
 const ALPHA2_PERCENT: i64 = (CRACK_ALPHA * CRACK_ALPHA * 100.0 + 0.5) as i64;
+const SPECK2_PERCENT: i64 = (SPECK_ALPHA * SPECK_ALPHA * 100.0 + 0.5) as i64;
+const HUE_KEEP: i64 = ((1.0 - SPECK_HUE * SPECK_HUE) * 10_000.0 + 0.5) as i64;
 
 /// A pixel's RGB less the background's.
 #[inline]
@@ -76,12 +94,24 @@ fn bounds(a: u32, b: u32) -> Option<[i32; 3]> {
     (16 * dot(d, d) <= dot(s, s)).then_some(s)
 }
 
-/// Whether a pixel at squared distance `e` from the background lies nearer it than
-/// [`CRACK_ALPHA`] of the mean `s / 2`'s distance.
+/// Whether pixel `c`, at squared distance `e` from the background, lies in a crack bounded by
+/// pixels summing to `s`: nearer the background than [`CRACK_ALPHA`] of the mean `s / 2`'s
+/// distance, or than [`SPECK_ALPHA`] of it and within [`SPECK_HUE`] of the line through the
+/// mean.
 #[inline]
-fn low(e: f32, s: [i32; 3]) -> bool {
+fn low(c: u32, e: f32, s: [i32; 3]) -> bool {
     // e < α²·|s/2|²  ⇔  400·e < 100·α²·|s|² (integers).
-    (400 * e as i64) < ALPHA2_PERCENT * dot(s, s) as i64
+    let (e, ss) = (e as i64, dot(s, s) as i64);
+    if 400 * e < ALPHA2_PERCENT * ss {
+        return true;
+    }
+    if 400 * e >= SPECK2_PERCENT * ss {
+        return false;
+    }
+    // Off the line by at most h of its distance: |p|² − (p·s)²/|s|² ≤ h²·|p|²
+    // ⇔ (1 − h²)·|p|²·|s|² ≤ (p·s)² (at most 2·10¹¹·10⁴: exact in i64), on the mean's side.
+    let d = dot(rel(c), s) as i64;
+    d > 0 && HUE_KEEP * e * ss <= 10_000 * d * d
 }
 
 /// The sum of the pixels bounding the crack pixel `(x, y)` of `px` (`w × h`, squared
@@ -99,7 +129,7 @@ fn crack_at(px: &[u32], dist: &[f32], w: usize, h: usize, x: usize, y: usize) ->
                 }
                 let (a, b) = (pos - start - 1, pos + run - start);
                 let Some(s) = bounds(px[index(a)], px[index(b)]) else { continue };
-                if (a + 1..b).all(|i| low(dist[index(i)], s)) {
+                if (a + 1..b).all(|i| low(px[index(i)], dist[index(i)], s)) {
                     return Some(s);
                 }
             }
@@ -186,13 +216,18 @@ pub fn close_cracks(pixels: &mut [u32], w: usize, h: usize, scratch: &mut CrackS
 /// Whether a pixel at squared distance `d` from the background can lie in a crack whose
 /// bounding pixels are at most `far` from it (the farthest within [`CRACK_RUN`] along its row
 /// and column): the mean of two bounding pixels is no farther from the background than the
-/// farther of them, and a crack's pixels lie under [`CRACK_ALPHA`]² (0.49) of it, so under
-/// half of `far` (`f32` products exact: `d`, `far` are integers under 2²⁴, halving is exact).
-/// The pixel's own distance in `far` fails the second test alone, as it should.
+/// farther of them, and a crack's pixels lie under [`SPECK_ALPHA`]² (0.7225) of it, so under
+/// three quarters of `far` (`f32` products exact: `d`, `far` are integers under 2¹⁸, and
+/// three quarters of one needs two more bits). The pixel's own distance in `far` fails the
+/// second test alone, as it should.
 #[inline]
 fn may_crack(d: f32, far: f32) -> bool {
-    far >= (CRACK_SOLID * CRACK_SOLID) as f32 && d < 0.5 * far
+    far >= (CRACK_SOLID * CRACK_SOLID) as f32 && d < LOOK_SHARE * far
 }
+
+/// The share of the farthest neighbour's squared distance under which [`may_crack`] looks.
+const LOOK_SHARE: f32 = 0.75;
+const _: () = assert!(CRACK_ALPHA <= SPECK_ALPHA && SPECK_ALPHA * SPECK_ALPHA <= LOOK_SHARE);
 
 /// Per pixel of row `y` whether it [`may_crack`] (into `look`): away from the image's edges
 /// with `f32` maxima, which the compiler vectorizes on every x86-64 (`maxps`).
@@ -276,6 +311,35 @@ mod tests {
             }
         }
         assert!(px.iter().enumerate().all(|(i, &p)| p == SKIN || [2 * w + 2, 2 * w + 5, 2 * w + 6].contains(&i)));
+    }
+
+    /// `c`'s color `share` of the way from the background (premultiplied over it).
+    fn dimmed(c: u32, share: f32) -> u32 {
+        let (c, b) = (c.to_le_bytes(), BACKGROUND.to_le_bytes());
+        let ch = |i: usize| (b[i] as f32 + share * (c[i] as f32 - b[i] as f32)).round() as u8;
+        pack_color(ch(0), ch(1), ch(2), 255)
+    }
+
+    #[test]
+    fn a_semi_transparent_slab_s_speck_closes_and_another_hue_stays() {
+        let (w, h) = (7, 3);
+        for (share, closes) in [(0.6, true), (0.8, true), (0.84, true), (0.88, false)] {
+            let mut px = image(w, h, SKIN);
+            px[w + 3] = dimmed(SKIN, share);
+            let before = px.clone();
+            run(&mut px, w, h);
+            let got = px[w + 3].to_le_bytes();
+            let near = (0..3).all(|c| (got[c] as i32 - SKIN.to_le_bytes()[c] as i32).abs() <= 2);
+            assert_eq!(near, closes, "share {share}: {got:?}");
+            assert!(px.iter().zip(&before).enumerate().all(|(i, (a, b))| a == b || i == w + 3));
+        }
+        // The same distance from the background in a redder hue (a vessel): not a speck.
+        let vessel = pack_color(205, 120, 95, 255);
+        let mut px = image(w, h, SKIN);
+        px[w + 3] = vessel;
+        let before = px.clone();
+        run(&mut px, w, h);
+        assert_eq!(px, before);
     }
 
     #[test]
