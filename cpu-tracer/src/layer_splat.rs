@@ -54,7 +54,8 @@
 //! **Cracks** ([`LayerOptions::close_cracks`]): last, away from the frame's own camera, runs of
 //! one or two pixels along a row or column that show the background through between two
 //! like, solid pixels take what those cover (`layered::close_cracks`): a surface the frame saw
-//! edge-on and the new camera sees broadside, whose footprints parted.
+//! edge-on and the new camera sees broadside, whose footprints parted, or a semi-transparent
+//! slab's footprints parted over deeper ones.
 //!
 //! **Older frames** ([`Renderer::render_set`], the multi-frame filling; the client keeps
 //! 4 frames by default): pixels no segment of the newest frame covers first take the older
@@ -74,7 +75,8 @@
 //! **Warp-sized footprints** ([`Renderer::set_adaptive_radius`]): a surface seen from a new
 //! direction spreads its pixels' footprints apart at grazing angles; with adaptive sizing on,
 //! the half side grows by [`LayerOptions::grow_per_degree`] of the display's pixels per degree
-//! of warp (core's `warp_radius::warp_angle_deg`; [`LayerOptions::grown`]) up to [`MAX_OWN`]
+//! of warp beyond [`LayerOptions::grow_from_deg`] (core's `warp_radius::warp_angle_deg`;
+//! [`LayerOptions::grown`]) up to [`MAX_OWN`]
 //! source pixels; at the frame's own camera it is
 //! [`LayerOptions::own`], so the frame is still reproduced there.
 //!

@@ -9,8 +9,8 @@ pub fn arg<'a>(args: &'a [String], name: &str) -> Option<&'a str> {
 }
 
 /// The default [`LayerOptions`] with the flags `args` sets: `--own H` (half side, source
-/// pixels), `--no-fill`, `--no-cracks`, `--grow G` (source pixels per degree of warp; 0:
-/// fixed), `--grow-alpha A`, `--max-own H`, `--watertight T` (source pixels; 0: off),
+/// pixels), `--no-fill`, `--no-cracks`, `--grow G` (pixels per degree of warp; 0:
+/// fixed), `--grow-from D` (degrees of warp before growing), `--grow-alpha A`, `--max-own H`, `--watertight T` (source pixels; 0: off),
 /// `--water-ratio R`. A value that does not parse is an error naming its flag.
 pub fn layer_options(args: &[String]) -> Result<LayerOptions, String> {
     fn set<T: core::str::FromStr>(args: &[String], name: &str, what: &str, v: &mut T) -> Result<(), String> {
@@ -25,6 +25,7 @@ pub fn layer_options(args: &[String]) -> Result<LayerOptions, String> {
     o.fill &= !flag("--no-fill");
     o.close_cracks &= !flag("--no-cracks");
     set(args, "--grow", "a growth per degree", &mut o.grow_per_degree)?;
+    set(args, "--grow-from", "an angle in degrees", &mut o.grow_from_deg)?;
     set(args, "--grow-alpha", "an 8-bit alpha", &mut o.grow_min_alpha)?;
     set(args, "--max-own", "a half side", &mut o.max_own)?;
     set(args, "--watertight", "a tolerance in source pixels", &mut o.watertight)?;
@@ -46,8 +47,8 @@ mod tests {
         let o = layer_options(&args("prog dir --no-cracks --watertight 0 --water-ratio 0.25 --grow 0")).unwrap();
         assert!(!o.close_cracks && o.fill);
         assert_eq!((o.watertight, o.water_ratio, o.grow_per_degree), (0.0, 0.25, 0.0));
-        let o = layer_options(&args("prog --no-fill --own 0.7 --grow-alpha 128 --max-own 1.5")).unwrap();
-        assert_eq!((o.fill, o.own, o.grow_min_alpha, o.max_own), (false, 0.7, 128, 1.5));
+        let o = layer_options(&args("prog --no-fill --own 0.7 --grow-alpha 128 --max-own 1.5 --grow-from 2")).unwrap();
+        assert_eq!((o.fill, o.own, o.grow_min_alpha, o.max_own, o.grow_from_deg), (false, 0.7, 128, 1.5, 2.0));
         let e = layer_options(&args("prog --grow-alpha 300")).unwrap_err();
         assert!(e.contains("--grow-alpha"), "{e}");
         assert!(layer_options(&args("prog --watertight x")).is_err());

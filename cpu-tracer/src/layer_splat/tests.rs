@@ -68,6 +68,14 @@ fn footprints_grow_by_the_displays_pixels() {
     assert!((o.grown(&coarse, &cam) - o.own_at(deg / 2.0)).abs() < 1e-4);
     assert!(o.grown(&coarse, &cam) < o.grown(&fc, &cam));
     assert_eq!(o.grown(&fc, &fc), o.own, "the frame's own camera: its own pixels");
+    // Up to `grow_from_deg` footprints keep their own size, then grow `grow_per_degree` a degree.
+    assert!(o.grow_from_deg > 0.0 && o.grow_from_deg < deg);
+    assert_eq!(o.own_at(o.grow_from_deg), o.own);
+    assert_eq!(o.own_at(o.grow_from_deg * 0.5), o.own);
+    assert!((o.own_at(o.grow_from_deg + 2.0) - (o.own + 2.0 * o.grow_per_degree)).abs() < 1e-6);
+    assert_eq!(o.own_at(f32::NAN), o.own);
+    let from_zero = LayerOptions { grow_from_deg: f32::NAN, ..o };
+    assert!((from_zero.own_at(2.0) - (o.own + 2.0 * o.grow_per_degree)).abs() < 1e-6);
 }
 
 /// The footprints of a synthetic surface (plus random samples, some behind the eye, some

@@ -57,8 +57,14 @@ pub struct LayerOptions {
     pub own: f32,
     /// Fill the pixels no segment covers from the frame's image (see the module docs).
     pub fill: bool,
-    /// With adaptive sizing on, the half side added per degree of warp (source pixels).
+    /// With adaptive sizing on, the half side added per degree of warp beyond
+    /// [`LayerOptions::grow_from_deg`] (the display's pixels; see [`LayerOptions::grown`]).
     pub grow_per_degree: f32,
+    /// The warp (degrees) up to which footprints keep their own size with adaptive sizing on:
+    /// a small warp parts few footprints, and grown ones, dropping their slab's shared corners,
+    /// cover a neighbour's semi-transparent front segment (a lattice of bright dots on the
+    /// skin). Measured (`docs/results.md`, "The layered levers"): 1 against 0, 2, 5 and 8.
+    pub grow_from_deg: f32,
     /// Only samples at least this opaque (8-bit alpha) grow: growing a semi-transparent
     /// segment counts its color twice where footprints overlap.
     pub grow_min_alpha: u8,
@@ -91,6 +97,7 @@ impl LayerOptions {
         own: 0.5 + OWN_MARGIN,
         fill: true,
         grow_per_degree: 0.08,
+        grow_from_deg: 1.0,
         grow_min_alpha: 230,
         max_own: MAX_OWN,
         watertight: WATERTIGHT,
@@ -134,11 +141,14 @@ impl LayerOptions {
     }
 
     /// The half side of the footprint for a warp of `deg` degrees (adaptive sizing on), in
-    /// source pixels.
+    /// source pixels: [`LayerOptions::own`] up to [`LayerOptions::grow_from_deg`], then
+    /// [`LayerOptions::grow_per_degree`] more per degree, up to [`LayerOptions::max_own`].
     pub fn own_at(&self, deg: f32) -> f32 {
         let grow = if self.grow_per_degree.is_finite() { self.grow_per_degree.max(0.0) } else { 0.0 };
+        let from = if self.grow_from_deg.is_finite() { self.grow_from_deg.max(0.0) } else { 0.0 };
         let cap = if self.max_own.is_finite() { self.max_own.min(4.0) } else { MAX_OWN };
-        (self.own + grow * deg).min(cap.max(self.own))
+        let beyond = (deg - from).max(0.0);
+        (self.own + grow * beyond).min(cap.max(self.own))
     }
 }
 
