@@ -6,21 +6,22 @@
 //! background shows through in streaks one or two pixels wide, either uncovered (the fill's
 //! lookup finds background there too) or under a thin, semi-transparent footprint of a deeper
 //! slab; and where one semi-transparent slab's footprints part over deeper ones, the pixels
-//! between show those alone, a thin dark speck. On the image (RGBA8, composited over the background) a crack is a run of at most
-//! [`CRACK_RUN`] pixels along a row or a column whose two bounding pixels are solid (at least
-//! [`CRACK_SOLID`] from the background) and alike (their difference at most half their mean's
-//! distance from the background), every pixel of the run nearer the background than
-//! [`CRACK_ALPHA`] of that mean's distance, or than [`SPECK_ALPHA`] of it where the pixel is
-//! the mean's own color dimmed (within [`SPECK_HUE`]). Each pixel of the run, read as the background plus
-//! a share α of the mean (its projection on it), takes the missing `1 − α` of the mean over
-//! what it has: the footprints parted there, so what covers the pixels either side covers it.
+//! between show those alone, a thin dark speck. On the image (RGBA8, composited over the
+//! background) a crack is a run of at most [`CRACK_RUN`] pixels along a row or a column whose
+//! two bounding pixels are solid (at least [`CRACK_SOLID`] from the background) and alike
+//! (their difference at most half their mean's distance from the background), every pixel of
+//! the run nearer the background than [`CRACK_ALPHA`] of that mean's distance, or than
+//! [`SPECK_ALPHA`] of it where the pixel is the mean's own color dimmed (within
+//! [`SPECK_HUE`]). Each pixel of the run, read as the background plus a share α of the mean
+//! (its projection on it), takes the missing `1 − α` of the mean over what it has: the
+//! footprints parted there, so what covers the pixels either side covers it.
 //!
 //! Only the image is read, so the CPU and the GPU splatters run the same pass on what they
 //! drew (the GPU one on the image it reads back). It never runs at the frame's own camera,
 //! which is the server's image exactly. Work: one pass for each pixel's squared distance from
 //! the background, then a pixel is looked at only where it is under three quarters of the
-//! largest such distance within [`CRACK_RUN`] pixels along its row and column (which every crack pixel is);
-//! 4 bytes per pixel, and 8 per pixel closed. Measured (`docs/results.md`,
+//! largest such distance within [`CRACK_RUN`] pixels along its row and column (which every
+//! crack pixel is); 4 bytes per pixel, and 8 per pixel closed. Measured (`docs/results.md`,
 //! "Closing cracks"; `docs/perf.md` for its time).
 
 use super::options::LayerOptions;
