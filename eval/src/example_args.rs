@@ -30,6 +30,7 @@ pub fn layer_options(args: &[String]) -> Result<LayerOptions, String> {
     set(args, "--max-own", "a half side", &mut o.max_own)?;
     set(args, "--watertight", "a tolerance in source pixels", &mut o.watertight)?;
     set(args, "--water-ratio", "an area ratio", &mut o.water_ratio)?;
+    set(args, "--opacity-limit", "a factor", &mut o.opacity_limit)?;
     Ok(o)
 }
 
