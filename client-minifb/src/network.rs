@@ -247,8 +247,9 @@ struct Pending {
     frame: Frame,
     state: u32,
     requested_at: Option<Instant>,
-    /// Asked for on the coarser grid of adaptive resolution (its horizon is measured apart).
-    coarse: bool,
+    /// The divisor per axis of the grid it was asked for on (1: full resolution; adaptive
+    /// resolution's grids have their horizons measured apart).
+    divisor: u32,
     received_at: Instant,
 }
 
@@ -295,7 +296,8 @@ struct Shared {
     pending_cv: Condvar,
     ready: Mutex<Option<ReadyScene>>,
     recycle: Mutex<Option<Scene>>,
-    sent: Mutex<VecDeque<(u64, Instant, bool)>>,
+    /// Per request sent: its sequence number, when, and its grid's divisor per axis.
+    sent: Mutex<VecDeque<(u64, Instant, u32)>>,
     error: Mutex<Option<ClientError>>,
     /// The link's state and the current connection's end, and its wake-ups.
     link: Mutex<LinkSlot>,
@@ -304,6 +306,8 @@ struct Shared {
     down: AtomicBool,
     /// The last request sequence number sent (over all connections).
     seq: AtomicU64,
+    /// The newest request sequence number a frame arrived for.
+    arrived_seq: AtomicU64,
     /// The server's visual state and refusals.
     visual: Mutex<VisualSlot>,
     /// The id of the server's last VisualState on the current connection: frames read after it
@@ -431,6 +435,7 @@ impl Network {
             link_cv: Condvar::new(),
             down: AtomicBool::new(false),
             seq: AtomicU64::new(0),
+            arrived_seq: AtomicU64::new(0),
             visual: Mutex::new(VisualSlot::default()),
             state_id: AtomicU32::new(0),
             reconnects: AtomicU64::new(0),
@@ -796,8 +801,9 @@ fn read_loop(sh: &Shared, mut stream: impl Read, limits: Limits, recorder: Optio
         match msg {
             Message::Frame(frame) => {
                 let received_at = Instant::now();
-                let asked = lock(&sh.sent).iter().rev().find(|(s, ..)| *s == frame.header.seq).map(|&(_, t, c)| (t, c));
-                let (requested_at, coarse) = (asked.map(|a| a.0), asked.is_some_and(|a| a.1));
+                let asked = lock(&sh.sent).iter().rev().find(|(s, ..)| *s == frame.header.seq).map(|&(_, t, d)| (t, d));
+                let (requested_at, divisor) = (asked.map(|a| a.0), asked.map_or(1, |a| a.1));
+                sh.arrived_seq.fetch_max(frame.header.seq, Ordering::SeqCst);
                 if let Some(r) = recorder {
                     r.frame(bytes);
                 }
@@ -808,7 +814,7 @@ fn read_loop(sh: &Shared, mut stream: impl Read, limits: Limits, recorder: Optio
                         q.pop_front();
                     }
                     let state = sh.state_id.load(Ordering::SeqCst);
-                    q.push_back(Pending { frame, state, requested_at, coarse, received_at });
+                    q.push_back(Pending { frame, state, requested_at, divisor, received_at });
                 }
                 sh.pending_cv.notify_one();
                 lock(&sh.view).frame_arrived = true;
@@ -909,7 +915,7 @@ fn build_loop(sh: &Shared, cfg: &NetConfig) {
             let mut h = lock(&sh.horizon);
             let t0 = h.1;
             let secs = |t: Instant| t.saturating_duration_since(t0).as_secs_f64();
-            h.0.observe(secs(r), secs(Instant::now()), render_s, p.coarse);
+            h.0.observe(secs(r), secs(Instant::now()), render_s, p.divisor);
         }
         log::debug!("built scene seq {} ({} samples) in {build_ms:.1} ms", scene.header.seq, scene.samples.len());
         let ready = ReadyScene {
@@ -936,6 +942,8 @@ fn build_loop(sh: &Shared, cfg: &NetConfig) {
 /// display's own predictor (which has seen every camera shown), widened by a guard band.
 fn write_loop(sh: &Shared, mut stream: impl Write, request: RequestPolicy) {
     let mut last_send: Option<Instant> = None;
+    // The first request of the current move (none at rest).
+    let mut move_began: Option<u64> = None;
     loop {
         let (view, predictor, moving) = {
             let mut g = lock(&sh.view);
@@ -988,9 +996,14 @@ fn write_loop(sh: &Shared, mut stream: impl Write, request: RequestPolicy) {
         };
         let seq = sh.seq.fetch_add(1, Ordering::SeqCst) + 1;
         let horizon = lock(&sh.horizon).0;
-        // While the view moves, on the coarser grid of adaptive resolution (`--coarse`); a
-        // coarse view differs from the view at rest, so resting asks again at full resolution.
-        let asks = request.camera_at(view.camera, moving, &predictor, &horizon, &CADENCE);
+        // While the view moves, on the coarser grid of adaptive resolution (`--coarse`), the
+        // coarsest while it turns fast until a frame asked for since the move began has
+        // arrived; a coarse view differs from the view at rest, so resting asks again at full
+        // resolution.
+        move_began = if moving { Some(move_began.unwrap_or(seq)) } else { None };
+        let arrived = move_began.is_some_and(|b| sh.arrived_seq.load(Ordering::SeqCst) >= b);
+        let motion = request.motion(moving, arrived, &predictor, &horizon, &CADENCE);
+        let asks = request.camera_at(view.camera, motion, &predictor, &horizon, &CADENCE);
         lock(&sh.view).asked = Some(asks.view);
         let camera = asks.camera;
         // At rest, the segments per pixel of `--rest-layers` (a one-sample frame by default).
@@ -1007,7 +1020,7 @@ fn write_loop(sh: &Shared, mut stream: impl Write, request: RequestPolicy) {
             if s.len() >= MAX_SENT {
                 s.pop_front();
             }
-            s.push_back((seq, now, asks.view.width < view.camera.width));
+            s.push_back((seq, now, request.divisor_for(motion, view.camera.width, view.camera.height)));
         }
         last_send = Some(now);
         if let Err(e) = send_request(&mut stream, &req) {

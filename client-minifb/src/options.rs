@@ -418,7 +418,13 @@ mod tests {
     #[test]
     fn no_options_ask_for_the_default_method() {
         assert_eq!(Options::parse_from(["volwarp-client"]).method(), Method::DEFAULT);
-        assert_eq!(Options::parse_from(["volwarp-client", "--coarse", "2"]).method().request().divisor(true), 2);
+        assert_eq!(
+            Options::parse_from(["volwarp-client", "--coarse", "2"])
+                .method()
+                .request()
+                .divisor(volwarp_core::method::Motion::Moving),
+            2
+        );
         assert!(Options::try_parse_from(["volwarp-client", "--coarse", "3"]).is_err());
         assert_eq!(Options::parse_from(["volwarp-client"]).method().request().layers(false), 0, "the Hello's");
         let one = Options::parse_from(["volwarp-client", "--rest-layers", "1"]).method().request();

@@ -19,7 +19,12 @@
 //! a pixel grid `coarse` times coarser per axis (the same field of view, `1/coarse²` of the
 //! pixels, so the frame is marched, encoded and sent sooner) and warps it at display
 //! resolution, each segment drawn as its coarse source pixel's footprint; the first request
-//! after the view rests asks for the full resolution. The client decides, not the server: it
+//! after the view rests asks for the full resolution. Until a frame asked for since the move
+//! began has arrived ([`Motion::Starting`]), requests ask for a grid [`START_COARSE`] times
+//! coarser again: only the rest frame is on screen and every tick warps it further, so the
+//! sooner a frame of the moving view comes, the better (the requests of that stretch share one
+//! viewport, so none makes the server drop another's render). The client decides, not the
+//! server: it
 //! alone knows whether its view moves (a predicting client's still request differs from its
 //! last predicted one, so a server comparing successive requests would call it moving).
 //!
@@ -73,6 +78,39 @@ pub struct Method {
 
 /// The largest viewport divisor of adaptive resolution.
 pub const MAX_COARSE: u8 = 4;
+
+/// While the view turns fast and no frame asked for since it began to move has arrived,
+/// requests ask for a grid this many times coarser than [`Method::coarse`] (at most
+/// [`MAX_COARSE`]; only with adaptive resolution on): until then the client has only the rest
+/// frame, and every tick of a fast flick warps it further (36° and more before the first
+/// coarse frame came). Measured (`docs/results.md`, "Adaptive resolution").
+pub const START_COARSE: u8 = 2;
+
+/// How far (degrees) the view must turn before a frame on the moving grid could come (the
+/// predictor's turn rate times that grid's horizon) for a move's first requests to ask for the
+/// coarsest grid: a slow move keeps the sharper grid (at 30°/s the coarsest grid's blur cost
+/// more than its fresher frames gained: `docs/results.md`, "Adaptive resolution").
+pub const START_WARP_DEG: f32 = 20.0;
+
+/// How the view moves when a request is sent: what adaptive resolution's grid depends on
+/// ([`RequestPolicy::motion`]).
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum Motion {
+    /// The view holds still: the full resolution.
+    Rest,
+    /// The view turns fast and no frame asked for since it began to move has arrived: the
+    /// coarsest grid.
+    Starting,
+    /// The view moves: the moving grid.
+    Moving,
+}
+
+impl Motion {
+    /// Whether the view moves.
+    pub fn moving(self) -> bool {
+        self != Motion::Rest
+    }
+}
 
 /// The segments per pixel the default method asks for the view at rest: 0, the Hello's, as
 /// while it moves. Measured against 1 (`docs/results.md`, "Against the image-sending peers",
@@ -193,43 +231,68 @@ impl RequestPolicy {
     /// (less the cadence's display tick); with a guard band, that camera widened (where it
     /// fits the cadence's largest viewport).
     pub fn camera(&self, shown: Camera, predictor: &Predictor, horizon: &Horizon, cadence: &Cadence) -> Requested {
-        self.camera_at(shown, false, predictor, horizon, cadence)
+        self.camera_at(shown, Motion::Rest, predictor, horizon, cadence)
     }
 
-    /// The viewport divisor per axis of a request: `coarse` while the view is `moving`, else 1.
-    pub fn divisor(&self, moving: bool) -> u32 {
-        if moving {
-            u32::from(self.coarse.clamp(1, MAX_COARSE))
+    /// The motion of a request for a view that is `moving` or not, where a frame asked for
+    /// since the move began has `arrived` or not: [`Motion::Starting`] while none has and the
+    /// view would turn at least [`START_WARP_DEG`] before a frame on the moving grid could come
+    /// (the `predictor`'s turn rate times the `horizon` of that grid), else [`Motion::Moving`].
+    pub fn motion(
+        &self,
+        moving: bool,
+        arrived: bool,
+        predictor: &Predictor,
+        horizon: &Horizon,
+        cadence: &Cadence,
+    ) -> Motion {
+        if !moving {
+            return Motion::Rest;
+        }
+        let wait_s = horizon.seconds(cadence.display_tick_s, self.divisor(Motion::Moving));
+        if !arrived && predictor.turn_rate_deg_s() * wait_s >= START_WARP_DEG {
+            Motion::Starting
         } else {
-            1
+            Motion::Moving
         }
     }
 
-    /// [`RequestPolicy::divisor`] for a `width × height` view: 1 where the coarse grid would
-    /// be less than [`MIN_COARSE_SIDE`] pixels on its shorter side.
-    pub fn divisor_for(&self, moving: bool, width: u32, height: u32) -> u32 {
-        let d = self.divisor(moving);
-        if width.min(height) / d.max(1) < MIN_COARSE_SIDE {
-            1
-        } else {
-            d
+    /// The viewport divisor per axis of a request: `coarse` while the view moves,
+    /// [`START_COARSE`] times that (at most [`MAX_COARSE`]) as it starts to, 1 at rest.
+    pub fn divisor(&self, motion: Motion) -> u32 {
+        let coarse = u32::from(self.coarse.clamp(1, MAX_COARSE));
+        match motion {
+            Motion::Rest => 1,
+            Motion::Moving => coarse,
+            Motion::Starting if coarse > 1 => (coarse * u32::from(START_COARSE)).min(u32::from(MAX_COARSE)),
+            Motion::Starting => 1,
         }
     }
 
-    /// [`RequestPolicy::camera`] for a view that is `moving` (it changed since the last
-    /// request) or not: while moving, the camera asked for (the guard band's too) is on a pixel
-    /// grid [`RequestPolicy::divisor_for`] times coarser per axis ([`coarse_viewport`]); at rest it
+    /// [`RequestPolicy::divisor`] for a `width × height` view, halved (down to 1) while the
+    /// coarse grid would be less than [`MIN_COARSE_SIDE`] pixels on its shorter side.
+    pub fn divisor_for(&self, motion: Motion, width: u32, height: u32) -> u32 {
+        let mut d = self.divisor(motion).max(1);
+        while d > 1 && width.min(height) / d < MIN_COARSE_SIDE {
+            d /= 2;
+        }
+        d
+    }
+
+    /// [`RequestPolicy::camera`] for a view in `motion` (moving: it changed since the last
+    /// request): while moving, the camera asked for (the guard band's too) is on a pixel grid
+    /// [`RequestPolicy::divisor_for`] times coarser per axis ([`coarse_viewport`]); at rest it
     /// asks for [`RequestPolicy::layers`] segments per pixel.
     pub fn camera_at(
         &self,
         shown: Camera,
-        moving: bool,
+        motion: Motion,
         predictor: &Predictor,
         horizon: &Horizon,
         cadence: &Cadence,
     ) -> Requested {
         let mut view = shown;
-        let d = self.divisor_for(moving, shown.width, shown.height);
+        let d = self.divisor_for(motion, shown.width, shown.height);
         if self.predict {
             view = predictor.predict(horizon.seconds(cadence.display_tick_s, d)).unwrap_or(shown);
         }
@@ -237,7 +300,7 @@ impl RequestPolicy {
             let (w, h) = coarse_viewport(view.width, view.height, d);
             view = view.with_viewport(w, h);
         }
-        let layers = self.layers(moving);
+        let layers = self.layers(motion.moving());
         match GuardBand::new(&view, self.guard, cadence.max_viewport) {
             Ok(g) if self.guard > 0.0 => Requested { camera: g.camera, view, guard_offset: (g.x0, g.y0), layers },
             _ => Requested { camera: view, view, guard_offset: (0, 0), layers },
@@ -328,31 +391,79 @@ mod tests {
         predictor.observe(cam, 0.0);
         let h = Horizon::new();
         let p = RequestPolicy { predict: false, guard: 0.0, coarse: 2, rest_layers: 0 };
-        let moving = p.camera_at(cam, true, &predictor, &h, &CLIENT);
+        let moving = p.camera_at(cam, Motion::Moving, &predictor, &h, &CLIENT);
         assert_eq!((moving.camera.width, moving.camera.height), (256, 192));
         assert_eq!(moving.camera, cam.with_viewport(256, 192), "the same view on a coarser grid");
         assert_eq!(moving.view, moving.camera);
-        let still = p.camera_at(cam, false, &predictor, &h, &CLIENT);
+        let still = p.camera_at(cam, Motion::Rest, &predictor, &h, &CLIENT);
         assert_eq!(still.camera, cam, "at rest: the full resolution");
         assert_eq!(p.camera(cam, &predictor, &h, &CLIENT), still);
-        assert_eq!((p.divisor(true), p.divisor(false)), (2, 1));
-        assert_eq!(RequestPolicy { coarse: 9, ..p }.divisor(true), u32::from(MAX_COARSE));
-        assert_eq!(RequestPolicy { coarse: 0, ..p }.divisor(true), 1);
-        assert_eq!(Method::DEFAULT.request().divisor(true), 2, "the default is coarse while moving");
+        assert_eq!((p.divisor(Motion::Moving), p.divisor(Motion::Rest)), (2, 1));
+        assert_eq!(RequestPolicy { coarse: 9, ..p }.divisor(Motion::Moving), u32::from(MAX_COARSE));
+        assert_eq!(RequestPolicy { coarse: 0, ..p }.divisor(Motion::Moving), 1);
+        assert_eq!(Method::DEFAULT.request().divisor(Motion::Moving), 2, "the default is coarse while moving");
         // A small view stays at full resolution.
-        assert_eq!(p.divisor_for(true, 512, 384), 2);
-        assert_eq!(p.divisor_for(true, 255, 1000), 1);
-        assert_eq!(p.divisor_for(true, 256, 256), 2);
-        assert_eq!(p.divisor_for(false, 1024, 1024), 1);
+        assert_eq!(p.divisor_for(Motion::Moving, 512, 384), 2);
+        assert_eq!(p.divisor_for(Motion::Moving, 255, 1000), 1);
+        assert_eq!(p.divisor_for(Motion::Moving, 256, 256), 2);
+        assert_eq!(p.divisor_for(Motion::Rest, 1024, 1024), 1);
+        // The first request after a rest: twice as coarse again, at most 4, and halved while the
+        // grid would be too small.
+        assert_eq!(p.divisor(Motion::Starting), 4);
+        assert_eq!(RequestPolicy { coarse: 4, ..p }.divisor(Motion::Starting), 4);
+        assert_eq!(RequestPolicy { coarse: 1, ..p }.divisor(Motion::Starting), 1, "adaptive resolution off");
+        assert_eq!(p.divisor_for(Motion::Starting, 512, 512), 4);
+        assert_eq!(p.divisor_for(Motion::Starting, 384, 300), 2);
+        assert_eq!(p.divisor_for(Motion::Starting, 255, 255), 1);
+        assert_eq!(p.camera_at(cam, Motion::Starting, &predictor, &h, &CLIENT).camera, cam.with_viewport(256, 192));
+        let square = cam.with_viewport(512, 512);
+        let starting = p.camera_at(square, Motion::Starting, &predictor, &h, &CLIENT);
+        assert_eq!(starting.camera, square.with_viewport(128, 128));
+        assert_eq!(starting.layers, 0, "starting to move: the Hello's layers");
         let small = cam.with_viewport(200, 150);
-        assert_eq!(p.camera_at(small, true, &predictor, &h, &CLIENT).camera, small);
+        assert_eq!(p.camera_at(small, Motion::Moving, &predictor, &h, &CLIENT).camera, small);
         // A guard band on the coarse grid keeps its fraction of the coarse view.
-        let g = RequestPolicy { guard: 0.25, ..p }.camera_at(cam, true, &predictor, &h, &CLIENT);
+        let g = RequestPolicy { guard: 0.25, ..p }.camera_at(cam, Motion::Moving, &predictor, &h, &CLIENT);
         assert_eq!((g.view.width, g.view.height), (256, 192));
         assert!(g.camera.width > 256 && g.guard_offset.0 > 0 && g.guard_offset.0 < 128);
         assert_eq!(coarse_viewport(801, 601, 2), (401, 301));
         assert_eq!(coarse_viewport(3, 1, 4), (1, 1));
         assert_eq!(coarse_viewport(64, 48, 1), (64, 48));
+    }
+
+    #[test]
+    fn a_fast_turn_starts_on_the_coarsest_grid_until_a_frame_of_the_move_arrives() {
+        let cam = Camera::look_at(glam::Vec3::new(0.0, 0.0, 3.0), glam::Vec3::ZERO, glam::Vec3::Y, 45.0, 512, 512);
+        let turned = |deg: f32| {
+            let r = deg.to_radians();
+            Camera::look_at(
+                glam::Vec3::new(3.0 * r.sin(), 0.0, 3.0 * r.cos()),
+                glam::Vec3::ZERO,
+                glam::Vec3::Y,
+                45.0,
+                512,
+                512,
+            )
+        };
+        // A frame 0.6 s from request to arrival: the moving grid's horizon is about 0.44 s (half
+        // the span, and half of half the interval).
+        let mut h = Horizon::new();
+        h.observe(-0.6, 0.0, 0.0, 1);
+        let p = Method::DEFAULT.request();
+        let motion = |rate: f32, arrived: bool| {
+            let mut predictor = Predictor::new();
+            predictor.observe(cam, 0.0);
+            predictor.observe(turned(rate / 30.0), 1.0 / 30.0);
+            p.motion(true, arrived, &predictor, &h, &CLIENT)
+        };
+        assert!((motion(180.0, false) == Motion::Starting) && (motion(180.0, true) == Motion::Moving));
+        assert_eq!(motion(30.0, false), Motion::Moving, "30°/s turns 13° in 0.44 s");
+        let still = Predictor::new();
+        assert_eq!(p.motion(false, false, &still, &h, &CLIENT), Motion::Rest);
+        assert_eq!(p.motion(true, false, &still, &h, &CLIENT), Motion::Moving, "no turn rate yet");
+        // Without adaptive resolution every grid is the full one.
+        let full = RequestPolicy { coarse: 1, ..p };
+        assert_eq!(full.divisor(motion(180.0, false)), 1);
     }
 
     #[test]
@@ -362,12 +473,16 @@ mod tests {
         predictor.observe(cam, 0.0);
         let h = Horizon::new();
         let p = RequestPolicy { rest_layers: 1, ..Method::DEFAULT.request() };
-        assert_eq!(p.camera_at(cam, false, &predictor, &h, &SIMULATOR).layers, 1, "at rest: a one-sample frame");
-        assert_eq!(p.camera_at(cam, true, &predictor, &h, &SIMULATOR).layers, 0, "moving: the Hello's layers");
+        assert_eq!(p.camera_at(cam, Motion::Rest, &predictor, &h, &SIMULATOR).layers, 1, "at rest: a one-sample frame");
+        assert_eq!(
+            p.camera_at(cam, Motion::Moving, &predictor, &h, &SIMULATOR).layers,
+            0,
+            "moving: the Hello's layers"
+        );
         assert_eq!(p.camera(cam, &predictor, &h, &CLIENT).layers, 1);
         let layered = Method::DEFAULT.request();
         assert_eq!(
-            layered.camera_at(cam, false, &predictor, &h, &SIMULATOR).layers,
+            layered.camera_at(cam, Motion::Rest, &predictor, &h, &SIMULATOR).layers,
             0,
             "the default: the Hello's, at rest too"
         );

@@ -144,6 +144,19 @@ impl Predictor {
         self.newest = Some(TimedCamera { camera, t });
     }
 
+    /// How fast the view turns, degrees per second: core's `warp_radius::warp_angle_deg`
+    /// between the last two cameras seen over the time between them (0 with fewer than two, or
+    /// where that is not finite).
+    pub fn turn_rate_deg_s(&self) -> f32 {
+        let (Some(p), Some(n)) = (self.previous, self.newest) else { return 0.0 };
+        let rate = crate::warp_radius::warp_angle_deg(&p.camera, &n.camera) as f64 / (n.t - p.t);
+        if rate.is_finite() && rate > 0.0 {
+            rate as f32
+        } else {
+            0.0
+        }
+    }
+
     /// The camera expected `horizon_s` after the newest one (the newest itself with fewer than
     /// two cameras seen); `None` before any.
     pub fn predict(&self, horizon_s: f32) -> Option<Camera> {
@@ -175,9 +188,10 @@ impl Predictor {
 /// request as soon as the last frame is written delivers them that far apart):
 /// `render + (span − render) / 2`, or the whole span where no render time was reported.
 ///
-/// Frames at full resolution and frames on the coarser grid of adaptive resolution are measured
-/// apart: a coarse frame is marched and sent in a fraction of a full one's time. Until a coarse
-/// frame has arrived, a coarse request's horizon comes from the full frames': with a divisor `d`
+/// Frames at full resolution and frames on each coarser grid of adaptive resolution (2 and 4
+/// times coarser per axis) are measured apart: a coarse frame is marched and sent in a fraction
+/// of a full one's time. Until a frame of its grid has arrived, a coarse request's horizon comes
+/// from the full frames': with a divisor `d`
 /// per axis, the render and the transfer scale with the pixels (`1/d²`), the round trip does
 /// not, and the first coarse frame corrects it. Without a reported render time, the full
 /// frames' span and interval over `d` stand in. Over `d`, the fast flick's first coarse frame
@@ -187,9 +201,9 @@ impl Predictor {
 /// (`docs/results.md`, "Adaptive resolution").
 #[derive(Clone, Copy, Debug, Default, PartialEq)]
 pub struct Horizon {
-    /// Request-to-arrival, interval and render averages: of full-resolution frames, of coarse
-    /// frames.
-    classes: [Spans; 2],
+    /// Request-to-arrival, interval and render averages: of full-resolution frames, of frames
+    /// on the grid 2 times coarser per axis, of those 4 times coarser ([`Horizon::class`]).
+    classes: [Spans; 3],
     last_arrival_s: Option<f64>,
 }
 
@@ -245,16 +259,27 @@ impl Horizon {
 
     /// Nothing measured yet.
     pub const fn new() -> Self {
-        Horizon { classes: [Spans::NONE; 2], last_arrival_s: None }
+        Horizon { classes: [Spans::NONE; 3], last_arrival_s: None }
+    }
+
+    /// The class of frames on a grid `divisor` times coarser per axis: 0 for the full
+    /// resolution, 1 for 2 (and 3), 2 for 4 and more.
+    fn class(divisor: u32) -> usize {
+        match divisor {
+            0 | 1 => 0,
+            2 | 3 => 1,
+            _ => 2,
+        }
     }
 
     /// Records a frame whose request was sent at `requested_s` and that arrived (is ready to
     /// show) at `arrived_s`, on any clock in seconds, which the server reported rendering in
-    /// `render_s` seconds (the header's `render_us`; 0: not reported); `coarse`: a frame on the
-    /// coarser grid of adaptive resolution. Non-finite or negative spans and times are ignored.
-    pub fn observe(&mut self, requested_s: f64, arrived_s: f64, render_s: f64, coarse: bool) {
+    /// `render_s` seconds (the header's `render_us`; 0: not reported), on a grid `divisor` times
+    /// coarser per axis than the view (1: full resolution; adaptive resolution's 2 or 4).
+    /// Non-finite or negative spans and times are ignored.
+    pub fn observe(&mut self, requested_s: f64, arrived_s: f64, render_s: f64, divisor: u32) {
         let ema = |old: f64, new: f64| if old == 0.0 { new } else { old + (new - old) * Self::WEIGHT };
-        let c = &mut self.classes[usize::from(coarse)];
+        let c = &mut self.classes[Self::class(divisor)];
         let span = arrived_s - requested_s;
         if span.is_finite() && span >= 0.0 {
             c.request_to_arrival_s = ema(c.request_to_arrival_s, span);
@@ -282,14 +307,15 @@ impl Horizon {
     /// come at least once per tick). Where the class's interval or the class itself was not
     /// measured yet, they are estimated as [`Horizon`] says.
     pub fn seconds(&self, display_s: f32, divisor: u32) -> f32 {
-        let coarse = divisor > 1;
-        let own = self.classes[usize::from(coarse)];
+        let class = Self::class(divisor);
+        let own = self.classes[class];
         let (span, interval) = if own.measured() {
             own.span_and_interval()
-        } else if coarse {
+        } else if class > 0 && self.classes[0].measured() {
             self.classes[0].coarser(divisor)
         } else {
-            self.classes[1].span_and_interval()
+            // Nothing of this grid or the full one: another grid's as it is.
+            self.classes.iter().find(|c| c.measured()).copied().unwrap_or(Spans::NONE).span_and_interval()
         };
         let display = if display_s.is_finite() { display_s.max(0.0) as f64 } else { 0.0 };
         let shown = 0.5 * (interval - display).max(0.0);
@@ -401,31 +427,31 @@ mod tests {
         let mut h = Horizon::new();
         assert_eq!(h.seconds(0.0, 1), 0.0);
         // One frame: its request-to-arrival stands in for the interval too.
-        h.observe(-0.6, 0.0, 0.0, false);
+        h.observe(-0.6, 0.0, 0.0, 1);
         assert!((h.seconds(0.0, 1) - 0.9).abs() < 1e-6, "{}", h.seconds(0.0, 1));
         assert!((h.seconds(0.2, 1) - 0.8).abs() < 1e-6, "{}", h.seconds(0.2, 1));
         let mut h = Horizon::new();
         // Frames requested every 0.5 s, each arriving 0.6 s later: 0.6 + 0.25.
         for k in 0..40 {
             let t = k as f64 * 0.5;
-            h.observe(t, t + 0.6, 0.0, false);
+            h.observe(t, t + 0.6, 0.0, 1);
         }
         assert!((h.seconds(0.0, 1) - 0.85).abs() < 1e-4, "{}", h.seconds(0.0, 1));
         // Frames at least once per display tick: request-to-arrival only.
         assert!((h.seconds(0.5, 1) - 0.6).abs() < 1e-4, "{}", h.seconds(0.5, 1));
         assert!((h.seconds(f32::NAN, 1) - 0.85).abs() < 1e-4);
         // Garbage is ignored, and a huge latency is clamped.
-        h.observe(f64::NAN, 1.0, f64::NAN, false);
-        h.observe(5.0, 4.0, -1.0, false);
+        h.observe(f64::NAN, 1.0, f64::NAN, 1);
+        h.observe(5.0, 4.0, -1.0, 1);
         assert!(h.seconds(0.0, 1).is_finite());
         // A frame asked for after the last one arrived (the view rested in between): its gap
         // is not an interval.
         let mut idle = Horizon::new();
-        idle.observe(-0.6, 0.0, 0.0, false);
-        idle.observe(5.0, 5.6, 0.0, false);
+        idle.observe(-0.6, 0.0, 0.0, 1);
+        idle.observe(5.0, 5.6, 0.0, 1);
         assert!((idle.seconds(0.0, 1) - 0.9).abs() < 1e-6, "{}", idle.seconds(0.0, 1));
         let mut slow = Horizon::new();
-        slow.observe(0.0, 30.0, 0.0, false);
+        slow.observe(0.0, 30.0, 0.0, 1);
         assert_eq!(slow.seconds(0.016, 1), MAX_HORIZON_S);
     }
 
@@ -433,7 +459,7 @@ mod tests {
     fn coarse_frames_have_their_own_horizon() {
         let mut h = Horizon::new();
         // The first frame at full resolution: 0.6 s from request to arrival.
-        h.observe(-0.6, 0.0, 0.0, false);
+        h.observe(-0.6, 0.0, 0.0, 1);
         // A coarse request before any coarse frame: the full frame's time over d (0.3 s,
         // interval alike), plus half the interval.
         assert!((h.seconds(0.0, 2) - 0.45).abs() < 1e-6, "{}", h.seconds(0.0, 2));
@@ -442,21 +468,29 @@ mod tests {
         // Coarse frames measured: their own figures, the full frames' unchanged.
         for k in 1..40 {
             let t = k as f64 * 0.2;
-            h.observe(t - 0.3, t, 0.0, true);
+            h.observe(t - 0.3, t, 0.0, 2);
         }
         assert!((h.seconds(0.0, 2) - 0.4).abs() < 1e-3, "{}", h.seconds(0.0, 2));
         assert!((h.seconds(0.0, 1) - 0.9).abs() < 1e-6, "{}", h.seconds(0.0, 1));
+        // The grid 4 times coarser is measured apart: until one of its frames came, the full
+        // frames' over 4; then its own.
+        assert!((h.seconds(0.0, 4) - 0.225).abs() < 1e-6, "{}", h.seconds(0.0, 4));
+        h.observe(7.9, 8.0, 0.0, 4);
+        // 0.1 s from request to arrival, and as the interval (none measured on this grid).
+        assert!((h.seconds(0.0, 4) - 0.15).abs() < 1e-6, "{}", h.seconds(0.0, 4));
+        assert!((h.seconds(0.0, 2) - 0.4).abs() < 1e-3, "the other grid's unchanged: {}", h.seconds(0.0, 2));
         // Only coarse frames measured: a full request takes theirs.
         let mut c = Horizon::new();
-        c.observe(0.0, 0.3, 0.0, true);
+        c.observe(0.0, 0.3, 0.0, 2);
         assert!((c.seconds(0.0, 1) - 0.45).abs() < 1e-6);
+        assert!((c.seconds(0.0, 4) - 0.45).abs() < 1e-6, "{}", c.seconds(0.0, 4));
     }
 
     #[test]
     fn a_reported_render_time_splits_the_span() {
         // The first frame: 0.656 s from request to arrival, 0.5 s of it the server's render.
         let mut h = Horizon::new();
-        h.observe(-0.656, 0.0, 0.5, false);
+        h.observe(-0.656, 0.0, 0.5, 1);
         // Its own class: the interval is the render and half the rest (the transfer).
         let full = 0.656 + 0.5 * (0.5 + 0.078);
         assert!((h.seconds(0.0, 1) - full as f32).abs() < 1e-6, "{}", h.seconds(0.0, 1));
@@ -467,12 +501,12 @@ mod tests {
         assert!((h.seconds(1.0 / 30.0, 2) - want as f32).abs() < 1e-6, "{} vs {want}", h.seconds(1.0 / 30.0, 2));
         // Shorter than the full frame's span over d, which overshot a fast flick's end.
         let mut plain = Horizon::new();
-        plain.observe(-0.656, 0.0, 0.0, false);
+        plain.observe(-0.656, 0.0, 0.0, 1);
         assert!(h.seconds(1.0 / 30.0, 2) < plain.seconds(1.0 / 30.0, 2) - 0.1);
         // A render time longer than the span, or not finite, is not used.
         for bad in [0.9, f64::NAN, f64::INFINITY] {
             let mut b = Horizon::new();
-            b.observe(-0.656, 0.0, bad, false);
+            b.observe(-0.656, 0.0, bad, 1);
             assert_eq!(b.seconds(1.0 / 30.0, 2), plain.seconds(1.0 / 30.0, 2), "{bad}");
         }
     }

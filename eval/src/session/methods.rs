@@ -493,7 +493,7 @@ mod tests {
         assert_eq!(a.name(), "splat-layers+predict+frames=4+adapt+layers=4+coarse=2");
         assert_eq!(MethodSpec::parse(&a.name()).unwrap(), a);
         assert_eq!(MethodSpec::parse("volwarp-adaptive=4").unwrap().request.coarse, 4);
-        assert_eq!(a.method(1).request().divisor(true), 2);
+        assert_eq!(a.method(1).request().divisor(volwarp_core::method::Motion::Moving), 2);
         let r = MethodSpec::parse("splat-layers+predict+layers=4+rest=1").unwrap();
         assert_eq!((r.request.rest_layers, r.method(4).request().layers(false)), (1, 1));
         assert_eq!(r.name(), "splat-layers+predict+layers=4+rest=1");

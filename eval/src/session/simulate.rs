@@ -385,11 +385,16 @@ pub fn serve(
         let bytes = encode_frame(marcher, &req, &frame, cfg.encoding).0.len() as u64;
         (frame, bytes)
     };
-    // Adaptive resolution: a request sent while the camera moved asks for a coarser grid, which
-    // the server renders in its time times the marcher's measured ratio.
+    // Adaptive resolution: a request sent while the camera moved asks for a coarser grid (the
+    // coarsest while the view turns fast until a frame asked for since the move began has
+    // arrived: core's `RequestPolicy::motion`), which the server renders in its time times the
+    // marcher's measured ratio. Whether such a frame has arrived depends only on frames that
+    // arrived before the request was sent, all in `out` by then.
     let moving = |r: &Request| r.tick > 0 && cams[r.tick] != cams[r.tick - 1];
-    let server_ms = |r: &Request| {
-        net.server_ms * cfg.resolution_cost.ratio(request.policy().divisor_for(moving(r), cfg.size, cfg.size))
+    let arrived = |requests: &[Request], r: usize, out: &[(FrameEvent, volwarp_core::wire::Frame)]| {
+        let begun = (0..r).rev().take_while(|&k| moving(&requests[k])).last().unwrap_or(r);
+        let (from, sent) = (requests[begun].sent_ms, requests[r].sent_ms);
+        out.iter().skip(1).any(|(f, _)| f.request_ms >= from && f.arrive_ms <= sent)
     };
     // The first frame is layered: the first moves warp it (one sample per pixel there raised
     // the MRI orbit's p95 from 0.044 to 0.065).
@@ -401,10 +406,14 @@ pub fn serve(
     // The client side: what each request asks for, in the order they are sent.
     let mut predictor = Predictor::new();
     let mut observed = 0usize; // ticks the predictor has seen
-                               // Per request once asked: the camera sent, the view it shows exactly, the guard offset.
-    type Asked = (Camera, Camera, (u32, u32), u8);
+                               // Per request once asked: the camera sent, the view it shows exactly, the guard offset,
+                               // the segments per pixel and the grid's divisor per axis.
+    type Asked = (Camera, Camera, (u32, u32), u8, u32);
     let mut asked: Vec<Option<Asked>> = vec![None; requests.len()];
-    let mut ask = |i: usize, requests: &mut [Request], out: &[(FrameEvent, volwarp_core::wire::Frame)]| {
+    let mut ask = |i: usize,
+                   requests: &mut [Request],
+                   out: &[(FrameEvent, volwarp_core::wire::Frame)],
+                   asked: &mut Vec<Option<Asked>>| {
         // Requests are asked in order; catch the predictor up to request i.
         let first_unasked = asked.iter().position(Option::is_none).unwrap_or(asked.len());
         for r in first_unasked..=i {
@@ -418,15 +427,18 @@ pub fn serve(
                 }
                 observed = observed.max(requests[r].tick + 1);
                 // The first frame: requested one round trip, render and transfer before 0.
-                horizon.observe(-first_ms * 1e-3, 0.0, net.server_ms * 1e-3, false);
+                horizon.observe(-first_ms * 1e-3, 0.0, net.server_ms * 1e-3, 1);
                 for (f, _) in out.iter().skip(1).filter(|(f, _)| f.arrive_ms <= sent) {
-                    // A frame on the coarser grid of adaptive resolution: fewer pixels than shown.
-                    let coarse = f.view.width < cams[0].width;
-                    horizon.observe(f.request_ms * 1e-3, f.arrive_ms * 1e-3, f.render_ms * 1e-3, coarse);
+                    // A frame on a coarser grid of adaptive resolution: fewer pixels than shown.
+                    let d = (cams[0].width as f32 / f.view.width.max(1) as f32).round() as u32;
+                    horizon.observe(f.request_ms * 1e-3, f.arrive_ms * 1e-3, f.render_ms * 1e-3, d);
                 }
             }
-            let asks = request.policy().camera_at(shown, moving(&requests[r]), &predictor, &horizon, &cadence);
-            asked[r] = Some((asks.camera, asks.view, asks.guard_offset, asks.layers));
+            let policy = request.policy();
+            let motion = policy.motion(moving(&requests[r]), arrived(requests, r, out), &predictor, &horizon, &cadence);
+            let asks = policy.camera_at(shown, motion, &predictor, &horizon, &cadence);
+            let divisor = policy.divisor_for(motion, cfg.size, cfg.size);
+            asked[r] = Some((asks.camera, asks.view, asks.guard_offset, asks.layers, divisor));
             requests[r].camera = asks.camera;
         }
         asked[i].expect("asked above")
@@ -443,31 +455,32 @@ pub fn serve(
             j += 1;
         }
         s = s.max(arrival(&requests[j]));
-        let render_ms = server_ms(&requests[j]);
+        let (_, view, guard_offset, wanted, divisor) = ask(j, &mut requests, &out, &mut asked);
+        let render_ms = net.server_ms * cfg.resolution_cost.ratio(divisor);
         if s + render_ms + net.latency_ms > end_ms {
             break; // it would arrive after the session
         }
-        let (_, view, guard_offset, wanted) = ask(j, &mut requests, &out);
         // Preemption, the real server's rule: a request for another viewport (adaptive
         // resolution's, the view came to rest or started moving) that arrives while this one
         // renders ends the render there, unless the one before was dropped; one for a coarser
         // viewport (the view started moving) that arrives while it is written ends the write.
         // The server takes the newest request. `turn(from, to, coarser)`: the arrival of such a
         // request in that span.
-        let viewport = |r: &Request| request.policy().divisor_for(moving(r), cfg.size, cfg.size);
-        let turn = |from: f64, to: f64, coarser: bool| {
+        // (The requests arriving in the span are asked first: their grids are the client's.)
+        let turn = |from: f64, to: f64, coarser: bool, requests: &[Request], asked: &[Option<Asked>]| {
             if !request.preempt {
                 return None;
             }
-            let this = viewport(&requests[j]);
-            let other = |v: u32| if coarser { v > this } else { v != this };
-            requests[j + 1..]
-                .iter()
-                .map(|r| (arrival(r), r))
-                .find(|&(a, r)| a > from && a < to && other(viewport(r)))
+            let other = |v: u32| if coarser { v > divisor } else { v != divisor };
+            (j + 1..requests.len())
+                .map(|r| (arrival(&requests[r]), r))
+                .find(|&(a, r)| a > from && a < to && asked[r].is_some_and(|q| other(q.4)))
                 .map(|(a, _)| a)
         };
-        if let Some(a) = turn(s, s + render_ms, false).filter(|_| !dropped_last) {
+        if let Some(last) = requests.iter().rposition(|r| arrival(r) < s + render_ms) {
+            ask(last, &mut requests, &out, &mut asked);
+        }
+        if let Some(a) = turn(s, s + render_ms, false, &requests, &asked).filter(|_| !dropped_last) {
             served = j + 1;
             s = a;
             dropped_last = true;
@@ -485,7 +498,10 @@ pub fn serve(
         // the link still carries what the kernel holds: the part, the unsent bytes the socket
         // keeps and a round trip of bytes in flight. (The coarse frame asked for next is never
         // dropped on the link, so frames keep coming however often the view turns.)
-        if let Some(a) = turn(write_start, write_end, true) {
+        if let Some(last) = requests.iter().rposition(|r| arrival(r) < write_end) {
+            ask(last, &mut requests, &out, &mut asked);
+        }
+        if let Some(a) = turn(write_start, write_end, true, &requests, &asked) {
             s = a;
             let in_flight = net.mbps * 1e6 / 8.0 * 2.0 * net.latency_ms * 1e-3;
             let tail = (wire::PART_LEN + volwarp_server::server::NOTSENT_LOWAT) as f64 + in_flight;
