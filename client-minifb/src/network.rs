@@ -306,8 +306,6 @@ struct Shared {
     down: AtomicBool,
     /// The last request sequence number sent (over all connections).
     seq: AtomicU64,
-    /// The newest request sequence number a frame arrived for.
-    arrived_seq: AtomicU64,
     /// The server's visual state and refusals.
     visual: Mutex<VisualSlot>,
     /// The id of the server's last VisualState on the current connection: frames read after it
@@ -435,7 +433,6 @@ impl Network {
             link_cv: Condvar::new(),
             down: AtomicBool::new(false),
             seq: AtomicU64::new(0),
-            arrived_seq: AtomicU64::new(0),
             visual: Mutex::new(VisualSlot::default()),
             state_id: AtomicU32::new(0),
             reconnects: AtomicU64::new(0),
@@ -803,7 +800,6 @@ fn read_loop(sh: &Shared, mut stream: impl Read, limits: Limits, recorder: Optio
                 let received_at = Instant::now();
                 let asked = lock(&sh.sent).iter().rev().find(|(s, ..)| *s == frame.header.seq).map(|&(_, t, d)| (t, d));
                 let (requested_at, divisor) = (asked.map(|a| a.0), asked.map_or(1, |a| a.1));
-                sh.arrived_seq.fetch_max(frame.header.seq, Ordering::SeqCst);
                 if let Some(r) = recorder {
                     r.frame(bytes);
                 }
@@ -942,8 +938,6 @@ fn build_loop(sh: &Shared, cfg: &NetConfig) {
 /// display's own predictor (which has seen every camera shown), widened by a guard band.
 fn write_loop(sh: &Shared, mut stream: impl Write, request: RequestPolicy) {
     let mut last_send: Option<Instant> = None;
-    // The first request of the current move (none at rest).
-    let mut move_began: Option<u64> = None;
     loop {
         let (view, predictor, moving) = {
             let mut g = lock(&sh.view);
@@ -996,13 +990,10 @@ fn write_loop(sh: &Shared, mut stream: impl Write, request: RequestPolicy) {
         };
         let seq = sh.seq.fetch_add(1, Ordering::SeqCst) + 1;
         let horizon = lock(&sh.horizon).0;
-        // While the view moves, on the coarser grid of adaptive resolution (`--coarse`), the
-        // coarsest while it turns fast until a frame asked for since the move began has
-        // arrived; a coarse view differs from the view at rest, so resting asks again at full
-        // resolution.
-        move_began = if moving { Some(move_began.unwrap_or(seq)) } else { None };
-        let arrived = move_began.is_some_and(|b| sh.arrived_seq.load(Ordering::SeqCst) >= b);
-        let motion = request.motion(moving, arrived, &predictor, &horizon, &CADENCE);
+        // While the view moves, on the coarser grid of adaptive resolution (`--coarse`), coarser
+        // still while it turns fast; a coarse view differs from the view at rest, so resting
+        // asks again at full resolution.
+        let motion = request.motion(moving, &predictor, &horizon, &CADENCE);
         let asks = request.camera_at(view.camera, motion, &predictor, &horizon, &CADENCE);
         lock(&sh.view).asked = Some(asks.view);
         let camera = asks.camera;

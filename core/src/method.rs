@@ -19,12 +19,11 @@
 //! a pixel grid `coarse` times coarser per axis (the same field of view, `1/coarse²` of the
 //! pixels, so the frame is marched, encoded and sent sooner) and warps it at display
 //! resolution, each segment drawn as its coarse source pixel's footprint; the first request
-//! after the view rests asks for the full resolution. Until a frame asked for since the move
-//! began has arrived ([`Motion::Starting`]), requests ask for a grid [`START_COARSE`] times
-//! coarser again: only the rest frame is on screen and every tick warps it further, so the
-//! sooner a frame of the moving view comes, the better (the requests of that stretch share one
-//! viewport, so none makes the server drop another's render). The client decides, not the
-//! server: it
+//! after the view rests asks for the full resolution. While the view turns fast
+//! ([`Motion::Fast`]: it would turn [`FAST_WARP_DEG`] or more before a frame on that grid could
+//! come), requests ask for a grid [`FAST_COARSE`] times coarser again: every tick warps the
+//! frame on screen further, so the sooner the next comes, the better. The client decides, not
+//! the server: it
 //! alone knows whether its view moves (a predicting client's still request differs from its
 //! last predicted one, so a server comparing successive requests would call it moving).
 //!
@@ -79,18 +78,19 @@ pub struct Method {
 /// The largest viewport divisor of adaptive resolution.
 pub const MAX_COARSE: u8 = 4;
 
-/// While the view turns fast and no frame asked for since it began to move has arrived,
-/// requests ask for a grid this many times coarser than [`Method::coarse`] (at most
-/// [`MAX_COARSE`]; only with adaptive resolution on): until then the client has only the rest
-/// frame, and every tick of a fast flick warps it further (36° and more before the first
-/// coarse frame came). Measured (`docs/results.md`, "Adaptive resolution").
-pub const START_COARSE: u8 = 2;
+/// While the view turns fast ([`FAST_WARP_DEG`]), requests ask for a grid this many times
+/// coarser than [`Method::coarse`] (at most [`MAX_COARSE`]; only with adaptive resolution on):
+/// a fast flick from rest warped the rest frame 36° and more before the first half-grid frame
+/// came, and the last one 28° before the next. Measured (`docs/results.md`, "Adaptive
+/// resolution").
+pub const FAST_COARSE: u8 = 2;
 
 /// How far (degrees) the view must turn before a frame on the moving grid could come (the
-/// predictor's turn rate times that grid's horizon) for a move's first requests to ask for the
-/// coarsest grid: a slow move keeps the sharper grid (at 30°/s the coarsest grid's blur cost
-/// more than its fresher frames gained: `docs/results.md`, "Adaptive resolution").
-pub const START_WARP_DEG: f32 = 20.0;
+/// predictor's turn rate times that grid's horizon) for a request to ask for the coarser grid
+/// of [`FAST_COARSE`]: a slower move keeps the sharper grid (at 512² the 30°/s sessions turn
+/// 8–15° in that time, and the quarter grid's blur cost more there than its fresher frames
+/// gained: `docs/results.md`, "Adaptive resolution").
+pub const FAST_WARP_DEG: f32 = 20.0;
 
 /// How the view moves when a request is sent: what adaptive resolution's grid depends on
 /// ([`RequestPolicy::motion`]).
@@ -98,11 +98,10 @@ pub const START_WARP_DEG: f32 = 20.0;
 pub enum Motion {
     /// The view holds still: the full resolution.
     Rest,
-    /// The view turns fast and no frame asked for since it began to move has arrived: the
-    /// coarsest grid.
-    Starting,
     /// The view moves: the moving grid.
     Moving,
+    /// The view turns fast: the coarser grid of [`FAST_COARSE`].
+    Fast,
 }
 
 impl Motion {
@@ -234,38 +233,30 @@ impl RequestPolicy {
         self.camera_at(shown, Motion::Rest, predictor, horizon, cadence)
     }
 
-    /// The motion of a request for a view that is `moving` or not, where a frame asked for
-    /// since the move began has `arrived` or not: [`Motion::Starting`] while none has and the
-    /// view would turn at least [`START_WARP_DEG`] before a frame on the moving grid could come
-    /// (the `predictor`'s turn rate times the `horizon` of that grid), else [`Motion::Moving`].
-    pub fn motion(
-        &self,
-        moving: bool,
-        arrived: bool,
-        predictor: &Predictor,
-        horizon: &Horizon,
-        cadence: &Cadence,
-    ) -> Motion {
+    /// The motion of a request for a view that is `moving` or not: [`Motion::Fast`] where it
+    /// would turn at least [`FAST_WARP_DEG`] before a frame on the moving grid could come (the
+    /// `predictor`'s turn rate times the `horizon` of that grid), else [`Motion::Moving`].
+    pub fn motion(&self, moving: bool, predictor: &Predictor, horizon: &Horizon, cadence: &Cadence) -> Motion {
         if !moving {
             return Motion::Rest;
         }
         let wait_s = horizon.seconds(cadence.display_tick_s, self.divisor(Motion::Moving));
-        if !arrived && predictor.turn_rate_deg_s() * wait_s >= START_WARP_DEG {
-            Motion::Starting
+        if predictor.turn_rate_deg_s() * wait_s >= FAST_WARP_DEG {
+            Motion::Fast
         } else {
             Motion::Moving
         }
     }
 
     /// The viewport divisor per axis of a request: `coarse` while the view moves,
-    /// [`START_COARSE`] times that (at most [`MAX_COARSE`]) as it starts to, 1 at rest.
+    /// [`FAST_COARSE`] times that (at most [`MAX_COARSE`]) while it turns fast, 1 at rest.
     pub fn divisor(&self, motion: Motion) -> u32 {
         let coarse = u32::from(self.coarse.clamp(1, MAX_COARSE));
         match motion {
             Motion::Rest => 1,
             Motion::Moving => coarse,
-            Motion::Starting if coarse > 1 => (coarse * u32::from(START_COARSE)).min(u32::from(MAX_COARSE)),
-            Motion::Starting => 1,
+            Motion::Fast if coarse > 1 => (coarse * u32::from(FAST_COARSE)).min(u32::from(MAX_COARSE)),
+            Motion::Fast => 1,
         }
     }
 
@@ -407,19 +398,19 @@ mod tests {
         assert_eq!(p.divisor_for(Motion::Moving, 255, 1000), 1);
         assert_eq!(p.divisor_for(Motion::Moving, 256, 256), 2);
         assert_eq!(p.divisor_for(Motion::Rest, 1024, 1024), 1);
-        // The first request after a rest: twice as coarse again, at most 4, and halved while the
-        // grid would be too small.
-        assert_eq!(p.divisor(Motion::Starting), 4);
-        assert_eq!(RequestPolicy { coarse: 4, ..p }.divisor(Motion::Starting), 4);
-        assert_eq!(RequestPolicy { coarse: 1, ..p }.divisor(Motion::Starting), 1, "adaptive resolution off");
-        assert_eq!(p.divisor_for(Motion::Starting, 512, 512), 4);
-        assert_eq!(p.divisor_for(Motion::Starting, 384, 300), 2);
-        assert_eq!(p.divisor_for(Motion::Starting, 255, 255), 1);
-        assert_eq!(p.camera_at(cam, Motion::Starting, &predictor, &h, &CLIENT).camera, cam.with_viewport(256, 192));
+        // While the view turns fast: twice as coarse again, at most 4, and halved while the grid
+        // would be too small.
+        assert_eq!(p.divisor(Motion::Fast), 4);
+        assert_eq!(RequestPolicy { coarse: 4, ..p }.divisor(Motion::Fast), 4);
+        assert_eq!(RequestPolicy { coarse: 1, ..p }.divisor(Motion::Fast), 1, "adaptive resolution off");
+        assert_eq!(p.divisor_for(Motion::Fast, 512, 512), 4);
+        assert_eq!(p.divisor_for(Motion::Fast, 384, 300), 2);
+        assert_eq!(p.divisor_for(Motion::Fast, 255, 255), 1);
+        assert_eq!(p.camera_at(cam, Motion::Fast, &predictor, &h, &CLIENT).camera, cam.with_viewport(256, 192));
         let square = cam.with_viewport(512, 512);
-        let starting = p.camera_at(square, Motion::Starting, &predictor, &h, &CLIENT);
+        let starting = p.camera_at(square, Motion::Fast, &predictor, &h, &CLIENT);
         assert_eq!(starting.camera, square.with_viewport(128, 128));
-        assert_eq!(starting.layers, 0, "starting to move: the Hello's layers");
+        assert_eq!(starting.layers, 0, "turning fast: the Hello's layers");
         let small = cam.with_viewport(200, 150);
         assert_eq!(p.camera_at(small, Motion::Moving, &predictor, &h, &CLIENT).camera, small);
         // A guard band on the coarse grid keeps its fraction of the coarse view.
@@ -432,7 +423,7 @@ mod tests {
     }
 
     #[test]
-    fn a_fast_turn_starts_on_the_coarsest_grid_until_a_frame_of_the_move_arrives() {
+    fn a_fast_turn_asks_for_the_coarser_grid() {
         let cam = Camera::look_at(glam::Vec3::new(0.0, 0.0, 3.0), glam::Vec3::ZERO, glam::Vec3::Y, 45.0, 512, 512);
         let turned = |deg: f32| {
             let r = deg.to_radians();
@@ -450,20 +441,25 @@ mod tests {
         let mut h = Horizon::new();
         h.observe(-0.6, 0.0, 0.0, 1);
         let p = Method::DEFAULT.request();
-        let motion = |rate: f32, arrived: bool| {
+        let motion = |rate: f32, h: &Horizon| {
             let mut predictor = Predictor::new();
             predictor.observe(cam, 0.0);
             predictor.observe(turned(rate / 30.0), 1.0 / 30.0);
-            p.motion(true, arrived, &predictor, &h, &CLIENT)
+            p.motion(true, &predictor, h, &CLIENT)
         };
-        assert!((motion(180.0, false) == Motion::Starting) && (motion(180.0, true) == Motion::Moving));
-        assert_eq!(motion(30.0, false), Motion::Moving, "30°/s turns 13° in 0.44 s");
+        assert_eq!(motion(180.0, &h), Motion::Fast);
+        assert_eq!(motion(30.0, &h), Motion::Moving, "30°/s turns 13° in 0.44 s");
+        // Frames on the moving grid that come in 0.1 s (horizon about 0.14 s): 180°/s turns 25°,
+        // 120°/s 17°.
+        let mut quick = h;
+        quick.observe(0.9, 1.0, 0.0, 2);
+        assert_eq!((motion(180.0, &quick), motion(120.0, &quick)), (Motion::Fast, Motion::Moving));
         let still = Predictor::new();
-        assert_eq!(p.motion(false, false, &still, &h, &CLIENT), Motion::Rest);
-        assert_eq!(p.motion(true, false, &still, &h, &CLIENT), Motion::Moving, "no turn rate yet");
+        assert_eq!(p.motion(false, &still, &h, &CLIENT), Motion::Rest);
+        assert_eq!(p.motion(true, &still, &h, &CLIENT), Motion::Moving, "no turn rate yet");
         // Without adaptive resolution every grid is the full one.
         let full = RequestPolicy { coarse: 1, ..p };
-        assert_eq!(full.divisor(motion(180.0, false)), 1);
+        assert_eq!(full.divisor(motion(180.0, &h)), 1);
     }
 
     #[test]

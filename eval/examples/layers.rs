@@ -17,7 +17,7 @@
 //! ```
 //!
 //! Footprint options of the layered renderer: `--own`, `--no-fill`, `--no-cracks`, `--grow`, `--grow-alpha`,
-//! `--max-own`, `--watertight T` (0: off), `--water-ratio R`; `--png DIR` writes each layered
+//! `--max-own`, `--watertight T` (0: off), `--water-ratio R`, `--opacity-limit F`; `--png DIR` writes each layered
 //! image, the truth and the ꟻLIP map; `--angles A,B,…` warps to other angles, `--only NAME`
 //! takes one dataset.
 

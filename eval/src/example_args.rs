@@ -11,7 +11,8 @@ pub fn arg<'a>(args: &'a [String], name: &str) -> Option<&'a str> {
 /// The default [`LayerOptions`] with the flags `args` sets: `--own H` (half side, source
 /// pixels), `--no-fill`, `--no-cracks`, `--grow G` (pixels per degree of warp; 0:
 /// fixed), `--grow-from D` (degrees of warp before growing), `--grow-alpha A`, `--max-own H`, `--watertight T` (source pixels; 0: off),
-/// `--water-ratio R`. A value that does not parse is an error naming its flag.
+/// `--water-ratio R`, `--opacity-limit F` (at most 1: a slab's opacity not scaled by its
+/// footprint's area). A value that does not parse is an error naming its flag.
 pub fn layer_options(args: &[String]) -> Result<LayerOptions, String> {
     fn set<T: core::str::FromStr>(args: &[String], name: &str, what: &str, v: &mut T) -> Result<(), String> {
         if let Some(s) = arg(args, name) {
@@ -45,9 +46,11 @@ mod tests {
     #[test]
     fn flags_set_the_footprint_options_and_bad_values_are_errors() {
         assert_eq!(layer_options(&args("prog dir")).unwrap(), LayerOptions::DEFAULT);
-        let o = layer_options(&args("prog dir --no-cracks --watertight 0 --water-ratio 0.25 --grow 0")).unwrap();
+        let o =
+            layer_options(&args("prog dir --no-cracks --watertight 0 --water-ratio 0.25 --grow 0 --opacity-limit 1"))
+                .unwrap();
         assert!(!o.close_cracks && o.fill);
-        assert_eq!((o.watertight, o.water_ratio, o.grow_per_degree), (0.0, 0.25, 0.0));
+        assert_eq!((o.watertight, o.water_ratio, o.grow_per_degree, o.opacity_limit), (0.0, 0.25, 0.0, 1.0));
         let o = layer_options(&args("prog --no-fill --own 0.7 --grow-alpha 128 --max-own 1.5 --grow-from 2")).unwrap();
         assert_eq!((o.fill, o.own, o.grow_min_alpha, o.max_own, o.grow_from_deg), (false, 0.7, 128, 1.5, 2.0));
         let e = layer_options(&args("prog --grow-alpha 300")).unwrap_err();

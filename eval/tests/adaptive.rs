@@ -194,31 +194,28 @@ fn a_view_that_flips_between_moving_and_still_still_gets_every_other_render() {
 }
 
 #[test]
-fn a_fast_flick_from_rest_starts_on_the_coarsest_grid_until_its_first_frame_arrives() {
+fn a_fast_flick_asks_for_the_coarser_grid() {
     // The default method's flick (180°/s for 0.5 s, then rest) at 512², a 500 ms server: the
-    // view would turn far more than `START_WARP_DEG` before a half-resolution frame could come,
-    // so the move's requests ask for the quarter grid (128²) until one of its frames has
-    // arrived, then for the half grid (256²), and at rest for the full resolution.
+    // view would turn far more than `FAST_WARP_DEG` before a half-resolution frame could come,
+    // so while it turns its requests ask for the quarter grid (128²), and at rest for the full
+    // resolution; on the 30°/s orbit (about 10° in that time) for the half grid (256²).
     let net = NetworkModel { server_ms: 500.0, latency_ms: 50.0, mbps: 100.0 };
     let ds = vec![Dataset::default_bundled()];
-    let mut o = common::session_opts(&["flick"], "volwarp", net);
-    o.cfg.size = 512;
-    o.cfg.duration_s = 1.5;
-    o.cfg.score_every = 1000;
-    o.server_ms = Some(500.0);
-    let frames = simulate_all(&ds, &o).unwrap().remove(0).result.frames;
-    let widths: Vec<u32> = frames.iter().skip(1).map(|f| f.view.width).collect();
-    let quarter = widths.iter().take_while(|&&w| w == 128).count();
-    assert!(quarter >= 1, "the flick's first frames on the quarter grid: {widths:?}");
-    let first = &frames[1];
-    // Every quarter-grid request was sent before the first frame of the move arrived.
-    for f in frames.iter().skip(1).take(quarter) {
-        assert!(f.request_ms < first.arrive_ms, "{f:?} after {first:?}");
-    }
-    let rest = widths[quarter..].iter().position(|&w| w == 512).expect("a frame at rest");
-    assert!(rest >= 1 && widths[quarter..quarter + rest].iter().all(|&w| w == 256), "{widths:?}");
-    assert!(widths[quarter + rest..].iter().all(|&w| w == 512), "{widths:?}");
-    // The first frame of the move comes sooner than a half-resolution one could: its render is
-    // the quarter grid's share of the 500 ms.
-    assert!(first.render_ms < 0.2 * 500.0, "{first:?}");
+    let widths = |scenario: &str| {
+        let mut o = common::session_opts(&[scenario], "volwarp", net);
+        o.cfg.size = 512;
+        o.cfg.duration_s = 1.5;
+        o.cfg.score_every = 1000;
+        o.server_ms = Some(500.0);
+        let frames = simulate_all(&ds, &o).unwrap().remove(0).result.frames;
+        frames.iter().skip(1).map(|f| (f.view.width, f.request_ms, f.render_ms)).collect::<Vec<_>>()
+    };
+    let flick = widths("flick");
+    let turning = flick.iter().take_while(|f| f.1 < 500.0).count();
+    assert!(turning >= 3 && flick[..turning].iter().all(|f| f.0 == 128), "{flick:?}");
+    // Each rendered in the quarter grid's share of the 500 ms.
+    assert!(flick[..turning].iter().all(|f| f.2 < 0.2 * 500.0), "{flick:?}");
+    assert!(flick[turning..].iter().all(|f| f.0 == 512) && turning < flick.len(), "{flick:?}");
+    let orbit = widths("orbit");
+    assert!(orbit.len() >= 3 && orbit.iter().all(|f| f.0 == 256), "{orbit:?}");
 }

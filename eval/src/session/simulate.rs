@@ -386,16 +386,9 @@ pub fn serve(
         (frame, bytes)
     };
     // Adaptive resolution: a request sent while the camera moved asks for a coarser grid (the
-    // coarsest while the view turns fast until a frame asked for since the move began has
-    // arrived: core's `RequestPolicy::motion`), which the server renders in its time times the
-    // marcher's measured ratio. Whether such a frame has arrived depends only on frames that
-    // arrived before the request was sent, all in `out` by then.
+    // coarser still while the view turns fast: core's `RequestPolicy::motion`), which the
+    // server renders in its time times the marcher's measured ratio.
     let moving = |r: &Request| r.tick > 0 && cams[r.tick] != cams[r.tick - 1];
-    let arrived = |requests: &[Request], r: usize, out: &[(FrameEvent, volwarp_core::wire::Frame)]| {
-        let begun = (0..r).rev().take_while(|&k| moving(&requests[k])).last().unwrap_or(r);
-        let (from, sent) = (requests[begun].sent_ms, requests[r].sent_ms);
-        out.iter().skip(1).any(|(f, _)| f.request_ms >= from && f.arrive_ms <= sent)
-    };
     // The first frame is layered: the first moves warp it (one sample per pixel there raised
     // the MRI orbit's p95 from 0.044 to 0.065).
     let (first, first_bytes) = render(cams[0], 0, looks.state_at(0), 0);
@@ -419,23 +412,23 @@ pub fn serve(
         for r in first_unasked..=i {
             let sent = requests[r].sent_ms;
             let shown = requests[r].camera;
+            // The display's predictor sees every camera shown, up to the request's tick, and the
+            // horizon every frame arrived (both also say how fast the view turns for adaptive
+            // resolution, with or without prediction, as in the window client).
             let mut horizon = Horizon::new();
-            if request.predict {
-                // The display's predictor sees every camera shown, up to the request's tick.
-                for (k, c) in cams.iter().enumerate().take(requests[r].tick + 1).skip(observed) {
-                    predictor.observe(*c, k as f64 * tick_ms * 1e-3);
-                }
-                observed = observed.max(requests[r].tick + 1);
-                // The first frame: requested one round trip, render and transfer before 0.
-                horizon.observe(-first_ms * 1e-3, 0.0, net.server_ms * 1e-3, 1);
-                for (f, _) in out.iter().skip(1).filter(|(f, _)| f.arrive_ms <= sent) {
-                    // A frame on a coarser grid of adaptive resolution: fewer pixels than shown.
-                    let d = (cams[0].width as f32 / f.view.width.max(1) as f32).round() as u32;
-                    horizon.observe(f.request_ms * 1e-3, f.arrive_ms * 1e-3, f.render_ms * 1e-3, d);
-                }
+            for (k, c) in cams.iter().enumerate().take(requests[r].tick + 1).skip(observed) {
+                predictor.observe(*c, k as f64 * tick_ms * 1e-3);
+            }
+            observed = observed.max(requests[r].tick + 1);
+            // The first frame: requested one round trip, render and transfer before 0.
+            horizon.observe(-first_ms * 1e-3, 0.0, net.server_ms * 1e-3, 1);
+            for (f, _) in out.iter().skip(1).filter(|(f, _)| f.arrive_ms <= sent) {
+                // A frame on a coarser grid of adaptive resolution: fewer pixels than shown.
+                let d = (cams[0].width as f32 / f.view.width.max(1) as f32).round() as u32;
+                horizon.observe(f.request_ms * 1e-3, f.arrive_ms * 1e-3, f.render_ms * 1e-3, d);
             }
             let policy = request.policy();
-            let motion = policy.motion(moving(&requests[r]), arrived(requests, r, out), &predictor, &horizon, &cadence);
+            let motion = policy.motion(moving(&requests[r]), &predictor, &horizon, &cadence);
             let asks = policy.camera_at(shown, motion, &predictor, &horizon, &cadence);
             let divisor = policy.divisor_for(motion, cfg.size, cfg.size);
             asked[r] = Some((asks.camera, asks.view, asks.guard_offset, asks.layers, divisor));
