@@ -54,11 +54,7 @@ fn bad_address_and_nothing_listening() {
 /// A server that dies after the first real request (and never listens again).
 fn dying_server() -> String {
     fake_server(|mut s| {
-        use std::io::Write;
-        assert!(matches!(read_msg(&mut s), Some(Message::Hello(_))));
-        s.write_all(&encode(&Message::Hello(Hello::new(0)))).unwrap();
-        assert!(matches!(read_msg(&mut s), Some(Message::CameraRequest(_))));
-        s.write_all(&encode(&empty_frame(0))).unwrap();
+        greet(&mut s, Hello::new(0));
         // The first real request arrives, then the server dies.
         let _ = read_msg(&mut s);
     })

@@ -16,10 +16,7 @@ use volwarp_core::Heuristic;
 fn writer_sends_only_the_newest_camera_throttled() {
     let (tx, rx) = mpsc::channel();
     let addr = fake_server(move |mut s| {
-        assert!(matches!(read_msg(&mut s), Some(Message::Hello(_))));
-        s.write_all(&encode(&Message::Hello(Hello::new(0)))).unwrap();
-        assert!(matches!(read_msg(&mut s), Some(Message::CameraRequest(_))));
-        s.write_all(&encode(&empty_frame(0))).unwrap();
+        greet(&mut s, Hello::new(0));
         // Never answer: count what the client sends in one second.
         let t0 = Instant::now();
         let mut got = Vec::new();
@@ -70,11 +67,7 @@ fn a_moving_view_asks_for_the_hellos_layers_and_the_view_at_rest_for_one_sample(
     let (tx, rx) = mpsc::channel();
     let (still_tx, still_rx) = mpsc::channel::<()>();
     let addr = fake_server(move |mut s| {
-        assert!(matches!(read_msg(&mut s), Some(Message::Hello(_))));
-        s.write_all(&encode(&Message::Hello(Hello::new(0).with_layers(4)))).unwrap();
-        // The connection's probe.
-        assert!(matches!(read_msg(&mut s), Some(Message::CameraRequest(_))));
-        s.write_all(&encode(&empty_frame(0))).unwrap();
+        greet(&mut s, Hello::new(0).with_layers(4));
         // Every request as it comes, on its own thread (no read timeouts that could split one).
         let mut reader = s.try_clone().unwrap();
         std::thread::spawn(move || {
@@ -184,11 +177,7 @@ fn a_fast_turn_asks_for_the_coarser_grid_and_a_slow_one_for_the_moving_grid() {
     // times coarser; turning 15°/s it asks for the moving grid.
     let (tx, rx) = mpsc::channel();
     let addr = fake_server(move |mut s| {
-        assert!(matches!(read_msg(&mut s), Some(Message::Hello(_))));
-        s.write_all(&encode(&Message::Hello(Hello::new(0)))).unwrap();
-        // The connection's probe.
-        assert!(matches!(read_msg(&mut s), Some(Message::CameraRequest(_))));
-        s.write_all(&encode(&empty_frame(0))).unwrap();
+        greet(&mut s, Hello::new(0));
         // The view at rest: its frame comes 0.3 s after the request; then nothing.
         let Some(Message::CameraRequest(rest)) = read_msg(&mut s) else { return };
         tx.send(rest).unwrap();

@@ -118,6 +118,16 @@ pub fn read_msg(s: &mut TcpStream) -> Option<Message> {
     wire::read_payload(&mut &body[..], &h, &limits).ok()
 }
 
+/// The server's side of a connection's start, as a fake server plays it: reads the client's
+/// Hello, answers with `hello`, and answers the connection's probe request with an empty frame.
+pub fn greet(s: &mut TcpStream, hello: volwarp_core::wire::Hello) {
+    use std::io::Write;
+    assert!(matches!(read_msg(s), Some(Message::Hello(_))));
+    s.write_all(&encode(&Message::Hello(hello))).unwrap();
+    assert!(matches!(read_msg(s), Some(Message::CameraRequest(_))));
+    s.write_all(&encode(&empty_frame(0))).unwrap();
+}
+
 /// A one-connection fake server running `script` on the accepted socket; returns its address.
 pub fn fake_server(script: impl FnOnce(TcpStream) + Send + 'static) -> String {
     let l = TcpListener::bind("127.0.0.1:0").unwrap();
