@@ -175,8 +175,8 @@ pub struct Options {
     pub watertight: f32,
     /// Adaptive resolution: while the view moves, ask for frames on a pixel grid N times
     /// coarser per axis (fewer pixels to march and send, so fresher frames, warped at display
-    /// resolution), and for the full resolution once it rests; 1 (the default) always asks for
-    /// the full resolution; 1, 2 or 4.
+    /// resolution), twice as coarse again (at most 4) while it turns fast, and for the full
+    /// resolution once it rests; 1, 2 (the default) or 4; 1 always asks for the full resolution.
     #[arg(long, value_name = "N", default_value_t = Method::DEFAULT.coarse, value_parser = parse_coarse)]
     pub coarse: u8,
     /// Segments per pixel to ask for once the view rests, 0–16 (0, the default: as many as
