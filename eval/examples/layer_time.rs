@@ -31,7 +31,7 @@ use volwarp_core::wire::CameraRequest;
 use volwarp_core::{Heuristic, Image, RendererKind, Scene};
 use volwarp_cpu_tracer::{create, route::unbuilt_scene, LayerSplat};
 use volwarp_eval::camera_paths::orbit;
-use volwarp_eval::example_args::{arg, layer_options};
+use volwarp_eval::example_args::{arg, layer_options, only};
 use volwarp_eval::median;
 use volwarp_server::Marcher;
 
@@ -66,8 +66,10 @@ fn main() {
     // `--water-ratio R`, `--watertight T`, `--no-cracks`, …).
     let lopts = layer_options(&args).expect("footprint options");
     let mut datasets = volwarp_eval::report::shared_datasets(Path::new(dir)).expect("datasets");
-    if let Some(only) = arg(&args, "--only") {
-        datasets.retain(|d| d.name.contains(only));
+    // `--only NAME`: the datasets whose name contains NAME.
+    if let Err(e) = only(&args, &mut datasets, |d| &d.name) {
+        eprintln!("{e}");
+        std::process::exit(2);
     }
     println!(
         "{size}², {threads} thread(s), {} ms, median of {runs}; volwarp = splat-layers K={layers}, fill, adaptive",

@@ -19,7 +19,7 @@
 //! Footprint options of the layered renderer: `--own`, `--no-fill`, `--no-cracks`, `--grow`, `--grow-alpha`,
 //! `--max-own`, `--watertight T` (0: off), `--water-ratio R`, `--opacity-limit F`; `--png DIR` writes each layered
 //! image, the truth and the ꟻLIP map; `--angles A,B,…` warps to other angles, `--only NAME`
-//! takes one dataset.
+//! takes the datasets whose name contains NAME.
 
 use std::path::Path;
 use std::time::Instant;
@@ -29,7 +29,7 @@ use volwarp_core::wire::{CameraRequest, Frame};
 use volwarp_core::{Heuristic, Image, RendererKind, Scene};
 use volwarp_cpu_tracer::{build_scene, create};
 use volwarp_eval::camera_paths::orbit;
-use volwarp_eval::example_args::{arg, layer_options};
+use volwarp_eval::example_args::{arg, layer_options, only};
 use volwarp_eval::{median, Metrics};
 use volwarp_server::Marcher;
 
@@ -56,9 +56,10 @@ fn main() {
     let angles: Vec<f32> = arg(&args, "--angles")
         .map_or(ANGLES.to_vec(), |v| v.split(',').map(|a| a.parse().expect("an angle in degrees")).collect());
     let mut datasets = volwarp_eval::report::shared_datasets(Path::new(dir)).expect("datasets");
-    // `--only NAME`: one dataset of the folder.
-    if let Some(only) = arg(&args, "--only") {
-        datasets.retain(|d| d.name == only);
+    // `--only NAME`: the datasets whose name contains NAME.
+    if let Err(e) = only(&args, &mut datasets, |d| &d.name) {
+        eprintln!("{e}");
+        std::process::exit(2);
     }
     let h = Heuristic::Threshold;
     let base =

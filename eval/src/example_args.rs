@@ -1,11 +1,23 @@
 //! The command-line flags the layered examples (`layers`, `layer_time`) share: `--name value`
-//! lookups and the layered renderer's footprint options, parsed in one place.
+//! lookups, `--only NAME` and the layered renderer's footprint options, parsed in one place.
 
 use volwarp_cpu_tracer::layered::LayerOptions;
 
 /// The value after the flag `name` in `args`, if both are there.
 pub fn arg<'a>(args: &'a [String], name: &str) -> Option<&'a str> {
     args.iter().position(|a| a == name).and_then(|i| args.get(i + 1)).map(|s| s.as_str())
+}
+
+/// `--only NAME`: keeps the `items` whose `name` contains NAME (all without the flag); where
+/// none does, an error listing the names there are (not an empty run).
+pub fn only<T>(args: &[String], items: &mut Vec<T>, name: impl Fn(&T) -> &str) -> Result<(), String> {
+    let Some(want) = arg(args, "--only") else { return Ok(()) };
+    let names: Vec<String> = items.iter().map(|i| name(i).to_string()).collect();
+    items.retain(|i| name(i).contains(want));
+    if items.is_empty() {
+        return Err(format!("--only {want:?}: no dataset's name contains it (there are: {})", names.join(", ")));
+    }
+    Ok(())
 }
 
 /// The default [`LayerOptions`] with the flags `args` sets: `--own H` (half side, source
@@ -57,5 +69,18 @@ mod tests {
         assert!(e.contains("--grow-alpha"), "{e}");
         assert!(layer_options(&args("prog --watertight x")).is_err());
         assert_eq!(arg(&args("prog --size"), "--size"), None);
+    }
+
+    #[test]
+    fn only_keeps_the_names_containing_it_and_an_unknown_one_is_an_error() {
+        let all = vec!["ct_head_quarter", "mri_colin27", "tooth"];
+        let mut v = all.clone();
+        only(&args("prog dir"), &mut v, |s| s).unwrap();
+        assert_eq!(v, all);
+        only(&args("prog dir --only ct_head"), &mut v, |s| s).unwrap();
+        assert_eq!(v, ["ct_head_quarter"]);
+        let mut v = all.clone();
+        let e = only(&args("prog --only lung"), &mut v, |s| s).unwrap_err();
+        assert!(e.contains("lung") && e.contains("mri_colin27"), "{e}");
     }
 }
