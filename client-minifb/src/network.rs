@@ -1011,7 +1011,7 @@ fn write_loop(sh: &Shared, mut stream: impl Write, request: RequestPolicy) {
             if s.len() >= MAX_SENT {
                 s.pop_front();
             }
-            s.push_back((seq, now, request.divisor_for(motion, view.camera.width, view.camera.height)));
+            s.push_back((seq, now, asks.divisor));
         }
         last_send = Some(now);
         if let Err(e) = send_request(&mut stream, &req) {

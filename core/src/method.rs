@@ -210,6 +210,9 @@ pub struct Requested {
     pub guard_offset: (u32, u32),
     /// Segments per pixel asked for (the CameraRequest's `layers`; 0: the Hello's).
     pub layers: u8,
+    /// The divisor per axis of the grid `view` is on (1: the full resolution;
+    /// [`RequestPolicy::divisor_for`]).
+    pub divisor: u32,
 }
 
 impl RequestPolicy {
@@ -293,8 +296,10 @@ impl RequestPolicy {
         }
         let layers = self.layers(motion.moving());
         match GuardBand::new(&view, self.guard, cadence.max_viewport) {
-            Ok(g) if self.guard > 0.0 => Requested { camera: g.camera, view, guard_offset: (g.x0, g.y0), layers },
-            _ => Requested { camera: view, view, guard_offset: (0, 0), layers },
+            Ok(g) if self.guard > 0.0 => {
+                Requested { camera: g.camera, view, guard_offset: (g.x0, g.y0), layers, divisor: d }
+            }
+            _ => Requested { camera: view, view, guard_offset: (0, 0), layers, divisor: d },
         }
     }
 
@@ -387,6 +392,7 @@ mod tests {
         assert_eq!(moving.camera, cam.with_viewport(256, 192), "the same view on a coarser grid");
         assert_eq!(moving.view, moving.camera);
         let still = p.camera_at(cam, Motion::Rest, &predictor, &h, &CLIENT);
+        assert_eq!((moving.divisor, still.divisor), (2, 1), "the grid each asks for");
         assert_eq!(still.camera, cam, "at rest: the full resolution");
         assert_eq!(p.camera(cam, &predictor, &h, &CLIENT), still);
         assert_eq!((p.divisor(Motion::Moving), p.divisor(Motion::Rest)), (2, 1));
@@ -410,6 +416,7 @@ mod tests {
         let square = cam.with_viewport(512, 512);
         let starting = p.camera_at(square, Motion::Fast, &predictor, &h, &CLIENT);
         assert_eq!(starting.camera, square.with_viewport(128, 128));
+        assert_eq!(starting.divisor, 4);
         assert_eq!(starting.layers, 0, "turning fast: the Hello's layers");
         let small = cam.with_viewport(200, 150);
         assert_eq!(p.camera_at(small, Motion::Moving, &predictor, &h, &CLIENT).camera, small);

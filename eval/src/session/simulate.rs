@@ -430,8 +430,7 @@ pub fn serve(
             let policy = request.policy();
             let motion = policy.motion(moving(&requests[r]), &predictor, &horizon, &cadence);
             let asks = policy.camera_at(shown, motion, &predictor, &horizon, &cadence);
-            let divisor = policy.divisor_for(motion, cfg.size, cfg.size);
-            asked[r] = Some((asks.camera, asks.view, asks.guard_offset, asks.layers, divisor));
+            asked[r] = Some((asks.camera, asks.view, asks.guard_offset, asks.layers, asks.divisor));
             requests[r].camera = asks.camera;
         }
         asked[i].expect("asked above")
