@@ -24,14 +24,13 @@
 //! (`layered::close_cracks`, part of every volwarp draw away from the frame's camera) is also
 //! timed alone on the drawn image.
 
-use std::path::Path;
 use std::time::Instant;
 use volwarp_core::renderer::Renderer;
 use volwarp_core::wire::CameraRequest;
 use volwarp_core::{Heuristic, Image, RendererKind, Scene};
 use volwarp_cpu_tracer::{create, route::unbuilt_scene, LayerSplat};
 use volwarp_eval::camera_paths::orbit;
-use volwarp_eval::example_args::{arg, layer_options, only};
+use volwarp_eval::example_args::{arg, datasets_or_exit, layer_options};
 use volwarp_eval::median;
 use volwarp_server::Marcher;
 
@@ -55,7 +54,6 @@ fn ms(cpu: bool, f: impl FnOnce()) -> f64 {
 
 fn main() {
     let args: Vec<String> = std::env::args().collect();
-    let dir = args.get(1).map_or("../shared/data", |s| s.as_str());
     let size: u32 = arg(&args, "--size").map_or(512, |s| s.parse().expect("a size"));
     let runs: usize = arg(&args, "--runs").map_or(15, |s| s.parse().expect("a run count"));
     let threads: usize = arg(&args, "--threads").map_or(1, |s| s.parse().expect("a thread count"));
@@ -65,12 +63,7 @@ fn main() {
     // Footprint options other than the default's, to time a lever (`layers`' flags:
     // `--water-ratio R`, `--watertight T`, `--no-cracks`, …).
     let lopts = layer_options(&args).expect("footprint options");
-    let mut datasets = volwarp_eval::report::shared_datasets(Path::new(dir)).expect("datasets");
-    // `--only NAME`: the datasets whose name contains NAME.
-    if let Err(e) = only(&args, &mut datasets, |d| &d.name) {
-        eprintln!("{e}");
-        std::process::exit(2);
-    }
+    let datasets = datasets_or_exit(&args);
     println!(
         "{size}², {threads} thread(s), {} ms, median of {runs}; volwarp = splat-layers K={layers}, fill, adaptive",
         if cpu { "on-CPU" } else { "wall" }

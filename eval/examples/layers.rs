@@ -29,7 +29,7 @@ use volwarp_core::wire::{CameraRequest, Frame};
 use volwarp_core::{Heuristic, Image, RendererKind, Scene};
 use volwarp_cpu_tracer::{build_scene, create};
 use volwarp_eval::camera_paths::orbit;
-use volwarp_eval::example_args::{arg, layer_options, only};
+use volwarp_eval::example_args::{arg, datasets_or_exit, layer_options};
 use volwarp_eval::{median, Metrics};
 use volwarp_server::Marcher;
 
@@ -45,7 +45,6 @@ fn bytes(m: &Marcher, req: &CameraRequest, f: &Frame) -> (usize, usize) {
 
 fn main() {
     let args: Vec<String> = std::env::args().collect();
-    let dir = args.get(1).map_or("../shared/data", |s| s.as_str());
     let layers: Vec<u32> =
         arg(&args, "--layers").unwrap_or("2,4,8").split(',').map(|s| s.parse().expect("a layer count")).collect();
     let runs: usize = arg(&args, "--runs").map_or(9, |s| s.parse().expect("a run count"));
@@ -55,12 +54,7 @@ fn main() {
     let adapt = lopts.grow_per_degree > 0.0;
     let angles: Vec<f32> = arg(&args, "--angles")
         .map_or(ANGLES.to_vec(), |v| v.split(',').map(|a| a.parse().expect("an angle in degrees")).collect());
-    let mut datasets = volwarp_eval::report::shared_datasets(Path::new(dir)).expect("datasets");
-    // `--only NAME`: the datasets whose name contains NAME.
-    if let Err(e) = only(&args, &mut datasets, |d| &d.name) {
-        eprintln!("{e}");
-        std::process::exit(2);
-    }
+    let datasets = datasets_or_exit(&args);
     let h = Heuristic::Threshold;
     let base =
         [RendererKind::Stale, RendererKind::Points1, RendererKind::Points2, RendererKind::Points3, RendererKind::Splat];

@@ -1,7 +1,7 @@
-//! The measurement of the warp levers on single warps (until the session simulator
-//! lands): for every dataset of a folder, the C0 frame (default framing, `--size`, heuristic
-//! `--heuristic`) is warped along the orbit to 2.5–30° and scored (ꟻLIP) against the marcher's
-//! truth, for
+//! The measurement of the one-sample warp levers on single warps: for every dataset of a folder
+//! (the first argument; `--only NAME` keeps those whose name contains NAME), the C0 frame
+//! (default framing, 512², the heuristic the second argument names, `threshold` without it) is
+//! warped along the orbit to 2.5–30° and scored (ꟻLIP) against the marcher's truth, for
 //!
 //! * `stale`, `points2`, `points3`, `spheres-cpu`, `spheres-fill` (the registry's),
 //! * `fill+guard0.1`: `spheres-fill` of a frame rendered for a guard band of fraction 0.1,
@@ -18,7 +18,6 @@
 //! cargo run --release -p volwarp-eval --example warps -- ../shared/data rel-threshold
 //! ```
 
-use std::path::Path;
 use std::time::Instant;
 use volwarp_core::guard::GuardBand;
 use volwarp_core::renderer::Renderer;
@@ -37,12 +36,11 @@ fn flip(truth: &Image, img: &Image) -> f64 {
 
 fn main() {
     let args: Vec<String> = std::env::args().collect();
-    let dir = args.get(1).map_or("../shared/data", |s| s.as_str());
     let h: Heuristic = args.get(2).map_or(Heuristic::Threshold, |s| Heuristic::from_name(s).expect("a heuristic"));
     let time_only = args.iter().any(|a| a == "--time-only");
     let time = time_only || args.iter().any(|a| a == "--time");
     let size = 512;
-    let datasets = volwarp_eval::report::shared_datasets(Path::new(dir)).expect("datasets");
+    let datasets = volwarp_eval::example_args::datasets_or_exit(&args);
     if time_only {
         timings(&datasets[0], h);
         return;

@@ -1,7 +1,29 @@
-//! The command-line flags the layered examples (`layers`, `layer_time`) share: `--name value`
-//! lookups, `--only NAME` and the layered renderer's footprint options, parsed in one place.
+//! The command-line flags the examples (`layers`, `layer_time`, `warps`) share: the datasets'
+//! folder, `--name value` lookups, `--only NAME` and the layered renderer's footprint options,
+//! parsed in one place.
 
+use std::path::Path;
 use volwarp_cpu_tracer::layered::LayerOptions;
+use volwarp_server::dataset::Dataset;
+
+/// The folder of datasets an example reads when its first argument names none.
+pub const DEFAULT_DATA: &str = "../shared/data";
+
+/// The datasets of the folder the first argument names ([`DEFAULT_DATA`] where it is absent or
+/// a flag), those of `--only NAME` alone; where the folder cannot be read or no name contains
+/// NAME, prints why and exits with status 2.
+pub fn datasets_or_exit(args: &[String]) -> Vec<Dataset> {
+    let dir = args.get(1).filter(|a| !a.starts_with('-')).map_or(DEFAULT_DATA, |s| s.as_str());
+    let mut datasets = match crate::report::shared_datasets(Path::new(dir)) {
+        Ok(d) => d,
+        Err(e) => {
+            eprintln!("datasets: {e}");
+            std::process::exit(2);
+        }
+    };
+    only_or_exit(args, &mut datasets, |d| &d.name);
+    datasets
+}
 
 /// The value after the flag `name` in `args`, if both are there.
 pub fn arg<'a>(args: &'a [String], name: &str) -> Option<&'a str> {
@@ -18,6 +40,15 @@ pub fn only<T>(args: &[String], items: &mut Vec<T>, name: impl Fn(&T) -> &str) -
         return Err(format!("--only {want:?}: no dataset's name contains it (there are: {})", names.join(", ")));
     }
     Ok(())
+}
+
+/// [`only`] for an example's `main`: where no item's name contains NAME, prints the error and
+/// exits with status 2.
+pub fn only_or_exit<T>(args: &[String], items: &mut Vec<T>, name: impl Fn(&T) -> &str) {
+    if let Err(e) = only(args, items, name) {
+        eprintln!("{e}");
+        std::process::exit(2);
+    }
 }
 
 /// The default [`LayerOptions`] with the flags `args` sets: `--own H` (half side, source
