@@ -208,6 +208,9 @@ fn a_fast_flick_asks_for_the_coarser_grid() {
         o.cfg.score_every = 1000;
         o.server_ms = Some(500.0);
         let frames = simulate_all(&ds, &o).unwrap().remove(0).result.frames;
+        // Each frame names the grid it was rendered on: the display's width over the divisor.
+        assert_eq!(frames[0].divisor, 1);
+        assert!(frames.iter().all(|f| f.view.width * f.divisor == 512), "{frames:?}");
         frames.iter().skip(1).map(|f| (f.view.width, f.request_ms, f.render_ms)).collect::<Vec<_>>()
     };
     let flick = widths("flick");

@@ -235,6 +235,7 @@ pub fn serve_images(
                 camera,
                 view: camera,
                 guard_offset: (0, 0),
+                divisor: if reduced { peer.factor } else { 1 },
                 request_ms: plain[j].sent_ms,
                 start_ms: s,
                 render_ms: server_ms,

@@ -106,6 +106,9 @@ pub struct FrameEvent {
     pub view: Camera,
     /// Where `view`'s pixels start in the frame's (`(0, 0)` without a guard band).
     pub guard_offset: (u32, u32),
+    /// The viewport divisor per axis it was rendered with: 1 for the display's grid, more for
+    /// adaptive resolution's coarser grids (and a peer's reduced images).
+    pub divisor: u32,
     /// When the newest request it serves was sent, ms.
     pub request_ms: f64,
     /// When rendering started, ms.
@@ -128,6 +131,7 @@ impl FrameEvent {
             camera,
             view: camera,
             guard_offset: (0, 0),
+            divisor: 1,
             request_ms: 0.0,
             start_ms: 0.0,
             render_ms,
@@ -423,9 +427,7 @@ pub fn serve(
             // The first frame: requested one round trip, render and transfer before 0.
             horizon.observe(-first_ms * 1e-3, 0.0, net.server_ms * 1e-3, 1);
             for (f, _) in out.iter().skip(1).filter(|(f, _)| f.arrive_ms <= sent) {
-                // A frame on a coarser grid of adaptive resolution: fewer pixels than shown.
-                let d = (cams[0].width as f32 / f.view.width.max(1) as f32).round() as u32;
-                horizon.observe(f.request_ms * 1e-3, f.arrive_ms * 1e-3, f.render_ms * 1e-3, d);
+                horizon.observe(f.request_ms * 1e-3, f.arrive_ms * 1e-3, f.render_ms * 1e-3, f.divisor);
             }
             let policy = request.policy();
             let motion = policy.motion(moving(&requests[r]), &predictor, &horizon, &cadence);
@@ -514,6 +516,7 @@ pub fn serve(
                     camera,
                     view,
                     guard_offset,
+                    divisor,
                     request_ms: requests[j].sent_ms,
                     start_ms: s,
                     render_ms,
