@@ -36,7 +36,12 @@ fn flip(truth: &Image, img: &Image) -> f64 {
 
 fn main() {
     let args: Vec<String> = std::env::args().collect();
-    let h: Heuristic = args.get(2).map_or(Heuristic::Threshold, |s| Heuristic::from_name(s).expect("a heuristic"));
+    // The heuristic: the second positional argument (after the folder), if there is one.
+    let folder_given = args.get(1).is_some_and(|a| !a.starts_with('-'));
+    let h: Heuristic = args
+        .get(2)
+        .filter(|a| folder_given && !a.starts_with('-'))
+        .map_or(Heuristic::Threshold, |s| Heuristic::from_name(s).expect("a heuristic"));
     let time_only = args.iter().any(|a| a == "--time-only");
     let time = time_only || args.iter().any(|a| a == "--time");
     let size = 512;
