@@ -90,6 +90,34 @@ pub fn wire_err(e: WireError) -> ClientError {
     }
 }
 
+/// A reader whose read timeouts read as [`io::ErrorKind::TimedOut`]: a socket's read timeout
+/// is `WouldBlock` on Unix, which core's wire reads (through embedded-io, whose error kinds
+/// have no `WouldBlock`) would see as `Other`.
+struct Timeouts<'a, R: ?Sized>(&'a mut R);
+
+impl<R: Read + ?Sized> Read for Timeouts<'_, R> {
+    fn read(&mut self, buf: &mut [u8]) -> io::Result<usize> {
+        self.0.read(buf).map_err(|e| match e.kind() {
+            io::ErrorKind::WouldBlock => io::Error::new(io::ErrorKind::TimedOut, e),
+            _ => e,
+        })
+    }
+}
+
+/// Maps an error of reading a frame's part while `what` to a client error: the server falling
+/// silent or closing inside a frame says so, as between messages.
+fn part_err(what: &str, e: WireError) -> ClientError {
+    match e {
+        WireError::Io(k) if io::ErrorKind::from(k) == io::ErrorKind::TimedOut => {
+            ClientError::Gone(format!("no answer from the server inside a frame while {what} (timed out)"))
+        }
+        WireError::Closed | WireError::UnexpectedEof => {
+            ClientError::Gone(format!("the server closed the connection inside a frame while {what}"))
+        }
+        e => wire_err(e),
+    }
+}
+
 /// Reads one whole message; returns its exact bytes (header included) and the decoded message.
 /// A clean close before the first byte is [`ClientError::Gone`]; allocates only what `limits`
 /// allows.
@@ -139,8 +167,8 @@ pub fn read_message_bytes_marked<G>(
         if let Some(m) = mark.take() {
             _guard = Some(m());
         }
-        let mut r = embedded_io_adapters::std::FromStd::new(&mut *stream);
-        if let Some(whole) = wire::take_part(&mut r, &h, limits, &mut parts).map_err(wire_err)? {
+        let mut r = embedded_io_adapters::std::FromStd::new(Timeouts(&mut *stream));
+        if let Some(whole) = wire::take_part(&mut r, &h, limits, &mut parts).map_err(|e| part_err(what, e))? {
             break whole;
         }
         if matches!(h.ty, wire::MsgType::FramePart | wire::MsgType::FrameDropped) {
@@ -420,6 +448,55 @@ mod tests {
             count: samples.len() as u32,
         };
         Frame { header, samples, colors, segments }
+    }
+
+    /// A stream that gives `data`, then fails with `then` (`None`: ends).
+    struct Stalls {
+        data: Vec<u8>,
+        at: usize,
+        then: Option<io::ErrorKind>,
+    }
+
+    impl Read for Stalls {
+        fn read(&mut self, buf: &mut [u8]) -> io::Result<usize> {
+            if self.at < self.data.len() {
+                let n = buf.len().min(self.data.len() - self.at);
+                buf[..n].copy_from_slice(&self.data[self.at..self.at + n]);
+                self.at += n;
+                return Ok(n);
+            }
+            match self.then {
+                Some(k) => Err(io::Error::new(k, "stalled")),
+                None => Ok(0),
+            }
+        }
+    }
+
+    #[test]
+    fn a_stall_or_close_inside_a_frame_s_part_says_so() {
+        // A FramePart's header announcing 1000 bytes, and 10 of them.
+        let mut data = vec![0u8; HEADER_LEN];
+        data[..4].copy_from_slice(&wire::MAGIC);
+        data[4..6].copy_from_slice(&wire::VERSION.to_le_bytes());
+        data[6] = wire::MsgType::FramePart as u8;
+        data[8..12].copy_from_slice(&1000u32.to_le_bytes());
+        data.extend_from_slice(&[0u8; 10]);
+        let limits = Limits::default();
+        // A socket's read timeout (`WouldBlock` on Unix, `TimedOut` elsewhere) is a timeout.
+        for k in [io::ErrorKind::WouldBlock, io::ErrorKind::TimedOut] {
+            let mut s = Stalls { data: data.clone(), at: 0, then: Some(k) };
+            match read_message_bytes(&mut s, &limits, "waiting for a frame") {
+                Err(ClientError::Gone(m)) => {
+                    assert!(m.contains("timed out") && m.contains("inside a frame"), "{k:?}: {m}")
+                }
+                other => panic!("{k:?}: {other:?}"),
+            }
+        }
+        let mut s = Stalls { data, at: 0, then: None };
+        match read_message_bytes(&mut s, &limits, "waiting for a frame") {
+            Err(ClientError::Gone(m)) => assert!(m.contains("closed the connection inside a frame"), "{m}"),
+            other => panic!("{other:?}"),
+        }
     }
 
     #[test]
