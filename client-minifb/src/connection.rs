@@ -111,11 +111,14 @@ fn part_err(what: &str, e: WireError) -> ClientError {
         WireError::Io(k) if io::ErrorKind::from(k) == io::ErrorKind::TimedOut => {
             ClientError::Gone(format!("no answer from the server inside a frame while {what} (timed out)"))
         }
-        WireError::Closed | WireError::UnexpectedEof => {
-            ClientError::Gone(format!("the server closed the connection inside a frame while {what}"))
-        }
+        WireError::Closed | WireError::UnexpectedEof => closed_inside_a_frame(what),
         e => wire_err(e),
     }
+}
+
+/// The server closed the connection between a frame's parts or inside one, while `what`.
+fn closed_inside_a_frame(what: &str) -> ClientError {
+    ClientError::Gone(format!("the server closed the connection inside a frame while {what}"))
 }
 
 /// Reads one whole message; returns its exact bytes (header included) and the decoded message.
@@ -150,11 +153,7 @@ pub fn read_message_bytes_marked<G>(
                 Ok(0) if parts.is_empty() => {
                     return Err(ClientError::Gone(format!("the server closed the connection while {what}")))
                 }
-                Ok(0) => {
-                    return Err(ClientError::Gone(format!(
-                        "the server closed the connection inside a frame while {what}"
-                    )))
-                }
+                Ok(0) => return Err(closed_inside_a_frame(what)),
                 Ok(n) => got += n,
                 Err(e) if e.kind() == io::ErrorKind::Interrupted => {}
                 Err(e) => return Err(io_err(what, &e)),
