@@ -38,7 +38,7 @@ use crate::{ErrorBox, Metrics};
 use rayon::prelude::*;
 use std::collections::HashMap;
 use volwarp_core::compact_frame::Encoding;
-use volwarp_core::method::{Cadence, ViewEvents};
+use volwarp_core::method::{Cadence, Requested, ViewEvents};
 use volwarp_core::prediction::{Horizon, Predictor};
 use volwarp_core::renderer::Renderer;
 use volwarp_core::show::{self, Show};
@@ -403,14 +403,12 @@ pub fn serve(
     // The client side: what each request asks for, in the order they are sent.
     let mut predictor = Predictor::new();
     let mut observed = 0usize; // ticks the predictor has seen
-                               // Per request once asked: the camera sent, the view it shows exactly, the guard offset,
-                               // the segments per pixel and the grid's divisor per axis.
-    type Asked = (Camera, Camera, (u32, u32), u8, u32);
-    let mut asked: Vec<Option<Asked>> = vec![None; requests.len()];
+                               // Per request once asked: what it asks for.
+    let mut asked: Vec<Option<Requested>> = vec![None; requests.len()];
     let mut ask = |i: usize,
                    requests: &mut [Request],
                    out: &[(FrameEvent, volwarp_core::wire::Frame)],
-                   asked: &mut Vec<Option<Asked>>| {
+                   asked: &mut Vec<Option<Requested>>| {
         // Requests are asked in order; catch the predictor up to request i.
         let first_unasked = asked.iter().position(Option::is_none).unwrap_or(asked.len());
         for r in first_unasked..=i {
@@ -432,7 +430,7 @@ pub fn serve(
             let policy = request.policy();
             let motion = policy.motion(moving(&requests[r]), &predictor, &horizon, &cadence);
             let asks = policy.camera_at(shown, motion, &predictor, &horizon, &cadence);
-            asked[r] = Some((asks.camera, asks.view, asks.guard_offset, asks.layers, asks.divisor));
+            asked[r] = Some(asks);
             requests[r].camera = asks.camera;
         }
         asked[i].expect("asked above")
@@ -449,7 +447,7 @@ pub fn serve(
             j += 1;
         }
         s = s.max(arrival(&requests[j]));
-        let (_, view, guard_offset, wanted, divisor) = ask(j, &mut requests, &out, &mut asked);
+        let Requested { view, guard_offset, layers: wanted, divisor, .. } = ask(j, &mut requests, &out, &mut asked);
         let render_ms = net.server_ms * cfg.resolution_cost.ratio(divisor);
         if s + render_ms + net.latency_ms > end_ms {
             break; // it would arrive after the session
@@ -461,14 +459,14 @@ pub fn serve(
         // The server takes the newest request. `turn(from, to, coarser)`: the arrival of such a
         // request in that span.
         // (The requests arriving in the span are asked first: their grids are the client's.)
-        let turn = |from: f64, to: f64, coarser: bool, requests: &[Request], asked: &[Option<Asked>]| {
+        let turn = |from: f64, to: f64, coarser: bool, requests: &[Request], asked: &[Option<Requested>]| {
             if !request.preempt {
                 return None;
             }
             let other = |v: u32| if coarser { v > divisor } else { v != divisor };
             (j + 1..requests.len())
                 .map(|r| (arrival(&requests[r]), r))
-                .find(|&(a, r)| a > from && a < to && asked[r].is_some_and(|q| other(q.4)))
+                .find(|&(a, r)| a > from && a < to && asked[r].is_some_and(|q| other(q.divisor)))
                 .map(|(a, _)| a)
         };
         if let Some(last) = requests.iter().rposition(|r| arrival(r) < s + render_ms) {
