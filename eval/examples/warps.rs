@@ -24,6 +24,7 @@ use volwarp_core::renderer::Renderer;
 use volwarp_core::{Heuristic, Image, RendererKind, Scene};
 use volwarp_cpu_tracer::{build_scene, create, FillOptions, HoleFill, PacketTracer, SampleIds, SphereSplat};
 use volwarp_eval::camera_paths::orbit;
+use volwarp_eval::example_args;
 use volwarp_eval::quality::frame_for;
 use volwarp_eval::{median, Metrics};
 use volwarp_server::Marcher;
@@ -37,15 +38,14 @@ fn flip(truth: &Image, img: &Image) -> f64 {
 fn main() {
     let args: Vec<String> = std::env::args().collect();
     // The heuristic: the second positional argument (after the folder), if there is one.
-    let folder_given = args.get(1).is_some_and(|a| !a.starts_with('-'));
     let h: Heuristic = args
         .get(2)
-        .filter(|a| folder_given && !a.starts_with('-'))
+        .filter(|a| example_args::folder(&args).is_some() && !a.starts_with('-'))
         .map_or(Heuristic::Threshold, |s| Heuristic::from_name(s).expect("a heuristic"));
     let time_only = args.iter().any(|a| a == "--time-only");
     let time = time_only || args.iter().any(|a| a == "--time");
     let size = 512;
-    let datasets = volwarp_eval::example_args::datasets_or_exit(&args);
+    let datasets = example_args::datasets_or_exit(&args);
     if time_only {
         timings(&datasets[0], h);
         return;

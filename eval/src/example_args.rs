@@ -13,7 +13,7 @@ pub const DEFAULT_DATA: &str = "../shared/data";
 /// a flag), those of `--only NAME` alone; where the folder cannot be read or no name contains
 /// NAME, prints why and exits with status 2.
 pub fn datasets_or_exit(args: &[String]) -> Vec<Dataset> {
-    let dir = args.get(1).filter(|a| !a.starts_with('-')).map_or(DEFAULT_DATA, |s| s.as_str());
+    let dir = folder(args).unwrap_or(DEFAULT_DATA);
     let mut datasets = match crate::report::shared_datasets(Path::new(dir)) {
         Ok(d) => d,
         Err(e) => {
@@ -21,8 +21,17 @@ pub fn datasets_or_exit(args: &[String]) -> Vec<Dataset> {
             std::process::exit(2);
         }
     };
-    only_or_exit(args, &mut datasets, |d| &d.name);
+    if let Err(e) = only(args, &mut datasets, |d| &d.name) {
+        eprintln!("{e}");
+        std::process::exit(2);
+    }
     datasets
+}
+
+/// The folder the first argument names, if it is not a flag (the examples' positional
+/// arguments come first).
+pub fn folder(args: &[String]) -> Option<&str> {
+    args.get(1).filter(|a| !a.starts_with('-')).map(|s| s.as_str())
 }
 
 /// The value after the flag `name` in `args`, if both are there.
@@ -40,15 +49,6 @@ pub fn only<T>(args: &[String], items: &mut Vec<T>, name: impl Fn(&T) -> &str) -
         return Err(format!("--only {want:?}: no dataset's name contains it (there are: {})", names.join(", ")));
     }
     Ok(())
-}
-
-/// [`only`] for an example's `main`: where no item's name contains NAME, prints the error and
-/// exits with status 2.
-pub fn only_or_exit<T>(args: &[String], items: &mut Vec<T>, name: impl Fn(&T) -> &str) {
-    if let Err(e) = only(args, items, name) {
-        eprintln!("{e}");
-        std::process::exit(2);
-    }
 }
 
 /// The default [`LayerOptions`] with the flags `args` sets: `--own H` (half side, source
