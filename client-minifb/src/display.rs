@@ -131,16 +131,20 @@ impl Display {
                 // Frames of another visual state are never drawn beside the new one (their
                 // colors would fill its holes): a state change drops them.
                 let state = ready.state;
+                let camera = ready.scene.header.camera;
                 if let Some(old) = self.shown.replace(ready) {
-                    if self.drawn && old.state == state {
+                    // A frame for the same camera and state as the new one adds nothing beside
+                    // it (the server's copy for a repeated request at rest): it would only push
+                    // an older frame, a side view at rest, out of the kept ones.
+                    if self.drawn && old.state == state && old.scene.header.camera != camera {
                         self.older.push_front(old);
                     } else {
                         self.net.recycle(old.scene);
                     }
                 }
-                if self.older.iter().any(|o| o.state != state) {
+                if self.older.iter().any(|o| o.state != state || o.scene.header.camera == camera) {
                     for o in std::mem::take(&mut self.older) {
-                        if o.state == state {
+                        if o.state == state && o.scene.header.camera != camera {
                             self.older.push_back(o);
                         } else {
                             self.net.recycle(o.scene);

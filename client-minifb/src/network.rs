@@ -115,6 +115,10 @@ pub struct NetConfig {
 pub const CADENCE: Cadence =
     Cadence { display_tick_s: 1.0 / 60.0, on_frame_arrival: true, on_first_still: true, max_viewport: MAX_VIEWPORT };
 
+/// How many of the newest frames' distinct cameras the writer remembers for side views at
+/// rest: the resting view's and its two side views'.
+pub const HELD_VIEWS: usize = 3;
+
 /// How long one redial may take at most (connect, Hello, probe frame), whatever `--timeout-s`
 /// says: a server that is down answers at once, one that does not answer is tried again.
 pub const REDIAL_TIMEOUT: Duration = Duration::from_secs(5);
@@ -267,6 +271,10 @@ struct ViewSlot {
     /// The view came to rest ([`STILL_AFTER`] display frames still) since the last request,
     /// which asked for another.
     first_still: bool,
+    /// The cameras of the newest frames received, distinct, newest first (at most
+    /// [`HELD_VIEWS`]): what side views at rest are asked for against
+    /// (`RequestPolicy::prefetch`).
+    held: VecDeque<Camera>,
     /// Every camera the display showed, timed (so motion that starts after a still spell is
     /// measured from the last still display frame, not from the last request).
     predictor: Predictor,
@@ -798,6 +806,7 @@ fn read_loop(sh: &Shared, mut stream: impl Read, limits: Limits, recorder: Optio
         match msg {
             Message::Frame(frame) => {
                 let received_at = Instant::now();
+                let camera = frame.header.camera;
                 let asked = lock(&sh.sent).iter().rev().find(|(s, ..)| *s == frame.header.seq).map(|&(_, t, d)| (t, d));
                 let (requested_at, divisor) = (asked.map(|a| a.0), asked.map_or(1, |a| a.1));
                 if let Some(r) = recorder {
@@ -813,7 +822,13 @@ fn read_loop(sh: &Shared, mut stream: impl Read, limits: Limits, recorder: Optio
                     q.push_back(Pending { frame, state, requested_at, divisor, received_at });
                 }
                 sh.pending_cv.notify_one();
-                lock(&sh.view).frame_arrived = true;
+                {
+                    let mut g = lock(&sh.view);
+                    g.frame_arrived = true;
+                    g.held.retain(|c| *c != camera);
+                    g.held.push_front(camera);
+                    g.held.truncate(HELD_VIEWS);
+                }
                 sh.view_cv.notify_one();
             }
             Message::VisualState(v) => {
@@ -939,7 +954,7 @@ fn build_loop(sh: &Shared, cfg: &NetConfig) {
 fn write_loop(sh: &Shared, mut stream: impl Write, request: RequestPolicy) {
     let mut last_send: Option<Instant> = None;
     loop {
-        let (view, predictor, moving) = {
+        let (view, predictor, moving, side) = {
             let mut g = lock(&sh.view);
             loop {
                 if sh.stop.load(Ordering::SeqCst) {
@@ -978,10 +993,18 @@ fn write_loop(sh: &Shared, mut stream: impl Write, request: RequestPolicy) {
                             // frames of an orbit or a drag is coarse too); the request for the
                             // view come to rest asks for that view.
                             let moving = !g.first_still && g.still_frames < STILL_AFTER;
+                            // At rest, a frame's arrival asks for the next side view the
+                            // frames lack once the view's own frame is there.
+                            let side = (!moving && !g.changed && !g.first_still)
+                                .then(|| {
+                                    let held: Vec<Camera> = g.held.iter().copied().collect();
+                                    request.prefetch(&v.camera, &held)
+                                })
+                                .flatten();
                             g.changed = false;
                             g.frame_arrived = false;
                             g.first_still = false;
-                            break (v, g.predictor, moving);
+                            break (v, g.predictor, moving, side);
                         }
                     }
                 }
@@ -994,8 +1017,18 @@ fn write_loop(sh: &Shared, mut stream: impl Write, request: RequestPolicy) {
         // still while it turns fast; a coarse view differs from the view at rest, so resting
         // asks again at full resolution.
         let motion = request.motion(moving, &predictor, &horizon, &CADENCE);
-        let asks = request.camera_at(view.camera, motion, &predictor, &horizon, &CADENCE);
-        lock(&sh.view).asked = Some(asks.view);
+        let asks = match side {
+            // A side view leaves `asked` the resting view's: it is no overshoot to correct.
+            Some(side) => {
+                log::debug!("asking for a side view at rest");
+                side
+            }
+            None => {
+                let asks = request.camera_at(view.camera, motion, &predictor, &horizon, &CADENCE);
+                lock(&sh.view).asked = Some(asks.view);
+                asks
+            }
+        };
         let camera = asks.camera;
         // At rest, the segments per pixel of `--rest-layers` (a one-sample frame by default).
         let req = CameraRequest {

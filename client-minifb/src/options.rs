@@ -184,6 +184,12 @@ pub struct Options {
     /// there, and it arrives sooner than a layered frame, but the next move warps it.
     #[arg(long, value_name = "K", default_value_t = Method::DEFAULT.rest_layers, value_parser = clap::value_parser!(u8).range(0..=16))]
     pub rest_layers: u8,
+    /// Side views: while the view rests and its exact frame has arrived, ask for the views
+    /// DEG degrees along the orbit either way, one after the other, so a turn that starts
+    /// from rest warps the nearer side view until the move's first frame arrives; 0 turns it
+    /// off (default: 30).
+    #[arg(long, value_name = "DEG", default_value_t = Method::DEFAULT.prefetch_deg, value_parser = parse_prefetch)]
+    pub prefetch_deg: f32,
     /// Display frame rate limit (0: none). Default: 60 in the window, none headless.
     #[arg(long)]
     pub fps: Option<u32>,
@@ -227,7 +233,17 @@ impl Options {
             guard: self.guard,
             coarse: self.coarse,
             rest_layers: self.rest_layers,
+            prefetch_deg: self.prefetch_deg,
         }
+    }
+}
+
+/// Parses the side views' angle: 0 (off) to `method::MAX_PREFETCH_DEG` degrees.
+pub fn parse_prefetch(s: &str) -> Result<f32, String> {
+    let max = volwarp_core::method::MAX_PREFETCH_DEG;
+    match s.trim().parse::<f32>() {
+        Ok(d) if (0.0..=max).contains(&d) => Ok(d),
+        _ => Err(format!("--prefetch-deg `{s}`: degrees from 0 (off) to {max}")),
     }
 }
 
@@ -430,6 +446,15 @@ mod tests {
         let one = Options::parse_from(["volwarp-client", "--rest-layers", "1"]).method().request();
         assert_eq!((one.layers(false), one.layers(true)), (1, 0), "one sample at rest, the Hello's while moving");
         assert!(Options::try_parse_from(["volwarp-client", "--rest-layers", "17"]).is_err());
+        let off = Options::parse_from(["volwarp-client", "--prefetch-deg", "0"]).method().request();
+        assert_eq!(off.prefetch_deg, 0.0);
+        assert_eq!(
+            Options::parse_from(["volwarp-client"]).method().request().prefetch_deg,
+            Method::DEFAULT.prefetch_deg
+        );
+        for bad in ["-1", "91", "NaN", "x"] {
+            assert!(Options::try_parse_from(["volwarp-client", "--prefetch-deg", bad]).is_err(), "{bad}");
+        }
         let o = Options::parse_from(["volwarp-client", "--predict", "false", "--guard", "0.1", "--keep-frames", "2"]);
         let m = o.method();
         assert_eq!((m.predict, m.guard, m.frames), (false, 0.1, 2));

@@ -114,11 +114,14 @@ impl Replay {
             return self.scene.as_ref();
         }
         // The live display keeps the frames it drew before (the camera entries name them).
+        let camera = frame.header.camera;
         if self.lazy && self.keep > 1 {
             if let Some(prev) = self.scene.take() {
                 self.older.push_front(prev);
-                self.older.truncate(self.keep - 1);
             }
+            // As the live display: a frame for the new frame's camera adds nothing beside it.
+            self.older.retain(|s| s.header.camera != camera);
+            self.older.truncate(self.keep - 1);
         }
         match self.scene.as_mut() {
             _ if self.lazy => self.scene = Some(volwarp_cpu_tracer::route::unbuilt_scene(frame)),

@@ -217,3 +217,46 @@ fn a_fast_turn_asks_for_the_coarser_grid_and_a_slow_one_for_the_moving_grid() {
     // The slow turn's: the moving grid (after one or two requests that still saw the fast turn).
     assert!(moving[fast..].iter().all(|&w| w == 256) && moving[fast..].len() >= 10, "the slow turn: {widths:?}");
 }
+
+#[test]
+fn at_rest_each_side_view_is_asked_for_once_after_the_rest_frame() {
+    // A server that answers every request at once with a frame for its camera: the view rests
+    // at `home`; once its frame has arrived the client asks for the side views along the orbit
+    // (one, then the other, each after the previous one's frame), and then only for the view
+    // at rest again, never a side view twice.
+    let (tx, rx) = mpsc::channel();
+    let addr = fake_server(move |mut s| {
+        greet(&mut s, Hello::new(0));
+        while let Some(m) = read_msg(&mut s) {
+            if let Message::CameraRequest(r) = m {
+                let Message::Frame(mut f) = empty_frame(r.seq) else { unreachable!() };
+                f.header.camera = r.camera;
+                if tx.send(r).is_err() || s.write_all(&encode(&Message::Frame(f))).is_err() {
+                    break;
+                }
+            }
+        }
+    });
+    let conn = connect(&addr, None, Duration::from_secs(10)).unwrap();
+    let home = home_camera(&conn.bounds, 64, 64);
+    let request = volwarp_core::method::Method::DEFAULT.request();
+    let sides = request.side_views(&home);
+    assert_eq!(sides.len(), 2);
+    let net = Network::start(conn, volwarp_client::network::NetConfig { request, ..net_config() }, None).unwrap();
+    let t0 = Instant::now();
+    while t0.elapsed() < Duration::from_millis(1500) {
+        net.set_view(View { camera: home, heuristic: Heuristic::Peak, radius_scale: 1.0 });
+        while net.take_scene().is_some() {}
+        std::thread::sleep(Duration::from_millis(16));
+    }
+    net.shutdown();
+    let got: Vec<volwarp_core::Camera> = rx.try_iter().map(|r| r.camera).filter(|c| c.width > 1).collect();
+    let at = |c: &volwarp_core::Camera| got.iter().position(|g| g == c);
+    let (rest, first, second) = (at(&home), at(&sides[0]), at(&sides[1]));
+    assert!(rest.is_some() && first.is_some() && second.is_some(), "the rest view and both side views: {got:?}");
+    assert!(rest < first && first < second, "the rest view, then one side, then the other: {got:?}");
+    for s in &sides {
+        assert_eq!(got.iter().filter(|g| *g == s).count(), 1, "each side view once: {got:?}");
+    }
+    assert!(got.iter().all(|g| *g == home || sides.contains(g)), "nothing else at rest: {got:?}");
+}

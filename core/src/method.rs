@@ -39,6 +39,7 @@ use crate::guard::GuardBand;
 use crate::prediction::{Horizon, Predictor};
 use crate::renderer_kind::RendererKind;
 use crate::segments::DEFAULT_LAYERS;
+use alloc::vec::Vec;
 
 /// The default watertight tolerance of the layered renderers, in source pixels: where the
 /// depths of neighbouring segments of one slab lie within it, they share their footprints'
@@ -73,6 +74,9 @@ pub struct Method {
     pub coarse: u8,
     /// Segments per pixel asked for the view at rest (0: `layers`, as while it moves).
     pub rest_layers: u8,
+    /// Side views asked for while the view rests, degrees along the orbit either way (0: none;
+    /// [`RequestPolicy::prefetch`]).
+    pub prefetch_deg: f32,
 }
 
 /// The largest viewport divisor of adaptive resolution.
@@ -140,6 +144,7 @@ impl Method {
         guard: 0.0,
         coarse: DEFAULT_COARSE,
         rest_layers: REST_LAYERS,
+        prefetch_deg: PREFETCH_DEG,
     };
 
     /// The segments per pixel a renderer asks for unless told otherwise: the layered renderers
@@ -154,7 +159,13 @@ impl Method {
 
     /// What it asks the server for.
     pub const fn request(&self) -> RequestPolicy {
-        RequestPolicy { predict: self.predict, guard: self.guard, coarse: self.coarse, rest_layers: self.rest_layers }
+        RequestPolicy {
+            predict: self.predict,
+            guard: self.guard,
+            coarse: self.coarse,
+            rest_layers: self.rest_layers,
+            prefetch_deg: self.prefetch_deg,
+        }
     }
 }
 
@@ -171,6 +182,9 @@ pub struct RequestPolicy {
     pub coarse: u8,
     /// Segments per pixel asked for the view at rest (0: the Hello's, as while it moves).
     pub rest_layers: u8,
+    /// Side views asked for while the view rests, degrees along the orbit either way (0:
+    /// none; [`RequestPolicy::prefetch`]).
+    pub prefetch_deg: f32,
 }
 
 /// The caller's side of the request policy: what the policy assumes about the display and
@@ -217,7 +231,8 @@ pub struct Requested {
 
 impl RequestPolicy {
     /// Asks for the camera shown, as it is (what a send-image system does).
-    pub const NONE: RequestPolicy = RequestPolicy { predict: false, guard: 0.0, coarse: 1, rest_layers: 0 };
+    pub const NONE: RequestPolicy =
+        RequestPolicy { predict: false, guard: 0.0, coarse: 1, rest_layers: 0, prefetch_deg: 0.0 };
 
     /// Whether the client sends a request now: when the view moved; when a frame arrived, if
     /// the cadence says so; and when the view holds still for the first tick after motion, if
@@ -303,6 +318,33 @@ impl RequestPolicy {
         }
     }
 
+    /// The side views of a view at rest: `rest` orbited [`RequestPolicy::prefetch_deg`]
+    /// one way along its orbit, then the other (none where prefetching is off or the angle is
+    /// not a finite positive number).
+    pub fn side_views(&self, rest: &Camera) -> Vec<Camera> {
+        let d = self.prefetch_deg;
+        if !(d.is_finite() && d > 0.0) {
+            return Vec::new();
+        }
+        let d = d.min(MAX_PREFETCH_DEG);
+        [d, -d].into_iter().map(|yaw| rest.orbit(yaw, 0.0)).filter(|c| c != rest).collect()
+    }
+
+    /// What to ask for next while the view `rest` holds still and the client holds frames for
+    /// the views `held` (newest first): where one shows `rest` exactly (its frame has arrived),
+    /// the first of its [`RequestPolicy::side_views`] no held frame shows, at full resolution
+    /// and as a view at rest asks ([`RequestPolicy::layers`]); `None` where the rest frame has
+    /// not arrived, every side view is held, or prefetching is off. A turn that starts from
+    /// rest then warps the side view nearest the camera (core's `show::choose`) instead of the
+    /// rest frame, until the move's first frame arrives.
+    pub fn prefetch(&self, rest: &Camera, held: &[Camera]) -> Option<Requested> {
+        if !held.contains(rest) {
+            return None;
+        }
+        let side = self.side_views(rest).into_iter().find(|s| !held.contains(s))?;
+        Some(Requested { camera: side, view: side, guard_offset: (0, 0), layers: self.layers(false), divisor: 1 })
+    }
+
     /// The segments per pixel a request asks for (the CameraRequest's `layers`, 0: the
     /// Hello's): `rest_layers` when the view is not `moving`, else 0.
     pub fn layers(&self, moving: bool) -> u8 {
@@ -313,6 +355,16 @@ impl RequestPolicy {
         }
     }
 }
+
+/// The side views a client asks for while the view rests lie this many degrees along the
+/// orbit either way ([`RequestPolicy::prefetch`]): until a turn's first frame arrives (0.15 s
+/// after the first moving request at 512², 500 ms server, 100 Mbit/s) the client warps the
+/// frame it had, and a fast flick (180°/s) has turned 30° by then; the side view there is
+/// nearly its camera. Measured (`docs/results.md`, "Side views at rest").
+pub const PREFETCH_DEG: f32 = 30.0;
+
+/// The largest angle of the side views.
+pub const MAX_PREFETCH_DEG: f32 = 90.0;
 
 /// The fewest pixels the coarse grid of adaptive resolution keeps on its shorter side: a
 /// smaller view stays at full resolution while it moves (its frame is marched and sent in a few
@@ -344,7 +396,10 @@ mod tests {
         assert_eq!(d.renderer, RendererKind::SplatLayers);
         assert_eq!(d.layers as usize, DEFAULT_LAYERS);
         assert_eq!((d.frames, d.predict, d.adapt, d.guard), (4, true, true, 0.0));
-        assert_eq!(d.request(), RequestPolicy { predict: true, guard: 0.0, coarse: 2, rest_layers: 0 });
+        assert_eq!(
+            d.request(),
+            RequestPolicy { predict: true, guard: 0.0, coarse: 2, rest_layers: 0, prefetch_deg: PREFETCH_DEG }
+        );
         assert_eq!(Method::layers_for(RendererKind::Splat), 1);
     }
 
@@ -370,12 +425,8 @@ mod tests {
         predictor.observe(cam, 0.0);
         let r = RequestPolicy::NONE.camera(cam, &predictor, &Horizon::new(), &CLIENT);
         assert_eq!((r.camera, r.view, r.guard_offset, r.layers), (cam, cam, (0, 0), 0));
-        let wide = RequestPolicy { predict: false, guard: 0.25, coarse: 1, rest_layers: 0 }.camera(
-            cam,
-            &predictor,
-            &Horizon::new(),
-            &CLIENT,
-        );
+        let wide =
+            RequestPolicy { guard: 0.25, ..RequestPolicy::NONE }.camera(cam, &predictor, &Horizon::new(), &CLIENT);
         assert_eq!(wide.view, cam);
         assert!(wide.camera.width > cam.width && wide.guard_offset.0 > 0);
     }
@@ -386,7 +437,7 @@ mod tests {
         let mut predictor = Predictor::new();
         predictor.observe(cam, 0.0);
         let h = Horizon::new();
-        let p = RequestPolicy { predict: false, guard: 0.0, coarse: 2, rest_layers: 0 };
+        let p = RequestPolicy { coarse: 2, ..RequestPolicy::NONE };
         let moving = p.camera_at(cam, Motion::Moving, &predictor, &h, &CLIENT);
         assert_eq!((moving.camera.width, moving.camera.height), (256, 192));
         assert_eq!(moving.camera, cam.with_viewport(256, 192), "the same view on a coarser grid");
@@ -490,5 +541,31 @@ mod tests {
             "the default: the Hello's, at rest too"
         );
         assert_eq!(RequestPolicy { rest_layers: 200, ..p }.layers(false), crate::wire::MAX_LAYERS as u8);
+    }
+
+    #[test]
+    fn side_views_are_asked_for_once_the_rest_frame_is_held_one_at_a_time() {
+        let rest = Camera::look_at(glam::Vec3::new(0.0, 0.0, 3.0), glam::Vec3::ZERO, glam::Vec3::Y, 40.0, 64, 64);
+        let p = Method::DEFAULT.request();
+        let sides = p.side_views(&rest);
+        assert_eq!(sides, [rest.orbit(PREFETCH_DEG, 0.0), rest.orbit(-PREFETCH_DEG, 0.0)]);
+        for s in &sides {
+            assert!((crate::warp_radius::warp_angle_deg(&rest, s) - PREFETCH_DEG).abs() < 0.5);
+        }
+        // Not before the rest frame has arrived.
+        assert_eq!(p.prefetch(&rest, &[]), None);
+        assert_eq!(p.prefetch(&rest, &[rest.orbit(5.0, 0.0)]), None);
+        // Then one side after the other, each exact at full resolution, as a view at rest asks.
+        let first = p.prefetch(&rest, &[rest]).unwrap();
+        assert_eq!((first.camera, first.view, first.divisor, first.guard_offset), (sides[0], sides[0], 1, (0, 0)));
+        assert_eq!(first.layers, p.layers(false));
+        assert_eq!(p.prefetch(&rest, &[sides[0], rest]).unwrap().view, sides[1]);
+        assert_eq!(p.prefetch(&rest, &[sides[1], sides[0], rest]), None, "both held: nothing more");
+        // Off, or a nonsense angle: none.
+        let off = RequestPolicy { prefetch_deg: 0.0, ..p };
+        assert!(off.side_views(&rest).is_empty() && off.prefetch(&rest, &[rest]).is_none());
+        assert!(RequestPolicy { prefetch_deg: f32::NAN, ..p }.side_views(&rest).is_empty());
+        let wide = RequestPolicy { prefetch_deg: 1e9, ..p }.side_views(&rest);
+        assert!((crate::warp_radius::warp_angle_deg(&rest, &wide[0]) - MAX_PREFETCH_DEG).abs() < 0.5);
     }
 }

@@ -3,7 +3,7 @@
 //! A method is a CPU renderer of the registry (`stale`, `points2`, `splat`, `splat-fill`, …)
 //! plus what the client asks the server for and how many frames it keeps, written as a **method
 //! spec**:
-//! `RENDERER[+predict][+guard=G][+frames=K][+adapt][+pp=L][+layers=K][+rest=K][+coarse=N][+no-preempt]`,
+//! `RENDERER[+predict][+guard=G][+frames=K][+adapt][+pp=L][+layers=K][+rest=K][+coarse=N][+prefetch=D][+no-preempt]`,
 //! e.g. `splat-fill+predict+guard=0.1+frames=2` or `splat-layers+predict+adapt+layers=4`.
 //!
 //! - `+predict`: the client asks for the camera it expects to show when the frame is on screen
@@ -27,13 +27,17 @@
 //!   the server renders in its time times the marcher's measured ratio at that resolution
 //!   (`session-calibrate`'s `DATASET/N` lines, [`super::peers::ResolutionCost`]) and encodes
 //!   at that size; the full resolution at the first still tick.
+//! - `+prefetch=D`: while the camera rests and its exact frame has arrived, it asks for the two
+//!   side views `D` degrees along the orbit either way, one after the other (core's
+//!   `method::RequestPolicy::prefetch`); at time 0 it holds them beside the first frame (the
+//!   user looked at that image long enough for them to come);
 //! - `+no-preempt`: the server finishes every render it starts and every frame it writes. By
 //!   default, as the real server does, it drops the render in progress when a request for
 //!   another viewport arrives (with adaptive resolution: the view came to rest or started
 //!   moving), though never two in a row, and the frame being written, after the part under
 //!   way, when one for a coarser viewport arrives (`volwarp_server::server`'s module docs).
 //!
-//! [`default_method`] (alias `volwarp`, core's `Method::DEFAULT`, which has `+coarse=2`) is the
+//! [`default_method`] (alias `volwarp`, core's `Method::DEFAULT`, which has `+coarse=2+prefetch=30`) is the
 //! method the window client runs by default; `volwarp-adaptive` is the same and
 //! `volwarp-adaptive=4` it with `+coarse=4`.
 //! The `stale` method never predicts nor widens: it is what a send-image system shows.
@@ -41,7 +45,7 @@
 use super::peers::ImagePeer;
 use crate::ErrorBox;
 use volwarp_core::guard::MAX_GUARD;
-use volwarp_core::method::Method as CoreMethod;
+use volwarp_core::method::{Method as CoreMethod, MAX_PREFETCH_DEG};
 use volwarp_core::renderer::Renderer;
 use volwarp_core::segments::MAX_LAYERS;
 use volwarp_core::wire::Frame;
@@ -65,6 +69,9 @@ pub struct SessionRequest {
     pub coarse: u8,
     /// Segments per pixel it asks for the view at rest (0: as while it moves).
     pub rest_layers: u8,
+    /// Side views asked for while the camera rests, degrees along the orbit either way (0:
+    /// none).
+    pub prefetch_deg: f32,
     /// The server drops the render in progress, or the frame being written, when a request for
     /// another viewport arrives (the real server's rule; `false`: `+no-preempt`, every render
     /// finished and every frame written whole).
@@ -73,8 +80,15 @@ pub struct SessionRequest {
 
 impl SessionRequest {
     /// Asks for the camera shown (what a send-image system does).
-    pub const NONE: SessionRequest =
-        SessionRequest { predict: false, guard: 0.0, layers: 0, coarse: 1, rest_layers: 0, preempt: true };
+    pub const NONE: SessionRequest = SessionRequest {
+        predict: false,
+        guard: 0.0,
+        layers: 0,
+        coarse: 1,
+        rest_layers: 0,
+        prefetch_deg: 0.0,
+        preempt: true,
+    };
 
     /// Its request policy (core's `method::RequestPolicy`).
     pub const fn policy(&self) -> volwarp_core::method::RequestPolicy {
@@ -83,6 +97,7 @@ impl SessionRequest {
             guard: self.guard,
             coarse: self.coarse,
             rest_layers: self.rest_layers,
+            prefetch_deg: self.prefetch_deg,
         }
     }
 }
@@ -213,8 +228,8 @@ pub struct MethodSpec {
 }
 
 /// The method the window client runs by default and the sessions' `volwarp` alias (core's
-/// `Method::DEFAULT`), as a spec: `splat-layers+predict+frames=4+adapt+layers=4+coarse=2`.
-/// Without adaptive resolution it is `splat-layers+predict+frames=4+adapt+layers=4`.
+/// `Method::DEFAULT`), as a spec: `splat-layers+predict+frames=4+adapt+layers=4+coarse=2+prefetch=30`.
+/// Without adaptive resolution it is `splat-layers+predict+frames=4+adapt+layers=4+prefetch=30`.
 pub fn default_method() -> String {
     MethodSpec::of(&CoreMethod::DEFAULT).name()
 }
@@ -238,7 +253,7 @@ pub fn alias(name: &str) -> Option<MethodSpec> {
 pub const ALL: [&str; 7] = ["stale", "points1", "points2", "points3", "spheres-cpu", "splat", "volwarp"];
 
 impl MethodSpec {
-    /// Parses `RENDERER[+predict][+guard=G][+frames=K][+adapt][+pp=L][+layers=K][+rest=K][+coarse=N][+no-preempt]`
+    /// Parses `RENDERER[+predict][+guard=G][+frames=K][+adapt][+pp=L][+layers=K][+rest=K][+coarse=N][+prefetch=D][+no-preempt]`
     /// or an alias ([`alias`]).
     pub fn parse(spec: &str) -> Result<MethodSpec, ErrorBox> {
         let spec = spec.trim();
@@ -290,6 +305,13 @@ impl MethodSpec {
                         _ => return Err(format!("{spec}: coarse=N takes N = 1, 2 or 4").into()),
                     };
                 }
+                Some(("prefetch", d)) => {
+                    let d: f32 = d.parse().map_err(|_| format!("{spec}: prefetch {d:?} is not a number"))?;
+                    if !(0.0..=MAX_PREFETCH_DEG).contains(&d) {
+                        return Err(format!("{spec}: prefetch must be within 0..={MAX_PREFETCH_DEG} degrees").into());
+                    }
+                    m.request.prefetch_deg = d;
+                }
                 Some(("frames", k)) => {
                     let k: usize = k.parse().map_err(|_| format!("{spec}: frames {k:?} is not a count"))?;
                     if !(1..=MAX_FRAMES).contains(&k) {
@@ -299,7 +321,7 @@ impl MethodSpec {
                 }
                 _ => {
                     return Err(format!(
-                        "{spec}: unknown option {p:?} (predict, guard=G, frames=K, adapt, pp=L, layers=K, rest=K, coarse=N, no-preempt)"
+                        "{spec}: unknown option {p:?} (predict, guard=G, frames=K, adapt, pp=L, layers=K, rest=K, coarse=N, prefetch=D, no-preempt)"
                     )
                     .into())
                 }
@@ -339,6 +361,7 @@ impl MethodSpec {
                 layers,
                 coarse: m.coarse.max(1),
                 rest_layers,
+                prefetch_deg: m.prefetch_deg,
                 preempt: true,
             },
             frames: m.frames,
@@ -360,6 +383,7 @@ impl MethodSpec {
             guard: self.request.guard,
             coarse: self.request.coarse,
             rest_layers: self.request.rest_layers,
+            prefetch_deg: self.request.prefetch_deg,
         }
     }
 
@@ -389,6 +413,9 @@ impl MethodSpec {
         }
         if self.request.coarse > 1 {
             s.push_str(&format!("+coarse={}", self.request.coarse));
+        }
+        if self.request.prefetch_deg > 0.0 {
+            s.push_str(&format!("+prefetch={}", self.request.prefetch_deg));
         }
         if !self.request.preempt {
             s.push_str("+no-preempt");
@@ -461,7 +488,15 @@ mod tests {
         assert_eq!(m.renderer, RendererKind::SplatFill);
         assert_eq!(
             m.request,
-            SessionRequest { predict: true, guard: 0.2, layers: 0, coarse: 1, rest_layers: 0, preempt: true }
+            SessionRequest {
+                predict: true,
+                guard: 0.2,
+                layers: 0,
+                coarse: 1,
+                rest_layers: 0,
+                prefetch_deg: 0.0,
+                preempt: true
+            }
         );
         assert_eq!(m.frames, 3);
         assert_eq!(m.name(), "splat-fill+predict+guard=0.2+frames=3");
@@ -474,7 +509,15 @@ mod tests {
         let l = MethodSpec::parse("splat-layers+layers=4+adapt+predict").unwrap();
         assert_eq!(
             l.request,
-            SessionRequest { predict: true, guard: 0.0, layers: 4, coarse: 1, rest_layers: 0, preempt: true }
+            SessionRequest {
+                predict: true,
+                guard: 0.0,
+                layers: 4,
+                coarse: 1,
+                rest_layers: 0,
+                prefetch_deg: 0.0,
+                preempt: true
+            }
         );
         assert_eq!(l.name(), "splat-layers+predict+adapt+layers=4");
         assert_eq!(MethodSpec::parse(&l.name()).unwrap(), l);
@@ -486,11 +529,15 @@ mod tests {
         assert_eq!((d.renderer, d.frames, d.adapt), (RendererKind::SplatLayers, 4, true));
         assert_eq!(MethodSpec::parse(&d.name()).unwrap(), d);
         assert_eq!(d.name(), default_method(), "the default is written canonically");
-        assert_eq!(default_method(), "splat-layers+predict+frames=4+adapt+layers=4+coarse=2", "the sessions' CSV name");
+        assert_eq!(
+            default_method(),
+            "splat-layers+predict+frames=4+adapt+layers=4+coarse=2+prefetch=30",
+            "the sessions' CSV name"
+        );
         assert_eq!(d.method(1), CoreMethod::DEFAULT);
         let a = MethodSpec::parse("volwarp-adaptive").unwrap();
         assert_eq!(a, MethodSpec { request: SessionRequest { coarse: 2, ..d.request }, ..d });
-        assert_eq!(a.name(), "splat-layers+predict+frames=4+adapt+layers=4+coarse=2");
+        assert_eq!(a.name(), "splat-layers+predict+frames=4+adapt+layers=4+coarse=2+prefetch=30");
         assert_eq!(MethodSpec::parse(&a.name()).unwrap(), a);
         assert_eq!(MethodSpec::parse("volwarp-adaptive=4").unwrap().request.coarse, 4);
         assert_eq!(a.method(1).request().divisor(volwarp_core::method::Motion::Moving), 2);
@@ -499,6 +546,13 @@ mod tests {
         assert_eq!(r.name(), "splat-layers+predict+layers=4+rest=1");
         assert_eq!(MethodSpec::parse("splat-layers+rest=2").unwrap().name(), "splat-layers+rest=2");
         assert!(MethodSpec::parse("splat-layers+rest=17").is_err());
+        let f = MethodSpec::parse("splat-layers+predict+prefetch=20").unwrap();
+        assert_eq!((f.request.prefetch_deg, f.method(4).request().prefetch_deg), (20.0, 20.0));
+        assert_eq!(f.name(), "splat-layers+predict+prefetch=20");
+        assert_eq!(MethodSpec::parse(&f.name()).unwrap(), f);
+        for bad in ["splat-layers+prefetch=-1", "splat-layers+prefetch=91", "splat-layers+prefetch=x"] {
+            assert!(MethodSpec::parse(bad).is_err(), "{bad}");
+        }
         let names: Vec<String> =
             make_methods("volwarp,volwarp-adaptive", 1).unwrap().iter().map(|m| m.name().to_string()).collect();
         assert_eq!(names, ["volwarp", "volwarp-adaptive"], "aliases keep their names");

@@ -294,7 +294,8 @@ pub fn flip_over_time_chart(runs: &[&Run], path: &Path) -> Result<(), ErrorBox> 
                 Series::new(m, pts, Mark::Line, i)
             })
             .collect();
-        let arrivals = run.result.frames.iter().skip(1).map(|f| (f.arrive_ms * 1e-3, 0.0)).collect();
+        let arrivals =
+            run.result.frames.iter().filter(|f| !f.held_at_start()).map(|f| (f.arrive_ms * 1e-3, 0.0)).collect();
         series.push(Series::new("frame arrives", arrivals, Mark::Rings, 7));
         panels.push(Panel {
             title: format!("{} · {}", run.key.dataset, run.key.scenario),

@@ -5,8 +5,11 @@
 //!
 //! 1. **Display ticks** at `k / display_hz`; the camera of tick `k` is the path's. At time 0
 //!    the client already holds a frame for the first camera (the user looks at a finished
-//!    image, then starts to move). At every later tick whose camera differs from the last one
-//!    sent, the client sends a request, which reaches the server `latency_ms` later.
+//!    image, then starts to move), and a client asking for side views at rest
+//!    (`RequestPolicy::prefetch`) holds theirs too. At every later tick whose camera differs
+//!    from the last one sent, the client sends a request, which reaches the server
+//!    `latency_ms` later; while the camera rests, at the first tick after a frame arrives with
+//!    no request waiting, a client asking for side views asks for the next one its frames lack.
 //! 2. **Server**: when idle, it takes the newest request that arrived and that it has not
 //!    served yet (waiting for one if there is none), lets its [`ServerPolicy`] pick the camera,
 //!    renders the frame (the real marcher, so the frame's real sample count and bytes) in
@@ -122,6 +125,12 @@ pub struct FrameEvent {
 }
 
 impl FrameEvent {
+    /// Whether the client holds it at time 0 (the first frame, and with side views at rest
+    /// theirs; [`FrameEvent::at_start`]) rather than the server sending it during the session.
+    pub fn held_at_start(&self) -> bool {
+        self.arrive_ms <= 0.0
+    }
+
     /// The frame the client holds at time 0: rendered for the first camera as shown, in the
     /// first tick's visual state `state`, in `render_ms`, `bytes` long.
     pub fn at_start(camera: Camera, render_ms: f64, bytes: u64, state: usize) -> FrameEvent {
@@ -398,6 +407,17 @@ pub fn serve(
     let (first, first_bytes) = render(cams[0], 0, looks.state_at(0), 0);
     let mut out = vec![(FrameEvent::at_start(cams[0], net.server_ms, first_bytes, looks.state_at(0)), first)];
     let first_ms = 2.0 * net.latency_ms + net.server_ms + net.transfer_ms(out[0].0.bytes);
+    // Side views at rest: the client holds them beside the first frame (the user looked at
+    // that image long enough for them to come, as for the first frame itself).
+    while let Some(side) = request.policy().prefetch(&cams[0], &held_views(&out)) {
+        let state = looks.state_at(0);
+        let (frame, bytes) = render(side.camera, out.len(), state, side.layers);
+        out.push((
+            FrameEvent { seq: out.len(), ..FrameEvent::at_start(side.camera, net.server_ms, bytes, state) },
+            frame,
+        ));
+    }
+    let at_start = out.len();
     let mut requests = requests(cams, looks, tick_ms, request);
     let cadence = cadence(tick_ms);
     // The client side: what each request asks for, in the order they are sent.
@@ -412,6 +432,9 @@ pub fn serve(
         // Requests are asked in order; catch the predictor up to request i.
         let first_unasked = asked.iter().position(Option::is_none).unwrap_or(asked.len());
         for r in first_unasked..=i {
+            if asked[r].is_some() {
+                continue; // a side view at rest, asked as it was sent
+            }
             let sent = requests[r].sent_ms;
             let shown = requests[r].camera;
             // The display's predictor sees every camera shown, up to the request's tick, and the
@@ -424,7 +447,7 @@ pub fn serve(
             observed = observed.max(requests[r].tick + 1);
             // The first frame: requested one round trip, render and transfer before 0.
             horizon.observe(-first_ms * 1e-3, 0.0, net.server_ms * 1e-3, 1);
-            for (f, _) in out.iter().skip(1).filter(|(f, _)| f.arrive_ms <= sent) {
+            for (f, _) in out.iter().skip(at_start).filter(|(f, _)| f.arrive_ms <= sent) {
                 horizon.observe(f.request_ms * 1e-3, f.arrive_ms * 1e-3, f.render_ms * 1e-3, f.divisor);
             }
             let policy = request.policy();
@@ -523,10 +546,34 @@ pub fn serve(
                 },
                 frame,
             ));
+            // Side views at rest (core's `RequestPolicy::prefetch`): at the first tick after
+            // the frame arrives, where the view still rests and no request waits for its frame,
+            // the client asks for the next side view its frames lack.
+            let k = (arrive_ms / tick_ms).ceil() as usize;
+            let resting =
+                k > 0 && k < cams.len() && cams[k] == cams[k - 1] && looks.state_at(k) == looks.state_at(k - 1);
+            let waiting = requests[served..].iter().any(|r| r.sent_ms <= k as f64 * tick_ms);
+            if let Some(side) = request
+                .policy()
+                .prefetch(&cams[k.min(cams.len() - 1)], &held_views(&out))
+                .filter(|_| resting && !waiting)
+            {
+                let sent_ms = k as f64 * tick_ms;
+                let at = served + requests[served..].partition_point(|r| r.sent_ms <= sent_ms);
+                requests.insert(at, Request { tick: k, sent_ms, camera: side.camera });
+                asked.insert(at, Some(side));
+            }
         }
         s = write_end;
     }
     out
+}
+
+/// The views of the frames a client asking for side views at rest holds for them: the newest
+/// frames of the newest frame's visual state, as many as the rest frame and its side views.
+fn held_views(out: &[(FrameEvent, volwarp_core::wire::Frame)]) -> Vec<Camera> {
+    let state = out.last().map_or(0, |(f, _)| f.state);
+    out.iter().rev().take_while(|(f, _)| f.state == state).take(3).map(|(f, _)| f.view).collect()
 }
 
 /// Segments per pixel of the frames served to a client asking with `request`.
