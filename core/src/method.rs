@@ -333,7 +333,8 @@ impl RequestPolicy {
     /// What to ask for next while the view `rest` holds still and the client holds frames for
     /// the views `held` (newest first): where one shows `rest` exactly (its frame has arrived),
     /// the first of its [`RequestPolicy::side_views`] no held frame shows, at full resolution
-    /// and as a view at rest asks ([`RequestPolicy::layers`]); `None` where the rest frame has
+    /// and with the segments a moving view asks for ([`RequestPolicy::layers`]: a side view is
+    /// there to be warped, whatever `rest_layers` asks for the view at rest); `None` where the rest frame has
     /// not arrived, every side view is held, or prefetching is off. A turn that starts from
     /// rest then warps the side view nearest the camera (core's `show::choose`) instead of the
     /// rest frame, until the move's first frame arrives.
@@ -342,7 +343,7 @@ impl RequestPolicy {
             return None;
         }
         let side = self.side_views(rest).into_iter().find(|s| !held.contains(s))?;
-        Some(Requested { camera: side, view: side, guard_offset: (0, 0), layers: self.layers(false), divisor: 1 })
+        Some(Requested { camera: side, view: side, guard_offset: (0, 0), layers: self.layers(true), divisor: 1 })
     }
 
     /// The segments per pixel a request asks for (the CameraRequest's `layers`, 0: the
@@ -555,10 +556,11 @@ mod tests {
         // Not before the rest frame has arrived.
         assert_eq!(p.prefetch(&rest, &[]), None);
         assert_eq!(p.prefetch(&rest, &[rest.orbit(5.0, 0.0)]), None);
-        // Then one side after the other, each exact at full resolution, as a view at rest asks.
-        let first = p.prefetch(&rest, &[rest]).unwrap();
+        // Then one side after the other, each exact at full resolution, layered as a moving
+        // view's frames even where the view at rest asks for one sample per pixel.
+        let first = RequestPolicy { rest_layers: 1, ..p }.prefetch(&rest, &[rest]).unwrap();
         assert_eq!((first.camera, first.view, first.divisor, first.guard_offset), (sides[0], sides[0], 1, (0, 0)));
-        assert_eq!(first.layers, p.layers(false));
+        assert_eq!(first.layers, 0, "the Hello's segments per pixel");
         assert_eq!(p.prefetch(&rest, &[sides[0], rest]).unwrap().view, sides[1]);
         assert_eq!(p.prefetch(&rest, &[sides[1], sides[0], rest]), None, "both held: nothing more");
         // Off, or a nonsense angle: none.
