@@ -240,8 +240,7 @@ fn at_rest_each_side_view_is_asked_for_once_after_the_rest_frame() {
     let conn = connect(&addr, None, Duration::from_secs(10)).unwrap();
     let home = home_camera(&conn.bounds, 64, 64);
     let request = volwarp_core::method::Method::DEFAULT.request();
-    let sides = request.side_views(&home);
-    assert_eq!(sides.len(), 2);
+    let sides = request.side_views(&home).expect("side views on by default");
     let net = Network::start(conn, volwarp_client::network::NetConfig { request, ..net_config() }, None).unwrap();
     let t0 = Instant::now();
     while t0.elapsed() < Duration::from_millis(1500) {

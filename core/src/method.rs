@@ -39,7 +39,6 @@ use crate::guard::GuardBand;
 use crate::prediction::{Horizon, Predictor};
 use crate::renderer_kind::RendererKind;
 use crate::segments::DEFAULT_LAYERS;
-use alloc::vec::Vec;
 
 /// The default watertight tolerance of the layered renderers, in source pixels: where the
 /// depths of neighbouring segments of one slab lie within it, they share their footprints'
@@ -319,15 +318,15 @@ impl RequestPolicy {
     }
 
     /// The side views of a view at rest: `rest` orbited [`RequestPolicy::prefetch_deg`]
-    /// one way along its orbit, then the other (none where prefetching is off or the angle is
-    /// not a finite positive number).
-    pub fn side_views(&self, rest: &Camera) -> Vec<Camera> {
+    /// one way along its orbit, then the other (`None` where prefetching is off or the angle
+    /// is not a finite positive number).
+    pub fn side_views(&self, rest: &Camera) -> Option<[Camera; 2]> {
         let d = self.prefetch_deg;
         if !(d.is_finite() && d > 0.0) {
-            return Vec::new();
+            return None;
         }
         let d = d.min(MAX_PREFETCH_DEG);
-        [d, -d].into_iter().map(|yaw| rest.orbit(yaw, 0.0)).filter(|c| c != rest).collect()
+        Some([rest.orbit(d, 0.0), rest.orbit(-d, 0.0)])
     }
 
     /// What to ask for next while the view `rest` holds still and the client holds frames for
@@ -342,7 +341,7 @@ impl RequestPolicy {
         if !held.contains(rest) {
             return None;
         }
-        let side = self.side_views(rest).into_iter().find(|s| !held.contains(s))?;
+        let side = self.side_views(rest)?.into_iter().find(|s| s != rest && !held.contains(s))?;
         Some(Requested { camera: side, view: side, guard_offset: (0, 0), layers: self.layers(true), divisor: 1 })
     }
 
@@ -548,7 +547,7 @@ mod tests {
     fn side_views_are_asked_for_once_the_rest_frame_is_held_one_at_a_time() {
         let rest = Camera::look_at(glam::Vec3::new(0.0, 0.0, 3.0), glam::Vec3::ZERO, glam::Vec3::Y, 40.0, 64, 64);
         let p = Method::DEFAULT.request();
-        let sides = p.side_views(&rest);
+        let sides = p.side_views(&rest).unwrap();
         assert_eq!(sides, [rest.orbit(PREFETCH_DEG, 0.0), rest.orbit(-PREFETCH_DEG, 0.0)]);
         for s in &sides {
             assert!((crate::warp_radius::warp_angle_deg(&rest, s) - PREFETCH_DEG).abs() < 0.5);
@@ -565,9 +564,9 @@ mod tests {
         assert_eq!(p.prefetch(&rest, &[sides[1], sides[0], rest]), None, "both held: nothing more");
         // Off, or a nonsense angle: none.
         let off = RequestPolicy { prefetch_deg: 0.0, ..p };
-        assert!(off.side_views(&rest).is_empty() && off.prefetch(&rest, &[rest]).is_none());
-        assert!(RequestPolicy { prefetch_deg: f32::NAN, ..p }.side_views(&rest).is_empty());
-        let wide = RequestPolicy { prefetch_deg: 1e9, ..p }.side_views(&rest);
+        assert!(off.side_views(&rest).is_none() && off.prefetch(&rest, &[rest]).is_none());
+        assert!(RequestPolicy { prefetch_deg: f32::NAN, ..p }.side_views(&rest).is_none());
+        let wide = RequestPolicy { prefetch_deg: 1e9, ..p }.side_views(&rest).unwrap();
         assert!((crate::warp_radius::warp_angle_deg(&rest, &wide[0]) - MAX_PREFETCH_DEG).abs() < 0.5);
     }
 }

@@ -31,12 +31,12 @@ fn a_flick_from_rest_warps_the_side_view_and_the_rest_after_it_asks_for_both() {
     let c0 = frames[0].view;
     let start: Vec<_> = frames.iter().filter(|f| f.held_at_start()).map(|f| f.view).collect();
     let mut want = vec![c0];
-    want.extend(policy.side_views(&c0));
+    want.extend(policy.side_views(&c0).unwrap());
     assert_eq!(start, want, "the first frame and its side views at the start");
     // Where the flick rests: its rest frame arrives, then each side view, asked for after the
     // frame before it arrived, each rendered at full resolution.
     let rest = CameraPath::parse("flick").unwrap().camera(&c0, 3.0);
-    let sides = policy.side_views(&rest);
+    let sides = policy.side_views(&rest).unwrap();
     let at = |v| frames.iter().position(|f| f.view == v).unwrap_or_else(|| panic!("no frame for {v:?}: {frames:?}"));
     let (r, a, b) = (at(rest), at(sides[0]), at(sides[1]));
     assert!(r < a && a < b, "{frames:?}");
