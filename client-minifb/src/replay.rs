@@ -146,8 +146,9 @@ pub fn draw(replay: &mut Replay, renderers: &mut Renderers, req: &CameraRequest,
     let t0 = Instant::now();
     let scenes = replay.scenes_for(req.seq);
     let samples = scenes.first().map_or(0, |s| s.samples.len());
+    // As the live display draws them: core's frame choice among the kept frames.
     match scenes.first() {
-        Some(_) => renderers.render_set(&scenes, &req.camera, image),
+        Some(_) => crate::display::draw_kept(renderers, &scenes, &req.camera, image),
         None => image.reset_for(&req.camera),
     }
     FrameReport {
