@@ -115,10 +115,6 @@ pub struct NetConfig {
 pub const CADENCE: Cadence =
     Cadence { display_tick_s: 1.0 / 60.0, on_frame_arrival: true, on_first_still: true, max_viewport: MAX_VIEWPORT };
 
-/// How many of the newest frames' distinct cameras the writer remembers for side views at
-/// rest: the resting view's and its two side views'.
-pub const HELD_VIEWS: usize = 3;
-
 /// How long one redial may take at most (connect, Hello, probe frame), whatever `--timeout-s`
 /// says: a server that is down answers at once, one that does not answer is tried again.
 pub const REDIAL_TIMEOUT: Duration = Duration::from_secs(5);
@@ -272,7 +268,7 @@ struct ViewSlot {
     /// which asked for another.
     first_still: bool,
     /// The cameras of the newest frames received, distinct, newest first (at most
-    /// [`HELD_VIEWS`]): what side views at rest are asked for against
+    /// core's `method::PREFETCH_HELD`): what side views at rest are asked for against
     /// (`RequestPolicy::prefetch`).
     held: VecDeque<Camera>,
     /// Every camera the display showed, timed (so motion that starts after a still spell is
@@ -827,7 +823,7 @@ fn read_loop(sh: &Shared, mut stream: impl Read, limits: Limits, recorder: Optio
                     g.frame_arrived = true;
                     g.held.retain(|c| *c != camera);
                     g.held.push_front(camera);
-                    g.held.truncate(HELD_VIEWS);
+                    g.held.truncate(volwarp_core::method::PREFETCH_HELD);
                 }
                 sh.view_cv.notify_one();
             }
@@ -995,12 +991,9 @@ fn write_loop(sh: &Shared, mut stream: impl Write, request: RequestPolicy) {
                             let moving = !g.first_still && g.still_frames < STILL_AFTER;
                             // At rest, a frame's arrival asks for the next side view the
                             // frames lack once the view's own frame is there.
-                            let side = (!moving && !g.changed && !g.first_still)
-                                .then(|| {
-                                    let held: Vec<Camera> = g.held.iter().copied().collect();
-                                    request.prefetch(&v.camera, &held)
-                                })
-                                .flatten();
+                            let resting = !moving && !g.changed && !g.first_still;
+                            let side =
+                                if resting { request.prefetch(&v.camera, g.held.make_contiguous()) } else { None };
                             g.changed = false;
                             g.frame_arrived = false;
                             g.first_still = false;

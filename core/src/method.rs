@@ -366,6 +366,10 @@ pub const PREFETCH_DEG: f32 = 30.0;
 /// The largest angle of the side views.
 pub const MAX_PREFETCH_DEG: f32 = 90.0;
 
+/// How many of the newest frames' views a client passes to [`RequestPolicy::prefetch`]: the
+/// resting view's and its two side views'.
+pub const PREFETCH_HELD: usize = 3;
+
 /// The fewest pixels the coarse grid of adaptive resolution keeps on its shorter side: a
 /// smaller view stays at full resolution while it moves (its frame is marched and sent in a few
 /// milliseconds, and a coarser one would blur it; the default's adaptive resolution was

@@ -570,10 +570,16 @@ pub fn serve(
 }
 
 /// The views of the frames a client asking for side views at rest holds for them: the newest
-/// frames of the newest frame's visual state, as many as the rest frame and its side views.
+/// frames of the newest frame's visual state, as many as the rest frame and its side views
+/// (core's `method::PREFETCH_HELD`).
 fn held_views(out: &[(FrameEvent, volwarp_core::wire::Frame)]) -> Vec<Camera> {
     let state = out.last().map_or(0, |(f, _)| f.state);
-    out.iter().rev().take_while(|(f, _)| f.state == state).take(3).map(|(f, _)| f.view).collect()
+    out.iter()
+        .rev()
+        .take_while(|(f, _)| f.state == state)
+        .take(volwarp_core::method::PREFETCH_HELD)
+        .map(|(f, _)| f.view)
+        .collect()
 }
 
 /// Segments per pixel of the frames served to a client asking with `request`.
